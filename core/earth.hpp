@@ -1,0 +1,31 @@
+// WGS-84 Earth: rotation rate, normal gravity with the free-air correction, radii of curvature.
+// The simulator and the navigation call the same functions (CONVENTIONS.md, "Earth and site").
+#pragma once
+
+#include <Eigen/Core>
+
+#include "core/recording.hpp"
+
+namespace imucal::earth {
+
+inline constexpr double kA_m = 6378137.0;
+inline constexpr double kF = 1.0 / 298.257223563;
+inline constexpr double kB_m = kA_m * (1.0 - kF);
+inline constexpr double kE2 = kF * (2.0 - kF);
+inline constexpr double kOmega_radps = 7.292115e-5;
+inline constexpr double kGM = 3.986004418e14;
+
+// Somigliana normal gravity at geodetic latitude with the free-air correction for height.
+double normal_gravity_mps2(double latitude_rad, double height_m);
+
+// The site's g: measured value when the site gives one, otherwise normal gravity.
+double site_gravity_mps2(const Site& site);
+
+// Earth rate resolved in ENU at latitude.
+Eigen::Vector3d w_ie_n(double latitude_rad);
+
+// Meridian (north-south) and prime-vertical (east-west) radii of curvature.
+double meridian_radius_m(double latitude_rad);
+double prime_vertical_radius_m(double latitude_rad);
+
+}  // namespace imucal::earth

@@ -1,0 +1,213 @@
+// imucal: the command line. A thin shell over the libraries: simulate, navigate, export, import.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "core/units.hpp"
+#include "drivers/sim/simulator.hpp"
+#include "estimators/navigation_run.hpp"
+#include "motion_programs/program.hpp"
+#include "storage/bundle.hpp"
+#include "storage/run_db.hpp"
+
+namespace {
+
+using namespace imucal;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Progress on stderr, at most every few percent, so long runs show they are alive.
+class Progress {
+ public:
+  Progress(std::string what, std::int64_t total) : what_(std::move(what)), total_(total) {}
+  void update(std::int64_t done) {
+    if (total_ <= 0) return;
+    const int pct = static_cast<int>(100 * done / total_);
+    if (pct >= next_) {
+      std::fprintf(stderr, "\r%s: %3d %%", what_.c_str(), pct);
+      std::fflush(stderr);
+      next_ = pct + 5;
+    }
+  }
+  void done() { std::fprintf(stderr, "\r%s: 100 %%\n", what_.c_str()); }
+
+ private:
+  std::string what_;
+  std::int64_t total_;
+  int next_ = 0;
+};
+
+struct SimulateArgs {
+  std::string program, imu = "ideal", db;
+  double rate_hz = 1000, duration_s = 0, azimuth_deg = 0;
+  std::uint64_t seed = 1;
+  std::vector<double> r0_mm = {0, 0, 0};
+};
+
+int cmd_simulate(const SimulateArgs& a) {
+  const motion::TableLimits limits;
+  const motion::Program program = motion::load_program(a.program, limits);
+  const auto problems = motion::validate_program(program, limits);
+  if (!problems.empty()) {
+    std::cerr << "imucal simulate: program '" << program.name << "' violates the table limits:\n";
+    for (const auto& p : problems) std::cerr << "  - " << p << "\n";
+    return 2;
+  }
+  const ImuModel truth = a.imu == "ideal" ? ImuModel{} : read_imu_model_file(a.imu);
+  sim::SimConfig cfg;
+  cfg.rate_hz = a.rate_hz;
+  cfg.seed = a.seed;
+  cfg.duration_s = a.duration_s;
+  cfg.site.middle_axis_azimuth_deg = a.azimuth_deg;
+  cfg.mount.r0_p_m = Eigen::Vector3d(a.r0_mm[0], a.r0_mm[1], a.r0_mm[2]) * units::kMmToM;
+  sim::Simulator sim(program, truth, cfg);
+  auto db = storage::RunDb::create(a.db, sim.meta());
+  const auto t0 = Clock::now();
+  std::vector<ImuFrame> batch;
+  batch.reserve(8192);
+  Progress progress("simulate " + program.name, sim.frame_count());
+  ImuFrame f;
+  std::int64_t n = 0;
+  while (sim.next(f)) {
+    batch.push_back(f);
+    if (batch.size() == batch.capacity()) {
+      db.append(batch);
+      db.append_temps(sim.take_temps());
+      batch.clear();
+      progress.update(n);
+    }
+    ++n;
+  }
+  db.append(batch);
+  db.append_temps(sim.take_temps());
+  db.flush();
+  progress.done();
+  const double wall = seconds_since(t0);
+  std::printf("simulated '%s': %lld frames, %.1f s of data at %.0f Hz, in %.2f s (%.0f frames/s) -> %s\n",
+              program.name.c_str(), static_cast<long long>(n), static_cast<double>(n) / a.rate_hz, a.rate_hz, wall,
+              static_cast<double>(n) / wall, a.db.c_str());
+  return 0;
+}
+
+struct NavigateArgs {
+  std::string db, model, out, summary_json;
+  double interval_s = 1.0;
+};
+
+int cmd_navigate(const NavigateArgs& a) {
+  const auto db = storage::RunDb::open(a.db);
+  const RecordingMeta meta = db.meta();
+  const ImuModel model = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
+  std::ofstream csv(a.out);
+  if (!csv) throw std::runtime_error(a.out + ": cannot write");
+  csv << "t_s,dv_e_mps,dv_n_mps,dp_e_m,dp_n_m,att_e_arcsec,att_n_arcsec,att_u_arcsec\n";
+  char line[256];
+  nav::NavigationRun run(meta, model, a.interval_s, [&](const nav::NavErrorSample& e) {
+    const Eigen::Vector3d att = e.attitude_err_n_rad * units::kRadToArcsec;
+    std::snprintf(line, sizeof line, "%.3f,%.9e,%.9e,%.6e,%.6e,%.4f,%.4f,%.4f\n", e.t_s, e.dv_n_mps.x(),
+                  e.dv_n_mps.y(), e.dp_n_m.x(), e.dp_n_m.y(), att.x(), att.y(), att.z());
+    csv << line;
+  });
+  const auto t0 = Clock::now();
+  Progress progress("navigate", db.frame_count());
+  std::int64_t n = 0;
+  db.for_each_frame([&](const ImuFrame& f) {
+    run.push(f);
+    if ((++n & 0xFFFF) == 0) progress.update(n);
+  });
+  const nav::NavSummary s = run.finish();
+  progress.done();
+  const double wall = seconds_since(t0);
+  nlohmann::json j = {{"duration_s", s.duration_s},
+                      {"frames", s.frames},
+                      {"max_velocity_error_mps", s.max_velocity_error_mps},
+                      {"max_position_error_m", s.max_position_error_m},
+                      {"max_attitude_error_arcsec", s.max_attitude_error_rad * units::kRadToArcsec},
+                      {"model", a.model.empty() ? "ideal" : a.model},
+                      {"wall_time_s", wall},
+                      {"frames_per_s", static_cast<double>(n) / wall}};
+  if (!a.summary_json.empty()) {
+    std::ofstream out(a.summary_json);
+    if (!out) throw std::runtime_error(a.summary_json + ": cannot write");
+    out << j.dump(1) << "\n";
+  }
+  std::printf("navigated %.1f s: max horizontal velocity error %.3e m/s, position error %.3e m, attitude %.3f\" "
+              "(%.0f frames/s)\n",
+              s.duration_s, s.max_velocity_error_mps, s.max_position_error_m,
+              s.max_attitude_error_rad * units::kRadToArcsec, static_cast<double>(n) / wall);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"imucal: calibration of strapdown IMUs on a three-axis table"};
+  app.require_subcommand(1);
+
+  SimulateArgs sim_args;
+  auto* sim = app.add_subcommand("simulate", "Simulate a motion program with a truth IMU into a run database");
+  sim->add_option("--program", sim_args.program, "built-in program name or a program JSON file")->required();
+  sim->add_option("--imu", sim_args.imu, "truth imucal-imu-model/1 JSON, or 'ideal'")->capture_default_str();
+  sim->add_option("--db", sim_args.db, "output run database (must not exist)")->required();
+  sim->add_option("--rate", sim_args.rate_hz, "IMU rate, Hz")->capture_default_str()->check(CLI::PositiveNumber);
+  sim->add_option("--seed", sim_args.seed, "noise seed")->capture_default_str();
+  sim->add_option("--duration", sim_args.duration_s, "stop after this many seconds (0: whole program)")
+      ->check(CLI::NonNegativeNumber);
+  sim->add_option("--azimuth", sim_args.azimuth_deg, "middle-axis azimuth, deg clockwise from North")
+      ->capture_default_str();
+  sim->add_option("--r0-mm", sim_args.r0_mm, "IMU origin from the axis intersection, platform frame, mm")
+      ->expected(3);
+
+  NavigateArgs nav_args;
+  auto* navc = app.add_subcommand("navigate", "Free-inertial navigation of a run against the table reference");
+  navc->add_option("--db", nav_args.db, "run database")->required()->check(CLI::ExistingFile);
+  navc->add_option("--model", nav_args.model, "imucal-imu-model/1 to compensate with (default: none)")
+      ->check(CLI::ExistingFile);
+  navc->add_option("--out", nav_args.out, "CSV of the horizontal errors over time")->required();
+  navc->add_option("--summary-json", nav_args.summary_json, "summary (duration, max errors) as JSON");
+  navc->add_option("--interval", nav_args.interval_s, "CSV row interval, s")->capture_default_str()->check(
+      CLI::PositiveNumber);
+
+  std::string exp_db, exp_dir;
+  auto* exp = app.add_subcommand("export", "Write a run as an imucal-recording/1 bundle");
+  exp->add_option("--db", exp_db, "run database")->required()->check(CLI::ExistingFile);
+  exp->add_option("--out", exp_dir, "output folder")->required();
+
+  std::string imp_dir, imp_db;
+  auto* imp = app.add_subcommand("import", "Read an imucal-recording/1 bundle into a run database");
+  imp->add_option("dir", imp_dir, "bundle folder (meta.json, frames.csv)")->required()->check(CLI::ExistingDirectory);
+  imp->add_option("--db", imp_db, "output run database (must not exist)")->required();
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (sim->parsed()) return cmd_simulate(sim_args);
+    if (navc->parsed()) return cmd_navigate(nav_args);
+    if (exp->parsed()) {
+      const auto db = storage::RunDb::open(exp_db);
+      storage::export_bundle(db, exp_dir);
+      std::printf("exported %lld frames to %s\n", static_cast<long long>(db.frame_count()), exp_dir.c_str());
+      return 0;
+    }
+    if (imp->parsed()) {
+      const storage::ImportReport r = storage::import_bundle(imp_dir, imp_db);
+      std::printf("imported %lld frames, %lld temperature samples into %s\n", static_cast<long long>(r.frames),
+                  static_cast<long long>(r.temp_samples), imp_db.c_str());
+      for (const auto& g : r.gaps)
+        std::printf("  gap: %.6f s .. %.6f s (frames.csv line %lld)\n", g.t0_s, g.t1_s, static_cast<long long>(g.line));
+      return 0;
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "\nimucal %s: error: %s\n", app.get_subcommands().front()->get_name().c_str(), e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,256 @@
+#include "drivers/sim/simulator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/Geometry>
+
+#include "core/earth.hpp"
+#include "core/table.hpp"
+#include "core/units.hpp"
+
+namespace imucal::sim {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+
+double NormalStream::next() {
+  if (has_spare_) {
+    has_spare_ = false;
+    return spare_;
+  }
+  // Uniforms in (0, 1] from the top 53 bits, so log() never sees zero.
+  const double u1 = (static_cast<double>(engine_() >> 11) + 1.0) * 0x1.0p-53;
+  const double u2 = static_cast<double>(engine_() >> 11) * 0x1.0p-53;
+  const double r = std::sqrt(-2.0 * std::log(u1));
+  const double a = 2.0 * units::kPi * u2;
+  spare_ = r * std::sin(a);
+  has_spare_ = true;
+  return r * std::cos(a);
+}
+
+namespace {
+
+// splitmix64: decorrelates the per-source seeds derived from one user seed.
+std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t source) {
+  std::uint64_t z = seed + 0x9E3779B97F4A7C15ULL * (source + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+
+template <std::size_t N>
+std::array<NormalStream, N> make_streams(std::uint64_t seed, std::uint64_t first_source) {
+  return [&]<std::size_t... I>(std::index_sequence<I...>) {
+    return std::array<NormalStream, N>{NormalStream(mix_seed(seed, first_source + I))...};
+  }(std::make_index_sequence<N>{});
+}
+
+// Ratio of the Allan-deviation maximum of a first-order Gauss-Markov process to its standard
+// deviation (reached near tau = 1.89 Tc), and the IEEE definition of bias instability as the
+// Allan floor divided by 0.664: together they set the process sigma that shows a given floor.
+constexpr double kGmAllanPeakRatio = 0.6167;
+constexpr double kFlickerFloorFactor = 0.664;
+constexpr double kDefaultBiasCorrTime_s = 300.0;
+
+}  // namespace
+
+Simulator::Simulator(const motion::Program& program, const ImuModel& truth, const SimConfig& config)
+    : program_(program),
+      truth_(truth),
+      config_(config),
+      white_(make_streams<6>(config.seed, 0)),
+      bias_gm_(make_streams<6>(config.seed, 6)),
+      bias_rw_(make_streams<6>(config.seed, 12)) {
+  if (!(config.rate_hz > 0.0) || !std::isfinite(config.rate_hz))
+    throw std::invalid_argument("simulate: rate must be a positive number of Hz");
+  if (truth.frame != "instrument")
+    throw std::invalid_argument("simulate: the truth model must be in the instrument frame");
+  const double lat = config.site.latitude_deg * units::kDegToRad;
+  C_p0_n_ = table::C_p0_n(config.site.middle_axis_azimuth_deg * units::kDegToRad);
+  w_ie_n_ = earth::w_ie_n(lat);
+  g_mps2_ = earth::site_gravity_mps2(config.site);
+  dt_s_ = 1.0 / config.rate_hz;
+  const double duration = config.duration_s > 0 ? config.duration_s : program.duration_s();
+  n_frames_ = static_cast<std::int64_t>(std::floor(duration * config.rate_hz + 1e-9));
+  breakpoints_ = program.breakpoints_s();
+  D_gyro_ = misalignment_matrix(truth.gyro.misalignment_rad);
+  D_accel_ = misalignment_matrix(truth.accel.misalignment_rad);
+  gyro_lsb_rad_ = kGyroLsbAt1kHz_rad * 1000.0 / config.rate_hz;
+  accel_lsb_mps_ = kAccelLsbAt1kHz_mps * 1000.0 / config.rate_hz;
+
+  for (unsigned ch = 0; ch < 6; ++ch) {
+    const double d = ch < 3 ? truth.gyro.delay_s[ch] : truth.accel.delay_s[ch - 3];
+    auto it = std::find_if(groups_.begin(), groups_.end(), [&](const DelayGroup& g) { return g.delay_s == d; });
+    if (it == groups_.end())
+      groups_.push_back({d, 1u << ch});
+    else
+      it->mask |= 1u << ch;
+  }
+
+  for (std::size_t ch = 0; ch < 6; ++ch) {
+    const bool gyro = ch < 3;
+    const double white = gyro ? truth.gyro.noise.arw_rad_rts : truth.accel.noise.vrw_mps_rts;
+    const double instab = gyro ? truth.gyro.noise.bias_instability_radps : truth.accel.noise.bias_instability_mps2;
+    double tc = gyro ? truth.gyro.noise.bias_corr_time_s : truth.accel.noise.bias_corr_time_s;
+    if (tc <= 0) tc = kDefaultBiasCorrTime_s;
+    const double rw = gyro ? truth.gyro.noise.rate_random_walk_radps_rts : truth.accel.noise.accel_random_walk_mps2_rts;
+    white_sigma_[ch] = white * std::sqrt(dt_s_);
+    const double sigma_gm = instab * kFlickerFloorFactor / kGmAllanPeakRatio;
+    gm_phi_[ch] = std::exp(-dt_s_ / tc);
+    gm_drive_[ch] = sigma_gm * std::sqrt(1.0 - gm_phi_[ch] * gm_phi_[ch]);
+    rw_drive_[ch] = rw * std::sqrt(dt_s_);
+    // Start the correlated bias in its stationary distribution.
+    if (sigma_gm > 0) gm_state_[static_cast<Eigen::Index>(ch)] = sigma_gm * bias_gm_[ch].next();
+  }
+}
+
+TrueKinematics Simulator::kinematics(double t_s) const {
+  const table::AxisState axes = program_.evaluate(t_s, cursor_);
+  const table::PlatformRates pr = table::platform_rates(axes);
+  const Matrix3d C_p_n = table::C_p_n(axes.angle_rad, C_p0_n_);
+  const Matrix3d& C_o_p = config_.mount.C_o_p;
+  const Vector3d w_ie_p = C_p_n.transpose() * w_ie_n_;
+  const Vector3d w_ip_p = pr.w_np_p + w_ie_p;
+  // d/dt of the Earth-rate part, seen in the rotating platform: -w_np_p x w_ie_p.
+  const Vector3d dw_ip_p = pr.dw_np_p - pr.w_np_p.cross(w_ie_p);
+  const Vector3d& r0 = config_.mount.r0_p_m;
+  const Vector3d v_p = pr.w_np_p.cross(r0);
+  const Vector3d a_p = pr.dw_np_p.cross(r0) + pr.w_np_p.cross(v_p);
+  TrueKinematics k;
+  k.C_o_n = C_p_n * C_o_p;
+  k.w_io_o = C_o_p.transpose() * w_ip_p;
+  k.dw_io_o = C_o_p.transpose() * dw_ip_p;
+  k.r_origin_n = C_p_n * r0;
+  k.v_origin_n = C_p_n * v_p;
+  // Specific force at the origin: relative acceleration + Coriolis + gravity (with centrifugal).
+  const Vector3d f_n = C_p_n * a_p + 2.0 * w_ie_n_.cross(k.v_origin_n) + Vector3d(0.0, 0.0, g_mps2_);
+  k.f_origin_o = k.C_o_n.transpose() * f_n;
+  return k;
+}
+
+void Simulator::sensor_outputs(double t, Vector3d& u_gyro, Vector3d& u_accel) const {
+  const TrueKinematics k = kinematics(t);
+  u_gyro = apply_gyro_scale_misalignment(truth_.gyro, k.w_io_o);
+  // Each accelerometer senses the specific force at its own proof mass (seed eq. 3).
+  const Eigen::Matrix3d DS = D_accel_ * (Vector3d::Ones() + truth_.accel.scale).asDiagonal();
+  const Vector3d& w = k.w_io_o;
+  const Vector3d f_y = k.f_origin_o + w.cross(w.cross(truth_.accel.lever_arm_y_m)) + k.dw_io_o.cross(truth_.accel.lever_arm_y_m);
+  const Vector3d f_z = k.f_origin_o + w.cross(w.cross(truth_.accel.lever_arm_z_m)) + k.dw_io_o.cross(truth_.accel.lever_arm_z_m);
+  u_accel[0] = DS.row(0).dot(k.f_origin_o);
+  u_accel[1] = DS.row(1).dot(f_y);
+  u_accel[2] = DS.row(2).dot(f_z);
+}
+
+void Simulator::integrate(double a, double b, unsigned mask, Vector3d& gyro, Vector3d& accel) const {
+  static constexpr double kNode = 0.7745966692414834;  // sqrt(3/5)
+  static constexpr std::array<double, 3> kX = {-kNode, 0.0, kNode};
+  static constexpr std::array<double, 3> kW = {5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
+  gyro.setZero();
+  accel.setZero();
+  // Split [a, b] where the motion is not smooth, so each part is integrated to machine precision.
+  auto it = std::upper_bound(breakpoints_.begin(), breakpoints_.end(), a);
+  double lo = a;
+  while (lo < b) {
+    double hi = b;
+    if (it != breakpoints_.end() && *it < b) hi = *it++;
+    const double half = 0.5 * (hi - lo), mid = 0.5 * (hi + lo);
+    for (std::size_t n = 0; n < 3; ++n) {
+      Vector3d ug, ua;
+      sensor_outputs(mid + half * kX[n], ug, ua);
+      gyro += (kW[n] * half) * ug;
+      accel += (kW[n] * half) * ua;
+    }
+    lo = hi;
+  }
+  for (int j = 0; j < 3; ++j) {
+    if (!(mask & (1u << j))) gyro[j] = 0.0;
+    if (!(mask & (1u << (3 + j)))) accel[j] = 0.0;
+  }
+}
+
+bool Simulator::next(ImuFrame& out) {
+  if (k_ >= n_frames_) return false;
+  const double t0 = static_cast<double>(k_) * dt_s_;
+  const double t1 = static_cast<double>(k_ + 1) * dt_s_;
+  while (next_temp_t_s_ <= t1) {
+    TempSample ts;
+    ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
+    ts.gyro_C.setConstant(config_.temperature_C);
+    ts.accel_C.setConstant(config_.temperature_C);
+    ts.chamber_C = config_.temperature_C;
+    ts.chamber_setpoint_C = config_.temperature_C;
+    temps_.push_back(ts);
+    next_temp_t_s_ += 1.0 / config_.temp_rate_hz;
+  }
+  Vector3d dtheta = Vector3d::Zero(), dv = Vector3d::Zero();
+  for (const DelayGroup& g : groups_) {
+    Vector3d ig, ia;
+    // Channel output at t reflects its input at t - delay.
+    integrate(t0 - g.delay_s, t1 - g.delay_s, g.mask, ig, ia);
+    dtheta += ig;
+    dv += ia;
+  }
+  dtheta += truth_.gyro.bias_radps * dt_s_;
+  dv += truth_.accel.bias_mps2 * dt_s_;
+  for (std::size_t ch = 0; ch < 6; ++ch) {
+    const auto i = static_cast<Eigen::Index>(ch);
+    double noise = 0.0;
+    if (white_sigma_[ch] > 0) noise += white_sigma_[ch] * white_[ch].next();
+    if (gm_drive_[ch] > 0) {
+      gm_state_[i] = gm_phi_[ch] * gm_state_[i] + gm_drive_[ch] * bias_gm_[ch].next();
+      noise += gm_state_[i] * dt_s_;
+    }
+    if (rw_drive_[ch] > 0) {
+      rw_state_[i] += rw_drive_[ch] * bias_rw_[ch].next();
+      noise += rw_state_[i] * dt_s_;
+    }
+    if (ch < 3)
+      dtheta[i] += noise;
+    else
+      dv[i - 3] += noise;
+  }
+  // Quantise to integer counts as a real IMU does, carrying the remainder to the next sample.
+  for (int j = 0; j < 3; ++j) {
+    const double tg = dtheta[j] + gyro_remainder_[j];
+    const double cg = std::nearbyint(tg / gyro_lsb_rad_);
+    out.dtheta_rad[j] = cg * gyro_lsb_rad_;
+    gyro_remainder_[j] = tg - out.dtheta_rad[j];
+    const double ta = dv[j] + accel_remainder_[j];
+    const double ca = std::nearbyint(ta / accel_lsb_mps_);
+    out.dv_mps[j] = ca * accel_lsb_mps_;
+    accel_remainder_[j] = ta - out.dv_mps[j];
+  }
+  out.t_ns = std::llround(static_cast<double>(k_ + 1) * units::kNsPerS / config_.rate_hz);
+  out.table_deg = program_.evaluate(t1, cursor_).angle_rad * units::kRadToDeg;
+  ++k_;
+  return true;
+}
+
+std::vector<TempSample> Simulator::take_temps() {
+  std::vector<TempSample> out;
+  out.swap(temps_);
+  return out;
+}
+
+RecordingMeta Simulator::meta() const {
+  RecordingMeta m;
+  m.site = config_.site;
+  m.imu_serial = "SIM-" + std::to_string(config_.seed);
+  m.rate_hz = config_.rate_hz;
+  m.mount = config_.mount;
+  const double end_s = static_cast<double>(n_frames_) * dt_s_;
+  for (SegmentInfo s : program_.segments()) {
+    if (s.t0_s >= end_s) break;
+    s.t1_s = std::min(s.t1_s, end_s);
+    m.segments.push_back(s);
+  }
+  m.gyro_lsb_rad = gyro_lsb_rad_;
+  m.accel_lsb_mps = accel_lsb_mps_;
+  m.program_json = program_.source_json;
+  m.truth_json = imu_model_to_json_text(truth_);
+  return m;
+}
+
+}  // namespace imucal::sim

@@ -1,0 +1,163 @@
+#include "estimators/navigation_run.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+
+#include <Eigen/LU>
+
+#include "core/earth.hpp"
+#include "core/table.hpp"
+#include "core/units.hpp"
+
+namespace imucal::nav {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+
+Compensator::Compensator(const ImuModel& model) : model_(model) {}
+
+// Channel j's output lags its input by tau_j, so the input over (t_{k-1}, t_k] is the output over
+// (t_{k-1}+tau, t_k+tau]: linear interpolation of the cumulative output at those instants.
+Vector3d Compensator::shifted(const std::deque<ImuFrame>& window, bool gyro) const {
+  const Vector3d& delay = gyro ? model_.gyro.delay_s : model_.accel.delay_s;
+  Vector3d out;
+  for (int j = 0; j < 3; ++j) {
+    const double s = delay[j] / dt_nominal_s_;
+    const double n = std::floor(s);
+    const double f = s - n;
+    const auto at = [&](double offset) {
+      const auto idx = static_cast<std::size_t>(lookback_ + static_cast<int>(offset));
+      const ImuFrame& fr = window[idx];
+      return gyro ? fr.dtheta_rad[j] : fr.dv_mps[j];
+    };
+    out[j] = (f == 0.0) ? at(n) : (1.0 - f) * at(n) + f * at(n + 1);
+  }
+  return out;
+}
+
+void Compensator::compensate(const std::deque<ImuFrame>& window, double dt, Vector3d& dtheta_b, Vector3d& dv_b) const {
+  dtheta_b = compensate_gyro_increment(model_.gyro, shifted(window, true), dt);
+  dv_b = compensate_accel_increment(model_.accel, shifted(window, false), dt);
+  // Size effect (seed eq. 7): the y and z proof masses sit off the origin; remove the centripetal
+  // and tangential terms they add, with the rate from this sample and its derivative from the
+  // neighbours.
+  const Vector3d& ry = model_.accel.lever_arm_y_m;
+  const Vector3d& rz = model_.accel.lever_arm_z_m;
+  if (ry.squaredNorm() > 0 || rz.squaredNorm() > 0) {
+    const Vector3d w = dtheta_b / dt;
+    const auto& before = window[static_cast<std::size_t>(lookback_ - 1)];
+    const auto& after = window[static_cast<std::size_t>(lookback_ + 1)];
+    const Vector3d dw = (after.dtheta_rad - before.dtheta_rad) / (2.0 * dt * dt);
+    dv_b[1] -= (w.cross(w.cross(ry)) + dw.cross(ry))[1] * dt;
+    dv_b[2] -= (w.cross(w.cross(rz)) + dw.cross(rz))[2] * dt;
+  }
+}
+
+NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink)
+    : meta_(meta), model_(model), comp_(model_), sink_(std::move(sink)), output_interval_s_(output_interval_s) {
+  dt_nominal_s_ = 1.0 / meta.rate_hz;
+  comp_.dt_nominal_s_ = dt_nominal_s_;
+  double max_delay = 0, min_delay = 0;
+  for (int j = 0; j < 3; ++j) {
+    max_delay = std::max({max_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
+    min_delay = std::min({min_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
+  }
+  comp_.lookahead_ = 1 + static_cast<int>(std::ceil(max_delay / dt_nominal_s_));
+  comp_.lookback_ = 1 + static_cast<int>(std::ceil(-min_delay / dt_nominal_s_));
+  C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * units::kDegToRad);
+  C_b_o_ = Matrix3d::Identity();
+  if (model.frame == "body" && model.body_to_instrument_rad) C_b_o_ += table::skew(*model.body_to_instrument_rad);
+  r0_p_m_ = model.mount_r0_p_m ? *model.mount_r0_p_m : meta.mount.r0_p_m;
+  lat0_ = meta.site.latitude_deg * units::kDegToRad;
+  lon0_ = meta.site.longitude_deg * units::kDegToRad;
+  h0_ = meta.site.height_m;
+  RM0_ = earth::meridian_radius_m(lat0_) + h0_;
+  RN0_ = earth::prime_vertical_radius_m(lat0_) + h0_;
+}
+
+NavigationRun::Reference NavigationRun::reference(std::size_t i) const {
+  // Reference from the table angles (eq. 14): the origin only rotates about the axis intersection.
+  const ImuFrame& f = window_[i];
+  const std::size_t lo = i > 0 ? i - 1 : i, hi = i + 1 < window_.size() ? i + 1 : i;
+  table::AxisState axes;
+  axes.angle_rad = f.table_deg * units::kDegToRad;
+  if (hi > lo)
+    axes.rate_radps = (window_[hi].table_deg - window_[lo].table_deg) * units::kDegToRad /
+                      (static_cast<double>(window_[hi].t_ns - window_[lo].t_ns) * 1e-9);
+  const Matrix3d C_p_n = table::C_p_n(axes.angle_rad, C_p0_n_);
+  Reference r;
+  r.C_b_n = C_p_n * meta_.mount.C_o_p * C_b_o_;
+  r.r_n = C_p_n * r0_p_m_;
+  r.v_n = C_p_n * table::platform_rates(axes).w_np_p.cross(r0_p_m_);
+  return r;
+}
+
+void NavigationRun::push(const ImuFrame& frame) {
+  if (!window_.empty()) {
+    const double gap_s = static_cast<double>(frame.t_ns - window_.back().t_ns) * 1e-9;
+    if (gap_s > 1.5 * dt_nominal_s_ || gap_s <= 0) {
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "navigate: gap in the IMU frames at t=%.6f s (%.6f s without data); navigation does not "
+                    "integrate across gaps",
+                    static_cast<double>(window_.back().t_ns) * 1e-9, gap_s);
+      throw std::runtime_error(buf);
+    }
+  }
+  window_.push_back(frame);
+  ++frames_seen_;
+  const auto needed = static_cast<std::size_t>(comp_.lookback() + 1 + comp_.lookahead());
+  if (window_.size() < needed) return;
+  step();
+  window_.pop_front();
+}
+
+void NavigationRun::step() {
+  const auto k = static_cast<std::size_t>(comp_.lookback());
+  if (!started_) {
+    // Initialise at the previous frame's instant from the table: attitude, velocity, position.
+    const Reference r = reference(k - 1);
+    NavState s;
+    s.q_b_n = Eigen::Quaterniond(r.C_b_n);
+    s.v_n = r.v_n;
+    s.lat_rad = lat0_ + r.r_n.y() / RM0_;
+    s.lon_rad = lon0_ + r.r_n.x() / (RN0_ * std::cos(lat0_));
+    s.h_m = h0_ + r.r_n.z();
+    nav_ = std::make_unique<Strapdown>(s, earth::site_gravity_mps2(meta_.site));
+    first_t_ns_ = window_[k - 1].t_ns;
+    started_ = true;
+  }
+  const double dt = static_cast<double>(window_[k].t_ns - window_[k - 1].t_ns) * 1e-9;
+  Vector3d dtheta_b, dv_b;
+  comp_.compensate(window_, dt, dtheta_b, dv_b);
+  const Reference r = reference(k);
+  nav_->update(dtheta_b, dv_b, dt, r.v_n.z(), h0_ + r.r_n.z());
+  const NavState& s = nav_->state();
+  NavErrorSample e;
+  e.t_s = static_cast<double>(window_[k].t_ns) * 1e-9;
+  e.dv_n_mps = s.v_n - r.v_n;
+  e.dp_n_m = Vector3d((s.lon_rad - lon0_) * RN0_ * std::cos(lat0_) - r.r_n.x(), (s.lat_rad - lat0_) * RM0_ - r.r_n.y(), 0.0);
+  const Eigen::Quaterniond q_err = s.q_b_n * Eigen::Quaterniond(r.C_b_n).conjugate();
+  const Eigen::AngleAxisd aa(q_err);
+  e.attitude_err_n_rad = aa.angle() * aa.axis();
+  ++summary_.frames;
+  summary_.duration_s = static_cast<double>(window_[k].t_ns - first_t_ns_) * 1e-9;
+  summary_.max_velocity_error_mps = std::max(summary_.max_velocity_error_mps, e.dv_n_mps.head<2>().norm());
+  summary_.max_position_error_m = std::max(summary_.max_position_error_m, e.dp_n_m.head<2>().norm());
+  summary_.max_attitude_error_rad = std::max(summary_.max_attitude_error_rad, e.attitude_err_n_rad.norm());
+  if (sink_ && e.t_s + 1e-9 >= next_output_s_) {
+    sink_(e);
+    next_output_s_ = e.t_s + output_interval_s_;
+  }
+}
+
+NavSummary NavigationRun::finish() {
+  if (!started_)
+    throw std::runtime_error("navigate: too few frames to navigate (" + std::to_string(frames_seen_) + ")");
+  return summary_;
+}
+
+}  // namespace imucal::nav

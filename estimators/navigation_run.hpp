@@ -1,0 +1,90 @@
+// Free-inertial navigation of a recording against the reference the table implies (seed eq. 14):
+// frames in (streamed), model compensation (biases, scale factors, misalignments, lever arms,
+// delays), strapdown navigation, and the horizontal velocity and position errors of the IMU origin.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "estimators/strapdown.hpp"
+
+namespace imucal::nav {
+
+struct NavErrorSample {
+  double t_s = 0;
+  Eigen::Vector3d dv_n_mps = Eigen::Vector3d::Zero();      // navigation minus reference, ENU
+  Eigen::Vector3d dp_n_m = Eigen::Vector3d::Zero();        // ENU metres (Up held: zero)
+  Eigen::Vector3d attitude_err_n_rad = Eigen::Vector3d::Zero();
+};
+
+struct NavSummary {
+  double duration_s = 0;
+  std::int64_t frames = 0;
+  double max_velocity_error_mps = 0;   // horizontal
+  double max_position_error_m = 0;     // horizontal
+  double max_attitude_error_rad = 0;
+};
+
+// Reduces raw increments to the compensated input over each sample interval. Needs a few frames
+// of look-ahead to undo channel delays; the runner feeds it a window of frames.
+class Compensator {
+ public:
+  explicit Compensator(const ImuModel& model);
+  // Frames on each side of the current one that compensate() reads.
+  int lookahead() const { return lookahead_; }
+  int lookback() const { return lookback_; }
+  // window[lookback()] is the frame being compensated; window holds lookback()+1+lookahead() frames.
+  void compensate(const std::deque<ImuFrame>& window, double dt_s, Eigen::Vector3d& dtheta_b,
+                  Eigen::Vector3d& dv_b) const;
+
+ private:
+  Eigen::Vector3d shifted(const std::deque<ImuFrame>& window, bool gyro) const;
+  const ImuModel& model_;
+  int lookahead_ = 1, lookback_ = 1;
+  double dt_nominal_s_ = 0;
+  friend class NavigationRun;
+};
+
+class NavigationRun {
+ public:
+  using Sink = std::function<void(const NavErrorSample&)>;
+  NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink);
+
+  void push(const ImuFrame& frame);  // throws std::runtime_error on a gap in the frames
+  NavSummary finish();
+
+ private:
+  void step();  // navigate the frame at window_[lookback]
+  struct Reference {
+    Eigen::Matrix3d C_b_n;
+    Eigen::Vector3d v_n, r_n;
+  };
+  Reference reference(std::size_t index) const;
+
+  RecordingMeta meta_;
+  ImuModel model_;
+  Compensator comp_;
+  Sink sink_;
+  double output_interval_s_;
+  double next_output_s_ = 0;
+  Eigen::Matrix3d C_p0_n_;
+  Eigen::Matrix3d C_b_o_;
+  Eigen::Vector3d r0_p_m_;
+  double lat0_, lon0_, h0_, RM0_, RN0_;
+  double dt_nominal_s_;
+  std::deque<ImuFrame> window_;
+  std::int64_t frames_seen_ = 0;
+  std::int64_t first_t_ns_ = 0;
+  bool started_ = false;
+  std::unique_ptr<Strapdown> nav_;
+  NavSummary summary_;
+};
+
+}  // namespace imucal::nav

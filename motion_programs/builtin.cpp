@@ -1,0 +1,148 @@
+// The built-in motion programs, generated as data (the same JSON a user could write).
+#include <cmath>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+#include "motion_programs/program.hpp"
+
+namespace imucal::motion {
+
+using nlohmann::json;
+
+namespace {
+
+// Table poses (outer, middle, inner in degrees) that point one IMU axis up or down for an IMU
+// mounted square on the platform (C_o_p = I): z up at middle 0, y up at middle 90, x up at
+// middle 90 / inner 90. The outer angle sets the heading.
+json pose(double outer, double middle, double inner) { return json::array({outer, middle, inner}); }
+
+const double kDiagonalMiddleDeg = std::atan(std::sqrt(2.0)) * 180.0 / 3.14159265358979323846;
+
+json hold(const std::string& name, double s) { return {{"type", "hold"}, {"name", name}, {"duration_s", s}}; }
+json move(const std::string& name, const json& to) { return {{"type", "move"}, {"name", name}, {"to_deg", to}}; }
+
+// Multi-position statics and +/- rate runs about each IMU axis. dwell 36 s per the seed.
+json direct_program(double dwell_s, const std::vector<double>& headings, double rate_dps, double revolutions) {
+  json segs = json::array();
+  segs.push_back(hold("start", dwell_s));
+  json positions = json::array();
+  const std::vector<std::array<double, 2>> orientations = {
+      {0, 0}, {180, 0}, {90, 0}, {-90, 0}, {90, 90}, {90, -90}};  // z up/down, y up/down, x up/down
+  for (const auto& o : orientations)
+    for (double h : headings) positions.push_back(pose(h, o[0], o[1]));
+  segs.push_back({{"type", "positions"}, {"name", "pos"}, {"positions_deg", positions}, {"dwell_s", dwell_s}});
+  const std::vector<std::pair<std::string, json>> rate_axes = {
+      {"z", pose(0, 0, 0)}, {"x", pose(0, 90, 90)}, {"y", pose(0, 90, 0)}};
+  for (const auto& [axis, p] : rate_axes) {
+    segs.push_back(move("to-pre-" + axis, p));
+    segs.push_back(hold("pre-" + axis, dwell_s));
+    for (const char* sign : {"+", "-"}) {
+      const double r = sign[0] == '+' ? rate_dps : -rate_dps;
+      segs.push_back({{"type", "rate"}, {"name", "rate-" + axis + sign}, {"axis", "outer"}, {"rate_dps", r},
+                      {"revolutions", revolutions}, {"accel_dps2", 20.0}});
+      segs.push_back(hold("post-" + axis + sign, dwell_s));
+    }
+  }
+  return {{"name", "direct"},
+          {"comment", "Stage 1: each IMU axis up and down at several headings, then +/- rate runs about each IMU axis"},
+          {"segments", segs}};
+}
+
+json lever_arm_program() {
+  json segs = json::array();
+  const std::vector<std::pair<std::string, json>> up = {{"x", pose(0, 90, 90)}, {"y", pose(0, 90, 0)}, {"z", pose(0, 0, 0)}};
+  for (const auto& [axis, p] : up) {
+    segs.push_back(move("to-" + axis + "-up", p));
+    segs.push_back(hold("static-" + axis + "-up", 36));
+    // Variable angular acceleration about the vertical accelerometer axis: 20 deg at 2 s.
+    segs.push_back({{"type", "sine"}, {"name", "osc-" + axis + "-up"}, {"axis", "outer"}, {"amplitude_deg", 20.0},
+                    {"period_s", 2.0}, {"cycles", 60}, {"phase_deg", 0.0}, {"ramp_s", 4.0}});
+    segs.push_back(hold("after-" + axis + "-up", 36));
+  }
+  return {{"name", "lever-arm"},
+          {"comment", "Oscillations with variable angular acceleration about each accelerometer axis pointing up"},
+          {"segments", segs}};
+}
+
+json navigation_program() {
+  json segs = json::array();
+  auto swing = [&](const std::string& name, const char* axis) {
+    segs.push_back({{"type", "sine"}, {"name", name}, {"axis", axis}, {"amplitude_deg", 360.0},
+                    {"period_s", 1200.0}, {"cycles", 1}, {"phase_deg", 90.0}});
+  };
+  // Part 1: slow 360 deg swings, 20 min period, about each table axis; then 90 deg re-orientation.
+  segs.push_back(hold("start", 60));
+  swing("swing-outer-a", "outer");
+  swing("swing-middle-a", "middle");
+  segs.push_back(move("to-middle-90-a", pose(0, 90, 0)));
+  swing("swing-inner-a", "inner");
+  segs.push_back(move("reorient-90", pose(0, 90, 90)));
+  segs.push_back(hold("settle-b", 60));
+  swing("swing-outer-b", "outer");
+  swing("swing-middle-b", "middle");
+  swing("swing-inner-b", "inner");
+  // Part 2: fast 180 deg / 25 s oscillation of the outer axis with the IMU diagonal up.
+  segs.push_back(move("to-diagonal", pose(0, kDiagonalMiddleDeg, 45)));
+  segs.push_back(hold("diagonal-static", 60));
+  segs.push_back({{"type", "sine"}, {"name", "diagonal-osc"}, {"axis", "outer"}, {"amplitude_deg", 180.0},
+                  {"period_s", 25.0}, {"cycles", 20}, {"phase_deg", 0.0}, {"ramp_s", 25.0}});
+  // Part 3: single-axis 180 deg / 20 s oscillations about each IMU axis.
+  const std::vector<std::pair<std::string, json>> up = {{"z", pose(0, 0, 0)}, {"x", pose(0, 90, 90)}, {"y", pose(0, 90, 0)}};
+  for (const auto& [axis, p] : up) {
+    segs.push_back(move("to-osc-" + axis, p));
+    segs.push_back(hold("pre-osc-" + axis, 30));
+    segs.push_back({{"type", "sine"}, {"name", "osc-" + axis}, {"axis", "outer"}, {"amplitude_deg", 180.0},
+                    {"period_s", 20.0}, {"cycles", 10}, {"phase_deg", 0.0}, {"ramp_s", 20.0}});
+  }
+  segs.push_back(hold("end", 30));
+  return {{"name", "navigation"},
+          {"comment", "Stage 3 (seed ch. 4): slow swings, fast diagonal oscillation, single-axis oscillations"},
+          {"segments", segs}};
+}
+
+json noise_program() {
+  return {{"name", "noise"},
+          {"comment", "Two hours static, z up, for Allan deviation and bias instability"},
+          {"segments", json::array({hold("static", 7500)})}};
+}
+
+json evaluate_program() {
+  json segs = json::array();
+  segs.push_back(hold("start", 120));
+  // Tilts: accelerometer errors show as Schuler oscillations after each tilt.
+  segs.push_back({{"type", "tilts"}, {"name", "tilt"},
+                  {"positions_deg", json::array({pose(0, 10, 0), pose(0, 0, 0), pose(0, 10, 90)})},
+                  {"dwell_s", 1800}});
+  // Coning: middle and inner axes, same frequency, 90 deg apart.
+  segs.push_back(move("to-level", pose(0, 0, 0)));
+  segs.push_back({{"type", "coning"}, {"name", "coning"}, {"axes", {"middle", "inner"}}, {"amplitude_deg", 10.0},
+                  {"period_s", 10.0}, {"cycles", 540}, {"ramp_s", 10.0}});
+  segs.push_back(hold("end", 60));
+  return {{"name", "evaluate"},
+          {"comment", "Judging a calibration: tilts (30 min each), then 90 min of coning 10 deg at 10 s"},
+          {"segments", segs}};
+}
+
+}  // namespace
+
+std::vector<std::string> builtin_program_names() {
+  return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate"};
+}
+
+std::string builtin_program_json(const std::string& name) {
+  if (name == "direct") return direct_program(36.0, {0, 90, 180, 270}, 20.0, 5.0).dump(1);
+  if (name == "direct-short") {
+    json j = direct_program(10.0, {0, 180}, 30.0, 2.0);
+    j["name"] = "direct-short";
+    j["comment"] = "A 10-minute version of direct for quick checks (not enough statics for full accuracy)";
+    return j.dump(1);
+  }
+  if (name == "lever-arm") return lever_arm_program().dump(1);
+  if (name == "navigation") return navigation_program().dump(1);
+  if (name == "noise") return noise_program().dump(1);
+  if (name == "evaluate") return evaluate_program().dump(1);
+  throw std::invalid_argument("unknown built-in program '" + name + "'");
+}
+
+}  // namespace imucal::motion
