@@ -192,7 +192,9 @@ std::optional<double> exact_mm(double r_m) {
 // ---------------------------------------------------------------------------------------------
 // meta.json
 
-json meta_to_bundle_json(const RecordingMeta& meta) {
+// ordered_json keeps the keys in the order of formats.md, for the person reading the file.
+nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
+  using json = nlohmann::ordered_json;
   json site = {{"latitude_deg", meta.site.latitude_deg},
                {"longitude_deg", meta.site.longitude_deg},
                {"height_m", meta.site.height_m}};
@@ -552,12 +554,15 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
                                line_number, *previous_t_ns, frame.t_ns});
       }
     }
-    for (int axis = 0; axis < 3; ++axis) {
-      frame.dtheta_rad(axis) = number(1 + static_cast<std::size_t>(axis));
-      frame.dv_mps(axis) = number(4 + static_cast<std::size_t>(axis));
+    // The cursor reads in column order.
+    std::array<double, kRequiredColumns.size()> value{};
+    for (std::size_t column = 1; column < kRequiredColumns.size(); ++column) value[column] = number(column);
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      frame.dtheta_rad(static_cast<Eigen::Index>(axis)) = value[1 + axis];
+      frame.dv_mps(static_cast<Eigen::Index>(axis)) = value[4 + axis];
     }
     for (std::size_t axis = 0; axis < 3; ++axis) {
-      const double raw_deg = number(7 + axis);
+      const double raw_deg = value[7 + axis];
       // A jump of more than half a turn between two samples is a wrap of the encoder reading,
       // not motion (it would take > 3600 deg/s at 20 Hz).
       if (previous_t_ns) {
@@ -571,11 +576,11 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
 
     TempSample temp;
     temp.t_ns = frame.t_ns;
-    for (int axis = 0; axis < 3; ++axis) {
-      temp.gyro_C(axis) = number(10 + static_cast<std::size_t>(axis));
-      temp.accel_C(axis) = number(13 + static_cast<std::size_t>(axis));
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      temp.gyro_C(static_cast<Eigen::Index>(axis)) = value[10 + axis];
+      temp.accel_C(static_cast<Eigen::Index>(axis)) = value[13 + axis];
     }
-    temp.chamber_C = number(16);
+    temp.chamber_C = value[16];
     // The optional columns: the set point is kept (empty: none at this line), the rest skipped.
     while (!cursor.exhausted()) {
       const std::size_t column = cursor.consumed();

@@ -633,6 +633,8 @@ RunDb RunDb::open(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) fail(path, "no such file");
   auto db = open_handle(path, SQLITE_OPEN_READWRITE);
+  // SQLite silently falls back to read-only; say so now rather than at the first append.
+  if (sqlite3_db_readonly(db.get(), "main") == 1) fail(path, "the file is read-only");
 
   // Any SQLite file opens; the first read tells whether it is a database at all.
   const std::int64_t application_id = pragma_int(db.get(), path, "PRAGMA application_id");

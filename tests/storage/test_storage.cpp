@@ -330,6 +330,18 @@ TEST_F(RunDbTest, RangeReadsAreInclusiveAndCrossChunksAndGaps) {
     ++count;
   });
   EXPECT_EQ(count, 10'000);
+
+  // A callback may read the run again (its own query runs beside the outer one).
+  count = 0;
+  run.for_each_frame(
+      [&](const ImuFrame& f) {
+        const auto again = run.read_frames(f.t_ns, f.t_ns);
+        ASSERT_EQ(again.size(), 1U);
+        EXPECT_EQ(again[0].t_ns, f.t_ns);
+        ++count;
+      },
+      frames[4090].t_ns, frames[4100].t_ns);
+  EXPECT_EQ(count, 11);
 }
 
 TEST_F(RunDbTest, FlushKeepsFillingTheOpenChunkAndDestructorFlushes) {
@@ -574,6 +586,17 @@ TEST_F(BundleTest, SimulatedRunSurvivesExportAndImportExactly) {
   ASSERT_EQ(report.gaps.size(), 2U);  // the two gaps simulated_frames makes
   EXPECT_EQ(report.gaps[0].line, 4500 + 2);
   EXPECT_EQ(report.gaps[0].t1_ns, frames[4500].t_ns);
+
+  // Any reader that takes llround(t_s * 1e9) gets the nanoseconds back.
+  {
+    std::ifstream csv(dir + "/frames.csv");
+    std::string line;
+    std::getline(csv, line);
+    for (const auto& frame : frames) {
+      ASSERT_TRUE(std::getline(csv, line));
+      ASSERT_EQ(std::llround(std::stod(line.substr(0, line.find(','))) * 1e9), frame.t_ns) << line;
+    }
+  }
 
   const RunDb run = RunDb::open(db2);
   expect_meta_equal(meta, run.meta());

@@ -1,0 +1,413 @@
+#include "estimators/direct_calibration.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include <Eigen/Dense>
+
+#include "core/earth.hpp"
+#include "core/table.hpp"
+#include "core/units.hpp"
+
+namespace imucal::direct {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+using units::kDegToRad;
+
+// ---------------------------------------------------------------------------------------------
+void SegmentDetector::push(const ImuFrame& f) {
+  const double t = static_cast<double>(f.t_ns) * 1e-9;
+  if (have_prev_) {
+    const bool still = (f.table_deg - prev_deg_).cwiseAbs().maxCoeff() <= still_deg_;
+    if (still) {
+      if (!in_run_) {
+        in_run_ = true;
+        run_t0_s_ = prev_t_s_;
+      }
+      run_t1_s_ = t;
+    } else if (in_run_) {
+      close_run();
+    }
+  }
+  prev_deg_ = f.table_deg;
+  prev_t_s_ = t;
+  have_prev_ = true;
+}
+
+void SegmentDetector::close_run() {
+  in_run_ = false;
+  // Leave the settling after a move and the start of the next one out of the static.
+  const double t0 = run_t0_s_ + settle_s_, t1 = run_t1_s_ - settle_s_;
+  if (t1 - t0 >= min_static_s_) {
+    char name[32];
+    std::snprintf(name, sizeof name, "static-%02zu", statics_.size() + 1);
+    statics_.push_back({name, "static", t0, t1});
+  }
+}
+
+std::vector<SegmentInfo> SegmentDetector::finish() {
+  if (in_run_) close_run();
+  return statics_;
+}
+
+// ---------------------------------------------------------------------------------------------
+DirectCalibrator::DirectCalibrator(const RecordingMeta& meta, const Options& options)
+    : meta_(meta), options_(options) {
+  for (const SegmentInfo& s : meta.segments)
+    if (s.kind == "static" || s.kind == "tilt") statics_.push_back(s);
+  std::sort(statics_.begin(), statics_.end(), [](const SegmentInfo& a, const SegmentInfo& b) { return a.t0_s < b.t0_s; });
+  C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * kDegToRad);
+  w_ie_n_ = earth::w_ie_n(meta.site.latitude_deg * kDegToRad);
+  g_mps2_ = earth::site_gravity_mps2(meta.site);
+  dt_nominal_s_ = 1.0 / meta.rate_hz;
+  intervals_.reserve(statics_.size() * 2 + 1);
+}
+
+void DirectCalibrator::open_interval(const std::string& name, bool is_static, double t0_s) {
+  Interval iv;
+  iv.name = name;
+  iv.is_static = is_static;
+  iv.t0_s = t0_s;
+  iv.t1_s = t0_s;
+  intervals_.push_back(iv);
+  current_ = &intervals_.back();
+}
+
+void DirectCalibrator::push(const ImuFrame& f) {
+  if (!have_prev_) {
+    prev_ = f;
+    have_prev_ = true;
+    return;
+  }
+  const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev_.t_ns) * 1e-9;
+  const double dt = t - t_prev;
+  constexpr double eps = 1e-7;
+  while (next_static_ < statics_.size() && t > statics_[next_static_].t1_s + eps) ++next_static_;
+  const bool in_static = next_static_ < statics_.size() && t > statics_[next_static_].t0_s + eps;
+  std::string name;
+  if (in_static) {
+    name = statics_[next_static_].name;
+  } else if (next_static_ > 0 && next_static_ < statics_.size()) {
+    name = statics_[next_static_ - 1].name + " -> " + statics_[next_static_].name;
+  }
+  if (name.empty()) {  // before the first static or after the last: no rest-to-rest reference
+    prev_ = f;
+    current_ = nullptr;
+    return;
+  }
+  if (!current_ || current_->name != name) open_interval(name, in_static, t_prev);
+  Interval& iv = *current_;
+  if (dt > options_.gap_factor * dt_nominal_s_ || dt <= 0) iv.gap = true;
+
+  // Reference rotation of o over the frame interval: platform rate from the encoder increments at
+  // the mid angles (exact for single-axis motion), plus the Earth rate along the path.
+  const Vector3d a0 = prev_.table_deg * kDegToRad, a1 = f.table_deg * kDegToRad;
+  const Vector3d mid = 0.5 * (a0 + a1), d = a1 - a0;
+  const Matrix3d A = table::Rz(-mid[2]);
+  const Vector3d wdt_p = A * table::Rx(-mid[1]) * Vector3d::UnitZ() * d[0] + A * Vector3d::UnitX() * d[1] +
+                         Vector3d::UnitZ() * d[2];
+  const Matrix3d C_p_n = table::C_p_n(mid, C_p0_n_);
+  const Vector3d wdt_o = meta_.mount.C_o_p.transpose() * (wdt_p + C_p_n.transpose() * w_ie_n_ * dt);
+  for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
+  iv.moved_axes_rad += d.cwiseAbs();
+  if (iv.frames == 0 && iv.is_static) {
+    // Specific force at rest: gravity reaction resolved in o.
+    const Matrix3d C_o_n = table::C_p_n(a1, C_p0_n_) * meta_.mount.C_o_p;
+    iv.f_o_mps2 = C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
+  }
+  iv.sum_dtheta += f.dtheta_rad;
+  iv.sum_dv += f.dv_mps;
+  iv.sumsq_dtheta += f.dtheta_rad.cwiseAbs2();
+  iv.sumsq_dv += f.dv_mps.cwiseAbs2();
+  iv.T_s += dt;
+  iv.t1_s = t;
+  ++iv.frames;
+  prev_ = f;
+}
+
+namespace {
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+// Weighted least squares with the covariance scaled by the residual variance per unit weight.
+struct Fit {
+  Eigen::VectorXd x, sigma;
+  double rms_weighted = 0;
+};
+
+Fit solve_wls(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::VectorXd& w) {
+  const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
+  const Eigen::VectorXd rhs = A.transpose() * w.asDiagonal() * b;
+  // Scale columns so the conditioning check sees the geometry, not the units.
+  const Eigen::VectorXd scale = N.diagonal().cwiseSqrt().cwiseMax(1e-300);
+  const Eigen::MatrixXd Ns = scale.cwiseInverse().asDiagonal() * N * scale.cwiseInverse().asDiagonal();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(Ns);
+  Fit f;
+  f.x = scale.cwiseInverse().asDiagonal() * ldlt.solve(scale.cwiseInverse().asDiagonal() * rhs);
+  const Eigen::VectorXd r = b - A * f.x;
+  const auto dof = static_cast<double>(A.rows() - A.cols());
+  const double s0sq = dof > 0 ? r.dot(w.asDiagonal() * r) / dof : 0.0;
+  f.rms_weighted = std::sqrt(s0sq);
+  const Eigen::MatrixXd Ninv = scale.cwiseInverse().asDiagonal() *
+                               ldlt.solve(Eigen::MatrixXd::Identity(N.rows(), N.cols())) *
+                               scale.cwiseInverse().asDiagonal();
+  f.sigma = (Ninv.diagonal() * s0sq).cwiseSqrt();
+  return f;
+}
+
+double min_scaled_eigenvalue(const Eigen::MatrixXd& A, const Eigen::VectorXd& w) {
+  const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
+  const Eigen::VectorXd s = N.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
+  const Eigen::MatrixXd Ns = s.asDiagonal() * N * s.asDiagonal();
+  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Ns).eigenvalues().minCoeff();
+}
+
+// Off-diagonal misalignment entries of row j of D: (column k, sign, key) for the two k != j.
+struct OffDiag {
+  int k;
+  double sign;
+  double Misalignment::*member;
+};
+const OffDiag kOffDiag[3][2] = {
+    {{1, +1.0, &Misalignment::xz}, {2, -1.0, &Misalignment::xy}},
+    {{0, -1.0, &Misalignment::yz}, {2, +1.0, &Misalignment::yx}},
+    {{0, +1.0, &Misalignment::zy}, {1, -1.0, &Misalignment::zx}},
+};
+
+}  // namespace
+
+Result DirectCalibrator::finish(const ImuModel& seed) const {
+  if (seed.frame != "instrument")
+    throw std::invalid_argument("stage direct: give the seed model in the instrument frame");
+  Result res;
+  res.model = seed;
+  ImuErrorSet sigma = seed.sigma.value_or(ImuErrorSet{});
+
+  std::vector<const Interval*> statics, rotations;
+  for (const Interval& iv : intervals_) {
+    if (iv.frames < 2) continue;
+    if (iv.is_static) {
+      statics.push_back(&iv);
+      continue;
+    }
+    int moving = 0;
+    for (int k = 0; k < 3; ++k) moving += iv.moved_axes_rad[k] > 1e-8;
+    const double turned = iv.moved_axes_rad.maxCoeff();
+    if (iv.gap) {
+      res.notes.push_back("rotation '" + iv.name + "' left out: a gap in the frames (never integrated across)");
+    } else if (moving > 1) {
+      res.notes.push_back("rotation '" + iv.name + "' left out: several table axes moved together");
+    } else if (turned >= options_.min_rotation_rad) {
+      rotations.push_back(&iv);
+    }
+  }
+  res.statics = static_cast<int>(statics.size());
+  res.rotations = static_cast<int>(rotations.size());
+  for (const Interval* s : statics) res.static_time_s += s->T_s;
+
+  std::vector<std::string> missing;
+  // ---------------- accelerometers: multi-position in the gravity field
+  const auto ns = static_cast<Eigen::Index>(statics.size());
+  if (ns < 4) missing.push_back("accelerometer biases, scale factors and angles: " + std::to_string(ns) +
+                                " static positions (need each axis up and down and the others horizontal, 6 at least)");
+  for (int j = 0; j < 3 && ns >= 4; ++j) {
+    double fmax = -1e9, fmin = 1e9;
+    for (const Interval* s : statics) {
+      fmax = std::max(fmax, s->f_o_mps2[j]);
+      fmin = std::min(fmin, s->f_o_mps2[j]);
+    }
+    if (fmax < 0.5 * g_mps2_ || fmin > -0.5 * g_mps2_)
+      missing.push_back(std::string("accelerometer ") + kAxis[j] + " bias_mps2 and scale_ppm: the " + kAxis[j] +
+                        " axis was never pointed both up and down (add static positions with it vertical, both ways)");
+  }
+  // ---------------- gyros: rotations of both signs about each axis
+  for (int j = 0; j < 3; ++j) {
+    double pos = 0, neg = 0;
+    for (const Interval* r : rotations) {
+      pos += r->ref_pos_rad[j];
+      neg += r->ref_neg_rad[j];
+    }
+    if (pos < 1.0)
+      missing.push_back(std::string("gyro ") + kAxis[j] + " scale_pos_ppm (and the angles of the other gyros about " +
+                        kAxis[j] + "): no positive rotation about the " + kAxis[j] +
+                        " axis (add a single-axis rate run with positive rate about it)");
+    if (neg > -1.0)
+      missing.push_back(std::string("gyro ") + kAxis[j] + " scale_neg_ppm: no negative rotation about the " + kAxis[j] +
+                        " axis (add a single-axis rate run with negative rate about it)");
+  }
+  if (statics.empty()) missing.push_back("gyro biases: no static interval");
+  if (!missing.empty()) {
+    std::string msg = "stage direct: the recording cannot determine:";
+    for (const auto& m : missing) msg += "\n  - " + m;
+    throw UndeterminedError(msg);
+  }
+
+  AccelErrors& acc = res.model.accel;
+  acc.bias_mps2.setZero();
+  acc.scale.setZero();
+  acc.misalignment_rad = {};
+  double acc_rms_sq = 0;
+  for (int iter = 0; iter < 4; ++iter) {
+    AccelErrors next = acc;
+    acc_rms_sq = 0;
+    for (int j = 0; j < 3; ++j) {
+      Eigen::MatrixXd A(ns, 4);
+      Eigen::VectorXd b(ns), w(ns);
+      for (Eigen::Index i = 0; i < ns; ++i) {
+        const Interval& s = *statics[static_cast<std::size_t>(i)];
+        const Vector3d u = s.sum_dv / s.T_s;
+        const Vector3d& f = s.f_o_mps2;
+        A(i, 0) = 1.0;
+        A(i, 1) = f[j];
+        for (int c = 0; c < 2; ++c) {
+          const OffDiag& od = kOffDiag[j][c];
+          A(i, 2 + c) = od.sign * (1.0 + acc.scale[od.k]) * f[od.k];
+        }
+        b(i) = u[j] - f[j];
+        w(i) = s.T_s;  // white noise: variance of the mean falls as 1/T
+      }
+      if (min_scaled_eigenvalue(A, w) < 1e-10)
+        throw UndeterminedError(std::string("stage direct: accelerometer ") + kAxis[j] +
+                                ": bias, scale and angles are not separable with these positions (add positions with "
+                                "each of the other axes vertical)");
+      const Fit fit = solve_wls(A, b, w);
+      next.bias_mps2[j] = fit.x[0];
+      next.scale[j] = fit.x[1];
+      sigma.accel.bias_mps2[j] = fit.sigma[0];
+      sigma.accel.scale[j] = fit.sigma[1];
+      for (int c = 0; c < 2; ++c) {
+        next.misalignment_rad.*(kOffDiag[j][c].member) = fit.x[2 + c];
+        sigma.accel.misalignment_rad.*(kOffDiag[j][c].member) = fit.sigma[2 + c];
+      }
+      acc_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
+    }
+    acc.bias_mps2 = next.bias_mps2;
+    acc.scale = next.scale;
+    acc.misalignment_rad = next.misalignment_rad;
+  }
+  // rms per unit weight is in (m/s^2) sqrt(s): report it for a 1 s average
+  res.accel_residual_rms_mps2 = std::sqrt(acc_rms_sq);
+
+  // ---------------- gyros: statics against the Earth rate, rotations against the table
+  std::vector<const Interval*> eqs = statics;
+  eqs.insert(eqs.end(), rotations.begin(), rotations.end());
+  const auto ne = static_cast<Eigen::Index>(eqs.size());
+  GyroErrors& gy = res.model.gyro;
+  gy.bias_radps.setZero();
+  gy.scale_pos.setZero();
+  gy.scale_neg.setZero();
+  gy.misalignment_rad = {};
+  double gyro_rms_sq = 0;
+  for (int iter = 0; iter < 4; ++iter) {
+    GyroErrors next = gy;
+    gyro_rms_sq = 0;
+    for (int j = 0; j < 3; ++j) {
+      Eigen::MatrixXd A(ne, 5);
+      Eigen::VectorXd b(ne), w(ne);
+      for (Eigen::Index i = 0; i < ne; ++i) {
+        const Interval& e = *eqs[static_cast<std::size_t>(i)];
+        // Input through the current scale factors of axis k, split by sign as the FOG sees it.
+        auto scaled = [&](int k) {
+          return (1.0 + gy.scale_pos[k]) * e.ref_pos_rad[k] + (1.0 + gy.scale_neg[k]) * e.ref_neg_rad[k];
+        };
+        A(i, 0) = e.T_s;
+        A(i, 1) = e.ref_pos_rad[j];
+        A(i, 2) = e.ref_neg_rad[j];
+        for (int c = 0; c < 2; ++c) A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
+        b(i) = e.sum_dtheta[j] - (e.ref_pos_rad[j] + e.ref_neg_rad[j]);
+        w(i) = 1.0 / e.T_s;  // angle random walk: variance of the summed angle grows as T
+      }
+      if (min_scaled_eigenvalue(A, w) < 1e-12)
+        throw UndeterminedError(std::string("stage direct: gyro ") + kAxis[j] +
+                                ": bias, scale factors and angles are not separable (add statics and single-axis "
+                                "rotations of both signs about every axis)");
+      const Fit fit = solve_wls(A, b, w);
+      next.bias_radps[j] = fit.x[0];
+      next.scale_pos[j] = fit.x[1];
+      next.scale_neg[j] = fit.x[2];
+      sigma.gyro.bias_radps[j] = fit.sigma[0];
+      sigma.gyro.scale_pos[j] = fit.sigma[1];
+      sigma.gyro.scale_neg[j] = fit.sigma[2];
+      for (int c = 0; c < 2; ++c) {
+        next.misalignment_rad.*(kOffDiag[j][c].member) = fit.x[3 + c];
+        sigma.gyro.misalignment_rad.*(kOffDiag[j][c].member) = fit.sigma[3 + c];
+      }
+      gyro_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
+    }
+    gy.bias_radps = next.bias_radps;
+    gy.scale_pos = next.scale_pos;
+    gy.scale_neg = next.scale_neg;
+    gy.misalignment_rad = next.misalignment_rad;
+  }
+  res.gyro_residual_rms_rad = std::sqrt(gyro_rms_sq);
+
+  // ---------------- white noise from the statics: per-sample variance about each static's mean
+  Vector3d var_g = Vector3d::Zero(), var_a = Vector3d::Zero();
+  double n_used = 0, T_used = 0;
+  for (const Interval* s : statics) {
+    const auto n = static_cast<double>(s->frames);
+    const Vector3d mg = s->sum_dtheta / n, ma = s->sum_dv / n;
+    var_g += (s->sumsq_dtheta / n - mg.cwiseAbs2()) * n;
+    var_a += (s->sumsq_dv / n - ma.cwiseAbs2()) * n;
+    n_used += n;
+    T_used += s->T_s;
+  }
+  const double dt = T_used / n_used;
+  const Vector3d arw = (var_g / n_used / dt).cwiseMax(0).cwiseSqrt(), vrw = (var_a / n_used / dt).cwiseMax(0).cwiseSqrt();
+  gy.noise.arw_rad_rts = arw.mean();
+  acc.noise.vrw_mps_rts = vrw.mean();
+
+  res.model.sigma = sigma;
+  res.model.frame = "instrument";
+  char buf[200];
+  std::snprintf(buf, sizeof buf, "stage direct: %d statics (%.0f s), %d rotations used", res.statics, res.static_time_s,
+                res.rotations);
+  res.notes.insert(res.notes.begin(), buf);
+  return res;
+}
+
+ImuModel to_body_frame(const ImuModel& m) {
+  if (m.frame == "body") return m;
+  ImuModel b = m;
+  b.frame = "body";
+  // r takes o onto b (v_b = (I - [r x]) v_o): X along accel x, Y in the accel x-y plane.
+  const Misalignment& a = m.accel.misalignment_rad;
+  const Vector3d r(a.yx, a.xy, a.xz);
+  auto shift = [&](Misalignment mis) {
+    mis.xz -= r.z();
+    mis.yz -= r.z();
+    mis.xy -= r.y();
+    mis.zy -= r.y();
+    mis.yx -= r.x();
+    mis.zx -= r.x();
+    return mis;
+  };
+  b.accel.misalignment_rad = shift(m.accel.misalignment_rad);
+  b.gyro.misalignment_rad = shift(m.gyro.misalignment_rad);
+  b.accel.misalignment_rad.xy = b.accel.misalignment_rad.xz = b.accel.misalignment_rad.yx = 0.0;  // exact zeros
+  b.body_to_instrument_rad = r;
+  if (m.sigma) {
+    // The body axes are themselves estimated: add their variance to the shifted angles.
+    const Misalignment& sa = m.sigma->accel.misalignment_rad;
+    const Vector3d sr(sa.yx, sa.xy, sa.xz);
+    auto widen = [&](Misalignment s) {
+      s.xz = std::hypot(s.xz, sr.z());
+      s.yz = std::hypot(s.yz, sr.z());
+      s.xy = std::hypot(s.xy, sr.y());
+      s.zy = std::hypot(s.zy, sr.y());
+      s.yx = std::hypot(s.yx, sr.x());
+      s.zx = std::hypot(s.zx, sr.x());
+      return s;
+    };
+    b.sigma->gyro.misalignment_rad = widen(m.sigma->gyro.misalignment_rad);
+    Misalignment acc_sigma = widen(m.sigma->accel.misalignment_rad);
+    acc_sigma.xy = acc_sigma.xz = acc_sigma.yx = 0.0;
+    b.sigma->accel.misalignment_rad = acc_sigma;
+  }
+  return b;
+}
+
+}  // namespace imucal::direct

@@ -1,0 +1,114 @@
+// Stage 1 (direct measurements) against simulated truth and against an independent recording.
+#include <gtest/gtest.h>
+
+#include "calib_fixture.hpp"
+#include "drivers/sim/simulator.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "core/table.hpp"
+#include "storage/bundle.hpp"
+
+#include <filesystem>
+
+namespace {
+Eigen::Matrix3d table_skew(const Eigen::Vector3d& v) { return imucal::table::skew(v); }
+}  // namespace
+
+using namespace imucal;
+
+namespace {
+
+direct::Result calibrate_simulated(const std::string& program, const ImuModel& truth, double rate_hz,
+                                   std::uint64_t seed, bool detect_segments = false) {
+  const auto p = motion::load_program(program, motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = rate_hz;
+  cfg.seed = seed;
+  cfg.site.middle_axis_azimuth_deg = 15;
+  RecordingMeta meta = sim::Simulator(p, truth, cfg).meta();
+  if (detect_segments) {
+    direct::SegmentDetector det;
+    sim::Simulator s(p, truth, cfg);
+    ImuFrame f;
+    while (s.next(f)) det.push(f);
+    meta.segments = det.finish();
+  }
+  direct::DirectCalibrator cal(meta);
+  sim::Simulator s(p, truth, cfg);
+  ImuFrame f;
+  while (s.next(f)) cal.push(f);
+  return cal.finish();
+}
+
+}  // namespace
+
+TEST(Direct, RecoversEveryCoefficientOfARandomImu) {
+  const ImuModel truth = calibtest::random_stage1_imu(11);
+  const direct::Result r = calibrate_simulated("direct", truth, 100, 5);
+  for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
+  EXPECT_GE(r.static_time_s, 1200.0);
+  calibtest::expect_within(truth, r.model, calibtest::kStage1Limits);
+  EXPECT_NEAR(r.model.gyro.noise.arw_rad_rts / truth.gyro.noise.arw_rad_rts, 1.0, 0.10);
+  EXPECT_NEAR(r.model.accel.noise.vrw_mps_rts / truth.accel.noise.vrw_mps_rts, 1.0, 0.10);
+}
+
+TEST(Direct, FindsTheStaticsItselfWhenTheRecordingHasNoSegments) {
+  const ImuModel truth = calibtest::random_stage1_imu(12);
+  const direct::Result r = calibrate_simulated("direct", truth, 100, 6, true);
+  EXPECT_GE(r.statics, 30);
+  EXPECT_GE(r.rotations, 6);  // the six rate runs and the single-axis moves between positions
+  calibtest::expect_within(truth, r.model, calibtest::kStage1Limits);
+}
+
+TEST(Direct, IndependentRecordingCalibratesToItsTruth) {
+  const std::string db = std::string(IMUCAL_TEST_TMP) + "/direct-example.db";
+  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  std::filesystem::remove(db);
+  storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
+  const auto run = storage::RunDb::open(db);
+  direct::DirectCalibrator cal(run.meta());
+  run.for_each_frame([&](const ImuFrame& f) { cal.push(f); });
+  const direct::Result r = cal.finish();
+  for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
+  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  calibtest::expect_within(truth, r.model, calibtest::kStage1Limits);
+}
+
+TEST(Direct, MissingMotionIsNamed) {
+  // Statics with z up and down only: nothing about x and y scale, no rotations at all.
+  const std::string json = R"({"name":"z-only","segments":[{"type":"hold","name":"a","duration_s":20},
+    {"type":"positions","name":"p","positions_deg":[[0,180,0],[90,0,0],[90,180,0]],"dwell_s":20}]})";
+  const auto p = motion::compile_program(json, motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = 50;
+  sim::Simulator s(p, ImuModel{}, cfg);
+  direct::DirectCalibrator cal(s.meta());
+  ImuFrame f;
+  while (s.next(f)) cal.push(f);
+  try {
+    cal.finish();
+    FAIL() << "an undetermined model was returned";
+  } catch (const direct::UndeterminedError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("accelerometer x bias_mps2 and scale_ppm: the x axis was never pointed both up and down"),
+              std::string::npos) << msg;
+    EXPECT_NE(msg.find("gyro y scale_neg_ppm: no negative rotation about the y axis"), std::string::npos) << msg;
+  }
+}
+
+TEST(Direct, BodyFrameZeroesTheAccelerometerReferenceAngles) {
+  ImuModel m = calibtest::random_stage1_imu(3);
+  m.sigma = ImuErrorSet{};
+  const ImuModel b = direct::to_body_frame(m);
+  EXPECT_EQ(b.frame, "body");
+  EXPECT_EQ(b.accel.misalignment_rad.xy, 0.0);
+  EXPECT_EQ(b.accel.misalignment_rad.xz, 0.0);
+  EXPECT_EQ(b.accel.misalignment_rad.yx, 0.0);
+  ASSERT_TRUE(b.body_to_instrument_rad.has_value());
+  // The accelerometer axes expressed in b, to first order, have the same rows as in o rotated by r.
+  const Eigen::Matrix3d C_o_b = Eigen::Matrix3d::Identity() - table_skew(*b.body_to_instrument_rad);
+  const Eigen::Matrix3d Da_o = misalignment_matrix(m.accel.misalignment_rad);
+  const Eigen::Matrix3d Da_b = misalignment_matrix(b.accel.misalignment_rad);
+  EXPECT_LT((Da_o * C_o_b.transpose() - Da_b).cwiseAbs().maxCoeff(), 1e-7);
+  const Eigen::Matrix3d Dg_o = misalignment_matrix(m.gyro.misalignment_rad);
+  EXPECT_LT((Dg_o * C_o_b.transpose() - misalignment_matrix(b.gyro.misalignment_rad)).cwiseAbs().maxCoeff(), 1e-7);
+}
