@@ -1,8 +1,10 @@
 // imucal: the command line. A thin shell over the libraries: simulate, navigate, export, import.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -13,6 +15,8 @@
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
 #include "drivers/sim/simulator.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "estimators/lever_arm.hpp"
 #include "estimators/navigation_run.hpp"
 #include "motion_programs/program.hpp"
 #include "storage/bundle.hpp"
@@ -147,6 +151,82 @@ int cmd_navigate(const NavigateArgs& a) {
   return 0;
 }
 
+struct CalibrateArgs {
+  std::string db, stage = "direct", model, out, frame = "instrument";
+};
+
+// Stage 1 over a stored run: statics from the run's segments, or found from the table angles.
+direct::Result run_direct(const storage::RunDb& db, const ImuModel& seed) {
+  RecordingMeta meta = db.meta();
+  bool has_statics = false;
+  for (const auto& s : meta.segments) has_statics |= (s.kind == "static" || s.kind == "tilt");
+  if (!has_statics) {
+    direct::SegmentDetector detector;
+    db.for_each_frame([&](const ImuFrame& f) { detector.push(f); });
+    meta.segments = detector.finish();
+    std::fprintf(stderr, "stage direct: the run lists no statics; found %zu from the table angles\n",
+                 meta.segments.size());
+  }
+  direct::DirectCalibrator cal(meta);
+  // The calibrator refuses to integrate a rotation across a gap; list them so the operator knows why.
+  for (const auto& g : storage::stored_gaps(db))
+    std::fprintf(stderr, "gap in the frames: %.6f s .. %.6f s\n", g.t0_s, g.t1_s);
+  Progress progress("stage direct", db.frame_count());
+  std::int64_t n = 0;
+  db.for_each_frame([&](const ImuFrame& f) {
+    cal.push(f);
+    if ((++n & 0xFFFF) == 0) progress.update(n);
+  });
+  progress.done();
+  return cal.finish(seed);
+}
+
+int cmd_calibrate(const CalibrateArgs& a) {
+  const auto db = storage::RunDb::open(a.db);
+  ImuModel model = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
+  if (model.frame != "instrument")
+    throw std::invalid_argument(a.model + ": give the instrument-frame model (the body-frame form is an output)");
+  std::vector<std::string> ran, skipped;
+  const bool all = a.stage == "all";
+  // With --stage all, a stage the recording cannot support is skipped with its reason; asked for
+  // alone, the same reason is an error.
+  auto attempt = [&](const std::string& stage, const std::function<void()>& body) {
+    if (!all && a.stage != stage) return;
+    try {
+      body();
+      ran.push_back(stage);
+    } catch (const std::exception& e) {
+      if (!all) throw;
+      skipped.push_back(stage + ": " + e.what());
+    }
+  };
+  attempt("direct", [&] {
+    const direct::Result r = run_direct(db, model);
+    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
+    model = r.model;
+  });
+  attempt("lever-arm", [&] {
+    const RecordingMeta meta = db.meta();
+    if (std::none_of(meta.segments.begin(), meta.segments.end(), [](const SegmentInfo& s) { return s.kind == "sine"; }))
+      throw std::invalid_argument("the run has no oscillation segments (record the lever-arm program)");
+    lever::LeverArmFilter filter(meta, model);
+    db.for_each_frame([&](const ImuFrame& f) { filter.push(f); });
+    const lever::Result r = filter.finish();
+    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
+    model = r.model;
+  });
+  if (all) {
+    skipped.push_back("thermal: not implemented yet");
+    skipped.push_back("navigation: not implemented yet");
+  }
+  const ImuModel out = a.frame == "body" ? direct::to_body_frame(model) : model;
+  write_imu_model_file(out, a.out);
+  for (const auto& s : ran) std::printf("ran stage %s\n", s.c_str());
+  for (const auto& s : skipped) std::printf("skipped stage %s\n", s.c_str());
+  std::printf("wrote %s (%s frame)\n", a.out.c_str(), out.frame.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -187,10 +267,22 @@ int main(int argc, char** argv) {
   imp->add_option("dir", imp_dir, "bundle folder (meta.json, frames.csv)")->required()->check(CLI::ExistingDirectory);
   imp->add_option("--db", imp_db, "output run database (must not exist)")->required();
 
+  CalibrateArgs cal_args;
+  auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
+  cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
+  cal->add_option("--stage", cal_args.stage, "direct, lever-arm or all")->capture_default_str()->check(
+      CLI::IsMember({"direct", "lever-arm", "all"}));
+  cal->add_option("--model", cal_args.model, "model to start from; its other coefficients are carried over")
+      ->check(CLI::ExistingFile);
+  cal->add_option("--out", cal_args.out, "output imucal-imu-model/1 JSON")->required();
+  cal->add_option("--frame", cal_args.frame, "instrument or body")->capture_default_str()->check(
+      CLI::IsMember({"instrument", "body"}));
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (sim->parsed()) return cmd_simulate(sim_args);
     if (navc->parsed()) return cmd_navigate(nav_args);
+    if (cal->parsed()) return cmd_calibrate(cal_args);
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

@@ -194,36 +194,36 @@ std::optional<double> exact_mm(double r_m) {
 
 // ordered_json keeps the keys in the order of formats.md, for the person reading the file.
 nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
-  using json = nlohmann::ordered_json;
-  json site = {{"latitude_deg", meta.site.latitude_deg},
+  using ojson = nlohmann::ordered_json;
+  ojson site = {{"latitude_deg", meta.site.latitude_deg},
                {"longitude_deg", meta.site.longitude_deg},
                {"height_m", meta.site.height_m}};
   if (meta.site.gravity_mps2) site["gravity_mps2"] = *meta.site.gravity_mps2;
   site["middle_axis_azimuth_deg"] = meta.site.middle_axis_azimuth_deg;
 
-  json imu = {{"serial", meta.imu_serial}, {"rate_hz", meta.rate_hz}};
+  ojson imu = {{"serial", meta.imu_serial}, {"rate_hz", meta.rate_hz}};
   if (meta.gyro_lsb_rad) imu["gyro_lsb_rad"] = *meta.gyro_lsb_rad;
   if (meta.accel_lsb_mps) imu["accel_lsb_mps"] = *meta.accel_lsb_mps;
 
-  json c_o_p = json::array();
+  ojson c_o_p = ojson::array();
   for (int row = 0; row < 3; ++row) {
     c_o_p.push_back({meta.mount.C_o_p(row, 0), meta.mount.C_o_p(row, 1), meta.mount.C_o_p(row, 2)});
   }
-  json r0_p_mm = json::array();
+  ojson r0_p_mm = ojson::array();
   bool mm_exact = true;
   for (int axis = 0; axis < 3; ++axis) {
     const auto mm = exact_mm(meta.mount.r0_p_m(axis));
     mm_exact = mm_exact && mm.has_value();
     r0_p_mm.push_back(mm.value_or(meta.mount.r0_p_m(axis) * 1000.0));
   }
-  json mount = {{"C_o_p", c_o_p}, {"r0_p_mm", r0_p_mm}};
+  ojson mount = {{"C_o_p", c_o_p}, {"r0_p_mm", r0_p_mm}};
   if (!mm_exact) {
     mount["r0_p_m"] = {meta.mount.r0_p_m.x(), meta.mount.r0_p_m.y(), meta.mount.r0_p_m.z()};
   }
 
-  json root = {{"format", kRecordingFormat}, {"site", site}, {"imu", imu}, {"mount", mount}};
+  ojson root = {{"format", kRecordingFormat}, {"site", site}, {"imu", imu}, {"mount", mount}};
   if (!meta.segments.empty()) {
-    json segments = json::array();
+    ojson segments = ojson::array();
     for (const auto& segment : meta.segments) {
       segments.push_back(
           {{"name", segment.name}, {"kind", segment.kind}, {"t0_s", segment.t0_s}, {"t1_s", segment.t1_s}});

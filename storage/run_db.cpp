@@ -13,12 +13,15 @@
 //      2: n x i64 t_ns (used when a delta does not fit an i32, i.e. a gap > 2.1 s)
 //   codec 1 (integer counts):
 //      f64 gyro_lsb_rad, f64 accel_lsb_mps (the chunk decodes without the meta)
-//      n x {i32 dth_x, dth_y, dth_z, dv_x, dv_y, dv_z}    value = double(count) * lsb
+//      n x {i32 dth_x, dth_y, dth_z, dv_x, dv_y, dv_z}    value = double(count) * lsb,
+//      except count = INT32_MIN, which stands for -0.0 (a simulator rounding a small negative
+//      value with nearbyint makes -0.0; without this every such chunk would fall back to doubles)
 //   codec 2 (doubles):
 //      n x {f64 dth_x, dth_y, dth_z, dv_x, dv_y, dv_z}
 //   n x {f64 outer_deg, middle_deg, inner_deg}
 // Codec 1 costs 4 + 24 + 24 = 52 bytes per frame, codec 2 76. A chunk uses codec 1 only when
-// every value is exactly double(count) * lsb (bit for bit), so decoding never changes a value.
+// every value is exactly double(count) * lsb (bit for bit) or -0.0, so decoding never changes a
+// value (a tolerance such as 1e-6 LSB would).
 #include "storage/run_db.hpp"
 
 #include <sqlite3.h>
@@ -45,6 +48,8 @@ constexpr std::int32_t kApplicationId = 0x494D5543;
 
 constexpr int kCodecCounts = 1;
 constexpr int kCodecDoubles = 2;
+// Counts span +-(2^31 - 1); the one value left over encodes -0.0.
+constexpr std::int32_t kNegativeZeroCount = std::numeric_limits<std::int32_t>::min();
 constexpr std::uint8_t kTimeDeltas32 = 1;
 constexpr std::uint8_t kTimeAbsolute64 = 2;
 
@@ -318,6 +323,7 @@ T get(const unsigned char*& in) {
 
 // The integer count that reproduces `value` exactly as double(count) * lsb, if there is one.
 std::optional<std::int32_t> exact_count(double value, double lsb) {
+  if (std::bit_cast<std::uint64_t>(value) == std::bit_cast<std::uint64_t>(-0.0)) return kNegativeZeroCount;
   const double quotient = value / lsb;
   // |count| >= 2^31 does not fit; the comparison also rejects NaN.
   if (!(std::fabs(quotient) < 2147483647.5)) return std::nullopt;
@@ -431,13 +437,12 @@ void decode_chunk(std::int64_t chunk_id, std::int64_t n_frames, int codec,
   if (codec == kCodecCounts) {
     const double gyro_lsb_rad = get<double>(p);
     const double accel_lsb_mps = get<double>(p);
+    auto value = [](std::int32_t count, double lsb) {
+      return count == kNegativeZeroCount ? -0.0 : static_cast<double>(count) * lsb;
+    };
     for (auto& frame : out) {
-      for (int axis = 0; axis < 3; ++axis) {
-        frame.dtheta_rad(axis) = static_cast<double>(get<std::int32_t>(p)) * gyro_lsb_rad;
-      }
-      for (int axis = 0; axis < 3; ++axis) {
-        frame.dv_mps(axis) = static_cast<double>(get<std::int32_t>(p)) * accel_lsb_mps;
-      }
+      for (int axis = 0; axis < 3; ++axis) frame.dtheta_rad(axis) = value(get<std::int32_t>(p), gyro_lsb_rad);
+      for (int axis = 0; axis < 3; ++axis) frame.dv_mps(axis) = value(get<std::int32_t>(p), accel_lsb_mps);
     }
   } else {
     for (auto& frame : out) {

@@ -287,12 +287,16 @@ TEST_F(RunDbTest, Codec2RoundTripIsBitExactForAnyDouble) {
 TEST_F(RunDbTest, Codec1FallsBackToDoublesPerChunk) {
   const std::string path = temp_path("run.db");
   auto frames = simulated_frames(4 * 4096 + 100, 4);
-  // Chunk 1: one value that is not a whole number of LSBs (1 ulp off) and a negative zero.
+  // Chunk 1: one value that is not a whole number of LSBs (1 ulp off).
   frames[4096 + 17].dv_mps.x() = std::nextafter(frames[4096 + 17].dv_mps.x(), 1.0);
-  frames[4096 + 18].dtheta_rad.y() = -0.0;
   // Chunk 2: a count that does not fit 31 bits.
   frames[2 * 4096 + 5].dtheta_rad.z() = 3e9 * kGyroLsbRad;
-  // Chunk 3 stays codec 1.
+  // Chunks 0 and 3 stay codec 1, negative zeros (nearbyint(-0.3) * lsb) and +-(2^31 - 1) included.
+  frames[3].dtheta_rad.y() = -0.0;
+  frames[3 * 4096 + 1].dv_mps.z() = -0.0;
+  frames[3 * 4096 + 2].dv_mps.z() = 0.0;
+  frames[3 * 4096 + 3].dtheta_rad.x() = 2147483647.0 * kGyroLsbRad;
+  frames[3 * 4096 + 4].dtheta_rad.x() = -2147483647.0 * kGyroLsbRad;
 
   RunDb run = RunDb::create(path, simulated_meta());
   run.append(frames);

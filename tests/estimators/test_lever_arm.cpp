@@ -1,0 +1,84 @@
+// Stage 1, size effect: proof-mass positions from the lever-arm program.
+#include <gtest/gtest.h>
+
+#include "calib_fixture.hpp"
+#include "drivers/sim/simulator.hpp"
+#include "estimators/lever_arm.hpp"
+
+using namespace imucal;
+
+TEST(LeverArm, FindsTheProofMassesAndTheOriginWithinAFractionOfAMillimetre) {
+  ImuModel truth = calibtest::random_stage1_imu(21);
+  truth.accel.lever_arm_y_m << 0.012, -0.004, 0.007;
+  truth.accel.lever_arm_z_m << -0.006, 0.010, -0.015;
+  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = 200;
+  cfg.seed = 3;
+  cfg.mount.r0_p_m << 0.035, -0.020, 0.060;
+  // The stage-1 model: the truth with small residual errors, as stage 1 leaves them.
+  ImuModel stage1 = truth;
+  stage1.accel.lever_arm_y_m.setZero();
+  stage1.accel.lever_arm_z_m.setZero();
+  stage1.accel.bias_mps2 += Eigen::Vector3d(5e-6, -5e-6, 3e-6);
+  stage1.accel.scale += Eigen::Vector3d(1e-6, -1e-6, 1e-6);
+  sim::Simulator s(p, truth, cfg);
+  lever::LeverArmFilter filter(s.meta(), stage1);
+  ImuFrame f;
+  while (s.next(f)) filter.push(f);
+  const lever::Result r = filter.finish();
+  for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
+  const Eigen::Vector3d ey = (r.model.accel.lever_arm_y_m - truth.accel.lever_arm_y_m) * 1e3;
+  const Eigen::Vector3d ez = (r.model.accel.lever_arm_z_m - truth.accel.lever_arm_z_m) * 1e3;
+  const Eigen::Vector3d e0 = (*r.model.mount_r0_p_m - cfg.mount.r0_p_m) * 1e3;
+  std::printf("errors, mm: r_y %+.4f %+.4f %+.4f  r_z %+.4f %+.4f %+.4f  r0 %+.4f %+.4f %+.4f\n", ey.x(), ey.y(), ey.z(),
+              ez.x(), ez.y(), ez.z(), e0.x(), e0.y(), e0.z());
+  EXPECT_LT(ey.cwiseAbs().maxCoeff(), 0.3);
+  EXPECT_LT(ez.cwiseAbs().maxCoeff(), 0.3);
+  EXPECT_LT(e0.cwiseAbs().maxCoeff(), 0.3);
+  // The 9-state filter of the seed does not carry the stage-1 residuals injected above, so its sigma
+  // is only checked where the stage-1 model is exact (next test).
+}
+
+TEST(LeverArm, SigmaIsConsistentWhenStageOneIsExact) {
+  ImuModel truth = calibtest::random_stage1_imu(22);
+  truth.accel.lever_arm_y_m << -0.008, 0.003, 0.009;
+  truth.accel.lever_arm_z_m << 0.004, -0.011, 0.013;
+  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = 200;
+  cfg.seed = 4;
+  cfg.mount.r0_p_m << -0.02, 0.03, 0.05;
+  ImuModel stage1 = truth;
+  stage1.accel.lever_arm_y_m.setZero();
+  stage1.accel.lever_arm_z_m.setZero();
+  sim::Simulator s(p, truth, cfg);
+  lever::LeverArmFilter filter(s.meta(), stage1);
+  ImuFrame f;
+  while (s.next(f)) filter.push(f);
+  const lever::Result r = filter.finish();
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LE(std::abs(r.model.accel.lever_arm_y_m[i] - truth.accel.lever_arm_y_m[i]),
+              3 * r.model.sigma->accel.lever_arm_y_m[i]) << i;
+    EXPECT_LE(std::abs(r.model.accel.lever_arm_z_m[i] - truth.accel.lever_arm_z_m[i]),
+              3 * r.model.sigma->accel.lever_arm_z_m[i]) << i;
+    EXPECT_LE(std::abs((*r.model.mount_r0_p_m)[i] - cfg.mount.r0_p_m[i]), 3 * r.sigma_m[i]) << i;
+  }
+}
+
+TEST(LeverArm, StaticRecordingIsRefusedByName) {
+  const auto p = motion::compile_program(R"({"name":"s","segments":[{"type":"hold","duration_s":30}]})",
+                                         motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = 100;
+  sim::Simulator s(p, ImuModel{}, cfg);
+  lever::LeverArmFilter filter(s.meta(), ImuModel{});
+  ImuFrame f;
+  while (s.next(f)) filter.push(f);
+  try {
+    filter.finish();
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("does not determine r0.x"), std::string::npos) << e.what();
+  }
+}
