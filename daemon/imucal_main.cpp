@@ -17,6 +17,7 @@
 #include "drivers/sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
+#include "estimators/noise.hpp"
 #include "estimators/navigation_run.hpp"
 #include "motion_programs/program.hpp"
 #include "storage/bundle.hpp"
@@ -182,7 +183,7 @@ direct::Result run_direct(const storage::RunDb& db, const ImuModel& seed) {
 }
 
 int cmd_calibrate(const CalibrateArgs& a) {
-  const auto db = storage::RunDb::open(a.db);
+  auto db = storage::RunDb::open(a.db);
   ImuModel model = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
   if (model.frame != "instrument")
     throw std::invalid_argument(a.model + ": give the instrument-frame model (the body-frame form is an output)");
@@ -214,6 +215,14 @@ int cmd_calibrate(const CalibrateArgs& a) {
     const lever::Result r = filter.finish();
     for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
     model = r.model;
+  });
+  attempt("noise", [&] {
+    noise::NoiseAnalyzer analyzer(db.meta());
+    db.for_each_frame([&](const ImuFrame& f) { analyzer.push(f); });
+    const noise::Result r = analyzer.finish();
+    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
+    model = r.apply(model);
+    db.set_extra("noise_curves", r.curves_json());  // Allan and PSD curves for the plots
   });
   if (all) {
     skipped.push_back("thermal: not implemented yet");
@@ -270,8 +279,8 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, lever-arm or all")->capture_default_str()->check(
-      CLI::IsMember({"direct", "lever-arm", "all"}));
+  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, noise or all")->capture_default_str()->check(
+      CLI::IsMember({"direct", "lever-arm", "noise", "all"}));
   cal->add_option("--model", cal_args.model, "model to start from; its other coefficients are carried over")
       ->check(CLI::ExistingFile);
   cal->add_option("--out", cal_args.out, "output imucal-imu-model/1 JSON")->required();

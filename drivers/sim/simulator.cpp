@@ -50,9 +50,12 @@ std::array<NormalStream, N> make_streams(std::uint64_t seed, std::uint64_t first
 // Ratio of the Allan-deviation maximum of a first-order Gauss-Markov process to its standard
 // deviation (reached near tau = 1.89 Tc), and the IEEE definition of bias instability as the
 // Allan floor divided by 0.664: together they set the process sigma that shows a given floor.
-constexpr double kGmAllanPeakRatio = 0.6167;
+constexpr double kGmAllanPeakRatio = 0.6174;
 constexpr double kFlickerFloorFactor = 0.664;
-constexpr double kDefaultBiasCorrTime_s = 300.0;
+// Five unit Gauss-Markov processes with correlation times 1, 10, 100, 1000, 10000 s have an Allan
+// deviation flat within +-2 % at 0.77 from 4 s to 4000 s: a flicker floor without 1/f synthesis.
+constexpr double kFlickerBankAllanFloor = 0.77;
+constexpr std::array<double, 5> kFlickerBankTimes_s = {1.0, 10.0, 100.0, 1000.0, 10000.0};
 
 }  // namespace
 
@@ -61,7 +64,6 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
       truth_(truth),
       config_(config),
       white_(make_streams<6>(config.seed, 0)),
-      bias_gm_(make_streams<6>(config.seed, 6)),
       bias_rw_(make_streams<6>(config.seed, 12)) {
   if (!(config.rate_hz > 0.0) || !std::isfinite(config.rate_hz))
     throw std::invalid_argument("simulate: rate must be a positive number of Hz");
@@ -93,16 +95,27 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
     const bool gyro = ch < 3;
     const double white = gyro ? truth.gyro.noise.arw_rad_rts : truth.accel.noise.vrw_mps_rts;
     const double instab = gyro ? truth.gyro.noise.bias_instability_radps : truth.accel.noise.bias_instability_mps2;
-    double tc = gyro ? truth.gyro.noise.bias_corr_time_s : truth.accel.noise.bias_corr_time_s;
-    if (tc <= 0) tc = kDefaultBiasCorrTime_s;
+    const double tc = gyro ? truth.gyro.noise.bias_corr_time_s : truth.accel.noise.bias_corr_time_s;
     const double rw = gyro ? truth.gyro.noise.rate_random_walk_radps_rts : truth.accel.noise.accel_random_walk_mps2_rts;
     white_sigma_[ch] = white * std::sqrt(dt_s_);
-    const double sigma_gm = instab * kFlickerFloorFactor / kGmAllanPeakRatio;
-    gm_phi_[ch] = std::exp(-dt_s_ / tc);
-    gm_drive_[ch] = sigma_gm * std::sqrt(1.0 - gm_phi_[ch] * gm_phi_[ch]);
     rw_drive_[ch] = rw * std::sqrt(dt_s_);
-    // Start the correlated bias in its stationary distribution.
-    if (sigma_gm > 0) gm_state_[static_cast<Eigen::Index>(ch)] = sigma_gm * bias_gm_[ch].next();
+    if (instab > 0) {
+      std::vector<double> times;
+      double sigma_gm;
+      if (tc > 0) {
+        times = {tc};
+        sigma_gm = instab * kFlickerFloorFactor / kGmAllanPeakRatio;
+      } else {
+        times.assign(kFlickerBankTimes_s.begin(), kFlickerBankTimes_s.end());
+        sigma_gm = instab * kFlickerFloorFactor / kFlickerBankAllanFloor;
+      }
+      for (std::size_t i = 0; i < times.size(); ++i) {
+        GaussMarkov g{std::exp(-dt_s_ / times[i]), 0.0, 0.0, NormalStream(mix_seed(config.seed, 100 + 8 * ch + i))};
+        g.drive = sigma_gm * std::sqrt(1.0 - g.phi * g.phi);
+        g.state = sigma_gm * g.stream.next();  // start in the stationary distribution
+        gm_[ch].push_back(std::move(g));
+      }
+    }
   }
 }
 
@@ -198,9 +211,9 @@ bool Simulator::next(ImuFrame& out) {
     const auto i = static_cast<Eigen::Index>(ch);
     double noise = 0.0;
     if (white_sigma_[ch] > 0) noise += white_sigma_[ch] * white_[ch].next();
-    if (gm_drive_[ch] > 0) {
-      gm_state_[i] = gm_phi_[ch] * gm_state_[i] + gm_drive_[ch] * bias_gm_[ch].next();
-      noise += gm_state_[i] * dt_s_;
+    for (GaussMarkov& g : gm_[ch]) {
+      g.state = g.phi * g.state + g.drive * g.stream.next();
+      noise += g.state * dt_s_;
     }
     if (rw_drive_[ch] > 0) {
       rw_state_[i] += rw_drive_[ch] * bias_rw_[ch].next();

@@ -100,11 +100,16 @@ class Simulator {
 
   // One stream per noise source: white and correlated bias, per channel.
   std::array<NormalStream, 6> white_;
-  std::array<NormalStream, 6> bias_gm_;
+  // Correlated bias per channel: one Gauss-Markov process with the configured correlation time, or
+  // five with correlation times a decade apart whose Allan curves add to a flat flicker floor.
+  struct GaussMarkov {
+    double phi, drive, state;
+    NormalStream stream;
+  };
+  std::array<std::vector<GaussMarkov>, 6> gm_;
   std::array<NormalStream, 6> bias_rw_;
-  Eigen::Matrix<double, 6, 1> gm_state_ = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Matrix<double, 6, 1> rw_state_ = Eigen::Matrix<double, 6, 1>::Zero();
-  std::array<double, 6> white_sigma_{}, gm_phi_{}, gm_drive_{}, rw_drive_{};
+  std::array<double, 6> white_sigma_{}, rw_drive_{};
 
   std::vector<TempSample> temps_;
   double next_temp_t_s_ = 0.0;

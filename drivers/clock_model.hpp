@@ -1,0 +1,59 @@
+// Device clock to host time base: host = offset + (1 + drift) * device, fitted from pairs of
+// (device time tag, host time) observations whose host time carries an unknown, non-negative,
+// jittery delay (SO_TIMESTAMP receive stamps of an IMU) or a symmetric error bounded by half a
+// round trip (a table's reply to a request). Jitter must not reach the data: observations are
+// grouped in blocks of device time, each block keeps its best point (smallest delay proxy), and
+// a line is fitted through the best points of a sliding window. For one-sided delays the line
+// is then lowered onto the lowest block point (a lower envelope). docs/drivers.md gives the error.
+// Pure: no clock is read here.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+
+#include "drivers/interfaces.hpp"
+
+namespace imucal::drivers {
+
+struct ClockFitConfig {
+  std::int64_t block_span_ns = 100'000'000;  // device time per block
+  std::size_t window_blocks = 128;           // blocks in the fit (window = span * blocks)
+  bool lower_envelope = true;                // one-sided delays (receive stamps)
+  // An observation further than this from the model means the device or host clock jumped:
+  // the fit restarts from that observation.
+  std::int64_t reset_threshold_ns = 50'000'000;
+};
+
+class ClockFit {
+ public:
+  explicit ClockFit(ClockFitConfig config = {}) : config_(config) {}
+
+  // `key` ranks observations inside a block, smaller is better: host - device for receive
+  // stamps (the delay plus a constant), the round-trip time for request/reply pairs.
+  void add(std::int64_t device_ns, std::int64_t host_ns, std::int64_t key);
+  bool valid() const noexcept { return have_model_; }
+  std::int64_t map(std::int64_t device_ns) const noexcept;
+  ClockModelState state() const noexcept;
+  std::uint64_t resets() const noexcept { return resets_; }
+  void clear() noexcept;
+
+ private:
+  struct Point {
+    std::int64_t device_ns, host_ns, key;
+  };
+  void refit() noexcept;
+  double model_at(std::int64_t device_ns) const noexcept;  // host - ref_host, ns
+
+  ClockFitConfig config_;
+  std::deque<Point> blocks_;  // best point of each completed block
+  Point current_{};
+  bool have_current_ = false;
+  std::int64_t block_start_ns_ = 0;
+  bool have_model_ = false;
+  std::int64_t ref_device_ns_ = 0, ref_host_ns_ = 0;
+  double a_ns_ = 0.0, b_ = 1.0;  // host - ref_host = a + b (device - ref_device)
+  double residual_rms_ns_ = 0.0;
+  std::uint64_t resets_ = 0;
+};
+
+}  // namespace imucal::drivers
