@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -185,7 +186,7 @@ RegisterMap load_register_map(const std::string& name_or_path) {
 std::optional<std::vector<std::uint16_t>> encode_value(const RegisterMap& map, double value) {
   if (!std::isfinite(value)) return std::nullopt;
   if (map.encoding == ValueEncoding::float32) {
-    if (std::fabs(value) > 3.0e38) return std::nullopt;
+    if (std::fabs(value) > static_cast<double>(std::numeric_limits<float>::max())) return std::nullopt;
     const auto w = words::pack_float32(static_cast<float>(value), map.word_order);
     return std::vector<std::uint16_t>{w[0], w[1]};
   }

@@ -34,6 +34,8 @@ std::vector<double> overlapping_adev(const std::vector<double>& rate, double dt_
 }
 
 NoiseAnalyzer::NoiseAnalyzer(const RecordingMeta& meta, const Options& options) : meta_(meta), options_(options) {
+  // A bin is never shorter than one sample: slow recordings are analysed at their own rate.
+  options_.bin_s = std::max(options.bin_s, 1.0 / meta.rate_hz);
   for (const SegmentInfo& s : meta.segments)
     if ((s.kind == "static" || s.kind == "tilt") && s.t1_s - s.t0_s >= options.min_static_s) statics_.push_back(s);
   std::sort(statics_.begin(), statics_.end(), [](const auto& a, const auto& b) { return a.t0_s < b.t0_s; });
@@ -48,14 +50,15 @@ void NoiseAnalyzer::close_bin() {
 }
 
 void NoiseAnalyzer::push(const ImuFrame& f) {
-  const double t = static_cast<double>(f.t_ns) * 1e-9;
   const double dt = have_prev_ ? static_cast<double>(f.t_ns - prev_t_ns_) * 1e-9 : 0.0;
   const bool gap = have_prev_ && (dt > 1.5 / meta_.rate_hz || dt <= 0);
   prev_t_ns_ = f.t_ns;
   const bool first = !have_prev_;
   have_prev_ = true;
-  while (next_ < statics_.size() && t > statics_[next_].t1_s) ++next_;
-  const bool in_static = next_ < statics_.size() && t > statics_[next_].t0_s && !first;
+  // Membership on the nanosecond clock: a frame ending exactly at a static's start covers the move.
+  auto ns = [](double s) { return std::llround(s * 1e9); };
+  while (next_ < statics_.size() && f.t_ns > ns(statics_[next_].t1_s)) ++next_;
+  const bool in_static = next_ < statics_.size() && f.t_ns > ns(statics_[next_].t0_s) && !first;
   if (!in_static || gap) {
     in_run_ = false;
     return;

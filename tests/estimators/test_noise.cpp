@@ -4,6 +4,9 @@
 #include "core/units.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "estimators/noise.hpp"
+#include "storage/bundle.hpp"
+
+#include <filesystem>
 
 using namespace imucal;
 
@@ -45,4 +48,19 @@ TEST(Noise, RandomWalksFromTheDirectProgramStatics) {
   EXPECT_NEAR(m.gyro.noise.arw_rad_rts / truth.gyro.noise.arw_rad_rts, 1.0, 0.10);
   EXPECT_NEAR(m.accel.noise.vrw_mps_rts / truth.accel.noise.vrw_mps_rts, 1.0, 0.10);
   EXPECT_EQ(m.gyro.noise.bias_instability_radps, 0.0) << "36 s statics cannot show a bias floor";
+}
+
+// The independent recording: its statics end exactly where its moves end, on the same instant.
+TEST(Noise, IndependentRecordingGivesItsTruthNoise) {
+  const std::string db = std::string(IMUCAL_TEST_TMP) + "/noise-example.db";
+  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  std::filesystem::remove(db);
+  storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
+  const auto run = storage::RunDb::open(db);
+  noise::NoiseAnalyzer a(run.meta());
+  run.for_each_frame([&](const ImuFrame& f) { a.push(f); });
+  const ImuModel m = a.finish().apply(ImuModel{});
+  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  EXPECT_NEAR(m.gyro.noise.arw_rad_rts / truth.gyro.noise.arw_rad_rts, 1.0, 0.10);
+  EXPECT_NEAR(m.accel.noise.vrw_mps_rts / truth.accel.noise.vrw_mps_rts, 1.0, 0.10);
 }

@@ -1,0 +1,440 @@
+#include "daemon/service/campaign.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "core/units.hpp"
+#include "daemon/service/json_reader.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+// ------------------------------------------------------------------------------------------------
+// Chamber profile
+
+double ChamberProfile::setpoint_at(double program_time_s) const {
+  double value = setpoint_C;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const ChamberStep& s = steps[i];
+    if (program_time_s < s.at_s) break;
+    // `value` is the set point when this step begins; the step acts until the next one begins.
+    const double end_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
+    const double t = std::min(program_time_s, end_s);
+    if (s.ramp_C_per_min <= 0.0) {
+      value = s.setpoint_C;
+    } else {
+      const double max_change = s.ramp_C_per_min / 60.0 * (t - s.at_s);
+      const double delta = s.setpoint_C - value;
+      value += std::clamp(delta, -max_change, max_change);
+    }
+  }
+  return value;
+}
+
+bool ChamberProfile::ramps_within(double t0_s, double t1_s) const {
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const ChamberStep& s = steps[i];
+    if (s.ramp_C_per_min <= 0.0) continue;
+    const double next_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
+    // At its own start time a ramp has not changed anything yet: this is the value it starts from.
+    const double start_C = setpoint_at(s.at_s);
+    const double ramp_end_s = std::min(next_s, s.at_s + std::abs(s.setpoint_C - start_C) / (s.ramp_C_per_min / 60.0));
+    if (ramp_end_s > s.at_s && s.at_s < t1_s && ramp_end_s > t0_s) return true;
+  }
+  return false;
+}
+
+bool CampaignSpec::has_estimator(const std::string& name) const {
+  return std::find(estimators.begin(), estimators.end(), name) != estimators.end();
+}
+
+// ------------------------------------------------------------------------------------------------
+
+namespace {
+
+// An IMU model given as "ideal", a file path, or an inline object.
+std::optional<ImuModel> read_model(const json& v, const std::string& where, std::vector<std::string>& problems) {
+  try {
+    if (v.is_string()) {
+      const auto text = v.get<std::string>();
+      if (text == "ideal") return ImuModel{};
+      return read_imu_model_file(text);
+    }
+    if (v.is_object()) return imu_model_from_json_text(v.dump(), where);
+    problems.push_back(where + " must be \"ideal\", a path to an imucal-imu-model/1 file or a model object");
+  } catch (const std::exception& e) {
+    problems.push_back(where + ": " + e.what());
+  }
+  return std::nullopt;
+}
+
+json model_json(const ImuModel& m) { return json::parse(imu_model_to_json_text(m)); }
+
+// The JSON of one program item (a built-in name or an inline object), or nothing with a problem.
+std::optional<json> program_item(const json& item, const std::string& where, std::vector<std::string>& problems,
+                                 bool& malformed) {
+  if (item.is_string()) {
+    const auto name = item.get<std::string>();
+    const auto names = motion::builtin_program_names();
+    if (std::find(names.begin(), names.end(), name) == names.end()) {
+      std::string list;
+      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+      problems.push_back(where + ": unknown built-in program \"" + name + "\" (known: " + list + ")");
+      return std::nullopt;
+    }
+    return json::parse(motion::builtin_program_json(name));
+  }
+  if (item.is_object()) return item;
+  malformed = true;
+  problems.push_back(where + " must be a built-in program name, a program object or a list of those");
+  return std::nullopt;
+}
+
+std::string item_name(const json& program, std::size_t index) {
+  if (program.contains("name") && program.at("name").is_string()) return program.at("name").get<std::string>();
+  return "part" + std::to_string(index + 1);
+}
+
+// Joins several programs into one: segment names get the part's name as prefix and a move to each
+// part's start pose is inserted, so the table never jumps.
+std::optional<json> join_programs(const std::vector<json>& parts, const motion::TableLimits& limits,
+                                  std::vector<std::string>& problems) {
+  json joined = {{"name", ""}, {"segments", json::array()}};
+  std::string name;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const json& part = parts[i];
+    const std::string part_name = item_name(part, i);
+    name += (name.empty() ? "" : "+") + part_name;
+    try {
+      // Each part alone first, so that a problem names the part it is in.
+      (void)motion::compile_program(part.dump(), limits);
+    } catch (const std::exception& e) {
+      problems.push_back("campaign.program[" + std::to_string(i) + "]: " + e.what());
+      return std::nullopt;
+    }
+    if (i == 0) {
+      if (part.contains("start_deg")) joined["start_deg"] = part.at("start_deg");
+    } else {
+      const json start = part.contains("start_deg") ? part.at("start_deg") : json::array({0.0, 0.0, 0.0});
+      joined["segments"].push_back({{"type", "move"}, {"name", part_name + "/to-start"}, {"to_deg", start}});
+    }
+    if (part.contains("segments") && part.at("segments").is_array()) {
+      for (json seg : part.at("segments")) {
+        if (seg.is_object() && seg.contains("name") && seg.at("name").is_string())
+          seg["name"] = part_name + "/" + seg.at("name").get<std::string>();
+        joined["segments"].push_back(std::move(seg));
+      }
+    }
+  }
+  joined["name"] = name;
+  joined["comment"] = "joined by imucald: " + name;
+  return joined;
+}
+
+void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
+                   std::vector<std::string>& problems) {
+  ObjectReader r(j, "campaign.chamber", problems);
+  const ChamberLimits& lim = config.chamber;
+  auto in_limits = [&](double c, const std::string& where) {
+    if (c < lim.min_C || c > lim.max_C)
+      problems.push_back(where + " " + json(c).dump() + " C is outside the chamber's limits " + json(lim.min_C).dump() +
+                         " .. " + json(lim.max_C).dump() + " C");
+  };
+  if (auto v = r.number("setpoint_C")) {
+    profile.setpoint_C = *v;
+    in_limits(*v, "campaign.chamber.setpoint_C");
+  }
+  if (auto v = r.number_in("tolerance_C", 0.01, 50)) profile.tolerance_C = *v;
+  if (const json* steps = r.get("steps")) {
+    if (!steps->is_array()) {
+      problems.push_back("campaign.chamber.steps must be an array");
+      return;
+    }
+    std::size_t i = 0;
+    for (const json& s : *steps) {
+      const std::string where = "campaign.chamber.steps[" + std::to_string(i++) + "]";
+      ObjectReader sr(s, where, problems);
+      ChamberStep step;
+      const auto at = sr.number_in("at_s", 0, std::nullopt, true);
+      const auto sp = sr.number("setpoint_C", true);
+      const auto ramp = sr.number_in("ramp_C_per_min", 0);
+      if (!at || !sp) continue;
+      step.at_s = *at;
+      step.setpoint_C = *sp;
+      step.ramp_C_per_min = ramp.value_or(0.0);
+      in_limits(*sp, where + ".setpoint_C");
+      if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
+        problems.push_back(where + ".ramp_C_per_min " + json(step.ramp_C_per_min).dump() +
+                           " exceeds the chamber's limit " + json(lim.max_ramp_C_per_min).dump());
+      if (step.at_s > duration_s)
+        problems.push_back(where + ".at_s " + json(step.at_s).dump() + " s is after the program's end (" +
+                           json(duration_s).dump() + " s)");
+      if (!profile.steps.empty() && step.at_s <= profile.steps.back().at_s)
+        problems.push_back(where + ".at_s must be later than the previous step's");
+      profile.steps.push_back(step);
+    }
+  }
+}
+
+void check_faults(const json& j, double duration_s, std::vector<SimFault>& faults, std::vector<std::string>& problems) {
+  if (!j.is_array()) {
+    problems.push_back("campaign.sim_faults must be an array");
+    return;
+  }
+  std::size_t i = 0;
+  for (const json& f : j) {
+    const std::string where = "campaign.sim_faults[" + std::to_string(i++) + "]";
+    ObjectReader r(f, where, problems);
+    SimFault fault;
+    const auto kind = r.string("kind", true);
+    if (auto v = r.number_in("at_s", 0, duration_s, true)) fault.at_s = *v;
+    if (auto v = r.number_in("duration_s", 0, 86400)) fault.duration_s = *v;
+    if (!kind) continue;
+    if (*kind == "chamber_offset") {
+      fault.kind = SimFault::Kind::ChamberOffset;
+      if (auto v = r.number_in("offset_C", -100, 100, true)) fault.offset_C = *v;
+    } else if (*kind == "imu_dropout") {
+      fault.kind = SimFault::Kind::ImuDropout;
+    } else if (*kind == "imu_corrupt") {
+      fault.kind = SimFault::Kind::ImuCorrupt;
+      if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "disconnect") {
+      fault.kind = SimFault::Kind::Disconnect;
+      if (auto v = r.string("device", true)) {
+        if (*v != "table" && *v != "chamber" && *v != "imu")
+          problems.push_back(where + ".device must be table, chamber or imu");
+        fault.device = *v;
+      }
+    } else if (*kind == "table_fault") {
+      fault.kind = SimFault::Kind::TableFault;
+    } else {
+      problems.push_back(where + ".kind \"" + *kind +
+                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, disconnect, table_fault");
+    }
+    faults.push_back(fault);
+  }
+}
+
+}  // namespace
+
+CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
+  CampaignCheck check;
+  auto& problems = check.problems;
+  CampaignSpec spec;
+  spec.rate_hz = config.sim.rate_hz;
+  spec.time_scale = config.sim.time_scale;
+  spec.seed = config.sim.seed;
+  spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
+  spec.chamber.tolerance_C = config.chamber.tolerance_C;
+  spec.suspenders = {config.suspenders.settle_s, config.suspenders.frame_timeout_s,
+                     config.suspenders.chamber_persist_s};
+  spec.estimators = {"direct"};
+
+  // Form first: a problem here is the client's JSON (400), not the campaign's content (422).
+  std::size_t form_problems = 0;
+  json normalized = json::object();
+  motion::Program program;
+  bool have_program = false;
+  {
+    ObjectReader r(campaign, "campaign", problems);
+    if (!r.is_object()) {
+      check.malformed = true;
+      return check;
+    }
+    if (auto v = r.string("name", true)) {
+      if (v->empty() || v->size() > 200) problems.push_back("campaign.name must have 1 to 200 characters");
+      spec.name = *v;
+    }
+    const json* program_spec = r.get("program", true);
+    if (auto v = r.number_in("rate_hz", 1e-3)) spec.rate_hz = *v;
+    if (auto v = r.number_in("time_scale", 0, 1e6)) spec.time_scale = *v;
+    if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) spec.seed = static_cast<std::uint64_t>(*v);
+    const json* estimators = r.get("estimators");
+    const json* truth = r.get("truth");
+    const json* nav_model = r.get("navigation_model");
+    const json* chamber = r.get("chamber");
+    const json* suspenders = r.get("suspenders");
+    const json* faults = r.get("sim_faults");
+    r.finish();
+    form_problems = problems.size();
+
+    if (estimators != nullptr) {
+      spec.estimators.clear();
+      if (!estimators->is_array()) {
+        problems.push_back("campaign.estimators must be an array of names");
+      } else {
+        for (const json& e : *estimators) {
+          if (!e.is_string()) {
+            problems.push_back("campaign.estimators must hold names (strings)");
+            continue;
+          }
+          const auto name = e.get<std::string>();
+          const auto& known = known_estimators();
+          if (std::find(known.begin(), known.end(), name) == known.end()) {
+            problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: direct, navigation)");
+          } else if (spec.has_estimator(name)) {
+            problems.push_back("campaign.estimators: \"" + name + "\" is listed twice");
+          } else {
+            spec.estimators.push_back(name);
+          }
+        }
+      }
+      form_problems = problems.size();
+    }
+
+    // The program.
+    if (program_spec != nullptr) {
+      std::vector<json> parts;
+      bool malformed_program = false;
+      if (program_spec->is_array()) {
+        if (program_spec->empty()) {
+          problems.push_back("campaign.program must not be an empty list");
+          malformed_program = true;
+        }
+        for (std::size_t i = 0; i < program_spec->size(); ++i) {
+          if (auto p = program_item((*program_spec)[i], "campaign.program[" + std::to_string(i) + "]", problems,
+                                    malformed_program))
+            parts.push_back(std::move(*p));
+        }
+      } else if (auto p = program_item(*program_spec, "campaign.program", problems, malformed_program)) {
+        parts.push_back(std::move(*p));
+      }
+      if (malformed_program) form_problems = problems.size();
+      std::optional<json> program_json;
+      if (!parts.empty() && parts.size() == (program_spec->is_array() ? program_spec->size() : 1)) {
+        if (parts.size() == 1) {
+          program_json = parts.front();
+        } else {
+          program_json = join_programs(parts, config.table_limits, problems);
+        }
+      }
+      if (program_json) {
+        try {
+          program = motion::compile_program(program_json->dump(), config.table_limits);
+          have_program = true;
+          spec.program_json = program_json->dump();
+          if (program_spec->is_string()) {
+            spec.program_label = program_spec->get<std::string>();
+          } else if (program_spec->is_array()) {
+            spec.program_label = program.name;
+          } else {
+            spec.program_label = "inline:" + program.name;
+          }
+        } catch (const std::exception& e) {
+          problems.push_back(std::string("campaign.program: ") + e.what());
+        }
+      }
+      normalized["program"] = *program_spec;
+    }
+    if (have_program) {
+      for (const auto& p : motion::validate_program(program, config.table_limits))
+        problems.push_back("campaign.program: " + p);
+      check.duration_s = program.duration_s();
+      check.segments = program.segments();
+      if (check.duration_s > config.campaign.max_duration_s)
+        problems.push_back("campaign.program lasts " + json(check.duration_s).dump() + " s, more than the limit of " +
+                           json(config.campaign.max_duration_s).dump() + " s");
+      if (spec.has_estimator("direct")) {
+        int statics = 0, rates = 0;
+        for (const auto& s : check.segments) {
+          statics += s.kind == "static";
+          rates += s.kind == "rate";
+        }
+        if (statics < 6 || rates < 3)
+          problems.push_back("estimator \"direct\" needs at least 6 static segments and 3 rate segments; the program has " +
+                             std::to_string(statics) + " and " + std::to_string(rates));
+      }
+    }
+    if (spec.rate_hz > config.campaign.max_rate_hz)
+      problems.push_back("campaign.rate_hz " + json(spec.rate_hz).dump() + " exceeds the limit of " +
+                         json(config.campaign.max_rate_hz).dump() + " Hz");
+    if (truth != nullptr) {
+      if (auto m = read_model(*truth, "campaign.truth", problems)) spec.truth = *m;
+    } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", problems)) {
+      spec.truth = *m;
+    }
+    if (spec.truth.frame != "instrument") problems.push_back("campaign.truth must be in the instrument frame");
+    if (nav_model != nullptr) {
+      if (!spec.has_estimator("navigation"))
+        problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
+      if (auto m = read_model(*nav_model, "campaign.navigation_model", problems)) spec.navigation_model = *m;
+    }
+    if (chamber != nullptr) check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
+    if (suspenders != nullptr) {
+      ObjectReader s(*suspenders, "campaign.suspenders", problems);
+      if (auto v = s.number_in("settle_s", 0, 86400)) spec.suspenders.settle_s = *v;
+      if (auto v = s.number_in("frame_timeout_s", 0.01, 3600)) spec.suspenders.frame_timeout_s = *v;
+      if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
+    }
+    if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+  }
+  check.malformed = form_problems > 0;
+  if (!problems.empty()) return check;
+
+  normalized["name"] = spec.name;
+  normalized["estimators"] = spec.estimators;
+  normalized["rate_hz"] = spec.rate_hz;
+  normalized["time_scale"] = spec.time_scale;
+  normalized["seed"] = spec.seed;
+  normalized["truth"] = model_json(spec.truth);
+  if (spec.navigation_model) normalized["navigation_model"] = model_json(*spec.navigation_model);
+  json steps = json::array();
+  for (const auto& s : spec.chamber.steps)
+    steps.push_back({{"at_s", s.at_s}, {"setpoint_C", s.setpoint_C}, {"ramp_C_per_min", s.ramp_C_per_min}});
+  normalized["chamber"] = {{"setpoint_C", spec.chamber.setpoint_C}, {"tolerance_C", spec.chamber.tolerance_C},
+                           {"steps", steps}};
+  normalized["suspenders"] = {{"settle_s", spec.suspenders.settle_s},
+                              {"frame_timeout_s", spec.suspenders.frame_timeout_s},
+                              {"chamber_persist_s", spec.suspenders.chamber_persist_s}};
+  if (campaign.contains("sim_faults")) normalized["sim_faults"] = campaign.at("sim_faults");
+  spec.normalized = std::move(normalized);
+  check.spec = std::move(spec);
+  return check;
+}
+
+CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config) {
+  json j;
+  try {
+    j = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    CampaignCheck check;
+    check.malformed = true;
+    check.problems.push_back(std::string("not valid JSON: ") + e.what());
+    return check;
+  }
+  return check_campaign(j, config);
+}
+
+motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config) {
+  return motion::compile_program(spec.program_json, config.table_limits);
+}
+
+json model_estimates_json(const ImuModel& model) {
+  json out = json::object();
+  const ImuErrorSet zero{};
+  const ImuErrorSet& sigma = model.sigma ? *model.sigma : zero;
+  const char* axes[3] = {"x", "y", "z"};
+  auto vec = [&](const std::string& prefix, const Eigen::Vector3d& est, const Eigen::Vector3d& sig, double scale) {
+    for (int j = 0; j < 3; ++j) out[prefix + "." + axes[j]] = json::array({est[j] * scale, sig[j] * scale});
+  };
+  auto mis = [&](const std::string& prefix, const Misalignment& est, const Misalignment& sig) {
+    const std::pair<const char*, double Misalignment::*> keys[6] = {{"xy", &Misalignment::xy}, {"xz", &Misalignment::xz},
+                                                                    {"yx", &Misalignment::yx}, {"yz", &Misalignment::yz},
+                                                                    {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
+    for (const auto& [name, k] : keys)
+      out[prefix + "." + name] = json::array({est.*k * units::kRadToArcsec, sig.*k * units::kRadToArcsec});
+  };
+  vec("gyro.bias_dph", model.gyro.bias_radps, sigma.gyro.bias_radps, units::kRadpsToDph);
+  vec("gyro.scale_pos_ppm", model.gyro.scale_pos, sigma.gyro.scale_pos, 1e6);
+  vec("gyro.scale_neg_ppm", model.gyro.scale_neg, sigma.gyro.scale_neg, 1e6);
+  mis("gyro.misalignment_arcsec", model.gyro.misalignment_rad, sigma.gyro.misalignment_rad);
+  vec("accel.bias_mps2", model.accel.bias_mps2, sigma.accel.bias_mps2, 1.0);
+  vec("accel.scale_ppm", model.accel.scale, sigma.accel.scale, 1e6);
+  mis("accel.misalignment_arcsec", model.accel.misalignment_rad, sigma.accel.misalignment_rad);
+  return out;
+}
+
+}  // namespace imucal::daemon

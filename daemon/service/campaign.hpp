@@ -1,0 +1,97 @@
+// Campaigns as data: a motion program (built-in, inline, or several in a row), a chamber set-point
+// profile, the estimators to run online, and for simulated devices the IMU truth, rate, seed,
+// time scale and injected faults. Checked completely before anything is stored or moves: every
+// problem is listed (docs/api.md, "Campaign JSON").
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "daemon/service/config.hpp"
+#include "motion_programs/program.hpp"
+
+namespace imucal::daemon {
+
+// A set-point change at program time at_s, reached at ramp_C_per_min (0: a step).
+struct ChamberStep {
+  double at_s = 0.0;
+  double setpoint_C = 25.0;
+  double ramp_C_per_min = 0.0;
+};
+
+struct ChamberProfile {
+  double setpoint_C = 25.0;   // from program time 0 (the configured safe set point by default)
+  double tolerance_C = 2.0;   // suspender band around the profile's set point
+  std::vector<ChamberStep> steps;  // sorted by at_s
+
+  double setpoint_at(double program_time_s) const;
+  // Whether the set point changes gradually somewhere inside (t0_s, t1_s): a segment overlapping a
+  // ramp cannot be redone as it was (the chamber's history cannot be repeated).
+  bool ramps_within(double t0_s, double t1_s) const;
+};
+
+struct SimFault {
+  enum class Kind { ChamberOffset, ImuDropout, ImuCorrupt, Disconnect, TableFault } kind = Kind::ChamberOffset;
+  std::string device;       // Disconnect: table, chamber or imu
+  double at_s = 0.0;        // program time of the first pass
+  double duration_s = 0.0;  // simulated (device) seconds
+  double offset_C = 0.0;    // ChamberOffset
+  std::int64_t frames = 1;  // ImuCorrupt
+};
+
+struct SuspenderSettings {
+  double settle_s = 10.0;
+  double frame_timeout_s = 1.0;
+  double chamber_persist_s = 2.0;
+};
+
+struct CampaignSpec {
+  std::string name;
+  std::string program_label;  // "direct", "direct+navigation", or "inline:<name>"
+  std::string program_json;   // the program actually run (several joined into one), JSON text
+  std::vector<std::string> estimators;
+  double rate_hz = 100.0;
+  double time_scale = 10.0;
+  std::uint64_t seed = 1;
+  ImuModel truth;                            // resolved (files are read when the campaign is posted)
+  std::optional<ImuModel> navigation_model;  // for the "navigation" estimator (default: ideal)
+  ChamberProfile chamber;
+  SuspenderSettings suspenders;
+  std::vector<SimFault> faults;
+  nlohmann::json normalized;  // the stored form: defaults filled in, files resolved inline
+
+  bool has_estimator(const std::string& name) const;
+};
+
+struct CampaignCheck {
+  std::optional<CampaignSpec> spec;  // set when there is no problem
+  std::vector<std::string> problems;
+  bool malformed = false;  // problems of form (400) rather than of content (422)
+  double duration_s = 0.0;
+  std::vector<SegmentInfo> segments;
+};
+
+inline const std::vector<std::string>& known_estimators() {
+  static const std::vector<std::string> names = {"direct", "navigation"};
+  return names;
+}
+
+// Parses and validates a campaign against the configuration (limits, defaults). Never throws for
+// bad input; reads truth and model files named in it.
+CampaignCheck check_campaign(const nlohmann::json& campaign, const DaemonConfig& config);
+CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config);
+
+// The program of a checked campaign, compiled (cannot fail for a spec from check_campaign).
+motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config);
+
+// Flat "gyro.bias_dph.x" -> [estimate, sigma] map of a model, in the units the names carry.
+nlohmann::json model_estimates_json(const ImuModel& model);
+
+}  // namespace imucal::daemon

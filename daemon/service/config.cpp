@@ -1,0 +1,238 @@
+#include "daemon/service/config.hpp"
+
+#include <algorithm>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <tuple>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/service/json_reader.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+const char* to_string(Role role) { return role == Role::Operator ? "operator" : "viewer"; }
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+void read_site(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.site", problems);
+  if (auto v = r.string("name")) c.site_name = *v;
+  if (auto v = r.number_in("latitude_deg", -90, 90)) c.site.latitude_deg = *v;
+  if (auto v = r.number_in("longitude_deg", -180, 360)) c.site.longitude_deg = *v;
+  if (auto v = r.number_in("height_m", -500, 10000)) c.site.height_m = *v;
+  if (auto v = r.number_in("gravity_mps2", 9.7, 9.9)) c.site.gravity_mps2 = *v;
+  if (auto v = r.number_in("middle_axis_azimuth_deg", -360, 360)) c.site.middle_axis_azimuth_deg = *v;
+}
+
+void read_axis(const json& j, const std::string& where, motion::AxisLimits& a, std::vector<std::string>& problems) {
+  ObjectReader r(j, where, problems);
+  // null: unlimited (slip rings)
+  for (const auto& [key, target, fallback] :
+       {std::tuple<const char*, double*, double>{"min_deg", &a.min_deg, -kInf}, {"max_deg", &a.max_deg, kInf}}) {
+    const json* v = r.get(key);
+    if (v == nullptr) continue;
+    if (v->is_null()) {
+      *target = fallback;
+    } else if (v->is_number()) {
+      *target = v->get<double>();
+    } else {
+      problems.push_back(r.at(key) + " must be a number or null (unlimited)");
+    }
+  }
+  if (auto v = r.number_in("rate_dps", 1e-3, 10000)) a.rate_dps = *v;
+  if (auto v = r.number_in("accel_dps2", 1e-3, 100000)) a.accel_dps2 = *v;
+  if (a.min_deg >= a.max_deg) problems.push_back(where + ": min_deg must be below max_deg");
+}
+
+void read_table(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.table", problems);
+  if (const json* lim = r.get("limits")) {
+    ObjectReader l(*lim, "config.table.limits", problems);
+    for (std::size_t a = 0; a < 3; ++a) {
+      if (const json* ax = l.get(motion::kAxisNames[a]))
+        read_axis(*ax, l.at(motion::kAxisNames[a]), c.table_limits.axis[a], problems);
+    }
+  }
+}
+
+void read_chamber(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.chamber", problems);
+  if (auto v = r.number_in("min_C", -100, 300)) c.chamber.min_C = *v;
+  if (auto v = r.number_in("max_C", -100, 300)) c.chamber.max_C = *v;
+  if (auto v = r.number_in("max_ramp_C_per_min", 0, 100)) c.chamber.max_ramp_C_per_min = *v;
+  if (auto v = r.number_in("safe_setpoint_C", -100, 300)) c.chamber.safe_setpoint_C = *v;
+  if (auto v = r.number_in("tolerance_C", 0.01, 50)) c.chamber.tolerance_C = *v;
+  if (auto v = r.number_in("wait_timeout_s", 1, 7 * 86400.0)) c.chamber.wait_timeout_s = *v;
+  if (c.chamber.min_C >= c.chamber.max_C) problems.push_back("config.chamber: min_C must be below max_C");
+  if (c.chamber.safe_setpoint_C < c.chamber.min_C || c.chamber.safe_setpoint_C > c.chamber.max_C)
+    problems.push_back("config.chamber.safe_setpoint_C must lie between min_C and max_C");
+}
+
+void read_sim(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.sim", problems);
+  if (auto v = r.number_in("rate_hz", 1, 100000)) c.sim.rate_hz = *v;
+  if (auto v = r.number_in("time_scale", 0, 1e6)) c.sim.time_scale = *v;
+  if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) c.sim.seed = static_cast<std::uint64_t>(*v);
+  if (auto v = r.string("truth")) c.sim.truth = *v;
+  if (auto v = r.number_in("chamber_tau_s", 0.1, 1e5)) c.sim.chamber_tau_s = *v;
+  if (auto v = r.number_in("home_time_s", 0, 3600)) c.sim.home_time_s = *v;
+}
+
+void read_suspenders(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.suspenders", problems);
+  if (auto v = r.number_in("settle_s", 0, 86400)) c.suspenders.settle_s = *v;
+  if (auto v = r.number_in("frame_timeout_s", 0.01, 3600)) c.suspenders.frame_timeout_s = *v;
+  if (auto v = r.number_in("chamber_persist_s", 0, 3600)) c.suspenders.chamber_persist_s = *v;
+}
+
+void read_recorder(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.recorder", problems);
+  if (auto v = r.number_in("commit_interval_s", 0.01, 60)) c.recorder.commit_interval_s = *v;
+  if (auto v = r.integer("queue_frames", 1024, std::int64_t{1} << 30)) c.recorder.queue_frames = *v;
+}
+
+void read_http(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.http", problems);
+  if (auto v = r.integer("body_limit_bytes", 1024, std::int64_t{1} << 30)) c.http.body_limit_bytes = *v;
+  if (auto v = r.number_in("request_timeout_s", 0.1, 3600)) c.http.request_timeout_s = *v;
+  if (auto v = r.number_in("session_idle_s", 10, 30 * 86400.0)) c.http.session_idle_s = *v;
+  if (auto v = r.number_in("live_rate_hz", 0.1, 100)) c.http.live_rate_hz = *v;
+  if (auto v = r.integer("live_queue", 1, 100000)) c.http.live_queue = *v;
+  if (auto v = r.integer("threads", 1, 64)) c.http.threads = static_cast<int>(*v);
+  if (auto v = r.string("web_dir")) c.http.web_dir = *v;
+}
+
+void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.log", problems);
+  if (auto v = r.string("level")) {
+    static const std::vector<std::string> levels = {"trace", "debug", "info", "warn", "error", "critical", "off"};
+    if (std::find(levels.begin(), levels.end(), *v) == levels.end())
+      problems.push_back("config.log.level must be one of trace, debug, info, warn, error, critical, off");
+    else
+      c.log.level = *v;
+  }
+  if (auto v = r.string("file")) c.log.file = *v;
+  if (auto v = r.number_in("max_size_mb", 0.01, 100000)) c.log.max_size_mb = *v;
+  if (auto v = r.integer("max_files", 1, 1000)) c.log.max_files = static_cast<int>(*v);
+}
+
+void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  if (!j.is_array()) {
+    problems.push_back("config.users must be an array of {name, role, password, token}");
+    return;
+  }
+  std::size_t index = 0;
+  for (const json& u : j) {
+    const std::string where = "config.users[" + std::to_string(index++) + "]";
+    ObjectReader r(u, where, problems);
+    UserEntry e;
+    if (auto v = r.string("name", true)) e.name = *v;
+    if (auto v = r.string("role", true)) {
+      if (*v == "operator") {
+        e.role = Role::Operator;
+      } else if (*v != "viewer") {
+        problems.push_back(where + ".role must be \"operator\" or \"viewer\"");
+      }
+    }
+    if (auto v = r.string("password")) e.password = *v;
+    if (auto v = r.string("token")) e.token = *v;
+    // Short secrets are guessable over the network.
+    if (!e.token.empty() && e.token.size() < 16) problems.push_back(where + ".token must have at least 16 characters");
+    if (!e.password.empty() && e.password.size() < 8) problems.push_back(where + ".password must have at least 8 characters");
+    if (e.name.empty() && r.has("name")) problems.push_back(where + ".name must not be empty");
+    c.users.push_back(std::move(e));
+  }
+}
+
+}  // namespace
+
+void parse_listen(const std::string& text, std::string& host, std::uint16_t& port) {
+  const auto colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == text.size())
+    throw ConfigError("listen address '" + text + "' must be HOST:PORT, e.g. 127.0.0.1:8080");
+  const std::string port_text = text.substr(colon + 1);
+  std::size_t used = 0;
+  long value = -1;
+  try {
+    value = std::stol(port_text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != port_text.size() || value < 0 || value > 65535)
+    throw ConfigError("listen address '" + text + "': port must be a number from 0 to 65535");
+  host = text.substr(0, colon);
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  port = static_cast<std::uint16_t>(value);
+}
+
+DaemonConfig parse_config(const std::string& json_text, const std::string& source) {
+  json j;
+  try {
+    j = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    throw ConfigError(source + ": not valid JSON: " + e.what());
+  }
+  DaemonConfig c;
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(j, "config", problems);
+    if (const json* v = r.get("site")) read_site(*v, c, problems);
+    if (auto v = r.string("listen")) {
+      try {
+        parse_listen(*v, c.http.host, c.http.port);
+      } catch (const ConfigError& e) {
+        problems.push_back(std::string("config.listen: ") + e.what());
+      }
+    }
+    if (auto v = r.string("data_dir")) c.data_dir = *v;
+    if (auto v = r.string("devices")) {
+      if (*v != "sim" && *v != "sim-wire")
+        problems.push_back("config.devices must be \"sim\" or \"sim-wire\" (real devices come with the drivers)");
+      else
+        c.devices = *v;
+    }
+    if (const json* v = r.get("table")) read_table(*v, c, problems);
+    if (const json* v = r.get("chamber")) read_chamber(*v, c, problems);
+    if (const json* v = r.get("sim")) read_sim(*v, c, problems);
+    if (const json* v = r.get("suspenders")) read_suspenders(*v, c, problems);
+    if (const json* v = r.get("recorder")) read_recorder(*v, c, problems);
+    if (const json* v = r.get("http")) read_http(*v, c, problems);
+    if (const json* v = r.get("log")) read_log(*v, c, problems);
+    if (const json* v = r.get("campaign")) {
+      ObjectReader l(*v, "config.campaign", problems);
+      if (auto x = l.number_in("max_duration_s", 1, 365 * 86400.0)) c.campaign.max_duration_s = *x;
+      if (auto x = l.number_in("max_rate_hz", 1, 1e6)) c.campaign.max_rate_hz = *x;
+    }
+    if (const json* v = r.get("queue")) {
+      ObjectReader q(*v, "config.queue", problems);
+      if (auto x = q.boolean("autostart")) c.queue_autostart = *x;
+    }
+    if (auto v = r.string("operator_token")) {
+      if (!v->empty() && v->size() < 16) problems.push_back("config.operator_token must have at least 16 characters");
+      c.operator_token = *v;
+    }
+    if (const json* v = r.get("users")) read_users(*v, c, problems);
+  }
+  if (!problems.empty()) {
+    std::string message = source + ": " + std::to_string(problems.size()) + " problem(s):";
+    for (const auto& p : problems) message += "\n  - " + p;
+    throw ConfigError(message);
+  }
+  return c;
+}
+
+DaemonConfig load_config_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot read the configuration file");
+  std::stringstream text;
+  text << in.rdbuf();
+  return parse_config(text.str(), path);
+}
+
+}  // namespace imucal::daemon

@@ -1,0 +1,120 @@
+#include "daemon/service/json_reader.hpp"
+
+#include <cmath>
+#include <limits>
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+std::string json_type_name(const json& value) {
+  switch (value.type()) {
+    case json::value_t::null: return "null";
+    case json::value_t::object: return "an object";
+    case json::value_t::array: return "an array";
+    case json::value_t::string: return "a string";
+    case json::value_t::boolean: return "a boolean";
+    case json::value_t::number_integer:
+    case json::value_t::number_unsigned:
+    case json::value_t::number_float: return "a number";
+    default: return "an unsupported value";
+  }
+}
+
+ObjectReader::ObjectReader(const json& object, std::string where, std::vector<std::string>& problems)
+    : where_(std::move(where)), problems_(problems) {
+  if (object.is_object()) {
+    object_ = &object;
+  } else {
+    problems_.push_back(where_ + " must be an object, not " + json_type_name(object));
+  }
+}
+
+ObjectReader::~ObjectReader() { finish(); }
+
+bool ObjectReader::has(const char* key) const { return object_ != nullptr && object_->contains(key); }
+
+const json* ObjectReader::get(const char* key, bool required) {
+  if (object_ == nullptr) return nullptr;
+  known_.insert(key);
+  const auto it = object_->find(key);
+  if (it == object_->end()) {
+    if (required) problems_.push_back(at(key) + " is required");
+    return nullptr;
+  }
+  return &*it;
+}
+
+std::optional<double> ObjectReader::number(const char* key, bool required) {
+  const json* v = get(key, required);
+  if (v == nullptr) return std::nullopt;
+  if (!v->is_number()) {
+    problems_.push_back(at(key) + " must be a number, not " + json_type_name(*v));
+    return std::nullopt;
+  }
+  const double x = v->get<double>();
+  if (!std::isfinite(x)) {
+    problems_.push_back(at(key) + " must be finite");
+    return std::nullopt;
+  }
+  return x;
+}
+
+std::optional<double> ObjectReader::number_in(const char* key, double min, std::optional<double> max, bool required) {
+  const auto x = number(key, required);
+  if (!x) return std::nullopt;
+  if (*x < min || (max && *x > *max)) {
+    std::string range = max ? "between " + json(min).dump() + " and " + json(*max).dump() : "at least " + json(min).dump();
+    problems_.push_back(at(key) + " is " + json(*x).dump() + ", must be " + range);
+    return std::nullopt;
+  }
+  return x;
+}
+
+std::optional<std::int64_t> ObjectReader::integer(const char* key, std::int64_t min, std::int64_t max, bool required) {
+  const json* v = get(key, required);
+  if (v == nullptr) return std::nullopt;
+  if (!v->is_number_integer()) {
+    problems_.push_back(at(key) + " must be an integer, not " + json_type_name(*v));
+    return std::nullopt;
+  }
+  // Unsigned values above int64 range read as negative here and fail the range check below.
+  const auto x = v->get<std::int64_t>();
+  if (x < min || x > max) {
+    problems_.push_back(at(key) + " is " + std::to_string(x) + ", must be between " + std::to_string(min) + " and " +
+                        std::to_string(max));
+    return std::nullopt;
+  }
+  return x;
+}
+
+std::optional<std::string> ObjectReader::string(const char* key, bool required) {
+  const json* v = get(key, required);
+  if (v == nullptr) return std::nullopt;
+  if (!v->is_string()) {
+    problems_.push_back(at(key) + " must be a string, not " + json_type_name(*v));
+    return std::nullopt;
+  }
+  return v->get<std::string>();
+}
+
+std::optional<bool> ObjectReader::boolean(const char* key, bool required) {
+  const json* v = get(key, required);
+  if (v == nullptr) return std::nullopt;
+  if (!v->is_boolean()) {
+    problems_.push_back(at(key) + " must be true or false, not " + json_type_name(*v));
+    return std::nullopt;
+  }
+  return v->get<bool>();
+}
+
+void ObjectReader::finish() {
+  if (finished_ || object_ == nullptr) return;
+  finished_ = true;
+  for (const auto& [key, value] : object_->items()) {
+    if (!key.empty() && key.front() == '_') continue;
+    if (known_.count(key) == 0) problems_.push_back(where_ + ": unknown key \"" + key + "\"");
+  }
+}
+
+}  // namespace imucal::daemon

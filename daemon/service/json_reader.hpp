@@ -1,0 +1,58 @@
+// Strict reading of JSON objects written by people (the daemon configuration, campaigns, API
+// bodies): every problem is collected with its location instead of stopping at the first, an
+// unknown key is a problem (a typo must not become a silent default), and keys starting with '_'
+// are comments (JSON has none) and ignored.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace imucal::daemon {
+
+class ObjectReader {
+ public:
+  // `where` names the object in messages ("config", "campaign.chamber"). A non-object is reported
+  // at once and every getter then returns nothing.
+  ObjectReader(const nlohmann::json& object, std::string where, std::vector<std::string>& problems);
+  ObjectReader(const ObjectReader&) = delete;
+  ObjectReader& operator=(const ObjectReader&) = delete;
+  // Reports the unknown keys (once).
+  ~ObjectReader();
+
+  bool is_object() const { return object_ != nullptr; }
+  bool has(const char* key) const;
+  // The value, marking the key as known; nullptr when absent (and a problem when `required`).
+  const nlohmann::json* get(const char* key, bool required = false);
+
+  std::optional<double> number(const char* key, bool required = false);
+  // A finite number >= min (and <= max when given); outside: a problem naming the range.
+  std::optional<double> number_in(const char* key, double min, std::optional<double> max = std::nullopt,
+                                  bool required = false);
+  std::optional<std::int64_t> integer(const char* key, std::int64_t min, std::int64_t max, bool required = false);
+  std::optional<std::string> string(const char* key, bool required = false);
+  std::optional<bool> boolean(const char* key, bool required = false);
+
+  // Reports keys that no getter asked for (besides '_' comments). Called by the destructor too.
+  void finish();
+
+  const std::string& where() const { return where_; }
+  void problem(const std::string& text) { problems_.push_back(text); }
+  std::string at(const char* key) const { return where_ + "." + key; }
+
+ private:
+  const nlohmann::json* object_ = nullptr;
+  std::string where_;
+  std::vector<std::string>& problems_;
+  std::set<std::string> known_;
+  bool finished_ = false;
+};
+
+// "JSON type" in words for messages ("a string", "an array").
+std::string json_type_name(const nlohmann::json& value);
+
+}  // namespace imucal::daemon
