@@ -17,7 +17,16 @@ namespace imucal::nav {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
-Compensator::Compensator(const ImuModel& model) : model_(model) {}
+Compensator::Compensator(const ImuModel& model, double dt_nominal_s, double max_abs_delay_s)
+    : model_(model), dt_nominal_s_(dt_nominal_s) {
+  double max_delay = max_abs_delay_s, min_delay = -max_abs_delay_s;
+  for (int j = 0; j < 3; ++j) {
+    max_delay = std::max({max_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
+    min_delay = std::min({min_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
+  }
+  lookahead_ = 1 + static_cast<int>(std::ceil(max_delay / dt_nominal_s_));
+  lookback_ = 1 + static_cast<int>(std::ceil(-min_delay / dt_nominal_s_));
+}
 
 // Channel j's output lags its input by tau_j, so the input over (t_{k-1}, t_k] is the output over
 // (t_{k-1}+tau, t_k+tau]: linear interpolation of the cumulative output at those instants.
@@ -56,18 +65,9 @@ void Compensator::compensate(const std::deque<ImuFrame>& window, double dt, Vect
   }
 }
 
-NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink)
-    : meta_(meta), model_(model), comp_(model_), sink_(std::move(sink)), output_interval_s_(output_interval_s) {
-  dt_nominal_s_ = 1.0 / meta.rate_hz;
-  comp_.dt_nominal_s_ = dt_nominal_s_;
-  double max_delay = 0, min_delay = 0;
-  for (int j = 0; j < 3; ++j) {
-    max_delay = std::max({max_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
-    min_delay = std::min({min_delay, model.gyro.delay_s[j], model.accel.delay_s[j]});
-  }
-  comp_.lookahead_ = 1 + static_cast<int>(std::ceil(max_delay / dt_nominal_s_));
-  comp_.lookback_ = 1 + static_cast<int>(std::ceil(-min_delay / dt_nominal_s_));
+TableReference::TableReference(const RecordingMeta& meta, const ImuModel& model) {
   C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * units::kDegToRad);
+  C_o_p_ = meta.mount.C_o_p;
   C_b_o_ = Matrix3d::Identity();
   if (model.frame == "body" && model.body_to_instrument_rad) C_b_o_ += table::skew(*model.body_to_instrument_rad);
   r0_p_m_ = model.mount_r0_p_m ? *model.mount_r0_p_m : meta.mount.r0_p_m;
@@ -78,21 +78,46 @@ NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, d
   RN0_ = earth::prime_vertical_radius_m(lat0_) + h0_;
 }
 
-NavigationRun::Reference NavigationRun::reference(std::size_t i) const {
-  // Reference from the table angles (eq. 14): the origin only rotates about the axis intersection.
-  const ImuFrame& f = window_[i];
-  const std::size_t lo = i > 0 ? i - 1 : i, hi = i + 1 < window_.size() ? i + 1 : i;
+TableReference::Sample TableReference::at(const std::deque<ImuFrame>& window, std::size_t i) const {
+  // The stand moves the origin only by rotation about the axis intersection (eq. 14).
+  const ImuFrame& f = window[i];
+  const std::size_t lo = i > 0 ? i - 1 : i, hi = i + 1 < window.size() ? i + 1 : i;
   table::AxisState axes;
   axes.angle_rad = f.table_deg * units::kDegToRad;
   if (hi > lo)
-    axes.rate_radps = (window_[hi].table_deg - window_[lo].table_deg) * units::kDegToRad /
-                      (static_cast<double>(window_[hi].t_ns - window_[lo].t_ns) * 1e-9);
+    axes.rate_radps = (window[hi].table_deg - window[lo].table_deg) * units::kDegToRad /
+                      (static_cast<double>(window[hi].t_ns - window[lo].t_ns) * 1e-9);
   const Matrix3d C_p_n = table::C_p_n(axes.angle_rad, C_p0_n_);
-  Reference r;
-  r.C_b_n = C_p_n * meta_.mount.C_o_p * C_b_o_;
+  Sample r;
+  r.C_b_n = C_p_n * C_o_p_ * C_b_o_;
   r.r_n = C_p_n * r0_p_m_;
   r.v_n = C_p_n * table::platform_rates(axes).w_np_p.cross(r0_p_m_);
   return r;
+}
+
+NavState TableReference::initial_state(const Sample& r) const {
+  NavState s;
+  s.q_b_n = Eigen::Quaterniond(r.C_b_n);
+  s.v_n = r.v_n;
+  s.lat_rad = lat0_ + r.r_n.y() / RM0_;
+  s.lon_rad = lon0_ + r.r_n.x() / (RN0_ * std::cos(lat0_));
+  s.h_m = h0_ + r.r_n.z();
+  return s;
+}
+
+Vector3d TableReference::position_error_m(const NavState& s, const Sample& r) const {
+  return {(s.lon_rad - lon0_) * RN0_ * std::cos(lat0_) - r.r_n.x(), (s.lat_rad - lat0_) * RM0_ - r.r_n.y(),
+          s.h_m - h_ref_m(r)};
+}
+
+NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink)
+    : meta_(meta),
+      model_(model),
+      comp_(model_, 1.0 / meta.rate_hz),
+      sink_(std::move(sink)),
+      output_interval_s_(output_interval_s),
+      ref_(meta, model) {
+  dt_nominal_s_ = 1.0 / meta.rate_hz;
 }
 
 void NavigationRun::push(const ImuFrame& frame) {
@@ -119,27 +144,20 @@ void NavigationRun::step() {
   const auto k = static_cast<std::size_t>(comp_.lookback());
   if (!started_) {
     // Initialise at the previous frame's instant from the table: attitude, velocity, position.
-    const Reference r = reference(k - 1);
-    NavState s;
-    s.q_b_n = Eigen::Quaterniond(r.C_b_n);
-    s.v_n = r.v_n;
-    s.lat_rad = lat0_ + r.r_n.y() / RM0_;
-    s.lon_rad = lon0_ + r.r_n.x() / (RN0_ * std::cos(lat0_));
-    s.h_m = h0_ + r.r_n.z();
-    nav_ = std::make_unique<Strapdown>(s, earth::site_gravity_mps2(meta_.site));
+    nav_ = std::make_unique<Strapdown>(ref_.initial_state(ref_.at(window_, k - 1)), earth::site_gravity_mps2(meta_.site));
     first_t_ns_ = window_[k - 1].t_ns;
     started_ = true;
   }
   const double dt = static_cast<double>(window_[k].t_ns - window_[k - 1].t_ns) * 1e-9;
   Vector3d dtheta_b, dv_b;
   comp_.compensate(window_, dt, dtheta_b, dv_b);
-  const Reference r = reference(k);
-  nav_->update(dtheta_b, dv_b, dt, r.v_n.z(), h0_ + r.r_n.z());
+  const TableReference::Sample r = ref_.at(window_, k);
+  nav_->update(dtheta_b, dv_b, dt, r.v_n.z(), ref_.h_ref_m(r));
   const NavState& s = nav_->state();
   NavErrorSample e;
   e.t_s = static_cast<double>(window_[k].t_ns) * 1e-9;
   e.dv_n_mps = s.v_n - r.v_n;
-  e.dp_n_m = Vector3d((s.lon_rad - lon0_) * RN0_ * std::cos(lat0_) - r.r_n.x(), (s.lat_rad - lat0_) * RM0_ - r.r_n.y(), 0.0);
+  e.dp_n_m = ref_.position_error_m(s, r);
   const Eigen::Quaterniond q_err = s.q_b_n * Eigen::Quaterniond(r.C_b_n).conjugate();
   const Eigen::AngleAxisd aa(q_err);
   e.attitude_err_n_rad = aa.angle() * aa.axis();

@@ -36,7 +36,9 @@ struct NavSummary {
 // of look-ahead to undo channel delays; the runner feeds it a window of frames.
 class Compensator {
  public:
-  explicit Compensator(const ImuModel& model);
+  // The window covers the model's delays, or max_abs_delay_s when larger (for a filter that will
+  // update the delays while it runs).
+  Compensator(const ImuModel& model, double dt_nominal_s, double max_abs_delay_s = 0.0);
   // Frames on each side of the current one that compensate() reads.
   int lookahead() const { return lookahead_; }
   int lookback() const { return lookback_; }
@@ -49,7 +51,32 @@ class Compensator {
   const ImuModel& model_;
   int lookahead_ = 1, lookback_ = 1;
   double dt_nominal_s_ = 0;
-  friend class NavigationRun;
+};
+
+// The reference the table implies for the IMU origin (seed eq. 14), and the conversions between
+// the navigation state and metres on the site's local level.
+class TableReference {
+ public:
+  TableReference(const RecordingMeta& meta, const ImuModel& model);
+  struct Sample {
+    Eigen::Matrix3d C_b_n;
+    Eigen::Vector3d v_n, r_n;  // origin velocity and position from the axis intersection, ENU
+  };
+  // Reference at window[i]; the platform rate by central differences of the encoder angles.
+  Sample at(const std::deque<ImuFrame>& window, std::size_t i) const;
+  NavState initial_state(const Sample& s) const;
+  double h_ref_m(const Sample& s) const { return h0_ + s.r_n.z(); }
+  // Position error of a navigation state, ENU metres (Up is zero when the vertical is held).
+  Eigen::Vector3d position_error_m(const NavState& nav, const Sample& s) const;
+  // Metres east/north to radians of longitude/latitude at the site.
+  double RM_m() const { return RM0_; }
+  double RN_m() const { return RN0_; }
+  double latitude_rad() const { return lat0_; }
+
+ private:
+  Eigen::Matrix3d C_p0_n_, C_o_p_, C_b_o_;
+  Eigen::Vector3d r0_p_m_;
+  double lat0_, lon0_, h0_, RM0_, RN0_;
 };
 
 class NavigationRun {
@@ -62,11 +89,6 @@ class NavigationRun {
 
  private:
   void step();  // navigate the frame at window_[lookback]
-  struct Reference {
-    Eigen::Matrix3d C_b_n;
-    Eigen::Vector3d v_n, r_n;
-  };
-  Reference reference(std::size_t index) const;
 
   RecordingMeta meta_;
   ImuModel model_;
@@ -74,10 +96,7 @@ class NavigationRun {
   Sink sink_;
   double output_interval_s_;
   double next_output_s_ = 0;
-  Eigen::Matrix3d C_p0_n_;
-  Eigen::Matrix3d C_b_o_;
-  Eigen::Vector3d r0_p_m_;
-  double lat0_, lon0_, h0_, RM0_, RN0_;
+  TableReference ref_;
   double dt_nominal_s_;
   std::deque<ImuFrame> window_;
   std::int64_t frames_seen_ = 0;

@@ -17,18 +17,21 @@ struct NavState {
 
 class Strapdown {
  public:
-  Strapdown(const NavState& initial, double gravity_mps2);
+  // hold_vertical: after each update the vertical velocity and height are set to the reference
+  // (free-inertial judging); false integrates them too (a filter that measures them keeps them).
+  Strapdown(const NavState& initial, double gravity_mps2, bool hold_vertical = true);
 
-  // One IMU interval of length dt_s with compensated increments in the body frame. The vertical
-  // velocity and the height are then set to the reference values given.
+  // One IMU interval of length dt_s with compensated increments in the body frame.
   void update(const Eigen::Vector3d& dtheta_b, const Eigen::Vector3d& dv_b, double dt_s, double v_up_ref_mps,
               double h_ref_m);
 
   const NavState& state() const { return s_; }
+  NavState& mutable_state() { return s_; }  // for feedback of estimated errors
 
  private:
   NavState s_;
   double g_mps2_;
+  bool hold_vertical_;
   Eigen::Vector3d prev_dtheta_b_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d prev_dv_b_ = Eigen::Vector3d::Zero();
   bool first_ = true;

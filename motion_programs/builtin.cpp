@@ -1,5 +1,6 @@
 // The built-in motion programs, generated as data (the same JSON a user could write).
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
@@ -124,10 +125,50 @@ json evaluate_program() {
           {"segments", segs}};
 }
 
+// Stage 2 (seed ch. 3): one cycle of eight 36 s stops and eight single-axis rotations that gives
+// every coefficient of model (1) once (each axis up and down; rotations of both signs about each
+// axis between stops), repeated while the chamber runs its profile. Up and down of an axis are
+// adjacent stops, so a coefficient drifting with temperature hardly leaks into the scale factors.
+json thermal_program(const std::string& name, int cycles, double dwell_s) {
+  struct Stop {
+    const char* name;
+    double middle, inner;  // outer stays at 0
+    double move_s;         // length of the single-axis move into the stop
+  };
+  static const Stop kStops[] = {
+      {"z-up", 0, 0, 12},       // inner -90 from the previous cycle's last stop: about -z
+      {"y-up", 90, 0, 12},      // middle +90: about +x
+      {"y-down", 270, 0, 18},   // middle +180: about +x
+      {"z-down", 180, 0, 12},   // middle -90: about -x
+      {"z-down-b", 180, 90, 12},  // inner +90: about +z
+      {"x-up", 90, 90, 12},     // middle -90: about y
+      {"x-down", -90, 90, 18},  // middle -180: about y
+      {"z-up-b", 0, 90, 12},    // middle +90: about y, the other sign
+  };
+  json segs = json::array();
+  char prefix[32];
+  for (int c = 1; c <= cycles; ++c) {
+    std::snprintf(prefix, sizeof prefix, "cycle-%03d/", c);
+    for (const Stop& s : kStops) {
+      if (!(c == 1 && &s == &kStops[0]))  // the program starts at the first stop
+        segs.push_back({{"type", "move"}, {"name", std::string(prefix) + "to-" + s.name},
+                        {"to_deg", pose(0, s.middle, s.inner)}, {"duration_s", s.move_s}});
+      segs.push_back(hold(std::string(prefix) + s.name, dwell_s));
+    }
+  }
+  // The closing stop gives the last cycle's final rotation its rest at both ends.
+  segs.push_back({{"type", "move"}, {"name", "to-end"}, {"to_deg", pose(0, 0, 0)}, {"duration_s", kStops[0].move_s}});
+  segs.push_back(hold("end", dwell_s));
+  return {{"name", name},
+          {"comment", "Stage 2 (seed ch. 3): a cycle of 8 stops (36 s) and 8 single-axis rotations, repeated; run it "
+                      "with a chamber profile (imucal simulate --chamber)"},
+          {"segments", segs}};
+}
+
 }  // namespace
 
 std::vector<std::string> builtin_program_names() {
-  return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate"};
+  return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short"};
 }
 
 std::string builtin_program_json(const std::string& name) {
@@ -142,6 +183,9 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "navigation") return navigation_program().dump(1);
   if (name == "noise") return noise_program().dump(1);
   if (name == "evaluate") return evaluate_program().dump(1);
+  // 109 cycles of 396 s and the closing stop: 12 h, the length of the thermal chamber profile.
+  if (name == "thermal") return thermal_program("thermal", 109, 36.0).dump(1);
+  if (name == "thermal-short") return thermal_program("thermal-short", 18, 36.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

@@ -47,8 +47,8 @@ bool ChamberProfile::ramps_within(double t0_s, double t1_s) const {
   return false;
 }
 
-bool CampaignSpec::has_estimator(const std::string& name) const {
-  return std::find(estimators.begin(), estimators.end(), name) != estimators.end();
+bool CampaignSpec::has_estimator(const std::string& estimator) const {
+  return std::find(estimators.begin(), estimators.end(), estimator) != estimators.end();
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -67,7 +67,7 @@ struct CampaignSpec {
   std::vector<SimFault> faults;
   nlohmann::json normalized;  // the stored form: defaults filled in, files resolved inline
 
-  bool has_estimator(const std::string& name) const;
+  bool has_estimator(const std::string& estimator) const;
 };
 
 struct CampaignCheck {

@@ -1,0 +1,486 @@
+#include "daemon/service/daemon_db.hpp"
+
+#include <sqlite3.h>
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+
+namespace imucal::daemon {
+
+std::int64_t now_unix_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string iso8601_utc(std::int64_t unix_ms) {
+  const std::time_t secs = static_cast<std::time_t>(unix_ms / 1000);
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday,
+                tm.tm_hour, tm.tm_min, tm.tm_sec, static_cast<int>(unix_ms % 1000));
+  return buf;
+}
+
+namespace {
+
+const char* const kSchema = R"sql(
+CREATE TABLE IF NOT EXISTS campaign(
+  id INTEGER PRIMARY KEY,
+  name TEXT NOT NULL,
+  spec_json TEXT NOT NULL,
+  program_label TEXT NOT NULL,
+  duration_s REAL NOT NULL,
+  state TEXT NOT NULL,
+  created_ms INTEGER NOT NULL,
+  started_ms INTEGER,
+  ended_ms INTEGER,
+  checkpoint_segment INTEGER,
+  checkpoint_s REAL,
+  program_time_s REAL NOT NULL DEFAULT 0,
+  frames INTEGER NOT NULL DEFAULT 0,
+  lost_frames INTEGER NOT NULL DEFAULT 0,
+  bad_frames INTEGER NOT NULL DEFAULT 0,
+  run_db TEXT NOT NULL DEFAULT '',
+  model_json TEXT,
+  results_json TEXT,
+  estimators_json TEXT,
+  error TEXT);
+CREATE TABLE IF NOT EXISTS queue(
+  position INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL UNIQUE REFERENCES campaign(id));
+CREATE TABLE IF NOT EXISTS transition(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  t_ms INTEGER NOT NULL,
+  from_state TEXT,
+  to_state TEXT NOT NULL,
+  reason TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS transition_campaign ON transition(campaign_id);
+CREATE TABLE IF NOT EXISTS event(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  t_ms INTEGER NOT NULL,
+  kind TEXT NOT NULL,
+  segment INTEGER,
+  program_time_s REAL,
+  reason TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS event_campaign ON event(campaign_id);
+CREATE TABLE IF NOT EXISTS progress(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  estimator TEXT NOT NULL,
+  t_ms INTEGER NOT NULL,
+  program_time_s REAL NOT NULL,
+  json TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS progress_campaign ON progress(campaign_id);
+CREATE TABLE IF NOT EXISTS setting(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+)sql";
+
+// A prepared statement, finalized when it goes out of scope. The daemon database sees a few
+// statements a second, so preparing per call costs nothing worth caching.
+class Stmt {
+ public:
+  Stmt(sqlite3* db, const std::string& path, const char* sql) : db_(db), path_(path) {
+    if (sqlite3_prepare_v2(db, sql, -1, &stmt_, nullptr) != SQLITE_OK)
+      throw DbError("daemon database '" + path + "': cannot prepare '" + sql + "': " + sqlite3_errmsg(db));
+  }
+  ~Stmt() { sqlite3_finalize(stmt_); }
+  Stmt(const Stmt&) = delete;
+  Stmt& operator=(const Stmt&) = delete;
+
+  Stmt& bind(int i, std::int64_t v) { return check(sqlite3_bind_int64(stmt_, i, v)); }
+  Stmt& bind(int i, double v) { return check(sqlite3_bind_double(stmt_, i, v)); }
+  Stmt& bind(int i, const std::string& v) {
+    return check(sqlite3_bind_text(stmt_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT));
+  }
+  Stmt& bind(int i, std::optional<std::int64_t> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
+  Stmt& bind(int i, std::optional<double> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
+  Stmt& bind_null(int i) { return check(sqlite3_bind_null(stmt_, i)); }
+
+  bool step() {
+    const int rc = sqlite3_step(stmt_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    throw DbError("daemon database '" + path_ + "': '" + sqlite3_sql(stmt_) + "' failed: " + sqlite3_errmsg(db_));
+  }
+  void run() {
+    while (step()) {
+    }
+  }
+  std::int64_t i64(int c) const { return sqlite3_column_int64(stmt_, c); }
+  double f64(int c) const { return sqlite3_column_double(stmt_, c); }
+  bool null(int c) const { return sqlite3_column_type(stmt_, c) == SQLITE_NULL; }
+  std::string text(int c) const {
+    const auto* p = sqlite3_column_text(stmt_, c);
+    return p == nullptr ? std::string() : std::string(reinterpret_cast<const char*>(p), static_cast<std::size_t>(sqlite3_column_bytes(stmt_, c)));
+  }
+  std::optional<std::int64_t> opt_i64(int c) const { return null(c) ? std::nullopt : std::optional(i64(c)); }
+  std::optional<double> opt_f64(int c) const { return null(c) ? std::nullopt : std::optional(f64(c)); }
+  std::optional<std::string> opt_text(int c) const { return null(c) ? std::nullopt : std::optional(text(c)); }
+
+ private:
+  Stmt& check(int rc) {
+    if (rc != SQLITE_OK) throw DbError("daemon database '" + path_ + "': bind failed: " + sqlite3_errmsg(db_));
+    return *this;
+  }
+  sqlite3* db_;
+  const std::string& path_;
+  sqlite3_stmt* stmt_ = nullptr;
+};
+
+constexpr const char* kCampaignColumns =
+    "c.id, c.name, c.spec_json, c.program_label, c.duration_s, c.state, c.created_ms, c.started_ms, c.ended_ms, "
+    "c.checkpoint_segment, c.checkpoint_s, c.program_time_s, c.frames, c.lost_frames, c.bad_frames, c.run_db, "
+    "c.model_json, c.results_json, c.estimators_json, c.error, "
+    "(SELECT COUNT(*) FROM queue q2 WHERE q2.position < q.position) AS queue_position, q.position IS NOT NULL";
+
+}  // namespace
+
+DaemonDb::DaemonDb(const std::string& path) : path_(path) {
+  if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
+    std::string message = db_ != nullptr ? sqlite3_errmsg(db_) : "out of memory";
+    sqlite3_close_v2(db_);
+    db_ = nullptr;
+    throw DbError("daemon database '" + path + "': cannot open: " + message);
+  }
+  sqlite3_busy_timeout(db_, 5000);
+  try {
+    // WAL + NORMAL: readers never block the writer, and a crash loses at most the last commits,
+    // never the file.
+    exec("PRAGMA journal_mode=WAL");
+    exec("PRAGMA synchronous=NORMAL");
+    exec("PRAGMA foreign_keys=ON");
+    int version = 0;
+    {
+      Stmt s(db_, path_, "PRAGMA user_version");
+      if (s.step()) version = static_cast<int>(s.i64(0));
+    }
+    if (version > kSchemaVersion)
+      throw DbError("daemon database '" + path + "' has schema version " + std::to_string(version) +
+                    ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
+    {
+      Stmt s(db_, path_, "PRAGMA quick_check");
+      while (s.step())
+        if (s.text(0) != "ok") throw DbError("daemon database '" + path + "' is damaged: " + s.text(0));
+    }
+    exec("BEGIN IMMEDIATE");
+    exec(kSchema);
+    exec(("PRAGMA user_version=" + std::to_string(kSchemaVersion)).c_str());
+    exec("COMMIT");
+  } catch (...) {
+    sqlite3_close_v2(db_);
+    db_ = nullptr;
+    throw;
+  }
+}
+
+DaemonDb::~DaemonDb() {
+  if (db_ != nullptr) sqlite3_close_v2(db_);
+}
+
+void DaemonDb::exec(const char* sql) {
+  char* message = nullptr;
+  if (sqlite3_exec(db_, sql, nullptr, nullptr, &message) != SQLITE_OK) {
+    std::string reason = message != nullptr ? message : sqlite3_errmsg(db_);
+    sqlite3_free(message);
+    throw DbError("daemon database '" + path_ + "': '" + sql + "' failed: " + reason);
+  }
+}
+
+namespace {
+// BEGIN IMMEDIATE .. COMMIT, rolled back when left by an exception.
+class Txn {
+ public:
+  explicit Txn(sqlite3* db) : db_(db) { sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr); }
+  void commit() {
+    if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
+      throw DbError(std::string("daemon database: commit failed: ") + sqlite3_errmsg(db_));
+    done_ = true;
+  }
+  ~Txn() {
+    if (!done_) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+  }
+  Txn(const Txn&) = delete;
+  Txn& operator=(const Txn&) = delete;
+
+ private:
+  sqlite3* db_;
+  bool done_ = false;
+};
+}  // namespace
+
+CampaignRow DaemonDb::read_campaign_row(void* raw) {
+  Stmt& s = *static_cast<Stmt*>(raw);
+  CampaignRow r;
+  r.id = s.i64(0);
+  r.name = s.text(1);
+  r.spec_json = s.text(2);
+  r.program_label = s.text(3);
+  r.duration_s = s.f64(4);
+  r.state = parse_run_state(s.text(5)).value_or(RunState::Failed);
+  r.created_ms = s.i64(6);
+  r.started_ms = s.opt_i64(7);
+  r.ended_ms = s.opt_i64(8);
+  r.checkpoint_segment = s.opt_i64(9);
+  r.checkpoint_s = s.opt_f64(10);
+  r.program_time_s = s.f64(11);
+  r.frames = s.i64(12);
+  r.lost_frames = s.i64(13);
+  r.bad_frames = s.i64(14);
+  r.run_db = s.text(15);
+  r.model_json = s.opt_text(16);
+  r.results_json = s.opt_text(17);
+  r.estimators_json = s.opt_text(18);
+  r.error = s.opt_text(19);
+  if (s.i64(21) != 0) r.queue_position = s.i64(20);
+  return r;
+}
+
+std::int64_t DaemonDb::insert_campaign(const std::string& name, const std::string& spec_json,
+                                       const std::string& program_label, double duration_s, const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  Txn txn(db_);
+  const std::int64_t now = now_unix_ms();
+  Stmt s(db_, path_,
+         "INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms) VALUES (?1,?2,?3,?4,?5,?6)");
+  s.bind(1, name).bind(2, spec_json).bind(3, program_label).bind(4, duration_s);
+  s.bind(5, std::string(to_string(RunState::Created))).bind(6, now);
+  s.run();
+  const std::int64_t id = sqlite3_last_insert_rowid(db_);
+  Stmt t(db_, path_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,NULL,?3,?4)");
+  t.bind(1, id).bind(2, now).bind(3, std::string(to_string(RunState::Created))).bind(4, reason);
+  t.run();
+  txn.commit();
+  return id;
+}
+
+std::optional<CampaignRow> DaemonDb::campaign(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.id = ?1";
+  Stmt s(db_, path_, sql.c_str());
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  return read_campaign_row(&s);
+}
+
+std::vector<CampaignRow> DaemonDb::campaigns(std::int64_t limit) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id ORDER BY c.id DESC LIMIT ?1";
+  Stmt s(db_, path_, sql.c_str());
+  s.bind(1, limit);
+  std::vector<CampaignRow> rows;
+  while (s.step()) rows.push_back(read_campaign_row(&s));
+  return rows;
+}
+
+bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
+  std::lock_guard lock(mutex_);
+  Txn txn(db_);
+  std::optional<RunState> from;
+  {
+    Stmt s(db_, path_, "SELECT state FROM campaign WHERE id = ?1");
+    s.bind(1, id);
+    if (!s.step()) return false;
+    from = parse_run_state(s.text(0));
+  }
+  if (expected && from != expected) return false;
+  const std::int64_t now = now_unix_ms();
+  {
+    Stmt s(db_, path_,
+           "UPDATE campaign SET state = ?2, "
+           "started_ms = CASE WHEN ?2 = 'running' AND started_ms IS NULL THEN ?3 ELSE started_ms END, "
+           "ended_ms = CASE WHEN ?2 IN ('done', 'failed', 'aborted') THEN ?3 ELSE ended_ms END WHERE id = ?1");
+    s.bind(1, id).bind(2, std::string(to_string(to))).bind(3, now);
+    s.run();
+  }
+  {
+    Stmt s(db_, path_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,?3,?4,?5)");
+    s.bind(1, id).bind(2, now);
+    if (from) {
+      s.bind(3, std::string(to_string(*from)));
+    } else {
+      s.bind_null(3);
+    }
+    s.bind(4, std::string(to_string(to))).bind(5, reason);
+    s.run();
+  }
+  if (is_final(to)) {
+    Stmt s(db_, path_, "DELETE FROM queue WHERE campaign_id = ?1");
+    s.bind(1, id);
+    s.run();
+  }
+  txn.commit();
+  return true;
+}
+
+std::vector<TransitionRow> DaemonDb::transitions(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT t_ms, from_state, to_state, reason FROM transition WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<TransitionRow> rows;
+  while (s.step()) {
+    TransitionRow r;
+    r.t_ms = s.i64(0);
+    if (!s.null(1)) r.from = parse_run_state(s.text(1));
+    r.to = parse_run_state(s.text(2)).value_or(RunState::Failed);
+    r.reason = s.text(3);
+    rows.push_back(std::move(r));
+  }
+  return rows;
+}
+
+std::vector<std::int64_t> DaemonDb::recover_after_restart(const std::string& reason) {
+  std::vector<std::pair<std::int64_t, RunState>> found;
+  {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, path_, "SELECT id, state FROM campaign ORDER BY id");
+    while (s.step()) {
+      const auto state = parse_run_state(s.text(1));
+      if (state && is_active(*state)) found.emplace_back(s.i64(0), *state);
+    }
+  }
+  std::vector<std::int64_t> changed;
+  for (const auto& [id, state] : found) {
+    if (state == RunState::Aborting) {
+      set_state(id, RunState::Aborted, "abort completed at start-up (" + reason + ")", state);
+    } else {
+      set_state(id, RunState::Interrupted, reason, state);
+    }
+    changed.push_back(id);
+  }
+  return changed;
+}
+
+void DaemonDb::queue_push_back(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MAX(position), 0) + 1, ?1 FROM queue");
+  s.bind(1, id);
+  s.run();
+}
+
+void DaemonDb::queue_push_front(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MIN(position), 0) - 1, ?1 FROM queue");
+  s.bind(1, id);
+  s.run();
+}
+
+void DaemonDb::queue_remove(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "DELETE FROM queue WHERE campaign_id = ?1");
+  s.bind(1, id);
+  s.run();
+}
+
+std::vector<std::int64_t> DaemonDb::queue() {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT campaign_id FROM queue ORDER BY position");
+  std::vector<std::int64_t> ids;
+  while (s.step()) ids.push_back(s.i64(0));
+  return ids;
+}
+
+void DaemonDb::add_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                         std::optional<double> program_time_s, const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_,
+         "INSERT INTO event(campaign_id, t_ms, kind, segment, program_time_s, reason) VALUES (?1,?2,?3,?4,?5,?6)");
+  s.bind(1, id).bind(2, now_unix_ms()).bind(3, kind).bind(4, segment).bind(5, program_time_s).bind(6, reason);
+  s.run();
+}
+
+std::vector<EventRow> DaemonDb::events(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT t_ms, kind, segment, program_time_s, reason FROM event WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<EventRow> rows;
+  while (s.step()) rows.push_back({s.i64(0), s.text(1), s.opt_i64(2), s.opt_f64(3), s.text(4)});
+  return rows;
+}
+
+void DaemonDb::add_progress(std::int64_t id, const std::string& estimator, double program_time_s,
+                            const std::string& json) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_,
+         "INSERT INTO progress(campaign_id, estimator, t_ms, program_time_s, json) VALUES (?1,?2,?3,?4,?5)");
+  s.bind(1, id).bind(2, estimator).bind(3, now_unix_ms()).bind(4, program_time_s).bind(5, json);
+  s.run();
+}
+
+std::vector<ProgressRow> DaemonDb::progress(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT estimator, t_ms, program_time_s, json FROM progress WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<ProgressRow> rows;
+  while (s.step()) rows.push_back({s.text(0), s.i64(1), s.f64(2), s.text(3)});
+  return rows;
+}
+
+void DaemonDb::set_run_db(std::int64_t id, const std::string& relative_path) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "UPDATE campaign SET run_db = ?2 WHERE id = ?1");
+  s.bind(1, id).bind(2, relative_path);
+  s.run();
+}
+
+void DaemonDb::update_run(std::int64_t id, double program_time_s, std::int64_t frames, std::int64_t lost_frames,
+                          std::int64_t bad_frames) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_,
+         "UPDATE campaign SET program_time_s = ?2, frames = ?3, lost_frames = ?4, bad_frames = ?5 WHERE id = ?1");
+  s.bind(1, id).bind(2, program_time_s).bind(3, frames).bind(4, lost_frames).bind(5, bad_frames);
+  s.run();
+}
+
+void DaemonDb::set_checkpoint(std::int64_t id, std::int64_t segment, double t_s) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "UPDATE campaign SET checkpoint_segment = ?2, checkpoint_s = ?3 WHERE id = ?1");
+  s.bind(1, id).bind(2, segment).bind(3, t_s);
+  s.run();
+}
+
+namespace {
+void set_text_column(sqlite3* db, const std::string& path, const char* sql, std::int64_t id, const std::string& v) {
+  Stmt s(db, path, sql);
+  s.bind(1, id).bind(2, v);
+  s.run();
+}
+}  // namespace
+
+void DaemonDb::set_model(std::int64_t id, const std::string& model_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, path_, "UPDATE campaign SET model_json = ?2 WHERE id = ?1", id, model_json);
+}
+void DaemonDb::set_results(std::int64_t id, const std::string& results_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, path_, "UPDATE campaign SET results_json = ?2 WHERE id = ?1", id, results_json);
+}
+void DaemonDb::set_estimators(std::int64_t id, const std::string& estimators_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, path_, "UPDATE campaign SET estimators_json = ?2 WHERE id = ?1", id, estimators_json);
+}
+void DaemonDb::set_error(std::int64_t id, const std::string& error) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, path_, "UPDATE campaign SET error = ?2 WHERE id = ?1", id, error);
+}
+
+std::optional<std::string> DaemonDb::setting(const std::string& key) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT value FROM setting WHERE key = ?1");
+  s.bind(1, key);
+  if (!s.step()) return std::nullopt;
+  return s.text(0);
+}
+
+void DaemonDb::set_setting(const std::string& key, const std::string& value) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
+  s.bind(1, key).bind(2, value);
+  s.run();
+}
+
+}  // namespace imucal::daemon

@@ -1,0 +1,128 @@
+// The daemon's own database (DATA_DIR/imucald.db, SQLite in WAL mode): campaigns with their run
+// state, the queue, every state transition, run events (suspensions, redos, alarms) and estimator
+// progress. Frames live elsewhere, one storage::RunDb per run. Thread-safe: one connection behind
+// a mutex; every call is short.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "daemon/service/run_state.hpp"
+
+struct sqlite3;
+
+namespace imucal::daemon {
+
+class DbError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct CampaignRow {
+  std::int64_t id = 0;
+  std::string name;
+  std::string spec_json;       // normalized campaign
+  std::string program_label;
+  double duration_s = 0.0;
+  RunState state = RunState::Created;
+  std::int64_t created_ms = 0;
+  std::optional<std::int64_t> started_ms, ended_ms;
+  std::optional<std::int64_t> checkpoint_segment;
+  std::optional<double> checkpoint_s;
+  double program_time_s = 0.0;
+  std::int64_t frames = 0, lost_frames = 0, bad_frames = 0;
+  std::string run_db;          // relative to the data directory; empty before the first start
+  std::optional<std::string> model_json, results_json, estimators_json, error;
+  std::optional<std::int64_t> queue_position;  // 0 = head
+};
+
+struct TransitionRow {
+  std::int64_t t_ms = 0;
+  std::optional<RunState> from;
+  RunState to = RunState::Created;
+  std::string reason;
+};
+
+struct EventRow {
+  std::int64_t t_ms = 0;
+  std::string kind;
+  std::optional<std::int64_t> segment;
+  std::optional<double> program_time_s;
+  std::string reason;
+};
+
+struct ProgressRow {
+  std::string estimator;
+  std::int64_t t_ms = 0;
+  double program_time_s = 0.0;
+  std::string json;
+};
+
+std::int64_t now_unix_ms();
+std::string iso8601_utc(std::int64_t unix_ms);
+
+class DaemonDb {
+ public:
+  static constexpr int kSchemaVersion = 1;
+  explicit DaemonDb(const std::string& path);
+  ~DaemonDb();
+  DaemonDb(const DaemonDb&) = delete;
+  DaemonDb& operator=(const DaemonDb&) = delete;
+
+  const std::string& path() const { return path_; }
+
+  // Stores a checked campaign in state `created` (with its first transition). Returns its id.
+  std::int64_t insert_campaign(const std::string& name, const std::string& spec_json, const std::string& program_label,
+                               double duration_s, const std::string& reason);
+  std::optional<CampaignRow> campaign(std::int64_t id);
+  std::vector<CampaignRow> campaigns(std::int64_t limit);  // newest first
+
+  // Changes the state and records the transition, in one transaction; sets started/ended times.
+  // With `expected`, only when the current state is that one (returns false otherwise).
+  bool set_state(std::int64_t id, RunState to, const std::string& reason,
+                 std::optional<RunState> expected = std::nullopt);
+  std::vector<TransitionRow> transitions(std::int64_t id);
+
+  // Crash recovery at start-up: active runs become interrupted (an abort in progress completes
+  // as aborted). Returns the ids changed.
+  std::vector<std::int64_t> recover_after_restart(const std::string& reason);
+
+  // The queue (FIFO; an interrupted run that is resumed goes to the head).
+  void queue_push_back(std::int64_t id);
+  void queue_push_front(std::int64_t id);
+  void queue_remove(std::int64_t id);
+  std::vector<std::int64_t> queue();
+
+  void add_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                 std::optional<double> program_time_s, const std::string& reason);
+  std::vector<EventRow> events(std::int64_t id);
+
+  void add_progress(std::int64_t id, const std::string& estimator, double program_time_s, const std::string& json);
+  std::vector<ProgressRow> progress(std::int64_t id);
+
+  void set_run_db(std::int64_t id, const std::string& relative_path);
+  void update_run(std::int64_t id, double program_time_s, std::int64_t frames, std::int64_t lost_frames,
+                  std::int64_t bad_frames);
+  void set_checkpoint(std::int64_t id, std::int64_t segment, double t_s);
+  void set_model(std::int64_t id, const std::string& model_json);
+  void set_results(std::int64_t id, const std::string& results_json);
+  void set_estimators(std::int64_t id, const std::string& estimators_json);
+  void set_error(std::int64_t id, const std::string& error);
+
+  std::optional<std::string> setting(const std::string& key);
+  void set_setting(const std::string& key, const std::string& value);
+
+ private:
+  void exec(const char* sql);
+  CampaignRow read_campaign_row(void* stmt);
+  std::string path_;
+  std::mutex mutex_;
+  sqlite3* db_ = nullptr;
+};
+
+}  // namespace imucal::daemon

@@ -1,0 +1,66 @@
+// Online estimators on a worker thread. The worker does not take frames from the sequencer: it
+// tails the run database (its own read connection, WAL) up to what the recorder has committed.
+// So it never blocks recording whatever its speed, its memory stays bounded, and after a restart
+// it replays the committed frames with the same code before following the new ones. The
+// estimators are the library code of `imucal calibrate` (estimators/), fed frame by frame.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+
+namespace imucal::daemon {
+
+class EstimatorWorker {
+ public:
+  // Progress of one estimator (the live message's estimators.<name> block); called on the
+  // worker thread, at most about once a second per estimator.
+  using Sink = std::function<void(const std::string& estimator, double program_time_s, const nlohmann::json& progress)>;
+
+  struct Results {
+    std::optional<ImuModel> model;  // the direct estimator's result (instrument frame, with sigma)
+    nlohmann::json results = nlohmann::json::object();  // per estimator: summary or why there is none
+  };
+
+  // `committed_t_ns`: frames already committed in the file (replayed first); nothing when empty.
+  EstimatorWorker(std::string run_db_path, std::vector<std::string> estimators, std::optional<ImuModel> navigation_model,
+                  std::optional<std::int64_t> committed_t_ns, Sink sink);
+  ~EstimatorWorker();
+  EstimatorWorker(const EstimatorWorker&) = delete;
+  EstimatorWorker& operator=(const EstimatorWorker&) = delete;
+
+  // The recorder committed frames up to t_ns (thread-safe, never blocks).
+  void committed(std::int64_t t_ns);
+  // Feeds everything committed up to `final_t_ns`, finishes every estimator and ends the thread.
+  Results finish(std::optional<std::int64_t> final_t_ns);
+  // Ends the thread without results (abort, shutdown).
+  void cancel();
+
+ private:
+  void run();
+
+  std::string path_;
+  std::vector<std::string> estimators_;
+  std::optional<ImuModel> navigation_model_;
+  Sink sink_;
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::int64_t target_t_ns_ = std::numeric_limits<std::int64_t>::min();
+  bool finishing_ = false, cancelled_ = false;
+  Results results_;
+  std::thread thread_;
+};
+
+}  // namespace imucal::daemon

@@ -1,0 +1,795 @@
+#include "daemon/service/sequencer.hpp"
+
+#include <sqlite3.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include <spdlog/spdlog.h>
+
+#include "core/units.hpp"
+#include "daemon/service/campaign.hpp"
+#include "daemon/service/estimator_worker.hpp"
+#include "daemon/service/recorder.hpp"
+#include "daemon/service/sim_bench.hpp"
+#include "storage/run_db.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::int64_t kNoTime = std::numeric_limits<std::int64_t>::min();
+
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+json vec3(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+// The last frame and temperature times committed in a run file (resume point after a restart).
+// Raw SQL on storage's schema (run_db.cpp: imu_chunk.t1_ns, temp_sample.t_ns): RunDb does not
+// expose them.
+void committed_times(const std::string& path, std::optional<std::int64_t>& frame_t_ns,
+                     std::optional<std::int64_t>& temp_t_ns) {
+  sqlite3* db = nullptr;
+  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) {
+    std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
+    sqlite3_close_v2(db);
+    throw storage::StorageError("run database '" + path + "': cannot open: " + message);
+  }
+  sqlite3_busy_timeout(db, 5000);
+  auto query = [&](const char* sql) -> std::optional<std::int64_t> {
+    sqlite3_stmt* stmt = nullptr;
+    std::optional<std::int64_t> out;
+    if (sqlite3_prepare_v2(db, sql, -1, &stmt, nullptr) == SQLITE_OK && sqlite3_step(stmt) == SQLITE_ROW &&
+        sqlite3_column_type(stmt, 0) != SQLITE_NULL)
+      out = sqlite3_column_int64(stmt, 0);
+    sqlite3_finalize(stmt);
+    return out;
+  };
+  frame_t_ns = query("SELECT MAX(t1_ns) FROM imu_chunk");
+  temp_t_ns = query("SELECT MAX(t_ns) FROM temp_sample");
+  sqlite3_close_v2(db);
+}
+
+}  // namespace
+
+// Everything about the run in progress; lives on the sequencer thread only.
+struct RunContext {
+  std::int64_t id = 0;
+  CampaignRow row;
+  CampaignSpec spec;
+  motion::Program program;
+  std::vector<SegmentInfo> segments;
+  std::unique_ptr<Bench> bench;
+  // The recorder's commit listener reaches the worker through this pointer. Declared in this
+  // order so that the recorder (its thread) goes first and the worker outlives it.
+  std::atomic<EstimatorWorker*> worker{nullptr};
+  std::unique_ptr<EstimatorWorker> estimators;
+  std::unique_ptr<Recorder> recorder;
+  std::string run_db_path;
+
+  std::size_t segment = 0;
+  std::int64_t dt_ns = 0;
+  std::optional<std::int64_t> last_t_ns;       // last frame handed to the recorder
+  std::optional<std::int64_t> last_temp_t_ns;  // last temperature handed to the recorder
+  std::int64_t frames = 0, lost = 0, bad = 0;
+  std::int64_t prev_delivered_t_ns = 0;        // last frame the IMU delivered in this pass
+  std::int64_t delivered = 0;
+  double last_frame_world_s = 0.0;
+  std::optional<double> out_of_band_since_s;
+  double program_time_s = 0.0;
+  std::optional<double> commanded_setpoint_C;
+
+  Clock::time_point last_publish{}, last_db_update{}, window_wall{};
+  double window_program_s = 0.0, window_world_s = 0.0;
+  std::int64_t window_delivered = 0;
+  double speed_factor = 0.0, frame_rate_hz = 0.0;
+
+  std::int64_t segment_end_ns(std::size_t k) const {
+    return std::llround(segments[k].t1_s * units::kNsPerS);
+  }
+  double checkpoint_s() const { return segment < segments.size() ? segments[segment].t0_s : program.duration_s(); }
+};
+
+Sequencer::Sequencer(const DaemonConfig& config, DaemonDb& db)
+    : config_(config), db_(db), queue_enabled_(config.queue_autostart) {
+  telemetry_ = {{"run", nullptr},
+                {"table", {{"angle_deg", {0, 0, 0}}, {"rate_dps", {0, 0, 0}}, {"homed", false},
+                           {"interlock_closed", false}, {"connected", true}, {"fault", nullptr}}},
+                {"chamber", {{"temperature_C", config.chamber.safe_setpoint_C},
+                             {"setpoint_C", config.chamber.safe_setpoint_C},
+                             {"tolerance_C", config.chamber.tolerance_C}, {"in_band", true}, {"connected", true}}},
+                {"imu", {{"frame_rate_hz", 0.0}, {"frames", 0}, {"lost_frames", 0}, {"bad_frames", 0},
+                         {"connected", true}}},
+                {"recorder", {{"queue_frames", 0}, {"queue_high_water_frames", 0}, {"committed_frames", 0}}},
+                {"estimators", json::object()}};
+}
+
+Sequencer::~Sequencer() { shutdown(); }
+
+void Sequencer::set_event_listener(EventListener listener) { listener_ = std::move(listener); }
+
+void Sequencer::start() {
+  if (thread_.joinable()) return;
+  thread_ = std::thread([this] { runner(); });
+}
+
+void Sequencer::shutdown() {
+  {
+    std::lock_guard lock(mutex_);
+    shutdown_ = true;
+  }
+  cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+json Sequencer::telemetry() const {
+  std::lock_guard lock(telemetry_mutex_);
+  return telemetry_;
+}
+
+json Sequencer::active_estimators() const {
+  std::lock_guard lock(telemetry_mutex_);
+  return estimators_;
+}
+
+std::optional<std::int64_t> Sequencer::active_id() const {
+  std::lock_guard lock(mutex_);
+  return active_id_;
+}
+
+RunState Sequencer::active_state() const {
+  std::lock_guard lock(mutex_);
+  return active_state_;
+}
+
+void Sequencer::emit(const json& event) {
+  if (listener_) listener_(event);
+}
+
+bool Sequencer::transition(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
+  RunState from;
+  {
+    std::lock_guard lock(mutex_);
+    const bool active = active_id_ == id;
+    if (active) {
+      if (expected && active_state_ != *expected) return false;
+      from = active_state_;
+      if (!db_.set_state(id, to, reason)) return false;
+      active_state_ = to;
+    } else {
+      auto row = db_.campaign(id);
+      if (!row) return false;
+      from = row->state;
+      if (!db_.set_state(id, to, reason, expected)) return false;
+    }
+  }
+  cv_.notify_all();
+  spdlog::info("campaign {}: {} -> {} ({})", id, to_string(from), to_string(to), reason);
+  emit({{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", to_string(from)},
+        {"to", to_string(to)}, {"reason", reason}});
+  return true;
+}
+
+namespace {
+void sync_run_record(DaemonDb& db, RunContext& run) {
+  if (!run.recorder) return;
+  json record = {{"campaign_id", run.id}, {"name", run.spec.name}, {"transitions", json::array()},
+                 {"events", json::array()}};
+  for (const auto& t : db.transitions(run.id))
+    record["transitions"].push_back({{"t", iso8601_utc(t.t_ms)},
+                                     {"from", t.from ? json(to_string(*t.from)) : json(nullptr)},
+                                     {"to", to_string(t.to)},
+                                     {"reason", t.reason}});
+  for (const auto& e : db.events(run.id))
+    record["events"].push_back({{"t", iso8601_utc(e.t_ms)},
+                                {"kind", e.kind},
+                                {"segment", e.segment ? json(*e.segment) : json(nullptr)},
+                                {"program_time_s", e.program_time_s ? json(*e.program_time_s) : json(nullptr)},
+                                {"reason", e.reason}});
+  // In the run file too, so that the run's own record tells every interruption.
+  run.recorder->set_extra("imucald_run", record.dump());
+}
+}  // namespace
+
+void Sequencer::note_event(RunContext& run, const std::string& kind, const std::string& reason) {
+  db_.add_event(run.id, kind, static_cast<std::int64_t>(run.segment), run.program_time_s, reason);
+  if (kind == "alarm" || kind == "error") {
+    spdlog::warn("campaign {}: {}: {}", run.id, kind, reason);
+  } else {
+    spdlog::info("campaign {}: {}: {}", run.id, kind, reason);
+  }
+  emit({{"type", "event"}, {"campaign", run.id}, {"kind", kind}, {"reason", reason},
+        {"segment", run.segment}, {"program_time_s", run.program_time_s}});
+  sync_run_record(db_, run);
+}
+
+Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, const std::string& who,
+                                             const std::string& reason) {
+  const std::string why = std::string(to_string(command)) + " by " + who + (reason.empty() ? "" : ": " + reason);
+  std::optional<json> event;
+  CommandOutcome out;
+  {
+    std::lock_guard lock(mutex_);
+    if (shutdown_) return {503, "the daemon is shutting down", std::nullopt};
+    auto row = db_.campaign(id);
+    if (!row) return {404, "no campaign " + std::to_string(id), std::nullopt};
+    const bool active = active_id_ == id;
+    const RunState state = active ? active_state_ : row->state;
+    const auto target = command_target(state, command);
+    if (!target || (is_active(state) && !active)) {
+      std::string message = "cannot " + std::string(to_string(command)) + " campaign " + std::to_string(id) +
+                            ": it is " + std::string(to_string(state));
+      if (command == Command::Start && state != RunState::Created)
+        message = "campaign " + std::to_string(id) + " was already started (state " + std::string(to_string(state)) +
+                  "); post it again to repeat it";
+      if (command == Command::Resume && state == RunState::Suspended)
+        message += "; a suspended run resumes by itself when the condition has cleared";
+      return {409, message, state};
+    }
+    if (!db_.set_state(id, *target, why)) return {409, "campaign " + std::to_string(id) + " changed meanwhile", state};
+    if (active) active_state_ = *target;
+    if (*target == RunState::Queued) {
+      if (state == RunState::Interrupted) {
+        db_.queue_push_front(id);
+      } else {
+        db_.queue_push_back(id);
+      }
+      queue_enabled_ = true;
+    }
+    if (*target == RunState::Aborted) db_.queue_remove(id);
+    event = json{{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", to_string(state)},
+                 {"to", to_string(*target)}, {"reason", why}};
+    out.state = *target;
+  }
+  cv_.notify_all();
+  spdlog::info("campaign {}: {}", id, why);
+  if (event) emit(*event);
+  return out;
+}
+
+std::optional<Sequencer::Outcome> Sequencer::pending_command() {
+  std::lock_guard lock(mutex_);
+  if (shutdown_) return Outcome::Shutdown;
+  switch (active_state_) {
+    case RunState::Pausing: return Outcome::Pause;
+    case RunState::Stopping: return Outcome::Stop;
+    case RunState::Aborting: return Outcome::Abort;
+    default: return std::nullopt;
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+// The queue runner
+
+void Sequencer::runner() {
+  std::unique_lock lock(mutex_);
+  while (!shutdown_) {
+    std::vector<std::int64_t> queue;
+    cv_.wait_for(lock, std::chrono::milliseconds(500), [&] {
+      if (shutdown_) return true;
+      if (!queue_enabled_) return false;
+      queue = db_.queue();
+      return !queue.empty();
+    });
+    if (shutdown_) break;
+    if (!queue_enabled_ || queue.empty()) continue;
+    const std::int64_t id = queue.front();
+    db_.queue_remove(id);
+    const auto row = db_.campaign(id);
+    if (!row || row->state != RunState::Queued) continue;
+    const std::string reason = row->run_db.empty() ? "devices free: starting" : "resuming from the last checkpoint";
+    if (!db_.set_state(id, RunState::Running, reason, RunState::Queued)) continue;
+    active_id_ = id;
+    active_state_ = RunState::Running;
+    lock.unlock();
+    spdlog::info("campaign {}: queued -> running ({})", id, reason);
+    emit({{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", "queued"}, {"to", "running"},
+          {"reason", reason}});
+    try {
+      run_campaign(id);
+    } catch (const std::exception& e) {
+      // run_campaign handles its own failures; this is the last line of defence.
+      spdlog::critical("campaign {}: unexpected error: {}", id, e.what());
+      db_.set_error(id, e.what());
+      transition(id, RunState::Failed, std::string("internal error: ") + e.what(), std::nullopt);
+    }
+    lock.lock();
+    active_id_.reset();
+    {
+      std::lock_guard tlock(telemetry_mutex_);
+      telemetry_["run"] = nullptr;
+      estimators_ = json::object();
+      telemetry_["estimators"] = estimators_;
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+// One run
+
+void Sequencer::run_campaign(std::int64_t id) {
+  RunContext run;
+  run.id = id;
+  auto fail_early = [&](const std::string& why) {
+    db_.set_error(id, why);
+    db_.add_event(id, "error", std::nullopt, std::nullopt, why);
+    transition(id, RunState::Failed, why, std::nullopt);
+  };
+  const auto row = db_.campaign(id);
+  if (!row) return;
+  run.row = *row;
+  {
+    const CampaignCheck check = check_campaign_text(row->spec_json, config_);
+    if (!check.spec) {
+      std::string why = "the campaign is no longer valid with this configuration:";
+      for (const auto& p : check.problems) why += " " + p + ";";
+      fail_early(why);
+      return;
+    }
+    run.spec = *check.spec;
+  }
+  try {
+    run.program = compile_campaign_program(run.spec, config_);
+    run.segments = run.program.segments();
+    if (run.segments.empty()) throw std::runtime_error("the program has no segments");
+    run.dt_ns = std::llround(units::kNsPerS / run.spec.rate_hz);
+
+    if (config_.devices != "sim")
+      throw std::runtime_error("devices '" + config_.devices + "' are not available in this build");
+    SimBenchSettings sb;
+    sb.sim.site = config_.site;
+    sb.sim.rate_hz = run.spec.rate_hz;
+    sb.sim.seed = run.spec.seed;
+    sb.time_scale = run.spec.time_scale;
+    sb.chamber_tau_s = config_.sim.chamber_tau_s;
+    sb.chamber_start_C = config_.chamber.safe_setpoint_C;
+    sb.home_time_s = config_.sim.home_time_s;
+    sb.faults = run.spec.faults;
+    run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
+
+    // The run file: created on the first start, reopened to resume.
+    const std::string relative = "runs/" + std::to_string(id) + ".db";
+    run.run_db_path = (fs::path(config_.data_dir) / relative).string();
+    fs::create_directories(fs::path(run.run_db_path).parent_path());
+    const bool resuming = fs::exists(run.run_db_path);
+    storage::RunDb db = resuming ? storage::RunDb::open(run.run_db_path)
+                                 : storage::RunDb::create(run.run_db_path, run.bench->imu().recording_meta());
+    if (!resuming) db_.set_run_db(id, relative);
+    if (resuming) committed_times(run.run_db_path, run.last_t_ns, run.last_temp_t_ns);
+    run.frames = db.frame_count();
+
+    const auto committed_t = run.last_t_ns;
+    run.recorder = std::make_unique<Recorder>(std::move(db), config_.recorder.commit_interval_s,
+                                              config_.recorder.queue_frames, [&run](const RecorderStats& s) {
+                                                EstimatorWorker* worker = run.worker.load();
+                                                if (worker != nullptr && s.committed_t_ns)
+                                                  worker->committed(*s.committed_t_ns);
+                                              });
+    run.estimators = std::make_unique<EstimatorWorker>(
+        run.run_db_path, run.spec.estimators, run.spec.navigation_model, committed_t,
+        [this, id](const std::string& name, double t_s, const json& progress) {
+          json all;
+          {
+            std::lock_guard lock(telemetry_mutex_);
+            estimators_[name] = progress;
+            all = estimators_;
+          }
+          try {
+            db_.add_progress(id, name, t_s, progress.dump());
+            db_.set_estimators(id, all.dump());
+          } catch (const std::exception& e) {
+            spdlog::error("campaign {}: cannot store estimator progress: {}", id, e.what());
+          }
+        });
+    run.worker = run.estimators.get();
+
+    // Where to (re)start: the segment holding the frame after the last committed one.
+    run.segment = run.segments.size();
+    const std::int64_t next_t_ns = run.last_t_ns ? *run.last_t_ns + run.dt_ns : 0;
+    for (std::size_t k = 0; k < run.segments.size(); ++k) {
+      if (next_t_ns <= run.segment_end_ns(k)) {
+        run.segment = k;
+        break;
+      }
+    }
+    if (run.last_t_ns) run.program_time_s = static_cast<double>(*run.last_t_ns) / units::kNsPerS;
+    note_event(run, "info", run.bench->describe() + "; " + std::to_string(run.segments.size()) + " segments, " +
+                                std::to_string(run.program.duration_s()) + " s");
+    if (resuming) {
+      char text[256];
+      std::snprintf(text, sizeof text,
+                    "resuming after an interruption: %lld frames committed up to %.3f s; redoing segment %zu from "
+                    "its start at %.3f s",
+                    static_cast<long long>(run.frames), run.program_time_s, run.segment, run.checkpoint_s());
+      note_event(run, "redo", text);
+    }
+
+    Outcome outcome = prepare_devices(run);
+    for (;;) {
+      if (outcome == Outcome::Pause) {
+        outcome = paused(run);  // Redo on resume
+        continue;
+      }
+      if (outcome != Outcome::Completed && outcome != Outcome::Redo) break;
+      if (run.segment >= run.segments.size()) {
+        outcome = Outcome::Completed;
+        break;
+      }
+      db_.set_checkpoint(id, static_cast<std::int64_t>(run.segment), run.checkpoint_s());
+      outcome = run_segment(run);
+      if (outcome == Outcome::Completed) ++run.segment;
+    }
+    finish_run(run, outcome, "");
+  } catch (const std::exception& e) {
+    const std::string why = e.what();
+    spdlog::error("campaign {}: {}", id, why);
+    db_.set_error(id, why);
+    if (run.bench) {
+      note_event(run, "error", why);
+      finish_run(run, Outcome::Fail, why);
+    } else {
+      fail_early(why);
+    }
+  }
+}
+
+Sequencer::Outcome Sequencer::prepare_devices(RunContext& run) {
+  Table& table = run.bench->table();
+  if (!table.state().homed) {
+    if (auto r = table.home(); !r.ok) throw std::runtime_error("homing the table failed: " + r.message);
+    note_event(run, "homed", "table homed");
+  }
+  if (auto r = table.close_interlock(); !r.ok) throw std::runtime_error("closing the table interlock failed: " + r.message);
+  return wait_until_ready(run, false);
+}
+
+// Before the table moves (start, redo): the chamber at the profile's set point of the
+// checkpoint, every device answering. After a suspension the condition must stay clear for the
+// settle time; at the start the chamber only has to be in its band.
+Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) {
+  const double setpoint_C = run.spec.chamber.setpoint_at(run.checkpoint_s());
+  const double tolerance_C = run.spec.chamber.tolerance_C;
+  const double settle_s = suspended ? run.spec.suspenders.settle_s : 0.0;
+  const double start_s = run.bench->now_s();
+  std::optional<double> clear_since_s;
+  bool announced = false;
+  for (;;) {
+    if (auto c = pending_command()) return *c;
+    if (!run.commanded_setpoint_C || std::abs(*run.commanded_setpoint_C - setpoint_C) > 1e-9) {
+      if (run.bench->chamber().set_setpoint(setpoint_C).ok) run.commanded_setpoint_C = setpoint_C;
+    }
+    const TableState ts = run.bench->table().state();
+    const ChamberState cs = run.bench->chamber().state();
+    const bool clear = ts.connected && ts.fault.empty() && cs.connected && run.bench->imu().state().connected &&
+                       std::abs(cs.temperature_C - setpoint_C) <= tolerance_C;
+    const double now_s = run.bench->now_s();
+    if (clear) {
+      if (!clear_since_s) clear_since_s = now_s;
+      if (now_s - *clear_since_s >= settle_s) break;
+    } else {
+      clear_since_s.reset();
+      if (!suspended && !announced) {
+        char text[160];
+        std::snprintf(text, sizeof text, "waiting for the chamber to reach %.2f C (now %.2f C) before moving",
+                      setpoint_C, cs.temperature_C);
+        note_event(run, "info", text);
+        announced = true;
+      }
+      if (!suspended && now_s - start_s > config_.chamber.wait_timeout_s)
+        throw std::runtime_error("the chamber did not reach its set point within " +
+                                 std::to_string(config_.chamber.wait_timeout_s) + " s");
+    }
+    run.bench->wait(0.1);
+    // As fast as possible still must not spin a core while nothing changes.
+    if (run.bench->time_scale() <= 0.0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    publish(run, false);
+  }
+  return Outcome::Completed;
+}
+
+Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
+  const std::size_t k = run.segment;
+  const bool last = k + 1 == run.segments.size();
+  const std::int64_t end_ns = run.segment_end_ns(k);
+  const std::int64_t until_ns = last ? std::numeric_limits<std::int64_t>::max() : end_ns;
+  const double t0_s = run.segments[k].t0_s;
+
+  if (auto r = run.bench->table().start_program_at(t0_s); !r.ok) return hold(run, "table: " + r.message);
+  run.prev_delivered_t_ns = std::llround(t0_s * units::kNsPerS);
+  run.last_frame_world_s = run.bench->now_s();
+  run.out_of_band_since_s.reset();
+
+  FrameBatch batch;
+  std::vector<ImuFrame> accepted;
+  std::vector<TempSample> temps;
+  for (;;) {
+    if (auto c = pending_command()) return *c;
+    const double setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
+    if (!run.commanded_setpoint_C || std::abs(*run.commanded_setpoint_C - setpoint_C) > 1e-3) {
+      if (run.bench->chamber().set_setpoint(setpoint_C).ok) run.commanded_setpoint_C = setpoint_C;
+    }
+    if (auto r = run.bench->imu().read(batch, until_ns); !r.ok) return hold(run, "IMU: " + r.message);
+
+    // Check the frames as delivered: finite values, time increasing on the frame grid.
+    std::string problem;
+    accepted.clear();
+    for (const ImuFrame& f : batch.frames) {
+      const bool finite = f.dtheta_rad.allFinite() && f.dv_mps.allFinite() && f.table_deg.allFinite();
+      if (!finite || f.t_ns <= run.prev_delivered_t_ns) {
+        ++run.bad;
+        problem = "corrupt IMU frame at " + std::to_string(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+        break;
+      }
+      const std::int64_t step_ns = f.t_ns - run.prev_delivered_t_ns;
+      if (2 * step_ns > 3 * run.dt_ns) {
+        const std::int64_t missing = (step_ns + run.dt_ns / 2) / run.dt_ns - 1;
+        run.lost += missing;
+        problem = std::to_string(missing) + " IMU frame(s) missing before " +
+                  std::to_string(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+        break;
+      }
+      run.prev_delivered_t_ns = f.t_ns;
+      ++run.delivered;
+      if (!run.last_t_ns || f.t_ns > *run.last_t_ns) {
+        accepted.push_back(f);
+        run.last_t_ns = f.t_ns;
+      }
+    }
+    if (!batch.frames.empty()) {
+      run.last_frame_world_s = run.bench->now_s();
+      run.program_time_s = static_cast<double>(run.prev_delivered_t_ns) / units::kNsPerS;
+    }
+    temps.clear();
+    for (const TempSample& t : batch.temps) {
+      if (t.t_ns > run.prev_delivered_t_ns + run.dt_ns) break;  // beyond the frames accepted so far
+      if (!run.last_temp_t_ns || t.t_ns > *run.last_temp_t_ns) {
+        temps.push_back(t);
+        run.last_temp_t_ns = t.t_ns;
+      }
+    }
+    if (!accepted.empty()) {
+      run.frames += static_cast<std::int64_t>(accepted.size());
+      const auto pushed = run.recorder->push_frames(accepted, run.bench->paced_by_consumer());
+      if (pushed == Recorder::Push::Failed)
+        throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+      if (pushed == Recorder::Push::Dropped) {
+        run.lost += static_cast<std::int64_t>(accepted.size());
+        problem = "the recorder fell behind and dropped frames";
+      }
+    }
+    if (!temps.empty() && !run.recorder->push_temps(temps))
+      throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+    if (!problem.empty()) return hold(run, problem);
+
+    // Suspenders.
+    const double now_s = run.bench->now_s();
+    const TableState ts = run.bench->table().state();
+    if (!ts.connected) return hold(run, "table disconnected");
+    if (!ts.fault.empty()) return hold(run, "table fault: " + ts.fault);
+    const ChamberState cs = run.bench->chamber().state();
+    if (!cs.connected) return hold(run, "chamber disconnected");
+    const double band_setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
+    if (std::abs(cs.temperature_C - band_setpoint_C) > run.spec.chamber.tolerance_C) {
+      if (!run.out_of_band_since_s) run.out_of_band_since_s = now_s;
+      if (now_s - *run.out_of_band_since_s >= run.spec.suspenders.chamber_persist_s) {
+        char text[200];
+        std::snprintf(text, sizeof text, "chamber out of band: %.2f C, set point %.2f C +- %.2f C", cs.temperature_C,
+                      band_setpoint_C, run.spec.chamber.tolerance_C);
+        return hold(run, text);
+      }
+    } else {
+      run.out_of_band_since_s.reset();
+    }
+    if (now_s - run.last_frame_world_s > run.spec.suspenders.frame_timeout_s) {
+      char text[160];
+      std::snprintf(text, sizeof text, "IMU frames missing: none for %.2f s", now_s - run.last_frame_world_s);
+      ++run.lost;  // at least one; the exact count shows as a gap when frames return
+      return hold(run, text);
+    }
+
+    publish(run, false);
+    const bool reached_end = run.prev_delivered_t_ns > end_ns - run.dt_ns;
+    if (reached_end && (!last || !ts.moving)) return Outcome::Completed;
+  }
+}
+
+// Safe hold after a suspender tripped: the table stops where it is, the recorder commits, and the
+// run waits until every condition is clear for the settle time, then redoes the segment.
+Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
+  if (!transition(run.id, RunState::Suspended, reason, RunState::Running)) {
+    // An operator command arrived meanwhile; it takes precedence.
+    if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+    if (auto c = pending_command()) return *c;
+    return Outcome::Redo;
+  }
+  note_event(run, "suspended", reason);
+  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+  if (!run.recorder->commit_and_wait())
+    throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+  sync_run_record(db_, run);
+  publish(run, true);
+  const Outcome waited = wait_until_ready(run, true);
+  if (waited != Outcome::Completed) return waited;
+  const bool ramp = run.spec.chamber.ramps_within(run.segments[run.segment].t0_s, run.segments[run.segment].t1_s);
+  char text[400];
+  std::snprintf(text, sizeof text, "condition cleared and settled %.1f s; redoing segment %zu '%s' from %.3f s%s",
+                run.spec.suspenders.settle_s, run.segment, run.segments[run.segment].name.c_str(), run.checkpoint_s(),
+                ramp ? " (not redoable as it was: it overlaps a chamber ramp, which restarts from the checkpoint's "
+                       "set point)"
+                     : "");
+  if (!transition(run.id, RunState::Running, "resumed: " + reason + " cleared", RunState::Suspended)) {
+    if (auto c = pending_command()) return *c;
+  }
+  note_event(run, "resumed", text);
+  return Outcome::Redo;
+}
+
+// Operator pause: table stopped, recorder committed, then wait for resume, stop or abort.
+Sequencer::Outcome Sequencer::paused(RunContext& run) {
+  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+  if (!run.recorder->commit_and_wait())
+    throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+  if (!transition(run.id, RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
+    if (auto c = pending_command()) return *c;
+  }
+  note_event(run, "paused", "paused in segment " + std::to_string(run.segment) + " '" +
+                                run.segments[run.segment].name + "'");
+  publish(run, true);
+  for (;;) {
+    {
+      std::unique_lock lock(mutex_);
+      cv_.wait_for(lock, std::chrono::milliseconds(100), [&] { return shutdown_ || active_state_ != RunState::Paused; });
+    }
+    if (auto c = pending_command()) return *c;
+    if (active_state() == RunState::Running) break;
+    publish(run, false);
+  }
+  const Outcome waited = wait_until_ready(run, false);
+  if (waited != Outcome::Completed) return waited;
+  note_event(run, "resumed", "redoing segment " + std::to_string(run.segment) + " '" + run.segments[run.segment].name +
+                                 "' from " + std::to_string(run.checkpoint_s()) + " s");
+  return Outcome::Redo;
+}
+
+void Sequencer::safe_exit(RunContext& run) {
+  if (!run.bench) return;
+  // Rate zero first, then the interlock, then the chamber: the order that is safe whatever fails.
+  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "safe exit: stopping the table: " + r.message);
+  if (auto r = run.bench->table().open_interlock(); !r.ok)
+    note_event(run, "alarm", "safe exit: opening the interlock: " + r.message);
+  if (auto r = run.bench->chamber().set_setpoint(config_.chamber.safe_setpoint_C); !r.ok)
+    note_event(run, "alarm", "safe exit: chamber to its safe set point: " + r.message);
+}
+
+void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& reason) {
+  try {
+    safe_exit(run);
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: safe exit: {}", run.id, e.what());
+  }
+  RunState final_state = RunState::Failed;
+  std::string why = reason;
+  bool results = false;
+  switch (outcome) {
+    case Outcome::Completed:
+      final_state = RunState::Done;
+      why = "program complete";
+      results = true;
+      break;
+    case Outcome::Stop:
+      final_state = RunState::Done;
+      why = "stopped early at " + std::to_string(run.program_time_s) + " s; results from the data so far";
+      results = true;
+      break;
+    case Outcome::Abort:
+      final_state = RunState::Aborted;
+      why = "aborted; table parked, no results";
+      break;
+    case Outcome::Shutdown:
+      final_state = RunState::Interrupted;
+      why = "the daemon shut down; table parked, recording committed; resume continues from the last checkpoint";
+      break;
+    default:
+      final_state = RunState::Failed;
+      if (why.empty()) why = "failed";
+      break;
+  }
+  if (run.recorder && !run.recorder->commit_and_wait() && final_state != RunState::Failed) {
+    final_state = RunState::Failed;
+    why = "recording failed: " + run.recorder->error().value_or("unknown error");
+    db_.set_error(run.id, why);
+  }
+  if (run.estimators) {
+    if (results && final_state == RunState::Done) {
+      const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns);
+      if (r.model) db_.set_model(run.id, imu_model_to_json_text(*r.model));
+      db_.set_results(run.id, r.results.dump());
+      if (run.recorder) {
+        run.recorder->set_extra("imucald_results", r.results.dump());
+        if (r.model) run.recorder->set_extra("imucald_model", imu_model_to_json_text(*r.model));
+      }
+    } else {
+      run.estimators->cancel();
+    }
+  }
+  db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
+  transition(run.id, final_state, why, std::nullopt);
+  sync_run_record(db_, run);
+  publish(run, true);
+  if (run.recorder) run.recorder->close();
+  run.estimators.reset();
+  run.recorder.reset();
+}
+
+// Telemetry snapshot (at most 20 a second) and the run's counters in the database (once a second).
+void Sequencer::publish(RunContext& run, bool force) {
+  const auto now = Clock::now();
+  if (!force && now - run.last_publish < std::chrono::milliseconds(50)) return;
+  run.last_publish = now;
+  const double window_s = seconds(now - run.window_wall);
+  if (run.window_wall == Clock::time_point{} || window_s > 5.0) {
+    run.window_wall = now;
+    run.window_program_s = run.program_time_s;
+    run.window_world_s = run.bench->now_s();
+    run.window_delivered = run.delivered;
+  } else if (window_s >= 0.5) {
+    const double world_s = run.bench->now_s() - run.window_world_s;
+    run.speed_factor = (run.program_time_s - run.window_program_s) / window_s;
+    run.frame_rate_hz = world_s > 0 ? static_cast<double>(run.delivered - run.window_delivered) / world_s : 0.0;
+    run.window_wall = now;
+    run.window_program_s = run.program_time_s;
+    run.window_world_s = run.bench->now_s();
+    run.window_delivered = run.delivered;
+  }
+  const TableState ts = run.bench->table().state();
+  const ChamberState cs = run.bench->chamber().state();
+  const RecorderStats rs = run.recorder ? run.recorder->stats() : RecorderStats{};
+  const RunState state = active_state();
+  const double duration_s = run.program.duration_s();
+  const std::size_t k = std::min(run.segment, run.segments.size() - 1);
+  const double band_setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
+  json t = {
+      {"run",
+       {{"id", run.id},
+        {"name", run.spec.name},
+        {"state", to_string(state)},
+        {"segment", {{"index", k}, {"count", run.segments.size()}, {"name", run.segments[k].name},
+                     {"kind", run.segments[k].kind}}},
+        {"program_time_s", run.program_time_s},
+        {"duration_s", duration_s},
+        {"time_left_s", std::max(0.0, duration_s - run.program_time_s)},
+        {"checkpoint_s", run.checkpoint_s()},
+        {"speed_factor", run.speed_factor}}},
+      {"table",
+       {{"angle_deg", vec3(ts.angle_deg)}, {"rate_dps", vec3(ts.rate_dps)}, {"homed", ts.homed},
+        {"interlock_closed", ts.interlock_closed}, {"connected", ts.connected},
+        {"fault", ts.fault.empty() ? json(nullptr) : json(ts.fault)}}},
+      {"chamber",
+       {{"temperature_C", cs.temperature_C}, {"setpoint_C", cs.setpoint_C},
+        {"tolerance_C", run.spec.chamber.tolerance_C},
+        {"in_band", std::abs(cs.temperature_C - band_setpoint_C) <= run.spec.chamber.tolerance_C},
+        {"connected", cs.connected}}},
+      {"imu",
+       {{"frame_rate_hz", run.frame_rate_hz}, {"frames", run.frames}, {"lost_frames", run.lost},
+        {"bad_frames", run.bad}, {"connected", run.bench->imu().state().connected}}},
+      {"recorder",
+       {{"queue_frames", rs.queued_frames}, {"queue_high_water_frames", rs.high_water_frames},
+        {"committed_frames", rs.committed_frames}, {"dropped_frames", rs.dropped_frames}}}};
+  {
+    std::lock_guard lock(telemetry_mutex_);
+    t["estimators"] = estimators_;
+    telemetry_ = std::move(t);
+  }
+  if (force || now - run.last_db_update >= std::chrono::seconds(1)) {
+    run.last_db_update = now;
+    db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
+  }
+}
+
+}  // namespace imucal::daemon

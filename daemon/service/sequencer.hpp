@@ -1,0 +1,104 @@
+// The sequencer: runs the queued campaigns one after another on the bench, segment by segment,
+// with the run state machine of run_state.hpp, the suspenders (chamber out of band, IMU frames
+// missing or corrupt, a device disconnected, a table fault: safe hold, automatic resume after the
+// condition clears plus a settle time, the interrupted segment redone), operator commands, the
+// recorder and the online estimators, and the telemetry the live view shows.
+//
+// Checkpoints are the program's segment boundaries. Frames already recorded are never recorded
+// again: a redone segment records only frames after the last one handed to the recorder, so the
+// run file holds every program instant exactly once whatever happened (pause, suspension, crash).
+// Every path out of a run leaves the table at rate zero with its interlock open and the chamber
+// at its safe set point.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/service/config.hpp"
+#include "daemon/service/daemon_db.hpp"
+#include "daemon/service/run_state.hpp"
+
+namespace imucal::daemon {
+
+struct RunContext;
+
+class Sequencer {
+ public:
+  // Events for the live view ({"type": "event", ...} without seq and t); called on the thread that
+  // made the event, never under the sequencer's lock.
+  using EventListener = std::function<void(const nlohmann::json&)>;
+
+  Sequencer(const DaemonConfig& config, DaemonDb& db);
+  ~Sequencer();
+  Sequencer(const Sequencer&) = delete;
+  Sequencer& operator=(const Sequencer&) = delete;
+
+  void set_event_listener(EventListener listener);
+  // Starts the queue runner (after the database's crash recovery).
+  void start();
+  // Parks the active run (table stopped, interlock open, chamber safe, recorder flushed; the run
+  // becomes interrupted) and ends the runner. Idempotent.
+  void shutdown();
+
+  struct CommandOutcome {
+    int http_status = 200;
+    std::string error;
+    std::optional<RunState> state;
+  };
+  // An operator command (thread-safe). `who` and `reason` go into the transition's reason.
+  CommandOutcome command(std::int64_t id, Command command, const std::string& who, const std::string& reason);
+
+  // The latest telemetry (the live message without type, seq and t).
+  nlohmann::json telemetry() const;
+  std::optional<std::int64_t> active_id() const;
+  // Progress of the active run's estimators (latest), for GET /api/campaigns/{id}.
+  nlohmann::json active_estimators() const;
+
+ private:
+  friend struct RunContext;
+  enum class Outcome { Completed, Redo, Pause, Stop, Abort, Shutdown, Fail };
+
+  void runner();
+  void run_campaign(std::int64_t id);
+  bool transition(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected);
+  void note_event(RunContext& run, const std::string& kind, const std::string& reason);
+  std::optional<Outcome> pending_command();
+  RunState active_state() const;
+
+  Outcome prepare_devices(RunContext& run);
+  Outcome run_segment(RunContext& run);
+  Outcome hold(RunContext& run, const std::string& reason);
+  Outcome paused(RunContext& run);
+  Outcome wait_until_ready(RunContext& run, bool suspended);
+  void safe_exit(RunContext& run);
+  void finish_run(RunContext& run, Outcome outcome, const std::string& reason);
+  void publish(RunContext& run, bool force);
+  void emit(const nlohmann::json& event);
+
+  const DaemonConfig& config_;
+  DaemonDb& db_;
+  EventListener listener_;
+
+  mutable std::mutex mutex_;  // guards the members below and every state change
+  std::condition_variable cv_;
+  std::optional<std::int64_t> active_id_;
+  RunState active_state_ = RunState::Created;
+  bool shutdown_ = false;
+  bool queue_enabled_ = true;
+  std::thread thread_;
+
+  mutable std::mutex telemetry_mutex_;
+  nlohmann::json telemetry_;
+  nlohmann::json estimators_;  // latest progress per estimator of the active run
+};
+
+}  // namespace imucal::daemon

@@ -1,0 +1,433 @@
+#include "estimators/nav_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "core/earth.hpp"
+#include "core/table.hpp"
+#include "core/units.hpp"
+#include "estimators/direct_calibration.hpp"
+
+namespace imucal::navfilter {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+using namespace state;
+
+namespace {
+
+template <int Rows, int Cols>
+using Mat = Eigen::Matrix<double, Rows, Cols>;
+
+// d(delta_D w)/d(angles) for the gyro angles in the order xy xz yx yz zx zy (rows: sensor axes).
+Mat<3, 6> gyro_angle_jacobian(const Vector3d& w) {
+  Mat<3, 6> J = Mat<3, 6>::Zero();
+  J(0, 0) = -w.z();  // xy
+  J(0, 1) = w.y();   // xz
+  J(1, 2) = w.z();   // yx
+  J(1, 3) = -w.x();  // yz
+  J(2, 4) = -w.y();  // zx
+  J(2, 5) = w.x();   // zy
+  return J;
+}
+
+// The same for the accelerometer non-orthogonalities yz zx zy (x is the body reference).
+Mat<3, 3> accel_angle_jacobian(const Vector3d& f) {
+  Mat<3, 3> J = Mat<3, 3>::Zero();
+  J(1, 0) = -f.x();  // yz
+  J(2, 1) = -f.y();  // zx
+  J(2, 2) = f.x();   // zy
+  return J;
+}
+
+constexpr std::array<double Misalignment::*, 6> kGyroAngleKeys = {&Misalignment::xy, &Misalignment::xz,
+                                                                  &Misalignment::yx, &Misalignment::yz,
+                                                                  &Misalignment::zx, &Misalignment::zy};
+constexpr std::array<double Misalignment::*, 3> kAccelAngleKeys = {&Misalignment::yz, &Misalignment::zx,
+                                                                   &Misalignment::zy};
+
+template <class V>
+auto seg(V& v, const Block& b) {
+  return v.segment(b.index, b.size);
+}
+
+}  // namespace
+
+StateVector model_to_state(const ImuModel& m) {
+  StateVector x = StateVector::Zero();
+  seg(x, kGyroBias) = m.gyro.bias_radps;
+  seg(x, kAccelBias) = m.accel.bias_mps2;
+  seg(x, kGyroScalePos) = m.gyro.scale_pos;
+  seg(x, kGyroScaleNeg) = m.gyro.scale_neg;
+  seg(x, kAccelScale) = m.accel.scale;
+  for (int i = 0; i < 6; ++i) x[kGyroAngles.index + i] = m.gyro.misalignment_rad.*kGyroAngleKeys[static_cast<std::size_t>(i)];
+  for (int i = 0; i < 3; ++i) x[kAccelAngles.index + i] = m.accel.misalignment_rad.*kAccelAngleKeys[static_cast<std::size_t>(i)];
+  seg(x, kGyroDelay) = m.gyro.delay_s;
+  seg(x, kAccelDelay) = m.accel.delay_s;
+  return x;
+}
+
+struct NavCalibrationFilter::Impl {
+  RecordingMeta meta;
+  Options opt;
+  ImuModel model;  // body frame, updated by feedback
+  ImuModel model_at_start;
+  nav::Compensator comp;
+  nav::TableReference ref;
+  double dt_nominal_s;
+  double g_mps2;
+  std::deque<ImuFrame> window;
+  std::unique_ptr<nav::Strapdown> nav;
+
+  StateVector x = StateVector::Zero();
+  StateMatrix P = StateMatrix::Zero();
+  StateVector sigma0;
+
+  // Integrals over the current propagation interval of the time-varying parts of F.
+  Matrix3d S_C = Matrix3d::Zero(), S_Cwp = Matrix3d::Zero(), S_Cwn = Matrix3d::Zero();
+  Matrix3d S_Cwdot = Matrix3d::Zero(), S_Cf = Matrix3d::Zero(), S_Cfdot = Matrix3d::Zero();
+  Matrix3d S_fn = Matrix3d::Zero(), S_CMa = Matrix3d::Zero();
+  Mat<3, 6> S_CMg = Mat<3, 6>::Zero();
+  double S_dt = 0;
+  double since_update_s = 0;
+  Vector3d prev_w = Vector3d::Zero(), prev_f = Vector3d::Zero();
+  bool have_prev_rates = false;
+  bool stopped = false;
+  std::size_t next_restart = 0;
+  std::vector<double> restart_times_s;
+  double next_history_s = 0;
+  int consecutive_rejections = 0;
+  Result result;
+  double t_s = 0;
+
+  Impl(const RecordingMeta& m, const ImuModel& model_in, const Options& o)
+      : meta(m),
+        opt(o),
+        model(model_in.frame == "body" ? model_in : direct::to_body_frame(model_in)),
+        comp(model, 1.0 / m.rate_hz, o.max_delay_s),
+        ref(m, model),
+        dt_nominal_s(1.0 / m.rate_hz),
+        g_mps2(earth::site_gravity_mps2(m.site)) {
+    model_at_start = model;
+    for (const SegmentInfo& s : m.segments)
+      if ((s.kind == "static" || s.kind == "tilt") && s.t1_s - s.t0_s >= o.restart_static_s)
+        restart_times_s.push_back(s.t0_s);
+    std::sort(restart_times_s.begin(), restart_times_s.end());
+    StateVector s0;
+    seg(s0, kAttitude).setConstant(o.sigma_attitude_rad);
+    seg(s0, kVelocity).setConstant(o.sigma_velocity_mps);
+    seg(s0, kPosition).setConstant(o.sigma_position_m);
+    seg(s0, kGyroBias).setConstant(o.sigma_gyro_bias_radps);
+    seg(s0, kAccelBias).setConstant(o.sigma_accel_bias_mps2);
+    seg(s0, kGyroScalePos).setConstant(o.sigma_gyro_scale);
+    seg(s0, kGyroScaleNeg).setConstant(o.sigma_gyro_scale);
+    seg(s0, kAccelScale).setConstant(o.sigma_accel_scale);
+    seg(s0, kGyroAngles).setConstant(o.sigma_gyro_angle_rad);
+    seg(s0, kAccelAngles).setConstant(o.sigma_accel_angle_rad);
+    seg(s0, kGyroDelay).setConstant(o.sigma_gyro_delay_s);
+    seg(s0, kAccelDelay).setConstant(o.sigma_accel_delay_s);
+    sigma0 = s0;
+    P = s0.cwiseAbs2().asDiagonal();
+    result.sigma0 = s0;
+  }
+
+  void reset_navigation_covariance() {
+    P.topRows(9).setZero();
+    P.leftCols(9).setZero();
+    for (int i = 0; i < 9; ++i) P(i, i) = sigma0[i] * sigma0[i];
+  }
+
+  void push(const ImuFrame& f) {
+    if (stopped) return;
+    if (!window.empty()) {
+      const double gap_s = static_cast<double>(f.t_ns - window.back().t_ns) * 1e-9;
+      if (gap_s > 1.5 * dt_nominal_s || gap_s <= 0) {
+        // Never integrate across a gap: restart the navigation after it.
+        window.clear();
+        nav.reset();
+        have_prev_rates = false;
+      }
+    }
+    window.push_back(f);
+    const auto needed = static_cast<std::size_t>(comp.lookback() + 1 + comp.lookahead());
+    if (window.size() < needed) return;
+    step();
+    window.pop_front();
+  }
+
+  void step() {
+    const auto k = static_cast<std::size_t>(comp.lookback());
+    t_s = static_cast<double>(window[k].t_ns) * 1e-9;
+    if (next_restart < restart_times_s.size() && t_s >= restart_times_s[next_restart]) {
+      // A new part of the program: restart the navigation from the table (seed ch. 4).
+      while (next_restart < restart_times_s.size() && t_s >= restart_times_s[next_restart]) ++next_restart;
+      if (nav) {
+        nav.reset();
+        ++result.restarts;
+      }
+    }
+    if (!nav) {
+      // The vertical channel runs free here: its velocity and height are measured, which is what
+      // makes a scale error common to the three accelerometers (seen only along g) observable.
+      nav = std::make_unique<nav::Strapdown>(ref.initial_state(ref.at(window, k - 1)), g_mps2, false);
+      reset_navigation_covariance();
+      x.head(9).setZero();
+      have_prev_rates = false;
+    }
+    const double dt = static_cast<double>(window[k].t_ns - window[k - 1].t_ns) * 1e-9;
+    Vector3d dtheta, dv;
+    comp.compensate(window, dt, dtheta, dv);
+    const nav::TableReference::Sample r = ref.at(window, k);
+    nav->update(dtheta, dv, dt, r.v_n.z(), ref.h_ref_m(r));
+    ++result.frames;
+
+    const Vector3d w = dtheta / dt, fb = dv / dt;
+    const Vector3d wdot = have_prev_rates ? Vector3d((w - prev_w) / dt) : Vector3d::Zero();
+    const Vector3d fdot = have_prev_rates ? Vector3d((fb - prev_f) / dt) : Vector3d::Zero();
+    prev_w = w;
+    prev_f = fb;
+    have_prev_rates = true;
+    const Matrix3d C = nav->state().q_b_n.toRotationMatrix();
+    S_C += C * dt;
+    S_Cwp += C * w.cwiseMax(0.0).asDiagonal() * dt;
+    S_Cwn += C * w.cwiseMin(0.0).asDiagonal() * dt;
+    S_Cwdot += C * wdot.asDiagonal() * dt;
+    S_Cf += C * fb.asDiagonal() * dt;
+    S_Cfdot += C * fdot.asDiagonal() * dt;
+    S_fn += table::skew(C * fb) * dt;
+    S_CMg += C * gyro_angle_jacobian(w) * dt;
+    S_CMa += C * accel_angle_jacobian(fb) * dt;
+    S_dt += dt;
+    if (S_dt >= opt.propagate_interval_s - 1e-9) {
+      propagate();
+      since_update_s += S_dt;
+      S_dt = 0;
+      if (since_update_s >= opt.update_interval_s - 1e-9) {
+        since_update_s = 0;
+        update(r);
+      }
+    }
+  }
+
+  void propagate() {
+    const nav::NavState& s = nav->state();
+    const double lat = s.lat_rad, R = ref.RM_m(), Omega = earth::kOmega_radps;
+    const Vector3d w_ie = earth::w_ie_n(lat);
+    const Vector3d w_en(-s.v_n.y() / R, s.v_n.x() / R, s.v_n.x() * std::tan(lat) / R);
+    const double T = S_dt;
+    StateMatrix Fdt = StateMatrix::Zero();
+    auto blk = [&](const Block& r, const Block& c) { return Fdt.block(r.index, c.index, r.size, c.size); };
+    blk(kAttitude, kAttitude) = -table::skew(w_ie + w_en) * T;
+    Fdt(0, 4) = -T / R;                   // phi_E from dv_N
+    Fdt(1, 3) = T / R;                    // phi_N from dv_E
+    Fdt(2, 3) = std::tan(lat) * T / R;    // phi_U from dv_E
+    Fdt(1, 7) = -Omega * std::sin(lat) * T / R;  // Earth rate seen at the wrong latitude
+    Fdt(2, 7) = Omega * std::cos(lat) * T / R;
+    blk(kAttitude, kGyroBias) = -S_C;
+    blk(kAttitude, kGyroScalePos) = -S_Cwp;
+    blk(kAttitude, kGyroScaleNeg) = -S_Cwn;
+    blk(kAttitude, kGyroAngles) = -S_CMg;
+    blk(kAttitude, kGyroDelay) = S_Cwdot;
+    blk(kVelocity, kAttitude) = S_fn;
+    blk(kVelocity, kVelocity) = -table::skew(2.0 * w_ie + w_en) * T;
+    blk(kVelocity, kAccelBias) = S_C;
+    blk(kVelocity, kAccelScale) = S_Cf;
+    blk(kVelocity, kAccelAngles) = S_CMa;
+    blk(kVelocity, kAccelDelay) = -S_Cfdot;
+    blk(kPosition, kVelocity) = Matrix3d::Identity() * T;
+    const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
+    P = Phi * P * Phi.transpose();
+    StateVector q = StateVector::Zero();
+    const double arw = model.gyro.noise.arw_rad_rts, vrw = model.accel.noise.vrw_mps_rts;
+    const double qbg = opt.gyro_bias_rw_radps_rts > 0 ? opt.gyro_bias_rw_radps_rts
+                                                      : model.gyro.noise.rate_random_walk_radps_rts;
+    const double qba = opt.accel_bias_rw_mps2_rts > 0 ? opt.accel_bias_rw_mps2_rts
+                                                      : model.accel.noise.accel_random_walk_mps2_rts;
+    seg(q, kAttitude).setConstant(arw * arw * T);
+    seg(q, kVelocity).setConstant(vrw * vrw * T);
+    seg(q, kGyroBias).setConstant(qbg * qbg * T);
+    seg(q, kAccelBias).setConstant(qba * qba * T);
+    for (const Block& b : {kGyroScalePos, kGyroScaleNeg, kAccelScale}) seg(q, b).setConstant(opt.scale_rw_rts * opt.scale_rw_rts * T);
+    P.diagonal() += q;
+    P = 0.5 * (P + P.transpose());
+    ++result.covariance_steps;
+    S_C.setZero();
+    S_Cwp.setZero();
+    S_Cwn.setZero();
+    S_Cwdot.setZero();
+    S_Cf.setZero();
+    S_Cfdot.setZero();
+    S_fn.setZero();
+    S_CMa.setZero();
+    S_CMg.setZero();
+  }
+
+  void update(const nav::TableReference::Sample& r) {
+    const nav::NavState& s = nav->state();
+    const Vector3d dv = s.v_n - r.v_n, dp = ref.position_error_m(s, r);
+    const std::array<double, 6> z = {dv.x(), dv.y(), dv.z(), dp.x(), dp.y(), dp.z()};
+    MeasurementRecord rec{t_s, {}, {}, {}, {}};
+    int accepted = 0;
+    for (std::size_t m = 0; m < 6; ++m) {
+      const int i = kVelocity.index + static_cast<int>(m);  // velocity and position blocks are adjacent
+      const double R = m < 3 ? opt.velocity_noise_mps * opt.velocity_noise_mps : opt.position_noise_m * opt.position_noise_m;
+      const double innovation = z[m] - x[i];
+      const double S = P(i, i) + R;
+      const double ratio = innovation * innovation / (opt.gate_sigma * opt.gate_sigma * S);
+      rec.innovation[m] = innovation;
+      rec.variance[m] = S;
+      rec.test_ratio[m] = ratio;
+      rec.accepted[m] = ratio <= 1.0;
+      if (!rec.accepted[m]) {
+        ++result.rejected;
+        continue;
+      }
+      ++accepted;
+      const StateVector K = P.col(i) / S;
+      x += K * innovation;
+      // Joseph form for a scalar measurement of state i.
+      StateMatrix IKH = StateMatrix::Identity();
+      IKH.col(i) -= K;
+      P = IKH * P * IKH.transpose() + K * R * K.transpose();
+    }
+    result.measurements.push_back(rec);
+    ++result.updates;
+    consecutive_rejections = accepted == 0 ? consecutive_rejections + 1 : 0;
+    char buf[240];
+    if (consecutive_rejections >= opt.divergence_rejections) {
+      std::snprintf(buf, sizeof buf,
+                    "diverged at t=%.1f s: %d updates in a row had every innovation outside the %.0f-sigma gate",
+                    t_s, consecutive_rejections, opt.gate_sigma);
+      fail(buf);
+      return;
+    }
+    for (int i = 0; i < kSize; ++i)
+      if (!(P(i, i) >= 0.0) || !std::isfinite(P(i, i))) {
+        std::snprintf(buf, sizeof buf, "covariance lost positiveness at t=%.1f s (state %d)", t_s, i);
+        fail(buf);
+        return;
+      }
+    feedback();
+    const StateVector now = model_to_state(model), start = model_to_state(model_at_start);
+    for (int i = 0; i < 6; ++i)
+      if (std::abs(now[kGyroAngles.index + i] - start[kGyroAngles.index + i]) > 60.0 * units::kArcsecToRad ||
+          (i < 3 && std::abs(now[kAccelAngles.index + i] - start[kAccelAngles.index + i]) > 60.0 * units::kArcsecToRad)) {
+        std::snprintf(buf, sizeof buf,
+                      "stage-1 errors too large for the linear filter: an axis angle moved by more than 1' by t=%.1f s "
+                      "(run stage direct first)",
+                      t_s);
+        fail(buf);
+        return;
+      }
+    if (t_s >= next_history_s) {
+      record_history();
+      next_history_s = t_s + opt.history_interval_s;
+    }
+  }
+
+  void feedback() {
+    // Navigation: C_true = (I + [phi x]) C_hat, v_true = v_hat - dv, p_true = p_hat - dp.
+    nav::NavState& s = nav->mutable_state();
+    s.q_b_n = (nav::quat_from_rotvec(seg(x, kAttitude)) * s.q_b_n).normalized();
+    s.v_n -= seg(x, kVelocity);
+    s.h_m -= x[kPosition.index + 2];
+    s.lat_rad -= x[kPosition.index + 1] / ref.RM_m();
+    s.lon_rad -= x[kPosition.index] / (ref.RN_m() * std::cos(ref.latitude_rad()));
+    // Model: every residual is "true minus model", so the model moves by the estimate.
+    model.gyro.bias_radps += seg(x, kGyroBias);
+    model.accel.bias_mps2 += seg(x, kAccelBias);
+    model.gyro.scale_pos += seg(x, kGyroScalePos);
+    model.gyro.scale_neg += seg(x, kGyroScaleNeg);
+    model.accel.scale += seg(x, kAccelScale);
+    for (std::size_t i = 0; i < 6; ++i)
+      model.gyro.misalignment_rad.*kGyroAngleKeys[i] += x[kGyroAngles.index + static_cast<int>(i)];
+    for (std::size_t i = 0; i < 3; ++i)
+      model.accel.misalignment_rad.*kAccelAngleKeys[i] += x[kAccelAngles.index + static_cast<int>(i)];
+    model.gyro.delay_s += seg(x, kGyroDelay);
+    model.accel.delay_s += seg(x, kAccelDelay);
+    x.setZero();
+  }
+
+  void record_history() {
+    HistoryRecord h{t_s, model_to_state(model), P.diagonal().cwiseMax(0.0).cwiseSqrt()};
+    result.history.push_back(h);
+  }
+
+  void fail(const std::string& why) {
+    result.converged = false;
+    result.status = "not converged: " + why;
+    stopped = true;
+  }
+
+  Result finish() {
+    Result r = std::move(result);
+    r.model = model;
+    if (r.converged) r.status = "converged";
+    if (r.updates == 0 && r.converged) {
+      r.converged = false;
+      r.status = "not converged: no measurement update (the recording is too short)";
+    }
+    r.sigma_final = P.diagonal().cwiseMax(0.0).cwiseSqrt();
+    r.P_calibration = P.block<30, 30>(kFirstCalibration, kFirstCalibration);
+    r.model_values = model_to_state(model);
+    const int gx = kGyroDelay.index;
+    r.tau_yx_s = model.gyro.delay_s[1] - model.gyro.delay_s[0];
+    r.tau_zx_s = model.gyro.delay_s[2] - model.gyro.delay_s[0];
+    r.sigma_tau_yx_s = std::sqrt(std::max(0.0, P(gx + 1, gx + 1) + P(gx, gx) - 2 * P(gx, gx + 1)));
+    r.sigma_tau_zx_s = std::sqrt(std::max(0.0, P(gx + 2, gx + 2) + P(gx, gx) - 2 * P(gx, gx + 2)));
+    ImuErrorSet sg = model.sigma.value_or(ImuErrorSet{});
+    const StateVector& sd = r.sigma_final;
+    sg.gyro.bias_radps = seg(sd, kGyroBias);
+    sg.accel.bias_mps2 = seg(sd, kAccelBias);
+    sg.gyro.scale_pos = seg(sd, kGyroScalePos);
+    sg.gyro.scale_neg = seg(sd, kGyroScaleNeg);
+    sg.accel.scale = seg(sd, kAccelScale);
+    for (std::size_t i = 0; i < 6; ++i) sg.gyro.misalignment_rad.*kGyroAngleKeys[i] = sd[kGyroAngles.index + static_cast<int>(i)];
+    sg.accel.misalignment_rad = {};
+    for (std::size_t i = 0; i < 3; ++i) sg.accel.misalignment_rad.*kAccelAngleKeys[i] = sd[kAccelAngles.index + static_cast<int>(i)];
+    sg.gyro.delay_s = seg(sd, kGyroDelay);
+    sg.accel.delay_s = seg(sd, kAccelDelay);
+    r.model.sigma = sg;
+    nlohmann::json extra = r.model.extra_json.empty() ? nlohmann::json::object() : nlohmann::json::parse(r.model.extra_json);
+    extra["status"] = r.status;
+    r.model.extra_json = extra.dump();
+    return r;
+  }
+};
+
+NavCalibrationFilter::NavCalibrationFilter(const RecordingMeta& meta, const ImuModel& model, const Options& options)
+    : impl_(std::make_unique<Impl>(meta, model, options)) {}
+NavCalibrationFilter::~NavCalibrationFilter() = default;
+void NavCalibrationFilter::push(const ImuFrame& frame) { impl_->push(frame); }
+Result NavCalibrationFilter::finish() { return impl_->finish(); }
+
+std::string Result::history_json() const {
+  nlohmann::json j;
+  std::vector<double> t;
+  for (const auto& h : history) t.push_back(h.t_s);
+  j["t_s"] = t;
+  for (const Block& b : kAll) {
+    if (b.index < kFirstCalibration) continue;
+    for (int i = 0; i < b.size; ++i) {
+      std::vector<double> v, s;
+      for (const auto& h : history) {
+        v.push_back(h.value[b.index + i]);
+        s.push_back(h.sigma[b.index + i]);
+      }
+      const std::string key = std::string(b.name) + "[" + std::to_string(i) + "]";
+      j["value"][key] = v;
+      j["sigma"][key] = s;
+    }
+  }
+  nlohmann::json m = nlohmann::json::array();
+  for (const auto& r : measurements)
+    m.push_back({r.t_s, r.innovation, r.variance, r.test_ratio, r.accepted});
+  j["measurements"] = {{"columns", {"t_s", "innovation", "variance", "test_ratio", "accepted"}}, {"rows", m}};
+  return j.dump();
+}
+
+}  // namespace imucal::navfilter

@@ -1,0 +1,140 @@
+// Stage 3 of the method (seed ch. 4): refinement of the IMU model by the navigation solution.
+// Free-inertial navigation on the table with the current model; the velocity and position of the
+// IMU origin are compared with what the table implies (eq. 14) and a 39-state Kalman filter
+// (eq. 15) estimates the navigation errors and the residual model errors, which are fed back into
+// the model and the navigation at every update. Works in the body frame (accelerometer axes).
+// Pure: frames in, model out; the same object runs online (one pass) and offline.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "estimators/navigation_run.hpp"
+#include "estimators/strapdown.hpp"
+
+namespace imucal::navfilter {
+
+// Named blocks of the error state, PX4-style: nobody writes P(10, 10).
+struct Block {
+  int index, size;
+  const char* name;
+};
+namespace state {
+inline constexpr Block kAttitude{0, 3, "attitude_rad"};
+inline constexpr Block kVelocity{3, 3, "velocity_mps"};
+inline constexpr Block kPosition{6, 3, "position_m"};
+inline constexpr Block kGyroBias{9, 3, "gyro_bias_radps"};
+inline constexpr Block kAccelBias{12, 3, "accel_bias_mps2"};
+inline constexpr Block kGyroScalePos{15, 3, "gyro_scale_pos"};
+inline constexpr Block kGyroScaleNeg{18, 3, "gyro_scale_neg"};
+inline constexpr Block kAccelScale{21, 3, "accel_scale"};
+inline constexpr Block kGyroAngles{24, 6, "gyro_misalignment_rad"};   // xy xz yx yz zx zy
+inline constexpr Block kAccelAngles{30, 3, "accel_misalignment_rad"}; // yz zx zy (x is the reference)
+inline constexpr Block kGyroDelay{33, 3, "gyro_delay_s"};
+inline constexpr Block kAccelDelay{36, 3, "accel_delay_s"};
+inline constexpr int kSize = 39;
+inline constexpr int kFirstCalibration = 9;  // 30 calibration states follow the 9 navigation states
+inline constexpr std::array<Block, 12> kAll = {kAttitude, kVelocity,     kPosition,     kGyroBias,
+                                               kAccelBias, kGyroScalePos, kGyroScaleNeg, kAccelScale,
+                                               kGyroAngles, kAccelAngles, kGyroDelay,   kAccelDelay};
+}  // namespace state
+
+using StateVector = Eigen::Matrix<double, state::kSize, 1>;
+using StateMatrix = Eigen::Matrix<double, state::kSize, state::kSize>;
+
+struct Options {
+  double propagate_interval_s = 0.1;  // covariance propagation
+  double update_interval_s = 1.0;     // velocity and position measurements
+  double velocity_noise_mps = 1e-4;   // 1-sigma of the table reference
+  double position_noise_m = 1e-3;
+  double gate_sigma = 5.0;            // innovations beyond this many sigma are rejected
+  int divergence_rejections = 20;     // this many consecutive rejections end the run as diverged
+  double max_delay_s = 0.01;          // the largest delay the compensation window can follow
+  double history_interval_s = 10.0;   // estimate history kept for convergence plots
+  double restart_static_s = 25.0;     // statics at least this long restart the navigation (program parts)
+  // Initial 1-sigma (seed ch. 4) and process noise.
+  double sigma_attitude_rad = 5.0 * 4.84813681109536e-6;
+  double sigma_velocity_mps = 1e-4, sigma_position_m = 1e-3;
+  double sigma_gyro_bias_radps = 0.01 * 4.84813681109536e-6;  // 0.01 deg/h
+  double sigma_accel_bias_mps2 = 1e-3;
+  double sigma_gyro_scale = 1e-5, sigma_accel_scale = 1e-5;     // 0.001 %
+  double sigma_gyro_angle_rad = 3.0 * 4.84813681109536e-6;      // 3"
+  double sigma_accel_angle_rad = 3.0 * 4.84813681109536e-6;
+  double sigma_gyro_delay_s = 20e-6, sigma_accel_delay_s = 3e-3;
+  double gyro_bias_rw_radps_rts = 0.0;   // 0: from the model's noise, else this
+  double accel_bias_rw_mps2_rts = 0.0;
+  double scale_rw_rts = 1e-9;
+};
+
+struct MeasurementRecord {
+  double t_s;
+  std::array<double, 6> innovation;  // dv_E, dv_N, dv_U (m/s), dp_E, dp_N, dp_U (m)
+  std::array<double, 6> variance;
+  std::array<double, 6> test_ratio;  // innovation^2 / (gate^2 variance): > 1 is rejected
+  std::array<bool, 6> accepted;
+};
+
+struct HistoryRecord {
+  double t_s;
+  StateVector value;  // calibration states as model values (SI), navigation states as errors
+  StateVector sigma;
+};
+
+struct Result {
+  ImuModel model;  // body frame, with sigma
+  bool converged = true;
+  std::string status;  // "converged" or what went wrong and when
+  StateVector sigma0, sigma_final;
+  Eigen::Matrix<double, 30, 30> P_calibration;  // covariance of the 30 calibration states
+  StateVector model_values;  // calibration states' final values in the layout of the error state
+  std::int64_t updates = 0, rejected = 0, restarts = 0, frames = 0;
+  double covariance_time_s = 0;  // wall-clock share is measured by the caller; this counts steps
+  std::int64_t covariance_steps = 0;
+  std::vector<MeasurementRecord> measurements;
+  std::vector<HistoryRecord> history;
+  // Gyro delays of y and z relative to gyro x, and their sigmas (seed: tau_yx, tau_zx).
+  double tau_yx_s = 0, tau_zx_s = 0, sigma_tau_yx_s = 0, sigma_tau_zx_s = 0;
+  std::string history_json() const;
+};
+
+// Calibration-state values of a model in the filter's layout (for tests and NEES).
+StateVector model_to_state(const ImuModel& body_model);
+
+class NavCalibrationFilter {
+ public:
+  // model: the stage-1 model (instrument or body frame; converted to body).
+  NavCalibrationFilter(const RecordingMeta& meta, const ImuModel& model, const Options& options = {});
+  ~NavCalibrationFilter();
+  void push(const ImuFrame& frame);
+  Result finish();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Offline: several passes over a recording, each seeded with the previous pass's model.
+template <class ForEachFrame>
+Result calibrate_offline(const RecordingMeta& meta, const ImuModel& model, ForEachFrame for_each_frame, int passes,
+                         const Options& options = {}) {
+  ImuModel current = model;
+  Result r;
+  for (int pass = 0; pass < passes; ++pass) {
+    NavCalibrationFilter filter(meta, current, options);
+    for_each_frame([&](const ImuFrame& f) { filter.push(f); });
+    r = filter.finish();
+    if (!r.converged) break;
+    current = r.model;
+  }
+  return r;
+}
+
+}  // namespace imucal::navfilter

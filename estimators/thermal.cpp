@@ -1,0 +1,486 @@
+// The thermal section, its compensation and the eq. 8 fits.
+//
+// Why every model is additive (value + polynomial in T + polynomial in dT/dt):
+//  - Misalignment angles: the seed's multiplicative C~ = C^ (d + sum d_Tn T^n)(1 + ...) cannot
+//    move an angle whose stage-1 value is zero, and the temperature moves angles by tens of arc
+//    seconds whatever their value; the polynomial is in arc seconds, added.
+//  - Scale factors: M = 1/(1 + s) is within 2e-3 of one, so M^ (c + p(T)) (1 + q(rate)) equals
+//    M^ (1 + (c - 1) + p(T) + q(rate)) up to the product p q, below 2e-3 * 1e-4 = 0.2 ppm for the
+//    sensitivities the seed reports, and the additive form in ppm is linear in its parameters:
+//    plain least squares, and the same shape for every coefficient.
+//  - Biases: eq. 8 is already additive.
+#include "estimators/thermal.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numeric>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+#include <nlohmann/json.hpp>
+
+#include "core/units.hpp"
+
+namespace imucal::thermal {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr double Misalignment::*kMisMember[6] = {&Misalignment::xy, &Misalignment::xz, &Misalignment::yx,
+                                                 &Misalignment::yz, &Misalignment::zx, &Misalignment::zy};
+const char* const kMisName[6] = {"xy", "xz", "yx", "yz", "zx", "zy"};
+const char* const kAxisName[3] = {"x", "y", "z"};
+
+}  // namespace
+
+const std::array<Coefficient, kCoefficients>& coefficients() {
+  static const std::array<Coefficient, kCoefficients> table = [] {
+    std::array<Coefficient, kCoefficients> t{};
+    int i = 0;
+    auto add = [&](const char* group, const char* member, bool gyro, int axis, double factor) {
+      t[static_cast<std::size_t>(i)] = Coefficient{i, group, member, gyro, axis, factor};
+      ++i;
+    };
+    for (int j = 0; j < 3; ++j) add("gyro.bias_dph", kAxisName[j], true, j, units::kRadpsToDph);
+    for (int j = 0; j < 3; ++j) add("gyro.scale_pos_ppm", kAxisName[j], true, j, 1e6);
+    for (int j = 0; j < 3; ++j) add("gyro.scale_neg_ppm", kAxisName[j], true, j, 1e6);
+    for (int m = 0; m < 6; ++m) add("gyro.misalignment_arcsec", kMisName[m], true, kMisName[m][0] - 'x', units::kRadToArcsec);
+    for (int j = 0; j < 3; ++j) add("accel.bias_mps2", kAxisName[j], false, j, 1.0);
+    for (int j = 0; j < 3; ++j) add("accel.scale_ppm", kAxisName[j], false, j, 1e6);
+    for (int m = 0; m < 6; ++m)
+      add("accel.misalignment_arcsec", kMisName[m], false, kMisName[m][0] - 'x', units::kRadToArcsec);
+    return t;
+  }();
+  return table;
+}
+
+const std::array<const char*, 7>& groups() {
+  static const std::array<const char*, 7> g = {"accel.bias_mps2",    "accel.scale_ppm",    "accel.misalignment_arcsec",
+                                               "gyro.bias_dph",      "gyro.scale_pos_ppm", "gyro.scale_neg_ppm",
+                                               "gyro.misalignment_arcsec"};
+  return g;
+}
+
+std::string full_key(const Coefficient& c) { return std::string(c.group) + "." + c.member; }
+
+const char* channel_name(int ch) {
+  static const char* const names[kChannels] = {"temp_gx_C", "temp_gy_C", "temp_gz_C",
+                                               "temp_ax_C", "temp_ay_C", "temp_az_C"};
+  return ch >= 0 && ch < kChannels ? names[ch] : "temp_?";
+}
+
+namespace {
+// The SI field behind coefficient index i (const or not, one mapping for get and set).
+template <class G, class A>
+auto field(G& g, A& a, int i) -> decltype(&g.bias_radps[0]) {
+  if (i < 3) return &g.bias_radps[i];
+  if (i < 6) return &g.scale_pos[i - 3];
+  if (i < 9) return &g.scale_neg[i - 6];
+  if (i < 15) return &(g.misalignment_rad.*kMisMember[i - 9]);
+  if (i < 18) return &a.bias_mps2[i - 15];
+  if (i < 21) return &a.scale[i - 18];
+  return &(a.misalignment_rad.*kMisMember[i - 21]);
+}
+}  // namespace
+
+double get(const GyroErrors& g, const AccelErrors& a, const Coefficient& c) { return *field(g, a, c.index) * c.si_to_json; }
+
+void set(GyroErrors& g, AccelErrors& a, const Coefficient& c, double v) { *field(g, a, c.index) = v / c.si_to_json; }
+
+// ------------------------------------------------------------------------------------------------
+double Poly::eval(double dT, double rate) const {
+  double out = 0, p = 1;
+  for (double c : T) {
+    p *= dT;
+    out += c * p;
+  }
+  p = 1;
+  for (double c : dTdt) {
+    p *= rate;
+    out += c * p;
+  }
+  return out;
+}
+
+double oscillation_dph(const Oscillation& o, int axis, double t_s, double rate) {
+  if (o.amplitude_dph == 0.0 || o.period_s <= 0) return 0.0;
+  const double span = std::max(1e-12, o.full_C_per_min - o.onset_C_per_min);
+  const double x = std::clamp((std::abs(rate) - o.onset_C_per_min) / span, 0.0, 1.0);
+  const double gate = x * x * (3.0 - 2.0 * x);
+  const double phase = o.phase_deg[static_cast<std::size_t>(axis)] * units::kDegToRad;
+  return o.amplitude_dph * gate * std::sin(2.0 * units::kPi * t_s / o.period_s + phase);
+}
+
+bool ThermalSection::has_models() const {
+  return std::any_of(poly.begin(), poly.end(), [](const Poly& p) { return !p.empty(); });
+}
+
+// ------------------------------------------------------------------------------------------------
+// JSON
+
+namespace {
+
+[[noreturn]] void fail(const std::string& where, const std::string& what) {
+  throw std::runtime_error(where + ": " + what);
+}
+
+void check_keys(const json& j, const std::string& where, std::initializer_list<const char*> allowed) {
+  if (!j.is_object()) fail(where, "expected an object");
+  for (const auto& [key, value] : j.items()) {
+    bool ok = false;
+    for (const char* a : allowed) ok |= key == a;
+    if (!ok) fail(where, "unknown key \"" + key + "\"");
+  }
+}
+
+double number(const json& j, const std::string& where) {
+  if (!j.is_number()) fail(where, "expected a number");
+  const double v = j.get<double>();
+  if (!std::isfinite(v)) fail(where, "not finite");
+  return v;
+}
+
+std::vector<double> numbers(const json& j, const std::string& where) {
+  if (!j.is_array()) fail(where, "expected a list of numbers");
+  std::vector<double> out;
+  for (std::size_t k = 0; k < j.size(); ++k) out.push_back(number(j[k], where + "[" + std::to_string(k) + "]"));
+  return out;
+}
+
+std::array<double, 2> range(const json& j, const std::string& where) {
+  const auto v = numbers(j, where);
+  if (v.size() != 2 || v[0] > v[1]) fail(where, "expected [low, high]");
+  return {v[0], v[1]};
+}
+
+// Coefficient index from triad, group key within the triad and member.
+int index_of(bool gyro, const std::string& group_key, const std::string& member) {
+  for (const Coefficient& c : coefficients()) {
+    const std::string g = c.group;
+    const std::string prefix = gyro ? "gyro." : "accel.";
+    if (c.gyro == gyro && g == prefix + group_key && member == c.member) return c.index;
+  }
+  return -1;
+}
+
+}  // namespace
+
+ThermalSection parse_thermal(const std::string& text, const std::string& where0) {
+  const std::string where = where0 + ": thermal";
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::parse_error& e) {
+    fail(where, std::string("not valid JSON: ") + e.what());
+  }
+  check_keys(j, where,
+             {"format", "T_ref_C", "dTdt_unit", "fitted_T_C", "fitted_dTdt_C_per_min", "gyro", "accel", "sim_oscillation",
+              "comment"});
+  ThermalSection s;
+  if (j.contains("format") && j.at("format") != "imucal-thermal/1")
+    fail(where + ".format", "expected \"imucal-thermal/1\"");
+  if (j.contains("T_ref_C")) s.T_ref_C = number(j.at("T_ref_C"), where + ".T_ref_C");
+  if (j.contains("dTdt_unit") && j.at("dTdt_unit") != "C/min")
+    fail(where + ".dTdt_unit", "only \"C/min\" is defined (the rate polynomials are in C/min)");
+  if (j.contains("fitted_T_C")) s.fitted_T_C = range(j.at("fitted_T_C"), where + ".fitted_T_C");
+  if (j.contains("fitted_dTdt_C_per_min"))
+    s.fitted_rate_C_per_min = range(j.at("fitted_dTdt_C_per_min"), where + ".fitted_dTdt_C_per_min");
+  for (const bool gyro : {true, false}) {
+    const char* triad = gyro ? "gyro" : "accel";
+    if (!j.contains(triad)) continue;
+    const json& t = j.at(triad);
+    const std::string tw = where + "." + triad;
+    if (gyro)
+      check_keys(t, tw, {"bias_dph", "scale_pos_ppm", "scale_neg_ppm", "misalignment_arcsec"});
+    else
+      check_keys(t, tw, {"bias_mps2", "scale_ppm", "misalignment_arcsec"});
+    for (const auto& [group, members] : t.items()) {
+      const std::string gw = tw + "." + group;
+      if (!members.is_object()) fail(gw, "expected an object keyed by axis");
+      for (const auto& [member, entry] : members.items()) {
+        const std::string mw = gw + "." + member;
+        const int i = index_of(gyro, group, member);
+        if (i < 0) fail(mw, "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
+        check_keys(entry, mw, {"T", "dTdt"});
+        Poly& p = s.poly[static_cast<std::size_t>(i)];
+        if (entry.contains("T")) p.T = numbers(entry.at("T"), mw + ".T");
+        if (entry.contains("dTdt")) p.dTdt = numbers(entry.at("dTdt"), mw + ".dTdt");
+      }
+    }
+  }
+  if (j.contains("sim_oscillation")) {
+    const json& o = j.at("sim_oscillation");
+    const std::string ow = where + ".sim_oscillation";
+    check_keys(o, ow, {"gyro_bias_amplitude_dph", "period_s", "onset_C_per_min", "full_C_per_min", "phase_deg"});
+    Oscillation osc;
+    if (o.contains("gyro_bias_amplitude_dph"))
+      osc.amplitude_dph = number(o.at("gyro_bias_amplitude_dph"), ow + ".gyro_bias_amplitude_dph");
+    if (o.contains("period_s")) osc.period_s = number(o.at("period_s"), ow + ".period_s");
+    if (o.contains("onset_C_per_min")) osc.onset_C_per_min = number(o.at("onset_C_per_min"), ow + ".onset_C_per_min");
+    if (o.contains("full_C_per_min")) osc.full_C_per_min = number(o.at("full_C_per_min"), ow + ".full_C_per_min");
+    if (o.contains("phase_deg")) {
+      const auto ph = numbers(o.at("phase_deg"), ow + ".phase_deg");
+      if (ph.size() != 3) fail(ow + ".phase_deg", "expected three numbers (gyro x, y, z)");
+      osc.phase_deg = {ph[0], ph[1], ph[2]};
+    }
+    if (osc.period_s <= 0) fail(ow + ".period_s", "must be positive");
+    if (osc.full_C_per_min <= osc.onset_C_per_min) fail(ow, "full_C_per_min must exceed onset_C_per_min");
+    s.sim_oscillation = osc;
+  }
+  return s;
+}
+
+std::string thermal_to_json_text(const ThermalSection& s) {
+  json j = {{"format", "imucal-thermal/1"}, {"T_ref_C", s.T_ref_C}, {"dTdt_unit", "C/min"}};
+  if (s.fitted_T_C) j["fitted_T_C"] = {(*s.fitted_T_C)[0], (*s.fitted_T_C)[1]};
+  if (s.fitted_rate_C_per_min) j["fitted_dTdt_C_per_min"] = {(*s.fitted_rate_C_per_min)[0], (*s.fitted_rate_C_per_min)[1]};
+  for (const Coefficient& c : coefficients()) {
+    const Poly& p = s.poly[static_cast<std::size_t>(c.index)];
+    if (p.empty()) continue;
+    const std::string group = c.group;
+    const std::string triad = c.gyro ? "gyro" : "accel";
+    const std::string key = group.substr(triad.size() + 1);
+    json e = json::object();
+    if (!p.T.empty()) e["T"] = p.T;
+    if (!p.dTdt.empty()) e["dTdt"] = p.dTdt;
+    j[triad][key][c.member] = e;
+  }
+  if (s.sim_oscillation) {
+    const Oscillation& o = *s.sim_oscillation;
+    j["sim_oscillation"] = {{"gyro_bias_amplitude_dph", o.amplitude_dph},
+                            {"period_s", o.period_s},
+                            {"onset_C_per_min", o.onset_C_per_min},
+                            {"full_C_per_min", o.full_C_per_min},
+                            {"phase_deg", o.phase_deg}};
+  }
+  return j.dump();
+}
+
+std::optional<ThermalSection> thermal_of(const ImuModel& m) {
+  if (m.thermal_json.empty()) return std::nullopt;
+  return parse_thermal(m.thermal_json, "model");
+}
+
+void apply_thermal(const ThermalSection& s, const ChannelTemps& t, GyroErrors& g, AccelErrors& a) {
+  for (const Coefficient& c : coefficients()) {
+    const Poly& p = s.poly[static_cast<std::size_t>(c.index)];
+    if (p.empty()) continue;
+    const int ch = channel_of(c);
+    *field(g, a, c.index) += p.eval(t.T_C[ch] - s.T_ref_C, t.rate_C_per_min[ch]) / c.si_to_json;
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+void ChannelRate::push(const TempSample& s) {
+  Entry e;
+  e.t_s = static_cast<double>(s.t_ns) * 1e-9;
+  e.T_C << s.gyro_C, s.accel_C;
+  if (!e.T_C.allFinite()) return;  // a missing reading: keep the last good ones
+  samples_.push_back(e);
+  while (samples_.size() > 2 && samples_.front().t_s < e.t_s - window_s_) samples_.pop_front();
+}
+
+ChannelTemps ChannelRate::current() const {
+  ChannelTemps out;
+  if (samples_.empty()) return out;
+  out.T_C = samples_.back().T_C;
+  const auto n = static_cast<double>(samples_.size());
+  if (samples_.size() < 2) return out;
+  double tm = 0;
+  for (const Entry& e : samples_) tm += e.t_s / n;
+  double stt = 0;
+  Eigen::Matrix<double, kChannels, 1> sty = Eigen::Matrix<double, kChannels, 1>::Zero();
+  for (const Entry& e : samples_) {
+    const double dt = e.t_s - tm;
+    stt += dt * dt;
+    sty += dt * e.T_C;
+  }
+  if (stt > 0) out.rate_C_per_min = sty / stt * 60.0;
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------------
+// Fits
+
+namespace {
+
+struct Design {
+  double T_ref, T_scale, rate_scale;
+  // Columns: 1, x, x^2, .., r, r^2, .. with x = (T - T_ref)/T_scale, r = rate/rate_scale, so that
+  // every column is O(1) and the solve sees the geometry, not the units.
+  Eigen::RowVectorXd row(const Sample& s, int nT, int nR) const {
+    Eigen::RowVectorXd r(1 + nT + nR);
+    r[0] = 1.0;
+    const double x = (s.T_C - T_ref) / T_scale, q = s.rate_C_per_min / rate_scale;
+    double p = 1;
+    for (int k = 0; k < nT; ++k) r[1 + k] = (p *= x);
+    p = 1;
+    for (int k = 0; k < nR; ++k) r[1 + nT + k] = (p *= q);
+    return r;
+  }
+};
+
+struct Solved {
+  Eigen::VectorXd x;
+  bool ok = false;
+};
+
+Solved solve(const std::vector<const Sample*>& rows, const std::vector<double>& w, const Design& d, int nT, int nR) {
+  const int p = 1 + nT + nR;
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  Eigen::MatrixXd A(n, p);
+  Eigen::VectorXd b(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double sw = std::sqrt(w[static_cast<std::size_t>(i)]);
+    A.row(i) = sw * d.row(*rows[static_cast<std::size_t>(i)], nT, nR);
+    b[i] = sw * rows[static_cast<std::size_t>(i)]->value;
+  }
+  Solved s;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+  qr.setThreshold(1e-9);  // columns are O(1): anything smaller is not in the data
+  if (qr.rank() < p) return s;
+  s.x = qr.solve(b);
+  s.ok = s.x.allFinite();
+  return s;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const FitOptions& o) {
+  const std::size_t n = samples.size();
+  if (n < 3) throw std::runtime_error("fit: " + std::to_string(n) + " cycles (need 3 at least)");
+  Design d{T_ref_C, 0.0, 0.0};
+  std::vector<double> sig;
+  for (const Sample& s : samples) {
+    d.T_scale = std::max(d.T_scale, std::abs(s.T_C - T_ref_C));
+    d.rate_scale = std::max(d.rate_scale, std::abs(s.rate_C_per_min));
+    if (s.sigma > 0 && std::isfinite(s.sigma)) sig.push_back(s.sigma);
+  }
+  d.T_scale = std::max(d.T_scale, 1e-3);
+  d.rate_scale = std::max(d.rate_scale, 1e-4);
+  const double sigma_med = median(sig);
+  // Weights from the per-cycle sigmas, floored at their median: a cycle whose few residuals
+  // happened to agree must not outweigh the rest.
+  std::vector<double> w(n, 1.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double s = std::max(samples[i].sigma, sigma_med);
+    w[i] = s > 0 && std::isfinite(s) ? 1.0 / (s * s) : 1.0;
+  }
+  std::vector<const Sample*> all;
+  for (const Sample& s : samples) all.push_back(&s);
+
+  struct Candidate {
+    DegreeScore score;
+    int params;
+    std::vector<double> e2;  // held-back squared residuals, per sample
+  };
+  std::vector<Candidate> cands;
+  const int folds = std::max(2, o.folds);
+  for (int nT = 0; nT <= o.max_T_degree; ++nT) {
+    for (int nR = 0; nR <= o.max_rate_degree; ++nR) {
+      const int p = 1 + nT + nR;
+      if (static_cast<double>(n) < o.min_samples_per_parameter * p) continue;
+      const Solved full = solve(all, w, d, nT, nR);
+      if (!full.ok) continue;
+      Candidate c{{nT, nR, 0.0, 0.0}, p, std::vector<double>(n, 0.0)};
+      double ss = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double r = samples[i].value - d.row(samples[i], nT, nR).dot(full.x);
+        ss += r * r;
+      }
+      c.score.fit_rms = std::sqrt(ss / static_cast<double>(n));
+      bool ok = true;
+      for (int f = 0; f < folds && ok; ++f) {
+        std::vector<const Sample*> train;
+        std::vector<double> wt;
+        for (std::size_t i = 0; i < n; ++i)
+          if (static_cast<int>(i % static_cast<std::size_t>(folds)) != f) {
+            train.push_back(&samples[i]);
+            wt.push_back(w[i]);
+          }
+        if (static_cast<int>(train.size()) <= p) {
+          ok = false;
+          break;
+        }
+        const Solved part = solve(train, wt, d, nT, nR);
+        if (!part.ok) {
+          ok = false;
+          break;
+        }
+        for (std::size_t i = static_cast<std::size_t>(f); i < n; i += static_cast<std::size_t>(folds)) {
+          const double r = samples[i].value - d.row(samples[i], nT, nR).dot(part.x);
+          c.e2[i] = r * r;
+        }
+      }
+      if (!ok) continue;
+      c.score.cv_rms = std::sqrt(std::accumulate(c.e2.begin(), c.e2.end(), 0.0) / static_cast<double>(n));
+      cands.push_back(std::move(c));
+    }
+  }
+  if (cands.empty()) throw std::runtime_error("fit: no polynomial could be fitted to " + std::to_string(n) + " cycles");
+
+  const Candidate* best = &cands.front();
+  for (const Candidate& c : cands)
+    if (c.score.cv_rms < best->score.cv_rms) best = &c;
+  const double floor = std::pow(o.significance_sigmas * sigma_med, 2);
+  // The simplest model that predicts held-back cycles as well as the best one, within the noise
+  // of that comparison: a higher degree must earn its place.
+  const Candidate* chosen = best;
+  std::vector<const Candidate*> order;
+  for (const Candidate& c : cands) order.push_back(&c);
+  std::stable_sort(order.begin(), order.end(), [](const Candidate* a, const Candidate* b) {
+    return a->params != b->params ? a->params < b->params : a->score.cv_rms < b->score.cv_rms;
+  });
+  for (const Candidate* c : order) {
+    double mean = 0, sq = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double dlt = c->e2[i] - best->e2[i];
+      mean += dlt;
+      sq += dlt * dlt;
+    }
+    mean /= static_cast<double>(n);
+    const double var = std::max(0.0, sq / static_cast<double>(n) - mean * mean);
+    const double se = std::sqrt(var / static_cast<double>(n));
+    if (mean <= std::max(2.0 * se, floor)) {
+      chosen = c;
+      break;
+    }
+  }
+
+  PolyFit out;
+  out.T_degree = chosen->score.T_degree;
+  out.rate_degree = chosen->score.rate_degree;
+  out.fit_rms = chosen->score.fit_rms;
+  out.cv_rms = chosen->score.cv_rms;
+  out.samples = static_cast<int>(n);
+  for (const Candidate& c : cands) out.scores.push_back(c.score);
+  const Solved full = solve(all, w, d, out.T_degree, out.rate_degree);
+  const int p = chosen->params;
+  out.constant = full.x[0];
+  for (int k = 0; k < out.T_degree; ++k) out.poly.T.push_back(full.x[1 + k] / std::pow(d.T_scale, k + 1));
+  for (int k = 0; k < out.rate_degree; ++k)
+    out.poly.dTdt.push_back(full.x[1 + out.T_degree + k] / std::pow(d.rate_scale, k + 1));
+  // Sigma of the constant: (A'WA)^-1 scaled by the weighted residual variance.
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
+  double wrss = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::RowVectorXd r = d.row(samples[i], out.T_degree, out.rate_degree);
+    N += w[i] * r.transpose() * r;
+    const double e = samples[i].value - r.dot(full.x);
+    wrss += w[i] * e * e;
+  }
+  const double s0sq = static_cast<double>(n) > p ? wrss / (static_cast<double>(n) - p) : 0.0;
+  const Eigen::MatrixXd Ninv = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+  out.constant_sigma = std::sqrt(std::max(0.0, Ninv(0, 0) * s0sq));
+  return out;
+}
+
+}  // namespace imucal::thermal

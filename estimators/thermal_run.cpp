@@ -1,0 +1,647 @@
+// Stage 2 over a run: cycles, per-cycle estimates, temperature checks, fits and the report.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+#include <nlohmann/json.hpp>
+
+#include "estimators/thermal.hpp"
+
+namespace imucal::thermal {
+
+using nlohmann::json;
+
+namespace {
+
+std::string fmt(const char* f, double a) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, a);
+  return buf;
+}
+
+std::string span_text(double t0, double t1) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "t=%.0f..%.0f s", t0, t1);
+  return buf;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+std::vector<Cycle> find_cycles(const std::vector<SegmentInfo>& segments, int statics_per_cycle) {
+  std::vector<SegmentInfo> statics;
+  for (const SegmentInfo& s : segments)
+    if (s.kind == "static") statics.push_back(s);
+  std::sort(statics.begin(), statics.end(), [](const SegmentInfo& a, const SegmentInfo& b) { return a.t0_s < b.t0_s; });
+  auto prefix = [](const std::string& name) -> std::string {
+    const auto slash = name.find('/');
+    if (name.rfind("cycle-", 0) != 0 || slash == std::string::npos) return {};
+    return name.substr(0, slash);
+  };
+  const bool named = std::any_of(statics.begin(), statics.end(), [&](const SegmentInfo& s) { return !prefix(s.name).empty(); });
+  std::vector<Cycle> out;
+  std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [first, last] static of each cycle
+  if (named) {
+    for (std::size_t i = 0; i < statics.size();) {
+      const std::string p = prefix(statics[i].name);
+      std::size_t k = i;
+      while (k + 1 < statics.size() && prefix(statics[k + 1].name) == p) ++k;
+      if (!p.empty()) ranges.emplace_back(i, k);
+      i = k + 1;
+    }
+  } else if (statics_per_cycle > 0) {
+    const auto per = static_cast<std::size_t>(statics_per_cycle);
+    for (std::size_t i = 0; i + per <= statics.size(); i += per) ranges.emplace_back(i, i + per - 1);
+  } else {
+    throw std::runtime_error(
+        "stage thermal: the run's statics carry no \"cycle-NNN/\" names; give the number of statics per table cycle "
+        "(--statics-per-cycle)");
+  }
+  for (const auto& [first, last] : ranges) {
+    Cycle c;
+    const std::string p = prefix(statics[first].name);
+    c.name = p.empty() ? "cycle-" + std::to_string(out.size() + 1) : p;
+    c.statics.assign(statics.begin() + static_cast<std::ptrdiff_t>(first),
+                     statics.begin() + static_cast<std::ptrdiff_t>(last) + 1);
+    if (last + 1 < statics.size()) c.statics.push_back(statics[last + 1]);  // the closing rest
+    c.t0_s = c.statics.front().t0_s;
+    c.t1_s = c.statics.back().t1_s;
+    out.push_back(c);
+  }
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------------
+CycleEstimator::CycleEstimator(const RecordingMeta& meta, std::vector<Cycle> cycles, const ImuModel& seed)
+    : meta_(meta), cycles_(std::move(cycles)), seed_(seed) {
+  std::sort(cycles_.begin(), cycles_.end(), [](const Cycle& a, const Cycle& b) { return a.t0_s < b.t0_s; });
+  meta_.segments.clear();
+  results_.resize(cycles_.size());
+}
+
+namespace {
+
+// Off-diagonal entries of row j of D, as the stage-1 calibrator orders them: (column k, sign,
+// index of the angle in xy, xz, yx, yz, zx, zy).
+struct OffDiag {
+  int k;
+  double sign;
+  int mis;
+};
+constexpr OffDiag kOffDiag[3][2] = {{{1, +1.0, 1}, {2, -1.0, 0}}, {{0, -1.0, 3}, {2, +1.0, 2}}, {{0, +1.0, 5}, {1, -1.0, 4}}};
+
+// Influence of each interval on each coefficient: the stage-1 design at the solution, so that
+// the temperature an estimate refers to is the same weighted mean of the intervals' temperatures
+// that the estimate itself is of the coefficient's values (exact for a coefficient linear in T).
+void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, double min_rotation_rad, CycleEstimate& e) {
+  std::vector<const direct::Interval*> statics, rotations;
+  for (const direct::Interval& iv : ivs) {
+    if (iv.frames < 2) continue;
+    if (iv.is_static) {
+      statics.push_back(&iv);
+      continue;
+    }
+    int moving = 0;
+    for (int k = 0; k < 3; ++k) moving += iv.moved_axes_rad[k] > 1e-8;
+    if (!iv.gap && moving == 1 && iv.moved_axes_rad.maxCoeff() >= min_rotation_rad) rotations.push_back(&iv);
+  }
+  std::vector<const direct::Interval*> eqs = statics;
+  eqs.insert(eqs.end(), rotations.begin(), rotations.end());
+  e.spans.clear();
+  for (const auto* iv : eqs) e.spans.push_back({iv->t0_s, iv->t1_s});
+  for (auto& w : e.weight) w.assign(eqs.size(), 0.0);
+  auto spread = [&](const Eigen::MatrixXd& A, const Eigen::VectorXd& w, const std::array<int, 5>& index, int p) {
+    const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
+    const Eigen::MatrixXd K = N.ldlt().solve(A.transpose() * w.asDiagonal());
+    for (int c = 0; c < p; ++c)
+      for (Eigen::Index i = 0; i < A.rows(); ++i)
+        e.weight[static_cast<std::size_t>(index[static_cast<std::size_t>(c)])][static_cast<std::size_t>(i)] =
+            K(c, i) * A(i, c);
+  };
+  const auto ns = static_cast<Eigen::Index>(statics.size());
+  for (int j = 0; j < 3; ++j) {
+    Eigen::MatrixXd A(ns, 4);
+    Eigen::VectorXd w(ns);
+    for (Eigen::Index i = 0; i < ns; ++i) {
+      const direct::Interval& s = *statics[static_cast<std::size_t>(i)];
+      A(i, 0) = 1.0;
+      A(i, 1) = s.f_o_mps2[j];
+      for (int c = 0; c < 2; ++c) {
+        const OffDiag& od = kOffDiag[j][c];
+        A(i, 2 + c) = od.sign * (1.0 + m.accel.scale[od.k]) * s.f_o_mps2[od.k];
+      }
+      w[i] = s.T_s;
+    }
+    spread(A, w, {15 + j, 18 + j, 21 + kOffDiag[j][0].mis, 21 + kOffDiag[j][1].mis, 0}, 4);
+  }
+  const auto ne = static_cast<Eigen::Index>(eqs.size());
+  for (int j = 0; j < 3; ++j) {
+    Eigen::MatrixXd A(ne, 5);
+    Eigen::VectorXd w(ne);
+    for (Eigen::Index i = 0; i < ne; ++i) {
+      const direct::Interval& v = *eqs[static_cast<std::size_t>(i)];
+      auto scaled = [&](int k) {
+        return (1.0 + m.gyro.scale_pos[k]) * v.ref_pos_rad[k] + (1.0 + m.gyro.scale_neg[k]) * v.ref_neg_rad[k];
+      };
+      A(i, 0) = v.T_s;
+      A(i, 1) = v.ref_pos_rad[j];
+      A(i, 2) = v.ref_neg_rad[j];
+      for (int c = 0; c < 2; ++c) A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
+      w[i] = 1.0 / v.T_s;
+    }
+    spread(A, w, {j, 3 + j, 6 + j, 9 + kOffDiag[j][0].mis, 9 + kOffDiag[j][1].mis}, 5);
+  }
+}
+
+}  // namespace
+
+void CycleEstimator::close(Active& a) {
+  CycleEstimate& e = results_[a.index];
+  const Cycle& c = cycles_[a.index];
+  e.name = c.name;
+  e.t0_s = c.t0_s;
+  e.t1_s = c.t1_s;
+  try {
+    const direct::Result r = a.calibrator->finish(seed_);
+    const ImuErrorSet sig = r.model.sigma.value_or(ImuErrorSet{});
+    for (const Coefficient& k : coefficients()) {
+      e.value[static_cast<std::size_t>(k.index)] = get(r.model.gyro, r.model.accel, k);
+      e.sigma[static_cast<std::size_t>(k.index)] = get(sig.gyro, sig.accel, k);
+    }
+    influence(a.calibrator->intervals(), r.model, direct::Options{}.min_rotation_rad, e);
+    e.ok = true;
+  } catch (const std::exception& ex) {
+    e.ok = false;
+    e.note = ex.what();
+  }
+  a.calibrator.reset();
+}
+
+void CycleEstimator::push(const ImuFrame& f) {
+  const double t = static_cast<double>(f.t_ns) * 1e-9;
+  // A calibrator needs the frame before its first static: open it a little early.
+  constexpr double kLead_s = 1.0;
+  while (next_open_ < cycles_.size() && cycles_[next_open_].t0_s - kLead_s <= t) {
+    RecordingMeta m = meta_;
+    m.segments = cycles_[next_open_].statics;
+    active_.push_back({next_open_, std::make_unique<direct::DirectCalibrator>(m)});
+    ++next_open_;
+  }
+  for (Active& a : active_) {
+    if (t <= cycles_[a.index].t1_s + kLead_s) a.calibrator->push(f);
+    else close(a);
+  }
+  active_.erase(std::remove_if(active_.begin(), active_.end(), [](const Active& a) { return !a.calibrator; }),
+                active_.end());
+}
+
+std::vector<CycleEstimate> CycleEstimator::finish() {
+  for (Active& a : active_) close(a);
+  active_.clear();
+  for (std::size_t i = next_open_; i < cycles_.size(); ++i) {
+    results_[i].name = cycles_[i].name;
+    results_[i].t0_s = cycles_[i].t0_s;
+    results_[i].t1_s = cycles_[i].t1_s;
+    results_[i].note = "no frames";
+  }
+  return results_;
+}
+
+// ------------------------------------------------------------------------------------------------
+// Temperature series: sample-and-hold values and a centred least-squares rate at every sample.
+
+namespace {
+
+constexpr int kChamber = kChannels;  // the seventh column: chamber air
+
+class TempSeries {
+ public:
+  TempSeries(const std::vector<TempSample>& temps, double half_window_s) {
+    for (const TempSample& s : temps) {
+      std::array<double, kChannels + 1> v{};
+      for (int j = 0; j < 3; ++j) {
+        v[static_cast<std::size_t>(j)] = s.gyro_C[j];
+        v[static_cast<std::size_t>(3 + j)] = s.accel_C[j];
+      }
+      v[kChamber] = s.chamber_C;
+      t_.push_back(static_cast<double>(s.t_ns) * 1e-9);
+      v_.push_back(v);
+    }
+    rate_.assign(t_.size(), {});
+    // Running sums over the window [t - h, t + h] (two pointers), per channel.
+    for (int ch = 0; ch <= kChamber; ++ch) {
+      std::size_t lo = 0, hi = 0;
+      double n = 0, st = 0, stt = 0, sy = 0, sty = 0;
+      const auto c = static_cast<std::size_t>(ch);
+      for (std::size_t i = 0; i < t_.size(); ++i) {
+        while (hi < t_.size() && t_[hi] <= t_[i] + half_window_s) {
+          const double dt = t_[hi] - t_[0], y = v_[hi][c];
+          n += 1;
+          st += dt;
+          stt += dt * dt;
+          sy += y;
+          sty += dt * y;
+          ++hi;
+        }
+        while (t_[lo] < t_[i] - half_window_s) {
+          const double dt = t_[lo] - t_[0], y = v_[lo][c];
+          n -= 1;
+          st -= dt;
+          stt -= dt * dt;
+          sy -= y;
+          sty -= dt * y;
+          ++lo;
+        }
+        const double den = n * stt - st * st;
+        rate_[i][c] = n >= 2 && den > 1e-9 ? (n * sty - st * sy) / den * 60.0 : 0.0;
+      }
+    }
+  }
+
+  bool empty() const { return t_.empty(); }
+  std::size_t index_at(double t) const {
+    const auto it = std::upper_bound(t_.begin(), t_.end(), t);
+    return it == t_.begin() ? 0 : static_cast<std::size_t>(it - t_.begin()) - 1;
+  }
+  double value(int ch, double t) const { return v_[index_at(t)][static_cast<std::size_t>(ch)]; }
+  double rate(int ch, double t) const { return rate_[index_at(t)][static_cast<std::size_t>(ch)]; }
+  // Time average over [t0, t1] of the sample-and-hold value.
+  double mean(int ch, double t0, double t1) const {
+    if (t1 <= t0) return value(ch, t0);
+    std::size_t i = index_at(t0);
+    double acc = 0, t = t0;
+    while (t < t1) {
+      const double next = i + 1 < t_.size() ? std::min(t1, t_[i + 1]) : t1;
+      acc += v_[i][static_cast<std::size_t>(ch)] * (next - t);
+      t = next;
+      ++i;
+      if (i >= t_.size()) {
+        acc += v_.back()[static_cast<std::size_t>(ch)] * (t1 - t);
+        break;
+      }
+    }
+    return acc / (t1 - t0);
+  }
+  const std::vector<double>& times() const { return t_; }
+
+ private:
+  std::vector<double> t_;
+  std::vector<std::array<double, kChannels + 1>> v_;
+  std::vector<std::array<double, kChannels + 1>> rate_;
+};
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps, const CheckOptions& o) {
+  std::vector<TempProblem> out;
+  if (temps.empty()) {
+    out.push_back({"all", "no temperature samples at all", 0.0, 0.0, 0x3Fu});
+    return out;
+  }
+  const auto n = temps.size();
+  auto t_of = [&](std::size_t i) { return static_cast<double>(temps[i].t_ns) * 1e-9; };
+  auto val = [&](std::size_t i, int ch) {
+    if (ch < 3) return temps[i].gyro_C[ch];
+    if (ch < 6) return temps[i].accel_C[ch - 3];
+    return temps[i].chamber_C;
+  };
+  auto name = [](int ch) { return ch < kChannels ? std::string(channel_name(ch)) : std::string("temp_chamber_C"); };
+  auto mask = [](int ch) { return ch < kChannels ? 1u << ch : 0u; };
+  const double t_end = t_of(n - 1);
+
+  for (int ch = 0; ch <= kChamber; ++ch) {
+    // Missing or implausible readings (a broken sensor reads NaN, its maximum or nothing).
+    for (std::size_t i = 0; i < n;) {
+      const double v = val(i, ch);
+      if (std::isfinite(v) && v >= o.plausible_lo_C && v <= o.plausible_hi_C) {
+        ++i;
+        continue;
+      }
+      std::size_t k = i;
+      while (k + 1 < n && !(std::isfinite(val(k + 1, ch)) && val(k + 1, ch) >= o.plausible_lo_C &&
+                            val(k + 1, ch) <= o.plausible_hi_C))
+        ++k;
+      out.push_back({name(ch), "no valid reading (" + fmt("%g", v) + " C)", t_of(i), k + 1 < n ? t_of(k + 1) : t_end,
+                     mask(ch)});
+      i = k + 1;
+    }
+    // Jumps: a step no physical temperature makes; the channel is suspect until it steps back.
+    for (std::size_t i = 1; i < n; ++i) {
+      const double a = val(i - 1, ch), b = val(i, ch);
+      if (!std::isfinite(a) || !std::isfinite(b)) continue;
+      const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
+      if (std::abs(b - a) <= allowed) continue;
+      const double step = b - a;
+      std::size_t back = n;
+      for (std::size_t k = i + 1; k < n; ++k) {
+        const double d = val(k, ch) - val(k - 1, ch);
+        if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
+          back = k;
+          break;
+        }
+      }
+      std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
+      what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
+      out.push_back({name(ch), what, t_of(i - 1), back < n ? t_of(back) : t_end, mask(ch)});
+      i = back < n ? back : n;
+    }
+  }
+  // Stuck: a sensor channel frozen while the chamber and the other sensors moved.
+  for (int ch = 0; ch < kChannels; ++ch) {
+    for (std::size_t i = 0; i < n;) {
+      std::size_t k = i;
+      while (k + 1 < n && val(k + 1, ch) == val(i, ch)) ++k;
+      const double t0 = t_of(i), t1 = t_of(k);
+      if (t1 - t0 >= o.stuck_s) {
+        double cmin = val(i, kChamber), cmax = cmin;
+        std::vector<double> others_change;
+        for (int other = 0; other < kChannels; ++other) {
+          if (other == ch) continue;
+          double lo = val(i, other), hi = lo;
+          for (std::size_t m = i; m <= k; ++m) {
+            lo = std::min(lo, val(m, other));
+            hi = std::max(hi, val(m, other));
+          }
+          others_change.push_back(hi - lo);
+        }
+        for (std::size_t m = i; m <= k; ++m) {
+          cmin = std::min(cmin, val(m, kChamber));
+          cmax = std::max(cmax, val(m, kChamber));
+        }
+        std::sort(others_change.begin(), others_change.end());
+        const double others = others_change[others_change.size() / 2];
+        if (cmax - cmin >= o.stuck_chamber_change_C && others >= o.stuck_others_change_C) {
+          out.push_back({name(ch),
+                         "stuck at " + fmt("%.3f", val(i, ch)) + " C for " + fmt("%.0f", t1 - t0) +
+                             " s while the chamber moved by " + fmt("%.2f", cmax - cmin) + " C",
+                         t0, t1, mask(ch)});
+        }
+      }
+      i = k + 1;
+    }
+  }
+  // Gaps: no samples while the temperatures moved (a run-length store may skip unchanged ones).
+  for (std::size_t i = 1; i < n; ++i) {
+    const double dt = t_of(i) - t_of(i - 1);
+    if (dt <= o.gap_s) continue;
+    double moved = 0;
+    for (int ch = 0; ch <= kChamber; ++ch) moved = std::max(moved, std::abs(val(i, ch) - val(i - 1, ch)));
+    if (moved > 0.05)
+      out.push_back({"all", "no temperature samples for " + fmt("%.0f", dt) + " s while they moved by " +
+                                fmt("%.2f", moved) + " C",
+                     t_of(i - 1), t_of(i), 0x3Fu});
+  }
+  // The chamber at the end of each soak long enough to judge.
+  for (std::size_t i = 0; i < n;) {
+    if (!temps[i].chamber_setpoint_C) {
+      ++i;
+      continue;
+    }
+    const double sp = *temps[i].chamber_setpoint_C;
+    std::size_t k = i;
+    while (k + 1 < n && temps[k + 1].chamber_setpoint_C && *temps[k + 1].chamber_setpoint_C == sp) ++k;
+    const double t0 = t_of(i), t1 = t_of(k);
+    if (t1 - t0 >= o.setpoint_settle_s && std::abs(temps[k].chamber_C - sp) > o.setpoint_tolerance_C)
+      out.push_back({"temp_chamber_C",
+                     "never reached the set point " + fmt("%.2f", sp) + " C (air " + fmt("%.2f", temps[k].chamber_C) +
+                         " C at the end of the soak)",
+                     t0, t1, 0x3Fu});
+    i = k + 1;
+  }
+  std::sort(out.begin(), out.end(), [](const TempProblem& a, const TempProblem& b) { return a.t0_s < b.t0_s; });
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------------
+Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                 const std::vector<TempSample>& temps, const ImuModel& input, const Options& opt) {
+  Result res;
+  res.cycles_total = static_cast<int>(cycles.size());
+  res.problems = check_temperatures(temps, opt.checks);
+  for (const TempProblem& p : res.problems)
+    res.notes.push_back(p.channel + " " + p.what + " (" + span_text(p.t0_s, p.t1_s) + ")");
+  const TempSeries series(temps, opt.rate_half_window_s);
+  if (series.empty()) throw std::runtime_error("stage thermal: the run has no temperature samples");
+
+  // The temperature and rate each estimate refers to, per cycle and coefficient; who is left out.
+  struct Row {
+    std::size_t cycle;
+    std::array<double, kCoefficients> T{}, rate{};
+    std::array<bool, kCoefficients> use{};
+  };
+  std::vector<Row> rows;
+  json left_out = json::array();
+  for (std::size_t c = 0; c < cycles.size(); ++c) {
+    const CycleEstimate& e = cycles[c];
+    if (!e.ok) {
+      std::string first_line = e.note.substr(0, e.note.find('\n'));
+      res.notes.push_back(e.name + " (" + span_text(e.t0_s, e.t1_s) + ") left out: " + first_line);
+      left_out.push_back({{"cycle", e.name}, {"t0_s", e.t0_s}, {"t1_s", e.t1_s}, {"reason", e.note}});
+      continue;
+    }
+    Row r;
+    r.cycle = c;
+    unsigned bad = 0;
+    std::string why;
+    for (const TempProblem& p : res.problems)
+      if (p.channel_mask && p.t0_s <= e.t1_s && p.t1_s >= e.t0_s) {
+        bad |= p.channel_mask;
+        why += (why.empty() ? "" : "; ") + p.channel + " " + p.what;
+      }
+    for (const Coefficient& k : coefficients()) {
+      const auto i = static_cast<std::size_t>(k.index);
+      const int ch = channel_of(k);
+      double T = 0, rate = 0;
+      for (std::size_t s = 0; s < e.spans.size(); ++s) {
+        const double w = e.weight[i][s];
+        T += w * series.mean(ch, e.spans[s][0], e.spans[s][1]);
+        rate += w * series.rate(ch, 0.5 * (e.spans[s][0] + e.spans[s][1]));
+      }
+      r.T[i] = T;
+      r.rate[i] = rate;
+      r.use[i] = !(bad & (1u << ch));
+    }
+    if (bad) {
+      std::string chans;
+      for (int ch = 0; ch < kChannels; ++ch)
+        if (bad & (1u << ch)) chans += std::string(chans.empty() ? "" : ", ") + channel_name(ch);
+      const bool all = (bad & 0x3Fu) == 0x3Fu;
+      res.notes.push_back(e.name + " (" + span_text(e.t0_s, e.t1_s) + ") left out" +
+                          (all ? "" : " for the coefficients on " + chans) + ": " + why);
+      left_out.push_back({{"cycle", e.name}, {"t0_s", e.t0_s}, {"t1_s", e.t1_s}, {"channels", all ? "all" : chans},
+                          {"reason", why}});
+    }
+    rows.push_back(r);
+  }
+
+  // Reference temperature and coverage over the used estimates.
+  double Tlo = 1e300, Thi = -1e300, Rlo = 1e300, Rhi = -1e300;
+  std::array<std::array<double, 4>, kChannels> cov;
+  for (auto& c : cov) c = {1e300, -1e300, 1e300, -1e300};
+  int used_cycles = 0;
+  for (const Row& r : rows) {
+    bool any = false;
+    for (const Coefficient& k : coefficients()) {
+      const auto i = static_cast<std::size_t>(k.index);
+      if (!r.use[i]) continue;
+      any = true;
+      auto& c = cov[static_cast<std::size_t>(channel_of(k))];
+      c = {std::min(c[0], r.T[i]), std::max(c[1], r.T[i]), std::min(c[2], r.rate[i]), std::max(c[3], r.rate[i])};
+      Tlo = std::min(Tlo, r.T[i]);
+      Thi = std::max(Thi, r.T[i]);
+      Rlo = std::min(Rlo, r.rate[i]);
+      Rhi = std::max(Rhi, r.rate[i]);
+    }
+    used_cycles += any;
+  }
+  res.cycles_used = used_cycles;
+  if (used_cycles < 3)
+    throw std::runtime_error("stage thermal: " + std::to_string(used_cycles) + " usable cycles of " +
+                             std::to_string(cycles.size()) + " (need 3 at least); see the notes above");
+  const double T_ref = std::isfinite(opt.T_ref_C) ? opt.T_ref_C : std::round((Tlo + Thi)) / 2.0;
+  json coverage = json::object();
+  for (int ch = 0; ch < kChannels; ++ch) {
+    const auto& c = cov[static_cast<std::size_t>(ch)];
+    if (c[0] > c[1]) continue;
+    coverage[channel_name(ch)] = {{"T_C", {c[0], c[1]}}, {"dTdt_C_per_min", {c[2], c[3]}}};
+    if (c[0] > opt.range_lo_C + opt.coverage_tolerance_C || c[1] < opt.range_hi_C - opt.coverage_tolerance_C)
+      res.notes.push_back(std::string("coverage: ") + channel_name(ch) + " reached " + fmt("%.2f", c[0]) + ".." +
+                          fmt("%.2f", c[1]) + " C over the used cycles, asked " + fmt("%.1f", opt.range_lo_C) + ".." +
+                          fmt("%.1f", opt.range_hi_C) + " C: its models extrapolate outside");
+    if (c[3] < 0.05 || c[2] > -0.05)
+      res.notes.push_back(std::string("coverage: ") + channel_name(ch) + " dT/dt " + fmt("%+.3f", c[2]) + ".." +
+                          fmt("%+.3f", c[3]) + " C/min: no " + (c[3] < 0.05 ? "heating" : "cooling") +
+                          " cycles, the dT/dt terms rest on one side only");
+  }
+
+  // Fits.
+  res.model = input;
+  ImuErrorSet sigma = input.sigma.value_or(ImuErrorSet{});
+  res.section.T_ref_C = T_ref;
+  res.section.fitted_T_C = std::array<double, 2>{Tlo, Thi};
+  res.section.fitted_rate_C_per_min = std::array<double, 2>{Rlo, Rhi};
+  std::array<std::optional<PolyFit>, kCoefficients> fits;
+  json degrees = json::object();
+  for (const Coefficient& k : coefficients()) {
+    const auto i = static_cast<std::size_t>(k.index);
+    std::vector<Sample> samples;
+    for (const Row& r : rows)
+      if (r.use[i]) samples.push_back({r.T[i], r.rate[i], cycles[r.cycle].value[i], cycles[r.cycle].sigma[i]});
+    try {
+      fits[i] = fit_polynomial(samples, T_ref, opt.fit);
+    } catch (const std::exception& ex) {
+      res.notes.push_back(full_key(k) + ": no model (" + ex.what() + "); its value is carried over");
+      continue;
+    }
+    const PolyFit& f = *fits[i];
+    res.section.poly[i] = f.poly;
+    set(res.model.gyro, res.model.accel, k, f.constant);
+    set(sigma.gyro, sigma.accel, k, f.constant_sigma);
+    json table = json::array();
+    for (const DegreeScore& s : f.scores)
+      table.push_back({{"T", s.T_degree}, {"dTdt", s.rate_degree}, {"fit_rms", s.fit_rms}, {"cv_rms", s.cv_rms}});
+    degrees[full_key(k)] = {{"T_degree", f.T_degree}, {"dTdt_degree", f.rate_degree}, {"cycles", f.samples},
+                            {"fit_rms", f.fit_rms}, {"cv_rms", f.cv_rms}, {"per_degree", table}};
+  }
+  res.model.sigma = sigma;
+  res.model.thermal_json = thermal_to_json_text(res.section);
+
+  // The judge: the truth of a simulated run, seen through each estimate's own weighting, or the
+  // per-cycle estimates of a real one.
+  std::optional<ImuModel> truth;
+  std::optional<ThermalSection> truth_thermal;
+  if (!meta.truth_json.empty()) {
+    truth = imu_model_from_json_text(meta.truth_json, "the run's truth");
+    truth_thermal = thermal_of(*truth);
+  }
+  auto truth_at = [&](const Coefficient& k, double t) {
+    double v = get(truth->gyro, truth->accel, k);
+    if (!truth_thermal) return v;
+    const int ch = channel_of(k);
+    const double rate = series.rate(ch, t);
+    v += truth_thermal->poly[static_cast<std::size_t>(k.index)].eval(series.value(ch, t) - truth_thermal->T_ref_C, rate);
+    if (truth_thermal->sim_oscillation && k.index < 3) v += oscillation_dph(*truth_thermal->sim_oscillation, k.index, t, rate);
+    return v;
+  };
+  std::map<std::string, double> residual, before, residual_est, before_est, est_error, truth_lo, truth_hi;
+  for (const char* g : groups()) {
+    residual[g] = before[g] = residual_est[g] = before_est[g] = est_error[g] = 0.0;
+    truth_lo[g] = 1e300;
+    truth_hi[g] = -1e300;
+  }
+  json plots = json::object();
+  for (const Coefficient& k : coefficients()) {
+    const auto i = static_cast<std::size_t>(k.index);
+    const std::string g = k.group;
+    const double input_value = get(input.gyro, input.accel, k);
+    const double constant = get(res.model.gyro, res.model.accel, k);
+    json pts = json::array();
+    for (const Row& r : rows) {
+      if (!r.use[i]) continue;
+      const CycleEstimate& e = cycles[r.cycle];
+      const double thermal_part = fits[i] ? fits[i]->poly.eval(r.T[i] - T_ref, r.rate[i]) : 0.0;
+      const double model_value = constant + thermal_part;
+      const double est = e.value[i];
+      residual_est[g] = std::max(residual_est[g], std::abs(model_value - est));
+      before_est[g] = std::max(before_est[g], std::abs(input_value - est));
+      json truth_value = nullptr;
+      if (truth) {
+        double tv = 0;
+        for (std::size_t s = 0; s < e.spans.size(); ++s) {
+          // The interval's mean of the truth, on a grid fine against the thermal time constants.
+          const double a = e.spans[s][0], b = e.spans[s][1];
+          const int m = std::max(1, static_cast<int>(std::ceil((b - a) / 2.0)));
+          double mean = 0;
+          for (int q = 0; q < m; ++q) mean += truth_at(k, a + (b - a) * (q + 0.5) / m) / m;
+          tv += e.weight[i][s] * mean;
+        }
+        residual[g] = std::max(residual[g], std::abs(model_value - tv));
+        before[g] = std::max(before[g], std::abs(input_value - tv));
+        est_error[g] = std::max(est_error[g], std::abs(est - tv));
+        truth_lo[g] = std::min(truth_lo[g], tv);
+        truth_hi[g] = std::max(truth_hi[g], tv);
+        truth_value = tv;
+      }
+      pts.push_back({e.name, 0.5 * (e.t0_s + e.t1_s), r.T[i], r.rate[i], est, e.sigma[i], est - thermal_part,
+                     model_value, truth_value});
+    }
+    plots[full_key(k)] = pts;
+  }
+  auto to_json = [](const std::map<std::string, double>& m) {
+    json j = json::object();
+    for (const auto& [k, v] : m) j[k] = v;
+    return j;
+  };
+  json report = {{"format", "imucal-thermal-report/1"},
+                 {"residual_source", truth ? "truth" : "per-cycle estimates"},
+                 {"residual", to_json(truth ? residual : residual_est)},
+                 {"before", to_json(truth ? before : before_est)},
+                 {"residual_vs_estimates", to_json(residual_est)},
+                 {"before_vs_estimates", to_json(before_est)},
+                 {"T_ref_C", T_ref},
+                 {"cycles", {{"total", res.cycles_total}, {"used", res.cycles_used}, {"left_out", left_out}}},
+                 {"coverage", coverage},
+                 {"degrees", degrees},
+                 {"notes", res.notes}};
+  if (truth) {
+    report["estimate_error"] = to_json(est_error);
+    json p2p = json::object();
+    for (const char* g : groups()) p2p[g] = truth_hi[g] >= truth_lo[g] ? truth_hi[g] - truth_lo[g] : 0.0;
+    report["truth_peak_to_peak"] = p2p;
+  }
+  json problems = json::array();
+  for (const TempProblem& p : res.problems)
+    problems.push_back({{"channel", p.channel}, {"what", p.what}, {"t0_s", p.t0_s}, {"t1_s", p.t1_s}});
+  report["problems"] = problems;
+  report["plots"] = {{"columns", {"cycle", "t_mid_s", "T_C", "dTdt_C_per_min", "estimate", "sigma", "compensated",
+                                  "model", "truth"}},
+                     {"series", plots}};
+  res.report_json = report.dump();
+  return res;
+}
+
+}  // namespace imucal::thermal
