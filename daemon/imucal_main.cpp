@@ -1,4 +1,5 @@
-// imucal: the command line. A thin shell over the libraries: simulate, navigate, export, import.
+// imucal: the command line. A thin shell over the libraries: simulate, navigate, export, import,
+// campaign run.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -14,9 +15,12 @@
 
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
+#include "daemon/service/campaign_runner.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
+#include "estimators/evaluate.hpp"
+#include "estimators/nav_filter.hpp"
 #include "estimators/noise.hpp"
 #include "estimators/navigation_run.hpp"
 #include "motion_programs/program.hpp"
@@ -154,7 +158,35 @@ int cmd_navigate(const NavigateArgs& a) {
 
 struct CalibrateArgs {
   std::string db, stage = "direct", model, out, frame = "instrument";
+  int passes = 1;
 };
+
+// Stage 3 over a stored run: the filter's report on stdout, its history stored with the run.
+ImuModel run_navigation_stage(storage::RunDb& db, const ImuModel& model, int passes) {
+  const RecordingMeta meta = db.meta();
+  const auto t0 = Clock::now();
+  const navfilter::Result r = navfilter::calibrate_offline(
+      meta, model, [&](const auto& fn) { db.for_each_frame(fn); }, passes);
+  const double wall = seconds_since(t0);
+  std::printf("stage navigation: %s; %lld frames, %lld updates, %lld rejected, %lld restarts, %d pass(es) in %.1f s\n",
+              r.status.c_str(), static_cast<long long>(r.frames), static_cast<long long>(r.updates),
+              static_cast<long long>(r.rejected), static_cast<long long>(r.restarts), passes, wall);
+  std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
+  for (const navfilter::Block& b : navfilter::state::kAll) {
+    std::printf("    %-24s", b.name);
+    for (int i = 0; i < b.size; ++i) {
+      const double s0 = r.sigma0[b.index + i], s1 = r.sigma_final[b.index + i];
+      std::printf(" %8.1f", s1 > 0 ? s0 / s1 : 0.0);
+    }
+    std::printf("\n");
+  }
+  std::printf("  relative gyro delays: tau_yx %.3f us (sigma %.3f), tau_zx %.3f us (sigma %.3f)\n", r.tau_yx_s * 1e6,
+              r.sigma_tau_yx_s * 1e6, r.tau_zx_s * 1e6, r.sigma_tau_zx_s * 1e6);
+  db.set_extra("navigation_history", r.history_json());
+  if (!r.converged)
+    throw std::runtime_error("stage navigation " + r.status + " (estimates up to then are in the run as history)");
+  return r.model;
+}
 
 // Stage 1 over a stored run: statics from the run's segments, or found from the table angles.
 direct::Result run_direct(const storage::RunDb& db, const ImuModel& seed) {
@@ -185,7 +217,7 @@ direct::Result run_direct(const storage::RunDb& db, const ImuModel& seed) {
 int cmd_calibrate(const CalibrateArgs& a) {
   auto db = storage::RunDb::open(a.db);
   ImuModel model = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
-  if (model.frame != "instrument")
+  if (model.frame != "instrument" && a.stage != "navigation")
     throw std::invalid_argument(a.model + ": give the instrument-frame model (the body-frame form is an output)");
   std::vector<std::string> ran, skipped;
   const bool all = a.stage == "all";
@@ -216,6 +248,14 @@ int cmd_calibrate(const CalibrateArgs& a) {
     for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
     model = r.model;
   });
+  attempt("navigation", [&] {
+    const RecordingMeta meta = db.meta();
+    if (all && std::none_of(meta.segments.begin(), meta.segments.end(), [](const SegmentInfo& s) {
+          return s.kind == "sine" && s.name.find("swing") != std::string::npos;
+        }))
+      throw std::invalid_argument("the run has no slow swings (record the navigation program)");
+    model = run_navigation_stage(db, model, a.passes);
+  });
   attempt("noise", [&] {
     noise::NoiseAnalyzer analyzer(db.meta());
     db.for_each_frame([&](const ImuFrame& f) { analyzer.push(f); });
@@ -226,13 +266,60 @@ int cmd_calibrate(const CalibrateArgs& a) {
   });
   if (all) {
     skipped.push_back("thermal: not implemented yet");
-    skipped.push_back("navigation: not implemented yet");
   }
-  const ImuModel out = a.frame == "body" ? direct::to_body_frame(model) : model;
+  // Stage 3 works and reports in the body frame: it sees gyro-to-accelerometer alignment only.
+  const ImuModel out = (a.frame == "body" || model.frame == "body") ? direct::to_body_frame(model) : model;
   write_imu_model_file(out, a.out);
   for (const auto& s : ran) std::printf("ran stage %s\n", s.c_str());
   for (const auto& s : skipped) std::printf("skipped stage %s\n", s.c_str());
   std::printf("wrote %s (%s frame)\n", a.out.c_str(), out.frame.c_str());
+  return 0;
+}
+
+int cmd_evaluate(const std::string& db_path, const std::vector<std::string>& models, const std::string& out_path) {
+  const auto db = storage::RunDb::open(db_path);
+  const RecordingMeta meta = db.meta();
+  nlohmann::json report = {{"db", db_path}, {"variants", nlohmann::json::array()}};
+  double base_tilt = 0, base_coning = 0;
+  for (std::size_t i = 0; i < models.size(); ++i) {
+    std::string name = "variant-" + std::to_string(i + 1), path = models[i];
+    if (const auto eq = path.find('='); eq != std::string::npos) {
+      name = path.substr(0, eq);
+      path = path.substr(eq + 1);
+    }
+    const ImuModel model = read_imu_model_file(path);
+    const evaluate::Result r = evaluate::evaluate_model(
+        meta, model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); });
+    nlohmann::json segs = nlohmann::json::array();
+    for (const auto& s : r.segments)
+      segs.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},
+                      {"schuler_amplitude_e_mps", s.schuler_amplitude_e_mps},
+                      {"schuler_amplitude_n_mps", s.schuler_amplitude_n_mps},
+                      {"implied_accel_error_mps2", s.implied_accel_error_mps2},
+                      {"implied_gyro_drift_dph", s.implied_gyro_drift_radps * units::kRadpsToDph},
+                      {"max_velocity_error_mps", s.max_velocity_error_mps},
+                      {"max_position_error_m", s.max_position_error_m}});
+    if (i == 0) {
+      base_tilt = r.tilt_amplitude_mps;
+      base_coning = r.coning_amplitude_mps;
+    }
+    auto ratio = [](double base, double v) { return v > 0 ? base / v : 0.0; };
+    report["variants"].push_back({{"name", name},
+                                  {"model", path},
+                                  {"tilt_schuler_amplitude_mps", r.tilt_amplitude_mps},
+                                  {"coning_schuler_amplitude_mps", r.coning_amplitude_mps},
+                                  {"implied_accel_error_mps2", r.implied_accel_error_mps2},
+                                  {"implied_gyro_drift_dph", r.implied_gyro_drift_radps * units::kRadpsToDph},
+                                  {"tilt_improvement_over_first", ratio(base_tilt, r.tilt_amplitude_mps)},
+                                  {"coning_improvement_over_first", ratio(base_coning, r.coning_amplitude_mps)},
+                                  {"segments", segs}});
+    std::printf("%-12s tilt Schuler amplitude %.5f m/s (accel error %.2e m/s^2), coning %.5f m/s (drift %.5f deg/h)\n",
+                name.c_str(), r.tilt_amplitude_mps, r.implied_accel_error_mps2, r.coning_amplitude_mps,
+                r.implied_gyro_drift_radps * units::kRadpsToDph);
+  }
+  std::ofstream out(out_path);
+  if (!out) throw std::runtime_error(out_path + ": cannot write");
+  out << report.dump(1) << "\n";
   return 0;
 }
 
@@ -279,19 +366,74 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, noise or all")->capture_default_str()->check(
-      CLI::IsMember({"direct", "lever-arm", "noise", "all"}));
+  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, noise, navigation or all")->capture_default_str()->check(
+      CLI::IsMember({"direct", "lever-arm", "noise", "navigation", "all"}));
   cal->add_option("--model", cal_args.model, "model to start from; its other coefficients are carried over")
       ->check(CLI::ExistingFile);
   cal->add_option("--out", cal_args.out, "output imucal-imu-model/1 JSON")->required();
   cal->add_option("--frame", cal_args.frame, "instrument or body")->capture_default_str()->check(
       CLI::IsMember({"instrument", "body"}));
 
+  cal->add_option("--passes", cal_args.passes, "stage navigation: passes over the recording, each seeded by the last")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10));
+
+  std::string eval_db, eval_out;
+  std::vector<std::string> eval_models;
+  auto* ev = app.add_subcommand("evaluate", "Judge models by free-inertial navigation on an evaluate run (Schuler test)");
+  ev->add_option("--db", eval_db, "run of the evaluate program")->required()->check(CLI::ExistingFile);
+  ev->add_option("--model", eval_models, "MODEL.json or NAME=MODEL.json; repeat to compare variants (first = baseline)")
+      ->required();
+  ev->add_option("--out", eval_out, "report JSON")->required();
+
+  imucal::daemon::CampaignRunOptions camp_opts;
+  std::string camp_file;
+  double camp_time_scale = -1.0;
+  bool camp_json = false;
+  auto* camp = app.add_subcommand("campaign", "Campaigns through the daemon's sequencer, in-process");
+  camp->require_subcommand(1);
+  auto* camp_run = camp->add_subcommand(
+      "run", "Run a whole campaign on the simulated bench in accelerated time (sequencer, recorder, estimators)");
+  camp_run->add_option("file", camp_file, "campaign JSON (docs/api.md, \"Campaign JSON\")")->required()->check(
+      CLI::ExistingFile);
+  camp_run->add_option("--data-dir", camp_opts.data_dir, "data directory for the daemon database and the run file")
+      ->capture_default_str();
+  camp_run->add_option("--config", camp_opts.config_file, "imucald configuration (limits, site)")->check(CLI::ExistingFile);
+  camp_run->add_option("--model-out", camp_opts.model_out, "write the resulting imucal-imu-model/1 here");
+  camp_run->add_option("--time-scale", camp_time_scale, "program seconds per wall second (default: the campaign's, "
+                                                        "else as fast as possible)")
+      ->check(CLI::NonNegativeNumber);
+  camp_run->add_flag("--json", camp_json, "print the summary as one JSON object");
+
   CLI11_PARSE(app, argc, argv);
+  if (camp_run->parsed()) {
+    if (camp_time_scale >= 0) camp_opts.time_scale = camp_time_scale;
+    camp_opts.progress = !camp_json;
+    const auto r = imucal::daemon::run_campaign_file(camp_file, camp_opts);
+    const double speed = r.wall_s > 0 ? r.program_s / r.wall_s : 0.0;
+    if (camp_json) {
+      nlohmann::json j = {{"id", r.id},           {"state", r.state},       {"program_s", r.program_s},
+                          {"wall_s", r.wall_s},   {"speed_factor", speed},  {"frames", r.frames},
+                          {"run_db", r.run_db},   {"has_model", r.has_model}, {"results", r.results},
+                          {"error", r.error}};
+      std::printf("%s\n", j.dump().c_str());
+    } else if (r.id == 0) {
+      std::fprintf(stderr, "imucal campaign run: %s\n", r.error.c_str());
+    } else {
+      std::printf("campaign %lld: %s; %.1f s of program in %.2f s (%.0fx real time), %lld frames -> %s\n",
+                  static_cast<long long>(r.id), r.state.c_str(), r.program_s, r.wall_s, speed,
+                  static_cast<long long>(r.frames), r.run_db.c_str());
+      if (!r.error.empty()) std::printf("  error: %s\n", r.error.c_str());
+      for (const auto& [name, res] : r.results.items()) std::printf("  %s: %s\n", name.c_str(), res.dump().c_str());
+      if (r.has_model && !camp_opts.model_out.empty()) std::printf("  model -> %s\n", camp_opts.model_out.c_str());
+    }
+    return r.exit_code;
+  }
   try {
     if (sim->parsed()) return cmd_simulate(sim_args);
     if (navc->parsed()) return cmd_navigate(nav_args);
     if (cal->parsed()) return cmd_calibrate(cal_args);
+    if (ev->parsed()) return cmd_evaluate(eval_db, eval_models, eval_out);
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

@@ -16,6 +16,10 @@
 
 namespace imucal::drivers::can {
 
+// One 64-byte CAN FD frame per record, or the classic-CAN fallback (ten 8-byte frames).
+enum class Framing { fd, classic };
+inline constexpr double kClassicMaxRate_hz = 200.0;
+
 inline constexpr std::size_t kRecordBytes = 64;
 inline constexpr std::size_t kCrcOffset = 60;         // CRC-32 over bytes [0, 60), stored at 60
 inline constexpr std::size_t kCanMtu = 16;            // sizeof(struct can_frame)

@@ -11,6 +11,7 @@
 #include "core/earth.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
+#include "estimators/thermal.hpp"
 
 namespace imucal::nav {
 
@@ -110,6 +111,14 @@ Vector3d TableReference::position_error_m(const NavState& s, const Sample& r) co
           s.h_m - h_ref_m(r)};
 }
 
+// The model's coefficients at T_ref, and the temperatures and rates that move them (stage 2).
+struct NavigationRun::Thermal {
+  thermal::ThermalSection section;
+  GyroErrors gyro_at_ref;
+  AccelErrors accel_at_ref;
+  thermal::ChannelRate rate;
+};
+
 NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink)
     : meta_(meta),
       model_(model),
@@ -118,6 +127,17 @@ NavigationRun::NavigationRun(const RecordingMeta& meta, const ImuModel& model, d
       output_interval_s_(output_interval_s),
       ref_(meta, model) {
   dt_nominal_s_ = 1.0 / meta.rate_hz;
+  if (auto s = thermal::thermal_of(model); s && s->has_models())
+    thermal_ = std::make_shared<Thermal>(Thermal{*s, model.gyro, model.accel, thermal::ChannelRate{}});
+}
+
+void NavigationRun::push_temp(const TempSample& temp) {
+  if (!thermal_) return;
+  thermal_->rate.push(temp);
+  // The compensator reads model_: move its coefficients to this temperature and rate.
+  model_.gyro = thermal_->gyro_at_ref;
+  model_.accel = thermal_->accel_at_ref;
+  thermal::apply_thermal(thermal_->section, thermal_->rate.current(), model_.gyro, model_.accel);
 }
 
 void NavigationRun::push(const ImuFrame& frame) {

@@ -85,10 +85,15 @@ class NavigationRun {
   NavigationRun(const RecordingMeta& meta, const ImuModel& model, double output_interval_s, Sink sink);
 
   void push(const ImuFrame& frame);  // throws std::runtime_error on a gap in the frames
+  // Temperatures for a model with a "thermal" section (ignored without one): push each sample
+  // before the frames after it. Until the first, the coefficients are those at T_ref.
+  void push_temp(const TempSample& temp);
   NavSummary finish();
 
  private:
   void step();  // navigate the frame at window_[lookback]
+  struct Thermal;
+  std::shared_ptr<Thermal> thermal_;  // stage-2 compensation state, when the model has one
 
   RecordingMeta meta_;
   ImuModel model_;

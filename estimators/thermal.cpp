@@ -346,34 +346,22 @@ Solved solve(const std::vector<const Sample*>& rows, const std::vector<double>& 
   return s;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
 }  // namespace
 
 PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const FitOptions& o) {
   const std::size_t n = samples.size();
   if (n < 3) throw std::runtime_error("fit: " + std::to_string(n) + " cycles (need 3 at least)");
   Design d{T_ref_C, 0.0, 0.0};
-  std::vector<double> sig;
   for (const Sample& s : samples) {
     d.T_scale = std::max(d.T_scale, std::abs(s.T_C - T_ref_C));
     d.rate_scale = std::max(d.rate_scale, std::abs(s.rate_C_per_min));
-    if (s.sigma > 0 && std::isfinite(s.sigma)) sig.push_back(s.sigma);
   }
   d.T_scale = std::max(d.T_scale, 1e-3);
   d.rate_scale = std::max(d.rate_scale, 1e-4);
-  const double sigma_med = median(sig);
-  // Weights from the per-cycle sigmas, floored at their median: a cycle whose few residuals
-  // happened to agree must not outweigh the rest.
-  std::vector<double> w(n, 1.0);
-  for (std::size_t i = 0; i < n; ++i) {
-    const double s = std::max(samples[i].sigma, sigma_med);
-    w[i] = s > 0 && std::isfinite(s) ? 1.0 / (s * s) : 1.0;
-  }
+  // Equal weights: the per-cycle sigmas of stage 1 grow with the drift inside a cycle while the
+  // chamber ramps (its residuals are no longer noise), and those are the cycles that carry the
+  // dT/dt information.
+  const std::vector<double> w(n, 1.0);
   std::vector<const Sample*> all;
   for (const Sample& s : samples) all.push_back(&s);
 
@@ -430,7 +418,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
   const Candidate* best = &cands.front();
   for (const Candidate& c : cands)
     if (c.score.cv_rms < best->score.cv_rms) best = &c;
-  const double floor = std::pow(o.significance_sigmas * sigma_med, 2);
+  const double floor = std::max(o.min_improvement * best->score.cv_rms * best->score.cv_rms, o.resolution * o.resolution);
   // The simplest model that predicts held-back cycles as well as the best one, within the noise
   // of that comparison: a higher degree must earn its place.
   const Candidate* chosen = best;

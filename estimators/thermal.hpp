@@ -125,7 +125,7 @@ class ChannelRate {
 
 struct Sample {
   double T_C = 0, rate_C_per_min = 0;
-  double value = 0, sigma = 0;  // JSON unit
+  double value = 0;  // JSON unit
 };
 
 struct DegreeScore {
@@ -139,10 +139,12 @@ struct FitOptions {
   int max_rate_degree = 3;
   int folds = 5;                 // held-back cycles: every folds-th cycle in turn
   double min_samples_per_parameter = 3.0;
-  // A simpler model is kept unless the best one predicts held-back cycles better by more than
-  // two standard errors of the paired difference and by more than this many per-cycle sigmas
-  // (so that an improvement inside the estimates' own uncertainty never buys a degree).
-  double significance_sigmas = 1.0;
+  // A simpler model is kept unless the best one predicts held-back cycles better, in mean square,
+  // by more than two standard errors of the paired difference, by more than min_improvement of
+  // its own mean square, and by more than resolution^2 (JSON unit): an improvement within the
+  // scatter of the estimates, or too small to matter, never buys a degree.
+  double min_improvement = 0.25;
+  double resolution = 0.0;
 };
 
 struct PolyFit {
@@ -182,6 +184,15 @@ struct CycleEstimate {
   // estimate (the row of (A'WA)^-1 A'W times the column of A: they sum to one).
   std::vector<std::array<double, 2>> spans;
   std::array<std::vector<double>, kCoefficients> weight;
+  // The stage-1 least squares of each sensor (gyro x y z, accel x y z) at the solution: its
+  // coefficients, the intervals (into spans) and K = (A'WA)^-1 A'W, to tell how much of one
+  // coefficient's change inside the cycle leaks into another's estimate.
+  struct Design {
+    std::vector<int> coefficient;  // indices into coefficients()
+    std::vector<std::size_t> interval;
+    Eigen::MatrixXd A, K;
+  };
+  std::array<Design, 6> design;
 };
 
 // Runs one DirectCalibrator per cycle over a single pass of the frames.
@@ -192,14 +203,14 @@ class CycleEstimator {
   std::vector<CycleEstimate> finish();
 
  private:
-  void close(Active& a);
-  RecordingMeta meta_;
-  std::vector<Cycle> cycles_;
-  ImuModel seed_;
   struct Active {
     std::size_t index;
     std::unique_ptr<direct::DirectCalibrator> calibrator;
   };
+  void close(Active& a);
+  RecordingMeta meta_;
+  std::vector<Cycle> cycles_;
+  ImuModel seed_;
   std::vector<Active> active_;
   std::vector<CycleEstimate> results_;
   std::size_t next_open_ = 0;
@@ -239,6 +250,10 @@ struct Options {
   double range_lo_C = 15.0, range_hi_C = 35.0;  // the range the run was asked to cover
   double coverage_tolerance_C = 1.0;
   double rate_half_window_s = 120.0;  // centred window for the rate of each interval
+  int leak_iterations = 2;             // rounds of removing what one coefficient leaks into another
+  // Per report group (groups() order): the smallest RMS a term must explain to be fitted, 1/20 of
+  // the seed's figures after compensation (accel 1e-5 m/s^2, 10 ppm, 3"; FOG 0.01 deg/h, 20 ppm, 2").
+  std::array<double, 7> resolution = {5e-7, 0.5, 0.15, 5e-4, 1.0, 1.0, 0.1};
 };
 
 struct Result {

@@ -113,46 +113,54 @@ void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, doub
   e.spans.clear();
   for (const auto* iv : eqs) e.spans.push_back({iv->t0_s, iv->t1_s});
   for (auto& w : e.weight) w.assign(eqs.size(), 0.0);
-  auto spread = [&](const Eigen::MatrixXd& A, const Eigen::VectorXd& w, const std::array<int, 5>& index, int p) {
-    const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
-    const Eigen::MatrixXd K = N.ldlt().solve(A.transpose() * w.asDiagonal());
-    for (int c = 0; c < p; ++c)
-      for (Eigen::Index i = 0; i < A.rows(); ++i)
-        e.weight[static_cast<std::size_t>(index[static_cast<std::size_t>(c)])][static_cast<std::size_t>(i)] =
-            K(c, i) * A(i, c);
+  auto spread = [&](CycleEstimate::Design& d, const Eigen::VectorXd& w) {
+    d.K = (d.A.transpose() * w.asDiagonal() * d.A).ldlt().solve(d.A.transpose() * w.asDiagonal());
+    for (std::size_t c = 0; c < d.coefficient.size(); ++c)
+      for (std::size_t i = 0; i < d.interval.size(); ++i)
+        e.weight[static_cast<std::size_t>(d.coefficient[c])][d.interval[i]] =
+            d.K(static_cast<Eigen::Index>(c), static_cast<Eigen::Index>(i)) *
+            d.A(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(c));
   };
   const auto ns = static_cast<Eigen::Index>(statics.size());
   for (int j = 0; j < 3; ++j) {
-    Eigen::MatrixXd A(ns, 4);
+    CycleEstimate::Design& d = e.design[static_cast<std::size_t>(3 + j)];
+    d.coefficient = {15 + j, 18 + j, 21 + kOffDiag[j][0].mis, 21 + kOffDiag[j][1].mis};
+    d.A.resize(ns, 4);
+    d.interval.clear();
     Eigen::VectorXd w(ns);
     for (Eigen::Index i = 0; i < ns; ++i) {
       const direct::Interval& s = *statics[static_cast<std::size_t>(i)];
-      A(i, 0) = 1.0;
-      A(i, 1) = s.f_o_mps2[j];
+      d.interval.push_back(static_cast<std::size_t>(i));
+      d.A(i, 0) = 1.0;
+      d.A(i, 1) = s.f_o_mps2[j];
       for (int c = 0; c < 2; ++c) {
         const OffDiag& od = kOffDiag[j][c];
-        A(i, 2 + c) = od.sign * (1.0 + m.accel.scale[od.k]) * s.f_o_mps2[od.k];
+        d.A(i, 2 + c) = od.sign * (1.0 + m.accel.scale[od.k]) * s.f_o_mps2[od.k];
       }
       w[i] = s.T_s;
     }
-    spread(A, w, {15 + j, 18 + j, 21 + kOffDiag[j][0].mis, 21 + kOffDiag[j][1].mis, 0}, 4);
+    spread(d, w);
   }
   const auto ne = static_cast<Eigen::Index>(eqs.size());
   for (int j = 0; j < 3; ++j) {
-    Eigen::MatrixXd A(ne, 5);
+    CycleEstimate::Design& d = e.design[static_cast<std::size_t>(j)];
+    d.coefficient = {j, 3 + j, 6 + j, 9 + kOffDiag[j][0].mis, 9 + kOffDiag[j][1].mis};
+    d.A.resize(ne, 5);
+    d.interval.clear();
     Eigen::VectorXd w(ne);
     for (Eigen::Index i = 0; i < ne; ++i) {
       const direct::Interval& v = *eqs[static_cast<std::size_t>(i)];
       auto scaled = [&](int k) {
         return (1.0 + m.gyro.scale_pos[k]) * v.ref_pos_rad[k] + (1.0 + m.gyro.scale_neg[k]) * v.ref_neg_rad[k];
       };
-      A(i, 0) = v.T_s;
-      A(i, 1) = v.ref_pos_rad[j];
-      A(i, 2) = v.ref_neg_rad[j];
-      for (int c = 0; c < 2; ++c) A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
+      d.interval.push_back(static_cast<std::size_t>(i));
+      d.A(i, 0) = v.T_s;
+      d.A(i, 1) = v.ref_pos_rad[j];
+      d.A(i, 2) = v.ref_neg_rad[j];
+      for (int c = 0; c < 2; ++c) d.A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
       w[i] = 1.0 / v.T_s;
     }
-    spread(A, w, {j, 3 + j, 6 + j, 9 + kOffDiag[j][0].mis, 9 + kOffDiag[j][1].mis}, 5);
+    spread(d, w);
   }
 }
 
@@ -432,6 +440,9 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     std::size_t cycle;
     std::array<double, kCoefficients> T{}, rate{};
     std::array<bool, kCoefficients> use{};
+    std::array<double, kCoefficients> value{};  // the estimate less what other coefficients leaked in
+    // Per channel and interval: mean temperature and rate at the middle.
+    std::array<std::vector<double>, kChannels> T_iv, rate_iv;
   };
   std::vector<Row> rows;
   json left_out = json::array();
@@ -452,18 +463,23 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
         bad |= p.channel_mask;
         why += (why.empty() ? "" : "; ") + p.channel + " " + p.what;
       }
+    for (int ch = 0; ch < kChannels; ++ch)
+      for (const auto& sp : e.spans) {
+        r.T_iv[static_cast<std::size_t>(ch)].push_back(series.mean(ch, sp[0], sp[1]));
+        r.rate_iv[static_cast<std::size_t>(ch)].push_back(series.rate(ch, 0.5 * (sp[0] + sp[1])));
+      }
     for (const Coefficient& k : coefficients()) {
       const auto i = static_cast<std::size_t>(k.index);
-      const int ch = channel_of(k);
+      const auto ch = static_cast<std::size_t>(channel_of(k));
       double T = 0, rate = 0;
       for (std::size_t s = 0; s < e.spans.size(); ++s) {
-        const double w = e.weight[i][s];
-        T += w * series.mean(ch, e.spans[s][0], e.spans[s][1]);
-        rate += w * series.rate(ch, 0.5 * (e.spans[s][0] + e.spans[s][1]));
+        T += e.weight[i][s] * r.T_iv[ch][s];
+        rate += e.weight[i][s] * r.rate_iv[ch][s];
       }
       r.T[i] = T;
       r.rate[i] = rate;
       r.use[i] = !(bad & (1u << ch));
+      r.value[i] = e.value[i];
     }
     if (bad) {
       std::string chans;
@@ -525,16 +541,64 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
   res.section.fitted_T_C = std::array<double, 2>{Tlo, Thi};
   res.section.fitted_rate_C_per_min = std::array<double, 2>{Rlo, Rhi};
   std::array<std::optional<PolyFit>, kCoefficients> fits;
+  std::array<std::string, kCoefficients> fit_error;
+  auto fit_all = [&] {
+    for (const Coefficient& k : coefficients()) {
+      const auto i = static_cast<std::size_t>(k.index);
+      std::vector<Sample> samples;
+      for (const Row& r : rows)
+        if (r.use[i]) samples.push_back({r.T[i], r.rate[i], r.value[i]});
+      FitOptions fo = opt.fit;
+      for (std::size_t g = 0; g < groups().size(); ++g)
+        if (std::string(groups()[g]) == k.group) fo.resolution = opt.resolution[g];
+      try {
+        fits[i] = fit_polynomial(samples, T_ref, fo);
+      } catch (const std::exception& ex) {
+        fits[i].reset();
+        fit_error[i] = ex.what();
+      }
+    }
+  };
+  auto modelled = [&](std::size_t i, double T, double rate, double fallback) {
+    return fits[i] ? fits[i]->constant + fits[i]->poly.eval(T - T_ref, rate) : fallback;
+  };
+  fit_all();
+  // A coefficient that changes inside a cycle leaks into the estimates of the others the same
+  // stage-1 equations determine (a drifting angle into a bias through the rotations, a drifting
+  // scale factor into a bias through a position held at +-g). With the models fitted, predict
+  // that leak from each cycle's own design and remove it; then fit again.
+  for (int iter = 0; iter < opt.leak_iterations; ++iter) {
+    for (Row& r : rows) {
+      const CycleEstimate& e = cycles[r.cycle];
+      for (std::size_t row = 0; row < e.design.size(); ++row) {
+        const CycleEstimate::Design& d = e.design[row];
+        const auto ch = static_cast<std::size_t>(row);  // gyro x y z, accel x y z: the channel order
+        const auto n = static_cast<Eigen::Index>(d.interval.size());
+        const auto p = static_cast<Eigen::Index>(d.coefficient.size());
+        Eigen::MatrixXd X(n, p);  // SI, each coefficient at each interval, from the models
+        for (Eigen::Index q = 0; q < n; ++q)
+          for (Eigen::Index c = 0; c < p; ++c) {
+            const auto k = static_cast<std::size_t>(d.coefficient[static_cast<std::size_t>(c)]);
+            const std::size_t iv = d.interval[static_cast<std::size_t>(q)];
+            X(q, c) = modelled(k, r.T_iv[ch][iv], r.rate_iv[ch][iv], e.value[k]) / coefficients()[k].si_to_json;
+          }
+        const Eigen::VectorXd readings = (d.A.cwiseProduct(X)).rowwise().sum();
+        const Eigen::VectorXd predicted = d.K * readings;
+        for (Eigen::Index c = 0; c < p; ++c) {
+          const auto k = static_cast<std::size_t>(d.coefficient[static_cast<std::size_t>(c)]);
+          double own = 0;
+          for (Eigen::Index q = 0; q < n; ++q) own += e.weight[k][d.interval[static_cast<std::size_t>(q)]] * X(q, c);
+          r.value[k] = e.value[k] - (predicted[c] - own) * coefficients()[k].si_to_json;
+        }
+      }
+    }
+    fit_all();
+  }
   json degrees = json::object();
   for (const Coefficient& k : coefficients()) {
     const auto i = static_cast<std::size_t>(k.index);
-    std::vector<Sample> samples;
-    for (const Row& r : rows)
-      if (r.use[i]) samples.push_back({r.T[i], r.rate[i], cycles[r.cycle].value[i], cycles[r.cycle].sigma[i]});
-    try {
-      fits[i] = fit_polynomial(samples, T_ref, opt.fit);
-    } catch (const std::exception& ex) {
-      res.notes.push_back(full_key(k) + ": no model (" + ex.what() + "); its value is carried over");
+    if (!fits[i]) {
+      res.notes.push_back(full_key(k) + ": no model (" + fit_error[i] + "); its value is carried over");
       continue;
     }
     const PolyFit& f = *fits[i];
@@ -542,8 +606,8 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     set(res.model.gyro, res.model.accel, k, f.constant);
     set(sigma.gyro, sigma.accel, k, f.constant_sigma);
     json table = json::array();
-    for (const DegreeScore& s : f.scores)
-      table.push_back({{"T", s.T_degree}, {"dTdt", s.rate_degree}, {"fit_rms", s.fit_rms}, {"cv_rms", s.cv_rms}});
+    for (const DegreeScore& sc : f.scores)
+      table.push_back({{"T", sc.T_degree}, {"dTdt", sc.rate_degree}, {"fit_rms", sc.fit_rms}, {"cv_rms", sc.cv_rms}});
     degrees[full_key(k)] = {{"T_degree", f.T_degree}, {"dTdt_degree", f.rate_degree}, {"cycles", f.samples},
                             {"fit_rms", f.fit_rms}, {"cv_rms", f.cv_rms}, {"per_degree", table}};
   }
@@ -585,7 +649,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
       const CycleEstimate& e = cycles[r.cycle];
       const double thermal_part = fits[i] ? fits[i]->poly.eval(r.T[i] - T_ref, r.rate[i]) : 0.0;
       const double model_value = constant + thermal_part;
-      const double est = e.value[i];
+      const double est = r.value[i];
       residual_est[g] = std::max(residual_est[g], std::abs(model_value - est));
       before_est[g] = std::max(before_est[g], std::abs(input_value - est));
       json truth_value = nullptr;
@@ -607,7 +671,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
         truth_value = tv;
       }
       pts.push_back({e.name, 0.5 * (e.t0_s + e.t1_s), r.T[i], r.rate[i], est, e.sigma[i], est - thermal_part,
-                     model_value, truth_value});
+                     model_value, truth_value, e.value[i]});
     }
     plots[full_key(k)] = pts;
   }
@@ -638,7 +702,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     problems.push_back({{"channel", p.channel}, {"what", p.what}, {"t0_s", p.t0_s}, {"t1_s", p.t1_s}});
   report["problems"] = problems;
   report["plots"] = {{"columns", {"cycle", "t_mid_s", "T_C", "dTdt_C_per_min", "estimate", "sigma", "compensated",
-                                  "model", "truth"}},
+                                  "model", "truth", "raw_estimate"}},
                      {"series", plots}};
   res.report_json = report.dump();
   return res;

@@ -125,43 +125,46 @@ json evaluate_program() {
           {"segments", segs}};
 }
 
-// Stage 2 (seed ch. 3): one cycle of eight 36 s stops and eight single-axis rotations that gives
-// every coefficient of model (1) once (each axis up and down; rotations of both signs about each
-// axis between stops), repeated while the chamber runs its profile. Up and down of an axis are
-// adjacent stops, so a coefficient drifting with temperature hardly leaks into the scale factors.
+// Stage 2 (seed ch. 3): a table cycle that gives every coefficient of model (1) once (each axis
+// up and down; rotations of both signs about each axis between stops), repeated while the chamber
+// runs its profile. The cycle is a palindrome in time: six stops out, the sixth held twice as
+// long, the same stops back in reverse order to the first, which the next cycle shares. The
+// sensors drift by up to 1e-3 m/s^2 within a cycle while the chamber ramps; with every stop
+// mirrored about the cycle's middle a linear drift cancels out of every estimate instead of
+// leaking from one coefficient into another.
 json thermal_program(const std::string& name, int cycles, double dwell_s) {
   struct Stop {
     const char* name;
-    double middle, inner;  // outer stays at 0
-    double move_s;         // length of the single-axis move into the stop
+    double middle, inner;  // outer stays at 0; every move between neighbours is one axis by 90 deg
   };
   static const Stop kStops[] = {
-      {"z-up", 0, 0, 12},       // inner -90 from the previous cycle's last stop: about -z
-      {"y-up", 90, 0, 12},      // middle +90: about +x
-      {"y-down", 270, 0, 18},   // middle +180: about +x
-      {"z-down", 180, 0, 12},   // middle -90: about -x
-      {"z-down-b", 180, 90, 12},  // inner +90: about +z
-      {"x-up", 90, 90, 12},     // middle -90: about y
-      {"x-down", -90, 90, 18},  // middle -180: about y
-      {"z-up-b", 0, 90, 12},    // middle +90: about y, the other sign
+      {"z-up", 0, 0}, {"y-up", 90, 0}, {"x-up", 90, 90}, {"z-down", 180, 90}, {"x-down", 270, 90}, {"y-down", 270, 0},
   };
+  constexpr int kN = 6;
+  constexpr double kMove_s = 12.0;
   json segs = json::array();
   char prefix[32];
+  auto stop = [&](int k, const char* suffix, double dwell) {
+    const Stop& s = kStops[k];
+    const std::string label = std::string(prefix) + s.name + suffix;
+    if (!segs.empty())
+      segs.push_back({{"type", "move"}, {"name", "to-" + label}, {"to_deg", pose(0, s.middle, s.inner)},
+                      {"duration_s", kMove_s}});
+    segs.push_back(hold(label, dwell));
+  };
   for (int c = 1; c <= cycles; ++c) {
     std::snprintf(prefix, sizeof prefix, "cycle-%03d/", c);
-    for (const Stop& s : kStops) {
-      if (!(c == 1 && &s == &kStops[0]))  // the program starts at the first stop
-        segs.push_back({{"type", "move"}, {"name", std::string(prefix) + "to-" + s.name},
-                        {"to_deg", pose(0, s.middle, s.inner)}, {"duration_s", s.move_s}});
-      segs.push_back(hold(std::string(prefix) + s.name, dwell_s));
-    }
+    for (int k = 0; k < kN; ++k) stop(k, "", k == kN - 1 ? 2.0 * dwell_s : dwell_s);
+    for (int k = kN - 2; k >= 1; --k) stop(k, "-b", dwell_s);
   }
-  // The closing stop gives the last cycle's final rotation its rest at both ends.
-  segs.push_back({{"type", "move"}, {"name", "to-end"}, {"to_deg", pose(0, 0, 0)}, {"duration_s", kStops[0].move_s}});
-  segs.push_back(hold("end", dwell_s));
+  // The closing stop gives the last cycle its final rest, mirroring its first.
+  prefix[0] = '\0';
+  stop(0, "", dwell_s);
+  segs[segs.size() - 2]["name"] = "to-end";
+  segs.back()["name"] = "end";
   return {{"name", name},
-          {"comment", "Stage 2 (seed ch. 3): a cycle of 8 stops (36 s) and 8 single-axis rotations, repeated; run it "
-                      "with a chamber profile (imucal simulate --chamber)"},
+          {"comment", "Stage 2 (seed ch. 3): a palindromic cycle of 36 s stops and 90 deg single-axis rotations, "
+                      "repeated; run it with a chamber profile (imucal simulate --chamber)"},
           {"segments", segs}};
 }
 
@@ -183,9 +186,9 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "navigation") return navigation_program().dump(1);
   if (name == "noise") return noise_program().dump(1);
   if (name == "evaluate") return evaluate_program().dump(1);
-  // 109 cycles of 396 s and the closing stop: 12 h, the length of the thermal chamber profile.
-  if (name == "thermal") return thermal_program("thermal", 109, 36.0).dump(1);
-  if (name == "thermal-short") return thermal_program("thermal-short", 18, 36.0).dump(1);
+  // 83 cycles of 516 s and the closing stop: 11.9 h, the length of the thermal chamber profile.
+  if (name == "thermal") return thermal_program("thermal", 83, 36.0).dump(1);
+  if (name == "thermal-short") return thermal_program("thermal-short", 14, 36.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

@@ -330,8 +330,24 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       normalized["program"] = *program_spec;
     }
     if (have_program) {
-      for (const auto& p : motion::validate_program(program, config.table_limits))
-        problems.push_back("campaign.program: " + p);
+      // The motion library reports a limit at every instant it is exceeded; one line per
+      // segment, axis and limit is what a person needs, with the count of the others.
+      std::vector<std::pair<std::string, int>> grouped;
+      for (const auto& p : motion::validate_program(program, config.table_limits)) {
+        std::string key = p;
+        const auto t0 = key.find(" (t=");
+        const auto t1 = t0 == std::string::npos ? t0 : key.find(" s)", t0);
+        if (t1 != std::string::npos) key.erase(t0, t1 + 3 - t0);
+        auto it = std::find_if(grouped.begin(), grouped.end(), [&](const auto& g) { return g.first == key; });
+        if (it == grouped.end()) {
+          grouped.emplace_back(key, 0);
+          problems.push_back("campaign.program: " + p);
+        } else {
+          ++it->second;
+        }
+      }
+      for (std::size_t i = 0, k = problems.size() - grouped.size(); i < grouped.size(); ++i, ++k)
+        if (grouped[i].second > 0) problems[k] += " (and " + std::to_string(grouped[i].second) + " more times)";
       check.duration_s = program.duration_s();
       check.segments = program.segments();
       if (check.duration_s > config.campaign.max_duration_s)

@@ -133,10 +133,12 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
       dt_s_(1.0 / settings.sim.rate_hz),
       chamber_C_(settings.chamber_start_C),
       setpoint_C_(settings.chamber_start_C) {
-  // As fast as possible: large batches. Paced: about 20 ms of wall time per batch, so that
-  // commands and telemetry stay responsive.
-  const double paced = settings.sim.rate_hz * settings.time_scale * 0.02;
-  batch_frames_ = settings.time_scale <= 0.0 ? 4096 : static_cast<std::int64_t>(std::clamp(paced, 1.0, 4096.0));
+  // A read covers at most a quarter second of device time, so that the suspenders see a
+  // condition while it lasts; paced, also at most about 20 ms of wall time, so that commands and
+  // telemetry stay responsive.
+  double frames = settings.sim.rate_hz * 0.25;
+  if (settings.time_scale > 0.0) frames = std::min(frames, settings.sim.rate_hz * settings.time_scale * 0.02);
+  batch_frames_ = static_cast<std::int64_t>(std::clamp(frames, 1.0, 4096.0));
   sim_ = std::make_unique<sim::Simulator>(program_, truth_, settings_.sim);
   for (const SimFault& f : settings.faults) faults_.push_back({f, false, 0.0, 0});
   pace_wall0_ = std::chrono::steady_clock::now();

@@ -145,12 +145,25 @@ TrueKinematics Simulator::kinematics(double t_s) const {
 
 void Simulator::sensor_outputs(double t, Vector3d& u_gyro, Vector3d& u_accel) const {
   const TrueKinematics k = kinematics(t);
-  u_gyro = apply_gyro_scale_misalignment(truth_.gyro, k.w_io_o);
+  if (config_.thermal) {
+    // Coefficients that move with temperature, taken at each quadrature node.
+    GyroErrors g = truth_.gyro;
+    AccelErrors a = truth_.accel;
+    config_.thermal->coefficients(t, g, a);
+    outputs(k, g, a, misalignment_matrix(a.misalignment_rad), u_gyro, u_accel);
+    return;
+  }
+  outputs(k, truth_.gyro, truth_.accel, D_accel_, u_gyro, u_accel);
+}
+
+void Simulator::outputs(const TrueKinematics& k, const GyroErrors& gyro, const AccelErrors& accel,
+                        const Eigen::Matrix3d& D_accel, Vector3d& u_gyro, Vector3d& u_accel) {
+  u_gyro = apply_gyro_scale_misalignment(gyro, k.w_io_o);
   // Each accelerometer senses the specific force at its own proof mass (seed eq. 3).
-  const Eigen::Matrix3d DS = D_accel_ * (Vector3d::Ones() + truth_.accel.scale).asDiagonal();
+  const Eigen::Matrix3d DS = D_accel * (Vector3d::Ones() + accel.scale).asDiagonal();
   const Vector3d& w = k.w_io_o;
-  const Vector3d f_y = k.f_origin_o + w.cross(w.cross(truth_.accel.lever_arm_y_m)) + k.dw_io_o.cross(truth_.accel.lever_arm_y_m);
-  const Vector3d f_z = k.f_origin_o + w.cross(w.cross(truth_.accel.lever_arm_z_m)) + k.dw_io_o.cross(truth_.accel.lever_arm_z_m);
+  const Vector3d f_y = k.f_origin_o + w.cross(w.cross(accel.lever_arm_y_m)) + k.dw_io_o.cross(accel.lever_arm_y_m);
+  const Vector3d f_z = k.f_origin_o + w.cross(w.cross(accel.lever_arm_z_m)) + k.dw_io_o.cross(accel.lever_arm_z_m);
   u_accel[0] = DS.row(0).dot(k.f_origin_o);
   u_accel[1] = DS.row(1).dot(f_y);
   u_accel[2] = DS.row(2).dot(f_z);
@@ -189,6 +202,14 @@ bool Simulator::next(ImuFrame& out) {
   const double t1 = static_cast<double>(k_ + 1) * dt_s_;
   while (next_temp_t_s_ <= t1) {
     TempSample ts;
+    if (config_.thermal) {
+      if (config_.thermal->temperatures(next_temp_t_s_, ts)) {
+        ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
+        temps_.push_back(ts);
+      }
+      next_temp_t_s_ += 1.0 / config_.temp_rate_hz;
+      continue;
+    }
     ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
     ts.gyro_C.setConstant(config_.temperature_C);
     ts.accel_C.setConstant(config_.temperature_C);
@@ -205,8 +226,17 @@ bool Simulator::next(ImuFrame& out) {
     dtheta += ig;
     dv += ia;
   }
-  dtheta += truth_.gyro.bias_radps * dt_s_;
-  dv += truth_.accel.bias_mps2 * dt_s_;
+  if (config_.thermal) {
+    // Biases that move with temperature: their value mid-sample (they change over hours).
+    GyroErrors g = truth_.gyro;
+    AccelErrors a = truth_.accel;
+    config_.thermal->coefficients(0.5 * (t0 + t1), g, a);
+    dtheta += g.bias_radps * dt_s_;
+    dv += a.bias_mps2 * dt_s_;
+  } else {
+    dtheta += truth_.gyro.bias_radps * dt_s_;
+    dv += truth_.accel.bias_mps2 * dt_s_;
+  }
   for (std::size_t ch = 0; ch < 6; ++ch) {
     const auto i = static_cast<Eigen::Index>(ch);
     double noise = 0.0;

@@ -18,6 +18,18 @@
 
 namespace imucal::sim {
 
+// Temperatures and truth coefficients that change over the run (drivers/sim/thermal_model.hpp).
+// Without one the simulator logs the constant temperature_C and uses the truth's constants, bit
+// for bit as it always has.
+class ThermalSource {
+ public:
+  virtual ~ThermalSource() = default;
+  // The logged temperatures at t; false when the logger delivers no sample then.
+  virtual bool temperatures(double t_s, TempSample& out) const = 0;
+  // The biases, scale factors and misalignments at t, starting from the truth's constants.
+  virtual void coefficients(double t_s, GyroErrors& gyro, AccelErrors& accel) const = 0;
+};
+
 struct SimConfig {
   Site site;
   Mount mount;
@@ -26,6 +38,7 @@ struct SimConfig {
   double duration_s = 0.0;  // 0: the program's duration
   double temperature_C = 25.0;
   double temp_rate_hz = 1.0;  // temperature samples per second
+  const ThermalSource* thermal = nullptr;  // not owned; outlives the simulator
 };
 
 // Normal deviates from a 64-bit Mersenne Twister by Box-Muller, written out so the stream is the
@@ -73,6 +86,8 @@ class Simulator {
   // bit 3+j: accel j), split at the program's breakpoints, Gauss-Legendre inside each part.
   void integrate(double a, double b, unsigned mask, Eigen::Vector3d& gyro, Eigen::Vector3d& accel) const;
   void sensor_outputs(double t, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel) const;
+  static void outputs(const TrueKinematics& k, const GyroErrors& gyro, const AccelErrors& accel,
+                      const Eigen::Matrix3d& D_accel, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel);
 
   const motion::Program& program_;
   ImuModel truth_;

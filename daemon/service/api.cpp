@@ -1,0 +1,479 @@
+#include "daemon/service/api.hpp"
+
+#include <cmath>
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/service/campaign.hpp"
+#include "daemon/service/json_reader.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "motion_programs/program.hpp"
+
+#ifndef IMUCAL_VERSION
+#define IMUCAL_VERSION "0.0.0"
+#endif
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+namespace {
+
+HttpReply json_reply(int status, const json& body) {
+  HttpReply r;
+  r.status = status;
+  r.body = body.dump();
+  r.content_type = "application/json";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  return r;
+}
+
+HttpReply error_reply(int status, const std::string& message, json extra = json::object()) {
+  extra["error"] = message;
+  return json_reply(status, extra);
+}
+
+json opt_time(const std::optional<std::int64_t>& ms) { return ms ? json(iso8601_utc(*ms)) : json(nullptr); }
+
+json parse_or_null(const std::optional<std::string>& text) {
+  if (!text) return nullptr;
+  try {
+    return json::parse(*text);
+  } catch (const json::exception&) {
+    return nullptr;
+  }
+}
+
+std::optional<std::int64_t> parse_id(const std::string& text) {
+  if (text.empty() || text.size() > 18) return std::nullopt;
+  for (char c : text)
+    if (c < '0' || c > '9') return std::nullopt;
+  return std::stoll(text);
+}
+
+std::vector<std::string> split_path(const std::string& path) {
+  std::vector<std::string> parts;
+  std::size_t start = 1;
+  while (start <= path.size()) {
+    const auto end = std::min(path.find('/', start), path.size());
+    parts.emplace_back(path.substr(start, end - start));
+    start = end + 1;
+  }
+  if (!parts.empty() && parts.back().empty()) parts.pop_back();
+  return parts;
+}
+
+json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+// A JSON body for a command or a login: empty means {}. Only JSON content types are accepted, so
+// that a plain HTML form on another site cannot post to the API with the browser's cookie.
+std::optional<HttpReply> parse_body(const ApiRequest& request, json& out) {
+  if (request.body.empty()) {
+    out = json::object();
+    return std::nullopt;
+  }
+  const std::string& ct = request.content_type;
+  if (!ct.empty() && ct.rfind("application/json", 0) != 0)
+    return error_reply(415, "Content-Type must be application/json");
+  try {
+    out = json::parse(request.body);
+  } catch (const json::parse_error& e) {
+    return error_reply(400, std::string("malformed JSON: ") + e.what());
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string session_from_cookie(const std::string& cookie_header) {
+  const std::string key = std::string(kSessionCookie) + "=";
+  std::size_t pos = 0;
+  while (pos < cookie_header.size()) {
+    while (pos < cookie_header.size() && (cookie_header[pos] == ' ' || cookie_header[pos] == ';')) ++pos;
+    const auto end = std::min(cookie_header.find(';', pos), cookie_header.size());
+    if (cookie_header.compare(pos, key.size(), key) == 0) return cookie_header.substr(pos + key.size(), end - pos - key.size());
+    pos = end + 1;
+  }
+  return {};
+}
+
+bool split_target(const std::string& target, std::string& path, std::map<std::string, std::string>& query) {
+  const auto q = target.find('?');
+  path = target.substr(0, q);
+  query.clear();
+  if (q == std::string::npos) return true;
+  const std::string qs = target.substr(q + 1);
+  std::size_t start = 0;
+  while (start <= qs.size()) {
+    const auto end = std::min(qs.find('&', start), qs.size());
+    const std::string pair = qs.substr(start, end - start);
+    if (!pair.empty()) {
+      const auto eq = pair.find('=');
+      std::string key, value;
+      if (!percent_decode(pair.substr(0, eq), key, true)) return false;
+      if (eq != std::string::npos && !percent_decode(pair.substr(eq + 1), value, true)) return false;
+      query[key] = value;
+    }
+    start = end + 1;
+  }
+  return true;
+}
+
+Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth)
+    : config_(config),
+      db_(db),
+      sequencer_(sequencer),
+      auth_(auth),
+      programs_(json::array()),
+      started_ms_(now_unix_ms()),
+      started_(std::chrono::steady_clock::now()) {
+  for (const auto& name : motion::builtin_program_names()) {
+    const std::string text = motion::builtin_program_json(name);
+    json segments = json::array();
+    double duration_s = 0.0;
+    try {
+      const motion::Program p = motion::compile_program(text, config.table_limits);
+      duration_s = p.duration_s();
+      for (const auto& s : p.segments())
+        segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
+    } catch (const std::exception& e) {
+      spdlog::warn("built-in program '{}' does not compile with the configured table limits: {}", name, e.what());
+    }
+    programs_.push_back(
+        {{"name", name}, {"duration_s", duration_s}, {"segments", segments}, {"program", json::parse(text)}});
+  }
+}
+
+std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow_query_token) {
+  const std::string& a = request.authorization;
+  if (a.size() > 7 && (a.compare(0, 7, "Bearer ") == 0 || a.compare(0, 7, "bearer ") == 0)) {
+    return auth_.from_token(std::string_view(a).substr(7));
+  }
+  if (const std::string sid = session_from_cookie(request.cookie); !sid.empty()) {
+    if (auto p = auth_.from_session(sid)) return p;
+  }
+  if (allow_query_token) {
+    std::string path;
+    std::map<std::string, std::string> query;
+    if (split_target(request.target, path, query)) {
+      const auto it = query.find("token");
+      if (it != query.end()) return auth_.from_token(it->second);
+    }
+  }
+  return std::nullopt;
+}
+
+json Api::status() {
+  json limits_table = json::object();
+  for (std::size_t a = 0; a < 3; ++a) {
+    const auto& l = config_.table_limits.axis[a];
+    limits_table[motion::kAxisNames[a]] = {{"min_deg", limit_or_null(l.min_deg)}, {"max_deg", limit_or_null(l.max_deg)},
+                                           {"rate_dps", l.rate_dps}, {"accel_dps2", l.accel_dps2}};
+  }
+  json active = nullptr;
+  if (const auto id = sequencer_.active_id()) {
+    if (const auto row = db_.campaign(*id)) active = {{"id", row->id}, {"name", row->name}, {"state", to_string(row->state)}};
+  }
+  return {{"service", "imucald"},
+          {"version", IMUCAL_VERSION},
+          {"started", iso8601_utc(started_ms_)},
+          {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
+          {"devices", config_.devices},
+          {"site", {{"name", config_.site_name}, {"latitude_deg", config_.site.latitude_deg},
+                    {"longitude_deg", config_.site.longitude_deg}, {"height_m", config_.site.height_m},
+                    {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}}},
+          {"active", active},
+          {"queue", db_.queue()},
+          {"limits",
+           {{"table", limits_table},
+            {"chamber", {{"min_C", config_.chamber.min_C}, {"max_C", config_.chamber.max_C},
+                         {"max_ramp_C_per_min", config_.chamber.max_ramp_C_per_min},
+                         {"safe_setpoint_C", config_.chamber.safe_setpoint_C},
+                         {"tolerance_C", config_.chamber.tolerance_C}}},
+            {"campaign", {{"max_duration_s", config_.campaign.max_duration_s},
+                          {"max_rate_hz", config_.campaign.max_rate_hz},
+                          {"estimators", known_estimators()}}}}}};
+}
+
+HttpReply Api::handle(const ApiRequest& request) {
+  std::string path;
+  std::map<std::string, std::string> query;
+  if (!split_target(request.target, path, query)) return error_reply(400, "malformed URL");
+  try {
+    return route(request, path, query);
+  } catch (const std::exception& e) {
+    spdlog::error("{} {}: {}", request.method, path, e.what());
+    return error_reply(500, std::string("internal error: ") + e.what());
+  }
+}
+
+HttpReply Api::route(const ApiRequest& request, const std::string& path, const std::map<std::string, std::string>& query) {
+  const std::string& method = request.method;
+  auto only = [&](const char* allowed) -> std::optional<HttpReply> {
+    if (method == allowed || (std::string(allowed) == "GET" && method == "HEAD")) return std::nullopt;
+    HttpReply r = error_reply(405, method + " is not allowed on " + path);
+    r.headers.emplace_back("Allow", allowed);
+    return r;
+  };
+
+  if (path == "/api/login") {
+    if (auto r = only("POST")) return *r;
+    return login(request);
+  }
+  if (path == "/api/logout") {
+    if (auto r = only("POST")) return *r;
+    return logout(request);
+  }
+
+  const auto who = authenticate(request, false);
+  if (!who) {
+    HttpReply r = error_reply(401, "authentication required");
+    r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"imucald\"");
+    return r;
+  }
+  // Every POST changes something except validation (a read with a body).
+  const bool mutation = method != "GET" && method != "HEAD" && path != "/api/campaigns/validate";
+  if (mutation && who->role != Role::Operator) return error_reply(403, "operator role required");
+  if (mutation && shutting_down_) return error_reply(503, "the daemon is shutting down");
+
+  if (path == "/api/me") {
+    if (auto r = only("GET")) return *r;
+    return json_reply(200, {{"user", who->user}, {"role", to_string(who->role)}, {"via", who->via}});
+  }
+  if (path == "/api/status") {
+    if (auto r = only("GET")) return *r;
+    return json_reply(200, status());
+  }
+  if (path == "/api/programs") {
+    if (auto r = only("GET")) return *r;
+    return json_reply(200, {{"programs", programs_}});
+  }
+  if (path == "/api/campaigns/validate") {
+    if (auto r = only("POST")) return *r;
+    return validate_campaign(request);
+  }
+  if (path == "/api/campaigns") {
+    if (method == "GET" || method == "HEAD") return list_campaigns(query);
+    if (method == "POST") return create_campaign(request);
+    HttpReply r = error_reply(405, method + " is not allowed on " + path);
+    r.headers.emplace_back("Allow", "GET, POST");
+    return r;
+  }
+  const auto parts = split_path(path);
+  if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "campaigns") {
+    const auto id = parse_id(parts[2]);
+    if (!id) return error_reply(404, "no campaign '" + parts[2] + "'");
+    if (parts.size() == 3) {
+      if (auto r = only("GET")) return *r;
+      return campaign_detail(*id);
+    }
+    const std::string& action = parts[3];
+    if (action == "model") {
+      if (auto r = only("GET")) return *r;
+      return campaign_model(*id, query);
+    }
+    if (action == "progress") {
+      if (auto r = only("GET")) return *r;
+      return campaign_progress(*id);
+    }
+    if (parse_command(action)) {
+      if (auto r = only("POST")) return *r;
+      return campaign_command(*id, action, request, *who);
+    }
+  }
+  return error_reply(404, "no such endpoint: " + path);
+}
+
+HttpReply Api::login(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::optional<std::string> user, password, token;
+  {
+    ObjectReader r(body, "body", problems);
+    user = r.string("user");
+    password = r.string("password");
+    token = r.string("token");
+  }
+  if (problems.empty() && !token && !(user && password))
+    problems.push_back("body must hold {\"user\", \"password\"} or {\"token\"}");
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const Auth::Login l = token ? auth_.login_token(*token) : auth_.login_password(*user, *password);
+  if (l.status != 200) return error_reply(l.status, l.error);
+  HttpReply r = json_reply(200, {{"user", l.principal.user}, {"role", to_string(l.principal.role)},
+                                 {"idle_timeout_s", auth_.idle_timeout_s()}});
+  r.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) + "=" + l.session_id +
+                                           "; HttpOnly; SameSite=Strict; Path=/");
+  spdlog::info("sign-in: {} ({})", l.principal.user, to_string(l.principal.role));
+  return r;
+}
+
+HttpReply Api::logout(const ApiRequest& request) {
+  const std::string sid = session_from_cookie(request.cookie);
+  if (!sid.empty()) auth_.logout(sid);
+  HttpReply r = json_reply(200, {{"ok", true}});
+  r.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) + "=; HttpOnly; SameSite=Strict; Path=/; Max-Age=0");
+  return r;
+}
+
+json Api::summary(const CampaignRow& row) {
+  const double progress = row.duration_s > 0 ? std::clamp(row.program_time_s / row.duration_s, 0.0, 1.0) : 0.0;
+  return {{"id", row.id},
+          {"name", row.name},
+          {"state", to_string(row.state)},
+          {"program", row.program_label},
+          {"created", iso8601_utc(row.created_ms)},
+          {"started", opt_time(row.started_ms)},
+          {"ended", opt_time(row.ended_ms)},
+          {"duration_s", row.duration_s},
+          {"program_time_s", row.program_time_s},
+          {"progress", progress},
+          {"queue_position", row.queue_position ? json(*row.queue_position) : json(nullptr)},
+          {"has_model", row.model_json.has_value()},
+          {"error", row.error ? json(*row.error) : json(nullptr)}};
+}
+
+HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
+  std::int64_t limit = 100;
+  if (const auto it = query.find("limit"); it != query.end()) {
+    const auto v = parse_id(it->second);
+    if (!v || *v < 1 || *v > 10000) return error_reply(400, "limit must be a number from 1 to 10000");
+    limit = *v;
+  }
+  json list = json::array();
+  for (const auto& row : db_.campaigns(limit)) list.push_back(summary(row));
+  return json_reply(200, {{"campaigns", list}});
+}
+
+HttpReply Api::validate_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  const CampaignCheck check = check_campaign(body, config_);
+  json segments = json::array();
+  for (const auto& s : check.segments)
+    segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
+  return json_reply(200, {{"valid", check.problems.empty()},
+                          {"problems", check.problems},
+                          {"duration_s", check.duration_s},
+                          {"segments", segments}});
+}
+
+HttpReply Api::create_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  const CampaignCheck check = check_campaign(body, config_);
+  if (check.malformed) {
+    return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
+  }
+  if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
+  const CampaignSpec& spec = *check.spec;
+  const auto who = authenticate(request, false);
+  const std::int64_t id = db_.insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s,
+                                              "posted by " + (who ? who->user : std::string("?")));
+  spdlog::info("campaign {} '{}' posted ({}, {:.1f} s)", id, spec.name, spec.program_label, check.duration_s);
+  HttpReply r = json_reply(201, {{"id", id}, {"state", "created"}, {"duration_s", check.duration_s}});
+  r.headers.emplace_back("Location", "/api/campaigns/" + std::to_string(id));
+  return r;
+}
+
+HttpReply Api::campaign_detail(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  json out = summary(*row);
+  json spec = parse_or_null(row->spec_json);
+  out["spec"] = spec;
+  json segments = json::array();
+  const CampaignCheck check = check_campaign_text(row->spec_json, config_);
+  for (std::size_t i = 0; i < check.segments.size(); ++i) {
+    const auto& s = check.segments[i];
+    const bool redoable = !check.spec || !check.spec->chamber.ramps_within(s.t0_s, s.t1_s);
+    segments.push_back({{"index", i}, {"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},
+                        {"redoable", redoable}});
+  }
+  out["segments"] = segments;
+  out["checkpoint"] = row->checkpoint_segment
+                          ? json{{"segment", *row->checkpoint_segment}, {"t_s", row->checkpoint_s.value_or(0.0)}}
+                          : json(nullptr);
+  out["frames"] = row->frames;
+  out["lost_frames"] = row->lost_frames;
+  out["bad_frames"] = row->bad_frames;
+  json transitions = json::array();
+  for (const auto& t : db_.transitions(id))
+    transitions.push_back({{"t", iso8601_utc(t.t_ms)},
+                           {"from", t.from ? json(to_string(*t.from)) : json(nullptr)},
+                           {"to", to_string(t.to)},
+                           {"reason", t.reason}});
+  out["transitions"] = transitions;
+  json events = json::array();
+  for (const auto& e : db_.events(id))
+    events.push_back({{"t", iso8601_utc(e.t_ms)},
+                      {"kind", e.kind},
+                      {"segment", e.segment ? json(*e.segment) : json(nullptr)},
+                      {"program_time_s", e.program_time_s ? json(*e.program_time_s) : json(nullptr)},
+                      {"reason", e.reason}});
+  out["events"] = events;
+  json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row->estimators_json);
+  out["estimators"] = estimators.is_null() ? json::object() : estimators;
+  const json results = parse_or_null(row->results_json);
+  out["results"] = results.is_null() ? json::object() : results;
+  out["run_db"] = row->run_db.empty() ? json(nullptr) : json(row->run_db);
+  return json_reply(200, out);
+}
+
+HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (!row->model_json)
+    return error_reply(404, "campaign " + std::to_string(id) + " has no model (state " +
+                                std::string(to_string(row->state)) + ")");
+  std::string text = *row->model_json;
+  if (const auto it = query.find("frame"); it != query.end()) {
+    if (it->second == "body") {
+      text = imu_model_to_json_text(direct::to_body_frame(imu_model_from_json_text(text, "stored model")));
+    } else if (it->second != "instrument") {
+      return error_reply(400, "frame must be instrument or body");
+    }
+  }
+  HttpReply r;
+  r.body = text;
+  r.content_type = "application/json";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition",
+                         "inline; filename=\"campaign-" + std::to_string(id) + "-model.json\"");
+  return r;
+}
+
+HttpReply Api::campaign_progress(std::int64_t id) {
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  json out = json::object();
+  for (const auto& p : db_.progress(id)) {
+    json entry = parse_or_null(p.json);
+    if (!entry.is_object()) continue;
+    entry["program_time_s"] = p.program_time_s;
+    entry["t"] = iso8601_utc(p.t_ms);
+    out[p.estimator].push_back(std::move(entry));
+  }
+  return json_reply(200, out);
+}
+
+HttpReply Api::campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
+                                const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::string reason;
+  {
+    ObjectReader r(body, "body", problems);
+    if (auto v = r.string("reason")) reason = v->substr(0, 500);
+  }
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const auto outcome = sequencer_.command(id, *parse_command(command), who.user, reason);
+  if (outcome.http_status != 200) {
+    json extra = json::object();
+    if (outcome.state) extra["state"] = to_string(*outcome.state);
+    return error_reply(outcome.http_status, outcome.error, extra);
+  }
+  return json_reply(200, {{"id", id}, {"state", to_string(*outcome.state)}});
+}
+
+}  // namespace imucal::daemon

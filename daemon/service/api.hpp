@@ -1,0 +1,74 @@
+// The HTTP API of docs/api.md as plain request -> reply functions, with no networking in them:
+// routing, authentication and roles, JSON bodies, error replies. The Beast server
+// (http_server.cpp) only moves bytes; tests can call handle() directly.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <map>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/service/auth.hpp"
+#include "daemon/service/config.hpp"
+#include "daemon/service/daemon_db.hpp"
+#include "daemon/service/sequencer.hpp"
+#include "daemon/service/static_files.hpp"
+
+namespace imucal::daemon {
+
+struct ApiRequest {
+  std::string method;  // "GET", "POST", ...
+  std::string target;  // path and query as received
+  std::string authorization;
+  std::string cookie;
+  std::string content_type;
+  std::string body;
+};
+
+inline constexpr const char* kSessionCookie = "imucal_session";
+
+class Api {
+ public:
+  Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth);
+
+  // Any /api/ request except the WebSocket.
+  HttpReply handle(const ApiRequest& request);
+  // Who is asking: bearer token, session cookie, or (WebSocket only) ?token= in the query.
+  std::optional<Principal> authenticate(const ApiRequest& request, bool allow_query_token);
+  nlohmann::json status();
+  // From now on every change is refused with 503.
+  void set_shutting_down() { shutting_down_ = true; }
+
+ private:
+  HttpReply route(const ApiRequest& request, const std::string& path, const std::map<std::string, std::string>& query);
+  HttpReply login(const ApiRequest& request);
+  HttpReply logout(const ApiRequest& request);
+  HttpReply list_campaigns(const std::map<std::string, std::string>& query);
+  HttpReply create_campaign(const ApiRequest& request);
+  HttpReply validate_campaign(const ApiRequest& request);
+  HttpReply campaign_detail(std::int64_t id);
+  HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
+  HttpReply campaign_progress(std::int64_t id);
+  HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
+                             const Principal& who);
+  nlohmann::json summary(const CampaignRow& row);
+
+  const DaemonConfig& config_;
+  DaemonDb& db_;
+  Sequencer& sequencer_;
+  Auth& auth_;
+  nlohmann::json programs_;  // built once: the built-in programs do not change
+  std::int64_t started_ms_;
+  std::chrono::steady_clock::time_point started_;
+  std::atomic<bool> shutting_down_{false};
+};
+
+// The session id in a Cookie header, or empty.
+std::string session_from_cookie(const std::string& cookie_header);
+// Splits "/a/b?x=1&y=2" into the path and the decoded query; false when malformed.
+bool split_target(const std::string& target, std::string& path, std::map<std::string, std::string>& query);
+
+}  // namespace imucal::daemon

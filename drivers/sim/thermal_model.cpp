@@ -1,0 +1,191 @@
+#include "drivers/sim/thermal_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/units.hpp"
+
+namespace imucal::sim {
+
+namespace {
+
+// Relative lag of coil sensor s (0..7) around the coil's own: spread evenly over +-1.
+double sensor_factor(int s) { return -1.0 + 2.0 * s / 7.0; }
+
+int channel_index(const std::string& name, int& sensor) {
+  sensor = -1;
+  static const char* const names[6] = {"gx", "gy", "gz", "ax", "ay", "az"};
+  for (int ch = 0; ch < 6; ++ch) {
+    if (name == names[ch]) return ch;
+    if (ch < 3 && name.size() == 3 && name.compare(0, 2, names[ch]) == 0 && name[2] >= '1' && name[2] <= '8') {
+      sensor = name[2] - '1';
+      return ch;
+    }
+  }
+  if (name == "chamber") return 6;
+  return -1;
+}
+
+}  // namespace
+
+ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel& truth, const ThermalConfig& config,
+                           double duration_s)
+    : profile_(profile), config_(config) {
+  if (auto s = thermal::thermal_of(truth)) {
+    section_ = *s;
+    has_section_ = true;
+  }
+  for (const SensorFault& f : config_.faults) {
+    int sensor;
+    if (channel_index(f.channel, sensor) < 0)
+      throw std::invalid_argument("thermal fault: unknown channel '" + f.channel + "' (gx gy gz, gx1..gz8, ax ay az, chamber)");
+    if (f.kind != "stuck" && f.kind != "jump" && f.kind != "missing")
+      throw std::invalid_argument("thermal fault: unknown kind '" + f.kind + "' (stuck, jump, missing)");
+  }
+  const double h = config_.step_s;
+  if (!(h > 0)) throw std::invalid_argument("thermal model: step_s must be positive");
+  const auto n = static_cast<std::size_t>(std::ceil(std::max(duration_s, 0.0) / h)) + 2;
+  grid_.resize(n);
+  slope_.resize(n);
+  value6_.resize(n);
+  const Stabilisation& stab = config_.stabilisation;
+  auto plate_target = [&](double case_C) { return stab.setpoint_C + stab.leak * (case_C - stab.setpoint_C); };
+  // Start in equilibrium at the first set point, as after a night in the chamber.
+  std::array<double, kColumns> x{};
+  x[kSet] = x[kAir] = x[kCase] = profile_.setpoint_C(0.0);
+  x[kPlate] = stab.enabled ? plate_target(x[kCase]) : x[kCase];
+  const double source0 = stab.enabled ? x[kPlate] : x[kCase];
+  for (std::size_t c = kAccel; c < kColumns; ++c) x[c] = source0;
+  const double max_step = config_.lags.chamber_max_rate_C_per_min / 60.0 * h;
+  auto derivatives = [&](const std::array<double, kColumns>& y, std::size_t k) {
+    const double source = stab.enabled ? y[kPlate] : y[kCase];
+    for (int j = 0; j < 3; ++j) {
+      value6_[k][static_cast<std::size_t>(3 + j)] = y[kAccel + static_cast<std::size_t>(j)];
+      slope_[k][static_cast<std::size_t>(3 + j)] = (source - y[kAccel + static_cast<std::size_t>(j)]) / config_.accel_tau_s[j];
+      double mean = 0, dmean = 0;
+      for (int s = 0; s < 8; ++s) {
+        const double tau = config_.coil_tau_s[j] * (1.0 + config_.coil_sensor_spread * sensor_factor(s));
+        const double v = y[kCoil + static_cast<std::size_t>(8 * j + s)];
+        mean += v / 8.0;
+        dmean += (source - v) / tau / 8.0;
+      }
+      value6_[k][static_cast<std::size_t>(j)] = mean;
+      slope_[k][static_cast<std::size_t>(j)] = dmean;
+    }
+  };
+  grid_[0] = x;
+  derivatives(x, 0);
+  for (std::size_t k = 1; k < n; ++k) {
+    const double t0 = static_cast<double>(k - 1) * h, t1 = static_cast<double>(k) * h;
+    const std::array<double, kColumns> y = grid_[k - 1];
+    x[kSet] = profile_.setpoint_C(t1);
+    const double air = motion::first_order_lag_step(y[kAir], profile_.setpoint_C(t0), x[kSet], h,
+                                                    config_.lags.chamber_tau_s);
+    x[kAir] = std::clamp(std::clamp(air, y[kAir] - max_step, y[kAir] + max_step), config_.chamber_min_C,
+                         config_.chamber_max_C);
+    x[kCase] = motion::first_order_lag_step(y[kCase], y[kAir], x[kAir], h, config_.lags.case_tau_s);
+    x[kPlate] = stab.enabled ? motion::first_order_lag_step(y[kPlate], plate_target(y[kCase]), plate_target(x[kCase]), h,
+                                                            stab.tau_s)
+                             : x[kCase];
+    const double src0 = stab.enabled ? y[kPlate] : y[kCase], src1 = stab.enabled ? x[kPlate] : x[kCase];
+    for (int j = 0; j < 3; ++j) {
+      const std::size_t a = kAccel + static_cast<std::size_t>(j);
+      x[a] = motion::first_order_lag_step(y[a], src0, src1, h, config_.accel_tau_s[j]);
+      for (int s = 0; s < 8; ++s) {
+        const std::size_t c = kCoil + static_cast<std::size_t>(8 * j + s);
+        const double tau = config_.coil_tau_s[j] * (1.0 + config_.coil_sensor_spread * sensor_factor(s));
+        x[c] = motion::first_order_lag_step(y[c], src0, src1, h, tau);
+      }
+    }
+    grid_[k] = x;
+    derivatives(x, k);
+  }
+}
+
+thermal::ChannelTemps ThermalModel::channels(double t) const {
+  // Cubic Hermite between grid points from the values and the ODE's own derivatives.
+  const double h = config_.step_s;
+  const double u = std::clamp(t / h, 0.0, static_cast<double>(grid_.size() - 2));
+  const auto k = std::min(static_cast<std::size_t>(u), grid_.size() - 2);
+  const double s = u - static_cast<double>(k);
+  const double s2 = s * s, s3 = s2 * s;
+  const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
+  const double d00 = (6 * s2 - 6 * s) / h, d10 = 3 * s2 - 4 * s + 1, d01 = (-6 * s2 + 6 * s) / h, d11 = 3 * s2 - 2 * s;
+  thermal::ChannelTemps out;
+  for (std::size_t c = 0; c < thermal::kChannels; ++c) {
+    const double y0 = value6_[k][c], y1 = value6_[k + 1][c], m0 = slope_[k][c], m1 = slope_[k + 1][c];
+    const auto i = static_cast<Eigen::Index>(c);
+    out.T_C[i] = h00 * y0 + h10 * h * m0 + h01 * y1 + h11 * h * m1;
+    out.rate_C_per_min[i] = (d00 * y0 + d10 * m0 + d01 * y1 + d11 * m1) * 60.0;
+  }
+  return out;
+}
+
+double ThermalModel::grid_value(std::size_t column, double t) const {
+  const double h = config_.step_s;
+  const double u = std::clamp(t / h, 0.0, static_cast<double>(grid_.size() - 2));
+  const auto k = std::min(static_cast<std::size_t>(u), grid_.size() - 2);
+  const double s = u - static_cast<double>(k);
+  return (1 - s) * grid_[k][column] + s * grid_[k + 1][column];
+}
+
+ThermalModel::State ThermalModel::state(double t) const {
+  State st;
+  st.setpoint_C = profile_.setpoint_C(t);
+  st.air_C = grid_value(kAir, t);
+  st.case_C = grid_value(kCase, t);
+  st.plate_C = grid_value(kPlate, t);
+  st.sensors = channels(t);
+  for (std::size_t j = 0; j < 3; ++j)
+    for (std::size_t s = 0; s < 8; ++s) st.coil_sensors_C[j][s] = grid_value(kCoil + 8 * j + s, t);
+  return st;
+}
+
+bool ThermalModel::temperatures(double t, TempSample& out) const {
+  for (const SensorFault& f : config_.faults)
+    if (f.kind == "missing" && t >= f.t0_s && t <= f.t1_s) return false;
+  // Faults act on what the logger reads, at the reading's own instant (stuck: the value at t0).
+  auto read = [&](int ch, int sensor, double at) {
+    double v;
+    if (ch == 6) v = grid_value(kAir, at);
+    else if (ch >= 3) v = grid_value(kAccel + static_cast<std::size_t>(ch - 3), at);
+    else v = grid_value(kCoil + static_cast<std::size_t>(8 * ch + sensor), at);
+    return v;
+  };
+  auto faulty = [&](int ch, int sensor) {
+    double at = t, offset = 0;
+    for (const SensorFault& f : config_.faults) {
+      int fs;
+      const int fc = channel_index(f.channel, fs);
+      const bool hits = fc == ch && (fs < 0 || fs == sensor);
+      if (!hits || t < f.t0_s || t > f.t1_s) continue;
+      if (f.kind == "stuck") at = f.t0_s;
+      if (f.kind == "jump") offset += f.jump_C;
+    }
+    return read(ch, sensor, at) + offset;
+  };
+  auto quantise = [&](double v) { return config_.lsb_C > 0 ? std::round(v / config_.lsb_C) * config_.lsb_C : v; };
+  for (int j = 0; j < 3; ++j) {
+    // The coil channel is the mean of its eight logged sensors.
+    double mean = 0;
+    for (int s = 0; s < 8; ++s) mean += quantise(faulty(j, s)) / 8.0;
+    out.gyro_C[j] = quantise(mean);
+    out.accel_C[j] = quantise(faulty(3 + j, -1));
+  }
+  out.chamber_C = quantise(faulty(6, -1));
+  out.chamber_setpoint_C = profile_.setpoint_C(t);
+  return true;
+}
+
+void ThermalModel::coefficients(double t, GyroErrors& g, AccelErrors& a) const {
+  if (!has_section_) return;
+  const thermal::ChannelTemps c = channels(t);
+  thermal::apply_thermal(section_, c, g, a);
+  if (section_.sim_oscillation)
+    for (int j = 0; j < 3; ++j)
+      g.bias_radps[j] += thermal::oscillation_dph(*section_.sim_oscillation, j, t, c.rate_C_per_min[j]) *
+                         units::kDphToRadps;
+}
+
+}  // namespace imucal::sim

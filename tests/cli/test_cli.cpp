@@ -1,0 +1,110 @@
+// imucal end to end: simulate, calibrate, navigate, export, import, and clear errors on bad input.
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "storage/run_db.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+  int status;
+  std::string output;  // stdout and stderr together
+};
+
+CliRun run(const std::string& args) {
+  const std::string cmd = std::string(IMUCAL_BIN) + " " + args + " 2>&1";
+  CliRun r{0, {}};
+  FILE* p = popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf{};
+  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
+  r.status = pclose(p);
+  return r;
+}
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path d = fs::path(IMUCAL_TEST_TMP) / name;
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+}  // namespace
+
+TEST(Cli, HelpAndBadArguments) {
+  EXPECT_EQ(run("--help").status, 0);
+  for (const char* sub : {"simulate", "navigate", "calibrate", "export", "import", "evaluate"})
+    EXPECT_EQ(run(std::string(sub) + " --help").status, 0) << sub;
+  const CliRun bad = run("simulate --program direct --db x.db --rate -5");
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("--rate"), std::string::npos) << bad.output;
+  const CliRun unknown = run("simulate --program no-such --db /tmp/never.db");
+  EXPECT_NE(unknown.status, 0);
+  EXPECT_NE(unknown.output.find("neither a built-in"), std::string::npos) << unknown.output;
+}
+
+TEST(Cli, ProgramOutsideTheLimitsIsRefusedWithTheSegment) {
+  const fs::path d = fresh_dir("cli-limits");
+  std::ofstream(d / "fast.json") << R"({"name":"fast","segments":[{"type":"hold","duration_s":1},
+    {"type":"rate","name":"spin","axis":"inner","rate_dps":500,"duration_s":10,"accel_dps2":200}]})";
+  const CliRun r = run("simulate --program " + (d / "fast.json").string() + " --db " + (d / "x.db").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("segment 'spin'"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "x.db")) << "nothing is recorded for a refused program";
+}
+
+TEST(Cli, SimulateCalibrateNavigateExportImport) {
+  const fs::path d = fresh_dir("cli-e2e");
+  const std::string db = (d / "run.db").string();
+  CliRun r = run("simulate --program direct-short --imu ideal --db " + db + " --rate 50 --seed 3");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("calibrate --db " + db + " --stage all --out " + (d / "model.json").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("ran stage direct"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("skipped stage lever-arm"), std::string::npos) << r.output;
+  const imucal::ImuModel m = imucal::read_imu_model_file((d / "model.json").string());
+  ASSERT_TRUE(m.sigma.has_value());
+  EXPECT_LT(std::abs(m.gyro.bias_radps[0]), 1e-7);  // ideal IMU: small, not NaN
+  r = run("navigate --db " + db + " --model " + (d / "model.json").string() + " --out " + (d / "nav.csv").string() +
+          " --summary-json " + (d / "summary.json").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto summary = nlohmann::json::parse(std::ifstream(d / "summary.json"));
+  for (const char* key : {"duration_s", "max_velocity_error_mps", "max_position_error_m"})
+    EXPECT_TRUE(summary.contains(key)) << key;
+  EXPECT_GT(summary["duration_s"].get<double>(), 300.0);
+  r = run("export --db " + db + " --out " + (d / "bundle").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("import " + (d / "bundle").string() + " --db " + (d / "back.db").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  // import(export(run)) reproduces the run exactly.
+  const auto a = imucal::storage::RunDb::open(db).read_frames();
+  const auto b = imucal::storage::RunDb::open((d / "back.db").string()).read_frames();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].t_ns, b[i].t_ns);
+    ASSERT_TRUE(a[i].dtheta_rad == b[i].dtheta_rad && a[i].dv_mps == b[i].dv_mps && a[i].table_deg == b[i].table_deg)
+        << "frame " << i;
+  }
+}
+
+TEST(Cli, MalformedBundleIsRefusedWithItsLine) {
+  const fs::path d = fresh_dir("cli-bad-bundle");
+  fs::copy_file(IMUCAL_TEST_DATA "/example-direct/meta.json", d / "meta.json");
+  std::ifstream in(IMUCAL_TEST_DATA "/example-direct/frames.csv");
+  std::ofstream out(d / "frames.csv");
+  std::string line;
+  for (int i = 0; i < 10 && std::getline(in, line); ++i) out << (i == 6 ? "0.35,abc" + line.substr(line.find(',', 9)) : line) << "\n";
+  out.close();
+  const CliRun r = run("import " + d.string() + " --db " + (d / "x.db").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("line 7"), std::string::npos) << r.output;
+}

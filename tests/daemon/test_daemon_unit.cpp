@@ -1,0 +1,311 @@
+// The daemon's pure parts: the run state machine, the configuration and campaign checks (every
+// problem listed, unknown keys refused, comments ignored), static files (no way out of the root),
+// the one-time operator token.
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "daemon/service/api.hpp"
+#include "daemon/service/auth.hpp"
+#include "daemon/service/campaign.hpp"
+#include "daemon/service/config.hpp"
+#include "daemon/service/run_state.hpp"
+#include "daemon/service/static_files.hpp"
+#include "daemon_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemon;
+using nlohmann::json;
+
+TEST(RunState, NamesRoundTripAndFinalStates) {
+  for (const char* name : {"created", "queued", "running", "pausing", "paused", "suspended", "stopping", "aborting",
+                           "done", "failed", "aborted", "interrupted"}) {
+    const auto s = parse_run_state(name);
+    ASSERT_TRUE(s.has_value()) << name;
+    EXPECT_EQ(to_string(*s), name);
+  }
+  EXPECT_FALSE(parse_run_state("idle"));
+  EXPECT_TRUE(is_final(RunState::Done));
+  EXPECT_TRUE(is_final(RunState::Failed));
+  EXPECT_TRUE(is_final(RunState::Aborted));
+  EXPECT_FALSE(is_final(RunState::Interrupted));
+}
+
+TEST(RunState, CommandsApplyOnlyInTheirStates) {
+  EXPECT_EQ(command_target(RunState::Created, Command::Start), RunState::Queued);
+  EXPECT_FALSE(command_target(RunState::Queued, Command::Start));
+  EXPECT_FALSE(command_target(RunState::Done, Command::Start));
+  EXPECT_EQ(command_target(RunState::Running, Command::Pause), RunState::Pausing);
+  EXPECT_FALSE(command_target(RunState::Paused, Command::Pause));
+  EXPECT_FALSE(command_target(RunState::Running, Command::Resume));  // resume while running
+  EXPECT_EQ(command_target(RunState::Paused, Command::Resume), RunState::Running);
+  EXPECT_EQ(command_target(RunState::Interrupted, Command::Resume), RunState::Queued);
+  EXPECT_FALSE(command_target(RunState::Suspended, Command::Resume));
+  EXPECT_EQ(command_target(RunState::Suspended, Command::Stop), RunState::Stopping);
+  EXPECT_EQ(command_target(RunState::Queued, Command::Abort), RunState::Aborted);
+  EXPECT_EQ(command_target(RunState::Paused, Command::Abort), RunState::Aborting);
+  EXPECT_FALSE(command_target(RunState::Aborting, Command::Abort));
+  EXPECT_FALSE(command_target(RunState::Done, Command::Abort));
+}
+
+TEST(Config, DefaultsRunWithNoFile) {
+  const DaemonConfig c = parse_config("{}", "test");
+  EXPECT_EQ(c.http.host, "127.0.0.1");
+  EXPECT_EQ(c.http.port, 8080);
+  EXPECT_EQ(c.data_dir, "./data");
+  EXPECT_EQ(c.devices, "sim");
+}
+
+TEST(Config, ReadsEveryBlockAndIgnoresComments) {
+  const DaemonConfig c = parse_config(R"({
+    "_comment": "a comment",
+    "listen": "0.0.0.0:9000", "data_dir": "/var/lib/imucal", "devices": "sim",
+    "site": {"_comment": "x", "name": "lab", "latitude_deg": 45.0},
+    "table": {"limits": {"middle": {"min_deg": -100, "max_deg": 100, "rate_dps": 50}}},
+    "chamber": {"min_C": -20, "max_C": 70, "safe_setpoint_C": 23},
+    "users": [{"name": "ann", "role": "viewer", "password": "long enough"}],
+    "http": {"body_limit_bytes": 4096, "live_queue": 8},
+    "log": {"level": "debug", "file": ""}
+  })", "test");
+  EXPECT_EQ(c.http.host, "0.0.0.0");
+  EXPECT_EQ(c.http.port, 9000);
+  EXPECT_EQ(c.site_name, "lab");
+  EXPECT_DOUBLE_EQ(c.site.latitude_deg, 45.0);
+  EXPECT_DOUBLE_EQ(c.table_limits.axis[1].max_deg, 100.0);
+  EXPECT_DOUBLE_EQ(c.table_limits.axis[1].rate_dps, 50.0);
+  EXPECT_DOUBLE_EQ(c.chamber.safe_setpoint_C, 23.0);
+  ASSERT_EQ(c.users.size(), 1u);
+  EXPECT_EQ(c.users[0].role, Role::Viewer);
+  EXPECT_EQ(c.http.body_limit_bytes, 4096);
+  EXPECT_EQ(c.log.level, "debug");
+}
+
+TEST(Config, ListsEveryProblem) {
+  try {
+    parse_config(R"({"listen": "nope", "devices": "real", "site": {"latitude_deg": 120}, "typo": 1,
+                     "users": [{"name": "x", "role": "king", "token": "short"}]})",
+                 "cfg.json");
+    FAIL() << "accepted a bad configuration";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("config.listen"), std::string::npos) << m;
+    EXPECT_NE(m.find("config.devices"), std::string::npos) << m;
+    EXPECT_NE(m.find("latitude_deg"), std::string::npos) << m;
+    EXPECT_NE(m.find("unknown key \"typo\""), std::string::npos) << m;
+    EXPECT_NE(m.find("role"), std::string::npos) << m;
+    EXPECT_NE(m.find("token must have at least 16"), std::string::npos) << m;
+  }
+  EXPECT_THROW(parse_config("{not json", "x"), ConfigError);
+}
+
+TEST(Config, ListenAddress) {
+  std::string host;
+  std::uint16_t port = 1;
+  parse_listen("127.0.0.1:0", host, port);
+  EXPECT_EQ(port, 0);
+  parse_listen("[::1]:8081", host, port);
+  EXPECT_EQ(host, "::1");
+  EXPECT_EQ(port, 8081);
+  EXPECT_THROW(parse_listen("localhost", host, port), ConfigError);
+  EXPECT_THROW(parse_listen("h:70000", host, port), ConfigError);
+  EXPECT_THROW(parse_listen("h:80x", host, port), ConfigError);
+}
+
+TEST(Campaign, ShortFormUsesTheConfiguredDefaults) {
+  DaemonConfig config;
+  config.sim.rate_hz = 200;
+  const CampaignCheck c = check_campaign(json{{"name", "quick"}, {"program", "direct"}}, config);
+  ASSERT_TRUE(c.spec) << (c.problems.empty() ? "" : c.problems.front());
+  EXPECT_EQ(c.spec->program_label, "direct");
+  EXPECT_DOUBLE_EQ(c.spec->rate_hz, 200.0);
+  EXPECT_EQ(c.spec->estimators, std::vector<std::string>{"direct"});
+  EXPECT_GT(c.duration_s, 1000.0);
+  // The stored form checks again to the same campaign (what a restart relies on).
+  const CampaignCheck again = check_campaign(c.spec->normalized, config);
+  ASSERT_TRUE(again.spec);
+  EXPECT_EQ(again.spec->program_json, c.spec->program_json);
+  EXPECT_DOUBLE_EQ(again.duration_s, c.duration_s);
+}
+
+TEST(Campaign, MalformedIsToldApartFromInvalid) {
+  const DaemonConfig config;
+  const auto unknown = check_campaign(json{{"name", "x"}, {"program", "direct"}, {"colour", "red"}}, config);
+  EXPECT_FALSE(unknown.spec);
+  EXPECT_TRUE(unknown.malformed);
+  EXPECT_NE(unknown.problems.front().find("unknown key \"colour\""), std::string::npos);
+
+  const auto not_json = check_campaign_text("{\"name\": ", config);
+  EXPECT_TRUE(not_json.malformed);
+
+  const auto missing = check_campaign(json{{"program", "direct"}}, config);
+  EXPECT_TRUE(missing.malformed);
+
+  // Well-formed but outside the limits: every problem, and not "malformed".
+  DaemonConfig tight;
+  tight.table_limits.axis[0].rate_dps = 10.0;
+  tight.campaign.max_rate_hz = 500;
+  const auto invalid = check_campaign(json{{"name", "x"},
+                                           {"program", "direct"},
+                                           {"rate_hz", 1000},
+                                           {"estimators", {"direct", "kalman"}},
+                                           {"chamber", {{"setpoint_C", 200}}}},
+                                      tight);
+  EXPECT_FALSE(invalid.spec);
+  std::string all;
+  for (const auto& p : invalid.problems) all += p + "\n";
+  EXPECT_NE(all.find("rate"), std::string::npos) << all;              // table rate limit
+  EXPECT_NE(all.find("rate_hz 1000"), std::string::npos) << all;      // IMU rate limit
+  EXPECT_NE(all.find("unknown estimator \"kalman\""), std::string::npos) << all;
+  EXPECT_NE(all.find("200.0 C is outside"), std::string::npos) << all;
+  EXPECT_NE(all.find("more times"), std::string::npos) << all;  // one line per segment and limit
+  EXPECT_GE(invalid.problems.size(), 4u);
+}
+
+TEST(Campaign, EstimatorPrerequisites) {
+  const DaemonConfig config;
+  const auto noise_direct = check_campaign(json{{"name", "x"}, {"program", "noise"}, {"estimators", {"direct"}}}, config);
+  ASSERT_FALSE(noise_direct.spec);
+  EXPECT_NE(noise_direct.problems.front().find("needs at least 6 static segments"), std::string::npos);
+  EXPECT_TRUE(check_campaign(json{{"name", "x"}, {"program", "noise"}, {"estimators", {"navigation"}}}, config).spec);
+}
+
+TEST(Campaign, ProgramsRunOneAfterTheOther) {
+  const DaemonConfig config;
+  const auto one = check_campaign(json{{"name", "a"}, {"program", "direct-short"}}, config);
+  const auto nav = check_campaign(json{{"name", "b"}, {"program", "navigation"}, {"estimators", {"navigation"}}}, config);
+  const auto both = check_campaign(
+      json{{"name", "c"}, {"program", {"direct-short", "navigation"}}, {"estimators", {"direct", "navigation"}}}, config);
+  ASSERT_TRUE(both.spec) << both.problems.front();
+  EXPECT_EQ(both.spec->program_label, "direct-short+navigation");
+  EXPECT_GE(both.duration_s, one.duration_s + nav.duration_s);
+  bool prefixed = false;
+  for (const auto& s : both.segments) prefixed = prefixed || s.name.rfind("navigation/", 0) == 0;
+  EXPECT_TRUE(prefixed);
+  const auto bad = check_campaign(json{{"name", "c"}, {"program", {"direct", "nonesuch"}}}, config);
+  EXPECT_FALSE(bad.spec);
+}
+
+TEST(Campaign, ChamberProfileAndRamps) {
+  ChamberProfile p;
+  p.setpoint_C = 25;
+  p.steps = {{100, 45, 1.0}, {2000, 30, 0.0}};
+  EXPECT_DOUBLE_EQ(p.setpoint_at(50), 25.0);
+  EXPECT_NEAR(p.setpoint_at(160), 26.0, 1e-12);  // 1 C/min for 60 s
+  EXPECT_NEAR(p.setpoint_at(1300), 45.0, 1e-12);  // reached after 1200 s
+  EXPECT_DOUBLE_EQ(p.setpoint_at(2500), 30.0);    // a step
+  EXPECT_TRUE(p.ramps_within(0, 200));
+  EXPECT_TRUE(p.ramps_within(1000, 1400));
+  EXPECT_FALSE(p.ramps_within(1400, 3000));
+  EXPECT_FALSE(p.ramps_within(0, 100));
+
+  const DaemonConfig config;
+  const auto fast = check_campaign(
+      json{{"name", "x"}, {"program", "direct"}, {"chamber", {{"steps", {{{"at_s", 10}, {"setpoint_C", 40}, {"ramp_C_per_min", 50}}}}}}},
+      config);
+  ASSERT_FALSE(fast.spec);
+  EXPECT_NE(fast.problems.front().find("exceeds the chamber's limit"), std::string::npos);
+}
+
+TEST(Campaign, FaultsAreChecked) {
+  const DaemonConfig config;
+  const auto ok = check_campaign(json{{"name", "x"},
+                                      {"program", "direct-short"},
+                                      {"sim_faults", {{{"kind", "chamber_offset"}, {"at_s", 50}, {"duration_s", 5},
+                                                       {"offset_C", 9}},
+                                                      {{"kind", "disconnect"}, {"device", "imu"}, {"at_s", 60},
+                                                       {"duration_s", 1}}}}},
+                                 config);
+  ASSERT_TRUE(ok.spec) << ok.problems.front();
+  EXPECT_EQ(ok.spec->faults.size(), 2u);
+  const auto bad = check_campaign(
+      json{{"name", "x"}, {"program", "direct-short"}, {"sim_faults", {{{"kind", "meteor"}, {"at_s", 5000}}}}}, config);
+  ASSERT_FALSE(bad.spec);
+  EXPECT_EQ(bad.problems.size(), 2u);  // unknown kind, at_s after the end
+}
+
+TEST(StaticFiles, ServesFilesWithTypesAndNeverLeavesTheRoot) {
+  const std::string dir = daemontest::scratch_dir("static");
+  std::filesystem::create_directories(dir + "/web/js");
+  std::ofstream(dir + "/web/index.html") << "<html>hi</html>";
+  std::ofstream(dir + "/web/js/app.js") << "export const x = 1;";
+  std::ofstream(dir + "/web/.secret") << "no";
+  std::ofstream(dir + "/outside.txt") << "secret";
+  std::filesystem::create_symlink(dir + "/outside.txt", dir + "/web/link.txt");
+  const StaticFiles files(dir + "/web");
+
+  auto index = files.get("/", "", false);
+  EXPECT_EQ(index.status, 200);
+  EXPECT_EQ(index.body, "<html>hi</html>");
+  EXPECT_EQ(index.content_type, "text/html; charset=utf-8");
+  auto js = files.get("/js/app.js", "", false);
+  EXPECT_EQ(js.status, 200);
+  EXPECT_EQ(js.content_type, "text/javascript; charset=utf-8");
+  std::string etag;
+  for (const auto& [k, v] : js.headers)
+    if (k == "ETag") etag = v;
+  ASSERT_FALSE(etag.empty());
+  EXPECT_EQ(files.get("/js/app.js", etag, false).status, 304);
+
+  for (const char* evil : {"/../outside.txt", "/js/../../outside.txt", "/%2e%2e/outside.txt", "/js/%2E%2E/%2E%2E/outside.txt",
+                           "/.secret", "/link.txt", "/nonexistent", "/js", "/..%5coutside.txt", "/%00"}) {
+    const auto r = files.get(evil, "", false);
+    EXPECT_TRUE(r.status == 404 || r.status == 400) << evil << " gave " << r.status;
+    EXPECT_EQ(r.body.find("secret"), std::string::npos) << evil;
+  }
+}
+
+TEST(Auth, GeneratesTheOperatorTokenOnceAndKeepsIt) {
+  const std::string dir = daemontest::scratch_dir("auth");
+  DaemonConfig config;
+  std::string token;
+  {
+    const Auth auth(config, dir);
+    token = auth.generated_token();
+    ASSERT_EQ(token.size(), 64u);
+    EXPECT_EQ(std::filesystem::status(dir + "/operator-token").permissions() & std::filesystem::perms::group_all,
+              std::filesystem::perms::none);
+    const auto p = auth.from_token(token);
+    ASSERT_TRUE(p);
+    EXPECT_EQ(p->role, Role::Operator);
+    EXPECT_FALSE(auth.from_token(token.substr(1)));
+    EXPECT_FALSE(auth.from_token(""));
+  }
+  const Auth again(config, dir);
+  EXPECT_TRUE(again.generated_token().empty());  // printed once only
+  EXPECT_TRUE(again.from_token(token));
+  // A configured operator means no generated token at all.
+  config.operator_token = "0123456789abcdef0123";
+  const std::string dir2 = daemontest::scratch_dir("auth2");
+  const Auth configured(config, dir2);
+  EXPECT_TRUE(configured.generated_token().empty());
+  EXPECT_FALSE(std::filesystem::exists(dir2 + "/operator-token"));
+}
+
+TEST(Auth, SessionsAndThrottling) {
+  DaemonConfig config;
+  config.users = {{"vic", Role::Viewer, "viewer-password", ""}, {"ops", Role::Operator, "operator-password", ""}};
+  Auth auth(config, daemontest::scratch_dir("sessions"));
+  const auto ok = auth.login_password("vic", "viewer-password");
+  ASSERT_EQ(ok.status, 200);
+  const auto p = auth.from_session(ok.session_id);
+  ASSERT_TRUE(p);
+  EXPECT_EQ(p->user, "vic");
+  EXPECT_EQ(p->role, Role::Viewer);
+  auth.logout(ok.session_id);
+  EXPECT_FALSE(auth.from_session(ok.session_id));
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(auth.login_password("ops", "guess").status, 401);
+  EXPECT_EQ(auth.login_password("ops", "operator-password").status, 429);
+}
+
+TEST(Api, TargetsAndCookies) {
+  std::string path;
+  std::map<std::string, std::string> q;
+  ASSERT_TRUE(split_target("/api/campaigns?limit=5&x=a%20b+c", path, q));
+  EXPECT_EQ(path, "/api/campaigns");
+  EXPECT_EQ(q["limit"], "5");
+  EXPECT_EQ(q["x"], "a b c");
+  EXPECT_FALSE(split_target("/a?x=%zz", path, q));
+  EXPECT_EQ(session_from_cookie("a=1; imucal_session=abc; b=2"), "abc");
+  EXPECT_EQ(session_from_cookie("imucal_sessionx=1"), "");
+}

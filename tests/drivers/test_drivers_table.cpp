@@ -1,0 +1,465 @@
+// The simulated table's servo model (pure), then the ACL table driver against the simulated table
+// (an Asio server on loopback): lifecycle, modes, coherent position reads and their clock model,
+// limits, interlock, watchdog, and every link fault as a typed error within a bounded time.
+#include <cmath>
+#include <random>
+#include <thread>
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "core/units.hpp"
+#include "drivers/acl_table.hpp"
+#include "drivers/sim/sim_table.hpp"
+#include "drivers/sim/table_servo.hpp"
+#include "test_helpers.hpp"
+
+using namespace imucal;
+using namespace imucal::drivers;
+using namespace std::chrono_literals;
+using imucal::drivers::test::eventually;
+using imucal::drivers::test::Stopwatch;
+
+namespace {
+
+constexpr int kOuter = 0, kMiddle = 1, kInner = 2;
+
+sim::ServoConfig servo_config() {
+  sim::ServoConfig c;
+  c.start_deg = {0.0, 0.0, 0.0};
+  for (auto& axis : c.limits)
+    for (auto& m : axis) m = AxisLimitSetting{-1e9, 1e9, 200.0, 400.0};
+  return c;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// Servo model
+
+TEST(TableServo, RateDemandRampsAtTheAccelerationLimit) {
+  sim::TableServo s(servo_config());
+  ASSERT_TRUE(s.interlock_close(0.0).ok());
+  ASSERT_TRUE(s.set_mode(1.0, kOuter, TableMode::rate).ok());
+  ASSERT_TRUE(s.demand_rate(1.0, kOuter, 40.0).ok());  // 0.1 s ramp at 400 deg/s^2
+  const auto a = s.sample(1.05);
+  EXPECT_NEAR(a[0].rate_dps, 20.0, 1e-9);
+  EXPECT_NEAR(a[0].angle_deg, 0.5 * 400.0 * 0.05 * 0.05, 1e-9);
+  const auto b = s.sample(3.0);
+  EXPECT_NEAR(b[0].rate_dps, 40.0, 1e-9);
+  EXPECT_NEAR(b[0].angle_deg, 0.5 * 40.0 * 0.1 + 40.0 * 1.9, 1e-9);
+}
+
+TEST(TableServo, PositionMoveIsARestToRestTrapezoid) {
+  sim::TableServo s(servo_config());
+  s.interlock_close(0.0);
+  s.set_mode(0.0, kMiddle, TableMode::position);
+  ASSERT_TRUE(s.demand_position(0.0, kMiddle, 90.0).ok());
+  // 200 deg/s, 400 deg/s^2: 0.5 s up (50 deg), 0 s cruise ... 90 deg < 100: triangular, ta = sqrt(90/400)
+  const double ta = std::sqrt(90.0 / 400.0);
+  EXPECT_NEAR(s.sample(ta)[1].angle_deg, 45.0, 1e-9);
+  EXPECT_NEAR(s.sample(ta)[1].rate_dps, 400.0 * ta, 1e-9);
+  EXPECT_NEAR(s.sample(2 * ta + 0.01)[1].angle_deg, 90.0, 1e-12);
+  EXPECT_EQ(s.sample(2 * ta + 0.01)[1].rate_dps, 0.0);
+  EXPECT_EQ(s.demand_position(5.0, kMiddle, 1e10).code, 201);
+}
+
+TEST(TableServo, RateModeRunsIntoItsPositionLimitAndLatches) {
+  sim::TableServo s(servo_config());
+  s.interlock_close(0.0);
+  ASSERT_TRUE(s.set_limit_position(0.0, kInner, TableMode::rate, -10.0, 10.0).ok());
+  s.set_mode(0.0, kInner, TableMode::rate);
+  ASSERT_TRUE(s.demand_rate(0.0, kInner, 20.0).ok());
+  s.advance(2.0);
+  const TableStatus st = s.status(2.0);
+  EXPECT_TRUE(st.axes[2].at_limit);
+  EXPECT_EQ(st.axes[2].mode, TableMode::off);
+  const double a = s.sample(2.0)[2].angle_deg;
+  EXPECT_GT(a, 10.0);  // braked beyond the limit (limit switch before the hard stop)
+  EXPECT_LT(a, 10.0 + 20.0 * 20.0 / (2 * 400.0) + 1e-9);
+  EXPECT_EQ(s.sample(2.0)[2].rate_dps, 0.0);
+  EXPECT_EQ(s.set_mode(2.0, kInner, TableMode::rate).code, 202);
+  ASSERT_TRUE(s.interlock_reset(2.0).ok());
+  ASSERT_TRUE(s.set_mode(2.0, kInner, TableMode::position).ok());
+  ASSERT_TRUE(s.set_limit_position(2.0, kInner, TableMode::position, -10.0, 10.0).ok());
+  EXPECT_TRUE(s.demand_position(2.0, kInner, 0.0).ok());
+}
+
+TEST(TableServo, OscillationStartsAndStopsAtTurningPointsInPhaseWithWorldTime) {
+  sim::TableServo s(servo_config());
+  s.interlock_close(0.0);
+  s.set_mode(0.0, kOuter, TableMode::synthesis);
+  ASSERT_TRUE(s.demand_oscillation(0.0, kOuter, {2.0, 1.0, 30.0}).ok());
+  // From t = 2 s on it oscillates as 2 sin(2 pi t + 30 deg) about 0.
+  for (double t = 2.0; t < 4.0; t += 0.0371) {
+    const double psi = 2 * units::kPi * t + 30.0 * units::kDegToRad;
+    EXPECT_NEAR(s.sample(t)[0].angle_deg, 2.0 * std::sin(psi), 1e-9) << t;
+    EXPECT_NEAR(s.sample(t)[0].rate_dps, 2.0 * 2 * units::kPi * std::cos(psi), 1e-7) << t;
+  }
+  // Repeating the demand (keep-alive) changes nothing.
+  const auto v = s.version();
+  ASSERT_TRUE(s.demand_oscillation(4.0, kOuter, {2.0, 1.0, 30.0}).ok());
+  EXPECT_EQ(s.version(), v);
+  ASSERT_TRUE(s.set_mode(4.0, kOuter, TableMode::off).ok());
+  // Stopped at the next turning point: at rest at +-2 deg, never a rate jump.
+  const auto end = s.sample(6.0)[0];
+  EXPECT_NEAR(std::fabs(end.angle_deg), 2.0, 1e-9);
+  EXPECT_EQ(end.rate_dps, 0.0);
+  EXPECT_EQ(s.demand_oscillation(6.0, kOuter, {1.0, 1.0, 0.0}).code, 204);
+}
+
+TEST(TableServo, OscillationBeyondTheLimitsIsRefused) {
+  sim::TableServo s(servo_config());
+  s.interlock_close(0.0);
+  s.set_mode(0.0, kOuter, TableMode::synthesis);
+  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {10.0, 10.0, 0.0}).code, 201);  // rate 628 deg/s
+  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {1.0, -1.0, 0.0}).code, 101);
+}
+
+TEST(TableServo, InterlockAndWatchdog) {
+  sim::TableServo s(servo_config());
+  EXPECT_EQ(s.set_mode(0.0, kOuter, TableMode::rate).code, 200);
+  s.interlock_close(0.0);
+  ASSERT_TRUE(s.set_watchdog(0.0, 0.5).ok());
+  s.set_mode(0.0, kOuter, TableMode::rate);
+  s.demand_rate(0.0, kOuter, 10.0);
+  s.demand_rate(0.4, kOuter, 10.0);  // fed
+  s.advance(0.8);
+  EXPECT_EQ(s.status(0.8).axes[0].mode, TableMode::rate);
+  s.advance(1.0);
+  EXPECT_EQ(s.status(1.0).axes[0].mode, TableMode::off);
+  EXPECT_TRUE(s.status(1.0).axes[0].watchdog_expired);
+  EXPECT_EQ(s.demand_rate(1.0, kOuter, 10.0).code, 203);
+  // Interlock open brakes everything.
+  s.set_mode(1.0, kMiddle, TableMode::rate);
+  s.set_watchdog(1.0, 0.0);
+  s.demand_rate(1.0, kMiddle, 100.0);
+  s.interlock_open(2.0);
+  EXPECT_EQ(s.status(2.0).interlock, InterlockState::open);
+  EXPECT_EQ(s.sample(3.0)[1].rate_dps, 0.0);
+  EXPECT_EQ(s.demand_rate(3.0, kMiddle, 1.0).code, 200);
+}
+
+TEST(TableServo, ProgramFromMatchesTheServoMotion) {
+  // The physics reads the motion through motion::Program; it must be the motion the table
+  // reports, whatever the piece boundaries of the three axes.
+  sim::TableServo s(servo_config());
+  s.interlock_close(0.0);
+  s.set_mode(0.0, kOuter, TableMode::rate);
+  s.demand_rate(0.1, kOuter, 30.0);
+  s.set_mode(0.2, kMiddle, TableMode::position);
+  s.demand_position(0.3, kMiddle, 54.7356);
+  s.set_mode(0.35, kInner, TableMode::synthesis);
+  s.demand_oscillation(0.4, kInner, {3.0, 2.0, 45.0});
+  s.demand_rate(1.7, kOuter, -20.0);
+  const double t_from = 0.25;
+  const motion::Program p = s.program_from(t_from);
+  std::size_t cursor = 0;
+  // (Program time 0 itself is "before the start", at rest, by the Program convention.)
+  for (double t = t_from + 1e-6; t < 6.0; t += 0.00731) {
+    const auto st = p.evaluate(t - t_from, cursor);
+    const auto smp = s.sample(t);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(st.angle_rad[k] * units::kRadToDeg, smp[static_cast<std::size_t>(k)].angle_deg, 1e-8) << t << " axis " << k;
+      EXPECT_NEAR(st.rate_radps[k] * units::kRadToDeg, smp[static_cast<std::size_t>(k)].rate_dps, 1e-6) << t << " axis " << k;
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Driver against the simulated table
+
+namespace {
+
+struct Rig {
+  sim::SimWorld world{servo_config()};
+  sim::SimTable table;
+  AclTable driver;
+  explicit Rig(sim::SimTableConfig tc = {}, std::function<void(AclTableConfig&)> tweak = {})
+      : table(world, tc), driver(make_config(table, tweak)) {}
+  static AclTableConfig make_config(const sim::SimTable& t, const std::function<void(AclTableConfig&)>& tweak) {
+    AclTableConfig c;
+    c.port = t.port();
+    c.response_timeout = 500ms;
+    c.backoff_initial = 50ms;
+    c.backoff_max = 400ms;
+    c.safe_stop_timeout = 10s;
+    if (tweak) tweak(c);
+    return c;
+  }
+  void up() {
+    ASSERT_TRUE(driver.connect()) << driver.describe();
+    ASSERT_TRUE(driver.configure());
+    ASSERT_TRUE(driver.activate());
+  }
+};
+
+}  // namespace
+
+TEST(AclTable, LifecycleConfiguresLimitsAndClosesTheInterlock) {
+  Rig rig({}, [](AclTableConfig& c) { c.limits[1][static_cast<int>(TableMode::position)] = AxisLimitSetting{-95.0, 95.0, 50.0, 100.0}; });
+  rig.up();
+  EXPECT_EQ(rig.driver.state(), DeviceState::active);
+  const auto st = rig.driver.read_status();
+  ASSERT_TRUE(st) << st.error().message;
+  EXPECT_EQ(st->interlock, InterlockState::closed);
+  ASSERT_TRUE(rig.driver.set_mode(kMiddle, TableMode::position));
+  EXPECT_EQ(rig.driver.demand_position(kMiddle, 100.0).code(), DriverErrc::limit_exceeded);
+  ASSERT_TRUE(rig.driver.safe_stop());
+  EXPECT_EQ(rig.driver.read_status()->interlock, InterlockState::open);
+  EXPECT_EQ(rig.driver.state(), DeviceState::configured);
+  rig.driver.disconnect();
+  EXPECT_EQ(rig.driver.state(), DeviceState::disconnected);
+  EXPECT_EQ(rig.driver.read_positions().code(), DriverErrc::invalid_state);
+}
+
+TEST(AclTable, RateModeAndTimeCoherentPositionReads) {
+  sim::SimTableConfig tc;
+  tc.clock_drift_ppm = 80.0;
+  tc.clock_offset_us = 123'456'789'000;
+  Rig rig(tc);
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 30.0));
+  std::this_thread::sleep_for(200ms);  // past the 75 ms ramp
+  std::vector<TablePositions> reads;
+  Stopwatch sw;
+  while (sw.seconds() < 1.5) {
+    auto p = rig.driver.read_positions();
+    ASSERT_TRUE(p) << p.error().message;
+    reads.push_back(*p);
+    std::this_thread::sleep_for(2ms);
+  }
+  ASSERT_GT(reads.size(), 50u);
+  double worst_us = 0.0;
+  for (std::size_t i = 1; i < reads.size(); ++i) {
+    EXPECT_GT(reads[i].t_ns, reads[i - 1].t_ns);
+    EXPECT_NEAR(reads[i].rate_dps[0], 30.0, 1e-9);
+    // Where the table really was at the mapped time (world clock is the truth here).
+    const double true_world_s = (static_cast<double>(reads[i].device_time_us - tc.clock_offset_us) / (1.0 + 80e-6)) * 1e-6;
+    const double err_us = static_cast<double>(reads[i].t_ns - rig.world.host_ns(true_world_s)) / 1e3;
+    if (i > reads.size() / 2) worst_us = std::max(worst_us, std::fabs(err_us));
+  }
+  // Loopback round trips are tens of microseconds; allow a loaded machine its hiccups.
+  EXPECT_LT(worst_us, 2000.0);
+  RecordProperty("table_time_error_us", std::to_string(worst_us));
+  const auto cm = rig.driver.clock_model();
+  EXPECT_TRUE(cm.valid);
+}
+
+TEST(AclTable, PositionAndOscillationDemandsMoveTheTable) {
+  Rig rig;
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kMiddle, TableMode::position));
+  ASSERT_TRUE(rig.driver.demand_position(kMiddle, 30.0));
+  ASSERT_TRUE(eventually([&] {
+    auto p = rig.driver.read_positions();
+    return p && std::fabs(p->angle_deg[1] - 30.0) < 1e-9 && p->rate_dps[1] == 0.0;
+  }));
+  ASSERT_TRUE(rig.driver.set_mode(kInner, TableMode::synthesis));
+  ASSERT_TRUE(rig.driver.demand_oscillation(kInner, {1.5, 2.0, 0.0}));
+  double lo = 0.0, hi = 0.0;
+  Stopwatch sw;
+  while (sw.seconds() < 2.5) {
+    auto p = rig.driver.read_positions();
+    ASSERT_TRUE(p);
+    lo = std::min(lo, p->angle_deg[2]);
+    hi = std::max(hi, p->angle_deg[2]);
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_GT(hi, 1.4);
+  EXPECT_LT(lo, -1.4);
+  EXPECT_LE(hi, 1.5 + 1e-9);
+  EXPECT_GE(lo, -1.5 - 1e-9);
+}
+
+TEST(AclTable, InterlockOpenRefusesMotion) {
+  Rig rig;
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 50.0));
+  rig.table.trip_interlock();  // emergency stop on the panel
+  const auto r = rig.driver.demand_rate(kOuter, 50.0);
+  EXPECT_EQ(r.code(), DriverErrc::interlock_open) << (r ? "" : r.error().message);
+  const auto st = rig.driver.read_status();
+  ASSERT_TRUE(st);
+  EXPECT_EQ(st->interlock, InterlockState::open);
+  EXPECT_EQ(st->axes[0].mode, TableMode::off);
+  ASSERT_TRUE(eventually([&] {
+    auto p = rig.driver.read_positions();
+    return p && p->rate_dps[0] == 0.0;
+  }));
+  EXPECT_EQ(rig.driver.set_mode(kOuter, TableMode::rate).code(), DriverErrc::interlock_open);
+  ASSERT_TRUE(rig.driver.interlock_close());
+  EXPECT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+}
+
+TEST(AclTable, AxisLimitHitIsATypedFaultUntilReset) {
+  Rig rig;
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_limits(kInner, TableMode::rate, {-5.0, 5.0, 100.0, 400.0}));
+  ASSERT_TRUE(rig.driver.set_mode(kInner, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kInner, 25.0));
+  Stopwatch sw;
+  ASSERT_TRUE(eventually([&] {
+    auto st = rig.driver.read_status();
+    return st && st->axes[2].at_limit;
+  }));
+  EXPECT_LT(sw.seconds(), 5.0);  // 0.2 s of motion; the rest is the machine's load
+  const auto st = rig.driver.read_status();
+  EXPECT_TRUE(st->axes[2].fault);
+  EXPECT_EQ(st->axes[2].mode, TableMode::off);
+  EXPECT_EQ(rig.driver.set_mode(kInner, TableMode::rate).code(), DriverErrc::axis_fault);
+  ASSERT_TRUE(rig.driver.interlock_reset());
+  ASSERT_TRUE(rig.driver.set_mode(kInner, TableMode::position));
+  ASSERT_TRUE(rig.driver.demand_position(kInner, 0.0));
+  EXPECT_EQ(rig.driver.demand_rate(kInner, 1.0).code(), DriverErrc::invalid_state);  // wrong mode
+}
+
+TEST(AclTable, WatchdogDropsAnUnfedAxisAndFeedingKeepsItAlive) {
+  Rig rig({}, [](AclTableConfig& c) { c.watchdog_s = 0.4; });
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 5.0));
+  // Fed every 50 ms for a second: still in rate mode.
+  Stopwatch sw;
+  while (sw.seconds() < 1.0) {
+    ASSERT_TRUE(rig.driver.demand_rate(kOuter, 5.0));
+    std::this_thread::sleep_for(50ms);
+  }
+  EXPECT_EQ(rig.driver.read_status()->axes[0].mode, TableMode::rate);
+  // Demands stop: the axis is dropped to off.
+  ASSERT_TRUE(eventually([&] {
+    auto st = rig.driver.read_status();
+    return st && st->axes[0].watchdog_expired && st->axes[0].mode == TableMode::off;
+  }));
+  EXPECT_EQ(rig.driver.demand_rate(kOuter, 5.0).code(), DriverErrc::watchdog_expired);
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));  // re-arms
+  EXPECT_TRUE(rig.driver.demand_rate(kOuter, 5.0));
+}
+
+TEST(AclTable, BadCommandsGetErrorRepliesAndBadArgumentsNeverLeave) {
+  Rig rig;
+  rig.up();
+  EXPECT_EQ(rig.driver.demand_rate(3, 1.0).code(), DriverErrc::invalid_argument);
+  EXPECT_EQ(rig.driver.demand_position(0, std::nan("")).code(), DriverErrc::invalid_argument);
+  EXPECT_EQ(rig.driver.set_limits(0, TableMode::rate, {5.0, -5.0, 1.0, 1.0}).code(), DriverErrc::invalid_argument);
+  // A raw client: unknown command, bad arguments, an over-long line.
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(static_cast<std::uint16_t>(rig.table.port()));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  auto ask = [&](const std::string& line) {
+    (void)::send(s, line.data(), line.size(), MSG_NOSIGNAL);
+    std::string reply;
+    char ch;
+    while (::recv(s, &ch, 1, 0) == 1 && ch != '\n') reply += ch;
+    return reply;
+  };
+  EXPECT_EQ(ask(":FOO:BAR 1\n").rfind("ERR 100,", 0), 0u);
+  EXPECT_EQ(ask(":DEM:RATE 7,1\n").rfind("ERR 101,", 0), 0u);
+  EXPECT_EQ(ask(":READ:POS?\r\n").rfind("POS ", 0), 0u);
+  EXPECT_EQ(ask(std::string(2000, 'A') + "\n").rfind("ERR 100,", 0), 0u);
+  ::close(s);
+}
+
+TEST(AclTable, DroppedConnectionIsReportedThenReconnected) {
+  Rig rig;
+  rig.up();
+  rig.table.drop_connections();
+  Stopwatch sw;
+  const auto r = rig.driver.read_positions();
+  ASSERT_FALSE(r);
+  EXPECT_TRUE(r.code() == DriverErrc::connection_lost || r.code() == DriverErrc::timeout) << r.error().message;
+  EXPECT_LT(sw.seconds(), 3.0);
+  EXPECT_EQ(rig.driver.state(), DeviceState::faulted);
+  ASSERT_TRUE(eventually([&] { return rig.driver.read_positions().ok(); }));
+  EXPECT_EQ(rig.driver.reconnects(), 1u);
+  EXPECT_EQ(rig.driver.state(), DeviceState::active);
+  // The reconnection restored the session's checksum mode: corrupted replies are still caught.
+  rig.table.corrupt_next_replies(1);
+  EXPECT_EQ(rig.driver.read_positions().code(), DriverErrc::crc_error);
+}
+
+TEST(AclTable, LateReplyIsATimeoutAndNeverAStaleValue) {
+  Rig rig({}, [](AclTableConfig& c) { c.response_timeout = 300ms; });
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 20.0));
+  rig.table.set_reply_delay(900ms);
+  Stopwatch sw;
+  const auto r = rig.driver.read_positions();
+  EXPECT_EQ(r.code(), DriverErrc::timeout);
+  EXPECT_LT(sw.seconds(), 2.0);
+  const std::int64_t after_timeout = host_time_ns();
+  rig.table.set_reply_delay(0ms);
+  auto p = rig.driver.read_positions();
+  ASSERT_TRUE(eventually([&] { return (p = rig.driver.read_positions()).ok(); }));
+  // The late reply (sampled before the timeout) was never delivered: this one is newer.
+  EXPECT_GT(p->t_ns, after_timeout - 1'000'000);
+}
+
+TEST(AclTable, CorruptedReplyIsCaughtByTheChecksum) {
+  Rig rig;
+  rig.up();
+  for (int i = 0; i < 5; ++i) {
+    rig.table.corrupt_next_replies(1);
+    const auto r = rig.driver.read_positions();
+    EXPECT_EQ(r.code(), DriverErrc::crc_error) << (r ? "a corrupted value was returned" : r.error().message);
+    ASSERT_TRUE(eventually([&] { return rig.driver.read_positions().ok(); }));
+  }
+}
+
+TEST(AclTable, SilentTableTimesOut) {
+  Rig rig({}, [](AclTableConfig& c) { c.response_timeout = 300ms; });
+  rig.up();
+  rig.table.set_silent(true);
+  Stopwatch sw;
+  EXPECT_EQ(rig.driver.read_status().code(), DriverErrc::timeout);
+  EXPECT_LT(sw.seconds(), 2.0);
+  rig.table.set_silent(false);
+  ASSERT_TRUE(eventually([&] { return rig.driver.read_status().ok(); }));
+}
+
+TEST(AclTable, SafeStopBringsEveryAxisToRestThenOpensTheInterlock) {
+  Rig rig;
+  rig.up();
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 100.0));
+  ASSERT_TRUE(rig.driver.set_mode(kInner, TableMode::synthesis));
+  ASSERT_TRUE(rig.driver.demand_oscillation(kInner, {1.0, 1.0, 0.0}));
+  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(rig.driver.safe_stop());
+  const auto p = rig.driver.read_positions();
+  ASSERT_TRUE(p);
+  for (double w : p->rate_dps) EXPECT_EQ(w, 0.0);
+  EXPECT_EQ(rig.driver.read_status()->interlock, InterlockState::open);
+}
+
+TEST(AclTable, UnreachableTableFailsWithinTheConnectTimeout) {
+  AclTableConfig c;
+  c.port = 1;  // nothing listens on port 1 of the loopback
+  AclTable d(c);
+  Stopwatch sw;
+  const auto r = d.connect();
+  EXPECT_EQ(r.code(), DriverErrc::connect_failed);
+  EXPECT_NE(r.error().message.find("127.0.0.1:1"), std::string::npos);
+  EXPECT_LT(sw.seconds(), 2.0);
+}
+
+TEST(AclTable, ConfigurationFromJson) {
+  const auto c = acl_table_config_from_json(
+      R"({"host":"10.0.0.5","port":5001,"watchdog_s":0.5,"reply_checksum":false,
+          "limits":[{"axis":"middle","mode":"rate","min_deg":-90,"max_deg":90,"rate_dps":50,"accel_dps2":20}]})");
+  EXPECT_EQ(c.host, "10.0.0.5");
+  EXPECT_EQ(c.port, 5001);
+  EXPECT_FALSE(c.reply_checksum);
+  ASSERT_TRUE(c.limits[1][2]);
+  EXPECT_DOUBLE_EQ(c.limits[1][2]->max_deg, 90.0);
+  EXPECT_THROW(acl_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
+}
