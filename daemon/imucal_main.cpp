@@ -7,6 +7,9 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
+#include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -17,13 +20,17 @@
 #include "core/units.hpp"
 #include "daemon/service/campaign_runner.hpp"
 #include "drivers/sim/simulator.hpp"
+#include "drivers/sim/thermal_model.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
 #include "estimators/evaluate.hpp"
 #include "estimators/nav_filter.hpp"
 #include "estimators/noise.hpp"
 #include "estimators/navigation_run.hpp"
+#include "estimators/thermal.hpp"
+#include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
+#include "bench/storage_bench.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
 
@@ -60,7 +67,55 @@ struct SimulateArgs {
   double rate_hz = 1000, duration_s = 0, azimuth_deg = 0;
   std::uint64_t seed = 1;
   std::vector<double> r0_mm = {0, 0, 0};
+  std::string chamber;                       // stage 2: a chamber profile drives the temperatures
+  bool stabilise = false;
+  std::vector<std::string> temp_faults;      // channel:kind:t0:t1[:jump_C]
+  std::vector<double> chamber_reach_C;       // lo hi: what the chamber can reach (a fault)
 };
+
+// The chamber profile, its coverage predicted before anything runs, and the thermal model.
+std::unique_ptr<sim::ThermalModel> make_thermal(const SimulateArgs& a, const ImuModel& truth, double duration_s,
+                                                std::string& record_json) {
+  const motion::ChamberProfile profile = motion::load_chamber_profile(a.chamber);
+  const auto problems = motion::validate_chamber_profile(profile, motion::ChamberLimits{});
+  if (!problems.empty()) {
+    std::string msg = "chamber profile '" + profile.name + "' exceeds the chamber:";
+    for (const auto& p : problems) msg += "\n  - " + p;
+    throw std::invalid_argument(msg);
+  }
+  sim::ThermalConfig tc;
+  tc.stabilisation.enabled = a.stabilise;
+  if (a.chamber_reach_C.size() == 2) {
+    tc.chamber_min_C = a.chamber_reach_C[0];
+    tc.chamber_max_C = a.chamber_reach_C[1];
+  }
+  for (const std::string& f : a.temp_faults) {
+    sim::SensorFault fault;
+    std::vector<std::string> part;
+    std::stringstream ss(f);
+    for (std::string x; std::getline(ss, x, ':');) part.push_back(x);
+    if (part.size() < 3 || part.size() > 5)
+      throw std::invalid_argument("--temp-fault '" + f + "': expected channel:kind:t0_s[:t1_s[:jump_C]]");
+    fault.channel = part[0];
+    fault.kind = part[1];
+    fault.t0_s = std::stod(part[2]);
+    if (part.size() > 3) fault.t1_s = std::stod(part[3]);
+    if (part.size() > 4) fault.jump_C = std::stod(part[4]);
+    tc.faults.push_back(fault);
+  }
+  const motion::CoverageMap cov = motion::predict_coverage(profile, tc.lags);
+  std::printf("chamber profile '%s': %.1f h; predicted sensor coverage T %.2f..%.2f C, dT/dt %+.3f..%+.3f C/min, "
+              "T bins heated %.0f %%, cooled %.0f %%, at rest %.0f %%\n%s",
+              profile.name.c_str(), profile.duration_s() / 3600.0, cov.T_min_C, cov.T_max_C, cov.rate_min_C_per_min,
+              cov.rate_max_C_per_min, 100 * cov.heating_T_fraction(), 100 * cov.cooling_T_fraction(),
+              100 * cov.rest_T_fraction(), cov.ascii().c_str());
+  record_json = nlohmann::json{{"profile", nlohmann::json::parse(profile.source_json)},
+                               {"predicted_coverage", nlohmann::json::parse(cov.to_json())},
+                               {"stabilisation", a.stabilise},
+                               {"faults", a.temp_faults}}
+                    .dump();
+  return std::make_unique<sim::ThermalModel>(profile, truth, tc, duration_s);
+}
 
 int cmd_simulate(const SimulateArgs& a) {
   const motion::TableLimits limits;
@@ -78,8 +133,14 @@ int cmd_simulate(const SimulateArgs& a) {
   cfg.duration_s = a.duration_s;
   cfg.site.middle_axis_azimuth_deg = a.azimuth_deg;
   cfg.mount.r0_p_m = Eigen::Vector3d(a.r0_mm[0], a.r0_mm[1], a.r0_mm[2]) * units::kMmToM;
+  std::string chamber_json;
+  const std::unique_ptr<sim::ThermalModel> thermal =
+      a.chamber.empty() ? nullptr
+                        : make_thermal(a, truth, a.duration_s > 0 ? a.duration_s : program.duration_s(), chamber_json);
+  cfg.thermal = thermal.get();
   sim::Simulator sim(program, truth, cfg);
   auto db = storage::RunDb::create(a.db, sim.meta());
+  if (thermal) db.set_extra("chamber", chamber_json);
   const auto t0 = Clock::now();
   std::vector<ImuFrame> batch;
   batch.reserve(8192);
@@ -129,7 +190,11 @@ int cmd_navigate(const NavigateArgs& a) {
   const auto t0 = Clock::now();
   Progress progress("navigate", db.frame_count());
   std::int64_t n = 0;
+  // Temperatures in time order with the frames, for a model with a thermal section.
+  const std::vector<TempSample> temps = db.temps();
+  std::size_t next_temp = 0;
   db.for_each_frame([&](const ImuFrame& f) {
+    while (next_temp < temps.size() && temps[next_temp].t_ns <= f.t_ns) run.push_temp(temps[next_temp++]);
     run.push(f);
     if ((++n & 0xFFFF) == 0) progress.update(n);
   });
@@ -159,7 +224,53 @@ int cmd_navigate(const NavigateArgs& a) {
 struct CalibrateArgs {
   std::string db, stage = "direct", model, out, frame = "instrument";
   int passes = 1;
+  std::string report;                   // stage thermal: imucal-thermal-report/1
+  int statics_per_cycle = 0;            // stage thermal: when the statics carry no cycle names
+  double t_ref_C = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> range_C = {15.0, 35.0};
+  bool keep_shape = false;              // stage thermal: fit only the constants, keep the polynomials
 };
+
+// Stage 2 over a stored run: per-cycle estimates in one pass, the checks and fits, the report
+// stored with the run (plots' data included) and, if asked, written to a file.
+ImuModel run_thermal_stage(storage::RunDb& db, const ImuModel& model, const CalibrateArgs& a) {
+  const RecordingMeta meta = db.meta();
+  const std::vector<thermal::Cycle> cycles = thermal::find_cycles(meta.segments, a.statics_per_cycle);
+  if (cycles.size() < 3)
+    throw std::invalid_argument("the run has " + std::to_string(cycles.size()) +
+                                " table cycles (record the thermal program with a chamber profile)");
+  const auto t0 = Clock::now();
+  thermal::CycleEstimator estimator(meta, cycles, model);
+  Progress progress("stage thermal", db.frame_count());
+  std::int64_t n = 0;
+  db.for_each_frame([&](const ImuFrame& f) {
+    estimator.push(f);
+    if ((++n & 0xFFFF) == 0) progress.update(n);
+  });
+  progress.done();
+  thermal::Options opt;
+  opt.T_ref_C = a.t_ref_C;
+  opt.range_lo_C = a.range_C.at(0);
+  opt.range_hi_C = a.range_C.at(1);
+  const auto estimates = estimator.finish();
+  const thermal::Result r = a.keep_shape ? thermal::refit_constants(meta, estimates, db.temps(), model, opt)
+                                         : thermal::calibrate(meta, estimates, db.temps(), model, opt);
+  for (const auto& note : r.notes) std::printf("stage thermal: %s\n", note.c_str());
+  const auto report = nlohmann::json::parse(r.report_json);
+  std::printf("stage thermal: %d of %d cycles used, T_ref %.1f C, %.1f s; largest deviation over the run (%s):\n",
+              r.cycles_used, r.cycles_total, report.at("T_ref_C").get<double>(), seconds_since(t0),
+              report.at("residual_source").get<std::string>().c_str());
+  std::printf("  %-28s %14s %14s\n", "coefficient", "before", "compensated");
+  for (const char* g : thermal::groups())
+    std::printf("  %-28s %14.6g %14.6g\n", g, report.at("before").value(g, 0.0), report.at("residual").value(g, 0.0));
+  db.set_extra("thermal_report", r.report_json);
+  if (!a.report.empty()) {
+    std::ofstream out(a.report);
+    if (!out) throw std::runtime_error(a.report + ": cannot write");
+    out << report.dump(1) << "\n";
+  }
+  return r.model;
+}
 
 // Stage 3 over a stored run: the filter's report on stdout, its history stored with the run.
 ImuModel run_navigation_stage(storage::RunDb& db, const ImuModel& model, int passes) {
@@ -248,6 +359,7 @@ int cmd_calibrate(const CalibrateArgs& a) {
     for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
     model = r.model;
   });
+  attempt("thermal", [&] { model = run_thermal_stage(db, model, a); });
   attempt("navigation", [&] {
     const RecordingMeta meta = db.meta();
     if (all && std::none_of(meta.segments.begin(), meta.segments.end(), [](const SegmentInfo& s) {
@@ -264,9 +376,6 @@ int cmd_calibrate(const CalibrateArgs& a) {
     model = r.apply(model);
     db.set_extra("noise_curves", r.curves_json());  // Allan and PSD curves for the plots
   });
-  if (all) {
-    skipped.push_back("thermal: not implemented yet");
-  }
   // Stage 3 works and reports in the body frame: it sees gyro-to-accelerometer alignment only.
   const ImuModel out = (a.frame == "body" || model.frame == "body") ? direct::to_body_frame(model) : model;
   write_imu_model_file(out, a.out);
@@ -323,6 +432,50 @@ int cmd_evaluate(const std::string& db_path, const std::vector<std::string>& mod
   return 0;
 }
 
+// Coefficient by coefficient: estimate, truth, error, sigma, error/sigma (simulated runs).
+int cmd_compare(const std::string& model_path, const std::string& truth_path, const std::string& json_out) {
+  const ImuModel est = read_imu_model_file(model_path);
+  ImuModel truth = read_imu_model_file(truth_path);
+  if (est.frame == "body" && truth.frame != "body") truth = direct::to_body_frame(truth);
+  const ImuErrorSet sigma = est.sigma.value_or(ImuErrorSet{});
+  nlohmann::json rows = nlohmann::json::array();
+  std::printf("%-26s %14s %14s %12s %10s %7s\n", "coefficient", "estimate", "truth", "error", "sigma", "err/sig");
+  auto row = [&](const std::string& name, double e, double t, double s, double scale) {
+    const double err = (e - t) * scale, sig = s * scale;
+    std::printf("%-26s %14.6f %14.6f %12.6f %10.6f %7.2f\n", name.c_str(), e * scale, t * scale, err, sig,
+                sig > 0 ? err / sig : 0.0);
+    rows.push_back({{"name", name}, {"estimate", e * scale}, {"truth", t * scale}, {"error", err}, {"sigma", sig}});
+  };
+  const char* ax[3] = {"x", "y", "z"};
+  for (int j = 0; j < 3; ++j) {
+    const std::string a = ax[j];
+    row("gyro.bias_dph." + a, est.gyro.bias_radps[j], truth.gyro.bias_radps[j], sigma.gyro.bias_radps[j], units::kRadpsToDph);
+    row("gyro.scale_pos_ppm." + a, est.gyro.scale_pos[j], truth.gyro.scale_pos[j], sigma.gyro.scale_pos[j], 1e6);
+    row("gyro.scale_neg_ppm." + a, est.gyro.scale_neg[j], truth.gyro.scale_neg[j], sigma.gyro.scale_neg[j], 1e6);
+    row("gyro.delay_us." + a, est.gyro.delay_s[j], truth.gyro.delay_s[j], sigma.gyro.delay_s[j], 1e6);
+    row("accel.bias_mps2." + a, est.accel.bias_mps2[j], truth.accel.bias_mps2[j], sigma.accel.bias_mps2[j], 1.0);
+    row("accel.scale_ppm." + a, est.accel.scale[j], truth.accel.scale[j], sigma.accel.scale[j], 1e6);
+    row("accel.delay_us." + a, est.accel.delay_s[j], truth.accel.delay_s[j], sigma.accel.delay_s[j], 1e6);
+    row("accel.lever_arm_y_mm." + a, est.accel.lever_arm_y_m[j], truth.accel.lever_arm_y_m[j], sigma.accel.lever_arm_y_m[j], 1e3);
+    row("accel.lever_arm_z_mm." + a, est.accel.lever_arm_z_m[j], truth.accel.lever_arm_z_m[j], sigma.accel.lever_arm_z_m[j], 1e3);
+  }
+  const std::pair<const char*, double Misalignment::*> keys[6] = {
+      {"xy", &Misalignment::xy}, {"xz", &Misalignment::xz}, {"yx", &Misalignment::yx},
+      {"yz", &Misalignment::yz}, {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
+  for (const auto& [n, k] : keys) {
+    row(std::string("gyro.misalignment_arcsec.") + n, est.gyro.misalignment_rad.*k, truth.gyro.misalignment_rad.*k,
+        sigma.gyro.misalignment_rad.*k, units::kRadToArcsec);
+    row(std::string("accel.misalignment_arcsec.") + n, est.accel.misalignment_rad.*k, truth.accel.misalignment_rad.*k,
+        sigma.accel.misalignment_rad.*k, units::kRadToArcsec);
+  }
+  if (!json_out.empty()) {
+    std::ofstream out(json_out);
+    if (!out) throw std::runtime_error(json_out + ": cannot write");
+    out << nlohmann::json({{"frame", est.frame}, {"rows", rows}}).dump(1) << "\n";
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -340,6 +493,15 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   sim->add_option("--azimuth", sim_args.azimuth_deg, "middle-axis azimuth, deg clockwise from North")
       ->capture_default_str();
+  sim->add_option("--chamber", sim_args.chamber,
+                  "chamber profile (built-in thermal, thermal-short, or a JSON file): temperatures and the truth's "
+                  "thermal section drive the run");
+  sim->add_flag("--stabilise", sim_args.stabilise, "with --chamber: the IMU's own thermal stabilisation (0.4 C swing)");
+  sim->add_option("--temp-fault", sim_args.temp_faults,
+                  "with --chamber: a logged-temperature fault channel:kind:t0_s[:t1_s[:jump_C]] (kind stuck, jump, "
+                  "missing; channel gx..az, gx1..gz8, chamber, all)");
+  sim->add_option("--chamber-reach-C", sim_args.chamber_reach_C, "with --chamber: the lowest and highest air "
+                  "temperature the chamber can reach")->expected(2);
   sim->add_option("--r0-mm", sim_args.r0_mm, "IMU origin from the axis intersection, platform frame, mm")
       ->expected(3);
 
@@ -366,8 +528,16 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, noise, navigation or all")->capture_default_str()->check(
-      CLI::IsMember({"direct", "lever-arm", "noise", "navigation", "all"}));
+  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, thermal, noise, navigation or all")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"direct", "lever-arm", "thermal", "noise", "navigation", "all"}));
+  cal->add_option("--report", cal_args.report, "stage thermal: write the report (residuals, degrees, plots) here");
+  cal->add_option("--statics-per-cycle", cal_args.statics_per_cycle,
+                  "stage thermal: statics per table cycle, for a run whose statics are not named cycle-NNN/...");
+  cal->add_option("--t-ref-C", cal_args.t_ref_C, "stage thermal: reference temperature (default: middle of the data)");
+  cal->add_option("--range-C", cal_args.range_C, "stage thermal: the range the run was to cover, C")->expected(2);
+  cal->add_flag("--keep-shape", cal_args.keep_shape,
+                "stage thermal: keep the model's polynomials and fit only its constants to this run");
   cal->add_option("--model", cal_args.model, "model to start from; its other coefficients are carried over")
       ->check(CLI::ExistingFile);
   cal->add_option("--out", cal_args.out, "output imucal-imu-model/1 JSON")->required();
@@ -405,6 +575,18 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   camp_run->add_flag("--json", camp_json, "print the summary as one JSON object");
 
+  std::string cmp_model, cmp_truth, cmp_json;
+  auto* cmp = app.add_subcommand("compare", "Compare a calibration result with the truth of a simulated run");
+  cmp->add_option("model", cmp_model, "estimated imucal-imu-model/1")->required()->check(CLI::ExistingFile);
+  cmp->add_option("truth", cmp_truth, "truth imucal-imu-model/1 (put in the body frame when the model is)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmp->add_option("--json", cmp_json, "the table as JSON");
+
+  // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
+  auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
+  imucal::bench::add_storage_bench_commands(*bench);
+
   CLI11_PARSE(app, argc, argv);
   if (camp_run->parsed()) {
     if (camp_time_scale >= 0) camp_opts.time_scale = camp_time_scale;
@@ -434,6 +616,7 @@ int main(int argc, char** argv) {
     if (navc->parsed()) return cmd_navigate(nav_args);
     if (cal->parsed()) return cmd_calibrate(cal_args);
     if (ev->parsed()) return cmd_evaluate(eval_db, eval_models, eval_out);
+    if (cmp->parsed()) return cmd_compare(cmp_model, cmp_truth, cmp_json);
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

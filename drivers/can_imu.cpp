@@ -278,6 +278,10 @@ Result<void> CanImu::connect() {
   if (::setsockopt(m.fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0 &&
       ::setsockopt(m.fd, SOL_SOCKET, SO_TIMESTAMP, &on, sizeof on) != 0)
     return {DriverErrc::connect_failed, m.who() + ": cannot enable receive time stamps: " + std::strerror(errno)};
+  // A deep receive queue rides out scheduling hiccups of the polling thread without losing
+  // frames (best effort: the kernel clamps it to net.core.rmem_max).
+  const int bytes = 4 << 20;
+  (void)::setsockopt(m.fd, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
   m.link_lost = false;
   m.state = DeviceState::connected;
   return success();

@@ -437,7 +437,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
     mean /= static_cast<double>(n);
     const double var = std::max(0.0, sq / static_cast<double>(n) - mean * mean);
     const double se = std::sqrt(var / static_cast<double>(n));
-    if (mean <= std::max(2.0 * se, floor)) {
+    if (mean <= std::max(o.standard_errors * se, floor)) {
       chosen = c;
       break;
     }

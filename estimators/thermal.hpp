@@ -140,10 +140,11 @@ struct FitOptions {
   int folds = 5;                 // held-back cycles: every folds-th cycle in turn
   double min_samples_per_parameter = 3.0;
   // A simpler model is kept unless the best one predicts held-back cycles better, in mean square,
-  // by more than two standard errors of the paired difference, by more than min_improvement of
-  // its own mean square, and by more than resolution^2 (JSON unit): an improvement within the
-  // scatter of the estimates, or too small to matter, never buys a degree.
-  double min_improvement = 0.25;
+  // by more than standard_errors standard errors of the paired difference, by more than
+  // min_improvement of its own mean square, and by more than resolution^2 (JSON unit): an
+  // improvement within the scatter of the estimates, or too small to matter, never buys a degree.
+  double standard_errors = 2.0;
+  double min_improvement = 0.0;
   double resolution = 0.0;
 };
 
@@ -193,6 +194,9 @@ struct CycleEstimate {
     Eigen::MatrixXd A, K;
   };
   std::array<Design, 6> design;
+  // |K b - estimate| per coefficient (JSON unit), b the cycle's own measurements: zero when the
+  // design above is stage 1's; a check that it still is.
+  std::array<double, kCoefficients> design_mismatch{};
 };
 
 // Runs one DirectCalibrator per cycle over a single pass of the frames.
@@ -227,9 +231,8 @@ struct TempProblem {
 };
 
 struct CheckOptions {
-  double stuck_s = 600.0;             // unchanged this long while the chamber moved: stuck
-  double stuck_chamber_change_C = 1.0;
-  double stuck_others_change_C = 0.05;  // ... and the median of the other sensors by this much
+  double stuck_s = 600.0;               // unchanged this long while the median of the other
+  double stuck_others_change_C = 0.05;  // sensors moved by this much: stuck
   double jump_C = 0.3;                 // a step larger than this plus the physical rate: a jump
   double max_rate_C_per_min = 5.0;
   double gap_s = 30.0;                 // no samples this long while the values moved: missing
@@ -251,9 +254,11 @@ struct Options {
   double coverage_tolerance_C = 1.0;
   double rate_half_window_s = 120.0;  // centred window for the rate of each interval
   int leak_iterations = 2;             // rounds of removing what one coefficient leaks into another
-  // Per report group (groups() order): the smallest RMS a term must explain to be fitted, 1/20 of
-  // the seed's figures after compensation (accel 1e-5 m/s^2, 10 ppm, 3"; FOG 0.01 deg/h, 20 ppm, 2").
-  std::array<double, 7> resolution = {5e-7, 0.5, 0.15, 5e-4, 1.0, 1.0, 0.1};
+  // Per report group (groups() order): the smallest RMS a term must explain to be fitted, a tenth
+  // of the seed's figures after compensation (accel 1e-5 m/s^2, 10 ppm, 3"; FOG 0.01 deg/h,
+  // 20 ppm, 2"): below that a term does not matter, and in noise-free data nothing else would stop
+  // a degree from fitting the last traces of the cycles' own averaging.
+  std::array<double, 7> resolution = {1e-6, 1.0, 0.3, 2e-4, 2.0, 2.0, 0.2};
 };
 
 struct Result {
@@ -269,5 +274,14 @@ struct Result {
 // is judged against its truth; a real one against its own per-cycle estimates.
 Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
                  const std::vector<TempSample>& temps, const ImuModel& input, const Options& options);
+// The same checks and report for a model fitted before (e.g. over 15..35 C, judged on a run with
+// the IMU's thermal stabilisation): nothing is fitted; "before" is the model without its section.
+Result evaluate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                const std::vector<TempSample>& temps, const ImuModel& model, const Options& options);
+// Keeps the model's polynomials (their shape, from a run that covered the range) and fits only
+// the constants at T_ref to this run: a later run, e.g. with the IMU's thermal stabilisation,
+// whose narrow range cannot determine a shape but pins the level to a fraction of the noise.
+Result refit_constants(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                       const std::vector<TempSample>& temps, const ImuModel& model, const Options& options);
 
 }  // namespace imucal::thermal

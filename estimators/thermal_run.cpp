@@ -97,6 +97,9 @@ constexpr OffDiag kOffDiag[3][2] = {{{1, +1.0, 1}, {2, -1.0, 0}}, {{0, -1.0, 3},
 // the temperature an estimate refers to is the same weighted mean of the intervals' temperatures
 // that the estimate itself is of the coefficient's values (exact for a coefficient linear in T).
 void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, double min_rotation_rad, CycleEstimate& e) {
+  // Each row's measurements, as stage 1 forms them: the mean specific-force residual of a static,
+  // the summed-angle residual of an interval.
+  std::array<std::vector<double>, 6> b;
   std::vector<const direct::Interval*> statics, rotations;
   for (const direct::Interval& iv : ivs) {
     if (iv.frames < 2) continue;
@@ -138,6 +141,7 @@ void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, doub
         d.A(i, 2 + c) = od.sign * (1.0 + m.accel.scale[od.k]) * s.f_o_mps2[od.k];
       }
       w[i] = s.T_s;
+      b[static_cast<std::size_t>(3 + j)].push_back(s.sum_dv[j] / s.T_s - s.f_o_mps2[j]);
     }
     spread(d, w);
   }
@@ -159,8 +163,18 @@ void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, doub
       d.A(i, 2) = v.ref_neg_rad[j];
       for (int c = 0; c < 2; ++c) d.A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
       w[i] = 1.0 / v.T_s;
+      b[static_cast<std::size_t>(j)].push_back(v.sum_dtheta[j] - (v.ref_pos_rad[j] + v.ref_neg_rad[j]));
     }
     spread(d, w);
+  }
+  for (std::size_t row = 0; row < 6; ++row) {
+    const CycleEstimate::Design& d = e.design[row];
+    const Eigen::VectorXd x = d.K * Eigen::Map<const Eigen::VectorXd>(b[row].data(), static_cast<Eigen::Index>(b[row].size()));
+    for (std::size_t c = 0; c < d.coefficient.size(); ++c) {
+      const Coefficient& k = coefficients()[static_cast<std::size_t>(d.coefficient[c])];
+      e.design_mismatch[static_cast<std::size_t>(k.index)] =
+          std::abs(x[static_cast<Eigen::Index>(c)] * k.si_to_json - get(m.gyro, m.accel, k));
+    }
   }
 }
 
@@ -321,44 +335,10 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
   auto mask = [](int ch) { return ch < kChannels ? 1u << ch : 0u; };
   const double t_end = t_of(n - 1);
 
-  for (int ch = 0; ch <= kChamber; ++ch) {
-    // Missing or implausible readings (a broken sensor reads NaN, its maximum or nothing).
-    for (std::size_t i = 0; i < n;) {
-      const double v = val(i, ch);
-      if (std::isfinite(v) && v >= o.plausible_lo_C && v <= o.plausible_hi_C) {
-        ++i;
-        continue;
-      }
-      std::size_t k = i;
-      while (k + 1 < n && !(std::isfinite(val(k + 1, ch)) && val(k + 1, ch) >= o.plausible_lo_C &&
-                            val(k + 1, ch) <= o.plausible_hi_C))
-        ++k;
-      out.push_back({name(ch), "no valid reading (" + fmt("%g", v) + " C)", t_of(i), k + 1 < n ? t_of(k + 1) : t_end,
-                     mask(ch)});
-      i = k + 1;
-    }
-    // Jumps: a step no physical temperature makes; the channel is suspect until it steps back.
-    for (std::size_t i = 1; i < n; ++i) {
-      const double a = val(i - 1, ch), b = val(i, ch);
-      if (!std::isfinite(a) || !std::isfinite(b)) continue;
-      const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
-      if (std::abs(b - a) <= allowed) continue;
-      const double step = b - a;
-      std::size_t back = n;
-      for (std::size_t k = i + 1; k < n; ++k) {
-        const double d = val(k, ch) - val(k - 1, ch);
-        if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
-          back = k;
-          break;
-        }
-      }
-      std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
-      what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
-      out.push_back({name(ch), what, t_of(i - 1), back < n ? t_of(back) : t_end, mask(ch)});
-      i = back < n ? back : n;
-    }
-  }
-  // Stuck: a sensor channel frozen while the chamber and the other sensors moved.
+  // Stuck: a sensor channel frozen while the other sensors moved (the chamber alone is no witness:
+  // a stabilised IMU holds still while it moves). Found first, so that the step when it comes
+  // unstuck is not taken for a jump.
+  std::vector<std::vector<std::size_t>> stuck_end(kChannels + 1);
   for (int ch = 0; ch < kChannels; ++ch) {
     for (std::size_t i = 0; i < n;) {
       std::size_t k = i;
@@ -382,14 +362,55 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
         }
         std::sort(others_change.begin(), others_change.end());
         const double others = others_change[others_change.size() / 2];
-        if (cmax - cmin >= o.stuck_chamber_change_C && others >= o.stuck_others_change_C) {
+        if (others >= o.stuck_others_change_C) {
           out.push_back({name(ch),
                          "stuck at " + fmt("%.3f", val(i, ch)) + " C for " + fmt("%.0f", t1 - t0) +
-                             " s while the chamber moved by " + fmt("%.2f", cmax - cmin) + " C",
-                         t0, t1, mask(ch)});
+                             " s while the chamber moved by " + fmt("%.2f", cmax - cmin) +
+                             " C and the other sensors by " + fmt("%.2f", others) + " C",
+                         t0, k + 1 < n ? t_of(k + 1) : t1, mask(ch)});
+          stuck_end[static_cast<std::size_t>(ch)].push_back(k);
         }
       }
       i = k + 1;
+    }
+  }
+  for (int ch = 0; ch <= kChamber; ++ch) {
+    // Missing or implausible readings (a broken sensor reads NaN, its maximum or nothing).
+    for (std::size_t i = 0; i < n;) {
+      const double v = val(i, ch);
+      if (std::isfinite(v) && v >= o.plausible_lo_C && v <= o.plausible_hi_C) {
+        ++i;
+        continue;
+      }
+      std::size_t k = i;
+      while (k + 1 < n && !(std::isfinite(val(k + 1, ch)) && val(k + 1, ch) >= o.plausible_lo_C &&
+                            val(k + 1, ch) <= o.plausible_hi_C))
+        ++k;
+      out.push_back({name(ch), "no valid reading (" + fmt("%g", v) + " C)", t_of(i), k + 1 < n ? t_of(k + 1) : t_end,
+                     mask(ch)});
+      i = k + 1;
+    }
+    // Jumps: a step no physical temperature makes; the channel is suspect until it steps back.
+    const std::vector<std::size_t>& ends = stuck_end[static_cast<std::size_t>(ch)];
+    for (std::size_t i = 1; i < n; ++i) {
+      const double a = val(i - 1, ch), b = val(i, ch);
+      if (!std::isfinite(a) || !std::isfinite(b)) continue;
+      if (std::find(ends.begin(), ends.end(), i - 1) != ends.end()) continue;  // coming unstuck
+      const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
+      if (std::abs(b - a) <= allowed) continue;
+      const double step = b - a;
+      std::size_t back = n;
+      for (std::size_t k = i + 1; k < n; ++k) {
+        const double d = val(k, ch) - val(k - 1, ch);
+        if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
+          back = k;
+          break;
+        }
+      }
+      std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
+      what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
+      out.push_back({name(ch), what, t_of(i - 1), back < n ? t_of(back) : t_end, mask(ch)});
+      i = back < n ? back : n;
     }
   }
   // Gaps: no samples while the temperatures moved (a run-length store may skip unchanged ones).
@@ -425,8 +446,12 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
 }
 
 // ------------------------------------------------------------------------------------------------
-Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
-                 const std::vector<TempSample>& temps, const ImuModel& input, const Options& opt) {
+namespace {
+
+// Fits the models (fixed == nullptr) or takes the given ones, and judges them on the run.
+Result run_stage(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                 const std::vector<TempSample>& temps, const ImuModel& input, const Options& opt,
+                 const ThermalSection* fixed, bool refit_constants) {
   Result res;
   res.cycles_total = static_cast<int>(cycles.size());
   res.problems = check_temperatures(temps, opt.checks);
@@ -471,6 +496,11 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     for (const Coefficient& k : coefficients()) {
       const auto i = static_cast<std::size_t>(k.index);
       const auto ch = static_cast<std::size_t>(channel_of(k));
+      for (std::size_t g = 0; g < groups().size(); ++g)
+        if (std::string(groups()[g]) == k.group && e.design_mismatch[i] > 0.1 * opt.resolution[g])
+          res.notes.push_back(e.name + ": " + full_key(k) + " is not reproduced by stage 1's design as this stage " +
+                              "rebuilds it (off by " + fmt("%.3g", e.design_mismatch[i]) +
+                              "): its temperature and leak corrections are approximate");
       double T = 0, rate = 0;
       for (std::size_t s = 0; s < e.spans.size(); ++s) {
         T += e.weight[i][s] * r.T_iv[ch][s];
@@ -518,7 +548,9 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
   if (used_cycles < 3)
     throw std::runtime_error("stage thermal: " + std::to_string(used_cycles) + " usable cycles of " +
                              std::to_string(cycles.size()) + " (need 3 at least); see the notes above");
-  const double T_ref = std::isfinite(opt.T_ref_C) ? opt.T_ref_C : std::round((Tlo + Thi)) / 2.0;
+  const double T_ref = fixed                        ? fixed->T_ref_C
+                       : std::isfinite(opt.T_ref_C) ? opt.T_ref_C
+                                                    : std::round((Tlo + Thi)) / 2.0;
   json coverage = json::object();
   for (int ch = 0; ch < kChannels; ++ch) {
     const auto& c = cov[static_cast<std::size_t>(ch)];
@@ -528,10 +560,11 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
       res.notes.push_back(std::string("coverage: ") + channel_name(ch) + " reached " + fmt("%.2f", c[0]) + ".." +
                           fmt("%.2f", c[1]) + " C over the used cycles, asked " + fmt("%.1f", opt.range_lo_C) + ".." +
                           fmt("%.1f", opt.range_hi_C) + " C: its models extrapolate outside");
-    if (c[3] < 0.05 || c[2] > -0.05)
+    if (c[3] < 0.05 || c[2] > -0.05) {
+      const char* missing = c[3] < 0.05 && c[2] > -0.05 ? "heating or cooling" : c[3] < 0.05 ? "heating" : "cooling";
       res.notes.push_back(std::string("coverage: ") + channel_name(ch) + " dT/dt " + fmt("%+.3f", c[2]) + ".." +
-                          fmt("%+.3f", c[3]) + " C/min: no " + (c[3] < 0.05 ? "heating" : "cooling") +
-                          " cycles, the dT/dt terms rest on one side only");
+                          fmt("%+.3f", c[3]) + " C/min: no " + missing + " faster than 0.05 C/min");
+    }
   }
 
   // Fits.
@@ -545,6 +578,32 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
   auto fit_all = [&] {
     for (const Coefficient& k : coefficients()) {
       const auto i = static_cast<std::size_t>(k.index);
+      if (fixed) {
+        PolyFit f;
+        f.poly = fixed->poly[i];
+        f.constant = get(input.gyro, input.accel, k);
+        f.T_degree = static_cast<int>(f.poly.T.size());
+        f.rate_degree = static_cast<int>(f.poly.dTdt.size());
+        if (refit_constants) {
+          // The shape of the earlier models, the level of this run: the mean of what is left.
+          double sum = 0, sq = 0;
+          int n = 0;
+          for (const Row& r : rows)
+            if (r.use[i]) {
+              const double d = r.value[i] - f.poly.eval(r.T[i] - T_ref, r.rate[i]);
+              sum += d;
+              sq += d * d;
+              ++n;
+            }
+          if (n >= 2) {
+            f.constant = sum / n;
+            f.constant_sigma = std::sqrt(std::max(0.0, sq / n - f.constant * f.constant) / (n - 1));
+            f.samples = n;
+          }
+        }
+        fits[i] = f;
+        continue;
+      }
       std::vector<Sample> samples;
       for (const Row& r : rows)
         if (r.use[i]) samples.push_back({r.T[i], r.rate[i], r.value[i]});
@@ -567,7 +626,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
   // stage-1 equations determine (a drifting angle into a bias through the rotations, a drifting
   // scale factor into a bias through a position held at +-g). With the models fitted, predict
   // that leak from each cycle's own design and remove it; then fit again.
-  for (int iter = 0; iter < opt.leak_iterations; ++iter) {
+  for (int iter = 0; iter < (fixed && !refit_constants ? 1 : opt.leak_iterations); ++iter) {
     for (Row& r : rows) {
       const CycleEstimate& e = cycles[r.cycle];
       for (std::size_t row = 0; row < e.design.size(); ++row) {
@@ -592,7 +651,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
         }
       }
     }
-    fit_all();
+    if (!fixed || refit_constants) fit_all();
   }
   json degrees = json::object();
   for (const Coefficient& k : coefficients()) {
@@ -611,8 +670,18 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     degrees[full_key(k)] = {{"T_degree", f.T_degree}, {"dTdt_degree", f.rate_degree}, {"cycles", f.samples},
                             {"fit_rms", f.fit_rms}, {"cv_rms", f.cv_rms}, {"per_degree", table}};
   }
-  res.model.sigma = sigma;
-  res.model.thermal_json = thermal_to_json_text(res.section);
+  if (fixed && !refit_constants) {
+    res.model = input;
+    res.section = *fixed;
+  } else {
+    if (fixed) {
+      res.section = *fixed;
+      res.section.fitted_T_C = std::array<double, 2>{Tlo, Thi};
+      res.section.fitted_rate_C_per_min = std::array<double, 2>{Rlo, Rhi};
+    }
+    res.model.sigma = sigma;
+    res.model.thermal_json = thermal_to_json_text(res.section);
+  }
 
   // The judge: the truth of a simulated run, seen through each estimate's own weighting, or the
   // per-cycle estimates of a real one.
@@ -631,12 +700,8 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     if (truth_thermal->sim_oscillation && k.index < 3) v += oscillation_dph(*truth_thermal->sim_oscillation, k.index, t, rate);
     return v;
   };
-  std::map<std::string, double> residual, before, residual_est, before_est, est_error, truth_lo, truth_hi;
-  for (const char* g : groups()) {
-    residual[g] = before[g] = residual_est[g] = before_est[g] = est_error[g] = 0.0;
-    truth_lo[g] = 1e300;
-    truth_hi[g] = -1e300;
-  }
+  std::map<std::string, double> residual, before, residual_est, before_est, est_error, truth_p2p;
+  for (const char* g : groups()) residual[g] = before[g] = residual_est[g] = before_est[g] = est_error[g] = truth_p2p[g] = 0.0;
   json plots = json::object();
   for (const Coefficient& k : coefficients()) {
     const auto i = static_cast<std::size_t>(k.index);
@@ -644,6 +709,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     const double input_value = get(input.gyro, input.accel, k);
     const double constant = get(res.model.gyro, res.model.accel, k);
     json pts = json::array();
+    double lo = 1e300, hi = -1e300;
     for (const Row& r : rows) {
       if (!r.use[i]) continue;
       const CycleEstimate& e = cycles[r.cycle];
@@ -666,13 +732,14 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
         residual[g] = std::max(residual[g], std::abs(model_value - tv));
         before[g] = std::max(before[g], std::abs(input_value - tv));
         est_error[g] = std::max(est_error[g], std::abs(est - tv));
-        truth_lo[g] = std::min(truth_lo[g], tv);
-        truth_hi[g] = std::max(truth_hi[g], tv);
+        lo = std::min(lo, tv);
+        hi = std::max(hi, tv);
         truth_value = tv;
       }
       pts.push_back({e.name, 0.5 * (e.t0_s + e.t1_s), r.T[i], r.rate[i], est, e.sigma[i], est - thermal_part,
                      model_value, truth_value, e.value[i]});
     }
+    if (hi >= lo) truth_p2p[g] = std::max(truth_p2p[g], hi - lo);
     plots[full_key(k)] = pts;
   }
   auto to_json = [](const std::map<std::string, double>& m) {
@@ -693,9 +760,7 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
                  {"notes", res.notes}};
   if (truth) {
     report["estimate_error"] = to_json(est_error);
-    json p2p = json::object();
-    for (const char* g : groups()) p2p[g] = truth_hi[g] >= truth_lo[g] ? truth_hi[g] - truth_lo[g] : 0.0;
-    report["truth_peak_to_peak"] = p2p;
+    report["truth_peak_to_peak"] = to_json(truth_p2p);
   }
   json problems = json::array();
   for (const TempProblem& p : res.problems)
@@ -704,8 +769,30 @@ Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
   report["plots"] = {{"columns", {"cycle", "t_mid_s", "T_C", "dTdt_C_per_min", "estimate", "sigma", "compensated",
                                   "model", "truth", "raw_estimate"}},
                      {"series", plots}};
+  report["models"] = !fixed ? "fitted" : refit_constants ? "given shape, constants fitted" : "given";
   res.report_json = report.dump();
   return res;
+}
+
+}  // namespace
+
+Result calibrate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                 const std::vector<TempSample>& temps, const ImuModel& input, const Options& options) {
+  return run_stage(meta, cycles, temps, input, options, nullptr, false);
+}
+
+Result evaluate(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                const std::vector<TempSample>& temps, const ImuModel& model, const Options& options) {
+  const std::optional<ThermalSection> s = thermal_of(model);
+  if (!s) throw std::runtime_error("stage thermal: the model to judge has no thermal section");
+  return run_stage(meta, cycles, temps, model, options, &*s, false);
+}
+
+Result refit_constants(const RecordingMeta& meta, const std::vector<CycleEstimate>& cycles,
+                       const std::vector<TempSample>& temps, const ImuModel& model, const Options& options) {
+  const std::optional<ThermalSection> s = thermal_of(model);
+  if (!s) throw std::runtime_error("stage thermal: the model whose shape to keep has no thermal section");
+  return run_stage(meta, cycles, temps, model, options, &*s, true);
 }
 
 }  // namespace imucal::thermal

@@ -8,6 +8,13 @@ packages=(
   libeigen3-dev libmodbus-dev libboost1.81-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
   libsqlite3-dev sqlite3 libgtest-dev libgmock-dev libcli11-dev libbenchmark-dev
 )
+# The browser tests (tests/browser, ctest label `browser`): Debian's Chromium driven by Playwright,
+# and Node.js with npm. nodejs and npm are added only when their commands are missing, so a Node.js
+# installed another way (NodeSource's nodejs bundles npm and conflicts with Debian's npm) is kept.
+# Debian 12's nodejs is v18: tests/browser pins playwright-core 1.61, the last for Node 18.
+packages+=(chromium fonts-dejavu-core)
+command -v node >/dev/null 2>&1 || packages+=(nodejs)
+command -v npm >/dev/null 2>&1 || packages+=(npm)
 
 missing=()
 for p in "${packages[@]}"; do

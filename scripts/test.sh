@@ -7,6 +7,11 @@ cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 jobs=$(nproc)
 
+# The browser tests' npm packages (playwright-core, uplot) from tests/browser/package-lock.json:
+# nothing to do when node_modules already matches the lock; the registry is needed the first time.
+# Not fatal here: without them the browser tests fail and say why, the others still run.
+node tests/browser/npm-ci.mjs || echo "test.sh: npm ci failed in tests/browser; the browser tests will fail"
+
 cmake --preset release
 cmake --build --preset release -j "$jobs"
 ctest --preset release

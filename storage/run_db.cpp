@@ -1,11 +1,17 @@
-// RunDb implementation: SQLite schema, RAII handles, the frame chunk codec.
+// RunDb implementation: SQLite schema and migrations, RAII handles, the frame chunk codec, the
+// writer session and recovery.
 //
-// Schema (PRAGMA user_version = 1, PRAGMA application_id = kApplicationId):
+// Schema (PRAGMA user_version = 2, PRAGMA application_id = kApplicationId):
 //   run_meta(id = 1, json)                 RecordingMeta without the segments, as JSON
-//   imu_chunk(id, t0_ns, t1_ns, n, codec, data)   up to kFramesPerChunk frames per row
+//   imu_chunk(id, t0_ns, t1_ns, n, codec, summary, data)   up to kFramesPerChunk frames per row
 //   temp_sample(t_ns, gyro_*_C, accel_*_C, chamber_C, chamber_setpoint_C)
 //   segment(idx, name, kind, t0_s, t1_s)
 //   extra(key, json)                       results of later stages, import gaps, reports
+//   recorder_session(...)                  one row per writer session; closed_unix_ms IS NULL
+//                                          while writing -- after a crash, the unclean marker
+//   dropped_span(session, t0_ns, t1_ns, frames)   frames the recorder had to drop
+// Version 1 lacked summary, recorder_session and dropped_span; open() migrates it (a v1 chunk
+// keeps a NULL summary and is decoded when a plot needs it).
 //
 // Chunk payload `data` (little-endian, no padding, n = frames in the chunk):
 //   u8 time_encoding
@@ -22,12 +28,16 @@
 // Codec 1 costs 4 + 24 + 24 = 52 bytes per frame, codec 2 76. A chunk uses codec 1 only when
 // every value is exactly double(count) * lsb (bit for bit) or -0.0, so decoding never changes a
 // value (a tolerance such as 1e-6 LSB would).
+// Chunk `summary`: 9 x f64 minimum then 9 x f64 maximum of the channels dtheta xyz, dv xyz,
+// table xyz, so that plots of long ranges need no decoding.
 #include "storage/run_db.hpp"
 
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -52,9 +62,37 @@ constexpr int kCodecDoubles = 2;
 constexpr std::int32_t kNegativeZeroCount = std::numeric_limits<std::int32_t>::min();
 constexpr std::uint8_t kTimeDeltas32 = 1;
 constexpr std::uint8_t kTimeAbsolute64 = 2;
+constexpr std::size_t kSummaryBytes = 2 * RunDb::kPlotChannels * sizeof(double);
+
+// 16 KiB pages: a chunk of ~213 kB spans 13 overflow pages instead of 53, so SQLite makes a
+// quarter of the page writes, WAL frame headers and checksums per frame; the half page left
+// unused at a chunk's end costs ~2 bytes per frame.
+constexpr int kPageSizeBytes = 16384;
 
 [[noreturn]] void fail(const std::string& path, const std::string& reason) {
   throw StorageError("run database '" + path + "': " + reason);
+}
+
+// SQLite's message, with what it means for a run where a person can act on it.
+std::string sqlite_reason(sqlite3* db, int rc) {
+  const std::string message = db != nullptr ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
+  switch (rc & 0xff) {
+    case SQLITE_FULL:
+      return "the disk is full or the run reached its size limit (" + message +
+             "); the uncommitted writes were rolled back, everything committed before is intact";
+    case SQLITE_CORRUPT:
+    case SQLITE_NOTADB:
+      return "the file is damaged (" + message + ")";
+    case SQLITE_BUSY:
+    case SQLITE_LOCKED:
+      return "the run is locked by another connection (" + message + ")";
+    case SQLITE_IOERR:
+      return "I/O error (" + message + ")";
+    case SQLITE_READONLY:
+      return "the file cannot be written (" + message + ")";
+    default:
+      return message;
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -102,13 +140,20 @@ class Statement {
       bind_null(index);
     }
   }
+  void bind(int index, const std::optional<std::int64_t>& value) {
+    if (value) {
+      bind(index, *value);
+    } else {
+      bind_null(index);
+    }
+  }
 
   // True while a row is available.
   bool step() {
     const int rc = sqlite3_step(stmt_.get());
     if (rc == SQLITE_ROW) return true;
     if (rc == SQLITE_DONE) return false;
-    fail(*path_, std::string("'") + sqlite3_sql(stmt_.get()) + "' failed: " + sqlite3_errmsg(db_));
+    fail(*path_, std::string("'") + sqlite3_sql(stmt_.get()) + "' failed: " + sqlite_reason(db_, rc));
   }
   // For statements without result rows.
   void run() {
@@ -127,6 +172,10 @@ class Statement {
   std::optional<double> column_optional_double(int col) const {
     if (column_is_null(col)) return std::nullopt;
     return column_double(col);
+  }
+  std::optional<std::int64_t> column_optional_int64(int col) const {
+    if (column_is_null(col)) return std::nullopt;
+    return column_int64(col);
   }
   std::string column_text(int col) const {
     const auto* text = sqlite3_column_text(stmt_.get(), col);
@@ -202,6 +251,9 @@ void use_wal(sqlite3* db, const std::string& path) {
   exec(db, path, "PRAGMA synchronous=NORMAL");
 }
 
+// Version 2, as create() makes it. `summary` precedes `data` on purpose: SQLite stores columns in
+// order and a large blob spills into a chain of overflow pages, so a column after it could only
+// be read by walking that chain.
 const char* const kSchemaSql = R"sql(
 CREATE TABLE run_meta(id INTEGER PRIMARY KEY CHECK (id = 1), json TEXT NOT NULL);
 CREATE TABLE imu_chunk(
@@ -210,6 +262,7 @@ CREATE TABLE imu_chunk(
   t1_ns INTEGER NOT NULL,
   n INTEGER NOT NULL,
   codec INTEGER NOT NULL,
+  summary BLOB,
   data BLOB NOT NULL);
 CREATE INDEX imu_chunk_t0 ON imu_chunk(t0_ns);
 -- Value columns are declared without a type on purpose: a REAL column stores -0.0 as the
@@ -228,6 +281,46 @@ CREATE TABLE segment(
   t1_s NOT NULL);
 CREATE TABLE extra(key TEXT PRIMARY KEY, json TEXT NOT NULL);
 )sql";
+
+// Tables that version 2 added to version 1 (also part of a fresh version 2 file).
+const char* const kSessionTablesSql = R"sql(
+CREATE TABLE recorder_session(
+  id INTEGER PRIMARY KEY,
+  opened_unix_ms INTEGER NOT NULL,
+  closed_unix_ms INTEGER,
+  pid INTEGER NOT NULL,
+  host TEXT NOT NULL,
+  frames_at_open INTEGER NOT NULL,
+  committed_frames INTEGER NOT NULL DEFAULT 0,
+  committed_t_ns INTEGER,
+  commits INTEGER NOT NULL DEFAULT 0,
+  queue_high_water_frames INTEGER NOT NULL DEFAULT 0,
+  dropped_frames INTEGER NOT NULL DEFAULT 0,
+  unclean INTEGER NOT NULL DEFAULT 0,
+  lost_uncommitted_frames INTEGER,
+  integrity TEXT NOT NULL DEFAULT '');
+CREATE TABLE dropped_span(
+  id INTEGER PRIMARY KEY,
+  session INTEGER NOT NULL,
+  t0_ns INTEGER NOT NULL,
+  t1_ns INTEGER NOT NULL,
+  frames INTEGER NOT NULL);
+)sql";
+
+// Turns version `from` into version `from` + 1. The caller runs every step and the new
+// user_version in one transaction, so that a failed migration leaves the old version intact.
+void migrate_one_step(sqlite3* db, const std::string& path, std::int64_t from) {
+  switch (from) {
+    case 1:
+      // Chunk summaries for plots (NULL for the chunks already written; they are decoded when a
+      // plot needs them) and the writer sessions with their unclean-shutdown marker.
+      exec(db, path, "ALTER TABLE imu_chunk ADD COLUMN summary BLOB");
+      exec(db, path, kSessionTablesSql);
+      return;
+    default:
+      fail(path, "no migration from schema version " + std::to_string(from));
+  }
+}
 
 // ---------------------------------------------------------------------------------------------
 // Meta as JSON inside the database (not the bundle's meta.json: this one keeps metres, the LSBs
@@ -322,23 +415,55 @@ T get(const unsigned char*& in) {
 }
 
 // The integer count that reproduces `value` exactly as double(count) * lsb, if there is one.
-std::optional<std::int32_t> exact_count(double value, double lsb) {
+// `inv_lsb` = 1 / lsb: a multiplication instead of a division on the recorder's hot path; the
+// bitwise check below makes the result exact whatever rounding the reciprocal adds, and a value
+// the reciprocal misses by one count is retried with the division.
+std::optional<std::int32_t> exact_count(double value, double lsb, double inv_lsb) {
   if (std::bit_cast<std::uint64_t>(value) == std::bit_cast<std::uint64_t>(-0.0)) return kNegativeZeroCount;
-  const double quotient = value / lsb;
-  // |count| >= 2^31 does not fit; the comparison also rejects NaN.
-  if (!(std::fabs(quotient) < 2147483647.5)) return std::nullopt;
-  const auto count = static_cast<std::int32_t>(std::llround(quotient));
-  // Bitwise: -0.0 must not come back as +0.0.
-  if (std::bit_cast<std::uint64_t>(static_cast<double>(count) * lsb) != std::bit_cast<std::uint64_t>(value)) {
-    return std::nullopt;
+  for (const double quotient : {value * inv_lsb, value / lsb}) {
+    // |count| >= 2^31 does not fit; the comparison also rejects NaN.
+    if (!(std::fabs(quotient) < 2147483647.5)) return std::nullopt;
+    // Round half away from zero by hand: std::llround is a library call on baseline x86-64,
+    // and this runs six times per frame.
+    const auto count = static_cast<std::int32_t>(quotient + (quotient >= 0.0 ? 0.5 : -0.5));
+    // Bitwise: -0.0 must not come back as +0.0.
+    if (std::bit_cast<std::uint64_t>(static_cast<double>(count) * lsb) == std::bit_cast<std::uint64_t>(value)) {
+      return count;
+    }
   }
-  return count;
+  return std::nullopt;
 }
 
 struct EncodedChunk {
   int codec = kCodecDoubles;
   std::vector<unsigned char> data;
+  std::array<double, 2 * RunDb::kPlotChannels> summary{};  // min of each channel, then max
 };
+
+// Min and max of every plot channel over `frames` (non-empty).
+void summarize(std::span<const ImuFrame> frames, std::array<double, 2 * RunDb::kPlotChannels>& out) {
+  constexpr int kC = RunDb::kPlotChannels;
+  std::array<double, kC> lo{}, hi{};
+  auto channels = [](const ImuFrame& f, std::array<double, kC>& v) {
+    for (int axis = 0; axis < 3; ++axis) {
+      v[static_cast<std::size_t>(axis)] = f.dtheta_rad(axis);
+      v[static_cast<std::size_t>(3 + axis)] = f.dv_mps(axis);
+      v[static_cast<std::size_t>(6 + axis)] = f.table_deg(axis);
+    }
+  };
+  channels(frames[0], lo);
+  hi = lo;
+  std::array<double, kC> v{};
+  for (const auto& frame : frames.subspan(1)) {
+    channels(frame, v);
+    for (std::size_t k = 0; k < kC; ++k) {
+      lo[k] = v[k] < lo[k] ? v[k] : lo[k];
+      hi[k] = v[k] > hi[k] ? v[k] : hi[k];
+    }
+  }
+  std::copy(lo.begin(), lo.end(), out.begin());
+  std::copy(hi.begin(), hi.end(), out.begin() + kC);
+}
 
 // `frames` is non-empty with strictly increasing times (append() checks).
 void encode_chunk(std::span<const ImuFrame> frames, std::optional<double> gyro_lsb_rad,
@@ -354,10 +479,11 @@ void encode_chunk(std::span<const ImuFrame> frames, std::optional<double> gyro_l
   bool counts_fit = gyro_lsb_rad.has_value() && accel_lsb_mps.has_value();
   if (counts_fit) {
     counts_scratch.resize(6 * n);
+    const double gyro_inv = 1.0 / *gyro_lsb_rad, accel_inv = 1.0 / *accel_lsb_mps;
     for (std::size_t i = 0; i < n && counts_fit; ++i) {
       for (int axis = 0; axis < 3 && counts_fit; ++axis) {
-        const auto gyro = exact_count(frames[i].dtheta_rad(axis), *gyro_lsb_rad);
-        const auto accel = exact_count(frames[i].dv_mps(axis), *accel_lsb_mps);
+        const auto gyro = exact_count(frames[i].dtheta_rad(axis), *gyro_lsb_rad, gyro_inv);
+        const auto accel = exact_count(frames[i].dv_mps(axis), *accel_lsb_mps, accel_inv);
         counts_fit = gyro.has_value() && accel.has_value();
         if (counts_fit) {
           counts_scratch[6 * i + static_cast<std::size_t>(axis)] = *gyro;
@@ -396,6 +522,7 @@ void encode_chunk(std::span<const ImuFrame> frames, std::optional<double> gyro_l
   for (const auto& frame : frames) {
     for (int axis = 0; axis < 3; ++axis) put<double>(p, frame.table_deg(axis));
   }
+  summarize(frames, out.summary);
 }
 
 // Decodes a whole chunk into `out` (resized to n). The size is checked up front, so a damaged row
@@ -462,6 +589,26 @@ void remove_db_files(const std::string& path) noexcept {
   }
 }
 
+std::int64_t unix_ms_now() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string host_name() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "?";
+  return name;
+}
+
+// Finds the first chunk that may hold ?1 (chunks never overlap in time, so it is the last one
+// starting at or before ?1) through the t0 index, instead of testing t1_ns on every earlier row.
+#define IMUCAL_CHUNK_RANGE                                                                       \
+  " FROM imu_chunk WHERE t0_ns >= (SELECT COALESCE(MAX(t0_ns), ?1) FROM imu_chunk WHERE t0_ns <= ?1)" \
+  " AND t0_ns <= ?2 AND t1_ns >= ?1 ORDER BY t0_ns"
+constexpr const char* kSelectChunksSql = "SELECT id, n, codec, data" IMUCAL_CHUNK_RANGE;
+constexpr const char* kSelectSummariesSql = "SELECT id, t0_ns, t1_ns, n, summary" IMUCAL_CHUNK_RANGE;
+#undef IMUCAL_CHUNK_RANGE
+
 }  // namespace
 
 // -----------------------------------------------------------------------------------------------
@@ -470,13 +617,16 @@ struct RunDb::Impl {
   // Declared first so that it is destroyed last: the statements below finalize before the close.
   std::string path;
   DbHandle db;
+  OpenMode mode = OpenMode::Auto;
 
   Statement begin, commit, rollback;
-  Statement insert_chunk, update_chunk, select_chunks, count_frames, storage_stats;
+  Statement insert_chunk, update_chunk, select_chunks, select_summaries, select_chunk_data;
+  Statement count_frames, last_frame_time, storage_stats;
   Statement insert_temp, select_temps;
   Statement delete_segments, insert_segment, select_segments;
   Statement upsert_extra, select_extra;
   Statement select_meta;
+  Statement insert_session, update_session, select_sessions, insert_dropped, select_dropped;
 
   RecordingMeta meta;  // cached: the codec needs the LSBs on every chunk
 
@@ -492,16 +642,33 @@ struct RunDb::Impl {
   std::vector<std::int32_t> counts_scratch;
   bool select_chunks_busy = false;  // for_each_frame called from inside its own callback
 
+  // ---- the writer session (only while `lease` is held) ----
+  std::unique_ptr<WriterLease> lease;
+  std::int64_t session_id = 0;
+  std::int64_t frames_at_open = 0;
+  std::int64_t frames_in_db = 0;              // frames in chunk rows, written by this connection
+  std::optional<std::int64_t> db_last_t_ns;   // time of the last frame in a chunk row
+  std::int64_t high_water_frames = 0, dropped_frames = 0;
+  bool accepted_counted_by_caller = false;
+  bool batch_open = false;
+  std::optional<std::string> poisoned;  // why writes are refused after a failed batch
+  std::vector<DroppedSpan> pending_drops;
+  std::optional<RecoveryReport> recovery;
+
   Impl(std::string path_in, DbHandle db_in) : path(std::move(path_in)), db(std::move(db_in)) {
     auto prepare = [&](const char* sql) { return Statement(db.get(), &path, sql); };
     begin = prepare("BEGIN IMMEDIATE");
     commit = prepare("COMMIT");
     rollback = prepare("ROLLBACK");
-    insert_chunk = prepare("INSERT INTO imu_chunk(t0_ns, t1_ns, n, codec, data) VALUES (?1, ?2, ?3, ?4, ?5)");
-    update_chunk = prepare("UPDATE imu_chunk SET t0_ns = ?1, t1_ns = ?2, n = ?3, codec = ?4, data = ?5 WHERE id = ?6");
-    select_chunks = prepare(
-        "SELECT id, n, codec, data FROM imu_chunk WHERE t0_ns <= ?2 AND t1_ns >= ?1 ORDER BY t0_ns");
+    insert_chunk = prepare(
+        "INSERT INTO imu_chunk(t0_ns, t1_ns, n, codec, summary, data) VALUES (?1, ?2, ?3, ?4, ?5, ?6)");
+    update_chunk = prepare(
+        "UPDATE imu_chunk SET t0_ns = ?1, t1_ns = ?2, n = ?3, codec = ?4, summary = ?5, data = ?6 WHERE id = ?7");
+    select_chunks = prepare(kSelectChunksSql);
+    select_summaries = prepare(kSelectSummariesSql);
+    select_chunk_data = prepare("SELECT n, codec, data FROM imu_chunk WHERE id = ?1");
     count_frames = prepare("SELECT COALESCE(SUM(n), 0) FROM imu_chunk");
+    last_frame_time = prepare("SELECT MAX(t1_ns) FROM imu_chunk");
     storage_stats = prepare(
         "SELECT COUNT(*), COALESCE(SUM(codec = 1), 0), COALESCE(SUM(codec = 2), 0), "
         "COALESCE(SUM(n), 0), COALESCE(SUM(LENGTH(data)), 0) FROM imu_chunk");
@@ -517,24 +684,53 @@ struct RunDb::Impl {
     upsert_extra = prepare("INSERT OR REPLACE INTO extra(key, json) VALUES (?1, ?2)");
     select_extra = prepare("SELECT json FROM extra WHERE key = ?1");
     select_meta = prepare("SELECT json FROM run_meta WHERE id = 1");
+    insert_session = prepare(
+        "INSERT INTO recorder_session(opened_unix_ms, pid, host, frames_at_open) VALUES (?1, ?2, ?3, ?4)");
+    update_session = prepare(
+        "UPDATE recorder_session SET committed_frames = ?2, committed_t_ns = ?3, commits = commits + ?4, "
+        "queue_high_water_frames = ?5, dropped_frames = ?6, closed_unix_ms = ?7 WHERE id = ?1");
+    select_sessions = prepare(
+        "SELECT id, opened_unix_ms, closed_unix_ms, pid, host, frames_at_open, committed_frames, committed_t_ns, "
+        "commits, queue_high_water_frames, dropped_frames, unclean, lost_uncommitted_frames, integrity "
+        "FROM recorder_session ORDER BY id");
+    insert_dropped = prepare("INSERT INTO dropped_span(session, t0_ns, t1_ns, frames) VALUES (?1, ?2, ?3, ?4)");
+    select_dropped = prepare("SELECT session, t0_ns, t1_ns, frames FROM dropped_span ORDER BY t0_ns");
   }
 
-  // BEGIN IMMEDIATE .. COMMIT; rolls back when left without commit().
+  std::int64_t query_int(Statement& stmt) {
+    Statement::Reset reset(stmt);
+    if (!stmt.step() || stmt.column_is_null(0)) return 0;
+    return stmt.column_int64(0);
+  }
+
+  std::optional<std::int64_t> query_optional_int(Statement& stmt) {
+    Statement::Reset reset(stmt);
+    if (!stmt.step()) return std::nullopt;
+    return stmt.column_optional_int64(0);
+  }
+
+  // BEGIN IMMEDIATE .. COMMIT; rolls back when left without commit(). Inside a batch it only
+  // marks a unit of work: the batch's transaction holds it, and a failure aborts the batch.
   class Transaction {
    public:
-    explicit Transaction(Impl& impl) : impl_(impl) { impl_.begin.run(); }
+    explicit Transaction(Impl& impl) : impl_(impl), nested_(impl.batch_open) {
+      if (!nested_) impl_.begin.run();
+    }
     void commit() {
-      impl_.commit.run();
+      if (!nested_) impl_.commit.run();
       committed_ = true;
     }
     ~Transaction() {
-      if (!committed_) {
-        try {
-          impl_.rollback.run();
-        } catch (const StorageError&) {
-          // The original error is more useful than this one; SQLite has rolled back anyway
-          // when the commit itself failed.
-        }
+      if (committed_) return;
+      if (nested_) {
+        impl_.abort_batch();
+        return;
+      }
+      try {
+        impl_.rollback.run();
+      } catch (const StorageError&) {
+        // The original error is more useful than this one; SQLite has rolled back anyway
+        // when the commit itself failed.
       }
     }
     Transaction(const Transaction&) = delete;
@@ -542,8 +738,26 @@ struct RunDb::Impl {
 
    private:
     Impl& impl_;
+    bool nested_;
     bool committed_ = false;
   };
+
+  // Rolls the open batch back; what this handle buffered no longer matches the file, so it
+  // refuses writes from now on. Idempotent, never throws.
+  void abort_batch() noexcept {
+    if (!batch_open) return;
+    batch_open = false;
+    try {
+      rollback.run();
+    } catch (const StorageError&) {
+      // SQLite may have rolled back by itself (SQLITE_FULL at COMMIT does).
+    }
+    poisoned = "a write of the batch failed and the batch was rolled back";
+    buffer.clear();
+    persisted_in_open = 0;
+    open_chunk_id.reset();
+    pending_drops.clear();
+  }
 
   // Writes `frames` as one chunk: into the row `id` if given, else a new row. Returns the row id.
   std::int64_t write_chunk(std::span<const ImuFrame> frames, std::optional<std::int64_t> id) {
@@ -553,8 +767,9 @@ struct RunDb::Impl {
     stmt.bind(2, frames.back().t_ns);
     stmt.bind(3, static_cast<std::int64_t>(frames.size()));
     stmt.bind(4, static_cast<std::int64_t>(encoded.codec));
-    stmt.bind_blob(5, encoded.data.data(), encoded.data.size());
-    if (id) stmt.bind(6, *id);
+    stmt.bind_blob(5, encoded.summary.data(), kSummaryBytes);
+    stmt.bind_blob(6, encoded.data.data(), encoded.data.size());
+    if (id) stmt.bind(7, *id);
     stmt.run();
     return id ? *id : static_cast<std::int64_t>(sqlite3_last_insert_rowid(db.get()));
   }
@@ -565,15 +780,148 @@ struct RunDb::Impl {
       if (!select_meta.step()) fail(path, "run_meta is missing");
       return meta_from_json(select_meta.column_text(0), path);
     }();
-    {
-      Statement stmt(db.get(), &path, "SELECT MAX(t1_ns) FROM imu_chunk");
-      Statement::Reset reset(stmt);
-      if (stmt.step() && !stmt.column_is_null(0)) last_frame_t_ns = stmt.column_int64(0);
-    }
+    last_frame_t_ns = query_optional_int(last_frame_time);
     {
       Statement stmt(db.get(), &path, "SELECT MAX(t_ns) FROM temp_sample");
+      last_temp_t_ns = query_optional_int(stmt);
+    }
+  }
+
+  // ---- writer session ----
+
+  void publish_committed() {
+    if (lease) lease->set_committed(frames_in_db - frames_at_open, db_last_t_ns.value_or(0));
+  }
+
+  void ensure_writable() {
+    if (poisoned) {
+      fail(path, "an earlier write failed (" + *poisoned +
+                     "); this handle accepts no more writes: reopen the run to continue");
+    }
+    claim();
+  }
+
+  void claim() {
+    if (lease) return;
+    if (mode == OpenMode::Read) fail(path, "opened for reading only");
+    auto new_lease = WriterLease::acquire(path);
+    recover(*new_lease);
+    start_session(std::move(new_lease));
+  }
+
+  void start_session(std::unique_ptr<WriterLease> new_lease) {
+    // Another writer may have appended since this handle opened: continue from the file.
+    load_state();
+    buffer.clear();
+    persisted_in_open = 0;
+    open_chunk_id.reset();
+    frames_in_db = query_int(count_frames);
+    db_last_t_ns = last_frame_t_ns;
+    {
+      const std::string host = host_name();
+      insert_session.bind(1, unix_ms_now());
+      insert_session.bind(2, static_cast<std::int64_t>(::getpid()));
+      insert_session.bind(3, host);
+      insert_session.bind(4, frames_in_db);
+      insert_session.run();  // its own transaction: the marker must be on disk before any frame
+    }
+    session_id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(db.get()));
+    frames_at_open = frames_in_db;
+    high_water_frames = 0;
+    dropped_frames = 0;
+    new_lease->begin_session(session_id, frames_at_open);
+    lease = std::move(new_lease);
+    publish_committed();
+  }
+
+  // Closes the sessions that a writer left open when it died: checks the whole file first, then
+  // records what the dead writer's lease page says it lost. Needs the lease (no writer is alive).
+  void recover(const WriterLease& held) {
+    struct Open {
+      std::int64_t id, pid, frames_at_open;
+    };
+    std::vector<Open> open_sessions;
+    {
+      Statement stmt(db.get(), &path,
+                     "SELECT id, pid, frames_at_open FROM recorder_session WHERE closed_unix_ms IS NULL ORDER BY id");
       Statement::Reset reset(stmt);
-      if (stmt.step() && !stmt.column_is_null(0)) last_temp_t_ns = stmt.column_int64(0);
+      while (stmt.step()) open_sessions.push_back({stmt.column_int64(0), stmt.column_int64(1), stmt.column_int64(2)});
+    }
+    if (open_sessions.empty()) return;
+    const Open& last = open_sessions.back();
+    {
+      Statement stmt(db.get(), &path, "PRAGMA integrity_check");
+      Statement::Reset reset(stmt);
+      std::string problems;
+      int shown = 0;
+      while (stmt.step()) {
+        const std::string row = stmt.column_text(0);
+        if (row != "ok" && shown++ < 5) problems += (problems.empty() ? "" : "; ") + row;
+      }
+      if (!problems.empty()) {
+        fail(path, "the last writer (process " + std::to_string(last.pid) +
+                       ") ended without closing the run, and PRAGMA integrity_check reports: " + problems +
+                       "; the file is left as it is (copy it before trying to repair it)");
+      }
+    }
+    const std::int64_t frames_now = query_int(count_frames);
+    const std::optional<std::int64_t> last_t = query_optional_int(last_frame_time);
+    RecoveryReport report;
+    report.session_id = last.id;
+    report.pid = last.pid;
+    report.committed_frames = frames_now - last.frames_at_open;
+    report.committed_t_ns = last_t;
+    const auto& page = held.previous();
+    std::int64_t high_water = 0, dropped = 0;
+    if (page && page->session_id == last.id) {
+      report.lost_uncommitted_frames = std::max<std::int64_t>(0, page->frames_at_open + page->accepted_frames - frames_now);
+      if (page->accepted_frames > 0) report.accepted_t_ns = page->accepted_t_ns;
+      high_water = page->high_water_frames;
+      dropped = page->dropped_frames;
+    }
+    Transaction txn(*this);
+    for (const auto& session : open_sessions) {
+      const bool is_last = session.id == last.id;
+      Statement stmt(db.get(), &path,
+                     "UPDATE recorder_session SET closed_unix_ms = ?2, unclean = 1, integrity = 'ok', "
+                     "lost_uncommitted_frames = ?3, committed_frames = ?4, committed_t_ns = ?5, "
+                     "queue_high_water_frames = MAX(queue_high_water_frames, ?6), "
+                     "dropped_frames = MAX(dropped_frames, ?7) WHERE id = ?1");
+      stmt.bind(1, session.id);
+      stmt.bind(2, unix_ms_now());
+      stmt.bind(3, is_last ? report.lost_uncommitted_frames : std::nullopt);
+      stmt.bind(4, is_last ? report.committed_frames : std::int64_t{0});
+      stmt.bind(5, is_last ? last_t : std::nullopt);
+      stmt.bind(6, is_last ? high_water : std::int64_t{0});
+      stmt.bind(7, is_last ? dropped : std::int64_t{0});
+      stmt.run();
+    }
+    txn.commit();
+    spdlog::warn("run '{}': the last writer (process {}) ended without closing the run; integrity_check ok, "
+                 "{} frames of its session committed, {} accepted frames lost",
+                 path, last.pid, report.committed_frames,
+                 report.lost_uncommitted_frames ? std::to_string(*report.lost_uncommitted_frames) : "an unknown number of");
+    recovery = report;
+  }
+
+  void write_session_row(std::int64_t commits_added, std::optional<std::int64_t> closed_ms) {
+    update_session.bind(1, session_id);
+    update_session.bind(2, frames_in_db - frames_at_open);
+    update_session.bind(3, db_last_t_ns);
+    update_session.bind(4, commits_added);
+    update_session.bind(5, high_water_frames);
+    update_session.bind(6, dropped_frames);
+    update_session.bind(7, closed_ms);
+    update_session.run();
+  }
+
+  void write_pending_drops() {
+    for (const auto& span : pending_drops) {
+      insert_dropped.bind(1, session_id);
+      insert_dropped.bind(2, span.t0_ns);
+      insert_dropped.bind(3, span.t1_ns);
+      insert_dropped.bind(4, span.frames);
+      insert_dropped.run();
     }
   }
 };
@@ -592,9 +940,9 @@ RunDb& RunDb::operator=(RunDb&& other) noexcept {
 RunDb::~RunDb() {
   if (!impl_) return;
   try {
-    flush();
+    close();
   } catch (const std::exception& e) {
-    spdlog::error("{} (frames buffered since the last flush are lost)", e.what());
+    spdlog::error("{} (frames buffered since the last commit are lost; the next open recovers the run)", e.what());
   }
 }
 
@@ -609,32 +957,57 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
   validate_meta(meta, path);
   std::error_code ec;
   if (std::filesystem::exists(path, ec)) fail(path, "file already exists (a run is never overwritten)");
+  auto lease = WriterLease::acquire(path);  // two processes creating the same run: one wins
+  if (std::filesystem::exists(path, ec)) fail(path, "file already exists (a run is never overwritten)");
+  // Made under a temporary name and renamed when complete, so that a crash while creating never
+  // leaves a file at `path` that is not a run.
+  const std::string making = path + ".creating";
   try {
-    auto db = open_handle(path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
-    use_wal(db.get(), path);
-    exec(db.get(), path, "BEGIN IMMEDIATE");
-    exec(db.get(), path, kSchemaSql);
-    exec(db.get(), path, ("PRAGMA application_id = " + std::to_string(kApplicationId)).c_str());
-    exec(db.get(), path, ("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
+    remove_db_files(making);
     {
-      const std::string json = meta_to_json(meta);
-      Statement stmt(db.get(), &path, "INSERT INTO run_meta(id, json) VALUES (1, ?1)");
-      stmt.bind(1, json);
-      stmt.run();
-    }
-    exec(db.get(), path, "COMMIT");
+      auto db = open_handle(making, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+      exec(db.get(), making, ("PRAGMA page_size = " + std::to_string(kPageSizeBytes)).c_str());
+      use_wal(db.get(), making);
+      exec(db.get(), making, "BEGIN IMMEDIATE");
+      exec(db.get(), making, kSchemaSql);
+      exec(db.get(), making, kSessionTablesSql);
+      exec(db.get(), making, ("PRAGMA application_id = " + std::to_string(kApplicationId)).c_str());
+      exec(db.get(), making, ("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
+      {
+        const std::string json = meta_to_json(meta);
+        Statement stmt(db.get(), &making, "INSERT INTO run_meta(id, json) VALUES (1, ?1)");
+        stmt.bind(1, json);
+        stmt.run();
+      }
+      exec(db.get(), making, "COMMIT");
+    }  // closing the only connection checkpoints the WAL into the file and removes it
+    std::filesystem::rename(making, path);
+  } catch (const std::filesystem::filesystem_error& e) {
+    remove_db_files(making);
+    lease->release(true);
+    fail(path, std::string("cannot create: ") + e.what());
+  } catch (...) {
+    remove_db_files(making);
+    lease->release(true);
+    throw;
+  }
+  try {
+    auto db = open_handle(path, SQLITE_OPEN_READWRITE);
+    use_wal(db.get(), path);
     auto impl = std::make_unique<Impl>(path, std::move(db));
-    impl->meta = meta;
+    impl->mode = OpenMode::Write;
+    impl->start_session(std::move(lease));
     RunDb run(std::move(impl));
     run.set_segments(meta.segments);
     return run;
   } catch (...) {
     remove_db_files(path);  // a half-made run file would block the next attempt
+    if (lease) lease->release(true);
     throw;
   }
 }
 
-RunDb RunDb::open(const std::string& path) {
+RunDb RunDb::open(const std::string& path, OpenMode mode) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) fail(path, "no such file");
   auto db = open_handle(path, SQLITE_OPEN_READWRITE);
@@ -649,24 +1022,48 @@ RunDb RunDb::open(const std::string& path) {
     fail(path, "schema version " + std::to_string(version) + " is newer than this imucal supports (" +
                    std::to_string(kSchemaVersion) + "); open it with a newer imucal");
   }
-  if (version < kSchemaVersion) {
-    // Migrations from older versions go here once there is an older version.
-    fail(path, "unknown schema version " + std::to_string(version));
-  }
-  {
-    Statement stmt(db.get(), &path, "PRAGMA quick_check");
-    Statement::Reset reset(stmt);
-    std::string problems;
-    while (stmt.step()) {
-      const std::string row = stmt.column_text(0);
-      if (row != "ok") problems += (problems.empty() ? "" : "; ") + row;
-    }
-    if (!problems.empty()) fail(path, "quick_check failed: " + problems);
-  }
+  if (version < 1) fail(path, "unknown schema version " + std::to_string(version));
   use_wal(db.get(), path);
+  if (version < kSchemaVersion) {
+    // BEGIN IMMEDIATE: two processes opening an old file at once migrate it once, one after the
+    // other (the second sees the new version and does nothing).
+    exec(db.get(), path, "BEGIN IMMEDIATE");
+    try {
+      const std::int64_t now = pragma_int(db.get(), path, "PRAGMA user_version");
+      for (std::int64_t v = now; v < kSchemaVersion; ++v) migrate_one_step(db.get(), path, v);
+      exec(db.get(), path, ("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
+      exec(db.get(), path, "COMMIT");
+    } catch (...) {
+      sqlite3_exec(db.get(), "ROLLBACK", nullptr, nullptr, nullptr);
+      throw;
+    }
+    spdlog::info("run '{}': schema migrated from version {} to {}", path, version, kSchemaVersion);
+  }
 
   auto impl = std::make_unique<Impl>(path, std::move(db));
+  impl->mode = mode;
   impl->load_state();
+  if (mode == OpenMode::Write) {
+    impl->claim();
+  } else {
+    Statement stmt(impl->db.get(), &impl->path,
+                   "SELECT EXISTS(SELECT 1 FROM recorder_session WHERE closed_unix_ms IS NULL)");
+    if (impl->query_int(stmt) != 0 && !WriterLease::probe(path).held) {
+      // The marker without a live writer: the writer died. Recover now, under the lease, so
+      // that readers (plots, estimators) see a checked file and the loss is on record.
+      std::unique_ptr<WriterLease> lease;
+      try {
+        lease = WriterLease::acquire(path);
+      } catch (const StorageError&) {
+        // A writer started meanwhile; it recovers the run itself.
+      }
+      if (lease) {
+        impl->recover(*lease);
+        lease->release(true);
+        impl->load_state();
+      }
+    }
+  }
   return RunDb(std::move(impl));
 }
 
@@ -675,6 +1072,7 @@ RunDb RunDb::open(const std::string& path) {
 void RunDb::append(std::span<const ImuFrame> frames) {
   Impl& d = impl();
   if (frames.empty()) return;
+  d.ensure_writable();
   // Check the whole batch before buffering any of it, so that a rejected call changes nothing.
   std::optional<std::int64_t> previous = d.last_frame_t_ns;
   for (const auto& frame : frames) {
@@ -684,38 +1082,66 @@ void RunDb::append(std::span<const ImuFrame> frames) {
     }
     previous = frame.t_ns;
   }
-  d.buffer.insert(d.buffer.end(), frames.begin(), frames.end());
   d.last_frame_t_ns = previous;
-
-  const std::size_t full_chunks = d.buffer.size() / kFramesPerChunk;
-  if (full_chunks == 0) return;
-  // The buffer is trimmed only after the commit: on an error the frames stay buffered and
-  // the next append or flush writes them again.
-  Impl::Transaction txn(d);
-  for (std::size_t k = 0; k < full_chunks; ++k) {
-    const std::span<const ImuFrame> chunk(d.buffer.data() + k * kFramesPerChunk, kFramesPerChunk);
-    d.write_chunk(chunk, k == 0 ? d.open_chunk_id : std::nullopt);
+  if (!d.accepted_counted_by_caller) d.lease->add_accepted(static_cast<std::int64_t>(frames.size()), *previous);
+  if (d.buffer.size() + frames.size() < kFramesPerChunk) {
+    d.buffer.insert(d.buffer.end(), frames.begin(), frames.end());
+    return;
   }
-  txn.commit();
-  d.buffer.erase(d.buffer.begin(),
-                 d.buffer.begin() + static_cast<std::ptrdiff_t>(full_chunks * kFramesPerChunk));
+
+  // The open chunk is topped up from `frames`, then whole chunks are encoded straight from
+  // `frames` (no copy through the buffer); only the remainder is buffered.
+  const std::size_t head = d.buffer.empty() ? 0 : kFramesPerChunk - d.buffer.size();
+  std::size_t used = 0;
+  bool head_buffered = false;
+  try {
+    Impl::Transaction txn(d);
+    if (head > 0) {
+      d.buffer.insert(d.buffer.end(), frames.begin(), frames.begin() + static_cast<std::ptrdiff_t>(head));
+      head_buffered = true;
+      d.write_chunk(d.buffer, d.open_chunk_id);
+      used = head;
+    }
+    while (frames.size() - used >= kFramesPerChunk) {
+      d.write_chunk(frames.subspan(used, kFramesPerChunk), std::nullopt);
+      used += kFramesPerChunk;
+    }
+    txn.commit();
+  } catch (...) {
+    // Outside a batch the frames stay buffered and the next append or flush writes them again;
+    // inside one the batch is aborted and nothing is kept.
+    if (!d.poisoned) {
+      d.buffer.insert(d.buffer.end(), frames.begin() + static_cast<std::ptrdiff_t>(head_buffered ? head : 0),
+                      frames.end());
+    }
+    throw;
+  }
+  d.frames_in_db += static_cast<std::int64_t>((head > 0 ? kFramesPerChunk - d.persisted_in_open : 0) + (used - head));
+  d.db_last_t_ns = frames[used - 1].t_ns;
+  d.buffer.assign(frames.begin() + static_cast<std::ptrdiff_t>(used), frames.end());
   d.open_chunk_id.reset();
   d.persisted_in_open = 0;
+  if (!d.batch_open) d.publish_committed();
 }
 
 void RunDb::flush() {
   Impl& d = impl();
   if (d.buffer.size() == d.persisted_in_open) return;
+  d.ensure_writable();
   Impl::Transaction txn(d);
   const std::int64_t id = d.write_chunk(d.buffer, d.open_chunk_id);
   txn.commit();
+  d.frames_in_db += static_cast<std::int64_t>(d.buffer.size() - d.persisted_in_open);
+  d.db_last_t_ns = d.buffer.back().t_ns;
   d.open_chunk_id = id;
   d.persisted_in_open = d.buffer.size();
+  if (!d.batch_open) d.publish_committed();
 }
 
 void RunDb::append_temps(std::span<const TempSample> temps) {
   Impl& d = impl();
   if (temps.empty()) return;
+  d.ensure_writable();
   std::optional<std::int64_t> previous = d.last_temp_t_ns;
   for (const auto& sample : temps) {
     if (previous && sample.t_ns <= *previous) {
@@ -742,6 +1168,7 @@ void RunDb::append_temps(std::span<const TempSample> temps) {
 
 void RunDb::set_segments(const std::vector<SegmentInfo>& segments) {
   Impl& d = impl();
+  d.ensure_writable();
   Impl::Transaction txn(d);
   d.delete_segments.run();
   std::int64_t index = 0;
@@ -761,9 +1188,106 @@ void RunDb::set_segments(const std::vector<SegmentInfo>& segments) {
 void RunDb::set_extra(const std::string& key, const std::string& json_text) {
   Impl& d = impl();
   if (!nlohmann::json::accept(json_text)) fail(d.path, "extra '" + key + "' is not valid JSON");
+  d.ensure_writable();
+  Impl::Transaction txn(d);
   d.upsert_extra.bind(1, key);
   d.upsert_extra.bind(2, json_text);
   d.upsert_extra.run();
+  txn.commit();
+}
+
+void RunDb::begin_batch() {
+  Impl& d = impl();
+  d.ensure_writable();
+  if (d.batch_open) fail(d.path, "begin_batch() inside a batch");
+  d.begin.run();
+  d.batch_open = true;
+}
+
+void RunDb::commit_batch() {
+  Impl& d = impl();
+  if (!d.batch_open) fail(d.path, "commit_batch() without begin_batch()");
+  try {
+    flush();
+    d.write_pending_drops();
+    d.write_session_row(1, std::nullopt);
+    d.commit.run();
+  } catch (...) {
+    d.abort_batch();
+    throw;
+  }
+  d.batch_open = false;
+  d.pending_drops.clear();
+  d.publish_committed();
+}
+
+bool RunDb::in_batch() const { return impl().batch_open; }
+
+void RunDb::close() {
+  Impl& d = impl();
+  try {
+    if (d.batch_open) commit_batch();
+    flush();
+    if (!d.lease) return;
+    if (d.poisoned) {
+      fail(d.path, "the writer session ends after a failed write (" + *d.poisoned +
+                       "); the next open recovers the run");
+    }
+    Impl::Transaction txn(d);
+    d.write_pending_drops();
+    d.pending_drops.clear();
+    d.write_session_row(0, unix_ms_now());
+    txn.commit();
+    d.lease->release(true);
+    d.lease.reset();
+    d.session_id = 0;
+  } catch (...) {
+    if (d.lease) {
+      d.lease->release(false);  // keep the page: the next open counts what was lost
+      d.lease.reset();
+    }
+    throw;
+  }
+}
+
+void RunDb::claim_writer() { impl().ensure_writable(); }
+
+void RunDb::checkpoint() {
+  Impl& d = impl();
+  if (d.batch_open) fail(d.path, "checkpoint() inside a batch");
+  const int rc = sqlite3_wal_checkpoint_v2(d.db.get(), nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
+  // BUSY: another connection is checkpointing right now, which does the same job.
+  if (rc != SQLITE_OK && (rc & 0xff) != SQLITE_BUSY) fail(d.path, "checkpoint failed: " + sqlite_reason(d.db.get(), rc));
+}
+
+bool RunDb::is_writer() const { return impl().lease != nullptr; }
+
+WriterLease* RunDb::lease() { return impl().lease.get(); }
+
+void RunDb::set_accepted_counted_by_caller(bool by_caller) { impl().accepted_counted_by_caller = by_caller; }
+
+void RunDb::set_queue_counters(std::int64_t high_water_frames, std::int64_t dropped_frames) {
+  Impl& d = impl();
+  d.high_water_frames = high_water_frames;
+  d.dropped_frames = dropped_frames;
+}
+
+void RunDb::record_dropped(std::int64_t t0_ns, std::int64_t t1_ns, std::int64_t frames) {
+  Impl& d = impl();
+  d.ensure_writable();
+  d.pending_drops.push_back({d.session_id, t0_ns, t1_ns, frames});
+  if (d.batch_open) return;
+  Impl::Transaction txn(d);
+  d.write_pending_drops();
+  txn.commit();
+  d.pending_drops.clear();
+}
+
+void RunDb::set_size_limit_bytes(std::int64_t bytes) {
+  Impl& d = impl();
+  const std::int64_t page_bytes = pragma_int(d.db.get(), d.path, "PRAGMA page_size");
+  const std::int64_t pages = std::max<std::int64_t>(1, bytes / page_bytes);
+  pragma_int(d.db.get(), d.path, ("PRAGMA max_page_count = " + std::to_string(pages)).c_str());
 }
 
 // ---- reading ----
@@ -790,12 +1314,10 @@ RecordingMeta RunDb::meta() const {
 
 std::int64_t RunDb::frame_count() const {
   Impl& d = impl();
-  Statement::Reset reset(d.count_frames);
-  d.count_frames.step();
-  return d.count_frames.column_int64(0) + static_cast<std::int64_t>(d.buffer.size() - d.persisted_in_open);
+  return d.query_int(d.count_frames) + static_cast<std::int64_t>(d.buffer.size() - d.persisted_in_open);
 }
 
-void RunDb::for_each_frame(const std::function<void(const ImuFrame&)>& fn, std::int64_t t0_ns,
+void RunDb::for_each_block(const std::function<void(std::span<const ImuFrame>)>& fn, std::int64_t t0_ns,
                            std::int64_t t1_ns) const {
   Impl& d = impl();
   if (t0_ns > t1_ns) return;
@@ -809,9 +1331,7 @@ void RunDb::for_each_frame(const std::function<void(const ImuFrame&)>& fn, std::
   std::optional<Statement> nested;
   Statement* stmt = &d.select_chunks;
   if (d.select_chunks_busy) {
-    nested.emplace(d.db.get(), &d.path,
-                   "SELECT id, n, codec, data FROM imu_chunk WHERE t0_ns <= ?2 AND t1_ns >= ?1 "
-                   "ORDER BY t0_ns");
+    nested.emplace(d.db.get(), &d.path, kSelectChunksSql);
     stmt = &*nested;
   }
   struct BusyFlag {
@@ -829,21 +1349,127 @@ void RunDb::for_each_frame(const std::function<void(const ImuFrame&)>& fn, std::
   while (stmt->step()) {
     decode_chunk(stmt->column_int64(0), stmt->column_int64(1), static_cast<int>(stmt->column_int64(2)),
                  stmt->column_blob(3), decoded, d.path);
-    // Chunks overlapping the range only at one end: skip to the first frame inside.
+    // Chunks overlapping the range only at one end: trim to the frames inside.
     auto first = decoded.begin();
     if (first->t_ns < t0_ns) {
       first = std::lower_bound(decoded.begin(), decoded.end(), t0_ns,
                                [](const ImuFrame& f, std::int64_t t) { return f.t_ns < t; });
     }
-    for (auto it = first; it != decoded.end() && it->t_ns <= t1_ns; ++it) fn(*it);
+    auto last = decoded.end();
+    if (decoded.back().t_ns > t1_ns) {
+      last = std::upper_bound(first, decoded.end(), t1_ns,
+                              [](std::int64_t t, const ImuFrame& f) { return t < f.t_ns; });
+    }
+    if (first != last) fn(std::span<const ImuFrame>(&*first, static_cast<std::size_t>(last - first)));
   }
-  for (const auto& frame : unstored) fn(frame);
+  if (!unstored.empty()) fn(unstored);
+}
+
+void RunDb::for_each_frame(const std::function<void(const ImuFrame&)>& fn, std::int64_t t0_ns,
+                           std::int64_t t1_ns) const {
+  for_each_block(
+      [&](std::span<const ImuFrame> block) {
+        for (const auto& frame : block) fn(frame);
+      },
+      t0_ns, t1_ns);
 }
 
 std::vector<ImuFrame> RunDb::read_frames(std::int64_t t0_ns, std::int64_t t1_ns) const {
   std::vector<ImuFrame> frames;
-  for_each_frame([&](const ImuFrame& frame) { frames.push_back(frame); }, t0_ns, t1_ns);
+  for_each_block([&](std::span<const ImuFrame> block) { frames.insert(frames.end(), block.begin(), block.end()); },
+                 t0_ns, t1_ns);
   return frames;
+}
+
+std::vector<PlotColumn> RunDb::decimate(std::int64_t t0_ns, std::int64_t t1_ns, int columns) const {
+  Impl& d = impl();
+  if (columns <= 0) fail(d.path, "decimate: the number of columns must be positive");
+  std::int64_t span_ns = 0;
+  if (t1_ns <= t0_ns || __builtin_sub_overflow(t1_ns, t0_ns, &span_ns)) {
+    fail(d.path, "decimate: the range must be non-empty and shorter than 292 years");
+  }
+  const auto n_columns = static_cast<std::size_t>(columns);
+  // Column k is [edge[k], edge[k + 1]); long double holds any int64 exactly.
+  std::vector<std::int64_t> edge(n_columns + 1);
+  for (std::size_t k = 0; k <= n_columns; ++k) {
+    edge[k] = t0_ns + static_cast<std::int64_t>(static_cast<long double>(span_ns) * static_cast<long double>(k) /
+                                                static_cast<long double>(columns));
+  }
+  edge[n_columns] = t1_ns;
+  std::vector<PlotColumn> out(n_columns);
+  for (std::size_t k = 0; k < n_columns; ++k) {
+    out[k].t0_ns = edge[k];
+    out[k].t1_ns = edge[k + 1];
+    out[k].min.fill(std::numeric_limits<double>::infinity());
+    out[k].max.fill(-std::numeric_limits<double>::infinity());
+  }
+  auto column_of = [&](std::int64_t t) {
+    return static_cast<std::size_t>(std::upper_bound(edge.begin(), edge.end(), t) - edge.begin() - 1);
+  };
+  auto merge_frames = [&](std::span<const ImuFrame> frames) {
+    std::size_t k = 0;
+    bool located = false;
+    for (const auto& f : frames) {
+      if (f.t_ns < t0_ns || f.t_ns >= t1_ns) continue;
+      if (!located) {
+        k = column_of(f.t_ns);
+        located = true;
+      }
+      while (f.t_ns >= edge[k + 1]) ++k;
+      PlotColumn& c = out[k];
+      const std::array<double, kPlotChannels> v = {f.dtheta_rad.x(), f.dtheta_rad.y(), f.dtheta_rad.z(),
+                                                   f.dv_mps.x(),     f.dv_mps.y(),     f.dv_mps.z(),
+                                                   f.table_deg.x(),  f.table_deg.y(),  f.table_deg.z()};
+      for (std::size_t ch = 0; ch < v.size(); ++ch) {
+        c.min[ch] = v[ch] < c.min[ch] ? v[ch] : c.min[ch];
+        c.max[ch] = v[ch] > c.max[ch] ? v[ch] : c.max[ch];
+      }
+      ++c.frames;
+    }
+  };
+
+  std::vector<ImuFrame> decoded;
+  {
+    Statement& stmt = d.select_summaries;
+    Statement::Reset reset(stmt);
+    stmt.bind(1, t0_ns);
+    stmt.bind(2, t1_ns - 1);
+    while (stmt.step()) {
+      const std::int64_t id = stmt.column_int64(0), c0 = stmt.column_int64(1), c1 = stmt.column_int64(2);
+      const std::int64_t n = stmt.column_int64(3);
+      const auto summary = stmt.column_blob(4);
+      // A chunk inside one column needs only its summary; a chunk that an open, partial chunk row
+      // is about to grow is read from the buffer below.
+      if (summary.size() == kSummaryBytes && c0 >= t0_ns && c1 < t1_ns && column_of(c0) == column_of(c1)) {
+        PlotColumn& c = out[column_of(c0)];
+        std::array<double, 2 * kPlotChannels> s{};
+        std::memcpy(s.data(), summary.data(), kSummaryBytes);
+        for (std::size_t ch = 0; ch < kPlotChannels; ++ch) {
+          c.min[ch] = std::min(c.min[ch], s[ch]);
+          c.max[ch] = std::max(c.max[ch], s[kPlotChannels + ch]);
+        }
+        c.frames += n;
+        continue;
+      }
+      Statement& data = d.select_chunk_data;
+      Statement::Reset data_reset(data);
+      data.bind(1, id);
+      if (!data.step()) continue;
+      decode_chunk(id, data.column_int64(0), static_cast<int>(data.column_int64(1)), data.column_blob(2), decoded,
+                   d.path);
+      merge_frames(decoded);
+    }
+  }
+  if (d.buffer.size() > d.persisted_in_open) {
+    merge_frames(std::span<const ImuFrame>(d.buffer).subspan(d.persisted_in_open));
+  }
+  for (auto& c : out) {
+    if (c.frames == 0) {
+      c.min.fill(0.0);
+      c.max.fill(0.0);
+    }
+  }
+  return out;
 }
 
 std::vector<TempSample> RunDb::temps() const {
@@ -876,6 +1502,58 @@ FrameStorageStats RunDb::frame_storage_stats() const {
   stats.frames = d.storage_stats.column_int64(3);
   stats.blob_bytes = d.storage_stats.column_int64(4);
   return stats;
+}
+
+std::vector<RecorderSession> RunDb::sessions() const {
+  Impl& d = impl();
+  std::vector<RecorderSession> out;
+  Statement& stmt = d.select_sessions;
+  Statement::Reset reset(stmt);
+  while (stmt.step()) {
+    RecorderSession s;
+    s.id = stmt.column_int64(0);
+    s.opened_unix_ms = stmt.column_int64(1);
+    s.closed_unix_ms = stmt.column_optional_int64(2);
+    s.pid = stmt.column_int64(3);
+    s.host = stmt.column_text(4);
+    s.frames_at_open = stmt.column_int64(5);
+    s.committed_frames = stmt.column_int64(6);
+    s.committed_t_ns = stmt.column_optional_int64(7);
+    s.commits = stmt.column_int64(8);
+    s.queue_high_water_frames = stmt.column_int64(9);
+    s.dropped_frames = stmt.column_int64(10);
+    s.unclean = stmt.column_int64(11) != 0;
+    s.lost_uncommitted_frames = stmt.column_optional_int64(12);
+    s.integrity = stmt.column_text(13);
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+std::vector<DroppedSpan> RunDb::dropped_spans() const {
+  Impl& d = impl();
+  std::vector<DroppedSpan> out;
+  Statement& stmt = d.select_dropped;
+  Statement::Reset reset(stmt);
+  while (stmt.step()) {
+    out.push_back({stmt.column_int64(0), stmt.column_int64(1), stmt.column_int64(2), stmt.column_int64(3)});
+  }
+  return out;
+}
+
+const std::optional<RecoveryReport>& RunDb::recovery() const { return impl().recovery; }
+
+void encode_chunk_payload(std::span<const ImuFrame> frames, const RecordingMeta& meta,
+                          std::vector<unsigned char>& out) {
+  if (frames.empty() || frames.size() > RunDb::kFramesPerChunk) {
+    throw StorageError("encode_chunk_payload: a chunk holds 1 to " + std::to_string(RunDb::kFramesPerChunk) +
+                       " frames");
+  }
+  EncodedChunk encoded;
+  encoded.data = std::move(out);
+  std::vector<std::int32_t> scratch;
+  encode_chunk(frames, meta.gyro_lsb_rad, meta.accel_lsb_mps, encoded, scratch);
+  out = std::move(encoded.data);
 }
 
 }  // namespace imucal::storage

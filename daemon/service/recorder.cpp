@@ -107,6 +107,12 @@ void Recorder::run() {
 
   // Commits (flushes the open chunk) and publishes; called without the lock.
   auto commit = [&]() {
+    // Temperatures (a few a second) go in with the frames' commit rather than in a transaction
+    // of their own each.
+    if (!pending_temps_.empty()) {
+      db_.append_temps(pending_temps_);
+      pending_temps_.clear();
+    }
     db_.flush();
     dirty = false;
     last_commit = Clock::now();
@@ -151,7 +157,8 @@ void Recorder::run() {
           dirty = true;
           break;
         case Item::Kind::Temps:
-          db_.append_temps(item.temps);  // commits by itself
+          pending_temps_.insert(pending_temps_.end(), item.temps.begin(), item.temps.end());
+          dirty = true;
           break;
         case Item::Kind::Extra:
           db_.set_extra(item.key, item.text);

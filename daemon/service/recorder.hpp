@@ -81,6 +81,7 @@ class Recorder {
   std::uint64_t next_barrier_ = 1, done_barrier_ = 0;
   bool closing_ = false;
   std::optional<std::string> error_;
+  std::vector<TempSample> pending_temps_;      // recorder thread only: written with the next commit
   std::int64_t appended_frames_ = 0;           // recorder thread only
   std::optional<std::int64_t> appended_t_ns_;  // recorder thread only
   std::thread thread_;

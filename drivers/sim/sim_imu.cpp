@@ -249,6 +249,10 @@ struct SimImu::Impl {
 
 SimImu::SimImu(SimWorld& world, int socket_fd, SimImuConfig config)
     : impl_(std::make_unique<Impl>(world, socket_fd, std::move(config))) {
+  // On a socket pair the sender's buffer is the link's queue: room for seconds of frames, as a
+  // CAN controller's receive queue plus the kernel's would hold (clamped by net.core.wmem_max).
+  const int bytes = 4 << 20;
+  (void)::setsockopt(socket_fd, SOL_SOCKET, SO_SNDBUF, &bytes, sizeof bytes);
   impl_->thread = std::thread([this] { impl_->run(); });
 }
 

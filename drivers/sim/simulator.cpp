@@ -245,10 +245,8 @@ bool Simulator::next(ImuFrame& out) {
       g.state = g.phi * g.state + g.drive * g.stream.next();
       noise += g.state * dt_s_;
     }
-    if (rw_drive_[ch] > 0) {
-      rw_state_[i] += rw_drive_[ch] * bias_rw_[ch].next();
-      noise += rw_state_[i] * dt_s_;
-    }
+    if (rw_drive_[ch] > 0) rw_state_[i] += rw_drive_[ch] * bias_rw_[ch].next();
+    noise += rw_state_[i] * dt_s_;  // also a walk continued from an earlier run without new drive
     if (ch < 3)
       dtheta[i] += noise;
     else
@@ -269,6 +267,21 @@ bool Simulator::next(ImuFrame& out) {
   out.table_deg = program_.evaluate(t1, cursor_).angle_rad * units::kRadToDeg;
   ++k_;
   return true;
+}
+
+Eigen::Matrix<double, 6, 1> Simulator::stochastic_bias() const {
+  Eigen::Matrix<double, 6, 1> b = rw_state_;
+  for (std::size_t ch = 0; ch < 6; ++ch)
+    for (const GaussMarkov& g : gm_[ch]) b[static_cast<Eigen::Index>(ch)] += g.state;
+  return b;
+}
+
+void Simulator::continue_stochastic_bias(const Eigen::Matrix<double, 6, 1>& bias) {
+  // The Gauss-Markov parts forget their past within their correlation times; the random walk
+  // carries the whole offset.
+  rw_state_ = bias;
+  for (auto& channel : gm_)
+    for (GaussMarkov& g : channel) g.state = 0.0;
 }
 
 std::vector<TempSample> Simulator::take_temps() {

@@ -77,6 +77,11 @@ class Simulator {
   std::int64_t frame_count() const { return n_frames_; }
   double dt_s() const { return dt_s_; }
   TrueKinematics kinematics(double t_s) const;
+  // The random part of the biases now (Gauss-Markov plus random walk): gyro x y z (rad/s), then
+  // accelerometer x y z (m/s^2). Tests compare estimates of drifting biases against it.
+  Eigen::Matrix<double, 6, 1> stochastic_bias() const;
+  // Continue the same IMU from another run: its random-walk biases start where that run ended.
+  void continue_stochastic_bias(const Eigen::Matrix<double, 6, 1>& bias);
 
   static constexpr double kGyroLsbAt1kHz_rad = 1e-11;
   static constexpr double kAccelLsbAt1kHz_mps = 1e-10;

@@ -296,10 +296,10 @@ ServoResult TableServo::demand_position(double t_s, int axis, double angle_deg) 
   a.last_feed_s = now_;
   const double v = L.rate_dps * kDegToRad, acc = L.accel_dps2 * kDegToRad;
   // A demand equal to where the axis already rests only feeds the watchdog.
-  double angle, rate, accel;
-  eval(a, now_, angle, rate, accel);
   const double target = angle_deg * kDegToRad;
-  if (active(a, now_).f.kind == AxisFunc::Kind::Const && std::fabs(angle - target) < 1e-12) return {};
+  // Nor does the demand of the move already under way (track-mode keep-alive): its trajectory
+  // ends at rest on the target.
+  if (a.segs.back().f.kind == AxisFunc::Kind::Const && std::fabs(a.segs.back().f.theta0 - target) < 1e-12) return {};
   const auto [t1, th1] = graceful_stop(axis, now_, acc);
   const double d = target - th1, s = sgn(d), D = std::fabs(d);
   std::vector<Seg> segs;

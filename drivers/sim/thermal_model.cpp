@@ -38,8 +38,9 @@ ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel
   }
   for (const SensorFault& f : config_.faults) {
     int sensor;
-    if (channel_index(f.channel, sensor) < 0)
-      throw std::invalid_argument("thermal fault: unknown channel '" + f.channel + "' (gx gy gz, gx1..gz8, ax ay az, chamber)");
+    if (channel_index(f.channel, sensor) < 0 && !(f.kind == "missing" && f.channel == "all"))
+      throw std::invalid_argument("thermal fault: unknown channel '" + f.channel +
+                                  "' (gx gy gz, gx1..gz8, ax ay az, chamber; all for missing)");
     if (f.kind != "stuck" && f.kind != "jump" && f.kind != "missing")
       throw std::invalid_argument("thermal fault: unknown kind '" + f.kind + "' (stuck, jump, missing)");
   }
@@ -167,10 +168,10 @@ bool ThermalModel::temperatures(double t, TempSample& out) const {
   };
   auto quantise = [&](double v) { return config_.lsb_C > 0 ? std::round(v / config_.lsb_C) * config_.lsb_C : v; };
   for (int j = 0; j < 3; ++j) {
-    // The coil channel is the mean of its eight logged sensors.
+    // The coil channel is the mean of its eight logged sensors (finer than one sensor's step).
     double mean = 0;
     for (int s = 0; s < 8; ++s) mean += quantise(faulty(j, s)) / 8.0;
-    out.gyro_C[j] = quantise(mean);
+    out.gyro_C[j] = mean;
     out.accel_C[j] = quantise(faulty(3 + j, -1));
   }
   out.chamber_C = quantise(faulty(6, -1));

@@ -28,14 +28,14 @@ namespace imucal::sim {
 
 struct Stabilisation {
   bool enabled = false;
-  double setpoint_C = 40.0;  // a heater holds the plate above the warmest ambient
+  double setpoint_C = 35.0;  // a heater holds the plate at the warm end of the working range
   double leak = 0.02;        // share of the case's deviation from the set point reaching the plate
   double tau_s = 600.0;      // the plate's response
 };
 
 // A fault of one logged channel: gx gy gz (coil means), gx1 .. gz8 (one coil sensor), ax ay az,
 // chamber; kind stuck (frozen at its value at t0), jump (offset by jump_C), missing (no samples
-// at all from the logger, whatever the channel).
+// at all from the logger: channel "all").
 struct SensorFault {
   std::string channel;
   std::string kind;
@@ -51,7 +51,7 @@ struct ThermalConfig {
   double coil_sensor_spread = 0.3;  // the eight sensors' lags: the coil's +-30 %
   double chamber_min_C = -70.0, chamber_max_C = 180.0;  // what the chamber can reach
   double step_s = 1.0;
-  double lsb_C = 0.01;  // resolution of the logged temperatures
+  double lsb_C = 0.001;  // resolution of one logged sensor (a 24-bit ADC on a platinum sensor)
   Stabilisation stabilisation;
   std::vector<SensorFault> faults;
 };

@@ -4,6 +4,9 @@
 // same program simulated straight through: nothing lost, nothing twice, whatever happened.
 #include <gtest/gtest.h>
 
+#include <fstream>
+
+#include "daemon/service/campaign_runner.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;
@@ -225,4 +228,28 @@ TEST(Sequencer, ShutdownParksTheRunAsInterruptedAndItResumes) {
   ASSERT_EQ(row->state, daemon::RunState::Done);
   again.stop();
   expect_same_frames(run_frames(dir + "/" + row->run_db), reference_frames(spec_json, config));
+}
+
+TEST(CampaignRun, RunsAFileInProcessAndWritesTheModel) {
+  const std::string dir = scratch_dir("campaign-run");
+  const std::string file = dir + "/campaign.json";
+  std::ofstream(file) << R"({"_comment": "regression run", "name": "cli", "program": "direct-short", "rate_hz": 100,
+                             "estimators": ["direct", "navigation"]})";
+  daemon::CampaignRunOptions options;
+  options.data_dir = dir + "/data";
+  options.model_out = dir + "/model.json";
+  options.progress = false;
+  const auto r = daemon::run_campaign_file(file, options);
+  EXPECT_EQ(r.exit_code, 0) << r.error;
+  EXPECT_EQ(r.state, "done");
+  EXPECT_EQ(r.frames, 40260);
+  EXPECT_GT(r.wall_s, 0.0);  // the speed figure is test_daemon_speed's (release only)
+  EXPECT_EQ(r.results.at("navigation").at("status"), "done");
+  EXPECT_NO_THROW(read_imu_model_file(options.model_out));
+
+  std::ofstream(dir + "/bad.json") << R"({"name": "bad", "program": "direct", "rate_hz": 1e6, "estimators": ["x"]})";
+  const auto bad = daemon::run_campaign_file(dir + "/bad.json", options);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.error.find("rate_hz"), std::string::npos) << bad.error;
+  EXPECT_NE(bad.error.find("unknown estimator"), std::string::npos) << bad.error;
 }

@@ -309,3 +309,11 @@ TEST(Api, TargetsAndCookies) {
   EXPECT_EQ(session_from_cookie("a=1; imucal_session=abc; b=2"), "abc");
   EXPECT_EQ(session_from_cookie("imucal_sessionx=1"), "");
 }
+
+TEST(Config, TheCommentedExampleParses) {
+  const DaemonConfig c = load_config_file(std::string(IMUCAL_SOURCE_DIR) + "/examples/imucald.json");
+  EXPECT_EQ(c.users.size(), 2u);
+  EXPECT_EQ(c.users[1].role, Role::Operator);
+  EXPECT_EQ(c.http.port, 8080);
+  EXPECT_TRUE(std::isinf(c.table_limits.axis[0].max_deg));
+}

@@ -103,7 +103,7 @@ TEST(ModbusChamber, Ezt570iStyleInt16MapWithControllerRamp) {
   bring_up(d);
   ASSERT_TRUE(d.set_setpoint(22.0));
   Stopwatch sw;
-  ASSERT_TRUE(d.ramp_to(30.0, 120.0));  // 2 C/s, run by the controller
+  ASSERT_TRUE(d.ramp_to(30.0, 240.0));  // 4 C/s, run by the controller
   EXPECT_NEAR(sim.setpoint_C(), 30.0, 0.05);
   auto r = d.read();
   ASSERT_TRUE(r);
@@ -111,12 +111,12 @@ TEST(ModbusChamber, Ezt570iStyleInt16MapWithControllerRamp) {
   EXPECT_NEAR(*r->ramp_target_C, 30.0, 1e-9);
   ASSERT_TRUE(r->working_setpoint_C);
   // Working set point on the ramp (0.1 C resolution of the int16 x10 registers).
-  EXPECT_LE(*r->working_setpoint_C, 22.0 + 2.0 * sw.seconds() + 0.2);
+  EXPECT_LE(*r->working_setpoint_C, 22.0 + 4.0 * sw.seconds() + 0.2);
   ASSERT_TRUE(eventually([&] {
     auto x = d.read();
     return x && x->working_setpoint_C && std::fabs(*x->working_setpoint_C - 30.0) < 0.05 && !x->ramp_target_C;
   }));
-  EXPECT_GT(sw.seconds(), 3.5);  // 8 C at 2 C/s
+  EXPECT_GT(sw.seconds(), 1.7);  // 8 C at 4 C/s
 }
 
 TEST(ModbusChamber, F4tRampIsSteppedByTheDriver) {
@@ -231,7 +231,8 @@ TEST(ModbusChamber, SilentControllerTimesOutWithinTheResponseTimeout) {
   Stopwatch sw;
   EXPECT_EQ(d.read().code(), DriverErrc::timeout);
   EXPECT_LT(sw.seconds(), 2.5);
-  EXPECT_EQ(d.set_setpoint(30.0).code() == DriverErrc::timeout || d.set_setpoint(30.0).code() == DriverErrc::not_connected, true);
+  const auto w = d.set_setpoint(30.0);  // the next call reconnects and times out again
+  EXPECT_EQ(w.code(), DriverErrc::timeout) << (w ? "" : w.error().message);
   sim.set_silent(false);
   ASSERT_TRUE(eventually([&] { return d.read().ok(); }));
 }
@@ -378,7 +379,7 @@ TEST(ModbusChamberFuzz, RandomRepliesNeverYieldAValue) {
   (void)d.connect();
   int values = 0;
   Stopwatch total;
-  for (int i = 0; i < 150 && total.seconds() < 4.0; ++i) {
+  for (int i = 0; i < 150 && total.seconds() < 2.5; ++i) {
     Stopwatch sw;
     const auto r = d.read();
     if (r) ++values;

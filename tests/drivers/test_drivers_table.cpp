@@ -320,7 +320,7 @@ TEST(AclTable, AxisLimitHitIsATypedFaultUntilReset) {
 }
 
 TEST(AclTable, WatchdogDropsAnUnfedAxisAndFeedingKeepsItAlive) {
-  Rig rig({}, [](AclTableConfig& c) { c.watchdog_s = 0.4; });
+  Rig rig({}, [](AclTableConfig& c) { c.watchdog_s = 1.0; });
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
   ASSERT_TRUE(rig.driver.demand_rate(kOuter, 5.0));

@@ -56,8 +56,10 @@ inline Scenario make_scenario(unsigned seed, double rate_hz) {
   return s;
 }
 
+// stochastic_bias_end: when given, receives the random part of the true biases at the end of the
+// run (the filter tracks drifting biases, so that is what it should have found).
 inline navfilter::Result run_filter(const Scenario& s, const std::string& program, int passes = 1,
-                                    double duration_s = 0) {
+                                    double duration_s = 0, Eigen::Matrix<double, 6, 1>* stochastic_bias_end = nullptr) {
   const auto p = motion::load_program(program, motion::TableLimits{});
   sim::SimConfig cfg = s.cfg;
   cfg.duration_s = duration_s;
@@ -72,6 +74,7 @@ inline navfilter::Result run_filter(const Scenario& s, const std::string& progra
         sim::Simulator sim(p, truth_sim, cfg);
         ImuFrame f;
         while (sim.next(f)) fn(f);
+        if (stochastic_bias_end) *stochastic_bias_end = sim.stochastic_bias();
       },
       passes);
 }

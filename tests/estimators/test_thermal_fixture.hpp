@@ -54,7 +54,10 @@ struct Outcome {
   std::vector<TempSample> temps;
 };
 
-inline Outcome run(const ImuModel& truth, const Run& r) {
+// Simulates and fits; with `earlier` set, judges that model on the run (mode "judge") or keeps its
+// shape and fits the constants (mode "constants") instead of fitting everything.
+inline Outcome run(const ImuModel& truth, const Run& r, const ImuModel* earlier = nullptr,
+                   const std::string& mode = "judge") {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   const motion::Program program = motion::load_program(r.program, motion::TableLimits{});
@@ -76,7 +79,9 @@ inline Outcome run(const ImuModel& truth, const Run& r) {
   out.temps = s.take_temps();
   const std::vector<thermal::CycleEstimate> cycles = est.finish();
   const auto t1 = Clock::now();
-  out.result = thermal::calibrate(meta, cycles, out.temps, stage1_of(truth), r.options);
+  out.result = !earlier            ? thermal::calibrate(meta, cycles, out.temps, stage1_of(truth), r.options)
+               : mode == "judge" ? thermal::evaluate(meta, cycles, out.temps, *earlier, r.options)
+                                 : thermal::refit_constants(meta, cycles, out.temps, *earlier, r.options);
   out.report = nlohmann::json::parse(out.result.report_json);
   out.sim_and_cycles_s = std::chrono::duration<double>(t1 - t0).count();
   out.fit_s = std::chrono::duration<double>(Clock::now() - t1).count();

@@ -456,12 +456,13 @@ TEST_F(RunDbTest, NewerSchemaVersionIsRejected) {
   EXPECT_NO_THROW(RunDb::open(path));
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "PRAGMA user_version = 2", nullptr, nullptr, nullptr), SQLITE_OK);
+  const std::string newer = std::to_string(RunDb::kSchemaVersion + 1);
+  ASSERT_EQ(sqlite3_exec(db, ("PRAGMA user_version = " + newer).c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
   sqlite3_close(db);
 
   const std::string message = error_message([&] { RunDb::open(path); });
   EXPECT_THAT(message, HasSubstr(path));
-  EXPECT_THAT(message, HasSubstr("schema version 2 is newer"));
+  EXPECT_THAT(message, HasSubstr("schema version " + newer + " is newer"));
 }
 
 // ---------------------------------------------------------------------------------------------

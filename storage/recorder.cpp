@@ -1,0 +1,347 @@
+#include "storage/recorder.hpp"
+
+#include <algorithm>
+#include <utility>
+
+#include <spdlog/spdlog.h>
+
+namespace imucal::storage {
+
+const char* to_string(RecorderAlarmKind kind) {
+  switch (kind) {
+    case RecorderAlarmKind::QueueHighWater:
+      return "queue_high_water";
+    case RecorderAlarmKind::FramesDropped:
+      return "frames_dropped";
+    case RecorderAlarmKind::WriteFailed:
+      return "write_failed";
+  }
+  return "?";
+}
+
+Recorder::Recorder(RunDb db, RecorderOptions options, AlarmHandler on_alarm, CommitListener on_commit)
+    : db_(std::move(db)),
+      path_(db_.path()),
+      options_(options),
+      on_alarm_(std::move(on_alarm)),
+      on_commit_(std::move(on_commit)) {
+  if (!(options_.commit_interval_s > 0.0)) throw StorageError("recorder: commit_interval_s must be positive");
+  if (options_.queue_capacity_frames < static_cast<std::int64_t>(kBlockFrames)) {
+    throw StorageError("recorder: queue_capacity_frames must be at least " + std::to_string(kBlockFrames));
+  }
+  db_.claim_writer();
+  db_.set_accepted_counted_by_caller(true);
+  lease_ = db_.lease();
+  recovery_ = db_.recovery();
+  stats_.queue_capacity_frames = options_.queue_capacity_frames;
+  thread_ = std::thread([this] { run(); });
+}
+
+Recorder::~Recorder() {
+  if (!close()) spdlog::error("recorder '{}': {}", path_, error().value_or("failed"));
+}
+
+void Recorder::raise(RecorderAlarmKind kind, std::string message) {
+  if (!on_alarm_) return;
+  RecorderAlarm alarm;
+  alarm.kind = kind;
+  alarm.message = std::move(message);
+  alarm.stats = stats();
+  on_alarm_(alarm);
+}
+
+std::vector<ImuFrame> Recorder::take_block_locked() {
+  if (free_blocks_.empty()) {
+    std::vector<ImuFrame> block;
+    block.reserve(kBlockFrames);
+    return block;
+  }
+  std::vector<ImuFrame> block = std::move(free_blocks_.back());
+  free_blocks_.pop_back();
+  return block;
+}
+
+Recorder::Push Recorder::push(std::span<const ImuFrame> frames) { return push(frames, options_.wait_when_full); }
+
+Recorder::Push Recorder::push(std::span<const ImuFrame> frames, bool wait_when_full) {
+  if (frames.empty()) return Push::Queued;
+  std::optional<RecorderAlarmKind> alarm;
+  std::string alarm_message;
+  Push result = Push::Queued;
+  {
+    std::unique_lock lock(mutex_);
+    if (error_ || closing_) return Push::Failed;
+    // Checked here, on the producer's thread, so that a bad batch is refused at once instead of
+    // failing the writer later.
+    std::optional<std::int64_t> previous = last_pushed_t_ns_;
+    for (const auto& frame : frames) {
+      if (previous && frame.t_ns <= *previous) return Push::Rejected;
+      previous = frame.t_ns;
+    }
+    const auto n = static_cast<std::int64_t>(frames.size());
+    const std::int64_t capacity = options_.queue_capacity_frames;
+    if (!wait_when_full && stats_.queued_frames + n > capacity) {
+      // Dropped as a whole, never in part: the gap is then exactly this batch.
+      stats_.dropped_frames += n;
+      lease_->add_dropped(n);
+      if (!pending_drops_.empty() && pending_drops_.back().t1_ns == last_pushed_t_ns_) {
+        pending_drops_.back().t1_ns = frames.back().t_ns;
+        pending_drops_.back().frames += n;
+      } else {
+        pending_drops_.push_back({0, frames.front().t_ns, frames.back().t_ns, n});
+      }
+      last_pushed_t_ns_ = frames.back().t_ns;
+      if (!dropping_) {
+        dropping_ = true;
+        alarm = RecorderAlarmKind::FramesDropped;
+        alarm_message = "recorder '" + path_ + "': the queue is full (" + std::to_string(stats_.queued_frames) +
+                        " of " + std::to_string(capacity) + " frames); dropping frames from t = " +
+                        std::to_string(frames.front().t_ns) + " ns (the writer falls behind the device)";
+      }
+      result = Push::Dropped;
+    } else {
+      std::size_t done = 0;
+      while (done < frames.size()) {
+        // Waits for room for the next slice; a slice never exceeds one block, so any batch fits
+        // eventually whatever the capacity.
+        const std::size_t slice = std::min(frames.size() - done, kBlockFrames);
+        cv_space_.wait(lock, [&] {
+          return error_ || closing_ || stats_.queued_frames + static_cast<std::int64_t>(slice) <= capacity;
+        });
+        if (error_ || closing_) return Push::Failed;
+        std::size_t copied = 0;
+        while (copied < slice) {
+          if (queue_.empty() || queue_.back().kind != Item::Kind::Frames ||
+              queue_.back().frames.size() >= kBlockFrames) {
+            Item item;
+            item.kind = Item::Kind::Frames;
+            item.frames = take_block_locked();
+            queue_.push_back(std::move(item));
+          }
+          std::vector<ImuFrame>& block = queue_.back().frames;
+          const std::size_t room = std::min(kBlockFrames - block.size(), slice - copied);
+          const auto first = frames.begin() + static_cast<std::ptrdiff_t>(done + copied);
+          block.insert(block.end(), first, first + static_cast<std::ptrdiff_t>(room));
+          copied += room;
+        }
+        const auto added = static_cast<std::int64_t>(slice);
+        stats_.queued_frames += added;
+        stats_.accepted_frames += added;
+        last_pushed_t_ns_ = frames[done + slice - 1].t_ns;
+        lease_->add_accepted(added, *last_pushed_t_ns_);
+        done += slice;
+      }
+      dropping_ = false;
+      if (stats_.queued_frames > stats_.high_water_frames) {
+        stats_.high_water_frames = stats_.queued_frames;
+        lease_->raise_high_water(stats_.high_water_frames);
+      }
+      const auto alarm_level = static_cast<std::int64_t>(options_.high_water_alarm_fraction *
+                                                         static_cast<double>(capacity));
+      if (!high_water_alarmed_ && stats_.queued_frames >= alarm_level) {
+        high_water_alarmed_ = true;
+        alarm = RecorderAlarmKind::QueueHighWater;
+        alarm_message = "recorder '" + path_ + "': the queue holds " + std::to_string(stats_.queued_frames) + " of " +
+                        std::to_string(capacity) + " frames (the writer falls behind the device)";
+      }
+      cv_work_.notify_one();
+    }
+  }
+  if (alarm) raise(*alarm, std::move(alarm_message));
+  return result;
+}
+
+bool Recorder::enqueue_small(Item item) {
+  {
+    std::lock_guard lock(mutex_);
+    if (error_ || closing_) return false;
+    queue_.push_back(std::move(item));
+  }
+  cv_work_.notify_one();
+  return true;
+}
+
+bool Recorder::push_temps(std::span<const TempSample> temps) {
+  if (temps.empty()) return true;
+  Item item;
+  item.kind = Item::Kind::Temps;
+  item.temps.assign(temps.begin(), temps.end());
+  return enqueue_small(std::move(item));
+}
+
+bool Recorder::set_segments(std::vector<SegmentInfo> segments) {
+  Item item;
+  item.kind = Item::Kind::Segments;
+  item.segments = std::move(segments);
+  return enqueue_small(std::move(item));
+}
+
+bool Recorder::set_extra(std::string key, std::string json_text) {
+  Item item;
+  item.kind = Item::Kind::Extra;
+  item.key = std::move(key);
+  item.text = std::move(json_text);
+  return enqueue_small(std::move(item));
+}
+
+bool Recorder::commit_and_wait() {
+  std::unique_lock lock(mutex_);
+  if (error_ || closing_) return !error_;
+  Item item;
+  item.kind = Item::Kind::Barrier;
+  item.barrier = next_barrier_++;
+  const std::uint64_t mine = item.barrier;
+  queue_.push_back(std::move(item));
+  cv_work_.notify_one();
+  cv_barrier_.wait(lock, [&] { return error_ || done_barrier_ >= mine; });
+  return !error_;
+}
+
+bool Recorder::close() {
+  {
+    std::lock_guard lock(mutex_);
+    closing_ = true;
+  }
+  cv_work_.notify_all();
+  cv_space_.notify_all();
+  if (thread_.joinable()) thread_.join();
+  std::lock_guard lock(mutex_);
+  return !error_;
+}
+
+RecorderStats Recorder::stats() const {
+  std::lock_guard lock(mutex_);
+  return stats_;
+}
+
+std::optional<std::string> Recorder::error() const {
+  std::lock_guard lock(mutex_);
+  return error_;
+}
+
+// Writer thread: the batch so far, with the counters, in one COMMIT.
+void Recorder::commit_batch() {
+  const auto t0 = Clock::now();
+  {
+    std::lock_guard lock(mutex_);
+    db_.set_queue_counters(stats_.high_water_frames, stats_.dropped_frames);
+  }
+  db_.commit_batch();
+  batch_dirty_ = false;
+  if (Clock::now() - last_checkpoint_ >=
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.checkpoint_interval_s))) {
+    db_.checkpoint();
+    last_checkpoint_ = Clock::now();
+  }
+  const double took_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  const LeaseCounters published = lease_->counters();
+  RecorderStats snapshot;
+  {
+    std::lock_guard lock(mutex_);
+    stats_.committed_frames = published.committed_frames;
+    if (published.committed_frames > 0 || stats_.committed_t_ns) stats_.committed_t_ns = published.committed_t_ns;
+    ++stats_.commits;
+    stats_.last_commit_s = took_s;
+    stats_.max_commit_s = std::max(stats_.max_commit_s, took_s);
+    snapshot = stats_;
+  }
+  if (on_commit_) on_commit_(snapshot);
+}
+
+void Recorder::run() {
+  const auto interval =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.commit_interval_s));
+  last_checkpoint_ = Clock::now();
+  std::unique_lock lock(mutex_);
+  try {
+    for (;;) {
+      const auto deadline = batch_dirty_ ? batch_started_ + interval : Clock::time_point::max();
+      cv_work_.wait_until(lock, deadline, [&] {
+        return !queue_.empty() || !pending_drops_.empty() || closing_ ||
+               (batch_dirty_ && Clock::now() >= deadline);
+      });
+      if (queue_.empty() && pending_drops_.empty() && closing_) break;
+
+      std::optional<Item> item;
+      std::vector<DroppedSpan> drops;
+      if (!queue_.empty()) {
+        item = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      drops.swap(pending_drops_);
+      lock.unlock();
+
+      if ((item || !drops.empty()) && !batch_dirty_) {
+        db_.begin_batch();
+        batch_dirty_ = true;
+        batch_started_ = Clock::now();
+      }
+      for (const auto& span : drops) db_.record_dropped(span.t0_ns, span.t1_ns, span.frames);
+      bool barrier = false;
+      if (item) {
+        switch (item->kind) {
+          case Item::Kind::Frames:
+            db_.append(item->frames);
+            break;
+          case Item::Kind::Temps:
+            db_.append_temps(item->temps);
+            break;
+          case Item::Kind::Segments:
+            db_.set_segments(item->segments);
+            break;
+          case Item::Kind::Extra:
+            db_.set_extra(item->key, item->text);
+            break;
+          case Item::Kind::Barrier:
+            barrier = true;
+            break;
+        }
+      }
+      if (batch_dirty_ && (barrier || Clock::now() >= batch_started_ + interval)) commit_batch();
+
+      lock.lock();
+      if (item && item->kind == Item::Kind::Frames) {
+        // Counted out only now that the frames are in the RunDb: the bound holds for everything
+        // the recorder keeps in memory, not only for what still waits.
+        stats_.queued_frames -= static_cast<std::int64_t>(item->frames.size());
+        item->frames.clear();
+        // Keep as many blocks as the queue can ever hold; more would be garbage.
+        if (free_blocks_.size() * kBlockFrames < static_cast<std::size_t>(options_.queue_capacity_frames)) {
+          free_blocks_.push_back(std::move(item->frames));
+        }
+        const auto rearm_level = static_cast<std::int64_t>(0.5 * options_.high_water_alarm_fraction *
+                                                           static_cast<double>(options_.queue_capacity_frames));
+        if (stats_.queued_frames < rearm_level) high_water_alarmed_ = false;
+        cv_space_.notify_all();
+      }
+      if (barrier) {
+        done_barrier_ = item->barrier;
+        cv_barrier_.notify_all();
+      }
+    }
+    lock.unlock();
+    if (batch_dirty_) commit_batch();
+    db_.close();  // the clean end of the writer session: the next open needs no recovery
+    lock.lock();
+  } catch (const std::exception& e) {
+    if (!lock.owns_lock()) lock.lock();
+    error_ = e.what();
+    queue_.clear();
+    stats_.queued_frames = 0;
+    lock.unlock();
+    spdlog::error("recorder: {}", e.what());
+    raise(RecorderAlarmKind::WriteFailed, std::string("recording stopped: ") + e.what());
+    try {
+      db_.close();  // fails after a failed batch and leaves the lease for the next open's recovery
+    } catch (const std::exception& close_error) {
+      spdlog::warn("recorder: {}", close_error.what());
+    }
+    lock.lock();
+  }
+  // Wake every waiter: barriers are satisfied (or failed), producers must not wait for space.
+  done_barrier_ = next_barrier_;
+  cv_barrier_.notify_all();
+  cv_space_.notify_all();
+}
+
+}  // namespace imucal::storage

@@ -1,0 +1,167 @@
+// Recorder: the thread that owns a run's RunDb while a campaign records, fed through a bounded
+// queue so that the device readers never touch SQLite.
+//
+// Guarantees:
+//  - Batches: everything that arrives within one commit interval goes into one transaction
+//    (WAL, synchronous=NORMAL); a frame is committed at most commit_interval_s after the writer
+//    took it from the queue. A commit survives a crash of the process (kill -9) at any moment.
+//  - Memory is bounded: at most queue_capacity_frames frames wait in the queue (in recycled
+//    blocks), plus one partial chunk inside the RunDb.
+//  - Backpressure is visible: the queue's high-water mark and every dropped frame are counted,
+//    stored in the run (recorder_session, dropped_span) and raised as alarms, so that the
+//    campaign can be suspended; nothing is lost silently.
+//  - Crash accounting: frames are counted as accepted in the run's writer lease (shared memory)
+//    when they enter the queue; after a crash the next RunDb::open reports how many accepted
+//    frames were never committed (RunDb::recovery()).
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/recording.hpp"
+#include "storage/run_db.hpp"
+
+namespace imucal::storage {
+
+struct RecorderOptions {
+  double commit_interval_s = 1.0;
+  std::int64_t queue_capacity_frames = std::int64_t{1} << 18;  // ~21 MB of frames, 0.13 s at 2 MHz
+  // Default of push(): false drops a batch that does not fit (real devices must never block on
+  // the disk); true makes the producer wait (simulation and benchmarks, paced by the recorder).
+  bool wait_when_full = false;
+  // The QueueHighWater alarm fires when the queue passes this fraction of its capacity, and is
+  // re-armed when it drains below half of it.
+  double high_water_alarm_fraction = 0.75;
+  // A commit survives a crash of the process at once; against a power loss only after a
+  // checkpoint has synced the WAL (synchronous=NORMAL). SQLite checkpoints by itself every
+  // 1000 WAL pages (16 MB, ~300 k frames); at 2 kHz that is minutes, so the recorder also
+  // checkpoints at least this often.
+  double checkpoint_interval_s = 10.0;
+};
+
+struct RecorderStats {
+  std::int64_t queued_frames = 0;  // accepted, not yet written to the RunDb
+  std::int64_t queue_capacity_frames = 0;
+  std::int64_t high_water_frames = 0;
+  std::int64_t accepted_frames = 0;   // entered the queue in this session
+  std::int64_t committed_frames = 0;  // committed in this session
+  std::optional<std::int64_t> committed_t_ns;  // time of the last committed frame
+  std::int64_t dropped_frames = 0;
+  std::int64_t commits = 0;
+  double last_commit_s = 0.0;  // how long the last commit took (chunk flush, session row, COMMIT)
+  double max_commit_s = 0.0;
+};
+
+enum class RecorderAlarmKind {
+  QueueHighWater,  // the writer falls behind; frames will be dropped if it goes on
+  FramesDropped,   // a batch did not fit the queue and was dropped (counted, stored in the run)
+  WriteFailed,     // the run cannot be written (disk full, damaged file, ...); recording stopped
+};
+
+struct RecorderAlarm {
+  RecorderAlarmKind kind = RecorderAlarmKind::QueueHighWater;
+  std::string message;  // for a person: what happened and to which run
+  RecorderStats stats;
+};
+
+const char* to_string(RecorderAlarmKind kind);
+
+class Recorder {
+ public:
+  // Called on the pushing thread (QueueHighWater, FramesDropped) or the writer thread
+  // (WriteFailed), never with the recorder's lock held; must be quick and must not call push()
+  // or commit_and_wait(). The daemon suspends the campaign from here.
+  using AlarmHandler = std::function<void(const RecorderAlarm&)>;
+  // Called on the writer thread after every commit (e.g. estimators tail the run up to
+  // committed_t_ns).
+  using CommitListener = std::function<void(const RecorderStats&)>;
+
+  // Takes the run's writer role (throws StorageError when another writer holds it) and starts
+  // the writer thread.
+  Recorder(RunDb db, RecorderOptions options = {}, AlarmHandler on_alarm = {}, CommitListener on_commit = {});
+  ~Recorder();  // close(), errors logged
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  enum class Push {
+    Queued,
+    Dropped,   // the queue was full (counted, alarmed, recorded in the run)
+    Rejected,  // times do not increase strictly after everything pushed before; nothing queued
+    Failed,    // the recorder has failed or is closed (see error())
+  };
+  // Copies the frames into the queue. The first form uses options.wait_when_full.
+  Push push(std::span<const ImuFrame> frames);
+  Push push(std::span<const ImuFrame> frames, bool wait_when_full);
+  // Temperatures, segments and extras are small: they always wait for space and never drop.
+  bool push_temps(std::span<const TempSample> temps);
+  bool set_segments(std::vector<SegmentInfo> segments);
+  bool set_extra(std::string key, std::string json_text);
+
+  // Commits everything queued so far and waits for it. False when the recorder has failed.
+  bool commit_and_wait();
+  // Commits the rest, closes the writer session cleanly and ends the thread (idempotent).
+  // False when the recorder has failed.
+  bool close();
+
+  RecorderStats stats() const;
+  std::optional<std::string> error() const;
+  const std::string& path() const { return path_; }
+  // What opening the run found when the previous writer had died (see RunDb::recovery()).
+  const std::optional<RecoveryReport>& recovery() const { return recovery_; }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  struct Item {
+    enum class Kind { Frames, Temps, Segments, Extra, Barrier } kind = Kind::Frames;
+    std::vector<ImuFrame> frames;
+    std::vector<TempSample> temps;
+    std::vector<SegmentInfo> segments;
+    std::string key, text;
+    std::uint64_t barrier = 0;
+  };
+  static constexpr std::size_t kBlockFrames = RunDb::kFramesPerChunk;
+
+  void run();
+  void commit_batch();
+  bool enqueue_small(Item item);
+  std::vector<ImuFrame> take_block_locked();
+  void raise(RecorderAlarmKind kind, std::string message);
+
+  RunDb db_;  // the writer thread's, between construction and the end of run()
+  std::string path_;
+  RecorderOptions options_;
+  AlarmHandler on_alarm_;
+  CommitListener on_commit_;
+  WriterLease* lease_ = nullptr;  // owned by db_
+  std::optional<RecoveryReport> recovery_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable cv_work_, cv_space_, cv_barrier_;
+  std::deque<Item> queue_;
+  std::vector<std::vector<ImuFrame>> free_blocks_;  // recycled, so a steady state allocates nothing
+  RecorderStats stats_;
+  std::optional<std::int64_t> last_pushed_t_ns_;
+  std::vector<DroppedSpan> pending_drops_;
+  bool dropping_ = false;             // inside a run of drops (one alarm per run)
+  bool high_water_alarmed_ = false;   // until the queue drains below half the alarm level
+  std::uint64_t next_barrier_ = 1, done_barrier_ = 0;
+  bool closing_ = false;
+  std::optional<std::string> error_;
+  std::thread thread_;
+
+  // Writer thread only.
+  bool batch_dirty_ = false;
+  Clock::time_point batch_started_{};
+  Clock::time_point last_checkpoint_{};
+};
+
+}  // namespace imucal::storage

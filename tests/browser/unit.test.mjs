@@ -1,0 +1,123 @@
+// Unit tests of the web UI's pure modules, in Node without a browser (fast, no Chromium needed):
+// the bounded decimating series behind the live plots, the builder's parsing and its sorting of
+// the daemon's problems by segment, and the flattening of an imucal-imu-model/1 into coefficients.
+import test from 'node:test';
+import assert from 'node:assert/strict';
+import { Series, BoundedList } from '../../web/js/series.mjs';
+import { parseField, SEGMENT_TYPES, mapProblems, compress } from '../../web/js/program_edit.mjs';
+import { flatten, coefficientRows, unitOf } from '../../web/js/coefficients.mjs';
+
+test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
+  const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
+  const n = 12 * 3600 * 10;
+  const t0 = performance.now();
+  for (let i = 0; i < n; i++) s.push(i / 10, [i, -i, Math.sin(i)]);
+  const ms = performance.now() - t0;
+  assert.equal(s.length, n);
+  assert.ok(s.heldPoints <= 8000, `held ${s.heldPoints}`);
+  const whole = s.view(Infinity);
+  assert.ok(whole[0].length <= 2001, `whole-run view has ${whole[0].length} points`);
+  assert.equal(whole[0][0], 0);
+  assert.equal(whole[0][whole[0].length - 1], (n - 1) / 10, 'ends on the newest sample');
+  for (let k = 1; k < whole[0].length; k++) assert.ok(whole[0][k] > whole[0][k - 1], 'times increase');
+  assert.equal(whole[1][whole[1].length - 1], n - 1);
+  const recent = s.view(60);
+  assert.equal(recent[0].length, 601, 'the last minute at full rate');
+  assert.equal(recent[0][0], (n - 1) / 10 - 60);
+  assert.ok(ms < 2000, `pushing 432 000 samples took ${ms.toFixed(0)} ms`);
+});
+
+test('views are thinned to maxPoints and keep the newest sample', () => {
+  const s = new Series(1, { recentCapacity: 10000, historyCapacity: 100 });
+  for (let i = 0; i < 9999; i++) s.push(i, [i]);
+  const v = s.view(Infinity, 1000);
+  assert.ok(v[0].length <= 1001);
+  assert.equal(v[0][v[0].length - 1], 9998);
+});
+
+test('a sample older than the last is dropped; missing values become gaps', () => {
+  const s = new Series(2);
+  assert.ok(s.push(1, [1, 2]));
+  assert.equal(s.push(0.5, [3, 4]), false);
+  assert.ok(s.push(2, [NaN, undefined]));
+  const [t, a, b] = s.view();
+  assert.deepEqual(t, [1, 2]);
+  assert.deepEqual(a, [1, null]);
+  assert.deepEqual(b, [2, null]);
+  assert.ok(Number.isNaN(s.last(0)));
+});
+
+test('the history keeps a uniform stride after compaction', () => {
+  const s = new Series(1, { recentCapacity: 10, historyCapacity: 8 });
+  for (let i = 0; i < 100; i++) s.push(i, [i]);
+  const [t] = s.view(Infinity);
+  const steps = new Set();
+  for (let k = 1; k < t.length - 1; k++) steps.add(t[k] - t[k - 1]);
+  assert.equal(steps.size, 1, `one stride in the history: ${[...steps]}`);
+});
+
+test('a bounded list keeps the newest items', () => {
+  const l = new BoundedList(100);
+  for (let i = 0; i < 1000; i++) l.push(i);
+  assert.ok(l.items.length <= 100);
+  assert.equal(l.items[l.items.length - 1], 999);
+});
+
+test('segment fields are parsed before anything is sent', () => {
+  const f = (type, key) => SEGMENT_TYPES[type].find((x) => x.key === key);
+  assert.deepEqual(parseField(f('rate', 'rate_dps'), ' -30 '), { value: -30 });
+  assert.equal(parseField(f('rate', 'rate_dps'), '0').error, 'must not be 0');
+  assert.equal(parseField(f('rate', 'rate_dps'), 'fast').error, 'not a number');
+  assert.equal(parseField(f('hold', 'duration_s'), '-1').error, 'must be greater than 0');
+  assert.deepEqual(parseField(f('hold', 'duration_s'), ''), { empty: true });
+  assert.deepEqual(parseField(f('move', 'to_deg'), '0, 90 90'), { value: [0, 90, 90] });
+  assert.match(parseField(f('move', 'to_deg'), '0, 90').error, /three angles/);
+  assert.deepEqual(parseField(f('positions', 'positions_deg'), '0,0,0; 180,0,0'), { value: [[0, 0, 0], [180, 0, 0]] });
+  assert.match(parseField(f('positions', 'positions_deg'), '0,0,0; 180,0').error, /three angles/);
+  assert.deepEqual(parseField(f('coning', 'axes'), 'middle, inner'), { value: ['middle', 'inner'] });
+  assert.ok(parseField(f('coning', 'axes'), 'middle, middle').error);
+  assert.deepEqual(parseField(f('coning', 'amplitude_deg'), '10'), { value: 10 });
+  assert.deepEqual(parseField(f('coning', 'amplitude_deg'), '10 5'), { value: [10, 5] });
+});
+
+test("the daemon's problems land beside their segment or field", () => {
+  const segments = [{ name: 'start' }, { name: 'pos' }, { name: 'rate-z+' }, { name: 'fast2' }];
+  const problems = [
+    "campaign.program: segment 'rate-z+' (t=10.0 s) axis outer: rate 400.000 deg/s exceeds the limit 300.000 deg/s",
+    "campaign.program: segment 'rate-z+' (t=12.7 s) axis outer: rate 400.000 deg/s exceeds the limit 300.000 deg/s",
+    "campaign.program: segment 'to-pos-03' (t=30.0 s) axis middle: acceleration 400 deg/s^2 exceeds the limit 300",
+    "campaign.program: program segment 4 'fast2': too few revolutions for the ramps at this rate and acceleration",
+    'campaign.chamber.setpoint_C 100.0 C is outside the chamber\'s limits -40.0 .. 85.0 C',
+    'estimator "direct" needs at least 6 static segments and 3 rate segments; the program has 1 and 2',
+  ];
+  const m = mapProblems(problems, segments);
+  assert.equal(m.bySegment.get(2).length, 2);
+  assert.equal(m.bySegment.get(1).length, 1, 'a move of a positions segment belongs to it');
+  assert.equal(m.bySegment.get(3).length, 1, 'by index when the daemon gives one');
+  assert.deepEqual([...m.byField.keys()], ['chamber.setpoint_C']);
+  assert.equal(m.general.length, 1);
+  const c = compress(m.bySegment.get(2));
+  assert.deepEqual(c, ["segment 'rate-z+' axis outer: rate 400.000 deg/s exceeds the limit 300.000 deg/s (at t = 10.0, 12.7 s)"]);
+});
+
+test('a model flattens to the names the live estimates use, with units', () => {
+  const model = {
+    format: 'imucal-imu-model/1', frame: 'instrument',
+    gyro: { bias_dph: [1, 2, 3], scale_pos_ppm: [0, 0, 0], misalignment_arcsec: { xy: 5, xz: 0, yx: 0, yz: 0, zx: 0, zy: 0 }, noise: { arw_deg_rth: 0.01 } },
+    accel: { bias_mps2: [0.001, 0, 0], lever_arm_mm: { y: [1, 2, 3], z: [0, 0, 0] } },
+    sigma: { gyro: { bias_dph: [0.5, 0.5, 0.5] }, accel: { bias_mps2: [0.0001, 1, 1] } },
+  };
+  const f = flatten(model);
+  assert.equal(f.get('gyro.bias_dph.z'), 3);
+  assert.equal(f.get('gyro.misalignment_arcsec.xy'), 5);
+  assert.equal(f.get('accel.lever_arm_mm.y.z'), 3);
+  assert.equal(unitOf('gyro.bias_dph.x'), '°/h');
+  assert.equal(unitOf('accel.bias_mps2.x'), 'm/s²');
+  assert.equal(unitOf('gyro.noise.arw_deg_rth'), '°/√h');
+  const truth = { gyro: { bias_dph: [0, 2, 0] }, accel: { bias_mps2: [0, 0, 0] } };
+  const rows = coefficientRows(model, truth);
+  const x = rows.find((r) => r.name === 'gyro.bias_dph.x');
+  assert.deepEqual([x.estimate, x.sigma, x.truth, x.error, x.ratio], [1, 0.5, 0, 1, 2]);
+  assert.equal(rows.find((r) => r.name === 'accel.bias_mps2.x').ratio, 10);
+  assert.equal(rows[0].group, 'Gyro bias', 'groups in the order of the model');
+});

@@ -1,0 +1,153 @@
+// The real imucald executable as a subprocess: kill -9 in the middle of a run, restart, and every
+// frame committed before the kill is there exactly once; the run shows as interrupted, resumes
+// from its last checkpoint after homing and completes, bit for bit the run an uninterrupted
+// simulation gives. Then SIGTERM: a clean exit that parks the run.
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include "service_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+struct Daemon {
+  pid_t pid = -1;
+  std::uint16_t port = 0;
+};
+
+// Starts imucald and reads its "listening on" line from stdout.
+Daemon spawn(const std::string& data_dir, const std::string& log_path) {
+  int out[2];
+  if (::pipe(out) != 0) return {};
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::dup2(out[1], STDOUT_FILENO);
+    const int err = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    if (err >= 0) ::dup2(err, STDERR_FILENO);
+    ::close(out[0]);
+    ::close(out[1]);
+    const std::string data_arg = data_dir;
+    ::execl(IMUCAL_IMUCALD, IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", data_arg.c_str(),
+            "--operator-token", kOperatorToken, "--log-level", "info", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::close(out[1]);
+  Daemon d;
+  d.pid = pid;
+  std::string text;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline) {
+    pollfd p{out[0], POLLIN, 0};
+    if (::poll(&p, 1, 200) > 0) {
+      char buf[512];
+      const auto n = ::read(out[0], buf, sizeof buf);
+      if (n <= 0) break;
+      text.append(buf, static_cast<std::size_t>(n));
+      const auto at = text.find("listening on http://127.0.0.1:");
+      const auto eol = at == std::string::npos ? at : text.find('\n', at);
+      if (eol != std::string::npos) {
+        d.port = static_cast<std::uint16_t>(std::stoi(text.substr(at + 30, eol - at - 30)));
+        break;
+      }
+    }
+  }
+  ::close(out[0]);
+  return d;
+}
+
+int wait_exit(pid_t pid, double timeout_s) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    int status = 0;
+    if (::waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, nullptr, 0);
+  return -1;
+}
+
+}  // namespace
+
+TEST(Crash, KillDashNineLosesNothingCommittedAndTheRunResumes) {
+  const std::string dir = scratch_dir("crash");
+  const std::string log = dir + "/imucald.stderr";
+  Daemon first = spawn(dir + "/data", log);
+  ASSERT_GT(first.port, 0) << "imucald did not start; see " << log;
+  const Client op{first.port, kOperatorToken};
+  const auto posted = op.post("/api/campaigns", json{{"name", "crash"},
+                                                     {"program", "direct-short"},
+                                                     {"rate_hz", 100},
+                                                     {"seed", 3},
+                                                     {"time_scale", 50},
+                                                     {"truth", noisy_truth()},
+                                                     {"estimators", {"direct"}}}
+                                                    .dump());
+  ASSERT_EQ(posted.status, 201) << posted.body;
+  const auto id = posted.json_body().at("id").get<std::int64_t>();
+  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const json before = op.wait_for(id, [](const json& c) { return c.at("program_time_s").get<double>() > 150.0; });
+  ASSERT_EQ(before.at("state"), "running");
+  const std::string run_db = dir + "/data/" + before.at("run_db").get<std::string>();
+
+  ::kill(first.pid, SIGKILL);
+  EXPECT_EQ(wait_exit(first.pid, 10), 128 + SIGKILL);
+
+  // What the crash left committed.
+  const auto committed = run_frames(run_db);
+  ASSERT_GT(committed.size(), 1000u);
+  for (std::size_t i = 1; i < committed.size(); ++i) ASSERT_LT(committed[i - 1].t_ns, committed[i].t_ns);
+
+  Daemon second = spawn(dir + "/data", log);
+  ASSERT_GT(second.port, 0) << "imucald did not restart; see " << log;
+  const Client op2{second.port, kOperatorToken};
+  const json found = op2.get_json("/api/campaigns/" + std::to_string(id));
+  EXPECT_EQ(found.at("state"), "interrupted");
+  EXPECT_TRUE(has_transition(found, "running", "interrupted"));
+  // Nothing was touched by the restart alone.
+  const auto after_restart = run_frames(run_db);
+  ASSERT_EQ(after_restart.size(), committed.size());
+
+  const auto resume = op2.post("/api/campaigns/" + std::to_string(id) + "/resume");
+  ASSERT_EQ(resume.status, 200) << resume.body;
+  EXPECT_EQ(resume.json_body().at("state"), "queued");
+  const json done = op2.wait_state(id, "done", 120);
+  EXPECT_TRUE(has_event(done, "homed"));
+  EXPECT_TRUE(has_event(done, "redo", "resuming after an interruption"));
+  EXPECT_TRUE(done.at("has_model").get<bool>());
+
+  const auto final_frames = run_frames(run_db);
+  // Every committed frame is still there, once, unchanged.
+  ASSERT_GE(final_frames.size(), committed.size());
+  for (std::size_t i = 0; i < committed.size(); ++i) ASSERT_TRUE(same_frame(final_frames[i], committed[i])) << i;
+  // And the whole run is what an uninterrupted simulation gives: no gap, no duplicate.
+  expect_same_frames(final_frames, reference_frames(done.at("spec"), daemon::DaemonConfig{}));
+
+  // SIGTERM mid-run: a clean exit, the run parked as interrupted with its frames committed.
+  const auto again = op2.post("/api/campaigns", json{{"name", "term"}, {"program", "direct-short"}, {"time_scale", 50}}.dump());
+  const auto id2 = again.json_body().at("id").get<std::int64_t>();
+  ASSERT_EQ(op2.post("/api/campaigns/" + std::to_string(id2) + "/start").status, 200);
+  const json running = op2.wait_for(id2, [](const json& c) { return c.at("program_time_s").get<double>() > 60.0; });
+  ::kill(second.pid, SIGTERM);
+  EXPECT_EQ(wait_exit(second.pid, 30), 0);
+  Daemon third = spawn(dir + "/data", log);
+  ASSERT_GT(third.port, 0);
+  const Client op3{third.port, kOperatorToken};
+  const json parked = op3.get_json("/api/campaigns/" + std::to_string(id2));
+  EXPECT_EQ(parked.at("state"), "interrupted");
+  bool clean = false;
+  for (const auto& t : parked.at("transitions"))
+    clean = clean || t.at("reason").get<std::string>().find("the daemon shut down") != std::string::npos;
+  EXPECT_TRUE(clean) << parked.dump();
+  EXPECT_EQ(parked.at("frames").get<std::int64_t>(),
+            static_cast<std::int64_t>(run_frames(dir + "/data/" + running.at("run_db").get<std::string>()).size()));
+  ::kill(third.pid, SIGTERM);
+  EXPECT_EQ(wait_exit(third.pid, 30), 0);
+}

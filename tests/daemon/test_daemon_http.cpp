@@ -1,0 +1,289 @@
+// imucald over HTTP on an ephemeral port (in-process): the acceptance end-to-end run (post a
+// campaign, start, pause, resume, finish, fetch the model), authentication and roles, every kind
+// of bad input answered with a clear JSON error, static files, and the live WebSocket.
+#include <filesystem>
+#include <fstream>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+#include <gtest/gtest.h>
+
+#include "service_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+std::string error_of(const HttpResult& r) { return r.json_body().value("error", std::string("<no error>")); }
+
+}  // namespace
+
+TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
+  LocalDaemon d("e2e", true);
+  const Client op{d.service->port(), kOperatorToken};
+  ASSERT_NE(op.port, 0);
+  const json programs = op.get_json("/api/programs");
+  bool found = false;
+  for (const auto& p : programs.at("programs")) found = found || p.at("name") == "direct-short";
+  ASSERT_TRUE(found);
+
+  const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
+                                                    "time_scale": 100})");
+  ASSERT_EQ(posted.status, 201) << posted.body;
+  const auto id = posted.json_body().at("id").get<std::int64_t>();
+  EXPECT_EQ(posted.headers.at("location"), "/api/campaigns/" + std::to_string(id));
+  EXPECT_EQ(op.get_json("/api/campaigns/" + std::to_string(id)).at("state"), "created");
+
+  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  op.wait_for(id, [](const json& c) { return c.at("state") == "running" && c.at("program_time_s").get<double>() > 40.0; });
+  const auto status = op.get_json("/api/status");
+  EXPECT_EQ(status.at("active").at("id"), id);
+
+  const auto pause = op.post("/api/campaigns/" + std::to_string(id) + "/pause", R"({"reason": "coffee"})");
+  ASSERT_EQ(pause.status, 200) << pause.body;
+  EXPECT_EQ(pause.json_body().at("state"), "pausing");
+  op.wait_state(id, "paused");
+  const auto resume = op.post("/api/campaigns/" + std::to_string(id) + "/resume");
+  ASSERT_EQ(resume.status, 200) << resume.body;
+  EXPECT_EQ(resume.json_body().at("state"), "running");
+  const json done = op.wait_state(id, "done", 90);
+  EXPECT_TRUE(has_transition(done, "paused", "running"));
+  bool reason_kept = false;
+  for (const auto& t : done.at("transitions"))
+    reason_kept = reason_kept || t.at("reason").get<std::string>().find("coffee") != std::string::npos;
+  EXPECT_TRUE(reason_kept);
+
+  const auto model = op.get("/api/campaigns/" + std::to_string(id) + "/model");
+  ASSERT_EQ(model.status, 200);
+  EXPECT_EQ(model.json_body().at("format"), "imucal-imu-model/1");
+  EXPECT_TRUE(model.json_body().contains("sigma"));
+  const auto list = op.get_json("/api/campaigns");
+  ASSERT_EQ(list.at("campaigns").size(), 1u);
+  EXPECT_EQ(list.at("campaigns")[0].at("state"), "done");
+  EXPECT_TRUE(list.at("campaigns")[0].at("has_model").get<bool>());
+  expect_same_frames(run_frames(d.run_path(done)), reference_frames(done.at("spec"), d.config));
+}
+
+TEST(Http, AuthenticationAndRoles) {
+  LocalDaemon d("auth", true);
+  const std::uint16_t port = d.service->port();
+  const Client anon{port, ""}, viewer{port, kViewerToken}, op{port, kOperatorToken}, wrong{port, "not-a-token-at-all"};
+
+  const auto r = anon.get("/api/status");
+  EXPECT_EQ(r.status, 401);
+  EXPECT_EQ(error_of(r), "authentication required");
+  EXPECT_EQ(r.headers.count("www-authenticate"), 1u);
+  EXPECT_EQ(wrong.get("/api/status").status, 401);
+  EXPECT_EQ(viewer.get("/api/status").status, 200);
+  EXPECT_EQ(viewer.get_json("/api/me").at("role"), "viewer");
+
+  // A viewer reads everything and changes nothing.
+  const auto vpost = viewer.post("/api/campaigns", R"({"name": "v", "program": "direct-short"})");
+  EXPECT_EQ(vpost.status, 403);
+  EXPECT_EQ(error_of(vpost), "operator role required");
+  const auto id = op.post("/api/campaigns", R"({"name": "o", "program": "direct-short"})").json_body().at("id").get<int>();
+  EXPECT_EQ(viewer.post("/api/campaigns/" + std::to_string(id) + "/start").status, 403);
+  EXPECT_EQ(anon.post("/api/campaigns/" + std::to_string(id) + "/start").status, 401);
+  EXPECT_EQ(viewer.get_json("/api/campaigns/" + std::to_string(id)).at("state"), "created");
+  EXPECT_EQ(viewer.post("/api/campaigns/validate", R"({"name": "v", "program": "direct-short"})").status, 200);
+
+  // Browser sign-in: a session cookie.
+  const auto bad = http_request(port, "POST", "/api/login", R"({"user": "viewer", "password": "nope"})");
+  EXPECT_EQ(bad.status, 401);
+  const auto login = http_request(port, "POST", "/api/login", R"({"user": "viewer", "password": "viewer-password"})");
+  ASSERT_EQ(login.status, 200) << login.body;
+  const std::string set_cookie = login.headers.at("set-cookie");
+  EXPECT_NE(set_cookie.find("HttpOnly"), std::string::npos);
+  EXPECT_NE(set_cookie.find("SameSite=Strict"), std::string::npos);
+  const std::string cookie = set_cookie.substr(0, set_cookie.find(';'));
+  const auto me = http_request(port, "GET", "/api/me", "", {{"Cookie", cookie}});
+  ASSERT_EQ(me.status, 200);
+  EXPECT_EQ(me.json_body().at("via"), "session");
+  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/start", "", {{"Cookie", cookie}}).status,
+            403);
+  // The generated or configured token signs an operator in.
+  const auto op_login = http_request(port, "POST", "/api/login", json{{"token", kOperatorToken}}.dump());
+  ASSERT_EQ(op_login.status, 200);
+  EXPECT_EQ(op_login.json_body().at("role"), "operator");
+  const std::string op_cookie = op_login.headers.at("set-cookie").substr(0, op_login.headers.at("set-cookie").find(';'));
+  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/abort", "", {{"Cookie", op_cookie}}).status,
+            200);
+  EXPECT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", op_cookie}}).status, 200);
+  EXPECT_EQ(http_request(port, "GET", "/api/me", "", {{"Cookie", op_cookie}}).status, 401);
+}
+
+TEST(Http, BadInputGetsAClearErrorAndChangesNothing) {
+  LocalDaemon d("bad-input", true, [](daemon::DaemonConfig& c) {
+    c.http.body_limit_bytes = 4096;
+    c.table_limits.axis[0].rate_dps = 25.0;  // the built-in programs' 30 deg/s runs are too fast here
+  });
+  const Client op{d.service->port(), kOperatorToken};
+
+  const auto malformed = op.post("/api/campaigns", R"({"name": "x", "program": )");
+  EXPECT_EQ(malformed.status, 400);
+  EXPECT_NE(error_of(malformed).find("malformed JSON"), std::string::npos) << malformed.body;
+
+  const auto unknown = op.post("/api/campaigns", R"({"name": "x", "program": "direct", "speed": 3})");
+  EXPECT_EQ(unknown.status, 400);
+  EXPECT_NE(error_of(unknown).find("unknown key \"speed\""), std::string::npos) << unknown.body;
+
+  const auto wrong_type = op.post("/api/campaigns", R"(["direct"])");
+  EXPECT_EQ(wrong_type.status, 400);
+
+  const auto limits = op.post("/api/campaigns", R"({"name": "x", "program": "direct-short", "chamber": {"setpoint_C": 300}})");
+  EXPECT_EQ(limits.status, 422);
+  EXPECT_EQ(error_of(limits), "campaign is invalid");
+  const auto problems = limits.json_body().at("problems");
+  EXPECT_GE(problems.size(), 2u) << limits.body;  // the table rate and the chamber, both listed
+  EXPECT_NE(limits.body.find("exceeds the limit 25"), std::string::npos) << limits.body;
+  EXPECT_NE(limits.body.find("300.0 C is outside"), std::string::npos) << limits.body;
+
+  const auto valid = op.post("/api/campaigns/validate", R"({"name": "x", "program": "direct-short"})");
+  EXPECT_EQ(valid.status, 200);
+  EXPECT_FALSE(valid.json_body().at("valid").get<bool>());
+
+  const std::string big = R"({"name": ")" + std::string(10000, 'x') + R"(", "program": "noise"})";
+  const auto too_big = op.post("/api/campaigns", big);
+  EXPECT_EQ(too_big.status, 413);
+  EXPECT_NE(error_of(too_big).find("larger than 4096"), std::string::npos);
+
+  const auto form = http_request(op.port, "POST", "/api/campaigns", "name=x",
+                                 {{"Authorization", std::string("Bearer ") + kOperatorToken},
+                                  {"Content-Type", "application/x-www-form-urlencoded"}});
+  EXPECT_EQ(form.status, 415);
+
+  // Nothing of the above was stored.
+  EXPECT_EQ(op.get_json("/api/campaigns").at("campaigns").size(), 0u);
+
+  const auto ok = op.post("/api/campaigns", R"({"name": "noise", "program": "noise", "estimators": ["navigation"],
+                                                "time_scale": 0})");
+  ASSERT_EQ(ok.status, 201) << ok.body;
+  const auto id = std::to_string(ok.json_body().at("id").get<int>());
+  const auto early = op.post("/api/campaigns/" + id + "/resume");
+  EXPECT_EQ(early.status, 409);
+  EXPECT_EQ(early.json_body().at("state"), "created");
+  EXPECT_EQ(op.post("/api/campaigns/" + id + "/frobnicate").status, 404);
+  const auto get_start = op.get("/api/campaigns/" + id + "/start");
+  EXPECT_EQ(get_start.status, 405);
+  EXPECT_EQ(get_start.headers.at("allow"), "POST");
+  EXPECT_EQ(op.get("/api/campaigns/999").status, 404);
+  EXPECT_EQ(op.get("/api/campaigns/abc").status, 404);
+  EXPECT_EQ(op.get("/api/campaigns/" + id + "/model").status, 404);
+  EXPECT_EQ(op.get("/api/nothing").status, 404);
+  EXPECT_EQ(op.get("/api/campaigns?limit=0").status, 400);
+  EXPECT_EQ(op.post("/api/campaigns/" + id + "/start", R"({"why": 1})").status, 400);
+  EXPECT_EQ(op.post("/api/campaigns/" + id + "/start").status, 200);
+  const auto twice = op.post("/api/campaigns/" + id + "/start");
+  EXPECT_EQ(twice.status, 409);
+  EXPECT_NE(error_of(twice).find("already started"), std::string::npos);
+  EXPECT_EQ(op.post("/api/campaigns/" + id + "/abort").status, 200);
+  EXPECT_EQ(op.wait_for(std::stoll(id), [](const json& c) { return c.at("state") == "aborted"; }).at("state"), "aborted");
+}
+
+TEST(Http, StaticFilesWithTypesAndNoTraversal) {
+  std::string web;
+  LocalDaemon d("static", true, [&](daemon::DaemonConfig& c) {
+    web = c.data_dir + "/../static-web-" + std::to_string(::getpid());
+    std::filesystem::create_directories(web + "/css");
+    std::ofstream(web + "/index.html") << "<!doctype html><title>imucal</title>";
+    std::ofstream(web + "/css/site.css") << "body{}";
+    c.http.web_dir = web;
+  });
+  const std::uint16_t port = d.service->port();
+  const auto index = http_request(port, "GET", "/");
+  ASSERT_EQ(index.status, 200);
+  EXPECT_EQ(index.headers.at("content-type"), "text/html; charset=utf-8");
+  EXPECT_EQ(index.headers.at("cache-control"), "no-cache");
+  const auto css = http_request(port, "GET", "/css/site.css");
+  ASSERT_EQ(css.status, 200);
+  EXPECT_EQ(css.headers.at("content-type"), "text/css; charset=utf-8");
+  EXPECT_EQ(http_request(port, "GET", "/css/site.css", "", {{"If-None-Match", css.headers.at("etag")}}).status, 304);
+  for (const char* evil : {"/../imucald.db", "/%2e%2e/%2e%2e/etc/passwd", "/css/../../etc/passwd", "/.hidden"}) {
+    const auto r = http_request(port, "GET", evil);
+    EXPECT_TRUE(r.status == 404 || r.status == 400) << evil << ": " << r.status;
+  }
+  EXPECT_EQ(http_request(port, "POST", "/index.html", "x").status, 405);
+}
+
+TEST(Http, LiveWebSocketSendsTelemetryToViewersOnly) {
+  namespace beast = boost::beast;
+  namespace websocket = beast::websocket;
+  namespace net = boost::asio;
+  using tcp = net::ip::tcp;
+  LocalDaemon d("live", true);
+  const std::uint16_t port = d.service->port();
+  const Client op{port, kOperatorToken};
+  const auto id = op.post("/api/campaigns", R"({"name": "live", "program": "direct-short", "time_scale": 100})")
+                      .json_body()
+                      .at("id")
+                      .get<std::int64_t>();
+  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+
+  net::io_context ioc;
+  auto connect = [&](const std::string& token, const std::string& target) {
+    auto ws = std::make_unique<websocket::stream<tcp::socket>>(ioc);
+    ws->next_layer().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+    ws->set_option(websocket::stream_base::decorator([token](websocket::request_type& req) {
+      if (!token.empty()) req.set(beast::http::field::authorization, "Bearer " + token);
+    }));
+    ws->handshake("127.0.0.1", target);
+    return ws;
+  };
+  EXPECT_THROW(connect("", "/api/live"), boost::system::system_error);
+  EXPECT_THROW(connect("wrong-token-wrong-token", "/api/live"), boost::system::system_error);
+
+  auto ws = connect(kViewerToken, "/api/live");
+  beast::flat_buffer buffer;
+  ws->read(buffer);
+  const json hello = json::parse(beast::buffers_to_string(buffer.data()));
+  EXPECT_EQ(hello.at("type"), "hello");
+  EXPECT_EQ(hello.at("role"), "viewer");
+  std::uint64_t last_seq = 0;
+  int telemetry = 0, transitions = 0;
+  bool saw_run = false;
+  for (int i = 0; i < 60 && telemetry < 15; ++i) {
+    buffer.consume(buffer.size());
+    ws->read(buffer);
+    const json m = json::parse(beast::buffers_to_string(buffer.data()));
+    ASSERT_TRUE(m.contains("seq"));
+    EXPECT_GT(m.at("seq").get<std::uint64_t>(), last_seq);
+    last_seq = m.at("seq").get<std::uint64_t>();
+    if (m.at("type") == "telemetry") {
+      ++telemetry;
+      for (const char* key : {"table", "chamber", "imu", "recorder", "estimators", "run"}) ASSERT_TRUE(m.contains(key)) << key;
+      EXPECT_EQ(m.at("table").at("angle_deg").size(), 3u);
+      if (m.at("run").is_object()) {
+        saw_run = true;
+        EXPECT_EQ(m.at("run").at("id"), id);
+        EXPECT_TRUE(m.at("imu").contains("lost_frames"));
+        EXPECT_TRUE(m.at("chamber").contains("setpoint_C"));
+      }
+    } else if (m.at("type") == "event" && m.at("kind") == "transition") {
+      ++transitions;
+    }
+  }
+  EXPECT_GE(telemetry, 15);
+  EXPECT_TRUE(saw_run);
+  // With the query token too (for scripts that cannot set headers).
+  auto ws2 = connect("", std::string("/api/live?token=") + kViewerToken);
+  buffer.consume(buffer.size());
+  ws2->read(buffer);
+  EXPECT_EQ(json::parse(beast::buffers_to_string(buffer.data())).at("type"), "hello");
+  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/abort").status, 200);
+  // The transition reaches the live clients as an event.
+  bool saw_abort = false;
+  for (int i = 0; i < 200 && !saw_abort; ++i) {
+    buffer.consume(buffer.size());
+    ws->read(buffer);
+    const json m = json::parse(beast::buffers_to_string(buffer.data()));
+    saw_abort = m.at("type") == "event" && m.value("to", "") == "aborting";
+  }
+  EXPECT_TRUE(saw_abort);
+  ws->close(websocket::close_code::normal);
+  ws2->close(websocket::close_code::normal);
+  (void)transitions;
+}

@@ -1,0 +1,385 @@
+// Stage 2 (seed ch. 3) in seconds: chamber profiles and their coverage, the thermal simulation,
+// the thermal section, the eq. 8 fits and their degree selection, a short chamber run end to end,
+// every kind of bad temperature input, and thermal compensation in navigation.
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/units.hpp"
+#include "estimators/navigation_run.hpp"
+#include "test_thermal_fixture.hpp"
+
+using namespace imucal;
+
+namespace {
+
+bool mentions(const std::vector<std::string>& notes, const std::string& a, const std::string& b = "") {
+  for (const auto& n : notes)
+    if (n.find(a) != std::string::npos && n.find(b) != std::string::npos) return true;
+  return false;
+}
+
+const thermal::TempProblem* problem_on(const thermal::Result& r, const std::string& channel) {
+  for (const auto& p : r.problems)
+    if (p.channel == channel) return &p;
+  return nullptr;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+TEST(Chamber, BuiltInProfileCoversThePlaneOverFifteenToThirtyFive) {
+  const motion::ChamberProfile p = motion::load_chamber_profile("thermal");
+  EXPECT_NEAR(p.duration_s(), 12 * 3600.0, 1.0);
+  EXPECT_TRUE(motion::validate_chamber_profile(p, motion::ChamberLimits{}).empty());
+  // Predicted before anything runs: the sensors reach both ends, heat and cool through every
+  // 1 C bin of 15..35, at more than one rate.
+  const motion::CoverageMap m = motion::predict_coverage(p, motion::ThermalLags{});
+  std::printf("%s", m.ascii().c_str());
+  EXPECT_LE(m.T_min_C, 15.0);
+  EXPECT_GE(m.T_max_C, 35.0);
+  EXPECT_DOUBLE_EQ(m.heating_T_fraction(), 1.0);
+  EXPECT_DOUBLE_EQ(m.cooling_T_fraction(), 1.0);
+  EXPECT_GE(m.rate_max_C_per_min, 0.4);
+  EXPECT_LE(m.rate_min_C_per_min, -0.4);
+  int rates_at_25 = 0;  // distinct heating rates seen around 25 C
+  for (int k = 0; k < m.rate_bins(); ++k) rates_at_25 += m.seconds[static_cast<std::size_t>(10 * m.rate_bins() + k)] > 0;
+  EXPECT_GE(rates_at_25, 5);
+}
+
+TEST(Chamber, ProfilesAreCheckedBeforeTheyRun) {
+  EXPECT_THROW(motion::compile_chamber_profile(R"({"start_C":25,"steps":[{"type":"soak","duraton_s":60}]})"),
+               std::invalid_argument);
+  try {
+    motion::compile_chamber_profile(R"({"start_C":25,"steps":[{"type":"ramp","name":"up","to_C":30}]})");
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'up'"), std::string::npos) << e.what();
+  }
+  const auto p = motion::compile_chamber_profile(
+      R"({"start_C":25,"steps":[{"type":"ramp","name":"fast","to_C":95,"rate_C_per_min":10}]})");
+  const auto problems = motion::validate_chamber_profile(p, motion::ChamberLimits{});
+  ASSERT_EQ(problems.size(), 2u);  // above the chamber's range, faster than it can go
+  EXPECT_NE(problems[0].find("'fast'"), std::string::npos);
+  EXPECT_DOUBLE_EQ(p.setpoint_C(p.duration_s() / 2), 60.0);
+}
+
+TEST(Chamber, ThermalProgramIsAPalindromicCycleOfThirtySixSecondStops) {
+  const motion::Program prog = motion::load_program("thermal", motion::TableLimits{});
+  EXPECT_TRUE(motion::validate_program(prog, motion::TableLimits{}).empty());
+  EXPECT_NEAR(prog.duration_s(), 12 * 3600.0, 400.0);
+  const auto cycles = thermal::find_cycles(prog.segments());
+  ASSERT_EQ(cycles.size(), 83u);
+  for (const auto& c : cycles) {
+    ASSERT_EQ(c.statics.size(), 11u);  // ten stops and the next cycle's first
+    for (std::size_t i = 0; i < c.statics.size(); ++i) {
+      // Mirrored about the middle stop in time and in pose (the name without its -b).
+      const auto& a = c.statics[i];
+      const auto& b = c.statics[c.statics.size() - 1 - i];
+      EXPECT_NEAR(a.t0_s - c.t0_s, c.t1_s - b.t1_s, 1e-6);
+      auto pose_name = [](std::string n) {
+        if (n == "end") return std::string("z-up");  // the closing stop after the last cycle
+        n = n.substr(n.find('/') + 1);
+        return n.size() > 2 && n.substr(n.size() - 2) == "-b" ? n.substr(0, n.size() - 2) : n;
+      };
+      EXPECT_EQ(pose_name(a.name), pose_name(b.name));
+    }
+    EXPECT_NEAR(c.statics[1].t1_s - c.statics[1].t0_s, 36.0, 1e-9);
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+TEST(ThermalSim, SensorsLagTheCaseWhichLagsTheAir) {
+  const auto profile = motion::compile_chamber_profile(
+      R"({"start_C":25,"steps":[{"type":"soak","duration_s":600},{"type":"set","to_C":35,"duration_s":20000}]})");
+  const sim::ThermalModel m(profile, thermaltest::truth_thermal(), sim::ThermalConfig{}, 21000);
+  const auto s = m.state(1800);
+  EXPECT_GT(s.air_C, s.case_C);
+  EXPECT_GT(s.case_C, s.sensors.T_C[0]);
+  EXPECT_GT(s.sensors.rate_C_per_min[0], 0.0);
+  double mean = 0;
+  for (double v : s.coil_sensors_C[1]) mean += v / 8;
+  EXPECT_NEAR(mean, s.sensors.T_C[1], 1e-9);  // a coil's temperature is its eight sensors' mean
+  EXPECT_GT(s.coil_sensors_C[1][0] - s.coil_sensors_C[1][7], 0.05);  // a gradient while heating
+  EXPECT_NEAR(m.state(20500).sensors.T_C[4], 35.0, 0.01);
+  // The rate is the derivative of the temperature.
+  const double d = (m.state(1801).sensors.T_C[3] - m.state(1799).sensors.T_C[3]) / 2.0 * 60.0;
+  EXPECT_NEAR(m.state(1800).sensors.rate_C_per_min[3], d, 1e-6);
+}
+
+TEST(ThermalSim, StabilisationHoldsTheSensorsWithinFourTenthsOfADegree) {
+  sim::ThermalConfig cfg;
+  cfg.stabilisation.enabled = true;
+  const auto profile = motion::load_chamber_profile("thermal");
+  const sim::ThermalModel m(profile, thermaltest::truth_thermal(), cfg, profile.duration_s());
+  double lo = 1e9, hi = -1e9;
+  for (double t = 0; t < profile.duration_s(); t += 60) {
+    lo = std::min(lo, m.state(t).sensors.T_C[0]);
+    hi = std::max(hi, m.state(t).sensors.T_C[0]);
+  }
+  std::printf("stabilised FOG x: %.3f .. %.3f C\n", lo, hi);
+  EXPECT_LT(hi - lo, 0.45);
+  EXPECT_GT(hi - lo, 0.3);
+}
+
+TEST(ThermalSim, TruthCoefficientsFollowTheSection) {
+  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
+  const auto profile = motion::load_chamber_profile("thermal");
+  const sim::ThermalModel m(profile, truth, sim::ThermalConfig{}, profile.duration_s());
+  const thermal::ThermalSection sec = *thermal::thermal_of(truth);
+  for (double t : {0.0, 5000.0, 20000.0}) {
+    GyroErrors g = truth.gyro;
+    AccelErrors a = truth.accel;
+    m.coefficients(t, g, a);
+    const auto st = m.state(t);
+    const double dT = st.sensors.T_C[3] - sec.T_ref_C, rate = st.sensors.rate_C_per_min[3];
+    EXPECT_NEAR(a.bias_mps2[0], truth.accel.bias_mps2[0] + 5e-5 * dT + 1e-6 * dT * dT, 1e-12);
+    EXPECT_NEAR(a.misalignment_rad.xy * units::kRadToArcsec,
+                truth.accel.misalignment_rad.xy * units::kRadToArcsec + 0.8 * dT + 10 * rate, 1e-9);
+    if (t == 0.0) {
+      EXPECT_DOUBLE_EQ(g.bias_radps[2], truth.gyro.bias_radps[2]);  // 25 C at rest
+    }
+  }
+}
+
+namespace {
+// A thermal source that changes nothing: the thermal path must then give the same bits as none.
+struct Inert final : sim::ThermalSource {
+  bool temperatures(double, TempSample& out) const override {
+    out.chamber_setpoint_C = 25.0;
+    return true;
+  }
+  void coefficients(double, GyroErrors&, AccelErrors&) const override {}
+};
+}  // namespace
+
+TEST(ThermalSim, AnInertSourceChangesNoBitOfTheFrames) {
+  const ImuModel truth = thermaltest::stage1_of(thermaltest::truth_thermal());
+  const auto p = motion::load_program("direct-short", motion::TableLimits{});
+  sim::SimConfig cfg;
+  cfg.rate_hz = 50;
+  cfg.duration_s = 120;
+  sim::Simulator plain(p, truth, cfg);
+  const Inert inert;
+  cfg.thermal = &inert;
+  sim::Simulator with(p, truth, cfg);
+  ImuFrame a, b;
+  int n = 0;
+  while (plain.next(a)) {
+    ASSERT_TRUE(with.next(b));
+    ASSERT_EQ(a.dtheta_rad, b.dtheta_rad) << "frame " << n;
+    ASSERT_EQ(a.dv_mps, b.dv_mps) << "frame " << n;
+    ++n;
+  }
+  EXPECT_EQ(n, 6000);
+}
+
+// ------------------------------------------------------------------------------------------------
+TEST(ThermalSection, ParsesWritesAndCompensates) {
+  const ImuModel m = thermaltest::truth_thermal();
+  const thermal::ThermalSection s = *thermal::thermal_of(m);
+  EXPECT_TRUE(s.has_models());
+  ASSERT_TRUE(s.sim_oscillation.has_value());
+  EXPECT_DOUBLE_EQ(s.sim_oscillation->amplitude_dph, 0.005);
+  const thermal::ThermalSection back = thermal::parse_thermal(thermal::thermal_to_json_text(s), "roundtrip");
+  for (int i = 0; i < thermal::kCoefficients; ++i) {
+    EXPECT_EQ(back.poly[static_cast<std::size_t>(i)].T, s.poly[static_cast<std::size_t>(i)].T);
+    EXPECT_EQ(back.poly[static_cast<std::size_t>(i)].dTdt, s.poly[static_cast<std::size_t>(i)].dTdt);
+  }
+  // The model file keeps the section through a write and a read.
+  const ImuModel again = imu_model_from_json_text(imu_model_to_json_text(m), "again");
+  EXPECT_EQ(thermal::thermal_of(again)->poly[0].T, s.poly[0].T);
+  // Compensation: gyro x bias at 30 C heating at 0.2 C/min.
+  thermal::ChannelTemps t;
+  t.T_C[0] = 30.0;
+  t.rate_C_per_min[0] = 0.2;
+  GyroErrors g = m.gyro;
+  AccelErrors a = m.accel;
+  thermal::apply_thermal(s, t, g, a);
+  EXPECT_NEAR(g.bias_radps[0] * units::kRadpsToDph, 0.037 + 0.001 * 5 + 0.0003 * 25 + 0.15 * 0.2, 1e-12);
+  EXPECT_EQ(g.delay_s, m.gyro.delay_s);
+  // A typo is an error that names the key, never a silent zero.
+  try {
+    thermal::parse_thermal(R"({"gyro":{"bias_dph":{"x":{"T":[1],"dTdT":[2]}}}})", "typo.json");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("typo.json: thermal.gyro.bias_dph.x"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("dTdT"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(thermal::parse_thermal(R"({"dTdt_unit":"C/s"})", "unit"), std::runtime_error);
+}
+
+// ------------------------------------------------------------------------------------------------
+namespace {
+
+// Cycles of a 12 h chamber run, shaped like the real ones: T over 15..35, the rate following it.
+std::vector<thermal::Sample> synthetic(const thermal::Poly& truth, double noise, unsigned seed, int n = 80) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n01;
+  std::vector<thermal::Sample> out;
+  for (int i = 0; i < n; ++i) {
+    const double phase = 2 * units::kPi * i / 26.0;
+    const double T = 25 + 10.5 * std::sin(phase) + 0.3 * n01(rng);
+    const double rate = 0.5 * std::cos(phase) * (i % 3 == 0 ? 0.5 : 1.0) + 0.02 * n01(rng);
+    out.push_back({T, rate, 3.0 + truth.eval(T - 25, rate) + noise * n01(rng)});
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(ThermalFit, PicksTheTruthsDegreeOnCleanDataAndNeverMoreWithNoise) {
+  const std::vector<thermal::Poly> truths = {
+      {{0.5}, {}}, {{0.5, 0.02}, {}}, {{0.5}, {2.0}}, {{-0.3, 0.02}, {1.5, 1.0}}, {{}, {2.0}}, {{0.4, 0.01, 0.001}, {1.0}}};
+  thermal::FitOptions o;
+  o.resolution = 0.01;
+  for (const auto& p : truths) {
+    const auto clean = thermal::fit_polynomial(synthetic(p, 0.0, 1), 25.0, o);
+    EXPECT_EQ(clean.T_degree, static_cast<int>(p.T.size()));
+    EXPECT_EQ(clean.rate_degree, static_cast<int>(p.dTdt.size()));
+    EXPECT_NEAR(clean.constant, 3.0, 1e-9);
+    for (unsigned seed = 1; seed <= 20; ++seed) {
+      const auto noisy = thermal::fit_polynomial(synthetic(p, 0.05, seed), 25.0, o);
+      EXPECT_LE(noisy.T_degree, static_cast<int>(p.T.size())) << "seed " << seed;
+      EXPECT_LE(noisy.rate_degree, static_cast<int>(p.dTdt.size())) << "seed " << seed;
+    }
+  }
+  // Every candidate degree is reported with its fit and held-back RMS.
+  const auto f = thermal::fit_polynomial(synthetic(truths[3], 0.05, 3), 25.0, o);
+  EXPECT_EQ(f.scores.size(), 20u);
+  for (const auto& s : f.scores) EXPECT_GE(s.cv_rms, s.fit_rms * 0.99);
+}
+
+// ------------------------------------------------------------------------------------------------
+TEST(ThermalRun, ShortChamberRunEndToEnd) {
+  thermaltest::Run r;
+  r.program = "thermal-short";
+  r.chamber = "thermal-short";
+  r.rate_hz = 10;
+  const auto o = thermaltest::run(thermaltest::truth_thermal(), r);
+  thermaltest::print(o);
+  EXPECT_EQ(o.result.cycles_total, 14);
+  EXPECT_EQ(o.result.cycles_used, 14);
+  EXPECT_TRUE(o.result.problems.empty());
+  // The stage rebuilds stage 1's least squares to weight the temperatures: it must match.
+  EXPECT_FALSE(mentions(o.result.notes, "not reproduced by stage 1's design"));
+  EXPECT_EQ(o.report.at("residual_source"), "truth");
+  // Two hours cannot separate everything, but the compensation already removes most of the
+  // temperature dependence (limits a few times the 12 h acceptance figures).
+  const auto& res = o.report.at("residual");
+  const auto& before = o.report.at("before");
+  EXPECT_LT(res.at("accel.bias_mps2").get<double>(), 3e-5);
+  EXPECT_LT(res.at("accel.scale_ppm").get<double>(), 30.0);
+  EXPECT_LT(res.at("accel.misalignment_arcsec").get<double>(), 3.0);
+  EXPECT_LT(res.at("gyro.bias_dph").get<double>(), 0.03);
+  EXPECT_LT(res.at("gyro.scale_pos_ppm").get<double>(), 20.0);
+  EXPECT_LT(res.at("gyro.misalignment_arcsec").get<double>(), 2.0);
+  for (const char* g : thermal::groups()) EXPECT_LT(res.at(g).get<double>(), 0.5 * before.at(g).get<double>()) << g;
+  // The model: constants at T_ref, the section with every coefficient, the plots' data.
+  EXPECT_TRUE(thermal::thermal_of(o.result.model)->has_models());
+  EXPECT_EQ(o.report.at("plots").at("series").size(), 27u);
+  EXPECT_EQ(o.report.at("degrees").size(), 27u);
+  EXPECT_LT(o.sim_and_cycles_s + o.fit_s, 30.0);
+}
+
+// ------------------------------------------------------------------------------------------------
+namespace {
+thermaltest::Outcome short_run_with(const std::function<void(thermaltest::Run&)>& set) {
+  thermaltest::Run r;
+  r.program = "thermal-short";
+  r.chamber = "thermal-short";
+  r.rate_hz = 10;
+  set(r);
+  auto o = thermaltest::run(thermaltest::truth_thermal(), r);
+  for (const auto& n : o.result.notes)
+    if (n.find("coverage") == std::string::npos) std::printf("  note: %s\n", n.c_str());
+  return o;
+}
+}  // namespace
+
+TEST(ThermalBadInput, StuckChannelIsNamedAndItsCyclesLeftOut) {
+  const auto o = short_run_with([](auto& r) { r.thermal.faults.push_back({"gx", "stuck", 2000, 3200, 0}); });
+  const auto* p = problem_on(o.result, "temp_gx_C");
+  ASSERT_NE(p, nullptr);
+  EXPECT_NE(p->what.find("stuck"), std::string::npos);
+  EXPECT_NEAR(p->t0_s, 2000, 2);
+  EXPECT_NEAR(p->t1_s, 3201, 2);
+  EXPECT_TRUE(mentions(o.result.notes, "cycle-004", "left out for the coefficients on temp_gx_C"));
+  EXPECT_TRUE(mentions(o.result.notes, "cycle-007", "temp_gx_C"));
+  EXPECT_FALSE(mentions(o.result.notes, "cycle-009", "left out"));
+  // Only gyro x lost those cycles.
+  EXPECT_EQ(o.report["degrees"]["gyro.bias_dph.x"]["cycles"].get<int>(), 14 - 4);
+  EXPECT_EQ(o.report["degrees"]["gyro.bias_dph.y"]["cycles"].get<int>(), 14);
+}
+
+TEST(ThermalBadInput, OneBrokenCoilSensorJumpingIsNamed) {
+  // Sensor 3 of the y coil jumps by 4 C for a while: the coil mean by 0.5 C.
+  const auto o = short_run_with([](auto& r) { r.thermal.faults.push_back({"gy3", "jump", 4000, 4300, 4.0}); });
+  const auto* p = problem_on(o.result, "temp_gy_C");
+  ASSERT_NE(p, nullptr);
+  EXPECT_NE(p->what.find("jumped by +0.5"), std::string::npos) << p->what;
+  EXPECT_NEAR(p->t1_s, 4301, 2);
+  EXPECT_TRUE(mentions(o.result.notes, "cycle-008", "temp_gy_C"));
+  EXPECT_EQ(o.report["degrees"]["gyro.bias_dph.y"]["cycles"].get<int>(), 12);
+}
+
+TEST(ThermalBadInput, MissingSamplesAreNamedAndTheirCyclesLeftOut) {
+  const auto o = short_run_with([](auto& r) { r.thermal.faults.push_back({"all", "missing", 5000, 5100, 0}); });
+  const auto* p = problem_on(o.result, "all");
+  ASSERT_NE(p, nullptr);
+  EXPECT_NE(p->what.find("no temperature samples"), std::string::npos);
+  EXPECT_TRUE(mentions(o.result.notes, "cycle-010", "left out:"));
+  EXPECT_EQ(o.result.cycles_used, 13);
+}
+
+TEST(ThermalBadInput, ChamberThatNeverReachesItsSetPointIsNamed) {
+  const auto o = short_run_with([](auto& r) { r.thermal.chamber_min_C = 16.0; });
+  const auto* p = problem_on(o.result, "temp_chamber_C");
+  ASSERT_NE(p, nullptr);
+  EXPECT_NE(p->what.find("never reached the set point 15.00 C"), std::string::npos) << p->what;
+  EXPECT_NEAR(p->t0_s, 1200, 2);  // the soak at 15 C
+  EXPECT_NEAR(p->t1_s, 3000, 2);
+  EXPECT_TRUE(mentions(o.result.notes, "cycle-005", "left out:"));
+  EXPECT_LE(o.result.cycles_used, 10);
+}
+
+TEST(ThermalBadInput, InsufficientCoverageIsReported) {
+  // An hour at 25 C: nothing to fit a temperature dependence to.
+  const auto o = short_run_with([](auto& r) {
+    r.duration_s = 3600;
+    r.chamber = "thermal";  // starts with a soak at 25 C
+  });
+  EXPECT_TRUE(mentions(o.result.notes, "coverage: temp_gx_C reached", "asked 15.0..35.0 C"));
+  EXPECT_TRUE(mentions(o.result.notes, "coverage: temp_az_C dT/dt", "no heating"));
+  for (const auto& [k, v] : o.report["degrees"].items()) EXPECT_LE(v["T_degree"].get<int>() + v["dTdt_degree"].get<int>(), 1) << k;
+}
+
+// ------------------------------------------------------------------------------------------------
+TEST(ThermalNavigation, CompensationAppliesInNavigation) {
+  // The truth's own section in the model: navigation across a chamber ramp gets far better than
+  // with the constants alone.
+  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
+  const auto program = motion::load_program("thermal-short", motion::TableLimits{});
+  const auto profile = motion::load_chamber_profile("thermal-short");
+  sim::SimConfig cfg;
+  cfg.rate_hz = 20;
+  cfg.duration_s = 3600;
+  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, cfg.duration_s);
+  cfg.thermal = &tm;
+  auto navigate = [&](const ImuModel& model) {
+    sim::Simulator s(program, truth, cfg);
+    nav::NavigationRun run(s.meta(), model, 10.0, nullptr);
+    ImuFrame f;
+    while (s.next(f)) {
+      for (const TempSample& t : s.take_temps()) run.push_temp(t);
+      run.push(f);
+    }
+    return run.finish();
+  };
+  const nav::NavSummary with = navigate(truth);
+  const nav::NavSummary without = navigate(thermaltest::stage1_of(truth));
+  std::printf("1 h across a chamber ramp: velocity error %.3f m/s compensated, %.3f m/s with the constants\n",
+              with.max_velocity_error_mps, without.max_velocity_error_mps);
+  EXPECT_LT(with.max_velocity_error_mps, 0.2 * without.max_velocity_error_mps);
+}

@@ -1,0 +1,62 @@
+// The imucald HTTP API (docs/api.md) from the browser: JSON in and out, the session cookie for
+// credentials, and one rule for an expired session: the request waits while the user signs in
+// again (in a dialog over the page, so nothing typed is lost) and is then sent again. A request
+// that got 401 changed nothing on the server (docs/api.md, "Errors"), so sending it again is safe.
+
+export class ApiError extends Error {
+  constructor(status, body) {
+    const data = body && typeof body === 'object' ? body : { error: String(body || '') };
+    super(data.error || `HTTP ${status}`);
+    this.status = status;
+    this.body = data;
+    this.problems = Array.isArray(data.problems) ? data.problems : [];
+    this.state = data.state;
+  }
+}
+
+let reauthenticate = null;  // async () => resolves once signed in again (set by session.mjs)
+let pendingReauth = null;   // one dialog for every request that hit 401 at the same time
+
+export function setReauthenticate(fn) {
+  reauthenticate = fn;
+}
+
+/**
+ * Sends a request; resolves with the parsed JSON body, rejects with ApiError (status 0 when the
+ * daemon cannot be reached). With `auth: false` a 401 is returned as an error instead of asking
+ * the user to sign in (the sign-in request itself, the start-up check).
+ */
+export async function api(method, path, body, { auth = true, signal } = {}) {
+  const headers = { Accept: 'application/json' };
+  const init = { method, headers, credentials: 'same-origin', cache: 'no-store', signal };
+  if (body !== undefined) {
+    headers['Content-Type'] = 'application/json';
+    init.body = typeof body === 'string' ? body : JSON.stringify(body);
+  }
+  let response;
+  try {
+    response = await fetch(path, init);
+  } catch (e) {
+    if (e.name === 'AbortError') throw e;
+    throw new ApiError(0, { error: `cannot reach imucald (${e.message}); is it running?` });
+  }
+  const text = await response.text();
+  let data = null;
+  if (text) {
+    try {
+      data = JSON.parse(text);
+    } catch {
+      data = { error: text.trim().slice(0, 300) || response.statusText };
+    }
+  }
+  if (response.status === 401 && auth && reauthenticate) {
+    if (!pendingReauth) pendingReauth = reauthenticate().finally(() => { pendingReauth = null; });
+    await pendingReauth;
+    return api(method, path, body, { auth, signal });
+  }
+  if (!response.ok) throw new ApiError(response.status, data || { error: `${response.status} ${response.statusText}` });
+  return data;
+}
+
+export const get = (path, options) => api('GET', path, undefined, options);
+export const post = (path, body, options) => api('POST', path, body === undefined ? {} : body, options);

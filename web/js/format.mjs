@@ -1,0 +1,96 @@
+// Formatting and small DOM helpers shared by the views. Every text that comes from the server is
+// put into the page with textContent (h() below), never as HTML.
+
+/** Creates an element: h('td', {class: 'num', title: 'x'}, 'text', childNode, ...). */
+export function h(tag, attrs = {}, ...children) {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === 'class') el.className = v;
+    else if (k === 'dataset') Object.assign(el.dataset, v);
+    else if (k.startsWith('on') && typeof v === 'function') el.addEventListener(k.slice(2), v);
+    else if (k === 'value') el.value = v;
+    else if (k === 'checked' || k === 'disabled' || k === 'selected' || k === 'hidden') el[k] = Boolean(v);
+    else el.setAttribute(k, v === true ? '' : String(v));
+  }
+  append(el, children);
+  return el;
+}
+
+function append(el, children) {
+  for (const c of children) {
+    if (c === undefined || c === null || c === false) continue;
+    if (Array.isArray(c)) append(el, c);
+    else el.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  }
+}
+
+export function clear(el) {
+  while (el.firstChild) el.removeChild(el.firstChild);
+  return el;
+}
+
+/** Seconds as "1 h 02 min", "6 min 42 s", "12.3 s". */
+export function duration(s) {
+  if (s === null || s === undefined || !Number.isFinite(s)) return '—';
+  const sign = s < 0 ? '-' : '';
+  s = Math.abs(s);
+  if (s < 60) return `${sign}${s < 10 ? s.toFixed(1) : Math.round(s)} s`;
+  const m = Math.floor(s / 60), sec = Math.round(s % 60);
+  if (m < 60) return `${sign}${m} min ${String(sec).padStart(2, '0')} s`;
+  const hr = Math.floor(m / 60);
+  return `${sign}${hr} h ${String(m % 60).padStart(2, '0')} min`;
+}
+
+/** ISO time as local "2025-03-01 21:04:05". */
+export function dateTime(iso) {
+  if (!iso) return '—';
+  const d = new Date(iso);
+  if (Number.isNaN(d.getTime())) return String(iso);
+  const p = (n) => String(n).padStart(2, '0');
+  return `${d.getFullYear()}-${p(d.getMonth() + 1)}-${p(d.getDate())} ${p(d.getHours())}:${p(d.getMinutes())}:${p(d.getSeconds())}`;
+}
+
+export function timeOfDay(iso) {
+  const s = dateTime(iso);
+  return s.length > 11 ? s.slice(11) : s;
+}
+
+/** A number with `digits` significant digits, plain or exponential as suits its size. */
+export function num(v, digits = 4) {
+  if (v === null || v === undefined) return '—';
+  if (typeof v !== 'number' || !Number.isFinite(v)) return String(v);
+  if (v === 0) return '0';
+  const a = Math.abs(v);
+  if (a >= 1e-3 && a < 1e6) {
+    const decimals = Math.max(0, digits - 1 - Math.floor(Math.log10(a)));
+    return v.toFixed(Math.min(decimals, 8));
+  }
+  return v.toExponential(digits - 1);
+}
+
+export function fixed(v, decimals) {
+  return typeof v === 'number' && Number.isFinite(v) ? v.toFixed(decimals) : '—';
+}
+
+export const FINAL_STATES = new Set(['done', 'failed', 'aborted']);
+export const ACTIVE_STATES = new Set(['running', 'pausing', 'paused', 'suspended', 'stopping', 'aborting']);
+
+export function stateBadge(state) {
+  return h('span', { class: `badge state-${state || 'unknown'}`, 'data-state': state }, state || '—');
+}
+
+/** Which commands the run-state table of docs/api.md allows from a state. */
+export function allowedCommands(state) {
+  const table = {
+    created: ['start', 'abort'],
+    queued: ['abort'],
+    running: ['pause', 'stop', 'abort'],
+    pausing: ['stop', 'abort'],
+    paused: ['resume', 'stop', 'abort'],
+    suspended: ['stop', 'abort'],
+    stopping: ['abort'],
+    interrupted: ['resume', 'abort'],
+  };
+  return table[state] || [];
+}

@@ -1,0 +1,262 @@
+// The WebSocket /api/live (docs/api.md) and what the page keeps of it. One connection for the
+// whole page, opened after sign-in and kept while the user moves between views, so the live plots
+// show the run so far when the live view is opened again.
+//
+// Reconnection: a closed socket, or one that has been silent for several telemetry periods, is
+// replaced after a back-off (0.5 s doubling to 10 s). Between attempts GET /api/me tells a daemon
+// that is down (keep trying) from a session that has ended (api.mjs asks the user to sign in).
+import { get, ApiError } from './api.mjs';
+import { Series, BoundedList } from './series.mjs';
+
+const AXES = ['outer', 'middle', 'inner'];
+export { AXES };
+
+export class LiveClient extends EventTarget {
+  constructor(path = '/api/live') {
+    super();
+    this.path = path;
+    this.ws = null;
+    this.state = 'idle';  // idle | connecting | open | waiting (to reconnect) | stopped
+    this.attempt = 0;
+    this.retryAt = 0;
+    this.lostAt = null;   // when the connection was lost (ms), null while fine
+    this.lastMessageAt = 0;
+    this.telemetryHz = 10;
+    this.timer = null;
+    this.watchdog = null;
+    this.everOpened = false;
+  }
+
+  start() {
+    if (this.state !== 'idle' && this.state !== 'stopped') return;
+    this.connect();
+    this.watchdog = setInterval(() => this.checkSilence(), 1000);
+  }
+
+  stop() {
+    this.state = 'stopped';
+    clearTimeout(this.timer);
+    clearInterval(this.watchdog);
+    if (this.ws) {
+      this.ws.onclose = null;
+      this.ws.close();
+      this.ws = null;
+    }
+    this.emitStatus();
+  }
+
+  connect() {
+    clearTimeout(this.timer);
+    const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}${this.path}`;
+    this.state = 'connecting';
+    this.emitStatus();
+    let ws;
+    try {
+      ws = new WebSocket(url);
+    } catch {
+      this.scheduleReconnect();
+      return;
+    }
+    this.ws = ws;
+    ws.onopen = () => {
+      this.state = 'open';
+      this.attempt = 0;
+      this.lastMessageAt = Date.now();
+      const wasLost = this.lostAt;
+      this.lostAt = null;
+      this.everOpened = true;
+      this.emitStatus({ restoredAfterMs: wasLost ? Date.now() - wasLost : null });
+    };
+    ws.onmessage = (ev) => {
+      this.lastMessageAt = Date.now();
+      let msg;
+      try {
+        msg = JSON.parse(ev.data);
+      } catch {
+        return;  // not ours to judge; the next message will do
+      }
+      if (msg.type === 'hello' && msg.telemetry_hz > 0) this.telemetryHz = msg.telemetry_hz;
+      this.dispatchEvent(new CustomEvent('message', { detail: msg }));
+    };
+    ws.onclose = () => {
+      if (this.ws !== ws) return;
+      this.ws = null;
+      if (this.state === 'stopped') return;
+      if (this.lostAt === null) this.lostAt = Date.now();
+      this.scheduleReconnect();
+    };
+    ws.onerror = () => {};  // onclose follows and handles it
+  }
+
+  scheduleReconnect() {
+    this.attempt++;
+    const delay = Math.min(10000, 500 * 2 ** Math.min(this.attempt - 1, 5));
+    this.state = 'waiting';
+    this.retryAt = Date.now() + delay;
+    this.emitStatus();
+    this.timer = setTimeout(() => this.probeThenConnect(), delay);
+  }
+
+  // A refused upgrade looks the same as a daemon that is down; /api/me tells them apart, and for
+  // an ended session api.mjs shows the sign-in dialog and resolves once signed in again.
+  async probeThenConnect() {
+    if (this.state === 'stopped') return;
+    try {
+      await get('/api/me');
+    } catch (e) {
+      if (!(e instanceof ApiError) || e.status === 0 || e.status >= 500) {
+        this.scheduleReconnect();
+        return;
+      }
+    }
+    if (this.state !== 'stopped') this.connect();
+  }
+
+  // Telemetry comes telemetryHz times a second; a socket silent for much longer is dead even if
+  // the browser has not noticed (a half-open TCP connection).
+  checkSilence() {
+    if (this.state === 'waiting') this.emitStatus();  // the countdown
+    if (this.state !== 'open' || !this.ws) return;
+    const silentMs = Date.now() - this.lastMessageAt;
+    if (silentMs > Math.max(5000, 20000 / this.telemetryHz)) {
+      const ws = this.ws;
+      ws.onclose = null;
+      ws.close();
+      this.ws = null;
+      this.lostAt = this.lastMessageAt;
+      this.scheduleReconnect();
+    }
+  }
+
+  emitStatus(extra = {}) {
+    this.dispatchEvent(new CustomEvent('status', { detail: { state: this.state, attempt: this.attempt,
+      retryInMs: Math.max(0, this.retryAt - Date.now()), lostAt: this.lostAt, everOpened: this.everOpened, ...extra } }));
+  }
+}
+
+// Estimator coefficient series are kept per run; a coefficient's estimate and sigma updates about
+// once per program second, so its bound is smaller than the telemetry's.
+const ESTIMATE_OPTIONS = { recentCapacity: 1500, historyCapacity: 1000 };
+
+/**
+ * What the page keeps of the telemetry: the latest message, bounded series for the plots and a
+ * bounded event log. Listeners get 'telemetry', 'event' and 'run' (the active run changed).
+ */
+export class LiveStore extends EventTarget {
+  constructor() {
+    super();
+    this.latest = null;
+    this.runId = null;
+    this.runName = null;
+    const opts = { recentCapacity: 6000, historyCapacity: 2000 };  // 10 min at 10 Hz; the whole run
+    this.angles = new Series(3, opts);
+    this.rates = new Series(3, opts);
+    // temperature, set point, set point - tolerance, set point + tolerance
+    this.chamber = new Series(4, opts);
+    this.frameRate = new Series(1, opts);
+    this.estimators = new Map();  // name -> {coefficients: Map(name -> Series[est, lo, hi]), latest}
+    this.events = new BoundedList(500);
+    this.droppedMessages = 0;
+    this.messages = 0;
+    this.lastSeq = null;
+  }
+
+  ingest(msg) {
+    this.messages++;
+    if (msg.dropped > 0) this.droppedMessages += msg.dropped;
+    if (msg.type === 'telemetry') this.ingestTelemetry(msg);
+    else if (msg.type === 'event') this.ingestEvent(msg);
+  }
+
+  ingestTelemetry(m) {
+    const t = Date.parse(m.t) / 1000;
+    if (!Number.isFinite(t)) return;
+    const run = m.run || null;
+    const id = run ? run.id : null;
+    if (id !== this.runId) {
+      const previous = this.runId;
+      this.runId = id;
+      this.runName = run ? run.name : null;
+      if (id !== null) {
+        this.estimators.clear();
+        this.loadProgress(id);
+      }
+      this.dispatchEvent(new CustomEvent('run', { detail: { id, previous } }));
+    }
+    this.latest = m;
+    const tb = m.table || {};
+    if (Array.isArray(tb.angle_deg)) this.angles.push(t, tb.angle_deg);
+    if (Array.isArray(tb.rate_dps)) this.rates.push(t, tb.rate_dps);
+    const ch = m.chamber || {};
+    if (ch.temperature_C !== undefined) {
+      const tol = ch.tolerance_C ?? NaN;
+      this.chamber.push(t, [ch.temperature_C, ch.setpoint_C, ch.setpoint_C - tol, ch.setpoint_C + tol]);
+    }
+    if (m.imu && run) this.frameRate.push(t, [m.imu.frame_rate_hz]);
+    for (const [name, e] of Object.entries(m.estimators || {})) this.addEstimate(name, e);
+    this.dispatchEvent(new CustomEvent('telemetry', { detail: m }));
+  }
+
+  ingestEvent(m) {
+    this.events.push(m);
+    this.dispatchEvent(new CustomEvent('event', { detail: m }));
+  }
+
+  estimator(name) {
+    let e = this.estimators.get(name);
+    if (!e) {
+      e = { coefficients: new Map(), latest: null };
+      this.estimators.set(name, e);
+    }
+    return e;
+  }
+
+  addEstimate(name, progress) {
+    const e = this.estimator(name);
+    e.latest = progress;
+    const t = progress.program_time_s;
+    if (!Number.isFinite(t) || !progress.estimates) return;
+    for (const [coef, pair] of Object.entries(progress.estimates)) {
+      if (!Array.isArray(pair)) continue;
+      let s = e.coefficients.get(coef);
+      if (!s) {
+        s = new Series(3, ESTIMATE_OPTIONS);
+        e.coefficients.set(coef, s);
+      }
+      if (t <= s.lastTime) continue;  // the same estimate again (telemetry repeats it)
+      const [v, sigma] = pair;
+      s.push(t, [v, v - sigma, v + sigma]);
+    }
+  }
+
+  // The estimates before this page connected come from /progress, so the convergence plots start
+  // at the beginning of the run, not at the moment the page was opened.
+  async loadProgress(id) {
+    try {
+      const history = await get(`/api/campaigns/${id}/progress`);
+      if (this.runId !== id) return;
+      for (const [name, list] of Object.entries(history || {})) {
+        if (!Array.isArray(list)) continue;
+        const e = this.estimator(name);
+        const latest = e.latest;  // the live message is newer than any of the history
+        const fresh = new Map();
+        const keep = e.coefficients;
+        e.coefficients = fresh;
+        for (const p of list) this.addEstimate(name, p);
+        if (latest) e.latest = latest;
+        // Live samples that arrived while the history loaded come after it.
+        for (const [coef, s] of keep) {
+          const [times, est, lo, hi] = s.view(Infinity, Infinity);
+          const target = fresh.get(coef) || (fresh.set(coef, new Series(3, ESTIMATE_OPTIONS)), fresh.get(coef));
+          for (let i = 0; i < times.length; i++) {
+            const v = est[i];
+            target.push(times[i], [v ?? NaN, lo[i] ?? NaN, hi[i] ?? NaN]);
+          }
+        }
+      }
+      this.dispatchEvent(new CustomEvent('progress', { detail: { id } }));
+    } catch {
+      // No history (yet): the live messages fill the plots from now on.
+    }
+  }
+}

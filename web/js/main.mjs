@@ -1,0 +1,192 @@
+// The imucal single-page UI: a hash router over the views, the header (who is signed in, the live
+// connection, the active run), and the one WebSocket the page keeps open. Views are modules with
+// mount(root, ctx) returning a cleanup function.
+import { get, ApiError } from './api.mjs';
+import { session, checkSession, signOut, onSessionChange } from './session.mjs';
+import { LiveClient, LiveStore } from './live.mjs';
+import { h, clear, duration, stateBadge } from './format.mjs';
+import * as signinView from './views/signin.mjs';
+import * as campaignsView from './views/campaigns.mjs';
+import * as builderView from './views/builder.mjs';
+import * as liveView from './views/live.mjs';
+import * as campaignView from './views/campaign.mjs';
+
+const viewRoot = document.getElementById('view');
+const banner = document.getElementById('banner');
+const alerts = document.getElementById('alerts');
+
+const live = new LiveClient();
+const store = new LiveStore();
+live.addEventListener('message', (ev) => store.ingest(ev.detail));
+
+let statusCache = null;
+const ctx = {
+  live,
+  store,
+  navigate: (hash) => { location.hash = hash; },
+  /** GET /api/status, cached for the session (limits, site, estimators); `fresh` refetches. */
+  async status(fresh = false) {
+    if (!statusCache || fresh) statusCache = get('/api/status').catch((e) => { statusCache = null; throw e; });
+    return statusCache;
+  },
+};
+// A handle for the browser tests and for debugging from the console.
+window.imucal = { live, store, session, ctx };
+
+const routes = [
+  { re: /^#\/signin$/, view: signinView, nav: null, public: true },
+  { re: /^#\/campaigns\/(\d+)$/, view: campaignView, nav: 'campaigns', params: (m) => ({ id: Number(m[1]) }) },
+  { re: /^#\/campaigns\/?$/, view: campaignsView, nav: 'campaigns' },
+  { re: /^#\/new(?:\/([\w.-]+))?$/, view: builderView, nav: 'new', params: (m) => ({ template: m[1] || null }) },
+  { re: /^#\/live$/, view: liveView, nav: 'live' },
+];
+
+let unmount = null;
+let afterSignIn = '#/campaigns';
+
+function route() {
+  const hash = location.hash || '#/campaigns';
+  let match = null, found = null;
+  for (const r of routes) {
+    match = r.re.exec(hash);
+    if (match) { found = r; break; }
+  }
+  if (!found) {
+    location.replace('#/campaigns');
+    return;
+  }
+  if (!found.public && !session.user) {
+    afterSignIn = hash;
+    location.replace('#/signin');
+    return;
+  }
+  if (unmount) {
+    try { unmount(); } catch (e) { console.error(e); }
+    unmount = null;
+  }
+  for (const a of document.querySelectorAll('#nav a')) a.classList.toggle('active', a.dataset.nav === found.nav);
+  clear(viewRoot);
+  viewRoot.dataset.view = found.nav || 'signin';
+  const params = found.params ? found.params(match) : {};
+  const local = { ...ctx, params, afterSignIn: () => afterSignIn };
+  unmount = found.view.mount(viewRoot, local) || null;
+  window.scrollTo(0, 0);
+}
+
+// ---- header -------------------------------------------------------------------------------------
+
+function renderWho() {
+  const who = document.getElementById('who');
+  clear(who);
+  if (!session.user) return;
+  who.append(
+    h('span', { class: `role role-${session.role}`, title: session.role === 'viewer' ? 'A viewer sees everything and changes nothing' : 'May start and stop campaigns' },
+      `${session.user} · ${session.role}`),
+    h('button', { type: 'button', class: 'link', id: 'signout', onclick: async () => {
+      live.stop();
+      await signOut();
+      location.hash = '#/signin';
+    } }, 'Sign out'));
+}
+
+let bannerTimer = null;
+function showBanner(kind, text, hideAfterMs = 0) {
+  clearTimeout(bannerTimer);
+  banner.hidden = !text;
+  banner.className = `banner banner-${kind}`;
+  banner.dataset.kind = kind;
+  banner.textContent = text || '';
+  if (hideAfterMs) bannerTimer = setTimeout(() => { banner.hidden = true; banner.dataset.kind = ''; }, hideAfterMs);
+}
+
+live.addEventListener('status', (ev) => {
+  const s = ev.detail;
+  const ind = document.getElementById('live-indicator');
+  ind.dataset.state = s.state;
+  const labels = { idle: 'live: —', connecting: 'live: connecting', open: 'live: connected', waiting: 'live: lost', stopped: 'live: off' };
+  ind.textContent = labels[s.state] || s.state;
+  if (s.state === 'waiting' && s.lostAt) {
+    const secs = Math.ceil(s.retryInMs / 1000);
+    showBanner('warn', `Live connection lost ${duration((Date.now() - s.lostAt) / 1000)} ago — reconnecting ${secs > 0 ? `in ${secs} s` : 'now'} (attempt ${s.attempt}). Plots and states resume when it is back.`);
+  } else if (s.state === 'waiting' && !s.everOpened) {
+    showBanner('warn', `Cannot open the live connection — retrying (attempt ${s.attempt}).`);
+  } else if (s.state === 'open' && s.restoredAfterMs != null) {
+    showBanner('ok', `Live connection restored after ${duration(s.restoredAfterMs / 1000)}.`, 6000);
+  } else if (s.state === 'open' && banner.dataset.kind === 'warn') {
+    showBanner('ok', 'Live connection open.', 3000);
+  }
+});
+
+function renderRunChip(m) {
+  const chip = document.getElementById('run-chip');
+  const run = m?.run;
+  if (!run) {
+    chip.hidden = true;
+    return;
+  }
+  chip.hidden = false;
+  clear(chip);
+  const pct = run.duration_s > 0 ? Math.min(100, (100 * run.program_time_s) / run.duration_s) : 0;
+  chip.append(h('a', { href: '#/live', title: 'Open the live view' }, `#${run.id} ${run.name}`), ' ', stateBadge(run.state),
+    h('span', { class: 'chip-progress' }, ` ${pct.toFixed(0)} %`));
+}
+let chipState = '';
+store.addEventListener('telemetry', (ev) => {
+  const run = ev.detail.run;
+  // Only touch the DOM when something shown changed (10 messages a second).
+  const key = run ? `${run.id}|${run.state}|${Math.floor((100 * run.program_time_s) / (run.duration_s || 1))}` : '';
+  if (key !== chipState) {
+    chipState = key;
+    renderRunChip(ev.detail);
+  }
+});
+
+// Alarms, suspensions and failures, wherever the user is: bottom right, clear of the controls.
+// A suspension's alert says when the run resumed and then goes away by itself; the others stay
+// until dismissed.
+const ALERT_KINDS = new Set(['suspended', 'alarm', 'error', 'interrupted']);
+store.addEventListener('event', (ev) => {
+  const e = ev.detail;
+  if (e.kind === 'resumed' || (e.kind === 'transition' && e.from === 'suspended' && e.to === 'running')) {
+    for (const item of alerts.querySelectorAll(`.alert-suspended[data-campaign="${e.campaign}"]:not(.resolved)`)) {
+      item.classList.add('resolved');
+      item.append(h('div', { class: 'resolved-note' }, `resumed: ${e.reason || 'condition cleared'}`));
+      setTimeout(() => item.remove(), 8000);
+    }
+    return;
+  }
+  // The transition into `suspended` comes with a `suspended` event giving the same reason.
+  const serious = ALERT_KINDS.has(e.kind) || (e.kind === 'transition' && ['failed', 'interrupted'].includes(e.to));
+  if (!serious) return;
+  const kind = e.kind === 'transition' ? e.to : e.kind;
+  const what = e.kind === 'transition' ? `campaign ${e.campaign}: ${e.from} → ${e.to}` : `campaign ${e.campaign}: ${e.kind}`;
+  const item = h('div', { class: `alert alert-${kind}`, role: 'alert', dataset: { campaign: e.campaign, kind } },
+    h('button', { type: 'button', class: 'link dismiss', 'aria-label': 'dismiss', onclick: () => item.remove() }, '×'),
+    h('strong', {}, what), e.reason ? ` — ${e.reason}` : '');
+  alerts.prepend(item);
+  while (alerts.children.length > 4) alerts.lastChild.remove();
+});
+
+// ---- start --------------------------------------------------------------------------------------
+
+onSessionChange(() => {
+  renderWho();
+  if (session.user) live.start();
+});
+
+async function boot() {
+  for (;;) {
+    try {
+      await checkSession();
+      break;
+    } catch (e) {
+      const msg = e instanceof ApiError ? e.message : String(e);
+      clear(viewRoot).append(h('p', { class: 'form-error' }, `${msg} Retrying in 3 s…`));
+      await new Promise((r) => setTimeout(r, 3000));
+    }
+  }
+  window.addEventListener('hashchange', route);
+  route();
+}
+
+boot();

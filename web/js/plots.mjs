@@ -1,0 +1,113 @@
+// uPlot wrappers: charts that follow their container's width, bands for +-sigma and tolerance,
+// and one drawing pass per animation frame however many messages arrived in between (10 Hz
+// telemetry never makes more than one redraw per chart per frame, and none while the tab is
+// hidden, since browsers pause animation frames then).
+import uPlot from '../vendor/uPlot.esm.js';
+
+export const COLORS = ['#1565c0', '#c62828', '#2e7d32', '#6a1b9a', '#ef6c00', '#00838f'];
+export const AXIS_COLORS = { outer: COLORS[0], middle: COLORS[1], inner: COLORS[2], x: COLORS[0], y: COLORS[1], z: COLORS[2] };
+
+const dirty = new Set();
+let frameRequested = false;
+
+/** Calls fn on the next animation frame, once, however often it is asked for before then. */
+export function schedule(fn) {
+  dirty.add(fn);
+  if (!frameRequested) {
+    frameRequested = true;
+    requestAnimationFrame(() => {
+      frameRequested = false;
+      const work = [...dirty];
+      dirty.clear();
+      for (const f of work) {
+        try {
+          f();
+        } catch (e) {
+          console.error('plot update failed', e);
+        }
+      }
+    });
+  }
+}
+
+/**
+ * A line chart in `el`.
+ * @param {HTMLElement} el
+ * @param {{title?: string, y?: string, x?: 'time'|string, height?: number,
+ *          series: {label: string, color?: string, dash?: number[], width?: number, band?: boolean}[],
+ *          bands?: [number, number, string][], yRange?: (u, min, max) => [number, number],
+ *          log?: boolean, points?: boolean}} spec
+ */
+export function lineChart(el, spec) {
+  const time = (spec.x ?? 'time') === 'time';
+  const height = spec.height ?? 170;
+  const series = [{ label: time ? 'time' : spec.x }];
+  spec.series.forEach((s, i) => {
+    series.push({
+      label: s.label,
+      stroke: s.band ? 'transparent' : (s.color || COLORS[i % COLORS.length]),
+      width: s.band ? 0 : (s.width ?? 1.5),
+      dash: s.dash,
+      spanGaps: false,
+      // uPlot shows the points by itself when they are sparse (an estimator's first few updates).
+      points: spec.points === undefined ? { size: 5 } : { show: spec.points, size: 4 },
+      value: s.value || ((u, v) => (v == null ? '—' : formatTick(v))),
+      show: true,
+    });
+  });
+  const opts = {
+    title: spec.title,
+    width: Math.max(200, el.clientWidth || 400),
+    height,
+    series,
+    bands: (spec.bands || []).map(([hi, lo, fill]) => ({ series: [hi, lo], fill })),
+    scales: {
+      x: { time, distr: spec.log ? 3 : 1 },
+      y: { distr: spec.log ? 3 : 1, range: spec.yRange },
+    },
+    axes: [
+      { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: time ? undefined : spec.x,
+        size: time ? 30 : 40, values: time ? undefined : (u, vals) => vals.map(formatTick) },
+      { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: spec.y, size: 62,
+        values: (u, vals) => vals.map(formatTick) },
+    ],
+    legend: { show: spec.legend ?? true, live: true },
+    cursor: { drag: { x: !time, y: false } },
+  };
+  const empty = [[], ...spec.series.map(() => [])];
+  const chart = new uPlot(opts, empty, el);
+  chart.root.dataset.points = '0';
+  let lastWidth = opts.width;
+  const resize = new ResizeObserver(() => {
+    const w = Math.max(200, el.clientWidth);
+    if (Math.abs(w - lastWidth) > 2) {
+      lastWidth = w;
+      chart.setSize({ width: w, height });
+    }
+  });
+  resize.observe(el);
+  return {
+    chart,
+    setData(data) {
+      chart.setData(data);
+      // For tests and for anyone curious: how many points are drawn and the newest x.
+      chart.root.dataset.points = String(data[0].length);
+      chart.root.dataset.lastX = data[0].length ? String(data[0][data[0].length - 1]) : '';
+    },
+    destroy() {
+      resize.disconnect();
+      chart.destroy();
+    },
+  };
+}
+
+export function formatTick(v) {
+  if (v == null || !Number.isFinite(v)) return '';
+  const a = Math.abs(v);
+  if (a === 0) return '0';
+  if (a >= 1e5 || a < 1e-3) return v.toExponential(1);
+  if (a >= 100) return v.toFixed(0);
+  if (a >= 10) return v.toFixed(1);
+  if (a >= 1) return v.toFixed(2);
+  return String(Number(v.toPrecision(3)));
+}

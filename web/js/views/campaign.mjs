@@ -1,0 +1,366 @@
+// One campaign: its state and commands while it runs, and its results when it is done: the
+// coefficient table with sigmas (with the truth and the error in simulated runs), the estimators'
+// convergence, the noise and evaluation plots where the API provides their data, the downloads
+// (model JSON, recording bundle, printable certificate), and the record of what happened.
+import { get, ApiError } from '../api.mjs';
+import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
+import { commandBar } from '../dialogs.mjs';
+import { coefficientRows, unitOf, groupOf } from '../coefficients.mjs';
+import { convergencePanel } from '../convergence.mjs';
+import { Series } from '../series.mjs';
+import { lineChart, COLORS } from '../plots.mjs';
+
+export function mount(root, ctx) {
+  const id = ctx.params.id;
+  let detail = null;
+  let stopped = false;
+  let timer = null;
+  let resultsFor = null;  // the state for which the results were loaded
+  const cleanups = [];
+
+  const title = h('h1', { id: 'campaign-title' }, `Campaign ${id}`);
+  const badge = h('span', { id: 'campaign-state' });
+  const pageError = h('div', { class: 'form-error', role: 'alert', id: 'campaign-error' });
+  const commands = commandBar({
+    getCampaign: () => detail && { id: detail.id, name: detail.name, state: detail.state },
+    onDone: () => refresh(),
+  });
+  const meta = h('dl', { class: 'meta', id: 'campaign-meta' });
+  const liveStrip = h('div', { class: 'live-strip', id: 'campaign-live', hidden: true });
+  const results = h('section', { class: 'card', id: 'results', hidden: true });
+  const record = h('section', { class: 'card', id: 'record' });
+  root.append(
+    h('div', { class: 'page-head' }, h('div', { class: 'title-line' }, title, badge), commands),
+    pageError,
+    h('section', { class: 'card' }, meta, liveStrip),
+    results, record);
+
+  async function refresh() {
+    if (stopped) return;
+    try {
+      const d = await get(`/api/campaigns/${id}`);
+      if (stopped) return;
+      detail = d;
+      pageError.textContent = '';
+      render();
+      const final = FINAL_STATES.has(d.state);
+      if (final && resultsFor !== d.state) {
+        resultsFor = d.state;
+        loadResults();
+      } else if (!final && !resultsFor && Object.keys(d.results || {}).length) {
+        resultsFor = 'partial';
+        loadResults();
+      }
+      if (final) clearInterval(timer);
+    } catch (e) {
+      pageError.textContent = e instanceof ApiError && e.status === 404 ? `There is no campaign ${id}.` : `Cannot load campaign ${id}: ${e.message}`;
+    }
+  }
+
+  function render() {
+    const d = detail;
+    title.textContent = `Campaign ${d.id}: ${d.name}`;
+    document.title = `imucal · ${d.name}`;
+    clear(badge).append(stateBadge(d.state));
+    commands.update();
+    const wall = d.started ? ((d.ended ? Date.parse(d.ended) : Date.now()) - Date.parse(d.started)) / 1000 : null;
+    const rows = [
+      ['program', d.program], ['created', dateTime(d.created)], ['started', dateTime(d.started)], ['ended', dateTime(d.ended)],
+      ['program length', duration(d.duration_s)], ['program time', `${duration(d.program_time_s)} (${Math.round(100 * (d.progress || 0))} %)`],
+      ['wall time', duration(wall)], ['frames', `${d.frames ?? '—'} recorded, ${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad`],
+      ['checkpoint', d.checkpoint ? `segment ${d.checkpoint.segment + 1} at ${duration(d.checkpoint.t_s)}` : '—'],
+      ['estimators', (d.spec?.estimators || []).join(', ') || '—'],
+      ['queue', d.queue_position != null ? `position ${d.queue_position + 1}` : '—'],
+      ['run database', d.run_db || '—'],
+    ];
+    if (d.error) rows.push(['error', d.error]);
+    clear(meta).append(...rows.flatMap(([k, v]) => [h('dt', {}, k), h('dd', { class: k === 'error' ? 'result-bad' : '' }, v ?? '—')]));
+    renderRecord();
+  }
+
+  // ---- the live strip while this campaign is the active run ----
+
+  const onTelemetry = (ev) => {
+    const run = ev.detail.run;
+    const mine = run && run.id === id;
+    liveStrip.hidden = !mine;
+    if (!mine) return;
+    const seg = run.segment || {};
+    const text = `Live: ${run.state}, step ${seg.index + 1}/${seg.count} ${seg.name}, program ${duration(run.program_time_s)} of ${duration(run.duration_s)}, ${duration(run.time_left_s)} left`;
+    if (liveStrip.firstChild?.textContent !== text) {
+      clear(liveStrip).append(h('span', {}, text), ' ', h('a', { href: '#/live' }, 'open the live view'));
+    }
+    if (detail && run.state !== detail.state) {
+      detail.state = run.state;
+      clear(badge).append(stateBadge(run.state));
+      commands.update();
+    }
+  };
+  const onEvent = (ev) => {
+    if (ev.detail.campaign === id) refresh();
+  };
+  ctx.store.addEventListener('telemetry', onTelemetry);
+  ctx.store.addEventListener('event', onEvent);
+
+  // ---- results ----
+
+  async function loadResults() {
+    const d = detail;
+    results.hidden = false;
+    clear(results).append(h('h2', {}, 'Results'));
+    const [model, progress, status] = await Promise.all([
+      d.has_model ? get(`/api/campaigns/${id}/model`).catch((e) => ({ _error: e })) : null,
+      get(`/api/campaigns/${id}/progress`).catch(() => null),
+      ctx.status().catch(() => null),
+    ]);
+    if (stopped) return;
+    const truth = d.spec && typeof d.spec.truth === 'object' ? d.spec.truth : null;
+    const simulated = (status?.devices || '').startsWith('sim') || truth !== null;
+
+    // Downloads
+    const downloads = h('div', { class: 'downloads', id: 'downloads' });
+    if (d.has_model) {
+      downloads.append(
+        h('a', { class: 'button primary', id: 'download-model', href: `/api/campaigns/${id}/model`, download: `campaign-${id}-model.json` }, 'Model JSON (instrument frame)'),
+        h('a', { class: 'button', id: 'download-model-body', href: `/api/campaigns/${id}/model?frame=body`, download: `campaign-${id}-model-body.json` }, 'Model JSON (body frame)'),
+        h('a', { class: 'button', id: 'certificate', href: `certificate.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Calibration certificate (print)'));
+    } else {
+      downloads.append(h('span', { class: 'muted', id: 'no-model' }, d.state === 'done' ? 'This campaign produced no model (see the estimator notes below).' : `No model: the campaign ended ${d.state}.`));
+    }
+    const bundle = h('a', { class: 'button', id: 'download-recording', 'aria-disabled': 'true', title: 'checking…' }, 'Recording bundle');
+    downloads.append(bundle, h('button', { type: 'button', class: 'link', id: 'download-record', onclick: () => saveJson(`campaign-${id}.json`, detail) }, 'Campaign record (JSON)'));
+    results.append(downloads);
+    probeRecording(bundle);
+
+    // Coefficients
+    if (model && !model._error) {
+      results.append(coefficientTable(model, truth, simulated));
+    } else if (model?._error) {
+      results.append(h('p', { class: 'form-error' }, `Cannot load the model: ${model._error.message}`));
+    }
+
+    // What the estimators said
+    const notes = h('div', { class: 'stage-results', id: 'stage-results' });
+    for (const [name, r] of Object.entries(d.results || {})) {
+      const facts = Object.entries(r).filter(([k, v]) => typeof v === 'number' || typeof v === 'string');
+      notes.append(h('div', { class: 'stage', dataset: { estimator: name } }, h('h3', {}, `${name}`),
+        h('dl', { class: 'meta compact' }, ...facts.flatMap(([k, v]) => [h('dt', {}, k.replace(/_/g, ' ')), h('dd', {}, typeof v === 'number' ? `${num(v)} ${unitOf(k)}` : v)])),
+        Array.isArray(r.notes) && r.notes.length ? h('ul', { class: 'notes' }, ...r.notes.map((n) => h('li', {}, n))) : null));
+    }
+    if (notes.childElementCount) results.append(h('h3', {}, 'Estimators'), notes);
+
+    // Convergence over the run
+    if (progress && Object.keys(progress).length) {
+      const name = progress.direct ? 'direct' : Object.keys(progress)[0];
+      const map = new Map();
+      for (const p of progress[name] || []) {
+        for (const [coef, pair] of Object.entries(p.estimates || {})) {
+          if (!Array.isArray(pair)) continue;
+          if (!map.has(coef)) map.set(coef, new Series(3, { recentCapacity: 4000, historyCapacity: 2000 }));
+          const [v, s] = pair;
+          map.get(coef).push(p.program_time_s, [v, v - s, v + s]);
+        }
+      }
+      if (map.size) {
+        const box = h('div', { id: 'results-convergence' });
+        results.append(h('h3', {}, `Convergence of the ${name} estimator (estimate ± σ over program time)`), box);
+        const panel = convergencePanel(box, () => map, { idPrefix: 'res-conv', height: 150 });
+        panel.update();
+        cleanups.push(() => panel.destroy());
+      }
+    }
+
+    // Plots whose data the API may provide (docs/web.md lists what it lacks today).
+    const optional = h('div', { class: 'optional-plots', id: 'optional-plots' });
+    results.append(h('h3', {}, 'Noise, thermal and navigation evaluation'), optional);
+    await optionalPlots(optional);
+  }
+
+  async function probeRecording(link) {
+    // Not in docs/api.md yet: offered as soon as the daemon serves it.
+    const url = `/api/campaigns/${id}/recording`;
+    try {
+      const r = await fetch(url, { method: 'HEAD', credentials: 'same-origin' });
+      if (r.ok) {
+        link.href = url;
+        link.setAttribute('download', `campaign-${id}-recording`);
+        link.removeAttribute('aria-disabled');
+        link.title = 'imucal-recording/1 bundle';
+        return;
+      }
+    } catch { /* fall through */ }
+    link.title = `imucald does not serve the recording bundle yet (GET ${url}); the run database is ${detail?.run_db || '—'} in its data directory, exportable with "imucal export".`;
+    link.classList.add('disabled');
+  }
+
+  async function optionalPlots(box) {
+    const sources = [
+      { key: 'allan', title: 'Allan deviation', render: renderAllan },
+      { key: 'thermal', title: 'Coefficients against temperature, before and after compensation', render: renderThermal },
+      { key: 'evaluation', title: 'Schuler test: navigation errors of the model variants', render: renderEvaluation },
+    ];
+    const missing = [];
+    for (const s of sources) {
+      try {
+        const data = await get(`/api/campaigns/${id}/${s.key}`);
+        if (stopped) return;
+        const el = h('div', { class: 'optional-plot', id: `plot-${s.key}` }, h('h4', {}, s.title));
+        box.append(el);
+        s.render(el, data);
+      } catch (e) {
+        if (!(e instanceof ApiError) || e.status !== 404) box.append(h('p', { class: 'form-error' }, `${s.title}: ${e.message}`));
+        else missing.push(s);
+      }
+    }
+    if (missing.length) {
+      box.append(h('p', { class: 'muted', id: 'plots-missing' },
+        `Not available for this campaign from imucald: ${missing.map((s) => s.title.toLowerCase()).join('; ')}. `,
+        'The model\'s noise figures (angle and velocity random walk, bias instability) are in the table above.'));
+    }
+  }
+
+  function renderAllan(el, data) {
+    // Proposed shape (docs/web.md): {tau_s: [...], gyro_dph: [[x], [y], [z]], accel_mps2: [[x], [y], [z]]}
+    const pairs = [['gyro_dph', 'Gyros', '°/h'], ['accel_mps2', 'Accelerometers', 'm/s²']];
+    const row = h('div', { class: 'plot-row' });
+    el.append(row);
+    for (const [key, label, unit] of pairs) {
+      if (!Array.isArray(data[key])) continue;
+      const box = h('div', { class: 'plot' });
+      row.append(box);
+      const c = lineChart(box, { title: `${label}: Allan deviation`, x: 'τ s', y: unit, log: true, height: 220,
+        series: ['x', 'y', 'z'].map((a, i) => ({ label: a, color: COLORS[i] })), points: true });
+      c.setData([data.tau_s, ...data[key]]);
+      cleanups.push(() => c.destroy());
+    }
+  }
+
+  function renderThermal(el, data) {
+    // Proposed shape: {temperature_C: [...], coefficients: {name: {before: [...], after: [...]}}}
+    const row = h('div', { class: 'plot-row wrap' });
+    el.append(row);
+    for (const [name, v] of Object.entries(data.coefficients || {})) {
+      const box = h('div', { class: 'plot third' });
+      row.append(box);
+      const c = lineChart(box, { title: `${name} [${unitOf(name)}]`, x: 'T °C', height: 170,
+        series: [{ label: 'before', color: COLORS[1] }, { label: 'after', color: COLORS[2] }], points: true });
+      c.setData([data.temperature_C, v.before, v.after]);
+      cleanups.push(() => c.destroy());
+    }
+  }
+
+  function renderEvaluation(el, data) {
+    // Proposed shape: {time_s: [...], variants: [{name, position_error_m: [...], velocity_error_mps: [...]}]}
+    const variants = data.variants || [];
+    const row = h('div', { class: 'plot-row' });
+    el.append(row);
+    for (const [key, label, unit] of [['position_error_m', 'Position error', 'm'], ['velocity_error_mps', 'Velocity error', 'm/s']]) {
+      const box = h('div', { class: 'plot' });
+      row.append(box);
+      const c = lineChart(box, { title: label, x: 'time s', y: unit, height: 220,
+        series: variants.map((v, i) => ({ label: v.name, color: COLORS[i % COLORS.length] })) });
+      c.setData([data.time_s, ...variants.map((v) => v[key])]);
+      cleanups.push(() => c.destroy());
+    }
+    el.append(h('table', { class: 'list compact' }, h('thead', {}, h('tr', {}, h('th', {}, 'variant'), h('th', { class: 'num' }, 'max position error m'), h('th', { class: 'num' }, 'max velocity error m/s'))),
+      h('tbody', {}, ...variants.map((v) => h('tr', {}, h('td', {}, v.name),
+        h('td', { class: 'num' }, num(v.max_position_error_m ?? Math.max(...(v.position_error_m || []).map(Math.abs)), 3)),
+        h('td', { class: 'num' }, num(v.max_velocity_error_mps ?? Math.max(...(v.velocity_error_mps || []).map(Math.abs)), 3)))))));
+  }
+
+  function coefficientTable(model, truth, simulated) {
+    const all = coefficientRows(model, truth);
+    const rows = all.filter((r) => r.estimated || groupOf(r.name));
+    const skipped = [...new Set(all.filter((r) => !rows.includes(r)).map((r) => r.name.replace(/\.[xyz]$/, '')))];
+    const withTruth = truth !== null;
+    // Gyros on the left, accelerometers and the rest on the right: the whole model on one screen.
+    const left = rows.filter((r) => r.name.startsWith('gyro.') && !r.name.includes('.noise.') && r.group !== 'Other');
+    const right = rows.filter((r) => !left.includes(r));
+    const bads = rows.filter((r) => r.ratio !== null && Math.abs(r.ratio) > 3).length;
+    return h('div', { class: 'coefficients' },
+      h('h3', {}, `Coefficients (${model.frame || 'instrument'} frame)`),
+      withTruth ? h('p', { class: bads ? 'result-bad' : 'result-ok', id: 'truth-verdict' },
+        bads ? `${bads} coefficient(s) are more than 3 σ from the simulation's truth (marked).` : 'Every coefficient is within 3 σ of the simulation\'s truth.')
+        : (simulated ? h('p', { class: 'muted' }, 'The truth of this simulated run is a file on the daemon\'s machine; the error is not shown.') : null),
+      h('div', { class: 'coefficient-columns', id: 'coefficient-table' }, table(left, withTruth), table(right, withTruth)),
+      skipped.length ? h('p', { class: 'muted' }, `Not estimated by this campaign (zero with zero σ in the model): ${skipped.join(', ')}.`) : null);
+  }
+
+  function table(rows, withTruth) {
+    const body = h('tbody');
+    let group = null;
+    for (const r of rows) {
+      if (r.group !== group) {
+        group = r.group;
+        body.append(h('tr', { class: 'group-row' }, h('th', { colspan: withTruth ? 7 : 4 }, group)));
+      }
+      const bad = r.ratio !== null && Math.abs(r.ratio) > 3;
+      body.append(h('tr', { dataset: { coefficient: r.name }, class: bad ? 'out-3sigma' : '' },
+        h('td', { class: 'coef' }, r.name.split('.').slice(1).join('.')),
+        h('td', { class: 'unit' }, r.unit),
+        h('td', { class: 'num estimate' }, num(r.estimate, 5)),
+        h('td', { class: 'num sigma' }, r.sigma === null ? '—' : num(r.sigma, 2)),
+        withTruth ? h('td', { class: 'num truth' }, r.truth === null ? '—' : num(r.truth, 5)) : null,
+        withTruth ? h('td', { class: 'num error' }, r.error === null ? '—' : num(r.error, 3)) : null,
+        withTruth ? h('td', { class: 'num ratio', title: 'error in sigmas; beyond ±3 is marked' }, r.ratio === null ? '—' : r.ratio.toFixed(2)) : null));
+    }
+    return h('table', { class: 'list compact coefficient-table' },
+        h('thead', {}, h('tr', {}, h('th', {}, 'coefficient'), h('th', {}, 'unit'), h('th', { class: 'num' }, 'estimate'), h('th', { class: 'num' }, 'σ'),
+          withTruth ? [h('th', { class: 'num' }, 'truth'), h('th', { class: 'num' }, 'error'), h('th', { class: 'num' }, 'error / σ')] : null)),
+        body);
+  }
+
+  // ---- record: segments, transitions, events, spec ----
+
+  function renderRecord() {
+    const d = detail;
+    const cp = d.checkpoint?.segment;
+    // Re-rendered every poll while the campaign runs: keep what the user opened open.
+    const open = new Set([...record.querySelectorAll('details[open]')].map((x) => x.id));
+    clear(record).append(
+      h('h2', {}, 'Record'),
+      h('div', { class: 'two-col' },
+        h('div', {}, h('h3', {}, 'Transitions'),
+          h('table', { class: 'list compact', id: 'transitions' }, h('thead', {}, h('tr', {}, h('th', {}, 'time'), h('th', {}, 'from'), h('th', {}, 'to'), h('th', {}, 'reason'))),
+            h('tbody', {}, ...(d.transitions || []).map((t) => h('tr', {}, h('td', {}, dateTime(t.t)), h('td', {}, t.from || '—'), h('td', {}, stateBadge(t.to)), h('td', {}, t.reason || '')))))),
+        h('div', {}, h('h3', {}, 'Events'),
+          (d.events || []).length ? h('table', { class: 'list compact', id: 'campaign-events' }, h('thead', {}, h('tr', {}, h('th', {}, 'time'), h('th', {}, 'kind'), h('th', {}, 'segment'), h('th', {}, 'reason'))),
+            h('tbody', {}, ...d.events.map((e) => h('tr', { class: ['suspended', 'alarm', 'error', 'interrupted'].includes(e.kind) ? 'event-serious' : '' },
+              h('td', {}, dateTime(e.t)), h('td', {}, e.kind), h('td', {}, segmentName(d, e.segment)), h('td', {}, e.reason || '')))))
+            : h('p', { class: 'muted' }, 'No events.'))),
+      h('details', { id: 'segments-details' }, h('summary', {}, `Segments (${(d.segments || []).length})`),
+        h('table', { class: 'list compact' }, h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'name'), h('th', {}, 'kind'), h('th', { class: 'num' }, 'from s'), h('th', { class: 'num' }, 'to s'), h('th', {}, 'redo'))),
+          h('tbody', {}, ...(d.segments || []).map((s) => h('tr', { class: s.index === cp ? 'checkpoint' : '' },
+            h('td', { class: 'num' }, s.index + 1), h('td', {}, s.name), h('td', {}, s.kind), h('td', { class: 'num' }, s.t0_s.toFixed(1)),
+            h('td', { class: 'num' }, s.t1_s.toFixed(1)), h('td', {}, s.redoable ? 'yes' : 'no (chamber ramp)')))))),
+      h('details', { id: 'spec-details' }, h('summary', {}, 'Campaign as stored (JSON)'), h('pre', { class: 'json-preview' }, JSON.stringify(d.spec, null, 1))));
+    for (const x of record.querySelectorAll('details')) if (open.has(x.id)) x.open = true;
+  }
+
+  refresh();
+  timer = setInterval(refresh, 2000);
+  return () => {
+    stopped = true;
+    clearInterval(timer);
+    ctx.store.removeEventListener('telemetry', onTelemetry);
+    ctx.store.removeEventListener('event', onEvent);
+    for (const c of cleanups) c();
+    document.title = 'imucal';
+  };
+}
+
+// Events carry the segment's index (0-based, as in the daemon's own texts); its name says more.
+function segmentName(d, index) {
+  if (index === null || index === undefined) return '—';
+  const s = (d.segments || [])[index];
+  return s ? `${s.name} (${index})` : String(index);
+}
+
+function saveJson(filename, data) {
+  const url = URL.createObjectURL(new Blob([JSON.stringify(data, null, 1)], { type: 'application/json' }));
+  const a = h('a', { href: url, download: filename });
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+}

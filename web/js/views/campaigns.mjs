@@ -1,0 +1,108 @@
+// Campaigns: what runs and waits (the queue), and the history with state, duration and result.
+import { get } from '../api.mjs';
+import { h, clear, duration, dateTime, stateBadge, FINAL_STATES } from '../format.mjs';
+import { isOperator } from '../session.mjs';
+
+export function mount(root, ctx) {
+  const status = h('div', { class: 'form-error', role: 'alert' });
+  const activeBody = h('tbody');
+  const historyBody = h('tbody');
+  const updated = h('span', { class: 'muted' });
+  const table = (body, id) => h('table', { class: 'list', id },
+    h('thead', {}, h('tr', {},
+      h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Program'), h('th', {}, 'State'),
+      h('th', {}, 'Created'), h('th', {}, 'Started'), h('th', { class: 'num' }, 'Program length'),
+      h('th', { class: 'num' }, 'Wall time'), h('th', {}, 'Progress / result'))),
+    body);
+
+  root.append(
+    h('div', { class: 'page-head' },
+      h('h1', {}, 'Campaigns'),
+      h('div', { class: 'actions' }, updated,
+        h('a', { class: 'button primary operator-only', href: '#/new', id: 'new-campaign' }, 'New campaign'))),
+    status,
+    h('section', { class: 'card' }, h('h2', {}, 'Running and queued'), table(activeBody, 'active-campaigns'),
+      h('p', { class: 'muted empty-note', id: 'active-empty', hidden: true }, 'Nothing runs or waits. ',
+        isOperator() ? h('a', { href: '#/new' }, 'Build a campaign') : 'An operator can start one.', '.')),
+    h('section', { class: 'card' }, h('h2', {}, 'History'), table(historyBody, 'history-campaigns'),
+      h('p', { class: 'muted empty-note', id: 'history-empty', hidden: true }, 'No finished campaigns yet.')));
+
+  let timer = null;
+  let stopped = false;
+  let inFlight = false;
+
+  async function refresh() {
+    if (stopped || inFlight) return;
+    inFlight = true;
+    try {
+      const { campaigns } = await get('/api/campaigns?limit=200');
+      status.textContent = '';
+      render(campaigns || []);
+      updated.textContent = `updated ${dateTime(new Date().toISOString()).slice(11)}`;
+    } catch (e) {
+      status.textContent = `Cannot load the campaigns: ${e.message}`;
+    } finally {
+      inFlight = false;
+    }
+  }
+
+  function render(list) {
+    const active = list.filter((c) => !FINAL_STATES.has(c.state))
+      // the head of the queue first after whatever runs, then the ones not started yet
+      .sort((a, b) => rank(a) - rank(b) || a.id - b.id);
+    const history = list.filter((c) => FINAL_STATES.has(c.state));
+    clear(activeBody).append(...active.map(row));
+    clear(historyBody).append(...history.map(row));
+    root.querySelector('#active-empty').hidden = active.length > 0;
+    root.querySelector('#history-empty').hidden = history.length > 0;
+  }
+
+  function rank(c) {
+    if (c.queue_position !== null && c.queue_position !== undefined) return 10 + c.queue_position;
+    if (c.state === 'created') return 100000;
+    if (c.state === 'interrupted') return 50000;
+    return 0;  // running, paused, suspended, ...
+  }
+
+  function row(c) {
+    const wall = c.started ? ((c.ended ? Date.parse(c.ended) : Date.now()) - Date.parse(c.started)) / 1000 : null;
+    return h('tr', { dataset: { id: c.id, state: c.state }, class: `state-row-${c.state}` },
+      h('td', { class: 'num' }, c.id),
+      h('td', {}, h('a', { href: `#/campaigns/${c.id}` }, c.name)),
+      h('td', {}, c.program),
+      h('td', {}, stateBadge(c.state), c.queue_position != null ? h('span', { class: 'muted' }, ` #${c.queue_position + 1} in queue`) : ''),
+      h('td', {}, dateTime(c.created)),
+      h('td', {}, dateTime(c.started)),
+      h('td', { class: 'num' }, duration(c.duration_s)),
+      h('td', { class: 'num' }, duration(wall)),
+      h('td', {}, result(c)));
+  }
+
+  function result(c) {
+    if (c.state === 'done')
+      return c.has_model ? h('a', { class: 'result-ok', href: `#/campaigns/${c.id}` }, 'model ready — see results')
+        : h('span', { class: 'muted' }, 'finished without a model');
+    if (c.state === 'failed') return h('span', { class: 'result-bad', title: c.error || '' }, c.error || 'failed');
+    if (c.state === 'aborted') return h('span', { class: 'muted' }, 'aborted, no results');
+    const pct = Math.round(100 * (c.progress || 0));
+    return h('div', { class: 'progress', title: `${pct} % of the program` },
+      h('div', { class: 'bar', style: `width:${pct}%` }), h('span', {}, `${pct} %`));
+  }
+
+  refresh();
+  timer = setInterval(refresh, 4000);
+  // A state change anywhere shows at once, not at the next poll.
+  let soon = null;
+  const onEvent = (ev) => {
+    if (ev.detail.kind !== 'transition') return;
+    clearTimeout(soon);
+    soon = setTimeout(refresh, 150);
+  };
+  ctx.store.addEventListener('event', onEvent);
+  return () => {
+    stopped = true;
+    clearInterval(timer);
+    clearTimeout(soon);
+    ctx.store.removeEventListener('event', onEvent);
+  };
+}

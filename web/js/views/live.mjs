@@ -1,0 +1,229 @@
+// The live view: the active run (step, time left, commands), table, chamber, IMU and recorder
+// readings, their plots, the estimators converging, and alarms and suspensions as they happen.
+// Everything comes from the page's one WebSocket through the LiveStore; this view only draws,
+// once per animation frame at most.
+import { h, clear, duration, num, fixed, stateBadge, timeOfDay } from '../format.mjs';
+import { lineChart, schedule, AXIS_COLORS, COLORS } from '../plots.mjs';
+import { commandBar } from '../dialogs.mjs';
+import { convergencePanel } from '../convergence.mjs';
+import { AXES } from '../live.mjs';
+
+const WINDOWS = [['60', '1 min'], ['600', '10 min'], ['3600', '1 h'], ['Infinity', 'whole run']];
+
+export function mount(root, ctx) {
+  const { store } = ctx;
+  let windowS = Number(localStorage.getItem('imucal.live.window') || 600);
+  if (!Number.isFinite(windowS) && windowS !== Infinity) windowS = 600;
+
+  const runBox = h('section', { class: 'card run-card', id: 'run-card' });
+  const suspendedBanner = h('div', { class: 'suspended-banner', id: 'suspended-banner', role: 'alert', hidden: true });
+  const runTitle = h('h1', { id: 'run-title' });
+  const runState = h('span', { id: 'run-state' });
+  const stepText = h('div', { class: 'kv', id: 'run-step' });
+  const timeText = h('div', { class: 'kv', id: 'run-time' });
+  const leftText = h('div', { class: 'kv', id: 'run-left' });
+  const speedText = h('div', { class: 'kv', id: 'run-speed' });
+  const progress = h('div', { class: 'progress wide', id: 'run-progress' }, h('div', { class: 'bar' }), h('span', {}));
+  let current = null;  // {id, name, state} of the run shown
+  const commands = commandBar({
+    getCampaign: () => current,
+    onDone: () => schedule(drawNumbers),
+  });
+  runBox.append(
+    h('div', { class: 'run-head' }, runTitle, runState, h('div', { class: 'spacer' }), commands),
+    suspendedBanner,
+    h('div', { class: 'run-facts' }, stepText, timeText, leftText, speedText), progress);
+
+  const cards = h('div', { class: 'cards' });
+  const cell = (id) => h('span', { class: 'value', id });
+  const kv = (label, id, unit = '') => h('div', { class: 'kv' }, h('span', { class: 'label' }, label), cell(id), unit ? h('span', { class: 'unit' }, unit) : null);
+  cards.append(
+    h('section', { class: 'card small', id: 'table-card' }, h('h2', {}, 'Table'),
+      h('table', { class: 'axes' }, h('thead', {}, h('tr', {}, h('th', {}, ''), h('th', { class: 'num' }, 'angle °'), h('th', { class: 'num' }, 'rate °/s'))),
+        h('tbody', {}, ...AXES.map((a) => h('tr', {}, h('th', { style: `color:${AXIS_COLORS[a]}` }, a), h('td', { class: 'num', id: `angle-${a}` }), h('td', { class: 'num', id: `rate-${a}` }))))),
+      h('div', { class: 'flags', id: 'table-flags' })),
+    h('section', { class: 'card small', id: 'chamber-card' }, h('h2', {}, 'Chamber'),
+      kv('temperature', 'chamber-temp', '°C'), kv('set point', 'chamber-sp', '°C'), kv('tolerance', 'chamber-tol', '± °C'),
+      h('div', { class: 'flags', id: 'chamber-flags' })),
+    h('section', { class: 'card small', id: 'imu-card' }, h('h2', {}, 'IMU and recorder'),
+      kv('frame rate', 'imu-rate', 'Hz'), kv('frames', 'imu-frames'), kv('lost', 'imu-lost'), kv('bad', 'imu-bad'),
+      kv('recorder queue', 'rec-queue', 'frames'), kv('committed', 'rec-committed', 'frames'),
+      h('div', { class: 'flags', id: 'imu-flags' })),
+    h('section', { class: 'card small', id: 'estimators-card' }, h('h2', {}, 'Estimators'), h('div', { id: 'estimator-status' })));
+
+  const windowSel = h('div', { class: 'tabs small', role: 'tablist', id: 'window-tabs' },
+    ...WINDOWS.map(([v, label]) => h('button', { type: 'button', role: 'tab', dataset: { window: v }, 'aria-selected': String(Number(v) === windowS),
+      onclick: () => {
+        windowS = Number(v);
+        localStorage.setItem('imucal.live.window', v);
+        for (const b of windowSel.children) b.setAttribute('aria-selected', String(b.dataset.window === v));
+        schedule(drawPlots);
+      } }, label)));
+  const plotGrid = h('div', { class: 'plot-grid' });
+  const plotBox = (id) => h('div', { class: 'plot', id });
+  const anglesEl = plotBox('plot-angles'), ratesEl = plotBox('plot-rates'), chamberEl = plotBox('plot-chamber'), rateEl = plotBox('plot-imu-rate');
+  plotGrid.append(anglesEl, ratesEl, chamberEl, rateEl);
+
+  const convEl = h('div', { id: 'convergence' });
+  const eventsBody = h('tbody', { id: 'events' });
+  root.append(runBox, cards,
+    h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Table, chamber and IMU'), windowSel), plotGrid),
+    h('section', { class: 'card' }, h('h2', {}, 'Estimators converging (estimate ± σ over program time)'), convEl),
+    h('section', { class: 'card' }, h('h2', {}, 'Events, alarms and suspensions'),
+      h('table', { class: 'list events' }, h('thead', {}, h('tr', {}, h('th', {}, 'time'), h('th', {}, 'campaign'), h('th', {}, 'event'), h('th', {}, 'reason'))), eventsBody),
+      h('p', { class: 'muted', id: 'events-empty' }, 'Nothing has happened since this page connected.')));
+
+  const height = 150;  // four plots and the run above them on a 768-pixel screen
+  const angles = lineChart(anglesEl, { height, title: 'Table angles', y: '°', series: AXES.map((a) => ({ label: a, color: AXIS_COLORS[a] })) });
+  const rates = lineChart(ratesEl, { height, title: 'Table rates', y: '°/s', series: AXES.map((a) => ({ label: a, color: AXIS_COLORS[a] })) });
+  const chamber = lineChart(chamberEl, { height, title: 'Chamber temperature against set point', y: '°C',
+    series: [{ label: 'temperature', color: COLORS[1] }, { label: 'set point', color: '#444', dash: [6, 4] },
+      { label: '−tol', band: true }, { label: '+tol', band: true }],
+    bands: [[4, 3, 'rgba(46,125,50,0.12)']] });
+  const frameRate = lineChart(rateEl, { height, title: 'IMU frame rate', y: 'Hz', series: [{ label: 'frames/s', color: COLORS[3] }] });
+  const conv = convergencePanel(convEl, () => {
+    const name = store.estimators.has('direct') ? 'direct' : [...store.estimators.keys()][0];
+    return name ? store.estimators.get(name).coefficients : new Map();
+  }, { idPrefix: 'live-conv' });
+
+  function drawPlots() {
+    angles.setData(store.angles.view(windowS));
+    rates.setData(store.rates.view(windowS));
+    chamber.setData(store.chamber.view(windowS));
+    frameRate.setData(store.frameRate.view(windowS));
+  }
+
+  const set = (id, text) => {
+    const el = root.querySelector(`#${id}`);
+    if (el && el.textContent !== text) el.textContent = text;
+  };
+  const flags = (id, list) => {
+    const el = root.querySelector(`#${id}`);
+    const sig = list.map((f) => f.join(':')).join('|');
+    if (el.dataset.sig === sig) return;
+    el.dataset.sig = sig;
+    clear(el).append(...list.map(([cls, text]) => h('span', { class: `flag ${cls}` }, text)));
+  };
+
+  let lastSuspendReason = '';
+  function drawNumbers() {
+    const m = store.latest;
+    const run = m?.run || null;
+    current = run ? { id: run.id, name: run.name, state: run.state } : null;
+    commands.update();
+    if (run) {
+      runTitle.textContent = `#${run.id} ${run.name}`;
+      if (runState.dataset.state !== run.state) {
+        runState.dataset.state = run.state;
+        clear(runState).append(stateBadge(run.state));
+      }
+      const seg = run.segment || {};
+      set('run-step', `step ${seg.index + 1} of ${seg.count}: ${seg.name} (${seg.kind})`);
+      set('run-time', `program ${duration(run.program_time_s)} of ${duration(run.duration_s)} · checkpoint ${duration(run.checkpoint_s)}`);
+      const wallLeft = run.speed_factor > 0 ? run.time_left_s / run.speed_factor : null;
+      set('run-left', `time left ${duration(run.time_left_s)}${wallLeft !== null && Math.abs(run.speed_factor - 1) > 0.05 ? ` (≈ ${duration(wallLeft)} wall)` : ''}`);
+      set('run-speed', run.speed_factor ? `speed ×${num(run.speed_factor, 3)}` : '');
+      const pct = run.duration_s > 0 ? Math.min(100, (100 * run.program_time_s) / run.duration_s) : 0;
+      progress.firstChild.style.width = `${pct}%`;
+      progress.lastChild.textContent = `${pct.toFixed(1)} %`;
+      const suspended = run.state === 'suspended';
+      suspendedBanner.hidden = !suspended;
+      if (suspended) suspendedBanner.textContent = `Suspended${lastSuspendReason ? `: ${lastSuspendReason}` : ''}. The run resumes by itself once the condition has cleared and settled; the interrupted segment is then redone.`;
+    } else {
+      runTitle.textContent = 'Nothing runs';
+      clear(runState);
+      runState.dataset.state = '';
+      set('run-step', 'The readings below are the idle bench.');
+      set('run-time', '');
+      set('run-left', '');
+      set('run-speed', '');
+      progress.firstChild.style.width = '0%';
+      progress.lastChild.textContent = '';
+      suspendedBanner.hidden = true;
+    }
+    if (!m) return;
+    const tb = m.table || {};
+    AXES.forEach((a, i) => {
+      set(`angle-${a}`, fixed(tb.angle_deg?.[i], 3));
+      set(`rate-${a}`, fixed(tb.rate_dps?.[i], 3));
+    });
+    flags('table-flags', [
+      tb.connected === false ? ['bad', 'disconnected'] : ['ok', 'connected'],
+      tb.homed ? ['ok', 'homed'] : ['warn', 'not homed'],
+      tb.interlock_closed ? ['warn', 'interlock closed (may move)'] : ['ok', 'interlock open'],
+      ...(tb.fault ? [['bad', `fault: ${tb.fault}`]] : []),
+    ]);
+    const ch = m.chamber || {};
+    set('chamber-temp', fixed(ch.temperature_C, 2));
+    set('chamber-sp', fixed(ch.setpoint_C, 2));
+    set('chamber-tol', fixed(ch.tolerance_C, 2));
+    flags('chamber-flags', [
+      ch.connected === false ? ['bad', 'disconnected'] : ['ok', 'connected'],
+      ch.in_band === false ? ['bad', 'out of band'] : ['ok', 'in band'],
+    ]);
+    const imu = m.imu || {};
+    set('imu-rate', fixed(imu.frame_rate_hz, 1));
+    set('imu-frames', String(imu.frames ?? '—'));
+    set('imu-lost', String(imu.lost_frames ?? '—'));
+    set('imu-bad', String(imu.bad_frames ?? '—'));
+    const rec = m.recorder || {};
+    set('rec-queue', `${rec.queue_frames ?? '—'} (peak ${rec.queue_high_water_frames ?? '—'})`);
+    set('rec-committed', String(rec.committed_frames ?? '—'));
+    flags('imu-flags', [
+      imu.connected === false ? ['bad', 'disconnected'] : ['ok', 'connected'],
+      ...(imu.lost_frames > 0 ? [['warn', `${imu.lost_frames} lost`]] : []),
+      ...(imu.bad_frames > 0 ? [['warn', `${imu.bad_frames} bad`]] : []),
+      ...(rec.dropped_frames > 0 ? [['bad', `recorder dropped ${rec.dropped_frames}`]] : []),
+      ...(store.droppedMessages > 0 ? [['warn', `${store.droppedMessages} live messages skipped (slow page)`]] : []),
+    ]);
+    const estBox = root.querySelector('#estimator-status');
+    const est = m.estimators || {};
+    const sig = JSON.stringify(Object.entries(est).map(([k, e]) => [k, e.status, e.statics, e.rotations, e.message, e.max_velocity_error_mps, e.max_position_error_m, Math.round(e.program_time_s || 0)]));
+    if (estBox.dataset.sig !== sig) {
+      estBox.dataset.sig = sig;
+      clear(estBox);
+      if (!Object.keys(est).length) estBox.append(h('p', { class: 'muted' }, run ? 'No estimator runs in this campaign.' : '—'));
+      for (const [name, e] of Object.entries(est)) {
+        estBox.append(h('div', { class: 'estimator', dataset: { estimator: name, status: e.status } },
+          h('strong', {}, name), ' ', h('span', { class: `badge est-${e.status}` }, e.status),
+          e.statics !== undefined ? h('div', { class: 'muted' }, `${e.statics} statics, ${e.rotations ?? 0} rotations, at ${duration(e.program_time_s)}`) : null,
+          e.max_velocity_error_mps !== undefined ? h('div', { class: 'muted' }, `max velocity error ${num(e.max_velocity_error_mps, 3)} m/s, position ${num(e.max_position_error_m, 3)} m`) : null,
+          e.message ? h('div', { class: 'estimator-message' }, e.message.split('\n')[0]) : null));
+      }
+    }
+  }
+
+  function addEvent(e) {
+    root.querySelector('#events-empty').hidden = true;
+    const what = e.kind === 'transition' ? `${e.from} → ${e.to}` : e.kind;
+    const serious = ['suspended', 'alarm', 'error', 'interrupted'].includes(e.kind) || ['failed', 'suspended', 'aborted'].includes(e.to);
+    if (e.kind === 'suspended' || e.to === 'suspended') lastSuspendReason = e.reason || lastSuspendReason;
+    eventsBody.prepend(h('tr', { class: serious ? 'event-serious' : '', dataset: { kind: e.kind } },
+      h('td', {}, timeOfDay(e.t)), h('td', {}, e.campaign ?? ''), h('td', {}, what), h('td', {}, e.reason || '')));
+    while (eventsBody.children.length > 200) eventsBody.lastChild.remove();
+  }
+
+  for (const e of store.events.items) addEvent(e);
+  const onTelemetry = () => {
+    schedule(drawNumbers);
+    schedule(drawPlots);
+    conv.update();
+  };
+  const onEvent = (ev) => addEvent(ev.detail);
+  const onProgress = () => conv.update();
+  store.addEventListener('telemetry', onTelemetry);
+  store.addEventListener('event', onEvent);
+  store.addEventListener('progress', onProgress);
+  onTelemetry();
+
+  return () => {
+    store.removeEventListener('telemetry', onTelemetry);
+    store.removeEventListener('event', onEvent);
+    store.removeEventListener('progress', onProgress);
+    angles.destroy();
+    rates.destroy();
+    chamber.destroy();
+    frameRate.destroy();
+    conv.destroy();
+  };
+}
