@@ -50,7 +50,7 @@ double rss_mb() {
 double peak_rss_mb() {
   rusage usage{};
   ::getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1e3;  // kB on Linux
+  return static_cast<double>(usage.ru_maxrss) * 1024.0 / 1e6;  // KiB on Linux
 }
 
 // The simulated stream: one run of a program, replayed cycle after cycle with shifted times, so
@@ -393,6 +393,63 @@ RecordBenchResult run_record_bench(const RecordBenchOptions& o) {
   return r;
 }
 
+namespace {
+
+// The baseline of `bench read`: the run's chunks as a plain file ([u32 frames, u32 codec, u32
+// bytes, payload] each, written untimed), read back with read(2) and decoded by the same codec.
+void raw_read_baseline(const std::string& run_path, const std::string& dir, ReadBenchResult& r) {
+  const std::string raw_path = (fs::path(dir) / "raw-read.bin").string();
+  {
+    const storage::RunDb db = storage::RunDb::open(run_path, storage::OpenMode::Read);
+    const RecordingMeta meta = db.meta();
+    std::ofstream out(raw_path, std::ios::binary | std::ios::trunc);
+    std::vector<unsigned char> payload;
+    db.for_each_block([&](std::span<const ImuFrame> block) {
+      for (std::size_t at = 0; at < block.size(); at += storage::RunDb::kFramesPerChunk) {
+        const auto part = block.subspan(at, std::min(storage::RunDb::kFramesPerChunk, block.size() - at));
+        const auto codec = static_cast<std::uint32_t>(storage::encode_chunk_payload(part, meta, payload));
+        const std::uint32_t header[3] = {static_cast<std::uint32_t>(part.size()), codec,
+                                         static_cast<std::uint32_t>(payload.size())};
+        out.write(reinterpret_cast<const char*>(header), sizeof(header));
+        out.write(reinterpret_cast<const char*>(payload.data()), static_cast<std::streamsize>(payload.size()));
+      }
+    });
+    if (!out) throw std::runtime_error(raw_path + ": cannot write");
+  }
+  const int fd = ::open(raw_path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error(raw_path + ": " + std::strerror(errno));
+  auto read_exact = [&](void* to, std::size_t bytes) {
+    std::size_t done = 0;
+    while (done < bytes) {
+      const ssize_t n = ::read(fd, static_cast<char*>(to) + done, bytes - done);
+      if (n <= 0) return false;
+      done += static_cast<std::size_t>(n);
+    }
+    return true;
+  };
+  std::vector<unsigned char> payload;
+  std::vector<ImuFrame> decoded;
+  std::int64_t frames = 0;
+  double checksum = 0.0;
+  const auto t0 = Clock::now();
+  std::uint32_t header[3];
+  while (read_exact(header, sizeof(header))) {
+    payload.resize(header[2]);
+    if (!read_exact(payload.data(), payload.size())) break;
+    storage::decode_chunk_payload(payload, header[0], static_cast<int>(header[1]), decoded);
+    frames += static_cast<std::int64_t>(decoded.size());
+    checksum += decoded.back().dv_mps.z();
+  }
+  const double wall_s = seconds_since(t0);
+  ::close(fd);
+  fs::remove(raw_path);
+  if (frames != r.frames) throw std::runtime_error("bench read: the raw file holds a different number of frames");
+  r.raw_frames_per_s = static_cast<double>(frames) / wall_s;
+  std::fprintf(stderr, "(raw checksum %.3g)\n", checksum);
+}
+
+}  // namespace
+
 ReadBenchResult run_read_bench(const ReadBenchOptions& o) {
   std::string path = o.db;
   bool made = false;
@@ -460,6 +517,8 @@ ReadBenchResult run_read_bench(const ReadBenchOptions& o) {
     std::fprintf(stderr, "(checksum %.3g)\n", checksum);
   }
   r.bytes_per_frame = static_cast<double>(fs::file_size(path)) / static_cast<double>(r.frames);
+  raw_read_baseline(path, o.dir, r);
+  r.raw_append_ratio = r.frames_per_s / r.raw_frames_per_s;
   if (made) remove_run(path);
   return r;
 }
@@ -577,15 +636,18 @@ void add_storage_bench_commands(CLI::App& bench) {
                         {"range_frames_per_s", r.range_frames_per_s},
                         {"decimate_full_ms", r.decimate_full_ms},
                         {"decimate_60s_decoded_ms", r.decimate_decoded_ms},
+                        {"raw_frames_per_s", r.raw_frames_per_s},
+                        {"raw_append_ratio", r.raw_append_ratio},
+                        {"raw_baseline", "the same chunk bytes read with read(2) from a plain file and decoded"},
                         {"bytes_per_frame", r.bytes_per_frame}};
     if (*read_json) {
       std::printf("%s\n", j.dump().c_str());
       return;
     }
-    std::printf("read: %lld frames in %.3f s = %.0f frames/s; random 10 s ranges %.0f frames/s; "
-                "decimate whole run %.1f ms, 60 s window %.1f ms; %.2f bytes/frame\n",
-                static_cast<long long>(r.frames), r.wall_s, r.frames_per_s, r.range_frames_per_s, r.decimate_full_ms,
-                r.decimate_decoded_ms, r.bytes_per_frame);
+    std::printf("read: %lld frames in %.3f s = %.0f frames/s (plain file %.0f frames/s, ratio %.2f); random 10 s "
+                "ranges %.0f frames/s; decimate whole run %.1f ms, 60 s window %.1f ms; %.2f bytes/frame\n",
+                static_cast<long long>(r.frames), r.wall_s, r.frames_per_s, r.raw_frames_per_s, r.raw_append_ratio,
+                r.range_frames_per_s, r.decimate_full_ms, r.decimate_decoded_ms, r.bytes_per_frame);
   });
 }
 

@@ -70,6 +70,10 @@ struct ReadBenchResult {
   double decimate_full_ms = 0.0;        // the whole run into plot_columns min/max columns
   double decimate_decoded_ms = 0.0;     // a 60 s window (every chunk decoded)
   double bytes_per_frame = 0.0;
+  // The same chunk bytes from a plain file, read(2) and decoded; the ratio is named as in
+  // `bench record` so that both commands print the same keys.
+  double raw_frames_per_s = 0.0;
+  double raw_append_ratio = 0.0;
 };
 
 ReadBenchResult run_read_bench(const ReadBenchOptions& options);

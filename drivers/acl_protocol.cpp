@@ -219,7 +219,10 @@ Result<Reply> parse_reply(std::string_view line, bool checksum) {
   if (checksum) {
     const std::size_t star = line.rfind('*');
     unsigned sum = 0;
-    if (star == std::string_view::npos || star + 3 != line.size() || !parse_hex(line.substr(star + 1), sum))
+    auto upper_hex = [](char ch) { return (ch >= '0' && ch <= '9') || (ch >= 'A' && ch <= 'F'); };
+    // Exactly two upper-case hex digits: a case change of a digit is a corruption too.
+    if (star == std::string_view::npos || star + 3 != line.size() || !upper_hex(line[star + 1]) ||
+        !upper_hex(line[star + 2]) || !parse_hex(line.substr(star + 1), sum))
       return {DriverErrc::crc_error, "reply without a valid checksum: '" + std::string(line) + "'"};
     body = line.substr(0, star);
     if (sum != xor_checksum(body))

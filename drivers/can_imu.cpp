@@ -345,6 +345,7 @@ Result<void> CanImu::poll(ImuBatch& out, std::chrono::milliseconds max_wait) {
   const std::size_t samples_before = out.samples.size(), temps_before = out.temperatures.size();
   const auto deadline = Clock::now() + max_wait;
   Result<void> err;
+  bool first_wait = true;
   for (;;) {
     if (!m.drain(out, err)) {
       m.publish();
@@ -353,8 +354,13 @@ Result<void> CanImu::poll(ImuBatch& out, std::chrono::milliseconds max_wait) {
     if (out.samples.size() > samples_before || out.temperatures.size() > temps_before) break;
     const auto now = Clock::now();
     if (now >= deadline) break;
-    if (now - m.last_sample > m.cfg.stall_timeout) break;
-    const auto left = std::min(deadline - now, m.cfg.stall_timeout - (now - m.last_sample));
+    // Wait for data up to the deadline, but wake when the stall timeout runs out so that a stall
+    // is reported promptly; once stalled, keep waiting the full max_wait (no busy loop).
+    auto left = deadline - now;
+    const auto stall_left = m.cfg.stall_timeout - (now - m.last_sample);
+    if (stall_left > Clock::duration::zero()) left = std::min(left, stall_left);
+    else if (!first_wait) break;
+    first_wait = false;
     pollfd p{m.fd, POLLIN, 0};
     const int wait_ms = static_cast<int>(std::chrono::ceil<std::chrono::milliseconds>(left).count());
     const int rc = ::poll(&p, 1, std::max(wait_ms, 1));

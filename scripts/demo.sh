@@ -7,6 +7,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
+# ccache keys on relative paths under the checkout, so a fresh clone reuses earlier compilations.
+export CCACHE_BASEDIR="$PWD"
 cmake --preset release >/dev/null
 cmake --build --preset release -j "$(nproc)" --target imucal
 bin=build/release/bin

@@ -5,6 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
+# ccache keys on relative paths under the checkout, so a fresh clone reuses earlier compilations.
+export CCACHE_BASEDIR="$PWD"
 jobs=$(nproc)
 
 # The browser tests' npm packages (playwright-core, uplot) from tests/browser/package-lock.json:

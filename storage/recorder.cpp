@@ -34,6 +34,8 @@ Recorder::Recorder(RunDb db, RecorderOptions options, AlarmHandler on_alarm, Com
   lease_ = db_.lease();
   recovery_ = db_.recovery();
   stats_.queue_capacity_frames = options_.queue_capacity_frames;
+  stats_.stored_frames = lease_->counters().frames_at_open;
+  last_pushed_t_ns_ = db_.last_frame_t_ns();  // a continued run: new frames must come after it
   thread_ = std::thread([this] { run(); });
 }
 
@@ -239,6 +241,7 @@ void Recorder::commit_batch() {
   {
     std::lock_guard lock(mutex_);
     stats_.committed_frames = published.committed_frames;
+    stats_.stored_frames = published.frames_at_open + published.committed_frames;
     if (published.committed_frames > 0 || stats_.committed_t_ns) stats_.committed_t_ns = published.committed_t_ns;
     ++stats_.commits;
     stats_.last_commit_s = took_s;

@@ -54,6 +54,7 @@ struct RecorderStats {
   std::int64_t high_water_frames = 0;
   std::int64_t accepted_frames = 0;   // entered the queue in this session
   std::int64_t committed_frames = 0;  // committed in this session
+  std::int64_t stored_frames = 0;     // in the run after the last commit (earlier sessions too)
   std::optional<std::int64_t> committed_t_ns;  // time of the last committed frame
   std::int64_t dropped_frames = 0;
   std::int64_t commits = 0;

@@ -249,6 +249,9 @@ void use_wal(sqlite3* db, const std::string& path) {
   // on power loss and never corrupts the file (rosbag2's "OFF" can).
   exec(db, path, "PRAGMA journal_mode=WAL");
   exec(db, path, "PRAGMA synchronous=NORMAL");
+  // A burst (a benchmark, a backlog) can grow the WAL to a few hundred MB; give the space back
+  // once a checkpoint has emptied it.
+  exec(db, path, "PRAGMA journal_size_limit=67108864");
 }
 
 // Version 2, as create() makes it. `summary` precedes `data` on purpose: SQLite stores columns in
@@ -1317,6 +1320,8 @@ std::int64_t RunDb::frame_count() const {
   return d.query_int(d.count_frames) + static_cast<std::int64_t>(d.buffer.size() - d.persisted_in_open);
 }
 
+std::optional<std::int64_t> RunDb::last_frame_t_ns() const { return impl().last_frame_t_ns; }
+
 void RunDb::for_each_block(const std::function<void(std::span<const ImuFrame>)>& fn, std::int64_t t0_ns,
                            std::int64_t t1_ns) const {
   Impl& d = impl();
@@ -1543,8 +1548,8 @@ std::vector<DroppedSpan> RunDb::dropped_spans() const {
 
 const std::optional<RecoveryReport>& RunDb::recovery() const { return impl().recovery; }
 
-void encode_chunk_payload(std::span<const ImuFrame> frames, const RecordingMeta& meta,
-                          std::vector<unsigned char>& out) {
+int encode_chunk_payload(std::span<const ImuFrame> frames, const RecordingMeta& meta,
+                         std::vector<unsigned char>& out) {
   if (frames.empty() || frames.size() > RunDb::kFramesPerChunk) {
     throw StorageError("encode_chunk_payload: a chunk holds 1 to " + std::to_string(RunDb::kFramesPerChunk) +
                        " frames");
@@ -1554,6 +1559,12 @@ void encode_chunk_payload(std::span<const ImuFrame> frames, const RecordingMeta&
   std::vector<std::int32_t> scratch;
   encode_chunk(frames, meta.gyro_lsb_rad, meta.accel_lsb_mps, encoded, scratch);
   out = std::move(encoded.data);
+  return encoded.codec;
+}
+
+void decode_chunk_payload(std::span<const unsigned char> data, std::int64_t n_frames, int codec,
+                          std::vector<ImuFrame>& out) {
+  decode_chunk(0, n_frames, codec, data, out, "(payload)");
 }
 
 }  // namespace imucal::storage

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -69,7 +70,7 @@ std::string CampaignReport::to_text() const {
                 "poll errors %llu, not sent by the device %llu)\n"
                 "table reads              %llu (errors %llu)\n"
                 "chamber reads            %llu (errors %llu)\n"
-                "table-to-IMU alignment   rms %.1f us, max %.1f us over %llu samples\n"
+                "table-to-IMU alignment   rms %.1f us, 99th percentile %.1f us, max %.1f us over %llu samples\n"
                 "IMU sample time vs truth rms %.1f us, max %.1f us\n"
                 "driver CPU (one core)    IMU %.2f %%, table %.2f %%, chamber %.3f %%\n"
                 "process CPU (one core)   %.1f %% (simulated devices and physics included)\n"
@@ -80,10 +81,12 @@ std::string CampaignReport::to_text() const {
                 static_cast<unsigned long long>(imu_errors), static_cast<unsigned long long>(imu_not_sent),
                 static_cast<unsigned long long>(table_reads), static_cast<unsigned long long>(table_errors),
                 static_cast<unsigned long long>(chamber_reads), static_cast<unsigned long long>(chamber_errors),
-                alignment_rms_us, alignment_max_us, static_cast<unsigned long long>(alignment_points), imu_time_rms_us,
+                alignment_rms_us, alignment_p99_us, alignment_max_us, static_cast<unsigned long long>(alignment_points), imu_time_rms_us,
                 imu_time_max_us, imu_cpu_percent, table_cpu_percent, chamber_cpu_percent, process_cpu_percent,
                 static_cast<unsigned long long>(physics_restarts));
-  return buf;
+  std::string out = buf;
+  for (const auto& [what, n] : errors) out += "  error " + what + ": " + std::to_string(n) + "\n";
+  return out;
 }
 
 CampaignReport run_driver_campaign(const CampaignOptions& o) {
@@ -135,6 +138,11 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   require(chamber_driver.ramp_to(30.0, 2.0), "chamber ramp");
 
   CampaignReport rep;
+  std::mutex errors_mutex;
+  auto note = [&](const char* device, const DriverError& e) {
+    std::lock_guard lock(errors_mutex);
+    ++rep.errors[std::string(device) + ": " + to_string(e.code)];
+  };
   std::atomic<bool> stop{false};
   const double process_cpu0 = cpu_seconds(CLOCK_PROCESS_CPUTIME_ID);
   const auto wall0 = std::chrono::steady_clock::now();
@@ -159,14 +167,26 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
         for (int a = 0; a < 3; ++a) {
           const auto i = static_cast<std::size_t>(a);
           if (modes[i] != s.mode[i]) {
-            if (!table_driver.set_mode(a, s.mode[i])) ++rep.table_errors;
-            modes[i] = s.mode[i];
+            if (auto r = table_driver.set_mode(a, s.mode[i]); !r) {
+              ++rep.table_errors;
+              note("table", r.error());
+            } else {
+              modes[i] = s.mode[i];
+            }
           }
           Result<void> r;
           if (s.mode[i] == TableMode::rate) r = table_driver.demand_rate(a, s.value[i]);
           else if (s.mode[i] == TableMode::position) r = table_driver.demand_position(a, s.value[i]);
           else r = table_driver.demand_oscillation(a, {s.value[i], 0.5, 0.0});
-          if (!r) ++rep.table_errors;
+          if (!r) {
+            ++rep.table_errors;
+            note("table", r.error());
+            // Recover as the daemon's sequencer does: clear latched faults, close the
+            // interlock if needed, and set the mode again on the next keep-alive.
+            if (r.code() == DriverErrc::watchdog_expired || r.code() == DriverErrc::axis_fault) (void)table_driver.interlock_reset();
+            if (r.code() == DriverErrc::interlock_open) (void)table_driver.interlock_close();
+            modes[i] = TableMode::off;  // no segment uses off: forces a mode command
+          }
         }
         seg = want;
         next_feed = now + std::chrono::milliseconds(250);
@@ -178,6 +198,7 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
           ++rep.table_reads;
         } else {
           ++rep.table_errors;
+          note("table", p.error());
         }
         next_read += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
         if (next_read < now) next_read = now;
@@ -191,8 +212,12 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   std::thread chamber_thread([&] {
     const double cpu0 = cpu_seconds(CLOCK_THREAD_CPUTIME_ID);
     while (!stop) {
-      if (chamber_driver.read()) ++rep.chamber_reads;
-      else ++rep.chamber_errors;
+      if (auto r = chamber_driver.read()) {
+        ++rep.chamber_reads;
+      } else {
+        ++rep.chamber_errors;
+        note("chamber", r.error());
+      }
       const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(1.0 / o.chamber_read_hz);
       while (!stop && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
@@ -209,7 +234,10 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
     while (!stop) {
       batch.samples.clear();
       batch.temperatures.clear();
-      if (!imu_driver.poll(batch, std::chrono::milliseconds(50))) ++rep.imu_errors;
+      if (auto r = imu_driver.poll(batch, std::chrono::milliseconds(50)); !r) {
+        ++rep.imu_errors;
+        note("imu", r.error());
+      }
       for (const ImuSample& s : batch.samples) {
         const auto truth = imu.truth(s.sequence);
         if (!truth) continue;
@@ -261,6 +289,8 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   // divided by the axis rate it is the time misalignment of the two streams.
   std::size_t j = 0;
   double sum2 = 0.0;
+  std::vector<double> abs_err_us;
+  abs_err_us.reserve(points.size());
   for (const ImuPoint& p : points) {
     while (j + 1 < reads.size() && reads[j + 1].t_ns <= p.t_ns) ++j;
     if (j + 1 >= reads.size() || reads[j].t_ns > p.t_ns) continue;
@@ -280,10 +310,16 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
     const double rate = a.rate_dps[k] + s * (b.rate_dps[k] - a.rate_dps[k]);
     const double err_us = (angle - p.table_deg[static_cast<Eigen::Index>(k)]) / rate * 1e6;
     sum2 += err_us * err_us;
+    abs_err_us.push_back(std::fabs(err_us));
     rep.alignment_max_us = std::max(rep.alignment_max_us, std::fabs(err_us));
     ++rep.alignment_points;
   }
-  if (rep.alignment_points > 0) rep.alignment_rms_us = std::sqrt(sum2 / static_cast<double>(rep.alignment_points));
+  if (rep.alignment_points > 0) {
+    rep.alignment_rms_us = std::sqrt(sum2 / static_cast<double>(rep.alignment_points));
+    const auto k99 = abs_err_us.begin() + static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(abs_err_us.size() - 1));
+    std::nth_element(abs_err_us.begin(), k99, abs_err_us.end());
+    rep.alignment_p99_us = *k99;
+  }
   if (time_n > 0) rep.imu_time_rms_us = std::sqrt(time_sum2 / static_cast<double>(time_n));
   return rep;
 }

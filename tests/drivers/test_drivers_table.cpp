@@ -1,6 +1,7 @@
 // The simulated table's servo model (pure), then the ACL table driver against the simulated table
 // (an Asio server on loopback): lifecycle, modes, coherent position reads and their clock model,
 // limits, interlock, watchdog, and every link fault as a typed error within a bounded time.
+#include <atomic>
 #include <cmath>
 #include <random>
 #include <thread>
@@ -8,10 +9,12 @@
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include "core/units.hpp"
+#include "drivers/acl_protocol.hpp"
 #include "drivers/acl_table.hpp"
 #include "drivers/sim/sim_table.hpp"
 #include "drivers/sim/table_servo.hpp"
@@ -462,4 +465,108 @@ TEST(AclTable, ConfigurationFromJson) {
   ASSERT_TRUE(c.limits[1][2]);
   EXPECT_DOUBLE_EQ(c.limits[1][2]->max_deg, 90.0);
   EXPECT_THROW(acl_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
+}
+
+// Fuzz at the wire: a table that answers the connection handshake properly and every position
+// request with a damaged reply (one byte changed, a truncated line, random printable garbage or
+// random bytes). With reply checksums on, the driver must never return a position.
+TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
+  const int ls = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(ls, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  ASSERT_EQ(::listen(ls, 8), 0);
+  socklen_t len = sizeof a;
+  ::getsockname(ls, reinterpret_cast<sockaddr*>(&a), &len);
+  std::atomic<bool> stop{false};
+  std::thread server([&] {
+    std::mt19937_64 rng(77);
+    std::vector<int> clients;
+    std::vector<std::string> pending;
+    while (!stop) {
+      std::vector<pollfd> fds{{ls, POLLIN, 0}};
+      for (int c : clients) fds.push_back({c, POLLIN, 0});
+      if (::poll(fds.data(), fds.size(), 20) <= 0) continue;
+      if (fds[0].revents & POLLIN) {
+        clients.push_back(::accept(ls, nullptr, nullptr));
+        pending.emplace_back();
+      }
+      for (std::size_t i = 1; i < fds.size(); ++i) {
+        if (!(fds[i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+        char buf[512];
+        const ssize_t n = ::recv(fds[i].fd, buf, sizeof buf, 0);
+        const std::size_t idx = i - 1;
+        if (n <= 0) {
+          ::close(fds[i].fd);
+          clients[idx] = -1;
+          continue;
+        }
+        pending[idx].append(buf, static_cast<std::size_t>(n));
+        std::size_t nl;
+        while ((nl = pending[idx].find('\n')) != std::string::npos) {
+          const std::string line = pending[idx].substr(0, nl);
+          pending[idx].erase(0, nl + 1);
+          std::string reply;
+          if (line == "*IDN?") reply = acl::frame_line("IDN FUZZ", false);
+          else if (line.rfind(":SYST:CHEC", 0) == 0) reply = acl::frame_line("OK", true);
+          else {
+            std::string good = acl::frame_line("POS 123456,1.5,2.5,3.5,0,0,0", true);
+            switch (rng() % 4) {
+              case 0: {  // one byte changed, the terminator kept
+                const std::size_t at = rng() % (good.size() - 1);
+                char c = static_cast<char>(good[at] ^ static_cast<char>(1 + rng() % 127));
+                if (c == '\n') c = 'x';
+                good[at] = c;
+                reply = good;
+                break;
+              }
+              case 1: reply = good.substr(0, rng() % (good.size() - 1)) + "\n"; break;
+              case 2: {
+                reply.resize(rng() % 60);
+                for (char& c : reply) c = static_cast<char>(0x20 + rng() % 95);
+                reply += '\n';
+                break;
+              }
+              default: {
+                reply.resize(1 + rng() % 60);
+                for (char& c : reply) c = static_cast<char>(rng() % 256);
+                if (rng() % 2) reply += '\n';
+                break;
+              }
+            }
+          }
+          (void)::send(fds[i].fd, reply.data(), reply.size(), MSG_NOSIGNAL);
+        }
+      }
+      for (std::size_t i = 0; i < clients.size();) {
+        if (clients[i] < 0) {
+          clients.erase(clients.begin() + static_cast<std::ptrdiff_t>(i));
+          pending.erase(pending.begin() + static_cast<std::ptrdiff_t>(i));
+        } else {
+          ++i;
+        }
+      }
+    }
+    for (int c : clients) ::close(c);
+  });
+  AclTableConfig c;
+  c.port = ntohs(a.sin_port);
+  c.response_timeout = 100ms;
+  c.backoff_initial = 1ms;
+  c.backoff_max = 1ms;
+  AclTable d(c);
+  ASSERT_TRUE(d.connect());
+  int values = 0;
+  Stopwatch total;
+  for (int i = 0; i < 400 && total.seconds() < 3.0; ++i) {
+    Stopwatch sw;
+    const auto r = d.read_positions();
+    if (r) ++values;
+    EXPECT_LT(sw.seconds(), 2.0);
+  }
+  EXPECT_EQ(values, 0);
+  stop = true;
+  server.join();
+  ::close(ls);
 }

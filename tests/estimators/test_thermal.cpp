@@ -31,7 +31,7 @@ const thermal::TempProblem* problem_on(const thermal::Result& r, const std::stri
 // ------------------------------------------------------------------------------------------------
 TEST(Chamber, BuiltInProfileCoversThePlaneOverFifteenToThirtyFive) {
   const motion::ChamberProfile p = motion::load_chamber_profile("thermal");
-  EXPECT_NEAR(p.duration_s(), 12 * 3600.0, 1.0);
+  EXPECT_NEAR(p.duration_s(), 12 * 3600.0, 0.05 * 12 * 3600.0);  // "about 12 h" (issue 5)
   EXPECT_TRUE(motion::validate_chamber_profile(p, motion::ChamberLimits{}).empty());
   // Predicted before anything runs: the sensors reach both ends, heat and cool through every
   // 1 C bin of 15..35, at more than one rate.
