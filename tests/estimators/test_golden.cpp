@@ -71,8 +71,9 @@ void flatten(const ImuModel& m, std::map<std::string, double>& v, std::map<std::
   }
 }
 
-storage::RunDb example_run() {
-  const std::string db = std::string(IMUCAL_TEST_TMP) + "/golden-example.db";
+// Each test imports into its own file: ctest runs the tests of one executable in parallel.
+storage::RunDb example_run(const std::string& name) {
+  const std::string db = std::string(IMUCAL_TEST_TMP) + "/golden-" + name + ".db";
   std::filesystem::create_directories(IMUCAL_TEST_TMP);
   std::filesystem::remove(db);
   storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
@@ -82,7 +83,7 @@ storage::RunDb example_run() {
 }  // namespace
 
 TEST(Golden, DirectOnTheIndependentRecording) {
-  const auto run = example_run();
+  const auto run = example_run("direct");
   direct::DirectCalibrator cal(run.meta());
   run.for_each_frame([&](const ImuFrame& f) { cal.push(f); });
   std::map<std::string, double> v, tol;
@@ -91,7 +92,7 @@ TEST(Golden, DirectOnTheIndependentRecording) {
 }
 
 TEST(Golden, NoiseOnTheIndependentRecording) {
-  const auto run = example_run();
+  const auto run = example_run("noise");
   noise::NoiseAnalyzer a(run.meta());
   run.for_each_frame([&](const ImuFrame& f) { a.push(f); });
   const noise::Result r = a.finish();
