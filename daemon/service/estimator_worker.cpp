@@ -71,7 +71,8 @@ void EstimatorWorker::run() {
   std::unique_ptr<storage::RunDb> db;
   RecordingMeta meta;
   try {
-    db = std::make_unique<storage::RunDb>(storage::RunDb::open(path_));
+    // Read-only: the worker must never become the run's writer (the recorder holds the lease).
+    db = std::make_unique<storage::RunDb>(storage::RunDb::open(path_, storage::OpenMode::Read));
     meta = db->meta();
   } catch (const std::exception& e) {
     spdlog::error("estimators: cannot open the run: {}", e.what());

@@ -270,8 +270,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (target == "/api" || target.rfind("/api/", 0) == 0 || target.rfind("/api?", 0) == 0) {
       reply = server_.api.handle(to_api_request(req));
     } else if (req.method() == http::verb::get || req.method() == http::verb::head) {
+      // HEAD reads the file too, so that its Content-Length is the GET's.
       reply = server_.files.get(std::string_view(target).substr(0, target.find('?')),
-                                std::string(req[http::field::if_none_match]), req.method() == http::verb::head);
+                                std::string(req[http::field::if_none_match]), false);
     } else {
       reply.status = 405;
       reply.body = json{{"error", std::string(req.method_string()) + " is not allowed on " + target}}.dump();
@@ -281,9 +282,13 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     res.set(http::field::server, "imucald");
     if (reply.status != 304) res.set(http::field::content_type, reply.content_type);
     for (const auto& [name, value] : reply.headers) res.insert(name, value);
-    res.body() = req.method() == http::verb::head ? std::string() : std::move(reply.body);
     res.keep_alive(req.keep_alive() && !server_.stopping);
-    res.prepare_payload();
+    if (req.method() == http::verb::head) {
+      res.content_length(reply.body.size());  // what a GET would send; no body follows
+    } else {
+      res.body() = std::move(reply.body);
+      res.prepare_payload();
+    }
     return res;
   }
 

@@ -602,6 +602,7 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
 // Safe hold after a suspender tripped: the table stops where it is, the recorder commits, and the
 // run waits until every condition is clear for the settle time, then redoes the segment.
 Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
+  publish(run, true);  // the counters as they are when the condition is found
   if (!transition(run.id, RunState::Suspended, reason, RunState::Running)) {
     // An operator command arrived meanwhile; it takes precedence.
     if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
@@ -635,6 +636,8 @@ Sequencer::Outcome Sequencer::paused(RunContext& run) {
   if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
   if (!run.recorder->commit_and_wait())
     throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+  // The counters first: whoever sees "paused" must see where the run holds.
+  publish(run, true);
   if (!transition(run.id, RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
     if (auto c = pending_command()) return *c;
   }

@@ -1,5 +1,7 @@
 #include "daemon/service/static_files.hpp"
 
+#include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -100,11 +102,15 @@ HttpReply StaticFiles::get(std::string_view path, std::string_view if_none_match
   if (!fs::is_regular_file(full, ec)) return text_reply(404, "not found");
   const auto size = fs::file_size(full, ec);
   if (ec || size > kMaxFileBytes) return text_reply(404, "not found");
-  const auto mtime = fs::last_write_time(full, ec).time_since_epoch().count();
+  // The file clock's epoch is implementation-defined (counts may be negative): only equality matters.
+  const auto mtime = static_cast<std::uint64_t>(fs::last_write_time(full, ec).time_since_epoch().count());
 
   HttpReply r;
   r.content_type = content_type_for(full_text);
-  const std::string etag = "\"" + std::to_string(size) + "-" + std::to_string(mtime) + "\"";
+  char etag_text[64];
+  std::snprintf(etag_text, sizeof etag_text, "\"%jx-%jx\"", static_cast<std::uintmax_t>(size),
+                static_cast<std::uintmax_t>(mtime));
+  const std::string etag = etag_text;
   r.headers.emplace_back("ETag", etag);
   // The UI's files have no content hashes in their names: let browsers keep them briefly and
   // revalidate (cheap with the ETag); HTML always revalidates so a new UI shows at once.

@@ -136,7 +136,7 @@ struct Client {
 };
 
 inline std::vector<ImuFrame> run_frames(const std::string& path) {
-  const auto db = storage::RunDb::open(path);
+  const auto db = storage::RunDb::open(path, storage::OpenMode::Read);
   return db.read_frames();
 }
 

@@ -287,3 +287,18 @@ TEST(Http, LiveWebSocketSendsTelemetryToViewersOnly) {
   ws2->close(websocket::close_code::normal);
   (void)transitions;
 }
+
+TEST(Http, HeadGivesTheLengthOfTheGet) {
+  std::string web;
+  LocalDaemon d("head", true, [&](daemon::DaemonConfig& c) {
+    web = c.data_dir + "/../head-web-" + std::to_string(::getpid());
+    std::filesystem::create_directories(web);
+    std::ofstream(web + "/index.html") << "<!doctype html><title>0123456789</title>";
+    c.http.web_dir = web;
+  });
+  const auto head = http_request(d.service->port(), "HEAD", "/index.html");
+  ASSERT_EQ(head.status, 200);
+  EXPECT_EQ(head.headers.at("content-length"), "40");
+  EXPECT_TRUE(head.body.empty());
+  EXPECT_EQ(head.headers.at("etag").find('-', 1) != std::string::npos, true);
+}

@@ -101,7 +101,7 @@ TEST(Sequencer, SuspendsWhenTheChamberLeavesItsBandAndResumesByItself) {
   EXPECT_TRUE(has_event(c, "resumed", "redoing segment"));
   expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
   // The interruption is in the run file itself too.
-  const auto db = storage::RunDb::open(d.run_path(c));
+  const auto db = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read);
   const auto record = db.extra("imucald_run");
   ASSERT_TRUE(record.has_value());
   EXPECT_NE(record->find("chamber out of band"), std::string::npos);
