@@ -31,7 +31,7 @@ void LeverArmFilter::push(const ImuFrame& frame) {
       window_.clear();
       block_z_.setZero();
       block_H_.setZero();
-      block_T_ = block_excitation_ = 0;
+      block_T_ = block_excitation_ = block_horizontal_rate_radps_ = 0;
       ++gaps_;
     }
   }
@@ -59,7 +59,14 @@ void LeverArmFilter::process_middle() {
   const Vector3d w_o = C_o_p.transpose() * (pr.w_np_p + w_ie_p);
   const Vector3d dw_o = C_o_p.transpose() * (pr.dw_np_p - pr.w_np_p.cross(w_ie_p));
   const Matrix3d K = table::skew(w_o) * table::skew(w_o) + table::skew(dw_o);
-  const Vector3d g_o = (C_p_n * C_o_p).transpose() * Vector3d(0, 0, g_mps2_);
+  const Matrix3d C_o_n = C_p_n * C_o_p;
+  Vector3d g_o = C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
+  // Accelerometer j reports the specific force of tau_j ago: gravity as it stood then, to first
+  // order g_o(t - tau) = g_o + tau (w_o x g_o) (gravity is fixed in n and turns by -w in o).
+  const Vector3d g_rate_o = w_o.cross(g_o);
+  for (int j = 0; j < 3; ++j) g_o[j] += model_.accel.delay_s[j] * g_rate_o[j];
+  const Vector3d w_n = C_o_n * w_o;
+  block_horizontal_rate_radps_ = std::max(block_horizontal_rate_radps_, std::hypot(w_n.x(), w_n.y()));
   // Stage-1 compensation (bias, scale, misalignment) of this interval's increments.
   const Vector3d dv = compensate_accel_increment(model_.accel, f2.dv_mps, dt);
   block_z_ += dv - g_o * dt;
@@ -70,7 +77,9 @@ void LeverArmFilter::process_middle() {
 }
 
 void LeverArmFilter::update_block() {
-  if (block_excitation_ >= options_.min_excitation_radps2) {
+  const bool gravity_turning = block_horizontal_rate_radps_ > options_.max_horizontal_rate_radps;
+  if (gravity_turning && block_excitation_ >= options_.min_excitation_radps2) ++skipped_turning_gravity_;
+  if (!gravity_turning && block_excitation_ >= options_.min_excitation_radps2) {
     // Channel j depends on rho_j only: three scalar updates per block, each on its 3-state block.
     const double R = std::pow(model_.accel.noise.vrw_mps_rts > 0 ? model_.accel.noise.vrw_mps_rts : 0.002 / 60.0, 2) *
                      block_T_;
@@ -90,7 +99,7 @@ void LeverArmFilter::update_block() {
   }
   block_z_.setZero();
   block_H_.setZero();
-  block_T_ = block_excitation_ = 0;
+  block_T_ = block_excitation_ = block_horizontal_rate_radps_ = 0;
 }
 
 Result LeverArmFilter::finish() const {
@@ -119,9 +128,10 @@ Result LeverArmFilter::finish() const {
     sigma.accel.lever_arm_z_m[i] = std::sqrt(P(6 + i, 6 + i) + P(i, i) - 2 * P(i, 6 + i));
   }
   r.model.sigma = sigma;
-  char buf[160];
-  std::snprintf(buf, sizeof buf, "stage lever-arm: %lld updates, %lld gaps; r0 sigma %.3f %.3f %.3f mm", updates_, gaps_,
-                r.sigma_m[0] * 1e3, r.sigma_m[1] * 1e3, r.sigma_m[2] * 1e3);
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "stage lever-arm: %lld updates, %lld gaps, %lld blocks left out (gravity turning); r0 sigma %.3f %.3f %.3f mm",
+                updates_, gaps_, skipped_turning_gravity_, r.sigma_m[0] * 1e3, r.sigma_m[1] * 1e3, r.sigma_m[2] * 1e3);
   r.notes.push_back(buf);
   return r;
 }

@@ -21,6 +21,10 @@ struct Options {
   double block_s = 0.02;            // frames summed into one measurement update
   double initial_sigma_m = 0.2;     // prior 1-sigma of each coordinate
   double min_excitation_radps2 = 0.5;  // blocks with less |dw/dt| or |w|^2 carry no information
+  // Blocks in which gravity turns in the sensor frame (a rate about a horizontal axis above this)
+  // are left out: there the unknown accelerometer delays (~2 ms, found only by stage 3) turn the
+  // changing gravity into errors of tau |w x g| that would pass for lever-arm signal.
+  double max_horizontal_rate_radps = 0.01;
 };
 
 struct Result {
@@ -50,11 +54,12 @@ class LeverArmFilter {
   // Current block: sum of (dv - gravity dt) and of K dt, per channel.
   Eigen::Vector3d block_z_ = Eigen::Vector3d::Zero();
   Eigen::Matrix3d block_H_ = Eigen::Matrix3d::Zero();  // row j: sum of K.row(j) dt
-  double block_T_ = 0, block_excitation_ = 0;
+  double block_T_ = 0, block_excitation_ = 0, block_horizontal_rate_radps_ = 0;
   Eigen::Matrix<double, 9, 1> x_ = Eigen::Matrix<double, 9, 1>::Zero();
   Eigen::Matrix<double, 9, 9> P_;
   long long updates_ = 0;
   long long gaps_ = 0;
+  long long skipped_turning_gravity_ = 0;
 };
 
 }  // namespace imucal::lever
