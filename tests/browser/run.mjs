@@ -353,13 +353,13 @@ try {
 
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
   // Posted with the API (the builder was covered above), as fast as the machine goes, at a low
-  // rate; the evaluation campaign uses the first one's truth so that calibrating makes a difference.
-  const first = await apiCall('GET', `/api/campaigns/${id}`);
+  // rate, with the navigation-grade truth of examples/ so that calibrating makes a difference.
+  const truth = JSON.parse(fs.readFileSync(path.join(repo, 'examples', 'truth-nav-grade.json'), 'utf8'));
   const evalPost = await apiCall('POST', '/api/campaigns', { name: 'browser test: calibrate and evaluate',
-    program: ['direct-short', 'evaluate'], rate_hz: 20, time_scale: 0, truth: first.body.spec.truth });
+    program: ['direct-short', 'evaluate'], rate_hz: 20, time_scale: 0, truth });
   assert.equal(evalPost.status, 201, JSON.stringify(evalPost.body));
   const thermalPost = await apiCall('POST', '/api/campaigns', { name: 'browser test: thermal cycles', program: 'thermal-short',
-    estimators: [], rate_hz: 10, time_scale: 0,
+    estimators: [], rate_hz: 10, time_scale: 0, truth,
     chamber: { setpoint_C: 25, tolerance_C: 3, steps: [{ at_s: 1000, setpoint_C: 35, ramp_C_per_min: 0.5 }, { at_s: 3000, setpoint_C: 15, ramp_C_per_min: 0.5 }] } });
   assert.equal(thermalPost.status, 201, JSON.stringify(thermalPost.body));
   for (const c of [evalPost.body.id, thermalPost.body.id]) assert.equal((await apiCall('POST', `/api/campaigns/${c}/start`)).status, 200);
