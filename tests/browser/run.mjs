@@ -369,14 +369,14 @@ try {
   const variants = await page.$$eval('#evaluation-table tbody tr', (rows) => rows.map((r) => r.dataset.variant));
   assert.deepEqual(variants, ['uncalibrated', `campaign ${evalPost.body.id}`, 'truth'], 'three variants compared');
   await page.waitForSelector('#plot-allan .uplot');
-  await page.$eval('#plot-evaluation', (el) => el.scrollIntoView());
+  await page.$eval('#plot-evaluation', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '13-results-schuler-test');
   await page.goto(`${base}/#/campaigns/${thermalPost.body.id}`);
   await waitText(page, '#campaign-state', /done/, 60000);
   await page.waitForSelector('#plot-thermal .uplot', { timeout: 30000 });
   assert.ok(await page.$$eval('#plot-thermal .uplot', (l) => l.length) >= 27, 'a thermal plot per coefficient');
   await waitText(page, '#no-model', /no model/i);  // no stage 1 in this campaign: said so, no download
-  await page.$eval('#plot-thermal', (el) => el.scrollIntoView());
+  await page.$eval('#plot-thermal', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14-results-thermal');
   log('Schuler test (three variants) and thermal plots drawn from campaigns that ran evaluate and thermal-short');
 
