@@ -65,6 +65,8 @@ std::vector<std::string> split_path(const std::string& path) {
   return parts;
 }
 
+constexpr std::size_t kAnalysisCacheEntries = 60;  // 20 campaigns' three results
+
 json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 // A JSON body for a command or a login: empty means {}. Only JSON content types are accepted, so
@@ -581,7 +583,11 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
     status = 404;
     body = {{"error", e.what()}};
   }
-  if (is_final(row->state)) analysis_cache_[key] = {status, body.dump()};
+  if (is_final(row->state)) {
+    // Bounded: the oldest campaigns' answers go first (they are computed again when asked).
+    if (analysis_cache_.size() >= kAnalysisCacheEntries) analysis_cache_.erase(analysis_cache_.begin());
+    analysis_cache_[key] = {status, body.dump()};
+  }
   return json_reply(status, body);
 }
 

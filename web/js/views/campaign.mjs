@@ -1,6 +1,7 @@
 // One campaign: its state and commands while it runs, and its results when it is done: the
 // coefficient table with sigmas (with the truth and the error in simulated runs), the estimators'
-// convergence, the noise and evaluation plots where the API provides their data, the downloads
+// convergence, the Allan, thermal and Schuler-test plots imucald computes from the recording (or
+// what the run would need for them), the downloads
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
 import { get, ApiError } from '../api.mjs';
 import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
