@@ -82,7 +82,10 @@ Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const Fr
       out.coning_amplitude_mps = std::max(out.coning_amplitude_mps, sr.amplitude_mps);
       out.implied_gyro_drift_radps = std::max(out.implied_gyro_drift_radps, sr.implied_gyro_drift_radps);
     }
-    out.segments.push_back(sr);
+    sr.t_s = std::move(t);
+    sr.ve_mps = std::move(ve);
+    sr.vn_mps = std::move(vn);
+    out.segments.push_back(std::move(sr));
   }
   return out;
 }

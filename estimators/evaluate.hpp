@@ -21,6 +21,8 @@ struct SegmentResult {
   double implied_accel_error_mps2 = 0;  // from the sine term (judged on tilts)
   double implied_gyro_drift_radps = 0;  // from the cosine term (judged on coning)
   double max_velocity_error_mps = 0, max_position_error_m = 0;
+  // The navigation's horizontal velocity error every 5 s of the segment (for the Schuler plots).
+  std::vector<double> t_s, ve_mps, vn_mps;
 };
 
 struct Result {

@@ -1,9 +1,11 @@
 #include "daemon/service/api.hpp"
 
 #include <cmath>
+#include <filesystem>
 
 #include <spdlog/spdlog.h>
 
+#include "daemon/service/analysis.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -62,6 +64,8 @@ std::vector<std::string> split_path(const std::string& path) {
   if (!parts.empty() && parts.back().empty()) parts.pop_back();
   return parts;
 }
+
+constexpr std::size_t kAnalysisCacheEntries = 60;  // 20 campaigns' three results
 
 json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
@@ -276,6 +280,14 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
       if (auto r = only("GET")) return *r;
       return campaign_progress(*id);
     }
+    if (action == "recording") {
+      if (auto r = only("GET")) return *r;
+      return campaign_recording(*id, method == "HEAD");
+    }
+    if (action == "allan" || action == "thermal" || action == "evaluation") {
+      if (auto r = only("GET")) return *r;
+      return campaign_analysis(*id, action);
+    }
     if (parse_command(action)) {
       if (auto r = only("POST")) return *r;
       return campaign_command(*id, action, request, *who);
@@ -417,6 +429,21 @@ HttpReply Api::campaign_detail(std::int64_t id) {
   const json results = parse_or_null(row->results_json);
   out["results"] = results.is_null() ? json::object() : results;
   out["run_db"] = row->run_db.empty() ? json(nullptr) : json(row->run_db);
+  // The serial the run file records (the IMU's own report; the simulator's for simulated runs).
+  json serial = nullptr;
+  if (!row->run_db.empty()) {
+    std::lock_guard lock(serial_mutex_);
+    auto it = serial_cache_.find(id);
+    if (it == serial_cache_.end()) {
+      try {
+        it = serial_cache_.emplace(id, imu_serial_of_run(run_path(*row))).first;
+      } catch (const std::exception& e) {
+        spdlog::warn("campaign {}: cannot read the IMU serial from {}: {}", id, row->run_db, e.what());
+      }
+    }
+    if (it != serial_cache_.end()) serial = it->second;
+  }
+  out["imu_serial"] = serial;
   return json_reply(200, out);
 }
 
@@ -474,6 +501,94 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
     return error_reply(outcome.http_status, outcome.error, extra);
   }
   return json_reply(200, {{"id", id}, {"state", to_string(*outcome.state)}});
+}
+
+std::string Api::run_path(const CampaignRow& row) const {
+  return (std::filesystem::path(config_.data_dir) / row.run_db).string();
+}
+
+HttpReply Api::campaign_recording(std::int64_t id, bool head) {
+  namespace fs = std::filesystem;
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (row->run_db.empty())
+    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  if (is_active(row->state) || row->state == RunState::Queued)
+    return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) +
+                                ": its recording can be downloaded when the run has ended",
+                       {{"state", to_string(row->state)}});
+  const std::string name = "campaign-" + std::to_string(id) + "-recording";
+  const fs::path dir = fs::path(config_.data_dir) / "exports";
+  const fs::path tar = dir / (name + ".tar");
+  const fs::path run = run_path(*row);
+  {
+    // Built once, and again when the run file is newer (an interrupted run resumed since).
+    std::lock_guard lock(export_mutex_);
+    std::error_code ec;
+    const bool fresh = fs::exists(tar, ec) && fs::last_write_time(tar, ec) >= fs::last_write_time(run, ec) && !ec;
+    if (!fresh) {
+      fs::create_directories(dir);
+      spdlog::info("campaign {}: exporting the recording bundle to {}", id, tar.string());
+      write_recording_tar(run.string(), tar.string(), name);
+    }
+  }
+  HttpReply r;
+  r.content_type = "application/x-tar";
+  r.file = tar.string();
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + name + ".tar\"");
+  (void)head;  // the server answers HEAD with the file's length and no body
+  return r;
+}
+
+HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  const std::string label = what == "allan" ? "Allan deviation" : what == "thermal" ? "thermal plots" : "Schuler test";
+  if (row->run_db.empty())
+    return error_reply(404, "not available for this run: campaign " + std::to_string(id) + " was never started");
+  if (is_active(row->state) || row->state == RunState::Queued)
+    return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) + ": the " +
+                                label + " is computed when the run has ended",
+                       {{"state", to_string(row->state)}});
+  const auto key = std::make_pair(id, what);
+  std::lock_guard lock(analysis_mutex_);
+  if (const auto it = analysis_cache_.find(key); it != analysis_cache_.end()) {
+    HttpReply r = json_reply(it->second.first, json::object());
+    r.body = it->second.second;
+    return r;
+  }
+  const std::string path = run_path(*row);
+  std::optional<ImuModel> model;
+  if (row->model_json) model = imu_model_from_json_text(*row->model_json, "campaign " + std::to_string(id) + "'s model");
+  int status = 200;
+  json body;
+  try {
+    if (what == "allan") {
+      body = allan_from_run(path);
+    } else if (what == "thermal") {
+      body = thermal_from_run(path, model.value_or(ImuModel{}));
+      body["input_model"] = model ? "the campaign's stage-1 model" : "ideal (the campaign has no model)";
+    } else {
+      std::vector<Variant> variants;
+      variants.push_back({"uncalibrated", "no compensation (the nominal sensor)", ImuModel{}});
+      if (model) variants.push_back({"campaign " + std::to_string(id), "this campaign's model (direct estimator)", *model});
+      const CampaignCheck check = check_campaign_text(row->spec_json, config_);
+      if (check.spec && check.spec->navigation_model)
+        variants.push_back({"navigation_model", "the campaign's navigation_model", *check.spec->navigation_model});
+      if (const auto truth = truth_of_run(path)) variants.push_back({"truth", "the simulation's truth (the best any calibration can do)", *truth});
+      body = evaluation_from_run(path, variants);
+    }
+  } catch (const NotAvailable& e) {
+    status = 404;
+    body = {{"error", e.what()}};
+  }
+  if (is_final(row->state)) {
+    // Bounded: the oldest campaigns' answers go first (they are computed again when asked).
+    if (analysis_cache_.size() >= kAnalysisCacheEntries) analysis_cache_.erase(analysis_cache_.begin());
+    analysis_cache_[key] = {status, body.dump()};
+  }
+  return json_reply(status, body);
 }
 
 }  // namespace imucal::daemon

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <string>
 
@@ -39,6 +40,8 @@ class Api {
   // Who is asking: bearer token, session cookie, or (WebSocket only) ?token= in the query.
   std::optional<Principal> authenticate(const ApiRequest& request, bool allow_query_token);
   nlohmann::json status();
+  // For the live WebSocket: has the session that opened it ended (sign-out, idle timeout)?
+  bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
   // From now on every change is refused with 503.
   void set_shutting_down() { shutting_down_ = true; }
 
@@ -52,6 +55,11 @@ class Api {
   HttpReply campaign_detail(std::int64_t id);
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_progress(std::int64_t id);
+  // The recording bundle as a tar file, built once per run under DATA_DIR/exports/.
+  HttpReply campaign_recording(std::int64_t id, bool head);
+  // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
+  HttpReply campaign_analysis(std::int64_t id, const std::string& what);
+  std::string run_path(const CampaignRow& row) const;
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
   nlohmann::json summary(const CampaignRow& row);
@@ -64,6 +72,13 @@ class Api {
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;
   std::atomic<bool> shutting_down_{false};
+  // Results of campaign_analysis for runs that cannot change any more (final states), and the
+  // IMU serial of each run file: (id, what) -> reply body and status.
+  std::mutex analysis_mutex_;  // held while computing: one analysis at a time
+  std::map<std::pair<std::int64_t, std::string>, std::pair<int, std::string>> analysis_cache_;
+  std::mutex export_mutex_;    // one recording export at a time
+  std::mutex serial_mutex_;
+  std::map<std::int64_t, std::string> serial_cache_;
 };
 
 // The session id in a Cookie header, or empty.

@@ -43,11 +43,11 @@ Auth::Auth(const DaemonConfig& config, const std::string& data_dir)
     : users_(config.users), idle_timeout_s_(config.http.session_idle_s) {
   bool have_operator = false;
   if (!config.operator_token.empty()) {
-    tokens_.push_back({config.operator_token, {"operator", Role::Operator, "token"}});
+    tokens_.push_back({config.operator_token, {"operator", Role::Operator, "token", ""}});
     have_operator = true;
   }
   for (const UserEntry& u : config.users) {
-    if (!u.token.empty()) tokens_.push_back({u.token, {u.name, u.role, "token"}});
+    if (!u.token.empty()) tokens_.push_back({u.token, {u.name, u.role, "token", ""}});
     if (u.role == Role::Operator && (!u.token.empty() || !u.password.empty())) have_operator = true;
   }
   if (!have_operator) {
@@ -66,7 +66,7 @@ Auth::Auth(const DaemonConfig& config, const std::string& data_dir)
       fs::permissions(token_file_, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::replace);
       generated_token_ = token;
     }
-    tokens_.push_back({token, {"operator", Role::Operator, "token"}});
+    tokens_.push_back({token, {"operator", Role::Operator, "token", ""}});
   }
 }
 
@@ -92,6 +92,7 @@ std::optional<Principal> Auth::from_session(std::string_view session_id) {
   it->second.last_use = now;
   Principal p = it->second.principal;
   p.via = "session";
+  p.session_id = std::string(session_id);
   return p;
 }
 
@@ -139,7 +140,7 @@ Auth::Login Auth::login_password(const std::string& user, const std::string& pas
     failed();
     return {401, "wrong user or password", {}, {}};
   }
-  return start_session({match->name, match->role, "session"});
+  return start_session({match->name, match->role, "session", ""});
 }
 
 Auth::Login Auth::login_token(const std::string& token) {
@@ -151,6 +152,17 @@ Auth::Login Auth::login_token(const std::string& token) {
     return {401, "unknown token", {}, {}};
   }
   return start_session(*p);
+}
+
+bool Auth::session_alive(std::string_view session_id) {
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(session_id);
+  if (it == sessions_.end()) return false;
+  if (std::chrono::duration<double>(Clock::now() - it->second.last_use).count() > idle_timeout_s_) {
+    sessions_.erase(it);
+    return false;
+  }
+  return true;
 }
 
 void Auth::logout(std::string_view session_id) {

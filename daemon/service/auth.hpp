@@ -22,6 +22,7 @@ struct Principal {
   std::string user;
   Role role = Role::Viewer;
   std::string via;  // "token" or "session"
+  std::string session_id;  // the session's id when via == "session"
 };
 
 // 32 random bytes from the system's entropy source, as 64 hex digits.
@@ -49,6 +50,9 @@ class Auth {
   Login login_password(const std::string& user, const std::string& password);
   Login login_token(const std::string& token);
   void logout(std::string_view session_id);
+  // Whether the session still exists and has not expired; unlike from_session() this is not a
+  // use (an open WebSocket does not keep its session alive).
+  bool session_alive(std::string_view session_id);
   double idle_timeout_s() const { return idle_timeout_s_; }
 
  private:

@@ -43,6 +43,7 @@ struct HttpServer::Impl {
   void send_to_all(std::shared_ptr<const std::string> message);
   void register_live(const std::shared_ptr<LiveSession>& s);
   void register_http(const std::shared_ptr<HttpSession>& s);
+  void close_ended_sessions();
 
   HttpConfig config;
   Api& api;
@@ -59,7 +60,11 @@ struct HttpServer::Impl {
   std::vector<std::weak_ptr<HttpSession>> http_sessions;
   std::atomic<std::uint64_t> seq{0};
   std::atomic<bool> stopping{false};
+  std::uint64_t ticks = 0;  // telemetry ticks (timer handler only)
 };
+
+// Close code of a live socket whose session has ended (4000-4999: for applications).
+constexpr std::uint16_t kCloseSessionEnded = 4001;
 
 // ------------------------------------------------------------------------------------------------
 // WebSocket /api/live
@@ -70,6 +75,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
 
   void run(http::request<http::string_body> request, const Principal& who) {
     role_ = to_string(who.role);
+    session_id_ = who.session_id;
     ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
     ws_.set_option(websocket::stream_base::decorator(
         [](websocket::response_type& res) { res.set(http::field::server, "imucald"); }));
@@ -98,14 +104,17 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
     });
   }
 
-  void close() {
-    net::post(ws_.get_executor(), [self = shared_from_this()] {
+  void close(websocket::close_reason reason = websocket::close_code::going_away) {
+    net::post(ws_.get_executor(), [self = shared_from_this(), reason] {
       if (self->closed_) return;
       self->closed_ = true;
       self->queue_.clear();
-      self->ws_.async_close(websocket::close_code::going_away, [self](beast::error_code) {});
+      self->ws_.async_close(reason, [self](beast::error_code) {});
     });
   }
+
+  // The browser session that opened this socket (empty when a token did).
+  const std::string& session_id() const { return session_id_; }
 
  private:
   void on_accept(beast::error_code ec) {
@@ -167,6 +176,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   bool writing_ = false, closed_ = false;
   std::uint64_t dropped_ = 0;
   std::string role_;
+  std::string session_id_;
 };
 
 // ------------------------------------------------------------------------------------------------
@@ -238,7 +248,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       std::make_shared<LiveSession>(stream_.release_socket(), server_)->run(std::move(req), *who);
       return;
     }
-    send(handle(req));
+    respond(req);
   }
 
   static ApiRequest to_api_request(const http::request<http::string_body>& req) {
@@ -264,7 +274,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     return res;
   }
 
-  http::response<http::string_body> handle(const http::request<http::string_body>& req) {
+  HttpReply reply_for(const http::request<http::string_body>& req) {
     const std::string target(req.target());
     HttpReply reply;
     if (target == "/api" || target.rfind("/api/", 0) == 0 || target.rfind("/api?", 0) == 0) {
@@ -278,11 +288,50 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       reply.body = json{{"error", std::string(req.method_string()) + " is not allowed on " + target}}.dump();
       reply.headers.emplace_back("Allow", "GET, HEAD");
     }
-    http::response<http::string_body> res{static_cast<http::status>(reply.status), req.version()};
+    return reply;
+  }
+
+  template <class Body>
+  void set_headers(http::response<Body>& res, const http::request<http::string_body>& req, const HttpReply& reply) {
     res.set(http::field::server, "imucald");
     if (reply.status != 304) res.set(http::field::content_type, reply.content_type);
     for (const auto& [name, value] : reply.headers) res.insert(name, value);
     res.keep_alive(req.keep_alive() && !server_.stopping);
+  }
+
+  // Answers a request: a string body, or a file from the disk (downloads).
+  void respond(const http::request<http::string_body>& req) {
+    HttpReply reply = reply_for(req);
+    if (reply.file.empty()) {
+      send(to_response(req, std::move(reply)));
+      return;
+    }
+    http::file_body::value_type file;
+    beast::error_code ec;
+    file.open(reply.file.c_str(), beast::file_mode::scan, ec);
+    if (ec) {
+      spdlog::error("http: cannot open {}: {}", reply.file, ec.message());
+      send(json_response(http::status::internal_server_error, req.version(), req.keep_alive(),
+                         "internal error: cannot open the file to send"));
+      return;
+    }
+    if (req.method() == http::verb::head) {
+      reply.body.clear();
+      http::response<http::string_body> res = to_response(req, std::move(reply));
+      res.content_length(file.size());
+      send(std::move(res));
+      return;
+    }
+    http::response<http::file_body> res{static_cast<http::status>(reply.status), req.version()};
+    set_headers(res, req, reply);
+    res.body() = std::move(file);
+    res.prepare_payload();
+    send(std::move(res), std::chrono::hours(1));  // a large bundle to a slow client
+  }
+
+  http::response<http::string_body> to_response(const http::request<http::string_body>& req, HttpReply reply) {
+    http::response<http::string_body> res{static_cast<http::status>(reply.status), req.version()};
+    set_headers(res, req, reply);
     if (req.method() == http::verb::head) {
       res.content_length(reply.body.size());  // what a GET would send; no body follows
     } else {
@@ -292,10 +341,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     return res;
   }
 
-  void send(http::response<http::string_body> res) {
-    auto shared = std::make_shared<http::response<http::string_body>>(std::move(res));
+  template <class Body>
+  void send(http::response<Body> res, std::chrono::steady_clock::duration write_timeout = {}) {
+    auto shared = std::make_shared<http::response<Body>>(std::move(res));
     const bool close = !shared->keep_alive();
-    stream_.expires_after(timeout());
+    stream_.expires_after(std::max(timeout(), write_timeout));
     http::async_write(stream_, *shared, [self = shared_from_this(), shared, close](beast::error_code ec, std::size_t) {
       if (ec) return;
       if (close) {
@@ -325,6 +375,22 @@ void HttpServer::Impl::register_http(const std::shared_ptr<HttpSession>& s) {
   std::lock_guard lock(sessions_mutex);
   std::erase_if(http_sessions, [](const auto& w) { return w.expired(); });
   http_sessions.push_back(s);
+}
+
+void HttpServer::Impl::close_ended_sessions() {
+  std::vector<std::shared_ptr<LiveSession>> ended;
+  {
+    std::lock_guard lock(sessions_mutex);
+    for (auto& w : live)
+      if (auto s = w.lock(); s && !s->session_id().empty()) ended.push_back(std::move(s));
+  }
+  for (auto& s : ended) {
+    if (api.session_alive(s->session_id())) continue;
+    s->close(websocket::close_reason(static_cast<websocket::close_code>(kCloseSessionEnded),
+                                     "session ended; sign in again"));
+    std::lock_guard lock(sessions_mutex);
+    std::erase_if(live, [&](const auto& w) { return w.lock() == s; });
+  }
 }
 
 void HttpServer::Impl::accept() {
@@ -361,6 +427,9 @@ void HttpServer::Impl::tick_telemetry() {
       std::lock_guard lock(sessions_mutex);
       for (const auto& w : live) any = any || !w.expired();
     }
+    // About once a second: close the sockets whose browser session has ended (sign-out, idle
+    // timeout), with close code 4001 so that the page asks to sign in again.
+    if (any && ++ticks % std::max(1, static_cast<int>(config.live_rate_hz)) == 0) close_ended_sessions();
     if (any) {
       json t = sequencer.telemetry();
       t["type"] = "telemetry";

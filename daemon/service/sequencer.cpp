@@ -500,6 +500,10 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
   const std::int64_t until_ns = last ? std::numeric_limits<std::int64_t>::max() : end_ns;
   const double t0_s = run.segments[k].t0_s;
 
+  // After a safe hold the interlock is open: close it before the table moves again.
+  if (!run.bench->table().state().interlock_closed) {
+    if (auto r = run.bench->table().close_interlock(); !r.ok) return hold(run, "table interlock: " + r.message);
+  }
   if (auto r = run.bench->table().start_program_at(t0_s); !r.ok) return hold(run, "table: " + r.message);
   run.prev_delivered_t_ns = std::llround(t0_s * units::kNsPerS);
   run.last_frame_world_s = run.bench->now_s();
@@ -610,7 +614,7 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
     return Outcome::Redo;
   }
   note_event(run, "suspended", reason);
-  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+  safe_hold(run);
   if (!run.recorder->commit_and_wait())
     throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
   sync_run_record(db_, run);
@@ -633,7 +637,7 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
 
 // Operator pause: table stopped, recorder committed, then wait for resume, stop or abort.
 Sequencer::Outcome Sequencer::paused(RunContext& run) {
-  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+  safe_hold(run);
   if (!run.recorder->commit_and_wait())
     throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
   // The counters first: whoever sees "paused" must see where the run holds.
@@ -658,6 +662,13 @@ Sequencer::Outcome Sequencer::paused(RunContext& run) {
   note_event(run, "resumed", "redoing segment " + std::to_string(run.segment) + " '" + run.segments[run.segment].name +
                                  "' from " + std::to_string(run.checkpoint_s()) + " s");
   return Outcome::Redo;
+}
+
+// Safe hold (pause, suspension): rate zero, then the interlock open, as on every path out of
+// running; the next segment closes it again before the table moves.
+void Sequencer::safe_hold(RunContext& run) {
+  if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
+  if (auto r = run.bench->table().open_interlock(); !r.ok) note_event(run, "alarm", "opening the interlock: " + r.message);
 }
 
 void Sequencer::safe_exit(RunContext& run) {

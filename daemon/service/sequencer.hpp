@@ -79,6 +79,7 @@ class Sequencer {
   Outcome hold(RunContext& run, const std::string& reason);
   Outcome paused(RunContext& run);
   Outcome wait_until_ready(RunContext& run, bool suspended);
+  void safe_hold(RunContext& run);
   void safe_exit(RunContext& run);
   void finish_run(RunContext& run, Outcome outcome, const std::string& reason);
   void publish(RunContext& run, bool force);

@@ -14,6 +14,9 @@ struct HttpReply {
   std::string body;
   std::string content_type = "application/json";
   std::vector<std::pair<std::string, std::string>> headers;
+  // When set, the body is this file's content, sent from the disk (large downloads); `body` is
+  // then ignored.
+  std::string file;
 };
 
 class StaticFiles {

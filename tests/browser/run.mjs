@@ -218,10 +218,14 @@ try {
   await shot(page, '02-builder-limit-violation');
   log('limit violation shown inline beside segment rate-z+ and refused by imucald (422)');
 
-  // ---- the session ends; signing in again keeps the form ----
+  // ---- the session ends; imucald closes the WebSocket; signing in again keeps the form ----
+  await page.fill('#c-name', 'browser test: direct-short (after sign-in)');
+  await waitText(page, '#verdict', /^Refused/);
   await page.evaluate(() => fetch('/api/logout', { method: 'POST' }));
-  await page.fill('#c-name', 'browser test: direct-short (after sign-in)');  // triggers a check -> 401
-  await page.waitForSelector('#reauth-dialog[open]');
+  // Nothing is sent by the page: the daemon closes the live socket (code 4001) and the page asks.
+  await page.waitForSelector('#reauth-dialog[open]', { timeout: 5000 });
+  await waitText(page, '#live-indicator', /sign in again/);
+  await waitText(page, '#banner', /session has ended/);
   await shot(page, '03-session-expired');
   await page.click('#reauth-mode-token');
   await page.fill('#reauth-token', TOKEN);
@@ -229,8 +233,10 @@ try {
   await page.waitForSelector('#reauth-dialog', { state: 'detached' });
   assert.equal(await page.inputValue('#c-name'), 'browser test: direct-short (after sign-in)');
   assert.equal(await page.inputValue(`#seg-${rateRow}-rate_dps`), '400');
-  await waitText(page, '#verdict', /^Refused/);  // the check that hit 401 was sent again
-  log('session ended: sign-in dialog, page state kept, the check went through afterwards');
+  await page.waitForSelector('#live-indicator[data-state="open"]');  // the live connection is back
+  await page.fill(`#seg-${rateRow}-revolutions`, '31');  // a check after signing in goes through
+  await waitText(page, '#verdict', /^Refused/);
+  log('session ended: imucald closed the WebSocket, sign-in dialog, page state kept, live connection back');
 
   // ---- fix it and launch ----
   await page.fill(`#seg-${rateRow}-rate_dps`, '30');
@@ -280,6 +286,11 @@ try {
   // ---- pause and resume ----
   await page.click('.command-bar .cmd-pause');
   await waitText(page, '#run-state', /paused/, 20000);
+  // Safe hold: table at rate zero with its interlock open, as the telemetry says.
+  await page.waitForFunction(() => {
+    const t = window.imucal.store.latest?.table;
+    return t && t.interlock_closed === false && t.rate_dps.every((r) => r === 0);
+  });
   await shot(page, '05-live-paused');
   await page.click('.command-bar .cmd-resume');
   await page.waitForSelector('#confirm-dialog[open]');
@@ -307,12 +318,27 @@ try {
   assert.equal(model.format, 'imucal-imu-model/1');
   assert.ok(model.sigma, 'the model carries its sigmas');
   log(`results page with ${coefRows} coefficients; model downloaded (${download.suggestedFilename()})`);
+  const [bundle] = await Promise.all([page.waitForEvent('download'), page.click('#download-recording')]);
+  const bundleFile = path.join(outDir, `campaign-${id}-recording.tar`);
+  await bundle.saveAs(bundleFile);
+  const tar = fs.readFileSync(bundleFile);
+  assert.equal(tar.subarray(257, 262).toString(), 'ustar', 'the recording bundle is a tar file');
+  for (const name of ['frames.csv', 'meta.json'])
+    assert.ok(tar.includes(`campaign-${id}-recording/${name}`), `the bundle holds ${name}`);
+  assert.ok(tar.includes('imucal-recording/1'), 'in the imucal-recording/1 format');
+  log(`recording bundle downloaded (${bundle.suggestedFilename()}, ${tar.length} bytes)`);
+  // direct-short has 10 s statics: enough for a short Allan curve; no thermal cycles, no tilts.
+  await page.waitForSelector('#plot-allan .uplot');
+  await waitText(page, '#plot-thermal-status', /Not available for this run: .*program 'thermal'/);
+  await waitText(page, '#plot-evaluation-status', /Not available for this run: .*program 'evaluate'/);
+  await page.$eval('#optional-plots', (el) => el.scrollIntoView());
+  await shot(page, '07b-results-allan-not-available');
 
   // ---- certificate ----
   const [cert] = await Promise.all([page.context().waitForEvent('page'), page.click('#certificate')]);
   await cert.waitForSelector('#certificate[data-ready="true"]');
   const certText = await cert.textContent('#certificate');
-  for (const expected of ['Calibration certificate', 'browser test lab', `IMUCAL-${id}-`, 'Gyro bias', 'bias_dph.x', 'Accelerometer scale factor'])
+  for (const expected of ['Calibration certificate', 'browser test lab', `IMUCAL-${id}-`, 'SIM-', 'browser test: direct-short', 'Gyro bias', 'bias_dph.x', 'Accelerometer scale factor'])
     assert.ok(certText.includes(expected), `the certificate shows ${expected}`);
   await cert.setViewportSize({ width: 1366, height: 768 });
   await shot(cert, '08-certificate');
@@ -325,29 +351,34 @@ try {
   await cert.close();
   log('certificate rendered and saved as self-contained HTML');
 
-  // ---- plots for data the API does not serve yet (docs/web.md proposes the shapes) ----
-  // Served here from fixtures, to check the results page draws them once imucald does; the
-  // screenshot's name says so.
-  const tau = [0.01, 0.1, 1, 10, 100, 1000];
-  const fixtures = {
-    allan: { tau_s: tau, gyro_dph: [0, 1, 2].map((k) => tau.map((t) => (0.1 + k * 0.02) / Math.sqrt(t) + 0.003)),
-      accel_mps2: [0, 1, 2].map((k) => tau.map((t) => (2e-4 + k * 2e-5) / Math.sqrt(t) + 1e-5)) },
-    thermal: { temperature_C: [-20, 0, 20, 40, 60], coefficients: {
-      'gyro.bias_dph.x': { before: [0.5, 0.3, 0.1, -0.1, -0.3], after: [0.01, -0.01, 0, 0.01, -0.01] },
-      'accel.bias_mps2.z': { before: [1e-3, 5e-4, 0, -5e-4, -1e-3], after: [1e-5, 0, -1e-5, 0, 1e-5] } } },
-    evaluation: { time_s: [0, 600, 1200, 1800, 2400, 3000], variants: [
-      { name: 'uncalibrated', position_error_m: [0, 150, 420, 700, 800, 900], velocity_error_mps: [0, 0.5, 0.8, 0.6, 0.3, 0.4] },
-      { name: 'stage 1', position_error_m: [0, 20, 60, 90, 110, 120], velocity_error_mps: [0, 0.06, 0.1, 0.08, 0.05, 0.05] },
-      { name: 'stage 3', position_error_m: [0, 5, 12, 18, 20, 22], velocity_error_mps: [0, 0.01, 0.02, 0.02, 0.01, 0.01] }] },
-  };
-  for (const [key, body] of Object.entries(fixtures))
-    await page.route(`**/api/campaigns/${id}/${key}`, (route) => route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(body) }));
-  await page.reload();
-  for (const key of Object.keys(fixtures)) await page.waitForSelector(`#plot-${key} .uplot`);
-  await page.$eval('#optional-plots', (el) => el.scrollIntoView());
-  await shot(page, '13-results-proposed-plots-from-fixtures');
-  await page.unrouteAll();
-  log('Allan deviation, thermal and Schuler plots render from the shapes proposed in docs/web.md');
+  // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
+  // Posted with the API (the builder was covered above), as fast as the machine goes, at a low
+  // rate, with the navigation-grade truth of examples/ so that calibrating makes a difference.
+  const truth = JSON.parse(fs.readFileSync(path.join(repo, 'examples', 'truth-nav-grade.json'), 'utf8'));
+  const evalPost = await apiCall('POST', '/api/campaigns', { name: 'browser test: calibrate and evaluate',
+    program: ['direct-short', 'evaluate'], rate_hz: 20, time_scale: 0, truth });
+  assert.equal(evalPost.status, 201, JSON.stringify(evalPost.body));
+  const thermalPost = await apiCall('POST', '/api/campaigns', { name: 'browser test: thermal cycles', program: 'thermal-short',
+    estimators: [], rate_hz: 10, time_scale: 0, truth,
+    chamber: { setpoint_C: 25, tolerance_C: 3, steps: [{ at_s: 1000, setpoint_C: 35, ramp_C_per_min: 0.5 }, { at_s: 3000, setpoint_C: 15, ramp_C_per_min: 0.5 }] } });
+  assert.equal(thermalPost.status, 201, JSON.stringify(thermalPost.body));
+  for (const c of [evalPost.body.id, thermalPost.body.id]) assert.equal((await apiCall('POST', `/api/campaigns/${c}/start`)).status, 200);
+  await page.goto(`${base}/#/campaigns/${evalPost.body.id}`);
+  await waitText(page, '#campaign-state', /done/, 60000);
+  await page.waitForSelector('#plot-evaluation .uplot', { timeout: 30000 });
+  const variants = await page.$$eval('#evaluation-table tbody tr', (rows) => rows.map((r) => r.dataset.variant));
+  assert.deepEqual(variants, ['uncalibrated', `campaign ${evalPost.body.id}`, 'truth'], 'three variants compared');
+  await page.waitForSelector('#plot-allan .uplot');
+  await page.$eval('#plot-evaluation', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '13-results-schuler-test');
+  await page.goto(`${base}/#/campaigns/${thermalPost.body.id}`);
+  await waitText(page, '#campaign-state', /done/, 60000);
+  await page.waitForSelector('#plot-thermal .uplot', { timeout: 30000 });
+  assert.ok(await page.$$eval('#plot-thermal .uplot', (l) => l.length) >= 27, 'a thermal plot per coefficient');
+  await waitText(page, '#no-model', /no model/i);  // no stage 1 in this campaign: said so, no download
+  await page.$eval('#plot-thermal', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '14-results-thermal');
+  log('Schuler test (three variants) and thermal plots drawn from campaigns that ran evaluate and thermal-short');
 
   // ---- the campaigns list ----
   await page.goto(`${base}/#/campaigns`);

@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "core/earth.hpp"
 #include "core/imu_model.hpp"
@@ -136,6 +137,17 @@ TEST(ModelJson, RoundTripKeepsEveryCoefficient) {
   EXPECT_NEAR(r.accel.noise.vrw_mps_rts, m.accel.noise.vrw_mps_rts, 1e-18);
   ASSERT_TRUE(r.sigma.has_value());
   EXPECT_TRUE(r.sigma->gyro.bias_radps.isApprox(m.sigma->gyro.bias_radps, 1e-14));
+}
+
+TEST(ModelJson, RoundTripKeepsTheCommentAndSerial) {
+  // Writing the extra keys back once iterated a destroyed temporary (and hung imucald).
+  const ImuModel m = imu_model_from_json_text(
+      R"({"format":"imucal-imu-model/1","comment":"a note","serial":"FOG-7","gyro":{"bias_dph":[0.04,0,0]}})", "m");
+  const std::string text = imu_model_to_json_text(m);
+  const auto j = nlohmann::json::parse(text);
+  EXPECT_EQ(j.at("comment"), "a note");
+  EXPECT_EQ(j.at("serial"), "FOG-7");
+  EXPECT_EQ(imu_model_from_json_text(text, "again").extra_json, m.extra_json);
 }
 
 TEST(ModelJson, UnknownKeysAndBadValuesAreNamed) {

@@ -302,3 +302,102 @@ TEST(Http, HeadGivesTheLengthOfTheGet) {
   EXPECT_TRUE(head.body.empty());
   EXPECT_EQ(head.headers.at("etag").find('-', 1) != std::string::npos, true);
 }
+
+// The results beyond the model (docs/api.md): the recording bundle as a tar file, the Allan
+// deviation, the Schuler test of the model variants, thermal plots refused with the reason, and
+// the IMU serial.
+TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
+  LocalDaemon d("results", true);
+  const Client op{d.service->port(), kOperatorToken};
+  const auto id = op.post("/api/campaigns",
+                          R"({"name": "results", "program": ["direct-short", "evaluate"], "rate_hz": 20, "time_scale": 0})")
+                      .json_body()
+                      .at("id")
+                      .get<std::int64_t>();
+  const std::string base = "/api/campaigns/" + std::to_string(id);
+  EXPECT_EQ(op.get(base + "/recording").status, 404);  // never started
+  ASSERT_EQ(op.post(base + "/start").status, 200);
+  const json done = op.wait_state(id, "done", 120.0);
+  ASSERT_EQ(done.at("state"), "done") << done.dump().substr(0, 2000);
+  EXPECT_EQ(done.at("imu_serial").get<std::string>().rfind("SIM-", 0), 0u);  // the simulated IMU's serial
+
+  const auto tar = op.get(base + "/recording");
+  ASSERT_EQ(tar.status, 200) << tar.body.substr(0, 500);
+  EXPECT_EQ(tar.headers.at("content-type"), "application/x-tar");
+  EXPECT_NE(tar.headers.at("content-disposition").find("attachment"), std::string::npos);
+  ASSERT_GT(tar.body.size(), 2048u);
+  EXPECT_EQ(tar.body.size() % 512, 0u);
+  const std::string top = "campaign-" + std::to_string(id) + "-recording/";
+  EXPECT_EQ(tar.body.compare(0, top.size(), top), 0);
+  EXPECT_EQ(tar.body.compare(257, 5, "ustar"), 0);
+  EXPECT_NE(tar.body.find(top + "frames.csv"), std::string::npos);
+  EXPECT_NE(tar.body.find(top + "meta.json"), std::string::npos);
+  EXPECT_NE(tar.body.find("imucal-recording/1"), std::string::npos);
+  const auto head = http_request(d.service->port(), "HEAD", base + "/recording", "", op.auth());
+  EXPECT_EQ(head.status, 200);
+  EXPECT_EQ(head.headers.at("content-length"), std::to_string(tar.body.size()));
+  EXPECT_TRUE(head.body.empty());
+
+  const json allan = op.get_json(base + "/allan");
+  ASSERT_TRUE(allan.contains("gyro_x")) << allan.dump().substr(0, 500);
+  EXPECT_GT(allan.at("gyro_x").at("tau_s").size(), 5u);
+  EXPECT_EQ(allan.at("gyro_x").at("tau_s").size(), allan.at("gyro_x").at("adev").size());
+  EXPECT_EQ(allan.at("gyro_x").at("unit"), "deg/h");
+  EXPECT_EQ(allan.at("arw_deg_rth").size(), 3u);
+
+  const auto thermal = op.get(base + "/thermal");
+  EXPECT_EQ(thermal.status, 404);
+  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("not available for this run"), std::string::npos);
+  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("thermal"), std::string::npos);
+
+  const auto evaluation = op.get(base + "/evaluation");
+  ASSERT_EQ(evaluation.status, 200) << evaluation.body.substr(0, 500);
+  const json variants = evaluation.json_body().at("variants");
+  ASSERT_EQ(variants.size(), 3u);  // uncalibrated, this campaign's model, the truth
+  EXPECT_EQ(variants[0].at("name"), "uncalibrated");
+  EXPECT_EQ(variants[2].at("name"), "truth");
+  for (const auto& v : variants) {
+    ASSERT_GE(v.at("segments").size(), 4u);
+    const json& seg = v.at("segments")[0];
+    EXPECT_GT(seg.at("time_s").size(), 10u);
+    EXPECT_EQ(seg.at("time_s").size(), seg.at("velocity_error_mps").size());
+  }
+  // A campaign never started has nothing to analyse; an unknown one is 404 too.
+  const auto created = op.post("/api/campaigns", R"({"name": "idle", "program": "direct-short"})").json_body().at("id");
+  EXPECT_EQ(op.get("/api/campaigns/" + created.dump() + "/allan").status, 404);
+  EXPECT_EQ(op.get("/api/campaigns/999/evaluation").status, 404);
+}
+
+// A browser session's WebSocket is closed (code 4001) when the session ends.
+TEST(Http, LiveWebSocketClosesWhenItsSessionEnds) {
+  namespace beast = boost::beast;
+  namespace websocket = beast::websocket;
+  namespace net = boost::asio;
+  using tcp = net::ip::tcp;
+  LocalDaemon d("live-session", true);
+  const std::uint16_t port = d.service->port();
+  const auto login = http_request(port, "POST", "/api/login", json{{"token", kViewerToken}}.dump());
+  ASSERT_EQ(login.status, 200);
+  const std::string set_cookie = login.headers.at("set-cookie");
+  const std::string cookie = set_cookie.substr(0, set_cookie.find(';'));
+
+  net::io_context ioc;
+  websocket::stream<tcp::socket> ws(ioc);
+  ws.next_layer().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  ws.set_option(websocket::stream_base::decorator(
+      [cookie](websocket::request_type& req) { req.set(beast::http::field::cookie, cookie); }));
+  ws.handshake("127.0.0.1", "/api/live");
+  beast::flat_buffer buffer;
+  ws.read(buffer);
+  EXPECT_EQ(json::parse(beast::buffers_to_string(buffer.data())).at("type"), "hello");
+
+  ASSERT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", cookie}}).status, 200);
+  beast::error_code ec;
+  for (int i = 0; i < 100 && !ec; ++i) {
+    buffer.consume(buffer.size());
+    ws.read(buffer, ec);
+  }
+  EXPECT_TRUE(ec == websocket::error::closed) << ec.message();
+  EXPECT_EQ(static_cast<int>(ws.reason().code), 4001);
+  EXPECT_NE(std::string(ws.reason().reason.c_str()).find("session ended"), std::string::npos);
+}

@@ -77,6 +77,7 @@ TEST(Sequencer, PauseAndResumeRedoTheSegmentWithoutDuplicates) {
   const json t = d.service->sequencer().telemetry();
   EXPECT_EQ(t.at("table").at("rate_dps"), json::array({0.0, 0.0, 0.0}));
   EXPECT_EQ(t.at("run").at("state"), "paused");
+  EXPECT_FALSE(t.at("table").at("interlock_closed").get<bool>());  // safe hold: the interlock is open
   ASSERT_EQ(d.command(id, "resume"), 200);
   EXPECT_EQ(d.command(id, "resume"), 409);  // resume while running
   const json c = d.wait_final(id);

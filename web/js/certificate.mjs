@@ -39,8 +39,8 @@ function render(d, model, status) {
   const number = `IMUCAL-${d.id}-${day}`;
   const site = status.site || {};
   const simulated = (status.devices || '').startsWith('sim');
-  // The IMU serial is not in docs/api.md yet (docs/web.md); shown when the daemon adds it.
-  const serial = d.imu_serial || d.imu?.serial || model.imu_serial || model.serial || null;
+  // The serial the run file records (GET /api/campaigns/{id}: imu_serial).
+  const serial = d.imu_serial || null;
   document.title = `Calibration certificate ${number}`;
   const rows = coefficientRows(model, null).filter((r) => r.estimated && (r.sigma !== null || r.group === 'Noise'));
   const body = h('tbody');
@@ -55,7 +55,7 @@ function render(d, model, status) {
   }
   const facts = [
     ['Certificate number', number],
-    ['IMU serial number', serial || 'not reported by imucald'],
+    ['IMU serial number', serial || 'not recorded (the campaign was never started)'],
     ['Date of calibration', `${dateTime(d.started)} – ${dateTime(d.ended)} (local time)`],
     ['Date of issue', dateTime(new Date().toISOString())],
     ['Site', `${site.name || '—'}; latitude ${num(site.latitude_deg, 6)}°, longitude ${num(site.longitude_deg, 6)}°, height ${num(site.height_m, 4)} m; middle axis azimuth ${num(site.middle_axis_azimuth_deg, 4)}°`],

@@ -9,6 +9,8 @@ import { get, ApiError } from './api.mjs';
 import { Series, BoundedList } from './series.mjs';
 
 const AXES = ['outer', 'middle', 'inner'];
+// The close code imucald uses when the session that opened the socket has ended (docs/api.md).
+export const SESSION_ENDED = 4001;
 export { AXES };
 
 export class LiveClient extends EventTarget {
@@ -16,7 +18,7 @@ export class LiveClient extends EventTarget {
     super();
     this.path = path;
     this.ws = null;
-    this.state = 'idle';  // idle | connecting | open | waiting (to reconnect) | stopped
+    this.state = 'idle';  // idle | connecting | open | waiting (to reconnect) | signin (session ended) | stopped
     this.attempt = 0;
     this.retryAt = 0;
     this.lostAt = null;   // when the connection was lost (ms), null while fine
@@ -78,11 +80,19 @@ export class LiveClient extends EventTarget {
       if (msg.type === 'hello' && msg.telemetry_hz > 0) this.telemetryHz = msg.telemetry_hz;
       this.dispatchEvent(new CustomEvent('message', { detail: msg }));
     };
-    ws.onclose = () => {
+    ws.onclose = (ev) => {
       if (this.ws !== ws) return;
       this.ws = null;
       if (this.state === 'stopped') return;
       if (this.lostAt === null) this.lostAt = Date.now();
+      if (ev.code === SESSION_ENDED) {
+        // imucald closed it because the session ended (sign-out, idle timeout): ask to sign in
+        // again now (GET /api/me gets 401 and api.mjs shows the dialog), then reconnect.
+        this.state = 'signin';
+        this.emitStatus();
+        this.probeThenConnect();
+        return;
+      }
       this.scheduleReconnect();
     };
     ws.onerror = () => {};  // onclose follows and handles it

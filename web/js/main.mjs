@@ -103,9 +103,11 @@ live.addEventListener('status', (ev) => {
   const s = ev.detail;
   const ind = document.getElementById('live-indicator');
   ind.dataset.state = s.state;
-  const labels = { idle: 'live: —', connecting: 'live: connecting', open: 'live: connected', waiting: 'live: lost', stopped: 'live: off' };
+  const labels = { idle: 'live: —', connecting: 'live: connecting', open: 'live: connected', waiting: 'live: lost', signin: 'live: sign in again', stopped: 'live: off' };
   ind.textContent = labels[s.state] || s.state;
-  if (s.state === 'waiting' && s.lostAt) {
+  if (s.state === 'signin') {
+    showBanner('warn', 'Your session has ended, so imucald closed the live connection. Sign in again to continue; the page keeps what you entered.');
+  } else if (s.state === 'waiting' && s.lostAt) {
     const secs = Math.ceil(s.retryInMs / 1000);
     showBanner('warn', `Live connection lost ${duration((Date.now() - s.lostAt) / 1000)} ago — reconnecting ${secs > 0 ? `in ${secs} s` : 'now'} (attempt ${s.attempt}). Plots and states resume when it is back.`);
   } else if (s.state === 'waiting' && !s.everOpened) {

@@ -1,6 +1,7 @@
 // One campaign: its state and commands while it runs, and its results when it is done: the
 // coefficient table with sigmas (with the truth and the error in simulated runs), the estimators'
-// convergence, the noise and evaluation plots where the API provides their data, the downloads
+// convergence, the Allan, thermal and Schuler-test plots imucald computes from the recording (or
+// what the run would need for them), the downloads
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
 import { get, ApiError } from '../api.mjs';
 import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
@@ -127,10 +128,10 @@ export function mount(root, ctx) {
     } else {
       downloads.append(h('span', { class: 'muted', id: 'no-model' }, d.state === 'done' ? 'This campaign produced no model (see the estimator notes below).' : `No model: the campaign ended ${d.state}.`));
     }
-    const bundle = h('a', { class: 'button', id: 'download-recording', 'aria-disabled': 'true', title: 'checking…' }, 'Recording bundle');
+    const bundle = h('a', { class: 'button', id: 'download-recording', 'aria-disabled': 'true' }, 'Recording bundle (tar)');
     downloads.append(bundle, h('button', { type: 'button', class: 'link', id: 'download-record', onclick: () => saveJson(`campaign-${id}.json`, detail) }, 'Campaign record (JSON)'));
     results.append(downloads);
-    probeRecording(bundle);
+    enableRecording(bundle);
 
     // Coefficients
     if (model && !model._error) {
@@ -176,96 +177,115 @@ export function mount(root, ctx) {
     await optionalPlots(optional);
   }
 
-  async function probeRecording(link) {
-    // Not in docs/api.md yet: offered as soon as the daemon serves it.
+  // The bundle is built from the run file once the run has ended (GET .../recording, a tar).
+  function enableRecording(link) {
+    const d = detail;
     const url = `/api/campaigns/${id}/recording`;
-    try {
-      const r = await fetch(url, { method: 'HEAD', credentials: 'same-origin' });
-      if (r.ok) {
-        link.href = url;
-        link.setAttribute('download', `campaign-${id}-recording`);
-        link.removeAttribute('aria-disabled');
-        link.title = 'imucal-recording/1 bundle';
-        return;
-      }
-    } catch { /* fall through */ }
-    link.title = `imucald does not serve the recording bundle yet (GET ${url}); the run database is ${detail?.run_db || '—'} in its data directory, exportable with "imucal export".`;
+    if (d.run_db && FINAL_STATES.has(d.state)) {
+      link.href = url;
+      link.setAttribute('download', `campaign-${id}-recording.tar`);
+      link.removeAttribute('aria-disabled');
+      link.title = 'imucal-recording/1 bundle (meta.json, frames.csv, program.json, truth.json) as one tar file; unpack and read it with "imucal import DIR"';
+      return;
+    }
+    link.title = d.run_db ? 'Available when the run has ended.' : 'This campaign was never started: there is no recording.';
     link.classList.add('disabled');
   }
 
+  // Each panel asks imucald for its data; a run that cannot give it gets the daemon's reason
+  // ("not available for this run: needs program ..."), shown in the panel.
   async function optionalPlots(box) {
     const sources = [
       { key: 'allan', title: 'Allan deviation', render: renderAllan },
       { key: 'thermal', title: 'Coefficients against temperature, before and after compensation', render: renderThermal },
       { key: 'evaluation', title: 'Schuler test: navigation errors of the model variants', render: renderEvaluation },
     ];
-    const missing = [];
-    for (const s of sources) {
+    await Promise.all(sources.map(async (s) => {
+      const el = h('div', { class: 'optional-plot', id: `plot-${s.key}` }, h('h4', {}, s.title));
+      const note = h('p', { class: 'muted', id: `plot-${s.key}-status` }, 'Computing from the recording…');
+      el.append(note);
+      box.append(el);
       try {
         const data = await get(`/api/campaigns/${id}/${s.key}`);
         if (stopped) return;
-        const el = h('div', { class: 'optional-plot', id: `plot-${s.key}` }, h('h4', {}, s.title));
-        box.append(el);
+        note.remove();
+        el.dataset.available = 'true';
         s.render(el, data);
       } catch (e) {
-        if (!(e instanceof ApiError) || e.status !== 404) box.append(h('p', { class: 'form-error' }, `${s.title}: ${e.message}`));
-        else missing.push(s);
+        el.dataset.available = 'false';
+        note.className = e instanceof ApiError && (e.status === 404 || e.status === 409) ? 'muted not-available' : 'form-error';
+        note.textContent = e instanceof ApiError && e.status === 404 && /^not available/.test(e.message)
+          ? `${e.message[0].toUpperCase()}${e.message.slice(1)}.` : `${s.title}: ${e.message}`;
       }
-    }
-    if (missing.length) {
-      box.append(h('p', { class: 'muted', id: 'plots-missing' },
-        `Not available for this campaign from imucald: ${missing.map((s) => s.title.toLowerCase()).join('; ')}. `,
-        'The model\'s noise figures (angle and velocity random walk, bias instability) are in the table above.'));
-    }
+    }));
+    // Keep the panels in their order whatever answered first.
+    for (const s of sources) box.append(box.querySelector(`#plot-${s.key}`));
   }
 
   function renderAllan(el, data) {
-    // Proposed shape (docs/web.md): {tau_s: [...], gyro_dph: [[x], [y], [z]], accel_mps2: [[x], [y], [z]]}
-    const pairs = [['gyro_dph', 'Gyros', '°/h'], ['accel_mps2', 'Accelerometers', 'm/s²']];
+    // {gyro_x: {tau_s, adev, unit}, ..., accel_z: {...}, arw_deg_rth, vrw_mps_rth, notes}
     const row = h('div', { class: 'plot-row' });
     el.append(row);
-    for (const [key, label, unit] of pairs) {
-      if (!Array.isArray(data[key])) continue;
+    for (const [sensor, label] of [['gyro', 'Gyros'], ['accel', 'Accelerometers']]) {
+      const axes = ['x', 'y', 'z'].map((a) => data[`${sensor}_${a}`]).filter(Boolean);
+      if (!axes.length) continue;
+      const tau = axes[0].tau_s;
       const box = h('div', { class: 'plot' });
       row.append(box);
-      const c = lineChart(box, { title: `${label}: Allan deviation`, x: 'τ s', y: unit, log: true, height: 220,
+      const c = lineChart(box, { title: `${label}: Allan deviation`, x: 'τ s', y: axes[0].unit, log: true, height: 220,
         series: ['x', 'y', 'z'].map((a, i) => ({ label: a, color: COLORS[i] })), points: true });
-      c.setData([data.tau_s, ...data[key]]);
+      c.setData([tau, ...axes.map((a) => tau.map((_, i) => a.adev[i] ?? null))]);
       cleanups.push(() => c.destroy());
     }
+    const fmt3 = (v) => (v || []).map((x) => (x == null ? '—' : num(x, 3))).join(', ');
+    el.append(h('p', { class: 'muted' },
+      `Angle random walk ${fmt3(data.arw_deg_rth)} °/√h; velocity random walk ${fmt3(data.vrw_mps_rth)} m/s/√h (x, y, z)`,
+      data.bias_instability_dph?.some((v) => v != null) ? `; bias instability ${fmt3(data.bias_instability_dph)} °/h` : '',
+      `. ${(data.notes || []).join(' ')}`));
   }
 
   function renderThermal(el, data) {
-    // Proposed shape: {temperature_C: [...], coefficients: {name: {before: [...], after: [...]}}}
+    // {T_ref_C, cycles_used, coefficients: {name: {T_C: [...], before: [...], after: [...], truth: [...]}}}
+    el.append(h('p', { class: 'muted' }, `${data.cycles_used} of ${data.cycles_total} table cycles used, reference ${num(data.T_ref_C, 3)} °C, `,
+      `input: ${data.input_model || 'the campaign\'s model'}. Points: the per-cycle estimate (before) and the estimate less the fitted thermal model (after).`));
     const row = h('div', { class: 'plot-row wrap' });
     el.append(row);
     for (const [name, v] of Object.entries(data.coefficients || {})) {
+      // Heating and cooling pass the same temperatures: points sorted by T, no lines.
+      const order = v.T_C.map((_, i) => i).sort((a, b) => v.T_C[a] - v.T_C[b]);
+      const pick = (list) => order.map((i) => list?.[i] ?? null);
+      const withTruth = (v.truth || []).some((x) => x != null);
       const box = h('div', { class: 'plot third' });
       row.append(box);
-      const c = lineChart(box, { title: `${name} [${unitOf(name)}]`, x: 'T °C', height: 170,
-        series: [{ label: 'before', color: COLORS[1] }, { label: 'after', color: COLORS[2] }], points: true });
-      c.setData([data.temperature_C, v.before, v.after]);
+      const c = lineChart(box, { title: `${name} [${unitOf(name)}]`, x: 'T °C', height: 170, points: true,
+        series: [{ label: 'before', color: COLORS[1], width: 0 }, { label: 'after', color: COLORS[2], width: 0 },
+          ...(withTruth ? [{ label: 'truth', color: COLORS[0], width: 1, dash: [4, 4] }] : [])] });
+      c.setData([pick(v.T_C), pick(v.before), pick(v.after), ...(withTruth ? [pick(v.truth)] : [])]);
       cleanups.push(() => c.destroy());
     }
   }
 
   function renderEvaluation(el, data) {
-    // Proposed shape: {time_s: [...], variants: [{name, position_error_m: [...], velocity_error_mps: [...]}]}
+    // {variants: [{name, source, tilt_schuler_amplitude_mps, ..., segments: [{name, kind, time_s, velocity_error_mps}]}]}
     const variants = data.variants || [];
-    const row = h('div', { class: 'plot-row' });
+    el.append(h('table', { class: 'list compact', id: 'evaluation-table' },
+      h('thead', {}, h('tr', {}, h('th', {}, 'variant'), h('th', {}, 'model'), h('th', { class: 'num' }, 'tilt Schuler amplitude m/s'),
+        h('th', { class: 'num' }, 'coning Schuler amplitude m/s'), h('th', { class: 'num' }, 'implied accel error m/s²'), h('th', { class: 'num' }, 'implied gyro drift °/h'))),
+      h('tbody', {}, ...variants.map((v) => h('tr', { dataset: { variant: v.name } }, h('td', {}, v.name), h('td', {}, v.source),
+        h('td', { class: 'num' }, num(v.tilt_schuler_amplitude_mps, 3)), h('td', { class: 'num' }, num(v.coning_schuler_amplitude_mps, 3)),
+        h('td', { class: 'num' }, num(v.implied_accel_error_mps2, 3)), h('td', { class: 'num' }, num(v.implied_gyro_drift_dph, 3)))))));
+    const row = h('div', { class: 'plot-row wrap' });
     el.append(row);
-    for (const [key, label, unit] of [['position_error_m', 'Position error', 'm'], ['velocity_error_mps', 'Velocity error', 'm/s']]) {
-      const box = h('div', { class: 'plot' });
+    const segments = variants[0]?.segments || [];
+    segments.forEach((seg, k) => {
+      const t0 = seg.time_s[0] ?? 0;
+      const box = h('div', { class: 'plot third' });
       row.append(box);
-      const c = lineChart(box, { title: label, x: 'time s', y: unit, height: 220,
+      const c = lineChart(box, { title: `${seg.name} (${seg.kind}): horizontal velocity error`, x: 's from start', y: 'm/s', height: 190,
         series: variants.map((v, i) => ({ label: v.name, color: COLORS[i % COLORS.length] })) });
-      c.setData([data.time_s, ...variants.map((v) => v[key])]);
+      c.setData([seg.time_s.map((t) => t - t0), ...variants.map((v) => seg.time_s.map((_, i) => v.segments[k]?.velocity_error_mps[i] ?? null))]);
       cleanups.push(() => c.destroy());
-    }
-    el.append(h('table', { class: 'list compact' }, h('thead', {}, h('tr', {}, h('th', {}, 'variant'), h('th', { class: 'num' }, 'max position error m'), h('th', { class: 'num' }, 'max velocity error m/s'))),
-      h('tbody', {}, ...variants.map((v) => h('tr', {}, h('td', {}, v.name),
-        h('td', { class: 'num' }, num(v.max_position_error_m ?? Math.max(...(v.position_error_m || []).map(Math.abs)), 3)),
-        h('td', { class: 'num' }, num(v.max_velocity_error_mps ?? Math.max(...(v.velocity_error_mps || []).map(Math.abs)), 3)))))));
+    });
   }
 
   function coefficientTable(model, truth, simulated) {

@@ -1,0 +1,240 @@
+#include "daemon/service/analysis.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "core/units.hpp"
+#include "estimators/evaluate.hpp"
+#include "estimators/noise.hpp"
+#include "estimators/thermal.hpp"
+#include "storage/bundle.hpp"
+#include "storage/run_db.hpp"
+
+namespace imucal::daemon {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+storage::RunDb open_run(const std::string& run_path) {
+  return storage::RunDb::open(run_path, storage::OpenMode::Read);
+}
+
+// ---- tar (POSIX ustar): a 512-byte header per file, the data padded to 512 bytes, two zero
+// blocks at the end. Names are short here (folder/file), so the 100-byte name field suffices.
+
+void put_octal(char* field, std::size_t width, unsigned long long value) {
+  // width - 1 octal digits and a NUL.
+  std::snprintf(field, width, "%0*llo", static_cast<int>(width - 1), value);
+}
+
+void write_tar_entry(std::ofstream& out, const std::string& name, const fs::path& file) {
+  if (name.size() >= 100) throw std::runtime_error("tar: name too long: " + name);
+  const auto size = fs::file_size(file);
+  char header[512];
+  std::memset(header, 0, sizeof header);
+  std::memcpy(header, name.data(), name.size());
+  put_octal(header + 100, 8, 0644);                                       // mode
+  put_octal(header + 108, 8, 0);                                          // uid
+  put_octal(header + 116, 8, 0);                                          // gid
+  put_octal(header + 124, 12, size);                                      // size
+  const auto mtime = std::chrono::duration_cast<std::chrono::seconds>(
+      std::chrono::system_clock::now().time_since_epoch()).count();
+  put_octal(header + 136, 12, static_cast<unsigned long long>(mtime));    // mtime
+  header[156] = '0';                                                      // regular file
+  std::memcpy(header + 257, "ustar", 6);                                  // magic + NUL
+  std::memcpy(header + 263, "00", 2);                                     // version
+  std::memset(header + 148, ' ', 8);                                      // checksum: spaces first
+  unsigned sum = 0;
+  for (unsigned char c : header) sum += c;
+  std::snprintf(header + 148, 8, "%06o", sum);  // six digits, NUL, and the space already there
+  header[155] = ' ';
+  out.write(header, sizeof header);
+
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw std::runtime_error("tar: cannot read " + file.string());
+  char buf[1 << 16];
+  std::uintmax_t copied = 0;
+  while (in) {
+    in.read(buf, sizeof buf);
+    const auto n = in.gcount();
+    if (n <= 0) break;
+    out.write(buf, n);
+    copied += static_cast<std::uintmax_t>(n);
+  }
+  if (copied != size) throw std::runtime_error("tar: " + file.string() + " changed while being archived");
+  static const char zeros[512] = {};
+  if (const auto rest = size % 512; rest != 0) out.write(zeros, static_cast<std::streamsize>(512 - rest));
+}
+
+}  // namespace
+
+json allan_from_run(const std::string& run_path) {
+  const storage::RunDb db = open_run(run_path);
+  const RecordingMeta meta = db.meta();
+  noise::NoiseAnalyzer analyzer(meta);
+  db.for_each_frame([&](const ImuFrame& f) { analyzer.push(f); });
+  noise::Result r;
+  try {
+    r = analyzer.finish();
+  } catch (const std::exception&) {
+    throw NotAvailable(
+        "not available for this run: the Allan deviation needs static segments of at least 10 s (program "
+        "'noise' holds still for 7500 s)");
+  }
+  json out = json::parse(r.curves_json());
+  for (const char* c : {"gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"}) {
+    out[c].erase("psd");  // the PSD is not plotted; keep the answer small
+    out[c].erase("psd_freq_hz");
+  }
+  json arw = json::array(), vrw = json::array(), bi_g = json::array(), bi_a = json::array();
+  for (int c = 0; c < 3; ++c) {
+    arw.push_back(r.channel[c].white * units::kRadToDeg * 60.0);  // rad/sqrt(s) -> deg/sqrt(h)
+    vrw.push_back(r.channel[c + 3].white * 60.0);                 // (m/s)/sqrt(s) -> (m/s)/sqrt(h)
+    bi_g.push_back(r.channel[c].bias_instability > 0 ? json(r.channel[c].bias_instability * units::kRadpsToDph)
+                                                     : json(nullptr));
+    bi_a.push_back(r.channel[c + 3].bias_instability > 0 ? json(r.channel[c + 3].bias_instability) : json(nullptr));
+  }
+  out["arw_deg_rth"] = arw;
+  out["vrw_mps_rth"] = vrw;
+  out["bias_instability_dph"] = bi_g;
+  out["bias_instability_mps2"] = bi_a;
+  out["longest_static_s"] = r.longest_static_s;
+  out["total_static_s"] = r.total_static_s;
+  out["notes"] = r.notes;
+  return out;
+}
+
+json thermal_from_run(const std::string& run_path, const ImuModel& input) {
+  const storage::RunDb db = open_run(run_path);
+  RecordingMeta meta = db.meta();
+  // A campaign of several programs prefixes the segment names with the program's
+  // ("thermal/cycle-001/pos-1"); the stage looks for names starting with "cycle-NNN/".
+  for (SegmentInfo& s : meta.segments)
+    if (const auto p = s.name.find("/cycle-"); p != std::string::npos) s.name = s.name.substr(p + 1);
+  std::vector<thermal::Cycle> cycles;
+  try {
+    cycles = thermal::find_cycles(meta.segments);
+  } catch (const std::exception&) {
+  }
+  if (cycles.size() < 3)
+    throw NotAvailable("not available for this run: the thermal plots need the table cycles of program 'thermal' "
+                       "(or 'thermal-short') run with a chamber profile; this run has " +
+                       std::to_string(cycles.size()) + " cycles");
+  thermal::CycleEstimator estimator(meta, cycles, input);
+  db.for_each_frame([&](const ImuFrame& f) { estimator.push(f); });
+  const auto estimates = estimator.finish();
+  thermal::Result r;
+  try {
+    r = thermal::calibrate(meta, estimates, db.temps(), input, thermal::Options{});
+  } catch (const std::exception& e) {
+    throw NotAvailable(std::string("not available for this run: the thermal stage failed: ") + e.what());
+  }
+  const json report = json::parse(r.report_json);
+  // report.plots: {"columns": [...], "series": {coefficient: [[row], ...]}} (docs/thermal.md).
+  const json& plots = report.at("plots");
+  std::map<std::string, std::size_t> col;
+  for (std::size_t i = 0; i < plots.at("columns").size(); ++i) col[plots["columns"][i].get<std::string>()] = i;
+  json coefficients = json::object();
+  for (const auto& [name, rows] : plots.at("series").items()) {
+    json c = {{"T_C", json::array()}, {"before", json::array()}, {"after", json::array()}, {"truth", json::array()}};
+    for (const auto& row : rows) {
+      c["T_C"].push_back(row.at(col.at("T_C")));
+      c["before"].push_back(row.at(col.at("estimate")));
+      c["after"].push_back(row.at(col.at("compensated")));
+      c["truth"].push_back(row.at(col.at("truth")));
+    }
+    coefficients[name] = c;
+  }
+  return {{"T_ref_C", report.value("T_ref_C", 0.0)},
+          {"cycles_total", r.cycles_total},
+          {"cycles_used", r.cycles_used},
+          {"residual_source", report.value("residual_source", "")},
+          {"before", report.value("before", json::object())},
+          {"residual", report.value("residual", json::object())},
+          {"notes", r.notes},
+          {"coefficients", coefficients}};
+}
+
+json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants) {
+  const storage::RunDb db = open_run(run_path);
+  const RecordingMeta meta = db.meta();
+  bool judged = false;
+  for (const SegmentInfo& s : meta.segments) judged = judged || s.kind == "tilt" || s.kind == "coning";
+  if (!judged)
+    throw NotAvailable("not available for this run: the Schuler test needs the tilt and coning segments of program "
+                       "'evaluate'");
+  json out = {{"variants", json::array()}};
+  for (const Variant& v : variants) {
+    const evaluate::Result r = evaluate::evaluate_model(
+        meta, v.model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); });
+    json segments = json::array();
+    for (const auto& s : r.segments) {
+      json speed = json::array();
+      for (std::size_t i = 0; i < s.t_s.size(); ++i) speed.push_back(std::hypot(s.ve_mps[i], s.vn_mps[i]));
+      segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},
+                          {"schuler_amplitude_mps", s.amplitude_mps},
+                          {"implied_accel_error_mps2", s.implied_accel_error_mps2},
+                          {"implied_gyro_drift_dph", s.implied_gyro_drift_radps * units::kRadpsToDph},
+                          {"max_velocity_error_mps", s.max_velocity_error_mps},
+                          {"max_position_error_m", s.max_position_error_m},
+                          {"time_s", s.t_s},
+                          {"velocity_error_e_mps", s.ve_mps},
+                          {"velocity_error_n_mps", s.vn_mps},
+                          {"velocity_error_mps", speed}});
+    }
+    out["variants"].push_back({{"name", v.name},
+                               {"source", v.source},
+                               {"tilt_schuler_amplitude_mps", r.tilt_amplitude_mps},
+                               {"coning_schuler_amplitude_mps", r.coning_amplitude_mps},
+                               {"implied_accel_error_mps2", r.implied_accel_error_mps2},
+                               {"implied_gyro_drift_dph", r.implied_gyro_drift_radps * units::kRadpsToDph},
+                               {"segments", segments}});
+  }
+  return out;
+}
+
+std::optional<ImuModel> truth_of_run(const std::string& run_path) {
+  const storage::RunDb db = open_run(run_path);
+  const RecordingMeta meta = db.meta();
+  if (meta.truth_json.empty()) return std::nullopt;
+  return imu_model_from_json_text(meta.truth_json, "the run's truth");
+}
+
+std::string imu_serial_of_run(const std::string& run_path) { return open_run(run_path).meta().imu_serial; }
+
+void write_recording_tar(const std::string& run_path, const std::string& tar_path, const std::string& top_dir) {
+  const fs::path work = fs::path(tar_path + ".work");
+  std::error_code ec;
+  fs::remove_all(work, ec);
+  const fs::path dir = work / top_dir;
+  {
+    const storage::RunDb db = open_run(run_path);
+    storage::export_bundle(db, dir.string());
+  }
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file()) files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  const std::string partial = tar_path + ".partial";
+  {
+    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
+    if (!out) throw std::runtime_error("cannot write " + partial);
+    for (const auto& f : files) write_tar_entry(out, top_dir + "/" + f.filename().string(), f);
+    static const char zeros[1024] = {};
+    out.write(zeros, sizeof zeros);
+    out.flush();
+    if (!out) throw std::runtime_error("writing " + partial + " failed (disk full?)");
+  }
+  fs::rename(partial, tar_path);
+  fs::remove_all(work, ec);
+}
+
+}  // namespace imucal::daemon
