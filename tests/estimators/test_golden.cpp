@@ -14,6 +14,7 @@
 #include "estimators/lever_arm.hpp"
 #include "estimators/nav_filter.hpp"
 #include "estimators/noise.hpp"
+#include "lever_fixture.hpp"
 #include "nav_calib_fixture.hpp"
 #include "storage/bundle.hpp"
 
@@ -107,22 +108,8 @@ TEST(Golden, NoiseOnTheIndependentRecording) {
 }
 
 TEST(Golden, LeverArmOnASimulatedRun) {
-  ImuModel truth = calibtest::random_stage1_imu(31);
-  truth.accel.lever_arm_y_m << 0.011, -0.003, 0.004;
-  truth.accel.lever_arm_z_m << -0.007, 0.009, -0.010;
-  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = 100;
-  cfg.seed = 31;
-  cfg.mount.r0_p_m << 0.02, 0.01, 0.04;
-  ImuModel stage1 = truth;
-  stage1.accel.lever_arm_y_m.setZero();
-  stage1.accel.lever_arm_z_m.setZero();
-  sim::Simulator s(p, truth, cfg);
-  lever::LeverArmFilter filter(s.meta(), stage1);
-  ImuFrame f;
-  while (s.next(f)) filter.push(f);
-  const lever::Result r = filter.finish();
+  const lever::Result r = levertest::run(levertest::make_run(calibtest::random_stage1_imu(31), {0.011, -0.003, 0.004},
+                                                             {-0.007, 0.009, -0.010}, {0.02, 0.01, 0.04}, 100, 31));
   std::map<std::string, double> v, tol;
   for (int i = 0; i < 9; ++i) {
     v["rho." + std::to_string(i)] = r.state_m[i];

@@ -4,29 +4,19 @@
 #include "calib_fixture.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "estimators/lever_arm.hpp"
+#include "lever_fixture.hpp"
 
 using namespace imucal;
 
 TEST(LeverArm, FindsTheProofMassesAndTheOriginWithinAFractionOfAMillimetre) {
-  ImuModel truth = calibtest::random_stage1_imu(21);
-  truth.accel.lever_arm_y_m << 0.012, -0.004, 0.007;
-  truth.accel.lever_arm_z_m << -0.006, 0.010, -0.015;
-  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = 200;
-  cfg.seed = 3;
-  cfg.mount.r0_p_m << 0.035, -0.020, 0.060;
+  levertest::LeverRun run = levertest::make_run(calibtest::random_stage1_imu(21), {0.012, -0.004, 0.007},
+                                                {-0.006, 0.010, -0.015}, {0.035, -0.020, 0.060}, 200, 3);
   // The stage-1 model: the truth with small residual errors, as stage 1 leaves them.
-  ImuModel stage1 = truth;
-  stage1.accel.lever_arm_y_m.setZero();
-  stage1.accel.lever_arm_z_m.setZero();
-  stage1.accel.bias_mps2 += Eigen::Vector3d(5e-6, -5e-6, 3e-6);
-  stage1.accel.scale += Eigen::Vector3d(1e-6, -1e-6, 1e-6);
-  sim::Simulator s(p, truth, cfg);
-  lever::LeverArmFilter filter(s.meta(), stage1);
-  ImuFrame f;
-  while (s.next(f)) filter.push(f);
-  const lever::Result r = filter.finish();
+  run.stage1.accel.bias_mps2 += Eigen::Vector3d(5e-6, -5e-6, 3e-6);
+  run.stage1.accel.scale += Eigen::Vector3d(1e-6, -1e-6, 1e-6);
+  const lever::Result r = levertest::run(run);
+  const ImuModel& truth = run.truth;
+  const sim::SimConfig& cfg = run.cfg;
   for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
   const Eigen::Vector3d ey = (r.model.accel.lever_arm_y_m - truth.accel.lever_arm_y_m) * 1e3;
   const Eigen::Vector3d ez = (r.model.accel.lever_arm_z_m - truth.accel.lever_arm_z_m) * 1e3;
@@ -41,22 +31,11 @@ TEST(LeverArm, FindsTheProofMassesAndTheOriginWithinAFractionOfAMillimetre) {
 }
 
 TEST(LeverArm, SigmaIsConsistentWhenStageOneIsExact) {
-  ImuModel truth = calibtest::random_stage1_imu(22);
-  truth.accel.lever_arm_y_m << -0.008, 0.003, 0.009;
-  truth.accel.lever_arm_z_m << 0.004, -0.011, 0.013;
-  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = 200;
-  cfg.seed = 4;
-  cfg.mount.r0_p_m << -0.02, 0.03, 0.05;
-  ImuModel stage1 = truth;
-  stage1.accel.lever_arm_y_m.setZero();
-  stage1.accel.lever_arm_z_m.setZero();
-  sim::Simulator s(p, truth, cfg);
-  lever::LeverArmFilter filter(s.meta(), stage1);
-  ImuFrame f;
-  while (s.next(f)) filter.push(f);
-  const lever::Result r = filter.finish();
+  const levertest::LeverRun run = levertest::make_run(calibtest::random_stage1_imu(22), {-0.008, 0.003, 0.009},
+                                                      {0.004, -0.011, 0.013}, {-0.02, 0.03, 0.05}, 200, 4);
+  const lever::Result r = levertest::run(run);
+  const ImuModel& truth = run.truth;
+  const sim::SimConfig& cfg = run.cfg;
   for (int i = 0; i < 3; ++i) {
     EXPECT_LE(std::abs(r.model.accel.lever_arm_y_m[i] - truth.accel.lever_arm_y_m[i]),
               3 * r.model.sigma->accel.lever_arm_y_m[i]) << i;
@@ -88,26 +67,13 @@ TEST(LeverArm, StaticRecordingIsRefusedByName) {
 // those blocks out, 2 ms delays moved the proof masses by a third of a millimetre, and stage 3 then
 // paid for it in the gyro axis angles (0.9" instead of 0.1").
 TEST(LeverArm, UnknownAccelerometerDelaysDoNotMoveTheProofMasses) {
-  ImuModel truth = calibtest::random_stage1_imu(23);
-  truth.accel.lever_arm_y_m << 0.010, -0.004, 0.006;
-  truth.accel.lever_arm_z_m << -0.005, 0.008, -0.012;
-  truth.accel.delay_s << 2.0e-3, 2.1e-3, 1.9e-3;
-  truth.gyro.delay_s << 2e-6, 5e-6, -3e-6;
-  const auto p = motion::load_program("lever-arm", motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = 200;
-  cfg.seed = 5;
-  cfg.mount.r0_p_m << 0.03, -0.02, 0.05;
-  ImuModel stage1 = truth;  // what stage 1 knows: no lever arms, no delays
-  stage1.accel.lever_arm_y_m.setZero();
-  stage1.accel.lever_arm_z_m.setZero();
-  stage1.accel.delay_s.setZero();
-  stage1.gyro.delay_s.setZero();
-  sim::Simulator s(p, truth, cfg);
-  lever::LeverArmFilter filter(s.meta(), stage1);
-  ImuFrame f;
-  while (s.next(f)) filter.push(f);
-  const lever::Result r = filter.finish();
+  levertest::LeverRun run = levertest::make_run(calibtest::random_stage1_imu(23), {0.010, -0.004, 0.006},
+                                                {-0.005, 0.008, -0.012}, {0.03, -0.02, 0.05}, 200, 5);
+  run.truth.accel.delay_s << 2.0e-3, 2.1e-3, 1.9e-3;  // stage 1 knows no delays
+  run.truth.gyro.delay_s << 2e-6, 5e-6, -3e-6;
+  const lever::Result r = levertest::run(run);
+  const ImuModel& truth = run.truth;
+  const sim::SimConfig& cfg = run.cfg;
   const Eigen::Vector3d ey = (r.model.accel.lever_arm_y_m - truth.accel.lever_arm_y_m) * 1e3;
   const Eigen::Vector3d ez = (r.model.accel.lever_arm_z_m - truth.accel.lever_arm_z_m) * 1e3;
   const Eigen::Vector3d e0 = (*r.model.mount_r0_p_m - cfg.mount.r0_p_m) * 1e3;
