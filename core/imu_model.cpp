@@ -88,18 +88,14 @@ Misalignment misalignment_from(const json& j, const std::string& where) {
   const json& a = j.at("misalignment_arcsec");
   const std::string w = where + ".misalignment_arcsec";
   check_keys(a, w, {"xy", "xz", "yx", "yz", "zx", "zy"});
-  m.xy = scalar(a, "xy", w, kArcsecToRad);
-  m.xz = scalar(a, "xz", w, kArcsecToRad);
-  m.yx = scalar(a, "yx", w, kArcsecToRad);
-  m.yz = scalar(a, "yz", w, kArcsecToRad);
-  m.zx = scalar(a, "zx", w, kArcsecToRad);
-  m.zy = scalar(a, "zy", w, kArcsecToRad);
+  for (const MisalignmentKey& k : kMisalignmentKeys) m.*k.member = scalar(a, k.name, w, kArcsecToRad);
   return m;
 }
 
 json misalignment_to(const Misalignment& m) {
-  return {{"xy", m.xy * kRadToArcsec}, {"xz", m.xz * kRadToArcsec}, {"yx", m.yx * kRadToArcsec},
-          {"yz", m.yz * kRadToArcsec}, {"zx", m.zx * kRadToArcsec}, {"zy", m.zy * kRadToArcsec}};
+  json j = json::object();
+  for (const MisalignmentKey& k : kMisalignmentKeys) j[k.name] = m.*k.member * kRadToArcsec;
+  return j;
 }
 
 json arr(const Eigen::Vector3d& v, double scale) { return {v[0] * scale, v[1] * scale, v[2] * scale}; }

@@ -4,6 +4,7 @@
 // Everything here is SI (rad, rad/s, m/s^2, m, s, dimensionless scale); JSON carries the units.
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 
@@ -15,6 +16,19 @@ namespace imucal {
 struct Misalignment {
   double xy = 0, xz = 0, yx = 0, yz = 0, zx = 0, zy = 0;
 };
+
+// The six angles in the order formats.md lists them, each with its JSON key: one table for every
+// loop over the angles (parsing, writing, filter states, thermal fits, comparisons).
+struct MisalignmentKey {
+  const char* name;
+  double Misalignment::*member;
+};
+inline constexpr std::array<MisalignmentKey, 6> kMisalignmentKeys = {{{"xy", &Misalignment::xy},
+                                                                     {"xz", &Misalignment::xz},
+                                                                     {"yx", &Misalignment::yx},
+                                                                     {"yz", &Misalignment::yz},
+                                                                     {"zx", &Misalignment::zx},
+                                                                     {"zy", &Misalignment::zy}}};
 
 // D (rows are the sensor axes in o, first order):
 //   | 1    xz  -xy |

@@ -459,10 +459,7 @@ int cmd_compare(const std::string& model_path, const std::string& truth_path, co
     row("accel.lever_arm_y_mm." + a, est.accel.lever_arm_y_m[j], truth.accel.lever_arm_y_m[j], sigma.accel.lever_arm_y_m[j], 1e3);
     row("accel.lever_arm_z_mm." + a, est.accel.lever_arm_z_m[j], truth.accel.lever_arm_z_m[j], sigma.accel.lever_arm_z_m[j], 1e3);
   }
-  const std::pair<const char*, double Misalignment::*> keys[6] = {
-      {"xy", &Misalignment::xy}, {"xz", &Misalignment::xz}, {"yx", &Misalignment::yx},
-      {"yz", &Misalignment::yz}, {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
-  for (const auto& [n, k] : keys) {
+  for (const auto& [n, k] : kMisalignmentKeys) {
     row(std::string("gyro.misalignment_arcsec.") + n, est.gyro.misalignment_rad.*k, truth.gyro.misalignment_rad.*k,
         sigma.gyro.misalignment_rad.*k, units::kRadToArcsec);
     row(std::string("accel.misalignment_arcsec.") + n, est.accel.misalignment_rad.*k, truth.accel.misalignment_rad.*k,

@@ -44,9 +44,10 @@ Mat<3, 3> accel_angle_jacobian(const Vector3d& f) {
   return J;
 }
 
-constexpr std::array<double Misalignment::*, 6> kGyroAngleKeys = {&Misalignment::xy, &Misalignment::xz,
-                                                                  &Misalignment::yx, &Misalignment::yz,
-                                                                  &Misalignment::zx, &Misalignment::zy};
+// The gyro angle states in the order of kMisalignmentKeys.
+constexpr std::array<double Misalignment::*, 6> kGyroAngleKeys = {
+    kMisalignmentKeys[0].member, kMisalignmentKeys[1].member, kMisalignmentKeys[2].member,
+    kMisalignmentKeys[3].member, kMisalignmentKeys[4].member, kMisalignmentKeys[5].member};
 constexpr std::array<double Misalignment::*, 3> kAccelAngleKeys = {&Misalignment::yz, &Misalignment::zx,
                                                                    &Misalignment::zy};
 

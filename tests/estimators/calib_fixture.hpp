@@ -30,9 +30,8 @@ inline ImuModel random_stage1_imu(unsigned seed) {
     m.accel.scale[j] = 100e-6 * n01(rng);
   }
   for (Misalignment* mis : {&m.gyro.misalignment_rad, &m.accel.misalignment_rad})
-    for (double Misalignment::*k : {&Misalignment::xy, &Misalignment::xz, &Misalignment::yx, &Misalignment::yz,
-                                    &Misalignment::zx, &Misalignment::zy})
-      mis->*k = 30.0 * n01(rng) * kArcsecToRad;
+    for (const MisalignmentKey& key : kMisalignmentKeys)
+      mis->*key.member = 30.0 * n01(rng) * kArcsecToRad;
   m.gyro.noise.arw_rad_rts = 0.0005 * kDegRthToRadRts;
   m.accel.noise.vrw_mps_rts = 0.002 * kMpsRthToMpsRts;
   return m;
@@ -70,10 +69,7 @@ inline void expect_within(const ImuModel& truth, const ImuModel& est, const Limi
     check(std::string("accel.scale_ppm.") + ax[j], truth.accel.scale[j], est.accel.scale[j], sg.accel.scale[j], 1e6,
           lim.accel_scale_ppm);
   }
-  const std::pair<const char*, double Misalignment::*> keys[6] = {
-      {"xy", &Misalignment::xy}, {"xz", &Misalignment::xz}, {"yx", &Misalignment::yx},
-      {"yz", &Misalignment::yz}, {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
-  for (const auto& [name, k] : keys) {
+  for (const auto& [name, k] : kMisalignmentKeys) {
     check(std::string("gyro.misalignment.") + name, truth.gyro.misalignment_rad.*k, est.gyro.misalignment_rad.*k,
           sg.gyro.misalignment_rad.*k, kRadToArcsec, lim.gyro_angle_arcsec);
     check(std::string("accel.misalignment.") + name, truth.accel.misalignment_rad.*k, est.accel.misalignment_rad.*k,

@@ -40,9 +40,8 @@ inline Scenario make_scenario(unsigned seed, double rate_hz) {
     m.accel.bias_mps2[j] += 1e-3 * n01(rng);
     m.accel.scale[j] += 1e-5 * n01(rng);
   }
-  for (double Misalignment::*k : {&Misalignment::xy, &Misalignment::xz, &Misalignment::yx, &Misalignment::yz,
-                                  &Misalignment::zx, &Misalignment::zy})
-    m.gyro.misalignment_rad.*k += 3.0 * kArcsecToRad * n01(rng);
+  for (const MisalignmentKey& key : kMisalignmentKeys)
+    m.gyro.misalignment_rad.*key.member += 3.0 * kArcsecToRad * n01(rng);
   for (double Misalignment::*k : {&Misalignment::yz, &Misalignment::zx, &Misalignment::zy})
     m.accel.misalignment_rad.*k += 3.0 * kArcsecToRad * n01(rng);
   m.gyro.delay_s.setZero();

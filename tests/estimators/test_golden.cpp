@@ -63,10 +63,7 @@ void flatten(const ImuModel& m, std::map<std::string, double>& v, std::map<std::
     put("accel.lever_y." + a, m.accel.lever_arm_y_m[j], s.accel.lever_arm_y_m[j]);
     put("accel.lever_z." + a, m.accel.lever_arm_z_m[j], s.accel.lever_arm_z_m[j]);
   }
-  const std::pair<const char*, double Misalignment::*> keys[6] = {
-      {"xy", &Misalignment::xy}, {"xz", &Misalignment::xz}, {"yx", &Misalignment::yx},
-      {"yz", &Misalignment::yz}, {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
-  for (const auto& [n, k] : keys) {
+  for (const auto& [n, k] : kMisalignmentKeys) {
     put(std::string("gyro.angle.") + n, m.gyro.misalignment_rad.*k, s.gyro.misalignment_rad.*k);
     put(std::string("accel.angle.") + n, m.accel.misalignment_rad.*k, s.accel.misalignment_rad.*k);
   }

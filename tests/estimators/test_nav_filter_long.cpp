@@ -22,10 +22,7 @@ void report(const navcaltest::Scenario& s, const navfilter::Result& r) {
                 (e.gyro.scale_pos[j] - t.gyro.scale_pos[j]) * 1e6, (e.gyro.scale_neg[j] - t.gyro.scale_neg[j]) * 1e6,
                 e.accel.bias_mps2[j] - t.accel.bias_mps2[j], (e.accel.scale[j] - t.accel.scale[j]) * 1e6,
                 (e.gyro.delay_s[j] - t.gyro.delay_s[j]) * 1e6, (e.accel.delay_s[j] - t.accel.delay_s[j]) * 1e6);
-  const std::pair<const char*, double Misalignment::*> keys[6] = {
-      {"xy", &Misalignment::xy}, {"xz", &Misalignment::xz}, {"yx", &Misalignment::yx},
-      {"yz", &Misalignment::yz}, {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
-  for (const auto& [n, k] : keys)
+  for (const auto& [n, k] : kMisalignmentKeys)
     std::printf("angle %s: gyro %+.3f\"  accel %+.3f\"\n", n, (e.gyro.misalignment_rad.*k - t.gyro.misalignment_rad.*k) * kRadToArcsec,
                 (e.accel.misalignment_rad.*k - t.accel.misalignment_rad.*k) * kRadToArcsec);
 }
@@ -48,9 +45,8 @@ TEST(NavFilterLong, RefinesEveryCoefficientOnTheNavigationProgram) {
     EXPECT_LE(std::abs(e.gyro.delay_s[j] - t.gyro.delay_s[j]) * 1e6, 3.0) << j;
     EXPECT_LE(std::abs(e.accel.delay_s[j] - t.accel.delay_s[j]) * 1e6, 50.0) << j;
   }
-  for (double Misalignment::*k : {&Misalignment::xy, &Misalignment::xz, &Misalignment::yx, &Misalignment::yz,
-                                  &Misalignment::zx, &Misalignment::zy})
-    EXPECT_LE(std::abs(e.gyro.misalignment_rad.*k - t.gyro.misalignment_rad.*k) * kRadToArcsec, 0.3);
+  for (const MisalignmentKey& key : kMisalignmentKeys)
+    EXPECT_LE(std::abs(e.gyro.misalignment_rad.*key.member - t.gyro.misalignment_rad.*key.member) * kRadToArcsec, 0.3);
   for (double Misalignment::*k : {&Misalignment::yz, &Misalignment::zx, &Misalignment::zy})
     EXPECT_LE(std::abs(e.accel.misalignment_rad.*k - t.accel.misalignment_rad.*k) * kRadToArcsec, 0.9);
   const double tau_yx = t.gyro.delay_s[1] - t.gyro.delay_s[0], tau_zx = t.gyro.delay_s[2] - t.gyro.delay_s[0];
