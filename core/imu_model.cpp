@@ -249,8 +249,11 @@ std::string imu_model_to_json_text(const ImuModel& m) {
   if (m.body_to_instrument_rad) j["body_to_instrument_arcsec"] = arr(*m.body_to_instrument_rad, kRadToArcsec);
   if (m.mount_r0_p_m) j["mount"] = {{"r0_p_mm", arr(*m.mount_r0_p_m, 1.0 / kMmToM)}};
   if (!m.thermal_json.empty()) j["thermal"] = json::parse(m.thermal_json);
-  if (!m.extra_json.empty())
-    for (const auto& [k, v] : json::parse(m.extra_json).items()) j[k] = v;
+  if (!m.extra_json.empty()) {
+    // Named: a range-for over parse(..).items() would iterate a temporary destroyed before the loop.
+    const json extra = json::parse(m.extra_json);
+    for (const auto& [k, v] : extra.items()) j[k] = v;
+  }
   return j.dump(1) + "\n";
 }
 

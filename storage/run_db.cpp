@@ -680,7 +680,7 @@ struct RunDb::Impl {
         "chamber_C, chamber_setpoint_C) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)");
     select_temps = prepare(
         "SELECT t_ns, gyro_x_C, gyro_y_C, gyro_z_C, accel_x_C, accel_y_C, accel_z_C, chamber_C, "
-        "chamber_setpoint_C FROM temp_sample ORDER BY t_ns");
+        "chamber_setpoint_C FROM temp_sample WHERE t_ns >= ?1 AND t_ns <= ?2 ORDER BY t_ns");
     delete_segments = prepare("DELETE FROM segment");
     insert_segment = prepare("INSERT INTO segment(idx, name, kind, t0_s, t1_s) VALUES (?1, ?2, ?3, ?4, ?5)");
     select_segments = prepare("SELECT name, kind, t0_s, t1_s FROM segment ORDER BY idx");
@@ -1477,11 +1477,13 @@ std::vector<PlotColumn> RunDb::decimate(std::int64_t t0_ns, std::int64_t t1_ns, 
   return out;
 }
 
-std::vector<TempSample> RunDb::temps() const {
+std::vector<TempSample> RunDb::temps(std::int64_t t0_ns, std::int64_t t1_ns) const {
   Impl& d = impl();
   std::vector<TempSample> temps;
   Statement& stmt = d.select_temps;
   Statement::Reset reset(stmt);
+  stmt.bind(1, t0_ns);
+  stmt.bind(2, t1_ns);
   while (stmt.step()) {
     TempSample sample;
     sample.t_ns = stmt.column_int64(0);
