@@ -115,7 +115,7 @@ enum class OpenMode {
 
 class RunDb {
  public:
-  static constexpr int kSchemaVersion = 2;  // PRAGMA user_version; open() migrates older files
+  static constexpr int kSchemaVersion = 3;  // PRAGMA user_version; open() migrates older files
   static constexpr std::size_t kFramesPerChunk = 4096;
   static constexpr int kPlotChannels = 9;
 
