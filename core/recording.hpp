@@ -29,6 +29,10 @@ struct TempSample {
   Eigen::Vector3d accel_C = Eigen::Vector3d::Constant(25.0);  // accelerometers, x y z
   double chamber_C = 25.0;
   std::optional<double> chamber_setpoint_C;
+  // The eight sensors of each FOG coil, [coil x y z][sensor 1..8], when the logger reports them
+  // (formats.md: temp_gx_1_C .. temp_gz_8_C); gyro_C is then their mean. They tell a broken
+  // sensor from a real change of the coil's temperature.
+  std::optional<std::array<std::array<double, 8>, 3>> coil_sensors_C;
 };
 
 struct Site {

@@ -276,8 +276,9 @@ ImuModel run_thermal_stage(storage::RunDb& db, const ImuModel& model, const Cali
 ImuModel run_navigation_stage(storage::RunDb& db, const ImuModel& model, int passes) {
   const RecordingMeta meta = db.meta();
   const auto t0 = Clock::now();
+  // The run's temperatures drive the model's thermal compensation (stage 2), if it has a section.
   const navfilter::Result r = navfilter::calibrate_offline(
-      meta, model, [&](const auto& fn) { db.for_each_frame(fn); }, passes);
+      meta, model, [&](const auto& fn) { db.for_each_frame(fn); }, passes, navfilter::Options{}, db.temps());
   const double wall = seconds_since(t0);
   std::printf("stage navigation: %s; %lld frames, %lld updates, %lld rejected, %lld restarts, %d pass(es) in %.1f s\n",
               r.status.c_str(), static_cast<long long>(r.frames), static_cast<long long>(r.updates),
@@ -398,7 +399,8 @@ int cmd_evaluate(const std::string& db_path, const std::vector<std::string>& mod
     }
     const ImuModel model = read_imu_model_file(path);
     const evaluate::Result r = evaluate::evaluate_model(
-        meta, model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); });
+        meta, model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); },
+        db.temps());
     nlohmann::json segs = nlohmann::json::array();
     for (const auto& s : r.segments)
       segs.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},

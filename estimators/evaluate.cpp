@@ -39,7 +39,8 @@ SchulerFit fit_schuler(const std::vector<double>& t_s, const std::vector<double>
   return {c[0], c[1], c[2]};
 }
 
-Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const FrameRange& frames) {
+Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const FrameRange& frames,
+                      const std::vector<TempSample>& temps) {
   Result out;
   const double g = earth::site_gravity_mps2(meta.site);
   const double nu = std::sqrt(g / earth::kA_m);
@@ -63,7 +64,17 @@ Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const Fr
     });
     // Start one second before the segment so the navigation is initialised at rest or in motion
     // exactly as the table says, then judge the whole segment.
-    frames([&](const ImuFrame& f) { run.push(f); }, std::llround((s.t0_s - 1.0) * 1e9), std::llround(s.t1_s * 1e9));
+    const std::int64_t t_start_ns = std::llround((s.t0_s - 1.0) * 1e9);
+    // Temperatures from a little more than the thermal rate's window (120 s) before the start, so
+    // that dT/dt is known from the first frame; then each sample before the frames after it.
+    auto next_temp = std::lower_bound(temps.begin(), temps.end(), t_start_ns - 150'000'000'000LL,
+                                      [](const TempSample& x, std::int64_t t_ns) { return x.t_ns < t_ns; });
+    frames(
+        [&](const ImuFrame& f) {
+          while (next_temp != temps.end() && next_temp->t_ns <= f.t_ns) run.push_temp(*next_temp++);
+          run.push(f);
+        },
+        t_start_ns, std::llround(s.t1_s * 1e9));
     const nav::NavSummary sum = run.finish();
     sr.max_velocity_error_mps = sum.max_velocity_error_mps;
     sr.max_position_error_m = sum.max_position_error_m;

@@ -48,7 +48,10 @@ double schuler_amplitude(const std::vector<double>& t_s, const std::vector<doubl
 using FrameRange = std::function<void(const std::function<void(const ImuFrame&)>&, std::int64_t t0_ns,
                                       std::int64_t t1_ns)>;
 
-// Segments of kind tilt and coning are judged; a recording with neither is an error.
-Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const FrameRange& frames);
+// Segments of kind tilt and coning are judged; a recording with neither is an error. `temps` (the
+// run's temperature samples in time order) drive the model's thermal compensation, if it has a
+// section; without them its coefficients are those at T_ref.
+Result evaluate_model(const RecordingMeta& meta, const ImuModel& model, const FrameRange& frames,
+                      const std::vector<TempSample>& temps = {});
 
 }  // namespace imucal::evaluate

@@ -11,6 +11,7 @@
 #include "core/table.hpp"
 #include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
+#include "estimators/thermal.hpp"
 
 namespace imucal::navfilter {
 
@@ -75,8 +76,16 @@ StateVector model_to_state(const ImuModel& m) {
 struct NavCalibrationFilter::Impl {
   RecordingMeta meta;
   Options opt;
-  ImuModel model;  // body frame, updated by feedback
+  ImuModel model;  // body frame, updated by feedback; with a thermal section: the values at T_ref
   ImuModel model_at_start;
+  // What the compensator applies: `model`, moved to the current temperatures by the thermal
+  // section. A temperature change of an angle is the same relative to o or to the body frame
+  // (fixed at T_ref), so the section's additive polynomials apply to the body-frame values as they
+  // are; the accelerometer's xy, xz, yx then leave zero, which the compensator handles.
+  ImuModel compensated;
+  std::optional<thermal::ThermalSection> thermal_section;
+  thermal::ChannelRate temp_rate;
+  bool have_temps = false;
   nav::Compensator comp;
   nav::TableReference ref;
   double dt_nominal_s;
@@ -109,11 +118,13 @@ struct NavCalibrationFilter::Impl {
       : meta(m),
         opt(o),
         model(model_in.frame == "body" ? model_in : direct::to_body_frame(model_in)),
-        comp(model, 1.0 / m.rate_hz, o.max_delay_s),
+        compensated(model),
+        comp(compensated, 1.0 / m.rate_hz, o.max_delay_s),
         ref(m, model),
         dt_nominal_s(1.0 / m.rate_hz),
         g_mps2(earth::site_gravity_mps2(m.site)) {
     model_at_start = model;
+    if (auto section = thermal::thermal_of(model); section && section->has_models()) thermal_section = *section;
     for (const SegmentInfo& s : m.segments)
       if ((s.kind == "static" || s.kind == "tilt") && s.t1_s - s.t0_s >= o.restart_static_s)
         restart_times_s.push_back(s.t0_s);
@@ -140,6 +151,22 @@ struct NavCalibrationFilter::Impl {
     P.topRows(9).setZero();
     P.leftCols(9).setZero();
     for (int i = 0; i < 9; ++i) P(i, i) = sigma0[i] * sigma0[i];
+  }
+
+  void push_temp(const TempSample& temp) {
+    if (!thermal_section) return;
+    temp_rate.push(temp);
+    have_temps = true;
+    refresh_compensation();
+  }
+
+  // The compensator's coefficients: the filter's current model, at the current temperatures.
+  // Until the first temperature sample, the values at T_ref.
+  void refresh_compensation() {
+    compensated.gyro = model.gyro;
+    compensated.accel = model.accel;
+    if (thermal_section && have_temps)
+      thermal::apply_thermal(*thermal_section, temp_rate.current(), compensated.gyro, compensated.accel);
   }
 
   void push(const ImuFrame& f) {
@@ -351,6 +378,7 @@ struct NavCalibrationFilter::Impl {
     model.gyro.delay_s += seg(x, kGyroDelay);
     model.accel.delay_s += seg(x, kAccelDelay);
     x.setZero();
+    refresh_compensation();
   }
 
   void record_history() {
@@ -404,6 +432,7 @@ NavCalibrationFilter::NavCalibrationFilter(const RecordingMeta& meta, const ImuM
     : impl_(std::make_unique<Impl>(meta, model, options)) {}
 NavCalibrationFilter::~NavCalibrationFilter() = default;
 void NavCalibrationFilter::push(const ImuFrame& frame) { impl_->push(frame); }
+void NavCalibrationFilter::push_temp(const TempSample& temp) { impl_->push_temp(temp); }
 Result NavCalibrationFilter::finish() { return impl_->finish(); }
 
 std::string Result::history_json() const {

@@ -114,6 +114,11 @@ class NavCalibrationFilter {
   NavCalibrationFilter(const RecordingMeta& meta, const ImuModel& model, const Options& options = {});
   ~NavCalibrationFilter();
   void push(const ImuFrame& frame);
+  // Temperatures for a model with a "thermal" section (ignored without one): push each sample
+  // before the frames after it. The compensation then uses the coefficients moved to the
+  // temperatures and rates (stage 2); the filter estimates and feeds back the constants at T_ref,
+  // which is what the result's model carries beside the unchanged section.
+  void push_temp(const TempSample& temp);
   Result finish();
 
  private:
@@ -121,15 +126,20 @@ class NavCalibrationFilter {
   std::unique_ptr<Impl> impl_;
 };
 
-// Offline: several passes over a recording, each seeded with the previous pass's model.
+// Offline: several passes over a recording, each seeded with the previous pass's model. `temps`
+// (time order) drive the model's thermal compensation, if it has a section.
 template <class ForEachFrame>
 Result calibrate_offline(const RecordingMeta& meta, const ImuModel& model, ForEachFrame for_each_frame, int passes,
-                         const Options& options = {}) {
+                         const Options& options = {}, const std::vector<TempSample>& temps = {}) {
   ImuModel current = model;
   Result r;
   for (int pass = 0; pass < passes; ++pass) {
     NavCalibrationFilter filter(meta, current, options);
-    for_each_frame([&](const ImuFrame& f) { filter.push(f); });
+    std::size_t next_temp = 0;
+    for_each_frame([&](const ImuFrame& f) {
+      while (next_temp < temps.size() && temps[next_temp].t_ns <= f.t_ns) filter.push_temp(temps[next_temp++]);
+      filter.push(f);
+    });
     r = filter.finish();
     if (!r.converged) break;
     current = r.model;

@@ -374,6 +374,71 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
       i = k + 1;
     }
   }
+  // The eight sensors of each coil, when every sample carries them: the same stuck and jump rules
+  // per sensor, the coil's other seven the witnesses that the temperature moved, so that the
+  // report names the sensor that broke (a problem of the coil mean below says what it did to the
+  // channel the models use). A sensor coming unstuck moves the mean by a step that is no jump.
+  const bool with_coil_sensors =
+      std::all_of(temps.begin(), temps.end(), [](const TempSample& s) { return s.coil_sensors_C.has_value(); });
+  for (std::size_t c = 0; c < 3 && with_coil_sensors; ++c) {
+    for (std::size_t k = 0; k < 8; ++k) {
+      auto sensor = [&](std::size_t i, std::size_t which) { return (*temps[i].coil_sensors_C)[c][which]; };
+      const std::string nm = std::string("temp_g") + "xyz"[c] + "_" + std::to_string(k + 1) + "_C";
+      const unsigned coil_mask = 1u << c;
+      std::vector<std::size_t> unstuck;  // ends of long unchanged runs (all eight stuck: the mean says so)
+      for (std::size_t i = 0; i < n;) {
+        std::size_t e = i;
+        while (e + 1 < n && sensor(e + 1, k) == sensor(i, k)) ++e;
+        if (t_of(e) - t_of(i) >= o.stuck_s) {
+          unstuck.push_back(e);
+          std::vector<double> others_change;
+          for (std::size_t other = 0; other < 8; ++other) {
+            if (other == k) continue;
+            double lo = sensor(i, other), hi = lo;
+            for (std::size_t m = i; m <= e; ++m) {
+              lo = std::min(lo, sensor(m, other));
+              hi = std::max(hi, sensor(m, other));
+            }
+            others_change.push_back(hi - lo);
+          }
+          std::sort(others_change.begin(), others_change.end());
+          const double others = others_change[others_change.size() / 2];
+          if (others >= o.stuck_others_change_C) {
+            out.push_back({nm,
+                           "stuck at " + fmt("%.3f", sensor(i, k)) + " C for " + fmt("%.0f", t_of(e) - t_of(i)) +
+                               " s while the coil's other sensors moved by " + fmt("%.2f", others) + " C",
+                           t_of(i), e + 1 < n ? t_of(e + 1) : t_of(e), coil_mask});
+            stuck_end[c].push_back(e);
+          }
+        }
+        i = e + 1;
+      }
+      for (std::size_t i = 1; i < n; ++i) {
+        const double a = sensor(i - 1, k), b = sensor(i, k);
+        if (!std::isfinite(a) || !std::isfinite(b)) {
+          out.push_back({nm, "no valid reading", t_of(i - 1), t_of(i), coil_mask});
+          continue;
+        }
+        if (std::find(unstuck.begin(), unstuck.end(), i - 1) != unstuck.end()) continue;  // coming unstuck
+        const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
+        const double step = b - a;
+        if (std::abs(step) <= allowed) continue;
+        std::size_t back = n;
+        for (std::size_t m = i + 1; m < n; ++m) {
+          const double d = sensor(m, k) - sensor(m - 1, k);
+          if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
+            back = m;
+            break;
+          }
+        }
+        std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
+        what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
+        out.push_back({nm, what + " (one of coil " + "xyz"[c] + "'s eight sensors)", t_of(i - 1),
+                       back < n ? t_of(back) : t_end, coil_mask});
+        i = back < n ? back : n;
+      }
+    }
+  }
   for (int ch = 0; ch <= kChamber; ++ch) {
     // Missing or implausible readings (a broken sensor reads NaN, its maximum or nothing).
     for (std::size_t i = 0; i < n;) {

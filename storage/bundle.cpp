@@ -32,6 +32,12 @@ constexpr std::array<const char*, 17> kRequiredColumns = {
     "dv_z_mps",  "outer_deg", "middle_deg", "inner_deg", "temp_gx_C", "temp_gy_C",
     "temp_gz_C", "temp_ax_C", "temp_ay_C",  "temp_az_C", "temp_chamber_C"};
 constexpr const char* kSetpointColumn = "chamber_setpoint_C";
+constexpr const char* kCoilNames[3] = {"gx", "gy", "gz"};
+
+// formats.md's optional columns of the individual coil sensors: temp_gx_1_C .. temp_gz_8_C.
+std::string coil_column(std::size_t coil, std::size_t sensor) {
+  return std::string("temp_") + kCoilNames[coil] + "_" + std::to_string(sensor + 1) + "_C";
+}
 constexpr std::int64_t kNsPerS = 1'000'000'000;
 
 // Frames handed to RunDb::append at once: one transaction per 16 chunks.
@@ -468,7 +474,13 @@ bool same_temperatures(const TempSample& a, const TempSample& b) {
   }
   if (!same_bits(a.chamber_C, b.chamber_C)) return false;
   if (a.chamber_setpoint_C.has_value() != b.chamber_setpoint_C.has_value()) return false;
-  return !a.chamber_setpoint_C || same_bits(*a.chamber_setpoint_C, *b.chamber_setpoint_C);
+  if (a.chamber_setpoint_C && !same_bits(*a.chamber_setpoint_C, *b.chamber_setpoint_C)) return false;
+  if (a.coil_sensors_C.has_value() != b.coil_sensors_C.has_value()) return false;
+  if (a.coil_sensors_C)
+    for (std::size_t c = 0; c < 3; ++c)
+      for (std::size_t k = 0; k < 8; ++k)
+        if (!same_bits((*a.coil_sensors_C)[c][k], (*b.coil_sensors_C)[c][k])) return false;
+  return true;
 }
 
 // Parses frames.csv into `run`. Throws StorageError naming the line.
@@ -497,10 +509,22 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
               std::to_string(found - header.begin() + 1) + ", expected as column " + std::to_string(i + 1));
   }
   std::optional<std::size_t> setpoint_column;
+  // The coil sensors are kept only when all 24 columns are there (a coil's mean needs its eight).
+  std::vector<std::pair<std::size_t, std::size_t>> coil_of_column(header.size(), {3, 0});  // {coil, sensor}
+  int coil_columns = 0;
+  for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t k = 0; k < 8; ++k) {
+      const auto found = std::find(header.begin() + static_cast<std::ptrdiff_t>(kRequiredColumns.size()),
+                                   header.end(), coil_column(c, k));
+      if (found == header.end()) continue;
+      coil_of_column[static_cast<std::size_t>(found - header.begin())] = {c, k};
+      ++coil_columns;
+    }
+  const bool with_coils = coil_columns == 24;
   for (std::size_t i = kRequiredColumns.size(); i < header.size(); ++i) {
     if (header[i] == kSetpointColumn && !setpoint_column) {
       setpoint_column = i;
-    } else {
+    } else if (!(with_coils && coil_of_column[i].first < 3)) {
       report.ignored_columns.push_back(header[i]);
     }
   }
@@ -581,22 +605,34 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       temp.accel_C(static_cast<Eigen::Index>(axis)) = value[13 + axis];
     }
     temp.chamber_C = value[16];
-    // The optional columns: the set point is kept (empty: none at this line), the rest skipped.
+    // The optional columns: the set point and the coil sensors are kept (empty: none at this
+    // line), the rest skipped.
+    int coil_fields = 0;
     while (!cursor.exhausted()) {
       const std::size_t column = cursor.consumed();
       if (column >= header.size()) fail_field("too many fields");
-      if (column == setpoint_column) {
+      const bool is_coil = with_coils && coil_of_column[column].first < 3;
+      if (column == setpoint_column || is_coil) {
         const std::string_view field = cursor.text();
         if (!trim(field).empty()) {
-          double setpoint_C = 0.0;
-          if (auto error = parse_double(field, setpoint_C)) fail_field("column '" + header[column] + "': " + *error);
-          temp.chamber_setpoint_C = setpoint_C;
+          double value_C = 0.0;
+          if (auto error = parse_double(field, value_C)) fail_field("column '" + header[column] + "': " + *error);
+          if (is_coil) {
+            const auto [coil, sensor] = coil_of_column[column];
+            if (!temp.coil_sensors_C) temp.coil_sensors_C.emplace();
+            (*temp.coil_sensors_C)[coil][sensor] = value_C;
+            ++coil_fields;
+          } else {
+            temp.chamber_setpoint_C = value_C;
+          }
         }
       } else {
         cursor.text();
       }
     }
     if (cursor.consumed() != header.size()) fail_field("too few fields");
+    if (coil_fields != 0 && coil_fields != 24)
+      fail_line(std::to_string(coil_fields) + " of the 24 coil sensors (temp_gx_1_C .. temp_gz_8_C) given: all or none");
     // Run-length: the export's sample-and-hold gives every frame its values back.
     if (!last_temp || !same_temperatures(temp, *last_temp)) {
       temps.push_back(temp);
@@ -650,6 +686,8 @@ void export_bundle(const RunDb& run, const std::string& dir) {
   if (temps.empty()) temps.emplace_back();  // documented: defaults when the run has none
   const bool with_setpoint = std::any_of(temps.begin(), temps.end(),
                                          [](const TempSample& t) { return t.chamber_setpoint_C.has_value(); });
+  const bool with_coils =
+      std::any_of(temps.begin(), temps.end(), [](const TempSample& t) { return t.coil_sensors_C.has_value(); });
 
   const fs::path csv_path = fs::path(dir) / "frames.csv";
   const fs::path partial = fs::path(csv_path.string() + ".partial");
@@ -678,10 +716,16 @@ void export_bundle(const RunDb& run, const std::string& dir) {
       append_text(",");
       append_text(kSetpointColumn);
     }
+    if (with_coils)
+      for (std::size_t c = 0; c < 3; ++c)
+        for (std::size_t k = 0; k < 8; ++k) {
+          append_text(",");
+          append_text(coil_column(c, k));
+        }
     append_text("\n");
 
-    // One line is at most 18 doubles of <= 24 chars plus a time: far below this margin.
-    constexpr std::size_t kMaxLine = 1024;
+    // One line is at most 42 doubles of <= 24 chars plus a time: far below this margin.
+    constexpr std::size_t kMaxLine = 2048;
     std::size_t temp_index = 0;
     run.for_each_frame([&](const ImuFrame& frame) {
       while (temp_index + 1 < temps.size() && temps[temp_index + 1].t_ns <= frame.t_ns) ++temp_index;
@@ -707,6 +751,15 @@ void export_bundle(const RunDb& run, const std::string& dir) {
           *out++ = ',';  // no set point at this time: empty field
         }
       }
+      if (with_coils)
+        for (std::size_t c = 0; c < 3; ++c)
+          for (std::size_t k = 0; k < 8; ++k) {
+            if (temp.coil_sensors_C) {
+              field((*temp.coil_sensors_C)[c][k]);
+            } else {
+              *out++ = ',';  // a sample without the eight sensors: empty fields
+            }
+          }
       *out++ = '\n';
       used = static_cast<std::size_t>(out - buffer.data());
     });

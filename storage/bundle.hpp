@@ -33,8 +33,9 @@ struct ImportReport {
   std::int64_t frames = 0;
   std::int64_t temp_samples = 0;  // stored run-length: one per change of any temperature
   std::vector<Gap> gaps;
-  // Columns after the required ones that the import does not keep (e.g. temp_gx_1_C), so that
-  // nothing is dropped without saying so.
+  // Columns after the required ones that the import does not keep (any but chamber_setpoint_C
+  // and the 24 coil sensors temp_gx_1_C .. temp_gz_8_C, which are kept only when all 24 are
+  // there), so that nothing is dropped without saying so.
   std::vector<std::string> ignored_columns;
 };
 

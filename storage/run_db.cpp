@@ -1,17 +1,20 @@
 // RunDb implementation: SQLite schema and migrations, RAII handles, the frame chunk codec, the
 // writer session and recovery.
 //
-// Schema (PRAGMA user_version = 2, PRAGMA application_id = kApplicationId):
+// Schema (PRAGMA user_version = 3, PRAGMA application_id = kApplicationId):
 //   run_meta(id = 1, json)                 RecordingMeta without the segments, as JSON
 //   imu_chunk(id, t0_ns, t1_ns, n, codec, summary, data)   up to kFramesPerChunk frames per row
-//   temp_sample(t_ns, gyro_*_C, accel_*_C, chamber_C, chamber_setpoint_C)
+//   temp_sample(t_ns, gyro_*_C, accel_*_C, chamber_C, chamber_setpoint_C, coil_sensors_C)
+//                                          coil_sensors_C: NULL, or the 24 coil sensors as
+//                                          f64 [coil x y z][sensor 1..8] (192 bytes)
 //   segment(idx, name, kind, t0_s, t1_s)
 //   extra(key, json)                       results of later stages, import gaps, reports
 //   recorder_session(...)                  one row per writer session; closed_unix_ms IS NULL
 //                                          while writing -- after a crash, the unclean marker
 //   dropped_span(session, t0_ns, t1_ns, frames)   frames the recorder had to drop
 // Version 1 lacked summary, recorder_session and dropped_span; open() migrates it (a v1 chunk
-// keeps a NULL summary and is decoded when a plot needs it).
+// keeps a NULL summary and is decoded when a plot needs it). Version 2 lacked coil_sensors_C
+// (its samples read as without the eight sensors).
 //
 // Chunk payload `data` (little-endian, no padding, n = frames in the chunk):
 //   u8 time_encoding
@@ -275,7 +278,8 @@ CREATE TABLE temp_sample(
   gyro_x_C NOT NULL, gyro_y_C NOT NULL, gyro_z_C NOT NULL,
   accel_x_C NOT NULL, accel_y_C NOT NULL, accel_z_C NOT NULL,
   chamber_C NOT NULL,
-  chamber_setpoint_C);
+  chamber_setpoint_C,
+  coil_sensors_C BLOB);
 CREATE TABLE segment(
   idx INTEGER PRIMARY KEY,
   name TEXT NOT NULL,
@@ -319,6 +323,10 @@ void migrate_one_step(sqlite3* db, const std::string& path, std::int64_t from) {
       // plot needs them) and the writer sessions with their unclean-shutdown marker.
       exec(db, path, "ALTER TABLE imu_chunk ADD COLUMN summary BLOB");
       exec(db, path, kSessionTablesSql);
+      return;
+    case 2:
+      // The eight sensors of each FOG coil (NULL for the samples already written).
+      exec(db, path, "ALTER TABLE temp_sample ADD COLUMN coil_sensors_C BLOB");
       return;
     default:
       fail(path, "no migration from schema version " + std::to_string(from));
@@ -677,10 +685,10 @@ struct RunDb::Impl {
         "COALESCE(SUM(n), 0), COALESCE(SUM(LENGTH(data)), 0) FROM imu_chunk");
     insert_temp = prepare(
         "INSERT INTO temp_sample(t_ns, gyro_x_C, gyro_y_C, gyro_z_C, accel_x_C, accel_y_C, accel_z_C, "
-        "chamber_C, chamber_setpoint_C) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)");
+        "chamber_C, chamber_setpoint_C, coil_sensors_C) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)");
     select_temps = prepare(
         "SELECT t_ns, gyro_x_C, gyro_y_C, gyro_z_C, accel_x_C, accel_y_C, accel_z_C, chamber_C, "
-        "chamber_setpoint_C FROM temp_sample ORDER BY t_ns");
+        "chamber_setpoint_C, coil_sensors_C FROM temp_sample WHERE t_ns >= ?1 AND t_ns <= ?2 ORDER BY t_ns");
     delete_segments = prepare("DELETE FROM segment");
     insert_segment = prepare("INSERT INTO segment(idx, name, kind, t0_s, t1_s) VALUES (?1, ?2, ?3, ?4, ?5)");
     select_segments = prepare("SELECT name, kind, t0_s, t1_s FROM segment ORDER BY idx");
@@ -1163,6 +1171,11 @@ void RunDb::append_temps(std::span<const TempSample> temps) {
     }
     stmt.bind(8, sample.chamber_C);
     stmt.bind(9, sample.chamber_setpoint_C);
+    if (sample.coil_sensors_C) {
+      stmt.bind_blob(10, sample.coil_sensors_C->data(), sizeof *sample.coil_sensors_C);  // bound until run()
+    } else {
+      stmt.bind_null(10);
+    }
     stmt.run();
   }
   txn.commit();
@@ -1477,11 +1490,13 @@ std::vector<PlotColumn> RunDb::decimate(std::int64_t t0_ns, std::int64_t t1_ns, 
   return out;
 }
 
-std::vector<TempSample> RunDb::temps() const {
+std::vector<TempSample> RunDb::temps(std::int64_t t0_ns, std::int64_t t1_ns) const {
   Impl& d = impl();
   std::vector<TempSample> temps;
   Statement& stmt = d.select_temps;
   Statement::Reset reset(stmt);
+  stmt.bind(1, t0_ns);
+  stmt.bind(2, t1_ns);
   while (stmt.step()) {
     TempSample sample;
     sample.t_ns = stmt.column_int64(0);
@@ -1491,6 +1506,14 @@ std::vector<TempSample> RunDb::temps() const {
     }
     sample.chamber_C = stmt.column_double(7);
     sample.chamber_setpoint_C = stmt.column_optional_double(8);
+    if (!stmt.column_is_null(9)) {
+      const auto blob = stmt.column_blob(9);
+      auto& coils = sample.coil_sensors_C.emplace();
+      if (blob.size() != sizeof coils)
+        fail(d.path, "temperature sample at " + std::to_string(sample.t_ns) + " ns: coil sensors of " +
+                         std::to_string(blob.size()) + " bytes, expected " + std::to_string(sizeof coils));
+      std::memcpy(coils.data(), blob.data(), sizeof coils);
+    }
     temps.push_back(sample);
   }
   return temps;

@@ -115,7 +115,7 @@ enum class OpenMode {
 
 class RunDb {
  public:
-  static constexpr int kSchemaVersion = 2;  // PRAGMA user_version; open() migrates older files
+  static constexpr int kSchemaVersion = 3;  // PRAGMA user_version; open() migrates older files
   static constexpr std::size_t kFramesPerChunk = 4096;
   static constexpr int kPlotChannels = 9;
 
@@ -211,7 +211,10 @@ class RunDb {
   // summary without decoding; only chunks across a column edge are decoded (a whole 12 h run at
   // 2 kHz into 1000 columns: ~0.25 s on the development machine).
   std::vector<PlotColumn> decimate(std::int64_t t0_ns, std::int64_t t1_ns, int columns) const;
-  std::vector<TempSample> temps() const;
+  // The temperature samples with t0_ns <= t_ns <= t1_ns in time order (t_ns is the table's key:
+  // a range is an index lookup, so an online reader can tail them).
+  std::vector<TempSample> temps(std::int64_t t0_ns = std::numeric_limits<std::int64_t>::min(),
+                                std::int64_t t1_ns = std::numeric_limits<std::int64_t>::max()) const;
   FrameStorageStats frame_storage_stats() const;
   std::vector<RecorderSession> sessions() const;
   std::vector<DroppedSpan> dropped_spans() const;

@@ -1,6 +1,8 @@
 #include "daemon/service/estimator_worker.hpp"
 
 #include <chrono>
+#include <deque>
+#include <limits>
 #include <memory>
 
 #include <spdlog/spdlog.h>
@@ -100,6 +102,11 @@ void EstimatorWorker::run() {
   }
 
   std::optional<std::int64_t> fed_t_ns;
+  // The navigation model's thermal section (stage 2) needs the temperatures with the frames: read
+  // as far as the frames, each pushed before the frames after it.
+  const bool nav_thermal = nav_run && !nav_model.thermal_json.empty();
+  std::deque<TempSample> pending_temps;
+  std::optional<std::int64_t> temps_read_to_ns;
   std::size_t intervals_reported = 0;
   auto last_report = Clock::now() - std::chrono::seconds(10);
 
@@ -137,11 +144,20 @@ void EstimatorWorker::run() {
   auto feed = [&](std::int64_t upto_t_ns) {
     const std::int64_t from = fed_t_ns ? *fed_t_ns + 1 : std::numeric_limits<std::int64_t>::min();
     if (from > upto_t_ns) return;
+    if (nav_thermal && (!temps_read_to_ns || upto_t_ns > *temps_read_to_ns)) {
+      const std::int64_t t0 = temps_read_to_ns ? *temps_read_to_ns + 1 : std::numeric_limits<std::int64_t>::min();
+      for (const TempSample& t : db->temps(t0, upto_t_ns)) pending_temps.push_back(t);
+      temps_read_to_ns = upto_t_ns;
+    }
     db->for_each_frame(
         [&](const ImuFrame& f) {
           if (direct_cal) direct_cal->push(f);
           if (nav_run && nav_state["status"] != "failed") {
             try {
+              while (!pending_temps.empty() && pending_temps.front().t_ns <= f.t_ns) {
+                nav_run->push_temp(pending_temps.front());
+                pending_temps.pop_front();
+              }
               nav_run->push(f);
             } catch (const std::exception& e) {
               nav_state["status"] = "failed";

@@ -167,10 +167,15 @@ bool ThermalModel::temperatures(double t, TempSample& out) const {
     return read(ch, sensor, at) + offset;
   };
   auto quantise = [&](double v) { return config_.lsb_C > 0 ? std::round(v / config_.lsb_C) * config_.lsb_C : v; };
+  auto& coils = out.coil_sensors_C.emplace();
   for (int j = 0; j < 3; ++j) {
     // The coil channel is the mean of its eight logged sensors (finer than one sensor's step).
     double mean = 0;
-    for (int s = 0; s < 8; ++s) mean += quantise(faulty(j, s)) / 8.0;
+    for (int s = 0; s < 8; ++s) {
+      const double sensor_C = quantise(faulty(j, s));
+      coils[static_cast<std::size_t>(j)][static_cast<std::size_t>(s)] = sensor_C;
+      mean += sensor_C / 8.0;
+    }
     out.gyro_C[j] = mean;
     out.accel_C[j] = quantise(faulty(3 + j, -1));
   }

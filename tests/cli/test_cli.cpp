@@ -108,3 +108,51 @@ TEST(Cli, MalformedBundleIsRefusedWithItsLine) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("line 7"), std::string::npos) << r.output;
 }
+
+namespace {
+
+// The number before " rejected" in the navigation stage's report line.
+long rejected_in(const std::string& output) {
+  const auto at = output.find(" rejected");
+  if (at == std::string::npos) return -1;
+  auto start = output.rfind(' ', at - 1);
+  return std::stol(output.substr(start + 1, at - start - 1));
+}
+
+}  // namespace
+
+TEST(Cli, ThermalSectionIsAppliedByNavigateAndTheNavigationStage) {
+  // A simulated half hour across a chamber ramp, navigated and refined (stage 3) with a model that
+  // has the truth's thermal section and with the same model without it: both commands must feed
+  // the run's temperatures to the compensation.
+  const fs::path d = fresh_dir("cli-thermal-nav");
+  const std::string db = (d / "run.db").string();
+  const std::string truth = std::string(IMUCAL_SOURCE_DIR) + "/examples/truth-thermal.json";
+  CliRun r = run("simulate --program thermal-short --chamber thermal-short --imu " + truth + " --db " + db +
+                 " --rate 20 --duration 1800 --seed 4");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto constants_only = nlohmann::json::parse(std::ifstream(truth));
+  constants_only.erase("thermal");
+  std::ofstream(d / "constants.json") << constants_only.dump(1);
+
+  auto navigate = [&](const std::string& model) {
+    const CliRun n = run("navigate --db " + db + " --model " + model + " --out " + (d / "nav.csv").string() +
+                         " --summary-json " + (d / "summary.json").string());
+    EXPECT_EQ(n.status, 0) << n.output;
+    return nlohmann::json::parse(std::ifstream(d / "summary.json"))["max_velocity_error_mps"].get<double>();
+  };
+  const double v_with = navigate(truth), v_without = navigate((d / "constants.json").string());
+  std::printf("navigate: %.3f m/s with the thermal section, %.3f m/s without\n", v_with, v_without);
+  EXPECT_LT(v_with, 0.3 * v_without);
+
+  const CliRun with = run("calibrate --db " + db + " --stage navigation --model " + truth + " --out " +
+                          (d / "nav-with.json").string());
+  ASSERT_EQ(with.status, 0) << with.output;
+  const CliRun without = run("calibrate --db " + db + " --stage navigation --model " + (d / "constants.json").string() +
+                             " --out " + (d / "nav-without.json").string());
+  const long rejected_with = rejected_in(with.output), rejected_without = rejected_in(without.output);
+  std::printf("stage navigation: %ld innovations rejected with the thermal section, %ld without (status %d)\n",
+              rejected_with, rejected_without, without.status);
+  EXPECT_GE(rejected_with, 0) << with.output;
+  EXPECT_GT(rejected_without, 10 * rejected_with + 100) << without.output;
+}

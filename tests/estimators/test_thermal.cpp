@@ -7,6 +7,9 @@
 #include <gtest/gtest.h>
 
 #include "core/units.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "estimators/evaluate.hpp"
+#include "estimators/nav_filter.hpp"
 #include "estimators/navigation_run.hpp"
 #include "test_thermal_fixture.hpp"
 
@@ -121,6 +124,24 @@ TEST(ThermalSim, StabilisationHoldsTheSensorsWithinFourTenthsOfADegree) {
   std::printf("stabilised FOG x: %.3f .. %.3f C\n", lo, hi);
   EXPECT_LT(hi - lo, 0.45);
   EXPECT_GT(hi - lo, 0.3);
+}
+
+TEST(ThermalSim, EachCoilReportsItsEightSensorsAndTheirMean) {
+  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
+  const sim::ThermalModel tm(motion::load_chamber_profile("thermal-short"), truth, sim::ThermalConfig{}, 7200);
+  TempSample s;
+  ASSERT_TRUE(tm.temperatures(3000, s));
+  ASSERT_TRUE(s.coil_sensors_C.has_value());
+  for (std::size_t c = 0; c < 3; ++c) {
+    double mean = 0, lo = 1e9, hi = -1e9;
+    for (const double v : (*s.coil_sensors_C)[c]) {
+      mean += v / 8.0;
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+    EXPECT_DOUBLE_EQ(mean, s.gyro_C[static_cast<Eigen::Index>(c)]) << "coil " << c;
+    EXPECT_GT(hi - lo, 0.01) << "coil " << c << ": a ramping coil has a gradient across its sensors";
+  }
 }
 
 TEST(ThermalSim, TruthCoefficientsFollowTheSection) {
@@ -322,6 +343,24 @@ TEST(ThermalBadInput, OneBrokenCoilSensorJumpingIsNamed) {
   EXPECT_NEAR(p->t1_s, 4301, 2);
   EXPECT_TRUE(mentions(o.result.notes, "cycle-008", "temp_gy_C"));
   EXPECT_EQ(o.report["degrees"]["gyro.bias_dph.y"]["cycles"].get<int>(), 12);
+  // The run carries the eight sensors: the report names the one that broke.
+  const auto* sensor = problem_on(o.result, "temp_gy_3_C");
+  ASSERT_NE(sensor, nullptr);
+  EXPECT_NE(sensor->what.find("jumped by +4.0"), std::string::npos) << sensor->what;
+  EXPECT_EQ(problem_on(o.result, "temp_gy_2_C"), nullptr);
+}
+
+TEST(ThermalBadInput, OneStuckCoilSensorIsNamedThoughTheMeanMoves) {
+  // Sensor 5 of the x coil stuck for 20 minutes of the ramp: the mean keeps moving (seven of eight
+  // do), so only the sensor itself tells.
+  const auto o = short_run_with([](auto& r) { r.thermal.faults.push_back({"gx5", "stuck", 2000, 3200, 0}); });
+  const auto* p = problem_on(o.result, "temp_gx_5_C");
+  ASSERT_NE(p, nullptr);
+  EXPECT_NE(p->what.find("stuck"), std::string::npos) << p->what;
+  EXPECT_NEAR(p->t0_s, 2000, 2);
+  EXPECT_EQ(problem_on(o.result, "temp_gx_C"), nullptr);
+  EXPECT_LT(o.report["degrees"]["gyro.bias_dph.x"]["cycles"].get<int>(), 14);
+  EXPECT_EQ(o.report["degrees"]["gyro.bias_dph.y"]["cycles"].get<int>(), 14);
 }
 
 TEST(ThermalBadInput, MissingSamplesAreNamedAndTheirCyclesLeftOut) {
@@ -382,4 +421,79 @@ TEST(ThermalNavigation, CompensationAppliesInNavigation) {
   std::printf("1 h across a chamber ramp: velocity error %.3f m/s compensated, %.3f m/s with the constants\n",
               with.max_velocity_error_mps, without.max_velocity_error_mps);
   EXPECT_LT(with.max_velocity_error_mps, 0.2 * without.max_velocity_error_mps);
+}
+
+TEST(ThermalNavigation, CompensationAppliesInTheNavigationFilter) {
+  // Stage 3's 39-state filter on a run across a chamber ramp. With the truth's section in its model
+  // the compensation leaves the filter nothing but its own transients to explain; with the constants
+  // alone the innovations carry the thermal drift of every coefficient, and the constants it
+  // feeds back chase the temperature.
+  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
+  const auto program = motion::load_program("thermal-short", motion::TableLimits{});
+  const auto profile = motion::load_chamber_profile("thermal-short");
+  sim::SimConfig cfg;
+  cfg.rate_hz = 20;
+  cfg.duration_s = 1800;
+  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, cfg.duration_s);
+  cfg.thermal = &tm;
+  auto run_filter = [&](const ImuModel& model) {
+    sim::Simulator s(program, truth, cfg);
+    navfilter::NavCalibrationFilter filter(s.meta(), model);
+    ImuFrame f;
+    while (s.next(f)) {
+      for (const TempSample& t : s.take_temps()) filter.push_temp(t);
+      filter.push(f);
+    }
+    return filter.finish();
+  };
+  auto velocity_innovation_rms = [](const navfilter::Result& r) {
+    double sum = 0;
+    for (const auto& m : r.measurements) sum += m.innovation[0] * m.innovation[0] + m.innovation[1] * m.innovation[1];
+    return std::sqrt(sum / (2.0 * static_cast<double>(r.measurements.size())));
+  };
+  const navfilter::Result with = run_filter(truth), without = run_filter(thermaltest::stage1_of(truth));
+  const double rms_with = velocity_innovation_rms(with), rms_without = velocity_innovation_rms(without);
+  const ImuModel truth_body = direct::to_body_frame(truth);
+  const double bias_err_with = (with.model.accel.bias_mps2 - truth_body.accel.bias_mps2).cwiseAbs().maxCoeff();
+  const double bias_err_without = (without.model.accel.bias_mps2 - truth_body.accel.bias_mps2).cwiseAbs().maxCoeff();
+  const double gbias_err_with = (with.model.gyro.bias_radps - truth_body.gyro.bias_radps).cwiseAbs().maxCoeff() * units::kRadpsToDph;
+  const double gbias_err_without = (without.model.gyro.bias_radps - truth_body.gyro.bias_radps).cwiseAbs().maxCoeff() * units::kRadpsToDph;
+  std::printf("filter across a chamber ramp: horizontal velocity innovation RMS %.2e m/s compensated, %.2e m/s "
+              "with the constants; %lld and %lld rejected; accel bias error %.2e vs %.2e m/s^2; gyro bias %.2e vs %.2e deg/h\n",
+              rms_with, rms_without, static_cast<long long>(with.rejected), static_cast<long long>(without.rejected),
+              bias_err_with, bias_err_without, gbias_err_with, gbias_err_without);
+  EXPECT_LT(rms_with, 0.2 * rms_without);
+  EXPECT_EQ(with.rejected, 0);
+  EXPECT_FALSE(with.model.thermal_json.empty()) << "the section is carried into the refined model";
+}
+
+TEST(ThermalNavigation, CompensationAppliesInEvaluate) {
+  // `imucal evaluate` judges a model by free-inertial navigation after a tilt: across a chamber
+  // ramp the Schuler amplitude with the constants alone carries the thermal drift.
+  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
+  const auto program = motion::compile_program(
+      R"({"name":"tilt-in-a-ramp","segments":[{"type":"hold","name":"start","duration_s":120},
+          {"type":"tilts","name":"tilt","positions_deg":[[0,10,0]],"dwell_s":1800}]})",
+      motion::TableLimits{});
+  const auto profile = motion::load_chamber_profile("thermal-short");
+  sim::SimConfig cfg;
+  cfg.rate_hz = 20;
+  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, program.duration_s());
+  cfg.thermal = &tm;
+  sim::Simulator s(program, truth, cfg);
+  const RecordingMeta meta = s.meta();
+  std::vector<ImuFrame> frames;
+  ImuFrame f;
+  while (s.next(f)) frames.push_back(f);
+  const std::vector<TempSample> temps = s.take_temps();
+  const evaluate::FrameRange range = [&](const std::function<void(const ImuFrame&)>& fn, std::int64_t t0_ns,
+                                         std::int64_t t1_ns) {
+    for (const ImuFrame& x : frames)
+      if (x.t_ns >= t0_ns && x.t_ns <= t1_ns) fn(x);
+  };
+  const double with = evaluate::evaluate_model(meta, truth, range, temps).tilt_amplitude_mps;
+  const double without = evaluate::evaluate_model(meta, thermaltest::stage1_of(truth), range, temps).tilt_amplitude_mps;
+  std::printf("evaluate, a tilt across a chamber ramp: Schuler amplitude %.4f m/s compensated, %.4f m/s with the "
+              "constants\n", with, without);
+  EXPECT_LT(with, 0.3 * without);
 }

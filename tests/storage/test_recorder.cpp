@@ -405,7 +405,8 @@ TEST_F(RecorderTest, MigratesAVersion1File) {
   ASSERT_EQ(sqlite3_open(path().c_str(), &raw), SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(raw,
                          "DROP TABLE recorder_session; DROP TABLE dropped_span; "
-                         "ALTER TABLE imu_chunk DROP COLUMN summary; PRAGMA user_version = 1;",
+                         "ALTER TABLE imu_chunk DROP COLUMN summary; ALTER TABLE temp_sample DROP COLUMN "
+                         "coil_sensors_C; PRAGMA user_version = 1;",
                          nullptr, nullptr, nullptr),
             SQLITE_OK);
   sqlite3_close(raw);

@@ -99,6 +99,14 @@ void expect_temps_identical(const TempSample& e, const TempSample& a, const std:
   if (e.chamber_setpoint_C) {
     EXPECT_EQ(bits(*e.chamber_setpoint_C), bits(*a.chamber_setpoint_C)) << where;
   }
+  ASSERT_EQ(e.coil_sensors_C.has_value(), a.coil_sensors_C.has_value()) << where;
+  if (e.coil_sensors_C) {
+    for (std::size_t c = 0; c < 3; ++c) {
+      for (std::size_t k = 0; k < 8; ++k) {
+        EXPECT_EQ(bits((*e.coil_sensors_C)[c][k]), bits((*a.coil_sensors_C)[c][k])) << where << " coil " << c << k;
+      }
+    }
+  }
 }
 
 // The temperatures each frame sees: sample and hold, the first sample before it starts.
@@ -406,6 +414,10 @@ TEST_F(RunDbTest, TempsSegmentsExtrasAndMetaPersist) {
   temps[2].t_ns = 2'000'000'000;
   temps[2].accel_C.z() = 25.123456789012345;
   temps[2].chamber_C = -40.0;
+  auto& coils = temps[2].coil_sensors_C.emplace();  // the eight sensors of each coil
+  for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t k = 0; k < 8; ++k) coils[c][k] = 20.0 + static_cast<double>(c) + 0.1 * static_cast<double>(k);
+  coils[1][7] = -0.0;
   const std::vector<SegmentInfo> segments = {{"a", "static", 0.0, 1.0}, {"b", "sine", 1.5, 2.0}};
   {
     RunDb run = RunDb::create(path, meta);
@@ -448,6 +460,34 @@ TEST_F(RunDbTest, CreateAndOpenReportTheFileAndTheReason) {
   RecordingMeta bad = simulated_meta();
   bad.rate_hz = 0.0;
   EXPECT_THAT(error_message([&] { RunDb::create(temp_path("bad.db"), bad); }), HasSubstr("rate_hz"));
+}
+
+TEST_F(RunDbTest, MigratesAVersion2FileToTheCoilSensors) {
+  // What imucal wrote before version 3: no coil_sensors_C column.
+  const std::string path = temp_path("v2.db");
+  TempSample old;
+  old.gyro_C.x() = 21.5;
+  {
+    RunDb run = RunDb::create(path, simulated_meta());
+    run.append_temps(std::vector<TempSample>{old});
+  }
+  sqlite3* raw = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &raw), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(raw, "ALTER TABLE temp_sample DROP COLUMN coil_sensors_C; PRAGMA user_version = 2;", nullptr,
+                         nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(raw);
+  TempSample later;
+  later.t_ns = 1'000'000'000;
+  later.coil_sensors_C.emplace()[2][3] = 30.25;
+  {
+    RunDb run = RunDb::open(path);
+    run.append_temps(std::vector<TempSample>{later});
+  }
+  const auto temps = RunDb::open(path).temps();
+  ASSERT_EQ(temps.size(), 2U);
+  expect_temps_identical(old, temps[0], "sample from version 2");
+  expect_temps_identical(later, temps[1], "sample after the migration");
 }
 
 TEST_F(RunDbTest, NewerSchemaVersionIsRejected) {
@@ -767,6 +807,46 @@ TEST_F(BundleTest, KeepsSetpointAndReportsIgnoredColumns) {
   std::getline(in, second_line);
   EXPECT_EQ(first_line, kHeader + ",chamber_setpoint_C");
   EXPECT_EQ(second_line, "0.1,1e-06,2e-06,3e-06,0.1,0.2,0.3,0,0,0,25,25,25,25,25,25,20,");
+}
+
+TEST_F(BundleTest, KeepsTheEightSensorsOfEachCoil) {
+  // formats.md's optional temp_gx_1_C .. temp_gz_8_C, in any order after the required columns:
+  // kept when all 24 are there (empty fields: none at that line), and exported back.
+  std::string header = kHeader;
+  std::vector<std::string> names;
+  for (const char* coil : {"gz", "gy", "gx"})  // reversed, to show that the names decide
+    for (int k = 1; k <= 8; ++k) names.push_back(std::string("temp_") + coil + "_" + std::to_string(k) + "_C");
+  for (const auto& n : names) header += "," + n;
+  auto line = [&](const std::string& t_s, bool with_sensors) {
+    std::string l = t_s + ",1e-6,2e-6,3e-6,0.1,0.2,0.3,0,0,0,25,25,25,25,25,25,20";
+    for (std::size_t i = 0; i < names.size(); ++i) l += with_sensors ? "," + std::to_string(24.0 + 0.25 * static_cast<double>(i)) : ",";
+    return l + "\n";
+  };
+  const std::string csv = header + "\n" + line("0.1", true) + line("0.2", true) + line("0.3", false);
+  const std::string db_path = temp_path("coils.db");
+  const ImportReport report = import_bundle(write_bundle("coils", csv), db_path);
+  EXPECT_TRUE(report.ignored_columns.empty());
+  EXPECT_EQ(report.temp_samples, 2);  // the second line repeats the first
+  const RunDb run = RunDb::open(db_path);
+  const auto temps = run.temps();
+  ASSERT_EQ(temps.size(), 2U);
+  ASSERT_TRUE(temps[0].coil_sensors_C.has_value());
+  EXPECT_EQ((*temps[0].coil_sensors_C)[2][0], 24.0);   // temp_gz_1_C, the first of the list
+  EXPECT_EQ((*temps[0].coil_sensors_C)[0][7], 29.75);  // temp_gx_8_C, the last
+  EXPECT_FALSE(temps[1].coil_sensors_C.has_value());
+
+  const std::string dir = temp_path("coils-export");
+  export_bundle(run, dir);
+  const std::string back = temp_path("coils-back.db");
+  import_bundle(dir, back);
+  const auto again = RunDb::open(back).temps();
+  ASSERT_EQ(again.size(), temps.size());
+  for (std::size_t i = 0; i < temps.size(); ++i) expect_temps_identical(temps[i], again[i], "sample " + std::to_string(i));
+
+  // Some of a line's 24 given and some not: refused with the line.
+  std::string partial = line("0.1", true);
+  partial.replace(partial.rfind(','), std::string::npos, ",\n");
+  expect_rejected(write_bundle("coils-partial", header + "\n" + partial), {"line 2", "23 of the 24 coil sensors"});
 }
 
 }  // namespace
