@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "core/units.hpp"
@@ -84,6 +85,7 @@ class WireBench::TableFacade final : public Table {
     b_.following_ = false;
     if (auto r = b_.dev_->table->interlock_open(); !r) return DeviceResult::failure(r.error().message);
     b_.modes_.fill(dr::TableMode::off);
+    b_.read_table();  // whoever looks next sees the interlock open
     return DeviceResult::success();
   }
   DeviceResult stop() override { return b_.stop_motion(); }
@@ -266,9 +268,10 @@ void WireBench::wait(double seconds) {
 }
 
 std::string WireBench::describe() const {
-  return "simulated devices on loopback through the real drivers, in real time: " + dev_->table->describe() + "; " +
-         dev_->chamber->describe() + " (map " + kChamberMap + "); " + dev_->imu->describe() +
-         " (CAN FD on a socket pair, " + std::to_string(settings_.rate_hz) + " Hz)";
+  char rate[32];
+  std::snprintf(rate, sizeof rate, "%g Hz", settings_.rate_hz);
+  return "simulated devices on loopback through the real drivers, in real time: table " + dev_->table->describe() +
+         "; chamber " + dev_->chamber->describe() + "; IMU " + dev_->imu->describe() + " on a socket pair at " + rate;
 }
 
 std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * units::kNsPerS); }
@@ -478,6 +481,7 @@ DeviceResult WireBench::stop_motion() {
     }
     if (!r) problems += std::string(problems.empty() ? "" : "; ") + motion::kAxisNames[i] + " axis: " + r.error().message;
   }
+  read_table();
   if (!problems.empty()) return DeviceResult::failure("stopping the table: " + problems);
   return DeviceResult::success();
 }
