@@ -1,8 +1,8 @@
 // `--devices sim-wire`: a short campaign through the daemon's sequencer and the real drivers,
 // against the simulated table (ACL over TCP), chamber (Modbus TCP) and IMU (CAN FD frames over a
-// socket pair) running in-process on loopback, in real time. It must run to completion with every
-// frame on the program's grid recorded once, none lost, and frames that show the motion the
-// table made.
+// socket pair) running in-process on loopback, in real time (about 30 s with a pause). It must
+// run to completion with every frame on the program's grid recorded once, none lost, and frames
+// that show the motion the table made.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -35,8 +35,15 @@ TEST(SimWire, ACampaignThroughTheRealDriversRecordsEveryFrame) {
   LocalDaemon d("wire", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
   const auto id = d.post_campaign(wire_campaign());
   ASSERT_EQ(d.command(id, "start"), 200);
+  // A pause in the rate segment: the table stops through the driver, and on resume it is moved
+  // back to the segment's start pose and the segment is redone; frames continue the grid.
+  d.wait_for(id, [](const json& x) { return x.at("program_time_s").get<double>() > 10.0; }, 60.0);
+  ASSERT_EQ(d.command(id, "pause"), 200);
+  d.wait_state(id, "paused", 30.0);
+  ASSERT_EQ(d.command(id, "resume"), 200);
   const json c = d.wait_final(id, 180.0);
   ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "resumed", "redoing segment 3 'spin'"));
   EXPECT_EQ(c.at("lost_frames"), 0);
   EXPECT_EQ(c.at("bad_frames"), 0);
   EXPECT_FALSE(has_event(c, "suspended"));
