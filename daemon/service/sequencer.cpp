@@ -71,6 +71,10 @@ struct RunContext {
   // order so that the recorder (its thread) goes first and the worker outlives it.
   std::atomic<EstimatorWorker*> worker{nullptr};
   std::unique_ptr<EstimatorWorker> estimators;
+  // Alarms raised by the recorder (on the pushing or the writer thread), taken by the sequencer.
+  // Declared before the recorder, whose handler uses them until it is gone.
+  std::mutex alarm_mutex;
+  std::vector<storage::RecorderAlarm> alarms;
   std::unique_ptr<storage::Recorder> recorder;
   int recorder_opens = 0;  // recorders started on the run file in this run
   std::string run_db_path;
@@ -79,9 +83,6 @@ struct RunContext {
   bool recorder_waits = true;
   // The recorder failed (disk full, damaged file): the run holds until the file reopens.
   bool recorder_failed = false;
-  // Alarms raised by the recorder (on the pushing or the writer thread), taken by the sequencer.
-  std::mutex alarm_mutex;
-  std::vector<storage::RecorderAlarm> alarms;
 
   std::size_t segment = 0;
   std::int64_t dt_ns = 0;
@@ -190,7 +191,16 @@ std::optional<std::string> Sequencer::recorder_problem(RunContext& run) {
     std::lock_guard lock(run.alarm_mutex);
     alarms.swap(run.alarms);
   }
+  // The most serious one names the suspension: a write failure, then dropped frames, then a high
+  // queue.
   std::optional<std::string> reason;
+  int severity = 0;
+  auto raise_reason = [&](int level, std::string why) {
+    if (level > severity) {
+      severity = level;
+      reason = std::move(why);
+    }
+  };
   for (const auto& alarm : alarms) {
     // A producer that waits for room loses nothing: a high queue is then the intended pacing.
     if (alarm.kind == storage::RecorderAlarmKind::QueueHighWater && run.recorder_waits) continue;
@@ -202,14 +212,14 @@ std::optional<std::string> Sequencer::recorder_problem(RunContext& run) {
     note_event(run, "alarm", std::string("recorder ") + storage::to_string(alarm.kind) + ": " + alarm.message + counts);
     switch (alarm.kind) {
       case storage::RecorderAlarmKind::QueueHighWater:
-        if (!reason) reason = "the recorder falls behind: its queue passed its high-water level";
+        raise_reason(1, "the recorder falls behind: its queue passed its high-water level");
         break;
       case storage::RecorderAlarmKind::FramesDropped:
-        if (!reason || reason->rfind("recording failed", 0) != 0) reason = "the recorder fell behind and dropped frames";
+        raise_reason(2, "the recorder fell behind and dropped frames");
         break;
       case storage::RecorderAlarmKind::WriteFailed:
         run.recorder_failed = true;
-        reason = "recording failed: " + alarm.message;
+        raise_reason(3, "recording failed: " + alarm.message);
         break;
     }
   }

@@ -206,7 +206,12 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   imu_config.truth = settings.truth;
   imu_config.site = settings.site;
   imu_config.temperature_C = settings.chamber_start_C;
-  dev_->sim_imu = std::make_unique<drsim::SimImu>(dev_->world, sv[1], imu_config);
+  try {
+    dev_->sim_imu = std::make_unique<drsim::SimImu>(dev_->world, sv[1], imu_config);
+  } catch (...) {
+    ::close(sv[0]);  // the driver's end, not yet owned by anyone
+    throw;
+  }
 
   dr::AclTableConfig table_config;
   table_config.port = dev_->sim_table.port();

@@ -84,3 +84,14 @@ TEST(SimWire, ACampaignThroughTheRealDriversRecordsEveryFrame) {
   const json t = d.service->sequencer().telemetry();
   EXPECT_FALSE(t.at("table").at("interlock_closed").get<bool>());
 }
+
+TEST(SimWire, SimFaultsAreRefusedWithAMessage) {
+  LocalDaemon d("wire-faults", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
+  json campaign = wire_campaign();
+  campaign["sim_faults"] = {{{"kind", "imu_dropout"}, {"at_s", 5}, {"duration_s", 1}}};
+  const auto id = d.post_campaign(campaign);
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 60.0);
+  EXPECT_EQ(c.at("state"), "failed");
+  EXPECT_TRUE(has_event(c, "error", "sim_faults need devices 'sim'")) << c.dump();
+}
