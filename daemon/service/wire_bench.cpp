@@ -275,8 +275,8 @@ void WireBench::wait(double seconds) {
 std::string WireBench::describe() const {
   char rate[32];
   std::snprintf(rate, sizeof rate, "%g Hz", settings_.rate_hz);
-  return "simulated devices on loopback through the real drivers, in real time: table " + dev_->table->describe() +
-         "; chamber " + dev_->chamber->describe() + "; IMU " + dev_->imu->describe() + " on a socket pair at " + rate;
+  return "simulated devices on loopback through the real drivers, in real time: " + dev_->table->describe() + "; " +
+         dev_->chamber->describe() + "; " + dev_->imu->describe() + " on a socket pair at " + rate;
 }
 
 std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * units::kNsPerS); }
