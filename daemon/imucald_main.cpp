@@ -38,10 +38,6 @@ int main(int argc, char** argv) {
       if (operator_token.size() < 16) throw ConfigError("--operator-token must have at least 16 characters");
       config.operator_token = operator_token;
     }
-    if (config.devices == "sim-wire")
-      throw ConfigError(
-          "devices 'sim-wire' (simulated devices over loopback) are not available yet: they need the drivers' "
-          "common interfaces (drivers/interfaces.hpp, the drivers issue). Use --devices sim.");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "imucald: %s\n", e.what());
     return 2;

@@ -94,7 +94,7 @@ void read_suspenders(const json& j, DaemonConfig& c, std::vector<std::string>& p
 void read_recorder(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
   ObjectReader r(j, "config.recorder", problems);
   if (auto v = r.number_in("commit_interval_s", 0.01, 60)) c.recorder.commit_interval_s = *v;
-  if (auto v = r.integer("queue_frames", 1024, std::int64_t{1} << 30)) c.recorder.queue_frames = *v;
+  if (auto v = r.integer("queue_frames", 4096, std::int64_t{1} << 30)) c.recorder.queue_frames = *v;
 }
 
 void read_http(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {

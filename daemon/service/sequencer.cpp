@@ -12,8 +12,9 @@
 #include "core/units.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/estimator_worker.hpp"
-#include "daemon/service/recorder.hpp"
 #include "daemon/service/sim_bench.hpp"
+#include "daemon/service/wire_bench.hpp"
+#include "storage/recorder.hpp"
 #include "storage/run_db.hpp"
 
 namespace imucal::daemon {
@@ -70,8 +71,18 @@ struct RunContext {
   // order so that the recorder (its thread) goes first and the worker outlives it.
   std::atomic<EstimatorWorker*> worker{nullptr};
   std::unique_ptr<EstimatorWorker> estimators;
-  std::unique_ptr<Recorder> recorder;
+  // Alarms raised by the recorder (on the pushing or the writer thread), taken by the sequencer.
+  // Declared before the recorder, whose handler uses them until it is gone.
+  std::mutex alarm_mutex;
+  std::vector<storage::RecorderAlarm> alarms;
+  std::unique_ptr<storage::Recorder> recorder;
+  int recorder_opens = 0;  // recorders started on the run file in this run
   std::string run_db_path;
+  // The producer waits for room in the recorder's queue (simulation paced by the recorder); when
+  // false a full queue drops frames, as it must with devices that do not wait.
+  bool recorder_waits = true;
+  // The recorder failed (disk full, damaged file): the run holds until the file reopens.
+  bool recorder_failed = false;
 
   std::size_t segment = 0;
   std::int64_t dt_ns = 0;
@@ -94,6 +105,18 @@ struct RunContext {
     return std::llround(segments[k].t1_s * units::kNsPerS);
   }
   double checkpoint_s() const { return segment < segments.size() ? segments[segment].t0_s : program.duration_s(); }
+  // Where to (re)start: the segment holding the frame after the last committed one.
+  void place_at_committed() {
+    segment = segments.size();
+    const std::int64_t next_t_ns = last_t_ns ? *last_t_ns + dt_ns : 0;
+    for (std::size_t k = 0; k < segments.size(); ++k) {
+      if (next_t_ns <= segment_end_ns(k)) {
+        segment = k;
+        break;
+      }
+    }
+    program_time_s = last_t_ns ? static_cast<double>(*last_t_ns) / units::kNsPerS : 0.0;
+  }
 };
 
 Sequencer::Sequencer(const DaemonConfig& config, DaemonDb& db)
@@ -113,6 +136,95 @@ Sequencer::Sequencer(const DaemonConfig& config, DaemonDb& db)
 Sequencer::~Sequencer() { shutdown(); }
 
 void Sequencer::set_event_listener(EventListener listener) { listener_ = std::move(listener); }
+
+void Sequencer::set_recorder_hooks(RecorderHooks hooks) {
+  std::lock_guard lock(mutex_);
+  recorder_hooks_ = std::move(hooks);
+}
+
+// Opens the run file (creating it on the first start, recovering it after a crash or a failed
+// write), takes up from what it holds, and starts a recorder on it.
+void Sequencer::open_recorder(RunContext& run) {
+  RecorderHooks hooks;
+  {
+    std::lock_guard lock(mutex_);
+    hooks = recorder_hooks_;
+  }
+  const bool exists = fs::exists(run.run_db_path);
+  storage::RunDb db = exists ? storage::RunDb::open(run.run_db_path)
+                             : storage::RunDb::create(run.run_db_path, run.bench->imu().recording_meta());
+  run.last_t_ns.reset();
+  run.last_temp_t_ns.reset();
+  if (exists) committed_times(run.run_db_path, run.last_t_ns, run.last_temp_t_ns);
+  run.frames = db.frame_count();
+  if (hooks.on_open) hooks.on_open(db, run.recorder_opens);
+  ++run.recorder_opens;
+
+  storage::RecorderOptions options;
+  options.commit_interval_s = config_.recorder.commit_interval_s;
+  options.queue_capacity_frames = config_.recorder.queue_frames;
+  options.wait_when_full = hooks.wait_when_full.value_or(run.bench->paced_by_consumer());
+  run.recorder_waits = options.wait_when_full;
+  run.recorder_failed = false;
+  {
+    std::lock_guard lock(run.alarm_mutex);
+    run.alarms.clear();
+  }
+  run.recorder = std::make_unique<storage::Recorder>(
+      std::move(db), options,
+      [&run](const storage::RecorderAlarm& alarm) {
+        std::lock_guard lock(run.alarm_mutex);
+        run.alarms.push_back(alarm);
+      },
+      [&run, after = hooks.after_commit](const storage::RecorderStats& s) {
+        EstimatorWorker* worker = run.worker.load();
+        if (worker != nullptr && s.committed_t_ns) worker->committed(*s.committed_t_ns);
+        if (after) after(s);
+      });
+}
+
+// The recorder's alarms since the last call, each an alarm event of the run. Returns why the run
+// must suspend: the writer falls behind a device that cannot wait, dropped frames, or failed.
+std::optional<std::string> Sequencer::recorder_problem(RunContext& run) {
+  std::vector<storage::RecorderAlarm> alarms;
+  {
+    std::lock_guard lock(run.alarm_mutex);
+    alarms.swap(run.alarms);
+  }
+  // The most serious one names the suspension: a write failure, then dropped frames, then a high
+  // queue.
+  std::optional<std::string> reason;
+  int severity = 0;
+  auto raise_reason = [&](int level, std::string why) {
+    if (level > severity) {
+      severity = level;
+      reason = std::move(why);
+    }
+  };
+  for (const auto& alarm : alarms) {
+    // A producer that waits for room loses nothing: a high queue is then the intended pacing.
+    if (alarm.kind == storage::RecorderAlarmKind::QueueHighWater && run.recorder_waits) continue;
+    char counts[160];
+    std::snprintf(counts, sizeof counts, " (queue high-water mark %lld of %lld frames, %lld frames dropped)",
+                  static_cast<long long>(alarm.stats.high_water_frames),
+                  static_cast<long long>(alarm.stats.queue_capacity_frames),
+                  static_cast<long long>(alarm.stats.dropped_frames));
+    note_event(run, "alarm", std::string("recorder ") + storage::to_string(alarm.kind) + ": " + alarm.message + counts);
+    switch (alarm.kind) {
+      case storage::RecorderAlarmKind::QueueHighWater:
+        raise_reason(1, "the recorder falls behind: its queue passed its high-water level");
+        break;
+      case storage::RecorderAlarmKind::FramesDropped:
+        raise_reason(2, "the recorder fell behind and dropped frames");
+        break;
+      case storage::RecorderAlarmKind::WriteFailed:
+        run.recorder_failed = true;
+        raise_reason(3, "recording failed: " + alarm.message);
+        break;
+    }
+  }
+  return reason;
+}
 
 void Sequencer::start() {
   if (thread_.joinable()) return;
@@ -192,6 +304,10 @@ void sync_run_record(DaemonDb& db, RunContext& run) {
                                 {"segment", e.segment ? json(*e.segment) : json(nullptr)},
                                 {"program_time_s", e.program_time_s ? json(*e.program_time_s) : json(nullptr)},
                                 {"reason", e.reason}});
+  const storage::RecorderStats rs = run.recorder->stats();
+  record["recorder"] = {{"queue_capacity_frames", rs.queue_capacity_frames},
+                        {"queue_high_water_frames", rs.high_water_frames},
+                        {"dropped_frames", rs.dropped_frames}};
   // In the run file too, so that the run's own record tells every interruption.
   run.recorder->set_extra("imucald_run", record.dump());
 }
@@ -340,37 +456,43 @@ void Sequencer::run_campaign(std::int64_t id) {
     if (run.segments.empty()) throw std::runtime_error("the program has no segments");
     run.dt_ns = std::llround(units::kNsPerS / run.spec.rate_hz);
 
-    if (config_.devices != "sim")
+    if (config_.devices == "sim") {
+      SimBenchSettings sb;
+      sb.sim.site = config_.site;
+      sb.sim.rate_hz = run.spec.rate_hz;
+      sb.sim.seed = run.spec.seed;
+      sb.time_scale = run.spec.time_scale;
+      sb.chamber_tau_s = config_.sim.chamber_tau_s;
+      sb.chamber_start_C = config_.chamber.safe_setpoint_C;
+      sb.home_time_s = config_.sim.home_time_s;
+      sb.faults = run.spec.faults;
+      run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
+    } else if (config_.devices == "sim-wire") {
+      if (!run.spec.faults.empty())
+        throw std::runtime_error("sim_faults need devices 'sim'; with 'sim-wire' faults are injected on the "
+                                 "simulated devices themselves (docs/drivers.md)");
+      WireBenchSettings wb;
+      wb.site = config_.site;
+      wb.rate_hz = run.spec.rate_hz;
+      wb.seed = run.spec.seed;
+      wb.truth = run.spec.truth;
+      wb.limits = config_.table_limits;
+      wb.chamber_tau_s = config_.sim.chamber_tau_s;
+      wb.chamber_start_C = config_.chamber.safe_setpoint_C;
+      wb.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
+      run.bench = std::make_unique<WireBench>(run.program, wb);
+    } else {
       throw std::runtime_error("devices '" + config_.devices + "' are not available in this build");
-    SimBenchSettings sb;
-    sb.sim.site = config_.site;
-    sb.sim.rate_hz = run.spec.rate_hz;
-    sb.sim.seed = run.spec.seed;
-    sb.time_scale = run.spec.time_scale;
-    sb.chamber_tau_s = config_.sim.chamber_tau_s;
-    sb.chamber_start_C = config_.chamber.safe_setpoint_C;
-    sb.home_time_s = config_.sim.home_time_s;
-    sb.faults = run.spec.faults;
-    run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
+    }
 
     // The run file: created on the first start, reopened to resume.
     const std::string relative = "runs/" + std::to_string(id) + ".db";
     run.run_db_path = (fs::path(config_.data_dir) / relative).string();
     fs::create_directories(fs::path(run.run_db_path).parent_path());
     const bool resuming = fs::exists(run.run_db_path);
-    storage::RunDb db = resuming ? storage::RunDb::open(run.run_db_path)
-                                 : storage::RunDb::create(run.run_db_path, run.bench->imu().recording_meta());
     if (!resuming) db_.set_run_db(id, relative);
-    if (resuming) committed_times(run.run_db_path, run.last_t_ns, run.last_temp_t_ns);
-    run.frames = db.frame_count();
-
+    open_recorder(run);
     const auto committed_t = run.last_t_ns;
-    run.recorder = std::make_unique<Recorder>(std::move(db), config_.recorder.commit_interval_s,
-                                              config_.recorder.queue_frames, [&run](const RecorderStats& s) {
-                                                EstimatorWorker* worker = run.worker.load();
-                                                if (worker != nullptr && s.committed_t_ns)
-                                                  worker->committed(*s.committed_t_ns);
-                                              });
     run.estimators = std::make_unique<EstimatorWorker>(
         run.run_db_path, run.spec.estimators, run.spec.navigation_model, committed_t,
         [this, id](const std::string& name, double t_s, const json& progress) {
@@ -389,16 +511,7 @@ void Sequencer::run_campaign(std::int64_t id) {
         });
     run.worker = run.estimators.get();
 
-    // Where to (re)start: the segment holding the frame after the last committed one.
-    run.segment = run.segments.size();
-    const std::int64_t next_t_ns = run.last_t_ns ? *run.last_t_ns + run.dt_ns : 0;
-    for (std::size_t k = 0; k < run.segments.size(); ++k) {
-      if (next_t_ns <= run.segment_end_ns(k)) {
-        run.segment = k;
-        break;
-      }
-    }
-    if (run.last_t_ns) run.program_time_s = static_cast<double>(*run.last_t_ns) / units::kNsPerS;
+    run.place_at_committed();
     note_event(run, "info", run.bench->describe() + "; " + std::to_string(run.segments.size()) + " segments, " +
                                 std::to_string(run.program.duration_s()) + " s");
     if (resuming) {
@@ -500,6 +613,8 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
   const std::int64_t until_ns = last ? std::numeric_limits<std::int64_t>::max() : end_ns;
   const double t0_s = run.segments[k].t0_s;
 
+  // After a pause during a suspension for a failed run file.
+  if (!run.recorder || run.recorder_failed) return hold(run, "recording failed: the run file is not open for writing");
   // After a safe hold the interlock is open: close it before the table moves again.
   if (!run.bench->table().state().interlock_closed) {
     if (auto r = run.bench->table().close_interlock(); !r.ok) return hold(run, "table interlock: " + r.message);
@@ -559,16 +674,21 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
     }
     if (!accepted.empty()) {
       run.frames += static_cast<std::int64_t>(accepted.size());
-      const auto pushed = run.recorder->push_frames(accepted, run.bench->paced_by_consumer());
-      if (pushed == Recorder::Push::Failed)
-        throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
-      if (pushed == Recorder::Push::Dropped) {
+      const auto pushed = run.recorder->push(accepted);
+      if (pushed == storage::Recorder::Push::Rejected)
+        throw std::runtime_error("internal error: the recorder refused frames that do not follow the recorded ones");
+      if (pushed == storage::Recorder::Push::Dropped) {
+        // Counted in the run file too (recorder_session, dropped_span); those instants stay a gap.
         run.lost += static_cast<std::int64_t>(accepted.size());
         problem = "the recorder fell behind and dropped frames";
       }
     }
-    if (!temps.empty() && !run.recorder->push_temps(temps))
-      throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+    if (!temps.empty()) (void)run.recorder->push_temps(temps);  // a failure shows as an alarm below
+    if (auto why = recorder_problem(run)) return hold(run, *why);
+    if (auto error = run.recorder->error()) {  // before its alarm has arrived
+      run.recorder_failed = true;
+      return hold(run, "recording failed: " + *error);
+    }
     if (!problem.empty()) return hold(run, problem);
 
     // Suspenders.
@@ -615,12 +735,35 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
   }
   note_event(run, "suspended", reason);
   safe_hold(run);
-  if (!run.recorder->commit_and_wait())
-    throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+  if (!run.recorder->commit_and_wait()) run.recorder_failed = true;
+  (void)recorder_problem(run);  // alarms raised meanwhile become events
   sync_run_record(db_, run);
   publish(run, true);
-  const Outcome waited = wait_until_ready(run, true);
-  if (waited != Outcome::Completed) return waited;
+  for (;;) {
+    const Outcome waited = wait_until_ready(run, true);
+    if (waited != Outcome::Completed) return waited;
+    if (!run.recorder_failed) break;
+    // The run file failed (disk full, damaged): reopen it, which rolls back to the last commit and
+    // checks it; the run then continues from the segment holding the first frame lost with the
+    // failed batch. While it cannot be written the run stays suspended and tries again each
+    // settle time.
+    try {
+      run.recorder.reset();
+      open_recorder(run);
+      run.place_at_committed();
+      char text[300];
+      std::snprintf(text, sizeof text,
+                    "run file reopened after the write failure: %lld frames committed up to %.3f s",
+                    static_cast<long long>(run.frames), run.program_time_s);
+      note_event(run, "info", text);
+      if (!run.recorder->commit_and_wait()) throw std::runtime_error(run.recorder->error().value_or("write failed"));
+    } catch (const std::exception& e) {
+      run.recorder_failed = true;
+      note_event(run, "alarm", std::string("the run file still cannot be written: ") + e.what() +
+                                   "; trying again after the settle time");
+    }
+    (void)recorder_problem(run);
+  }
   const bool ramp = run.spec.chamber.ramps_within(run.segments[run.segment].t0_s, run.segments[run.segment].t1_s);
   char text[400];
   std::snprintf(text, sizeof text, "condition cleared and settled %.1f s; redoing segment %zu '%s' from %.3f s%s",
@@ -638,8 +781,7 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
 // Operator pause: table stopped, recorder committed, then wait for resume, stop or abort.
 Sequencer::Outcome Sequencer::paused(RunContext& run) {
   safe_hold(run);
-  if (!run.recorder->commit_and_wait())
-    throw std::runtime_error("recording failed: " + run.recorder->error().value_or("unknown error"));
+  if (run.recorder && !run.recorder->commit_and_wait()) run.recorder_failed = true;  // reopened on resume
   // The counters first: whoever sees "paused" must see where the run holds.
   publish(run, true);
   if (!transition(run.id, RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
@@ -736,9 +878,10 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
   transition(run.id, final_state, why, std::nullopt);
   sync_run_record(db_, run);
   publish(run, true);
-  if (run.recorder) run.recorder->close();
-  run.estimators.reset();
+  if (run.recorder) (void)run.recorder->close();  // a failure was reported above
+  run.worker = nullptr;
   run.recorder.reset();
+  run.estimators.reset();
 }
 
 // Telemetry snapshot (at most 20 a second) and the run's counters in the database (once a second).
@@ -763,7 +906,7 @@ void Sequencer::publish(RunContext& run, bool force) {
   }
   const TableState ts = run.bench->table().state();
   const ChamberState cs = run.bench->chamber().state();
-  const RecorderStats rs = run.recorder ? run.recorder->stats() : RecorderStats{};
+  const storage::RecorderStats rs = run.recorder ? run.recorder->stats() : storage::RecorderStats{};
   const RunState state = active_state();
   const double duration_s = run.program.duration_s();
   const std::size_t k = std::min(run.segment, run.segments.size() - 1);
@@ -794,7 +937,7 @@ void Sequencer::publish(RunContext& run, bool force) {
         {"bad_frames", run.bad}, {"connected", run.bench->imu().state().connected}}},
       {"recorder",
        {{"queue_frames", rs.queued_frames}, {"queue_high_water_frames", rs.high_water_frames},
-        {"committed_frames", rs.committed_frames}, {"dropped_frames", rs.dropped_frames}}}};
+        {"committed_frames", rs.stored_frames}, {"dropped_frames", rs.dropped_frames}}}};
   {
     std::lock_guard lock(telemetry_mutex_);
     t["estimators"] = estimators_;

@@ -26,6 +26,7 @@
 #include "daemon/service/config.hpp"
 #include "daemon/service/daemon_db.hpp"
 #include "daemon/service/run_state.hpp"
+#include "storage/recorder.hpp"
 
 namespace imucal::daemon {
 
@@ -43,6 +44,18 @@ class Sequencer {
   Sequencer& operator=(const Sequencer&) = delete;
 
   void set_event_listener(EventListener listener);
+
+  // Seams for tests that need a slow or a full disk under a run; none in service.
+  struct RecorderHooks {
+    // Called with the run file before each recorder of a run takes it: attempt 0 at the start,
+    // 1, 2, ... each time the file is reopened after a write failure.
+    std::function<void(storage::RunDb&, int attempt)> on_open;
+    // Called on the writer thread after every commit.
+    std::function<void(const storage::RecorderStats&)> after_commit;
+    // Overrides the bench: false drops frames on a full queue, as with real devices.
+    std::optional<bool> wait_when_full;
+  };
+  void set_recorder_hooks(RecorderHooks hooks);
   // Starts the queue runner (after the database's crash recovery).
   void start();
   // Parks the active run (table stopped, interlock open, chamber safe, recorder flushed; the run
@@ -74,6 +87,8 @@ class Sequencer {
   std::optional<Outcome> pending_command();
   RunState active_state() const;
 
+  void open_recorder(RunContext& run);
+  std::optional<std::string> recorder_problem(RunContext& run);
   Outcome prepare_devices(RunContext& run);
   Outcome run_segment(RunContext& run);
   Outcome hold(RunContext& run, const std::string& reason);
@@ -95,6 +110,7 @@ class Sequencer {
   RunState active_state_ = RunState::Created;
   bool shutdown_ = false;
   bool queue_enabled_ = true;
+  RecorderHooks recorder_hooks_;
   std::thread thread_;
 
   mutable std::mutex telemetry_mutex_;

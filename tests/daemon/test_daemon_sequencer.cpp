@@ -4,7 +4,9 @@
 // same program simulated straight through: nothing lost, nothing twice, whatever happened.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <fstream>
+#include <memory>
 
 #include "daemon/service/campaign_runner.hpp"
 #include "service_fixture.hpp"
@@ -137,6 +139,69 @@ TEST(Sequencer, EverySuspenderHoldsAndResumes) {
   EXPECT_GT(c.at("bad_frames").get<std::int64_t>(), 0);
   // Suspended data was never recorded twice, and what was missing was recorded on the redo.
   expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
+}
+
+// Issue 8's backpressure: a writer that stalls (a slow disk) under a device that cannot wait. The
+// queue passes its high-water level, the alarm is an event of the run, the run suspends before any
+// frame is dropped, the recorder drains, and the run resumes: the file holds every frame once.
+TEST(Sequencer, RecorderFallingBehindSuspendsTheRunBeforeAFrameIsLost) {
+  LocalDaemon d("behind", false, [](daemon::DaemonConfig& c) {
+    c.recorder.queue_frames = 8192;
+    c.recorder.commit_interval_s = 0.05;
+  });
+  auto commits = std::make_shared<std::atomic<int>>(0);
+  daemon::Sequencer::RecorderHooks hooks;
+  hooks.wait_when_full = false;  // as with real devices: a full queue would drop
+  hooks.after_commit = [commits](const storage::RecorderStats&) {
+    if (++*commits == 5) std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the disk stalls
+  };
+  d.service->sequencer().set_recorder_hooks(hooks);
+  // 100 Hz at 100x: 10,000 frames a second, so the stall fills 6144 of 8192 in about 0.6 s.
+  const auto id = d.post_campaign(short_campaign("behind", 100));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "alarm", "queue_high_water"));
+  EXPECT_TRUE(has_event(c, "suspended", "the recorder falls behind"));
+  EXPECT_TRUE(has_transition(c, "suspended", "running"));
+  EXPECT_EQ(c.at("lost_frames"), 0);
+  expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
+  // The high-water mark is counted in the run file, and the alarm is in its record.
+  const auto db = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read);
+  std::int64_t high_water = 0;
+  for (const auto& session : db.sessions()) high_water = std::max(high_water, session.queue_high_water_frames);
+  EXPECT_GE(high_water, 6144);
+  EXPECT_TRUE(db.dropped_spans().empty());
+  const auto record = db.extra("imucald_run");
+  ASSERT_TRUE(record.has_value());
+  EXPECT_NE(record->find("queue_high_water"), std::string::npos);
+}
+
+// A disk that fills up (SQLite max_page_count on the first recorder's connection): the batch in
+// flight is rolled back, the alarm is recorded, the run suspends; the file is reopened (integrity
+// checked) once the settle time has passed, the run continues from the first frame lost with the
+// failed batch, and the file ends up with every frame exactly once.
+TEST(Sequencer, AFullDiskSuspendsTheRunWhichContinuesOnceTheFileCanBeWritten) {
+  LocalDaemon d("disk-full", false, [](daemon::DaemonConfig& c) { c.recorder.commit_interval_s = 0.02; });
+  daemon::Sequencer::RecorderHooks hooks;
+  hooks.on_open = [](storage::RunDb& db, int attempt) {
+    if (attempt == 0) db.set_size_limit_bytes(1'000'000);  // room for about a third of the run
+  };
+  d.service->sequencer().set_recorder_hooks(hooks);
+  const auto id = d.post_campaign(short_campaign("disk-full", 0));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "alarm", "write_failed"));
+  EXPECT_TRUE(has_event(c, "suspended", "recording failed"));
+  EXPECT_TRUE(has_event(c, "info", "run file reopened"));
+  EXPECT_TRUE(has_transition(c, "suspended", "running"));
+  expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
+  const auto db = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read);
+  const auto sessions = db.sessions();
+  ASSERT_GE(sessions.size(), 2u);
+  EXPECT_TRUE(sessions.front().unclean);  // closed by the reopen's recovery
+  EXPECT_EQ(sessions.front().integrity, "ok");
 }
 
 TEST(Sequencer, StopEndsEarlyWithResultsAbortWithout) {

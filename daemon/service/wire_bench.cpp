@@ -1,0 +1,524 @@
+#include "daemon/service/wire_bench.hpp"
+
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "core/units.hpp"
+#include "drivers/acl_table.hpp"
+#include "drivers/can_imu.hpp"
+#include "drivers/modbus_chamber.hpp"
+#include "drivers/register_map.hpp"
+#include "drivers/sim/sim_chamber.hpp"
+#include "drivers/sim/sim_imu.hpp"
+#include "drivers/sim/sim_table.hpp"
+#include "drivers/sim/sim_world.hpp"
+
+namespace imucal::daemon {
+
+namespace dr = imucal::drivers;
+namespace drsim = imucal::drivers::sim;
+
+namespace {
+
+constexpr const char* kChamberMap = "watlow-f4t";
+constexpr std::int64_t kChamberReadPeriod_ns = 250'000'000;
+constexpr std::int64_t kReadHistory_ns = 10'000'000'000;  // table reads kept for interpolation
+// Rate tracking of sine pieces: the program's rate a little ahead (the controller ramps towards a
+// new demand at its acceleration limit) plus this gain times the angle error.
+constexpr double kTrackLookahead_s = 0.02;
+constexpr double kTrackGain_per_s = 2.0;
+constexpr double kAtTarget_deg = 1e-4;
+
+dr::AxisLimitSetting limit_setting(const motion::AxisLimits& l) {
+  // The wire protocol carries finite numbers: slip rings become a range no program reaches.
+  dr::AxisLimitSetting s;
+  s.min_deg = std::isfinite(l.min_deg) ? l.min_deg : -1e9;
+  s.max_deg = std::isfinite(l.max_deg) ? l.max_deg : 1e9;
+  s.rate_dps = l.rate_dps;
+  s.accel_dps2 = l.accel_dps2;
+  return s;
+}
+
+template <class T>
+void require(const dr::Result<T>& r, const std::string& what) {
+  if (!r) throw std::runtime_error("sim-wire: " + what + ": " + r.error().message);
+}
+
+}  // namespace
+
+struct WireBench::Devices {
+  drsim::SimWorld world;
+  drsim::SimTable sim_table;
+  drsim::SimChamber sim_chamber;
+  std::unique_ptr<drsim::SimImu> sim_imu;
+  std::unique_ptr<dr::AclTable> table;
+  std::unique_ptr<dr::ModbusChamber> chamber;
+  std::unique_ptr<dr::CanImu> imu;
+
+  Devices(const drsim::ServoConfig& servo, const drsim::SimChamberConfig& chamber_config)
+      : world(servo), sim_table(world, drsim::SimTableConfig{}), sim_chamber(chamber_config) {}
+};
+
+// ------------------------------------------------------------------------------------------------
+// The facades the sequencer sees.
+
+class WireBench::TableFacade final : public Table {
+ public:
+  explicit TableFacade(WireBench& b) : b_(b) {}
+  DeviceResult home() override {
+    if (auto r = b_.dev_->table->interlock_close(); !r) return DeviceResult::failure(r.error().message);
+    if (auto r = b_.reposition(Eigen::Vector3d::Zero()); !r.ok) return r;
+    b_.homed_ = true;
+    return DeviceResult::success();
+  }
+  DeviceResult close_interlock() override {
+    if (auto r = b_.dev_->table->interlock_close(); !r) return DeviceResult::failure(r.error().message);
+    return DeviceResult::success();
+  }
+  DeviceResult open_interlock() override {
+    b_.following_ = false;
+    if (auto r = b_.dev_->table->interlock_open(); !r) return DeviceResult::failure(r.error().message);
+    b_.modes_.fill(dr::TableMode::off);
+    b_.read_table();  // whoever looks next sees the interlock open
+    return DeviceResult::success();
+  }
+  DeviceResult stop() override { return b_.stop_motion(); }
+  DeviceResult start_program_at(double t_s) override {
+    if (!b_.homed_) return DeviceResult::failure("table is not homed");
+    // Already following and the next frame is the checkpoint's first: the program goes on as it
+    // is (a segment boundary passed without interruption).
+    const auto t_ns = std::llround(t_s * units::kNsPerS);
+    if (b_.following_ && b_.table_error_.empty() && b_.delivered_t_ns_ <= t_ns && t_ns < b_.delivered_t_ns_ + b_.dt_ns_)
+      return DeviceResult::success();
+    if (auto r = b_.stop_motion(); !r.ok) return r;
+    const Eigen::Vector3d pose_deg = b_.program_.evaluate(t_s).angle_rad * units::kRadToDeg;
+    if (auto r = b_.reposition(pose_deg); !r.ok) return r;
+    b_.anchor_host_ns_ = dr::host_time_ns();
+    b_.anchor_t_s_ = t_s;
+    b_.delivered_t_ns_ = t_ns;
+    b_.first_sequence_.reset();
+    b_.pending_.clear();
+    b_.pending_temps_.clear();
+    b_.next_piece_ = 0;
+    while (b_.next_piece_ + 1 < b_.program_.pieces.size() && b_.program_.pieces[b_.next_piece_].t1_s <= t_s)
+      ++b_.next_piece_;
+    b_.table_error_.clear();
+    b_.following_ = true;
+    b_.follow_program();
+    if (!b_.table_error_.empty()) return DeviceResult::failure(b_.table_error_);
+    return DeviceResult::success();
+  }
+  TableState state() const override {
+    TableState s = b_.table_state_;
+    s.homed = b_.homed_;
+    if (!b_.table_error_.empty() && s.fault.empty()) s.fault = b_.table_error_;
+    return s;
+  }
+
+ private:
+  WireBench& b_;
+};
+
+class WireBench::ChamberFacade final : public Chamber {
+ public:
+  explicit ChamberFacade(WireBench& b) : b_(b) {}
+  DeviceResult set_setpoint(double setpoint_C) override {
+    if (auto r = b_.dev_->chamber->set_setpoint(setpoint_C); !r) return DeviceResult::failure(r.error().message);
+    b_.chamber_state_.setpoint_C = setpoint_C;
+    return DeviceResult::success();
+  }
+  ChamberState state() const override { return b_.chamber_state_; }
+
+ private:
+  WireBench& b_;
+};
+
+class WireBench::ImuFacade final : public Imu {
+ public:
+  explicit ImuFacade(WireBench& b) : b_(b) {}
+  DeviceResult read(FrameBatch& out, std::int64_t until_t_ns) override {
+    out.clear();
+    b_.service(10);
+    if (!b_.imu_error_.empty()) return DeviceResult::failure(b_.imu_error_);
+    // A frame leaves once a table read after it exists (its angles are interpolated).
+    while (!b_.pending_.empty() && b_.pending_.front().program_t_ns <= until_t_ns) {
+      PendingSample& p = b_.pending_.front();
+      if (!b_.interpolate(p.host_t_ns, p.frame.table_deg)) break;
+      out.frames.push_back(p.frame);
+      b_.delivered_t_ns_ = p.program_t_ns;
+      b_.pending_.pop_front();
+    }
+    if (!out.frames.empty()) {
+      const std::int64_t last_ns = out.frames.back().t_ns;
+      auto end = std::find_if(b_.pending_temps_.begin(), b_.pending_temps_.end(),
+                              [&](const TempSample& t) { return t.t_ns > last_ns; });
+      out.temps.assign(b_.pending_temps_.begin(), end);
+      b_.pending_temps_.erase(b_.pending_temps_.begin(), end);
+    }
+    return DeviceResult::success();
+  }
+  ImuState state() const override { return {b_.dev_->imu->state() != dr::DeviceState::faulted && b_.imu_error_.empty()}; }
+  RecordingMeta recording_meta() const override {
+    RecordingMeta m;
+    m.site = b_.settings_.site;
+    m.imu_serial = "SIM-WIRE-" + std::to_string(b_.settings_.seed);
+    m.rate_hz = b_.settings_.rate_hz;
+    m.segments = b_.program_.segments();
+    m.gyro_lsb_rad = b_.dev_->sim_imu->gyro_lsb_rad();
+    m.accel_lsb_mps = b_.dev_->sim_imu->accel_lsb_mps();
+    m.program_json = b_.program_.source_json;
+    m.truth_json = imu_model_to_json_text(b_.settings_.truth);
+    return m;
+  }
+
+ private:
+  WireBench& b_;
+};
+
+// ------------------------------------------------------------------------------------------------
+
+WireBench::WireBench(const motion::Program& program, const WireBenchSettings& settings)
+    : program_(program), settings_(settings), dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)) {
+  drsim::ServoConfig servo;
+  for (std::size_t a = 0; a < 3; ++a)
+    for (auto& mode : servo.limits[a]) mode = limit_setting(settings.limits.axis[a]);
+  drsim::SimChamberConfig chamber_config;
+  chamber_config.map = dr::load_register_map(kChamberMap);
+  chamber_config.initial_C = settings.chamber_start_C;
+  chamber_config.ambient_C = settings.chamber_start_C;
+  chamber_config.time_constant_s = settings.chamber_tau_s;
+  dev_ = std::make_unique<Devices>(servo, chamber_config);
+
+  // The IMU's CAN link: a socket pair carrying struct canfd_frame images (no AF_CAN here).
+  int sv[2];
+  if (::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv) != 0)
+    throw std::runtime_error("sim-wire: socketpair(AF_UNIX, SOCK_SEQPACKET) for the IMU link failed");
+  drsim::SimImuConfig imu_config;
+  imu_config.framing = dr::can::Framing::fd;
+  imu_config.rate_hz = settings.rate_hz;
+  imu_config.seed = settings.seed;
+  imu_config.truth = settings.truth;
+  imu_config.site = settings.site;
+  imu_config.temperature_C = settings.chamber_start_C;
+  try {
+    dev_->sim_imu = std::make_unique<drsim::SimImu>(dev_->world, sv[1], imu_config);
+  } catch (...) {
+    ::close(sv[0]);  // the driver's end, not yet owned by anyone
+    throw;
+  }
+
+  dr::AclTableConfig table_config;
+  table_config.port = dev_->sim_table.port();
+  for (std::size_t a = 0; a < 3; ++a)
+    for (auto& mode : table_config.limits[a]) mode = limit_setting(settings.limits.axis[a]);
+  dev_->table = std::make_unique<dr::AclTable>(table_config);
+
+  dr::ModbusChamberConfig chamber_driver_config;
+  chamber_driver_config.port = dev_->sim_chamber.port();
+  chamber_driver_config.map = chamber_config.map;
+  chamber_driver_config.safe_setpoint_C = settings.chamber_safe_setpoint_C;
+  dev_->chamber = std::make_unique<dr::ModbusChamber>(chamber_driver_config);
+
+  dr::CanImuConfig imu_driver_config;
+  imu_driver_config.framing = dr::can::Framing::fd;
+  imu_driver_config.rate_hz = settings.rate_hz;
+  imu_driver_config.gyro_lsb_rad = dev_->sim_imu->gyro_lsb_rad();
+  imu_driver_config.accel_lsb_mps = dev_->sim_imu->accel_lsb_mps();
+  imu_driver_config.stall_timeout = std::chrono::milliseconds(500);
+  dev_->imu = std::make_unique<dr::CanImu>(sv[0], imu_driver_config);
+
+  require(dev_->table->connect(), "table: connect");
+  require(dev_->table->configure(), "table: configure");
+  require(dev_->chamber->connect(), "chamber: connect");
+  require(dev_->chamber->configure(), "chamber: configure");
+  require(dev_->chamber->activate(), "chamber: activate");
+  require(dev_->imu->connect(), "IMU: connect");
+  require(dev_->imu->configure(), "IMU: configure");
+  require(dev_->imu->activate(), "IMU: activate");
+
+  table_ = std::make_unique<TableFacade>(*this);
+  chamber_ = std::make_unique<ChamberFacade>(*this);
+  imu_ = std::make_unique<ImuFacade>(*this);
+  chamber_state_.setpoint_C = settings.chamber_start_C;
+  chamber_state_.temperature_C = settings.chamber_start_C;
+  service(0);
+}
+
+WireBench::~WireBench() {
+  // The sequencer parked the table and the chamber; stop the stream and close the links.
+  (void)dev_->imu->safe_stop();
+  dev_->imu->disconnect();
+  dev_->chamber->disconnect();
+  dev_->table->disconnect();
+}
+
+Table& WireBench::table() { return *table_; }
+Chamber& WireBench::chamber() { return *chamber_; }
+Imu& WireBench::imu() { return *imu_; }
+double WireBench::now_s() const { return dev_->world.now_s(); }
+
+void WireBench::wait(double seconds) {
+  const auto deadline = dr::host_time_ns() + std::llround(seconds * units::kNsPerS);
+  for (;;) {
+    const std::int64_t left_ns = deadline - dr::host_time_ns();
+    if (left_ns <= 0) break;
+    service(static_cast<int>(std::min<std::int64_t>(10, left_ns / 1'000'000 + 1)));
+  }
+}
+
+std::string WireBench::describe() const {
+  char rate[32];
+  std::snprintf(rate, sizeof rate, "%g Hz", settings_.rate_hz);
+  return "simulated devices on loopback through the real drivers, in real time: " + dev_->table->describe() + "; " +
+         dev_->chamber->describe() + "; " + dev_->imu->describe() + " on a socket pair at " + rate;
+}
+
+std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * units::kNsPerS); }
+
+void WireBench::service(int max_wait_ms) {
+  dr::ImuBatch batch;
+  if (auto r = dev_->imu->poll(batch, std::chrono::milliseconds(max_wait_ms)); !r) {
+    imu_error_ = "IMU: " + r.error().message;
+  } else {
+    imu_error_.clear();
+  }
+  if (following_) {
+    for (const dr::ImuSample& s : batch.samples) {
+      if (s.t_ns <= anchor_host_ns_) continue;  // sensed before the table followed the program
+      if (!first_sequence_) {
+        first_sequence_ = s.sequence;
+        first_program_t_ns_ = anchor_ns() + dt_ns_;
+      }
+      const std::uint32_t periods = s.sequence - *first_sequence_;  // wraps like the counter
+      PendingSample p;
+      p.host_t_ns = s.t_ns;
+      p.program_t_ns = first_program_t_ns_ + static_cast<std::int64_t>(periods) * dt_ns_;
+      p.frame = s.to_frame();
+      p.frame.t_ns = p.program_t_ns;
+      // A sample the IMU marks faulty must not be recorded as good data: the sequencer sees a
+      // corrupt frame and suspends.
+      if (s.status_fault) p.frame.dtheta_rad.setConstant(std::nan(""));
+      pending_.push_back(p);
+    }
+    for (const dr::ImuTemperatures& t : batch.temperatures) {
+      if (t.t_ns <= anchor_host_ns_) continue;
+      TempSample sample = t.to_temp_sample();
+      sample.t_ns = anchor_ns() + (t.t_ns - anchor_host_ns_);
+      sample.chamber_C = chamber_state_.temperature_C;
+      sample.chamber_setpoint_C = chamber_state_.setpoint_C;
+      if (pending_temps_.empty() || sample.t_ns > pending_temps_.back().t_ns) pending_temps_.push_back(sample);
+    }
+  }
+  read_table();
+  const std::int64_t now_ns = dr::host_time_ns();
+  if (now_ns >= next_chamber_read_ns_) {
+    next_chamber_read_ns_ = now_ns + kChamberReadPeriod_ns;
+    if (auto r = dev_->chamber->read(); r) {
+      chamber_state_.temperature_C = r->process_C;
+      chamber_state_.setpoint_C = r->setpoint_C;
+      chamber_state_.connected = true;
+    } else {
+      chamber_state_.connected = false;
+    }
+  }
+  if (following_) follow_program();
+}
+
+void WireBench::read_table() {
+  auto positions = dev_->table->read_positions();
+  auto status = positions ? dev_->table->read_status() : dr::Result<dr::TableStatus>(positions.error());
+  if (!positions || !status) {
+    table_state_.connected = false;
+    return;
+  }
+  table_state_.connected = true;
+  TableRead read;
+  read.t_ns = positions->t_ns;
+  read.angle_deg = positions->angle_deg;
+  read.rate_dps = positions->rate_dps;
+  if (reads_.empty() || read.t_ns > reads_.back().t_ns) reads_.push_back(read);
+  while (reads_.size() > 2 && reads_.front().t_ns < read.t_ns - kReadHistory_ns) reads_.pop_front();
+  table_state_.angle_deg = Eigen::Vector3d(read.angle_deg[0], read.angle_deg[1], read.angle_deg[2]);
+  table_state_.rate_dps = Eigen::Vector3d(read.rate_dps[0], read.rate_dps[1], read.rate_dps[2]);
+  table_state_.interlock_closed = status->interlock == dr::InterlockState::closed;
+  table_state_.moving = false;
+  table_state_.fault.clear();
+  for (std::size_t a = 0; a < 3; ++a) {
+    const dr::AxisStatus& axis = status->axes[a];
+    modes_[a] = axis.mode;
+    table_state_.moving = table_state_.moving || axis.moving;
+    if (axis.fault || axis.watchdog_expired)
+      table_state_.fault = std::string(motion::kAxisNames[a]) + " axis: " +
+                           (axis.at_limit ? "position limit hit" : axis.watchdog_expired ? "watchdog expired" : "fault");
+  }
+}
+
+bool WireBench::interpolate(std::int64_t host_ns, Eigen::Vector3d& angle_deg) const {
+  if (reads_.size() < 2 || host_ns < reads_.front().t_ns || host_ns > reads_.back().t_ns) return false;
+  auto hi = std::lower_bound(reads_.begin(), reads_.end(), host_ns,
+                             [](const TableRead& r, std::int64_t t) { return r.t_ns < t; });
+  if (hi == reads_.begin()) ++hi;
+  const TableRead& r0 = *(hi - 1);
+  const TableRead& r1 = *hi;
+  const double h_s = static_cast<double>(r1.t_ns - r0.t_ns) / units::kNsPerS;
+  const double u = static_cast<double>(host_ns - r0.t_ns) / static_cast<double>(r1.t_ns - r0.t_ns);
+  // Cubic Hermite on angles and rates: exact for the controller's constant-acceleration pieces
+  // up to the rate kinks between reads.
+  const double h00 = (2 * u - 3) * u * u + 1, h10 = ((u - 2) * u + 1) * u, h01 = (3 - 2 * u) * u * u,
+               h11 = (u - 1) * u * u;
+  for (std::size_t a = 0; a < 3; ++a)
+    angle_deg[static_cast<Eigen::Index>(a)] =
+        h00 * r0.angle_deg[a] + h10 * h_s * r0.rate_dps[a] + h01 * r1.angle_deg[a] + h11 * h_s * r1.rate_dps[a];
+  return true;
+}
+
+std::optional<double> WireBench::program_time_s(std::int64_t host_ns) const {
+  if (!following_) return std::nullopt;
+  return anchor_t_s_ + static_cast<double>(host_ns - anchor_host_ns_) / units::kNsPerS;
+}
+
+// The demands of every piece that has begun, then the rate of the sine pieces under way.
+void WireBench::follow_program() {
+  const double t_s = *program_time_s(dr::host_time_ns());
+  while (next_piece_ < program_.pieces.size() && program_.pieces[next_piece_].t0_s <= t_s + 1e-9) {
+    if (!demand_piece(next_piece_)) return;
+    ++next_piece_;
+  }
+  track_sines();
+}
+
+bool WireBench::demand_piece(std::size_t index) {
+  const motion::Piece& piece = program_.pieces[index];
+  auto fail = [&](int axis, const dr::DriverError& e) {
+    table_error_ = "following segment '" + piece.segment + "', " + motion::kAxisNames[static_cast<std::size_t>(axis)] +
+                   " axis: " + e.message;
+    return false;
+  };
+  for (int a = 0; a < 3; ++a) {
+    const auto i = static_cast<std::size_t>(a);
+    const motion::AxisFunc& f = piece.axis[i];
+    const bool positional = f.kind == motion::AxisFunc::Kind::Const || f.kind == motion::AxisFunc::Kind::Cycloid;
+    const dr::TableMode mode = positional ? dr::TableMode::position : dr::TableMode::rate;
+    const motion::AxisLimits& limits = settings_.limits.axis[i];
+    // A ramp sets the rate-mode acceleration limit to its own; anything else runs at the limits.
+    const bool ramp = f.kind == motion::AxisFunc::Kind::Quadratic && f.alpha != 0.0;
+    if (ramp || rate_limit_changed_[i]) {
+      dr::AxisLimitSetting setting = limit_setting(limits);
+      if (ramp) setting.accel_dps2 = std::min(std::abs(f.alpha) * units::kRadToDeg, limits.accel_dps2);
+      if (auto r = dev_->table->set_limits(a, dr::TableMode::rate, setting); !r) return fail(a, r.error());
+      rate_limit_changed_[i] = ramp;
+    }
+    if (modes_[i] != mode) {
+      if (auto r = dev_->table->set_mode(a, mode); !r) return fail(a, r.error());
+      modes_[i] = mode;
+    }
+    dr::Result<void> r;
+    switch (f.kind) {
+      case motion::AxisFunc::Kind::Const:
+        r = dev_->table->demand_position(a, f.theta0 * units::kRadToDeg);
+        break;
+      case motion::AxisFunc::Kind::Cycloid:
+        r = dev_->table->demand_position(a, (f.theta0 + f.delta) * units::kRadToDeg);
+        break;
+      case motion::AxisFunc::Kind::Quadratic:
+        r = dev_->table->demand_rate(a, (f.omega0 + f.alpha * (piece.t1_s - piece.t0_s)) * units::kRadToDeg);
+        break;
+      case motion::AxisFunc::Kind::Sine:
+        break;  // track_sines()
+    }
+    if (!r) return fail(a, r.error());
+  }
+  return true;
+}
+
+void WireBench::track_sines() {
+  if (next_piece_ == 0 || reads_.empty()) return;
+  const motion::Piece& piece = program_.pieces[next_piece_ - 1];
+  const TableRead& read = reads_.back();
+  const double t_s = *program_time_s(read.t_ns);
+  if (t_s >= piece.t1_s) return;
+  const table::AxisState now = program_.evaluate(t_s);
+  const table::AxisState ahead = program_.evaluate(t_s + kTrackLookahead_s);
+  for (int a = 0; a < 3; ++a) {
+    const auto i = static_cast<std::size_t>(a);
+    if (piece.axis[i].kind != motion::AxisFunc::Kind::Sine) continue;
+    const auto e = static_cast<Eigen::Index>(a);
+    const double error_deg = now.angle_rad[e] * units::kRadToDeg - read.angle_deg[i];
+    const double limit_dps = settings_.limits.axis[i].rate_dps;
+    const double demand_dps =
+        std::clamp(ahead.rate_radps[e] * units::kRadToDeg + kTrackGain_per_s * error_deg, -limit_dps, limit_dps);
+    if (auto r = dev_->table->demand_rate(a, demand_dps); !r) {
+      table_error_ = "following segment '" + piece.segment + "', " + motion::kAxisNames[i] + " axis: " + r.error().message;
+      return;
+    }
+  }
+}
+
+void WireBench::restore_limits() {
+  for (int a = 0; a < 3; ++a) {
+    const auto i = static_cast<std::size_t>(a);
+    if (!rate_limit_changed_[i]) continue;
+    if (dev_->table->set_limits(a, dr::TableMode::rate, limit_setting(settings_.limits.axis[i])))
+      rate_limit_changed_[i] = false;
+  }
+}
+
+// Rate zero on every axis that is under control, where it is (the safe hold).
+DeviceResult WireBench::stop_motion() {
+  following_ = false;
+  pending_.clear();
+  pending_temps_.clear();
+  restore_limits();
+  std::string problems;
+  for (int a = 0; a < 3; ++a) {
+    const auto i = static_cast<std::size_t>(a);
+    if (modes_[i] == dr::TableMode::off) continue;
+    auto r = dev_->table->set_mode(a, dr::TableMode::rate);
+    if (r) {
+      modes_[i] = dr::TableMode::rate;
+      r = dev_->table->demand_rate(a, 0.0);
+    }
+    if (!r) problems += std::string(problems.empty() ? "" : "; ") + motion::kAxisNames[i] + " axis: " + r.error().message;
+  }
+  read_table();
+  if (!problems.empty()) return DeviceResult::failure("stopping the table: " + problems);
+  return DeviceResult::success();
+}
+
+// Position moves to a pose, waiting (and draining the IMU) until the table rests there.
+DeviceResult WireBench::reposition(const Eigen::Vector3d& target_deg) {
+  following_ = false;
+  restore_limits();
+  for (int a = 0; a < 3; ++a) {
+    const auto i = static_cast<std::size_t>(a);
+    if (modes_[i] != dr::TableMode::position) {
+      if (auto r = dev_->table->set_mode(a, dr::TableMode::position); !r)
+        return DeviceResult::failure(std::string(motion::kAxisNames[i]) + " axis: " + r.error().message);
+      modes_[i] = dr::TableMode::position;
+    }
+    if (auto r = dev_->table->demand_position(a, target_deg[static_cast<Eigen::Index>(a)]); !r)
+      return DeviceResult::failure(std::string(motion::kAxisNames[i]) + " axis: " + r.error().message);
+  }
+  const std::int64_t deadline_ns = dr::host_time_ns() + std::llround(settings_.home_timeout_s * units::kNsPerS);
+  for (;;) {
+    service(10);
+    if (table_state_.connected && !table_state_.moving &&
+        (table_state_.angle_deg - target_deg).cwiseAbs().maxCoeff() < kAtTarget_deg)
+      return DeviceResult::success();
+    if (!table_state_.fault.empty()) return DeviceResult::failure("table fault while moving: " + table_state_.fault);
+    if (dr::host_time_ns() > deadline_ns) {
+      char text[200];
+      std::snprintf(text, sizeof text, "the table did not reach [%.4f, %.4f, %.4f] deg within %.0f s", target_deg[0],
+                    target_deg[1], target_deg[2], settings_.home_timeout_s);
+      return DeviceResult::failure(text);
+    }
+  }
+}
+
+}  // namespace imucal::daemon
