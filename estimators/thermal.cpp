@@ -28,9 +28,6 @@ using nlohmann::json;
 
 namespace {
 
-constexpr double Misalignment::*kMisMember[6] = {&Misalignment::xy, &Misalignment::xz, &Misalignment::yx,
-                                                 &Misalignment::yz, &Misalignment::zx, &Misalignment::zy};
-const char* const kMisName[6] = {"xy", "xz", "yx", "yz", "zx", "zy"};
 const char* const kAxisName[3] = {"x", "y", "z"};
 
 }  // namespace
@@ -46,11 +43,12 @@ const std::array<Coefficient, kCoefficients>& coefficients() {
     for (int j = 0; j < 3; ++j) add("gyro.bias_dph", kAxisName[j], true, j, units::kRadpsToDph);
     for (int j = 0; j < 3; ++j) add("gyro.scale_pos_ppm", kAxisName[j], true, j, 1e6);
     for (int j = 0; j < 3; ++j) add("gyro.scale_neg_ppm", kAxisName[j], true, j, 1e6);
-    for (int m = 0; m < 6; ++m) add("gyro.misalignment_arcsec", kMisName[m], true, kMisName[m][0] - 'x', units::kRadToArcsec);
+    for (const MisalignmentKey& k : kMisalignmentKeys)
+      add("gyro.misalignment_arcsec", k.name, true, k.name[0] - 'x', units::kRadToArcsec);
     for (int j = 0; j < 3; ++j) add("accel.bias_mps2", kAxisName[j], false, j, 1.0);
     for (int j = 0; j < 3; ++j) add("accel.scale_ppm", kAxisName[j], false, j, 1e6);
-    for (int m = 0; m < 6; ++m)
-      add("accel.misalignment_arcsec", kMisName[m], false, kMisName[m][0] - 'x', units::kRadToArcsec);
+    for (const MisalignmentKey& k : kMisalignmentKeys)
+      add("accel.misalignment_arcsec", k.name, false, k.name[0] - 'x', units::kRadToArcsec);
     return t;
   }();
   return table;
@@ -78,10 +76,10 @@ auto field(G& g, A& a, int i) -> decltype(&g.bias_radps[0]) {
   if (i < 3) return &g.bias_radps[i];
   if (i < 6) return &g.scale_pos[i - 3];
   if (i < 9) return &g.scale_neg[i - 6];
-  if (i < 15) return &(g.misalignment_rad.*kMisMember[i - 9]);
+  if (i < 15) return &(g.misalignment_rad.*kMisalignmentKeys[static_cast<std::size_t>(i - 9)].member);
   if (i < 18) return &a.bias_mps2[i - 15];
   if (i < 21) return &a.scale[i - 18];
-  return &(a.misalignment_rad.*kMisMember[i - 21]);
+  return &(a.misalignment_rad.*kMisalignmentKeys[static_cast<std::size_t>(i - 21)].member);
 }
 }  // namespace
 

@@ -437,10 +437,7 @@ json model_estimates_json(const ImuModel& model) {
     for (int j = 0; j < 3; ++j) out[prefix + "." + axes[j]] = json::array({est[j] * scale, sig[j] * scale});
   };
   auto mis = [&](const std::string& prefix, const Misalignment& est, const Misalignment& sig) {
-    const std::pair<const char*, double Misalignment::*> keys[6] = {{"xy", &Misalignment::xy}, {"xz", &Misalignment::xz},
-                                                                    {"yx", &Misalignment::yx}, {"yz", &Misalignment::yz},
-                                                                    {"zx", &Misalignment::zx}, {"zy", &Misalignment::zy}};
-    for (const auto& [name, k] : keys)
+    for (const auto& [name, k] : kMisalignmentKeys)
       out[prefix + "." + name] = json::array({est.*k * units::kRadToArcsec, sig.*k * units::kRadToArcsec});
   };
   vec("gyro.bias_dph", model.gyro.bias_radps, sigma.gyro.bias_radps, units::kRadpsToDph);
