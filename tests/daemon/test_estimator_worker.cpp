@@ -13,14 +13,10 @@ using namespace imucal;
 TEST(EstimatorWorker, NavigationAppliesTheThermalSection) {
   // Half an hour of the short chamber run, recorded, then navigated by the worker with the truth's
   // section in its model and with the constants alone.
-  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
-  const auto program = motion::load_program("thermal-short", motion::TableLimits{});
-  const auto profile = motion::load_chamber_profile("thermal-short");
-  sim::SimConfig cfg;
-  cfg.rate_hz = 20;
-  cfg.duration_s = 1800;
-  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, cfg.duration_s);
-  cfg.thermal = &tm;
+  const thermaltest::ChamberStretch stretch(1800);
+  const ImuModel& truth = stretch.truth;
+  const motion::Program& program = stretch.program;
+  const sim::SimConfig& cfg = stretch.cfg;
   const std::string path = std::string(IMUCAL_TEST_TMP) + "/worker-thermal.db";
   std::filesystem::create_directories(IMUCAL_TEST_TMP);
   std::filesystem::remove(path);

@@ -398,14 +398,10 @@ TEST(ThermalBadInput, InsufficientCoverageIsReported) {
 TEST(ThermalNavigation, CompensationAppliesInNavigation) {
   // The truth's own section in the model: navigation across a chamber ramp gets far better than
   // with the constants alone.
-  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
-  const auto program = motion::load_program("thermal-short", motion::TableLimits{});
-  const auto profile = motion::load_chamber_profile("thermal-short");
-  sim::SimConfig cfg;
-  cfg.rate_hz = 20;
-  cfg.duration_s = 3600;
-  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, cfg.duration_s);
-  cfg.thermal = &tm;
+  const thermaltest::ChamberStretch stretch(3600);
+  const ImuModel& truth = stretch.truth;
+  const motion::Program& program = stretch.program;
+  const sim::SimConfig& cfg = stretch.cfg;
   auto navigate = [&](const ImuModel& model) {
     sim::Simulator s(program, truth, cfg);
     nav::NavigationRun run(s.meta(), model, 10.0, nullptr);
@@ -428,14 +424,10 @@ TEST(ThermalNavigation, CompensationAppliesInTheNavigationFilter) {
   // the compensation leaves the filter nothing but its own transients to explain; with the constants
   // alone the innovations carry the thermal drift of every coefficient, and the constants it
   // feeds back chase the temperature.
-  const ImuModel truth = thermaltest::clean(thermaltest::truth_thermal());
-  const auto program = motion::load_program("thermal-short", motion::TableLimits{});
-  const auto profile = motion::load_chamber_profile("thermal-short");
-  sim::SimConfig cfg;
-  cfg.rate_hz = 20;
-  cfg.duration_s = 1800;
-  const sim::ThermalModel tm(profile, truth, sim::ThermalConfig{}, cfg.duration_s);
-  cfg.thermal = &tm;
+  const thermaltest::ChamberStretch stretch(1800);
+  const ImuModel& truth = stretch.truth;
+  const motion::Program& program = stretch.program;
+  const sim::SimConfig& cfg = stretch.cfg;
   auto run_filter = [&](const ImuModel& model) {
     sim::Simulator s(program, truth, cfg);
     navfilter::NavCalibrationFilter filter(s.meta(), model);

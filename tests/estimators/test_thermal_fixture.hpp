@@ -37,6 +37,25 @@ inline ImuModel stage1_of(const ImuModel& truth) {
   return m;
 }
 
+// A stretch of the thermal-short chamber run at 20 Hz, the truth's coefficients following its own
+// thermal section: what the compensation tests navigate with and without that section.
+struct ChamberStretch {
+  ImuModel truth = clean(truth_thermal());
+  motion::Program program = motion::load_program("thermal-short", motion::TableLimits{});
+  sim::SimConfig cfg;
+  explicit ChamberStretch(double duration_s)
+      : tm_(motion::load_chamber_profile("thermal-short"), truth, sim::ThermalConfig{}, duration_s) {
+    cfg.rate_hz = 20;
+    cfg.duration_s = duration_s;
+    cfg.thermal = &tm_;
+  }
+  ChamberStretch(const ChamberStretch&) = delete;  // cfg points into it
+  ChamberStretch& operator=(const ChamberStretch&) = delete;
+
+ private:
+  sim::ThermalModel tm_;
+};
+
 struct Run {
   std::string program = "thermal";
   std::string chamber = "thermal";
