@@ -21,6 +21,7 @@ using namespace imucal::drivers;
 using namespace std::chrono_literals;
 using imucal::drivers::test::eventually;
 using imucal::drivers::test::Stopwatch;
+using imucal::drivers::test::bind_loopback;
 
 namespace {
 
@@ -238,19 +239,9 @@ TEST(ModbusChamber, SilentControllerTimesOutWithinTheResponseTimeout) {
 }
 
 TEST(ModbusChamber, UnreachableControllerBacksOff) {
+  // A port nobody listens on: bind, read the number, close.
   int port = 0;
-  {
-    // A port nobody listens on: bind, read the number, close.
-    const int s = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-    socklen_t len = sizeof a;
-    ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &len);
-    port = ntohs(a.sin_port);
-    ::close(s);
-  }
+  ::close(bind_loopback(port, false));
   ModbusChamberConfig c;
   c.port = port;
   c.map = load_register_map("watlow-f4t");
@@ -320,14 +311,8 @@ TEST(ModbusChamber, RefusesSetPointsOutsideTheConfiguredRange) {
 // transaction id half of the time, so that libmodbus reads on into the random PDU). The driver
 // must return an error every time, within its timeout, and never a value.
 TEST(ModbusChamberFuzz, RandomRepliesNeverYieldAValue) {
-  const int ls = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::bind(ls, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-  ASSERT_EQ(::listen(ls, 8), 0);
-  socklen_t len = sizeof a;
-  ::getsockname(ls, reinterpret_cast<sockaddr*>(&a), &len);
+  int port = 0;
+  const int ls = bind_loopback(port);
   std::atomic<bool> stop{false};
   std::thread server([&] {
     std::mt19937_64 rng(2024);
@@ -367,7 +352,7 @@ TEST(ModbusChamberFuzz, RandomRepliesNeverYieldAValue) {
     for (int c : clients) ::close(c);
   });
   ModbusChamberConfig c;
-  c.port = ntohs(a.sin_port);
+  c.port = port;
   c.map = load_register_map("watlow-f4t");
   c.map.units.reset();  // fewer registers per read: more random replies per second
   c.map.alarms.clear();

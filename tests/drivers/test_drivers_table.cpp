@@ -25,6 +25,7 @@ using namespace imucal::drivers;
 using namespace std::chrono_literals;
 using imucal::drivers::test::eventually;
 using imucal::drivers::test::Stopwatch;
+using imucal::drivers::test::bind_loopback;
 
 namespace {
 
@@ -471,14 +472,8 @@ TEST(AclTable, ConfigurationFromJson) {
 // request with a damaged reply (one byte changed, a truncated line, random printable garbage or
 // random bytes). With reply checksums on, the driver must never return a position.
 TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
-  const int ls = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::bind(ls, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-  ASSERT_EQ(::listen(ls, 8), 0);
-  socklen_t len = sizeof a;
-  ::getsockname(ls, reinterpret_cast<sockaddr*>(&a), &len);
+  int port = 0;
+  const int ls = bind_loopback(port);
   std::atomic<bool> stop{false};
   std::thread server([&] {
     std::mt19937_64 rng(77);
@@ -551,7 +546,7 @@ TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
     for (int c : clients) ::close(c);
   });
   AclTableConfig c;
-  c.port = ntohs(a.sin_port);
+  c.port = port;
   c.response_timeout = 100ms;
   c.backoff_initial = 1ms;
   c.backoff_max = 1ms;
