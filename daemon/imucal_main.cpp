@@ -495,7 +495,7 @@ int main(int argc, char** argv) {
   sim->add_option("--chamber", sim_args.chamber,
                   "chamber profile (built-in thermal, thermal-short, or a JSON file): temperatures and the truth's "
                   "thermal section drive the run");
-  sim->add_flag("--stabilise", sim_args.stabilise, "with --chamber: the IMU's own thermal stabilisation (0.4 C swing)");
+  sim->add_flag("--stabilise", sim_args.stabilise, "with --chamber: the IMU's own thermal stabilisation (relay heater at 55 C: 0.4 C range, 16-30 min control cycle)");
   sim->add_option("--temp-fault", sim_args.temp_faults,
                   "with --chamber: a logged-temperature fault channel:kind:t0_s[:t1_s[:jump_C]] (kind stuck, jump, "
                   "missing; channel gx..az, gx1..gz8, chamber, all)");

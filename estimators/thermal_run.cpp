@@ -239,6 +239,9 @@ namespace {
 
 constexpr int kChamber = kChannels;  // the seventh column: chamber air
 
+// Half window of the rates the judge of a simulated run evaluates its truth with (see calibrate).
+constexpr double kJudgeHalfWindow_s = 30.0;
+
 class TempSeries {
  public:
   TempSeries(const std::vector<TempSample>& temps, double half_window_s) {
@@ -756,12 +759,18 @@ Result run_stage(const RecordingMeta& meta, const std::vector<CycleEstimate>& cy
     truth = imu_model_from_json_text(meta.truth_json, "the run's truth");
     truth_thermal = thermal_of(*truth);
   }
+  // The judge reads the rates on a window of its own, short enough to follow the fastest thermal
+  // cycle a simulated run has (a stabiliser's, ~17 min) to a fraction of a percent: with the
+  // model's own window it would share the model's smoothing and could not see what it costs.
+  std::optional<TempSeries> judge_series;
+  if (truth_thermal) judge_series.emplace(temps, kJudgeHalfWindow_s);
   auto truth_at = [&](const Coefficient& k, double t) {
     double v = get(truth->gyro, truth->accel, k);
     if (!truth_thermal) return v;
     const int ch = channel_of(k);
-    const double rate = series.rate(ch, t);
-    v += truth_thermal->poly[static_cast<std::size_t>(k.index)].eval(series.value(ch, t) - truth_thermal->T_ref_C, rate);
+    const double rate = judge_series->rate(ch, t);
+    v += truth_thermal->poly[static_cast<std::size_t>(k.index)].eval(judge_series->value(ch, t) - truth_thermal->T_ref_C,
+                                                                     rate);
     if (truth_thermal->sim_oscillation && k.index < 3) v += oscillation_dph(*truth_thermal->sim_oscillation, k.index, t, rate);
     return v;
   };

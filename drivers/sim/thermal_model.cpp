@@ -51,16 +51,66 @@ ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel
   slope_.resize(n);
   value6_.resize(n);
   const Stabilisation& stab = config_.stabilisation;
-  auto plate_target = [&](double case_C) { return stab.setpoint_C + stab.leak * (case_C - stab.setpoint_C); };
-  // Start in equilibrium at the first set point, as after a night in the chamber.
+  if (stab.enabled && !(stab.hysteresis_C >= 0 && stab.excess_C > 0 && stab.heater_tau_s > 0 && stab.plate_tau_s > 0 &&
+                        stab.loss_tau_s > 0 && stab.warm_up_s >= 0))
+    throw std::invalid_argument(
+        "thermal model: stabilisation needs hysteresis_C >= 0, warm_up_s >= 0 and positive excess and time constants");
+  const double max_step = config_.lags.chamber_max_rate_C_per_min / 60.0 * h;
+  bool heater_on = true;
+  // One step of h from y (at t0) to x (at t1 = t0 + h): chamber air, case, stabiliser, sensors.
+  auto step = [&](const std::array<double, kColumns>& y, std::array<double, kColumns>& x, double t0, double t1) {
+    x[kSet] = profile_.setpoint_C(t1);
+    const double air = motion::first_order_lag_step(y[kAir], profile_.setpoint_C(t0), x[kSet], h,
+                                                    config_.lags.chamber_tau_s);
+    x[kAir] = std::clamp(std::clamp(air, y[kAir] - max_step, y[kAir] + max_step), config_.chamber_min_C,
+                         config_.chamber_max_C);
+    x[kCase] = motion::first_order_lag_step(y[kCase], y[kAir], x[kAir], h, config_.lags.case_tau_s);
+    if (stab.enabled) {
+      // The relay decides on the plate as it was; the heater block and the plate then advance by
+      // explicit Euler on quarter-second sub-steps (the time constants are minutes).
+      if (y[kPlate] < stab.setpoint_C - stab.hysteresis_C) heater_on = true;
+      if (y[kPlate] > stab.setpoint_C + stab.hysteresis_C) heater_on = false;
+      double heater = y[kHeater], plate = y[kPlate];
+      constexpr int kSub = 4;
+      for (int q = 0; q < kSub; ++q) {
+        const double u = (q + 0.5) / kSub;
+        const double case_C = (1 - u) * y[kCase] + u * x[kCase];
+        const double d_heater = ((heater_on ? plate + stab.excess_C : plate) - heater) / stab.heater_tau_s;
+        const double d_plate = (heater - plate) / stab.plate_tau_s + (case_C - plate) / stab.loss_tau_s;
+        heater += d_heater * h / kSub;
+        plate += d_plate * h / kSub;
+      }
+      x[kHeater] = heater;
+      x[kPlate] = plate;
+    } else {
+      x[kHeater] = x[kPlate] = x[kCase];
+    }
+    // The sensors follow the plate (the case itself without stabilisation).
+    const double src0 = y[kPlate], src1 = x[kPlate];
+    for (int j = 0; j < 3; ++j) {
+      const std::size_t a = kAccel + static_cast<std::size_t>(j);
+      x[a] = motion::first_order_lag_step(y[a], src0, src1, h, config_.accel_tau_s[j]);
+      for (int s = 0; s < 8; ++s) {
+        const std::size_t c = kCoil + static_cast<std::size_t>(8 * j + s);
+        const double tau = config_.coil_tau_s[j] * (1.0 + config_.coil_sensor_spread * sensor_factor(s));
+        x[c] = motion::first_order_lag_step(y[c], src0, src1, h, tau);
+      }
+    }
+  };
+  // Start in equilibrium at the first set point, as after a night in the chamber; a stabilised
+  // IMU switched on warm_up_s before, at the plate's set point with the heater holding it.
   std::array<double, kColumns> x{};
   x[kSet] = x[kAir] = x[kCase] = profile_.setpoint_C(0.0);
-  x[kPlate] = stab.enabled ? plate_target(x[kCase]) : x[kCase];
-  const double source0 = stab.enabled ? x[kPlate] : x[kCase];
-  for (std::size_t c = kAccel; c < kColumns; ++c) x[c] = source0;
-  const double max_step = config_.lags.chamber_max_rate_C_per_min / 60.0 * h;
+  x[kPlate] = stab.enabled ? stab.setpoint_C : x[kCase];
+  x[kHeater] = stab.enabled ? x[kPlate] + (x[kPlate] - x[kCase]) * stab.plate_tau_s / stab.loss_tau_s : x[kCase];
+  for (std::size_t c = kAccel; c < kColumns; ++c) x[c] = x[kPlate];
+  if (stab.enabled)
+    for (double t = 0; t < stab.warm_up_s; t += h) {
+      const std::array<double, kColumns> y = x;
+      step(y, x, 0.0, 0.0);  // the chamber holds the first set point
+    }
   auto derivatives = [&](const std::array<double, kColumns>& y, std::size_t k) {
-    const double source = stab.enabled ? y[kPlate] : y[kCase];
+    const double source = y[kPlate];
     for (int j = 0; j < 3; ++j) {
       value6_[k][static_cast<std::size_t>(3 + j)] = y[kAccel + static_cast<std::size_t>(j)];
       slope_[k][static_cast<std::size_t>(3 + j)] = (source - y[kAccel + static_cast<std::size_t>(j)]) / config_.accel_tau_s[j];
@@ -78,29 +128,8 @@ ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel
   grid_[0] = x;
   derivatives(x, 0);
   for (std::size_t k = 1; k < n; ++k) {
-    const double t0 = static_cast<double>(k - 1) * h, t1 = static_cast<double>(k) * h;
-    const std::array<double, kColumns> y = grid_[k - 1];
-    x[kSet] = profile_.setpoint_C(t1);
-    const double air = motion::first_order_lag_step(y[kAir], profile_.setpoint_C(t0), x[kSet], h,
-                                                    config_.lags.chamber_tau_s);
-    x[kAir] = std::clamp(std::clamp(air, y[kAir] - max_step, y[kAir] + max_step), config_.chamber_min_C,
-                         config_.chamber_max_C);
-    x[kCase] = motion::first_order_lag_step(y[kCase], y[kAir], x[kAir], h, config_.lags.case_tau_s);
-    x[kPlate] = stab.enabled ? motion::first_order_lag_step(y[kPlate], plate_target(y[kCase]), plate_target(x[kCase]), h,
-                                                            stab.tau_s)
-                             : x[kCase];
-    const double src0 = stab.enabled ? y[kPlate] : y[kCase], src1 = stab.enabled ? x[kPlate] : x[kCase];
-    for (int j = 0; j < 3; ++j) {
-      const std::size_t a = kAccel + static_cast<std::size_t>(j);
-      x[a] = motion::first_order_lag_step(y[a], src0, src1, h, config_.accel_tau_s[j]);
-      for (int s = 0; s < 8; ++s) {
-        const std::size_t c = kCoil + static_cast<std::size_t>(8 * j + s);
-        const double tau = config_.coil_tau_s[j] * (1.0 + config_.coil_sensor_spread * sensor_factor(s));
-        x[c] = motion::first_order_lag_step(y[c], src0, src1, h, tau);
-      }
-    }
-    grid_[k] = x;
-    derivatives(x, k);
+    step(grid_[k - 1], grid_[k], static_cast<double>(k - 1) * h, static_cast<double>(k) * h);
+    derivatives(grid_[k], k);
   }
 }
 
@@ -137,6 +166,7 @@ ThermalModel::State ThermalModel::state(double t) const {
   st.air_C = grid_value(kAir, t);
   st.case_C = grid_value(kCase, t);
   st.plate_C = grid_value(kPlate, t);
+  st.heater_C = grid_value(kHeater, t);
   st.sensors = channels(t);
   for (std::size_t j = 0; j < 3; ++j)
     for (std::size_t s = 0; s < 8; ++s) st.coil_sensors_C[j][s] = grid_value(kCoil + 8 * j + s, t);

@@ -2,8 +2,10 @@
 //  - Chamber air follows the profile's set point (first-order lag, limited heating/cooling rate
 //    and reach), the IMU case follows the air, each accelerometer and each of the eight sensors on
 //    every FOG coil follows the case with its own lag; a coil's temperature is the mean of its
-//    eight sensors (seed ch. 3). With the IMU's own thermal stabilisation the sensors follow a
-//    heated plate that lets through only a small fraction of the case's swing (0.4 C over 20 C).
+//    eight sensors (seed ch. 3). With the IMU's own thermal stabilisation the sensors sit on a
+//    plate held by an on/off heater (below): the chamber's 20 C swing reaches them only as a
+//    0.4 C range, but the heater's control cycle keeps them heating and cooling at a few
+//    hundredths of a degree per minute, and the FOG bias follows dT/dt.
 //  - Truth coefficients: the truth model's constants plus its "thermal" section evaluated at the
 //    true sensor temperatures and rates, plus the FOG bias oscillation of sim_oscillation.
 //  - Logged temperatures: quantised, with injected faults (stuck, jump, missing) that leave the
@@ -26,11 +28,24 @@
 
 namespace imucal::sim {
 
+// The IMU's thermal stabilisation: a plate carrying the sensors, heated through a heater block
+// switched on and off by a relay with hysteresis on the plate's control sensor.
+//   heater block: dTh/dt = ((on ? Tp + excess_C : Tp) - Th) / heater_tau_s
+//   plate:        dTp/dt = (Th - Tp) / plate_tau_s + (Tcase - Tp) / loss_tau_s
+// The heater's lag makes the relay overshoot, so the plate cycles around the set point with a
+// period of about 16..30 min that lengthens as the case warms (the plate then cools more slowly);
+// the sensors, lagging the plate, stay within about 0.4 C over a 15..35 C chamber run yet heat
+// and cool at up to 0.03..0.04 C/min. The set point is above the warmest case, as a heater needs.
+// The IMU is switched on warm_up_s before the run, so the run starts inside the control cycle.
 struct Stabilisation {
   bool enabled = false;
-  double setpoint_C = 35.0;  // a heater holds the plate at the warm end of the working range
-  double leak = 0.02;        // share of the case's deviation from the set point reaching the plate
-  double tau_s = 600.0;      // the plate's response
+  double setpoint_C = 55.0;
+  double hysteresis_C = 0.05;  // the relay switches at setpoint -+ hysteresis
+  double excess_C = 30.0;      // the heater block's rise over the plate at full power
+  double heater_tau_s = 600.0;
+  double plate_tau_s = 300.0;  // heater block to plate
+  double loss_tau_s = 8000.0;  // plate to case
+  double warm_up_s = 4 * 3600.0;
 };
 
 // A fault of one logged channel: gx gy gz (coil means), gx1 .. gz8 (one coil sensor), ax ay az,
@@ -66,7 +81,7 @@ class ThermalModel final : public ThermalSource {
   void coefficients(double t_s, GyroErrors& gyro, AccelErrors& accel) const override;
 
   struct State {
-    double setpoint_C = 0, air_C = 0, case_C = 0, plate_C = 0;
+    double setpoint_C = 0, air_C = 0, case_C = 0, plate_C = 0, heater_C = 0;
     thermal::ChannelTemps sensors;  // coil means x y z, accelerometers x y z; rates in C/min
     std::array<std::array<double, 8>, 3> coil_sensors_C{};
   };
@@ -80,9 +95,10 @@ class ThermalModel final : public ThermalSource {
   bool has_section_ = false;
   motion::ChamberProfile profile_;
   ThermalConfig config_;
-  // Grid columns: set point, air, case, plate, 3 accel, 24 coil sensors; then the six channels'
-  // derivatives (C/s) for the Hermite interpolation.
-  static constexpr std::size_t kSet = 0, kAir = 1, kCase = 2, kPlate = 3, kAccel = 4, kCoil = 7, kColumns = 31;
+  // Grid columns: set point, air, case, plate, heater block, 3 accel, 24 coil sensors; then the
+  // six channels' derivatives (C/s) for the Hermite interpolation.
+  static constexpr std::size_t kSet = 0, kAir = 1, kCase = 2, kPlate = 3, kHeater = 4, kAccel = 5, kCoil = 8,
+                               kColumns = 32;
   std::vector<std::array<double, kColumns>> grid_;
   std::vector<std::array<double, thermal::kChannels>> slope_;
   std::vector<std::array<double, thermal::kChannels>> value6_;

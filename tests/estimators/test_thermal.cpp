@@ -111,19 +111,30 @@ TEST(ThermalSim, SensorsLagTheCaseWhichLagsTheAir) {
   EXPECT_NEAR(m.state(1800).sensors.rate_C_per_min[3], d, 1e-6);
 }
 
-TEST(ThermalSim, StabilisationHoldsTheSensorsWithinFourTenthsOfADegree) {
+TEST(ThermalSim, StabilisationHoldsTheSensorsWithinFourTenthsOfADegreeButKeepsThemMoving) {
   sim::ThermalConfig cfg;
   cfg.stabilisation.enabled = true;
   const auto profile = motion::load_chamber_profile("thermal");
   const sim::ThermalModel m(profile, thermaltest::truth_thermal(), cfg, profile.duration_s());
-  double lo = 1e9, hi = -1e9;
+  double lo = 1e9, hi = -1e9, fastest = 0;
+  int heater_swings = 0;
+  bool rising = false;
   for (double t = 0; t < profile.duration_s(); t += 60) {
-    lo = std::min(lo, m.state(t).sensors.T_C[0]);
-    hi = std::max(hi, m.state(t).sensors.T_C[0]);
+    const auto s = m.state(t);
+    lo = std::min(lo, s.sensors.T_C[0]);
+    hi = std::max(hi, s.sensors.T_C[0]);
+    fastest = std::max(fastest, std::abs(s.sensors.rate_C_per_min[0]));
+    const bool up = s.sensors.rate_C_per_min[0] > 0;
+    heater_swings += up && !rising;
+    rising = up;
   }
-  std::printf("stabilised FOG x: %.3f .. %.3f C\n", lo, hi);
+  std::printf("stabilised FOG x: %.3f .. %.3f C, |dT/dt| up to %.3f C/min, %d heating phases\n", lo, hi, fastest,
+              heater_swings);
   EXPECT_LT(hi - lo, 0.45);
   EXPECT_GT(hi - lo, 0.3);
+  // The relay's control cycle (16..30 min) keeps the coil heating and cooling.
+  EXPECT_GT(fastest, 0.02);
+  EXPECT_GT(heater_swings, 12 * 60 / 30);
 }
 
 TEST(ThermalSim, EachCoilReportsItsEightSensorsAndTheirMean) {

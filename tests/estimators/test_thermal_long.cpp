@@ -66,30 +66,38 @@ TEST(ThermalLong, CleanDataGivesTheTruthsDegreeEverywhere) {
 }
 
 TEST(ThermalLong, WithThermalStabilisationTheFogBiasIsWithinAThousandthDegreePerHour) {
-  // The seed's order: characterise over 15..35 C, then run with the IMU's stabilisation (0.4 C
-  // swing); that run keeps the shape of the models and fits their constants.
+  // The seed's order: characterise over 15..35 C, then run with the IMU's stabilisation (a relay
+  // heater holding the sensors near 55 C within about 0.4 C, docs/thermal.md); that run keeps the
+  // shape of the models (their dT/dt part is what the control cycle excites) and fits their
+  // constants at the stabilised temperature, 20 C beyond the characterised range.
   const ImuModel truth = thermaltest::truth_thermal();
-  thermaltest::Run full;
-  full.seed = 11;
-  const auto characterised = thermaltest::run(truth, full);
-  thermaltest::Run stab;
-  stab.seed = 12;
-  stab.thermal.stabilisation.enabled = true;
-  const auto o = thermaltest::run(truth, stab, &characterised.result.model, "constants");
-  std::printf("stabilised run, shape from 15..35 C, constants from this run:\n");
-  thermaltest::print(o);
-  const double before = o.report.at("before").at("gyro.bias_dph").get<double>();
-  const double p2p = o.report.at("truth_peak_to_peak").at("gyro.bias_dph").get<double>();
-  const double after = o.report.at("residual").at("gyro.bias_dph").get<double>();
-  EXPECT_GT(before, 0.005);  // uncompensated, against stage 1 at 25 C
-  EXPECT_LE(after, 0.001);
-  std::printf("FOG bias with stabilisation: uncompensated %.4f deg/h (truth peak to peak %.4f), compensated %.5f\n",
-              before, p2p, after);
-  // For the record: the 15..35 C models unchanged, and a fit of the stabilised run alone.
-  const auto judged = thermaltest::run(truth, stab, &characterised.result.model, "judge");
-  const auto alone = thermaltest::run(truth, stab);
-  std::printf("  the same run judged with the 15..35 C models as they are: %.5f deg/h; fitted on its own: %.5f deg/h\n",
-              judged.report.at("residual").at("gyro.bias_dph").get<double>(),
-              alone.report.at("residual").at("gyro.bias_dph").get<double>());
-  EXPECT_LE(judged.report.at("residual").at("gyro.bias_dph").get<double>(), 0.002);
+  for (std::uint64_t seed : {11u, 13u, 15u}) {
+    thermaltest::Run full;
+    full.seed = seed;
+    const auto characterised = thermaltest::run(truth, full);
+    thermaltest::Run stab;
+    stab.seed = seed + 1;
+    stab.thermal.stabilisation.enabled = true;
+    const auto o = thermaltest::run(truth, stab, &characterised.result.model, "constants");
+    std::printf("seeds %llu/%llu: stabilised run, shape from 15..35 C, constants from this run:\n",
+                static_cast<unsigned long long>(seed), static_cast<unsigned long long>(seed + 1));
+    thermaltest::print(o);
+    const double p2p = o.report.at("truth_peak_to_peak").at("gyro.bias_dph").get<double>();
+    const double after = o.report.at("residual").at("gyro.bias_dph").get<double>();
+    // Stabilisation alone is not enough (seed ch. 3): the FOG bias still moves with the control
+    // cycle's dT/dt by more than 0.005 deg/h over the run.
+    EXPECT_GT(p2p, 0.005) << "seed " << seed;
+    EXPECT_LE(after, 0.001) << "seed " << seed;
+    std::printf("FOG bias with stabilisation: truth peak to peak %.4f deg/h, compensated %.5f\n", p2p, after);
+    if (seed != 11u) continue;
+    // For the record: the 15..35 C models unchanged (extrapolated to 55 C), and a fit of the
+    // stabilised run alone (its 0.4 C cannot separate T from noise, and the cycle's fast dT/dt
+    // moves the bias inside each 8.6 min table cycle).
+    const auto judged = thermaltest::run(truth, stab, &characterised.result.model, "judge");
+    const auto alone = thermaltest::run(truth, stab);
+    std::printf("  the same run judged with the 15..35 C models as they are: %.5f deg/h; fitted on its own: %.5f deg/h\n",
+                judged.report.at("residual").at("gyro.bias_dph").get<double>(),
+                alone.report.at("residual").at("gyro.bias_dph").get<double>());
+  }
 }
+
