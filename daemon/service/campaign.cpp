@@ -7,6 +7,7 @@
 
 #include "core/units.hpp"
 #include "daemon/service/json_reader.hpp"
+#include "motion_programs/chamber.hpp"
 
 namespace imucal::daemon {
 
@@ -134,48 +135,112 @@ std::optional<json> join_programs(const std::vector<json>& parts, const motion::
   return joined;
 }
 
+// The tolerance of a campaign run along a chamber profile that ramps, unless it gives its own: a
+// chamber's air lags a 1 C/min ramp by about 3 C (docs/daemon.md).
+constexpr double kProfileToleranceMin_C = 5.0;
+
+// A chamber profile in the format of motion_programs/chamber.hpp (soaks, ramps, sets; a built-in
+// name or an inline object) as the daemon's set-point steps.
+void profile_steps(const json& spec, const std::string& where, ChamberProfile& profile,
+                   std::vector<std::string>& problems) {
+  motion::ChamberProfile p;
+  try {
+    if (spec.is_string()) {
+      p = motion::load_chamber_profile(spec.get<std::string>());
+    } else if (spec.is_object()) {
+      p = motion::compile_chamber_profile(spec.dump());
+    } else {
+      problems.push_back(where + " must be a built-in chamber profile's name (" + [] {
+        std::string names;
+        for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
+        return names;
+      }() + ") or a profile object (docs/thermal.md)");
+      return;
+    }
+  } catch (const std::exception& e) {
+    problems.push_back(where + ": " + e.what());
+    return;
+  }
+  profile.setpoint_C = p.start_C;
+  profile.steps.clear();
+  for (const motion::ChamberStep& s : p.steps) {
+    if (s.kind == "soak") continue;  // a soak holds what the step before reached
+    ChamberStep step;
+    step.at_s = s.t0_s;
+    step.setpoint_C = s.to_C;
+    if (s.kind == "ramp" && s.t1_s > s.t0_s) step.ramp_C_per_min = std::abs(s.to_C - s.from_C) / (s.t1_s - s.t0_s) * 60.0;
+    profile.steps.push_back(step);
+  }
+  profile.tolerance_C = std::max(profile.tolerance_C, kProfileToleranceMin_C);
+}
+
+// `chamber`: {"setpoint_C", "tolerance_C", "steps": [...]} or {"profile": NAME|OBJECT,
+// "tolerance_C"}, or just the profile's name.
 void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
                    std::vector<std::string>& problems) {
-  ObjectReader r(j, "campaign.chamber", problems);
   const ChamberLimits& lim = config.chamber;
   auto in_limits = [&](double c, const std::string& where) {
     if (c < lim.min_C || c > lim.max_C)
       problems.push_back(where + " " + json(c).dump() + " C is outside the chamber's limits " + json(lim.min_C).dump() +
                          " .. " + json(lim.max_C).dump() + " C");
   };
-  if (auto v = r.number("setpoint_C")) {
-    profile.setpoint_C = *v;
-    in_limits(*v, "campaign.chamber.setpoint_C");
-  }
-  if (auto v = r.number_in("tolerance_C", 0.01, 50)) profile.tolerance_C = *v;
-  if (const json* steps = r.get("steps")) {
-    if (!steps->is_array()) {
-      problems.push_back("campaign.chamber.steps must be an array");
+  std::string where_steps = "campaign.chamber.steps";
+  if (j.is_string()) {
+    profile_steps(j, "campaign.chamber", profile, problems);
+    where_steps = "campaign.chamber (profile '" + j.get<std::string>() + "')";
+  } else {
+    ObjectReader r(j, "campaign.chamber", problems);
+    const json* named = r.get("profile");
+    const json* steps = r.get("steps");
+    if (named != nullptr && steps != nullptr) {
+      problems.push_back("campaign.chamber: give either a profile or steps, not both");
       return;
     }
-    std::size_t i = 0;
-    for (const json& s : *steps) {
-      const std::string where = "campaign.chamber.steps[" + std::to_string(i++) + "]";
-      ObjectReader sr(s, where, problems);
-      ChamberStep step;
-      const auto at = sr.number_in("at_s", 0, std::nullopt, true);
-      const auto sp = sr.number("setpoint_C", true);
-      const auto ramp = sr.number_in("ramp_C_per_min", 0);
-      if (!at || !sp) continue;
-      step.at_s = *at;
-      step.setpoint_C = *sp;
-      step.ramp_C_per_min = ramp.value_or(0.0);
-      in_limits(*sp, where + ".setpoint_C");
-      if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
-        problems.push_back(where + ".ramp_C_per_min " + json(step.ramp_C_per_min).dump() +
-                           " exceeds the chamber's limit " + json(lim.max_ramp_C_per_min).dump());
-      if (step.at_s > duration_s)
-        problems.push_back(where + ".at_s " + json(step.at_s).dump() + " s is after the program's end (" +
-                           json(duration_s).dump() + " s)");
-      if (!profile.steps.empty() && step.at_s <= profile.steps.back().at_s)
-        problems.push_back(where + ".at_s must be later than the previous step's");
-      profile.steps.push_back(step);
+    if (named != nullptr && r.has("setpoint_C"))
+      problems.push_back("campaign.chamber.setpoint_C: a profile starts at its own start_C");
+    if (named != nullptr) {
+      profile_steps(*named, "campaign.chamber.profile", profile, problems);
+      where_steps = "campaign.chamber.profile";
     }
+    if (auto v = r.number("setpoint_C")) {
+      profile.setpoint_C = *v;
+      in_limits(*v, "campaign.chamber.setpoint_C");
+    }
+    if (auto v = r.number_in("tolerance_C", 0.01, 50)) profile.tolerance_C = *v;
+    if (steps != nullptr) {
+      if (!steps->is_array()) {
+        problems.push_back("campaign.chamber.steps must be an array");
+        return;
+      }
+      std::size_t i = 0;
+      for (const json& s : *steps) {
+        ObjectReader sr(s, "campaign.chamber.steps[" + std::to_string(i++) + "]", problems);
+        ChamberStep step;
+        const auto at = sr.number_in("at_s", 0, std::nullopt, true);
+        const auto sp = sr.number("setpoint_C", true);
+        const auto ramp = sr.number_in("ramp_C_per_min", 0);
+        if (!at || !sp) continue;
+        step.at_s = *at;
+        step.setpoint_C = *sp;
+        step.ramp_C_per_min = ramp.value_or(0.0);
+        profile.steps.push_back(step);
+      }
+    }
+  }
+  // The same checks for steps given and steps from a profile.
+  if (where_steps != "campaign.chamber.steps") in_limits(profile.setpoint_C, where_steps + " start_C");
+  for (std::size_t i = 0; i < profile.steps.size(); ++i) {
+    const ChamberStep& step = profile.steps[i];
+    const std::string where = where_steps + "[" + std::to_string(i) + "]";
+    in_limits(step.setpoint_C, where + ".setpoint_C");
+    if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
+      problems.push_back(where + ".ramp_C_per_min " + json(step.ramp_C_per_min).dump() + " exceeds the chamber's limit " +
+                         json(lim.max_ramp_C_per_min).dump());
+    if (step.at_s > duration_s)
+      problems.push_back(where + ".at_s " + json(step.at_s).dump() + " s is after the program's end (" +
+                         json(duration_s).dump() + " s)");
+    if (i > 0 && step.at_s <= profile.steps[i - 1].at_s)
+      problems.push_back(where + ".at_s must be later than the previous step's");
   }
 }
 
@@ -353,6 +418,13 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (check.duration_s > config.campaign.max_duration_s)
         problems.push_back("campaign.program lasts " + json(check.duration_s).dump() + " s, more than the limit of " +
                            json(config.campaign.max_duration_s).dump() + " s");
+      // A built-in thermal program's table cycle has no rate segments for stage 1: no estimator
+      // online unless asked; stage 2 runs on the whole run (GET .../thermal, `imucal calibrate
+      // --stage thermal`).
+      const auto thermal_names = motion::builtin_chamber_names();
+      if (estimators == nullptr && program_spec->is_string() &&
+          std::find(thermal_names.begin(), thermal_names.end(), program_spec->get<std::string>()) != thermal_names.end())
+        spec.estimators.clear();
       if (spec.has_estimator("direct")) {
         int statics = 0, rates = 0;
         for (const auto& s : check.segments) {
@@ -378,7 +450,16 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
         problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
       if (auto m = read_model(*nav_model, "campaign.navigation_model", problems)) spec.navigation_model = *m;
     }
-    if (chamber != nullptr) check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
+    if (chamber != nullptr) {
+      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
+    } else if (program_spec != nullptr && program_spec->is_string()) {
+      // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
+      // built-in thermal campaign: it brings its profile.
+      const auto names = motion::builtin_chamber_names();
+      const std::string name = program_spec->get<std::string>();
+      if (std::find(names.begin(), names.end(), name) != names.end())
+        check_chamber(json(name), config, check.duration_s, spec.chamber, problems);
+    }
     if (suspenders != nullptr) {
       ObjectReader s(*suspenders, "campaign.suspenders", problems);
       if (auto v = s.number_in("settle_s", 0, 86400)) spec.suspenders.settle_s = *v;

@@ -466,6 +466,7 @@ void Sequencer::run_campaign(std::int64_t id) {
       sb.chamber_start_C = config_.chamber.safe_setpoint_C;
       sb.home_time_s = config_.sim.home_time_s;
       sb.faults = run.spec.faults;
+      sb.thermal = campaign_thermal_model(run.spec, run.program.duration_s());
       run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
     } else if (config_.devices == "sim-wire") {
       if (!run.spec.faults.empty())
@@ -749,6 +750,9 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
     // settle time.
     try {
       run.recorder.reset();
+      // The old writer has ended: an alarm it raised after the check above is recorded now, not
+      // lost when the new recorder starts with none.
+      (void)recorder_problem(run);
       open_recorder(run);
       run.place_at_committed();
       char text[300];

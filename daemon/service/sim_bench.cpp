@@ -6,11 +6,19 @@
 #include <thread>
 
 #include "core/units.hpp"
+#include "drivers/sim/thermal_model.hpp"
 
 namespace imucal::daemon {
 
 namespace {
 constexpr double kTempPeriod_s = 1.0;
+}
+
+std::shared_ptr<const sim::ThermalModel> campaign_thermal_model(const CampaignSpec& spec, double duration_s) {
+  if (!thermal::thermal_of(spec.truth)) return nullptr;
+  const ChamberProfile profile = spec.chamber;
+  return std::make_shared<const sim::ThermalModel>([profile](double t_s) { return profile.setpoint_at(t_s); },
+                                                   spec.truth, sim::ThermalConfig{}, duration_s);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -101,7 +109,7 @@ class SimBench::SimChamber final : public Chamber {
   }
   ChamberState state() const override {
     ChamberState s;
-    s.temperature_C = b_.chamber_C_;
+    s.temperature_C = b_.settings_.thermal ? b_.settings_.thermal->state(b_.program_time_s()).air_C : b_.chamber_C_;
     for (const auto& f : b_.faults_)
       if (f.fault.kind == SimFault::Kind::ChamberOffset && f.active(b_.world_s_)) s.temperature_C += f.fault.offset_C;
     s.setpoint_C = b_.setpoint_C_;
@@ -139,6 +147,7 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
   double frames = settings.sim.rate_hz * 0.25;
   if (settings.time_scale > 0.0) frames = std::min(frames, settings.sim.rate_hz * settings.time_scale * 0.02);
   batch_frames_ = static_cast<std::int64_t>(std::clamp(frames, 1.0, 4096.0));
+  if (settings_.thermal) settings_.sim.thermal = settings_.thermal.get();
   sim_ = std::make_unique<sim::Simulator>(program_, truth_, settings_.sim);
   for (const SimFault& f : settings.faults) faults_.push_back({f, false, 0.0, 0});
   pace_wall0_ = std::chrono::steady_clock::now();
@@ -277,14 +286,21 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
     }
     while (next_temp_t_s_ <= t_s) {
       TempSample ts;
-      ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
       const ChamberState cs = chamber_->state();
-      ts.chamber_C = cs.temperature_C;
+      bool logged = true;
+      if (settings_.thermal) {
+        // The thermal model's sensors and air at this instant, the chamber's faults on top.
+        logged = settings_.thermal->temperatures(next_temp_t_s_, ts);
+        ts.chamber_C += cs.temperature_C - settings_.thermal->state(program_time_s()).air_C;
+      } else {
+        // The IMU sits in the chamber's air; its sensors follow it closely enough for a simulation.
+        ts.chamber_C = cs.temperature_C;
+        ts.gyro_C.setConstant(chamber_C_);
+        ts.accel_C.setConstant(chamber_C_);
+      }
+      ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
       ts.chamber_setpoint_C = setpoint_C_;
-      // The IMU sits in the chamber's air; its sensors follow it closely enough for a simulation.
-      ts.gyro_C.setConstant(chamber_C_);
-      ts.accel_C.setConstant(chamber_C_);
-      out.temps.push_back(ts);
+      if (logged) out.temps.push_back(ts);
       next_temp_t_s_ += kTempPeriod_s;
     }
     if (table_blocked()) {

@@ -1,6 +1,10 @@
 // The simulated bench in-process (`--devices sim`): the physics Simulator of drivers/sim driven
 // along the campaign's program, a first-order thermal chamber, and fault injection for tests and
 // demonstrations (chamber drift, IMU dropouts and corrupt frames, disconnections, table faults).
+// With a thermal model (a truth with a "thermal" section) the chamber air, the IMU's sensor
+// temperatures and the truth's coefficients follow sim::ThermalModel along the campaign's chamber
+// profile instead, as functions of program time: a redone segment sees the same temperatures, and
+// while the run is held (paused, suspended) the simulated temperatures wait with it.
 // Runs in accelerated simulated time: `time_scale` program seconds per wall second, or as fast as
 // possible with 0.
 //
@@ -19,6 +23,10 @@
 #include "drivers/sim/simulator.hpp"
 #include "motion_programs/program.hpp"
 
+namespace imucal::sim {
+class ThermalModel;
+}
+
 namespace imucal::daemon {
 
 struct SimBenchSettings {
@@ -29,7 +37,14 @@ struct SimBenchSettings {
   double home_time_s = 5.0;
   double reposition_rate_dps = 30.0;
   std::vector<SimFault> faults;
+  // Set: temperatures and thermal truth from this model (built along the campaign's chamber
+  // profile over the program's duration); chamber_tau_s and chamber_start_C then do not apply.
+  std::shared_ptr<const sim::ThermalModel> thermal;
 };
+
+// The thermal model of a campaign on the simulated bench: along its chamber profile over
+// duration_s when its truth has a "thermal" section, else none (constant temperatures).
+std::shared_ptr<const sim::ThermalModel> campaign_thermal_model(const CampaignSpec& spec, double duration_s);
 
 class SimBench final : public Bench {
  public:

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include "core/units.hpp"
 
@@ -31,7 +32,10 @@ int channel_index(const std::string& name, int& sensor) {
 
 ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel& truth, const ThermalConfig& config,
                            double duration_s)
-    : profile_(profile), config_(config) {
+    : ThermalModel([profile](double t_s) { return profile.setpoint_C(t_s); }, truth, config, duration_s) {}
+
+ThermalModel::ThermalModel(Setpoint setpoint_C, const ImuModel& truth, const ThermalConfig& config, double duration_s)
+    : setpoint_C_(std::move(setpoint_C)), config_(config) {
   if (auto s = thermal::thermal_of(truth)) {
     section_ = *s;
     has_section_ = true;
@@ -59,8 +63,8 @@ ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel
   bool heater_on = true;
   // One step of h from y (at t0) to x (at t1 = t0 + h): chamber air, case, stabiliser, sensors.
   auto step = [&](const std::array<double, kColumns>& y, std::array<double, kColumns>& x, double t0, double t1) {
-    x[kSet] = profile_.setpoint_C(t1);
-    const double air = motion::first_order_lag_step(y[kAir], profile_.setpoint_C(t0), x[kSet], h,
+    x[kSet] = setpoint_C_(t1);
+    const double air = motion::first_order_lag_step(y[kAir], setpoint_C_(t0), x[kSet], h,
                                                     config_.lags.chamber_tau_s);
     x[kAir] = std::clamp(std::clamp(air, y[kAir] - max_step, y[kAir] + max_step), config_.chamber_min_C,
                          config_.chamber_max_C);
@@ -100,7 +104,7 @@ ThermalModel::ThermalModel(const motion::ChamberProfile& profile, const ImuModel
   // Start in equilibrium at the first set point, as after a night in the chamber; a stabilised
   // IMU switched on warm_up_s before, at the plate's set point with the heater holding it.
   std::array<double, kColumns> x{};
-  x[kSet] = x[kAir] = x[kCase] = profile_.setpoint_C(0.0);
+  x[kSet] = x[kAir] = x[kCase] = setpoint_C_(0.0);
   x[kPlate] = stab.enabled ? stab.setpoint_C : x[kCase];
   x[kHeater] = stab.enabled ? x[kPlate] + (x[kPlate] - x[kCase]) * stab.plate_tau_s / stab.loss_tau_s : x[kCase];
   for (std::size_t c = kAccel; c < kColumns; ++c) x[c] = x[kPlate];
@@ -162,7 +166,7 @@ double ThermalModel::grid_value(std::size_t column, double t) const {
 
 ThermalModel::State ThermalModel::state(double t) const {
   State st;
-  st.setpoint_C = profile_.setpoint_C(t);
+  st.setpoint_C = setpoint_C_(t);
   st.air_C = grid_value(kAir, t);
   st.case_C = grid_value(kCase, t);
   st.plate_C = grid_value(kPlate, t);
@@ -210,7 +214,7 @@ bool ThermalModel::temperatures(double t, TempSample& out) const {
     out.accel_C[j] = quantise(faulty(3 + j, -1));
   }
   out.chamber_C = quantise(faulty(6, -1));
-  out.chamber_setpoint_C = profile_.setpoint_C(t);
+  out.chamber_setpoint_C = setpoint_C_(t);
   return true;
 }
 

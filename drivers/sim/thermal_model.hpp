@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -73,9 +74,13 @@ struct ThermalConfig {
 
 class ThermalModel final : public ThermalSource {
  public:
+  // The chamber's set point over time, in seconds from the run's start.
+  using Setpoint = std::function<double(double t_s)>;
   // The truth's "thermal" section (if any) gives the coefficients' dependence.
   ThermalModel(const motion::ChamberProfile& profile, const ImuModel& truth, const ThermalConfig& config,
                double duration_s);
+  // The same for a set point given as a function (the daemon's campaign profiles).
+  ThermalModel(Setpoint setpoint_C, const ImuModel& truth, const ThermalConfig& config, double duration_s);
 
   bool temperatures(double t_s, TempSample& out) const override;
   void coefficients(double t_s, GyroErrors& gyro, AccelErrors& accel) const override;
@@ -93,7 +98,7 @@ class ThermalModel final : public ThermalSource {
 
   thermal::ThermalSection section_;
   bool has_section_ = false;
-  motion::ChamberProfile profile_;
+  Setpoint setpoint_C_;
   ThermalConfig config_;
   // Grid columns: set point, air, case, plate, heater block, 3 accel, 24 coil sensors; then the
   // six channels' derivatives (C/s) for the Hermite interpolation.
