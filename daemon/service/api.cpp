@@ -1,5 +1,6 @@
 #include "daemon/service/api.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -9,6 +10,7 @@
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "estimators/direct_calibration.hpp"
+#include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
 
 #ifndef IMUCAL_VERSION
@@ -143,8 +145,14 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
     } catch (const std::exception& e) {
       spdlog::warn("built-in program '{}' does not compile with the configured table limits: {}", name, e.what());
     }
-    programs_.push_back(
-        {{"name", name}, {"duration_s", duration_s}, {"segments", segments}, {"program", json::parse(text)}});
+    json entry = {{"name", name}, {"duration_s", duration_s}, {"segments", segments}, {"program", json::parse(text)}};
+    // The built-in thermal campaigns bring their chamber profile: the builder shows its steps.
+    const auto chambers = motion::builtin_chamber_names();
+    if (std::find(chambers.begin(), chambers.end(), name) != chambers.end()) {
+      const CampaignCheck check = check_campaign({{"name", name}, {"program", name}}, config);
+      if (check.spec) entry["chamber"] = check.spec->normalized.at("chamber");
+    }
+    programs_.push_back(std::move(entry));
   }
 }
 

@@ -31,6 +31,16 @@ TEST(DaemonThermal, TheBuiltInThermalCampaignFollowsItsChamberProfileAndFeedsSta
   EXPECT_EQ(lo, 15.0);
   EXPECT_EQ(hi, 35.0);
 
+  // The campaign builder sees the same chamber with the built-in program.
+  bool listed = false;
+  const json programs = d.get("/api/programs");
+  for (const auto& p : programs.at("programs"))
+    if (p.at("name") == "thermal-short") {
+      listed = true;
+      EXPECT_EQ(p.at("chamber"), chamber);
+    }
+  EXPECT_TRUE(listed) << programs.dump().substr(0, 300);
+
   ASSERT_EQ(d.command(id, "start"), 200);
   const json done = d.wait_final(id, 600.0);
   ASSERT_EQ(done.at("state"), "done") << done.dump().substr(0, 2000);

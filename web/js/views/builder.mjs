@@ -125,7 +125,9 @@ export function mount(root, ctx) {
         time_scale: 10,
         seed: 1,
         truth: 'ideal',
-        chamber: { setpoint_C: limits?.chamber?.safe_setpoint_C ?? 25, tolerance_C: limits?.chamber?.tolerance_C ?? 2, steps: [] },
+        // A thermal program brings its chamber profile; the others hold the safe set point.
+        chamber: p.chamber ? structuredClone(p.chamber)
+          : { setpoint_C: limits?.chamber?.safe_setpoint_C ?? 25, tolerance_C: limits?.chamber?.tolerance_C ?? 2, steps: [] },
       },
       program: structuredClone(p.program),
     };
