@@ -427,4 +427,12 @@ TEST(Config, TheCommentedExampleParses) {
   EXPECT_EQ(c.users[1].role, Role::Operator);
   EXPECT_EQ(c.http.port, 8080);
   EXPECT_TRUE(std::isinf(c.table_limits.axis[0].max_deg));
+  // Its real-devices example, put in place as the comment says, is a valid devices object.
+  std::ifstream in(std::string(IMUCAL_SOURCE_DIR) + "/examples/imucald.json");
+  json example = json::parse(in);
+  example["devices"] = example.at("_devices_real");
+  const DaemonConfig real = parse_config(example.dump(), "example");
+  ASSERT_TRUE(real.device_addresses);
+  EXPECT_EQ(real.device_addresses->imu.interface, "can0");
+  EXPECT_EQ(real.device_addresses->table.port, 5000);
 }
