@@ -477,10 +477,8 @@ void Sequencer::run_campaign(std::int64_t id) {
         // is checked again above, so this cannot be reached with faults.
         run.bench = std::make_unique<WireBench>(run.program, wb, *config_.device_addresses);
       } else {
-        if (!run.spec.faults.empty())
-          throw std::runtime_error("sim_faults need devices 'sim'; with 'sim-wire' faults are injected on the "
-                                   "simulated devices themselves (docs/drivers.md)");
         SimWireSettings sw;
+        sw.faults = run.spec.faults;
         sw.seed = run.spec.seed;
         sw.truth = run.spec.truth;
         sw.chamber_tau_s = config_.sim.chamber_tau_s;

@@ -99,6 +99,8 @@ class WireBench::TableFacade final : public Table {
   }
   DeviceResult open_interlock() override {
     b_.following_ = false;
+    // The safe hold takes over from a refused demand; what is still wrong shows in the status.
+    b_.table_error_.clear();
     if (auto r = b_.dev_->table->interlock_open(); !r) return DeviceResult::failure(r.error().message);
     b_.modes_.fill(dr::TableMode::off);
     b_.read_table();  // whoever looks next sees the interlock open
@@ -171,6 +173,7 @@ class WireBench::ImuFacade final : public Imu {
       b_.pending_.pop_front();
     }
     if (!out.frames.empty()) {
+      b_.fire_faults(b_.delivered_t_ns_);
       const std::int64_t last_ns = out.frames.back().t_ns;
       auto end = std::find_if(b_.pending_temps_.begin(), b_.pending_temps_.end(),
                               [&](const TempSample& t) { return t.t_ns > last_ns; });
@@ -242,6 +245,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   addresses_.imu.accel_lsb_mps = sim_->accel_lsb_mps();
   addresses_.imu.serial = sim.imu_serial;
   truth_json_ = imu_model_to_json_text(simulated.truth);
+  for (const SimFault& f : simulated.faults) faults_.push_back({f});
   imu_link_ = "a socket pair";
 
   // The IMU's CAN link: a socket pair carrying struct canfd_frame images (no AF_CAN here).
@@ -427,6 +431,56 @@ void WireBench::service(int max_wait_ms) {
   }
   if (following_) follow_program();
   keep_alive();
+  expire_faults();
+}
+
+// sim_faults of a sim-wire campaign, on the simulated devices' own injection points: the bench
+// then sees them as it would see a real fault, through the drivers only.
+void WireBench::fire_faults(std::int64_t program_t_ns) {
+  const std::int64_t now_ns = dr::host_time_ns();
+  for (InjectedFault& f : faults_) {
+    if (f.fired || program_t_ns < std::llround(f.fault.at_s * units::kNsPerS)) continue;
+    f.fired = true;
+    f.until_ns = now_ns + std::llround(f.fault.duration_s * units::kNsPerS);
+    const auto pause = std::chrono::milliseconds(std::llround(f.fault.duration_s * 1000.0));
+    switch (f.fault.kind) {
+      case SimFault::Kind::ChamberOffset:
+        sim_->chamber().set_reading_offset(f.fault.offset_C);
+        break;
+      case SimFault::Kind::ImuDropout:
+        sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+        break;
+      case SimFault::Kind::ImuCorrupt:
+        // Damaged frames on the link: the driver's CRC check drops them, the sequencer sees a gap.
+        sim_->with_imu([&](drsim::SimImu& imu) { imu.corrupt_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::Disconnect:
+        // A device that stops answering; the IMU's link cannot be reopened within a run, so the
+        // IMU goes silent rather than closing it.
+        if (f.fault.device == "table") {
+          sim_->table().set_silent(true);
+        } else if (f.fault.device == "chamber") {
+          sim_->chamber().set_silent(true);
+        } else {
+          sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+        }
+        break;
+      case SimFault::Kind::TableFault:
+        sim_->table().trip_interlock();  // the panel's emergency stop: the axes brake, demands are refused
+        break;
+    }
+  }
+}
+
+void WireBench::expire_faults() {
+  const std::int64_t now_ns = dr::host_time_ns();
+  for (InjectedFault& f : faults_) {
+    if (!f.fired || f.over || now_ns < f.until_ns) continue;
+    f.over = true;
+    if (f.fault.kind == SimFault::Kind::ChamberOffset) sim_->chamber().set_reading_offset(0.0);
+    if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "table") sim_->table().set_silent(false);
+    if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "chamber") sim_->chamber().set_silent(false);
+  }
 }
 
 dr::Result<void> WireBench::demand(int axis, dr::TableMode mode, double value) {

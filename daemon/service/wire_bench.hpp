@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "core/imu_model.hpp"
+#include "daemon/service/campaign.hpp"
 #include "daemon/service/device_config.hpp"
 #include "daemon/service/devices.hpp"
 #include "drivers/interfaces.hpp"
@@ -62,6 +63,9 @@ struct SimWireSettings {
   double chamber_tau_s = 20.0;
   double chamber_start_C = 25.0;
   double chamber_safe_setpoint_C = 25.0;
+  // A campaign's sim_faults, injected on the simulated devices themselves when the program first
+  // reaches them (docs/daemon.md): the daemon sees them only through the drivers.
+  std::vector<SimFault> faults;
 };
 
 class WireBench final : public Bench {
@@ -86,7 +90,7 @@ class WireBench final : public Bench {
   double time_scale() const override { return 1.0; }
   std::string describe() const override;
 
-  // sim-wire: the simulated devices (fault injection); nullptr with real devices.
+  // sim-wire: the simulated devices; nullptr with real devices.
   drivers::sim::SimDevices* simulated_devices() { return sim_.get(); }
 
  private:
@@ -106,6 +110,12 @@ class WireBench final : public Bench {
     ImuFrame frame;  // increments; angles filled when a table read after it exists
   };
   // The last demand sent to an axis, repeated as the watchdog's keep-alive.
+  struct InjectedFault {
+    SimFault fault;
+    bool fired = false;         // once, on the first pass (a redo does not fire it again)
+    std::int64_t until_ns = 0;  // host time its effect is taken back
+    bool over = false;
+  };
   struct AxisDemand {
     drivers::TableMode mode = drivers::TableMode::off;
     double value = 0.0;  // deg (position) or deg/s (rate)
@@ -124,6 +134,8 @@ class WireBench final : public Bench {
   void track_sines();
   drivers::Result<void> demand(int axis, drivers::TableMode mode, double value);
   void keep_alive();
+  void fire_faults(std::int64_t program_t_ns);
+  void expire_faults();
   DeviceResult reposition(const Eigen::Vector3d& target_deg);
   DeviceResult stop_motion();
   void restore_limits();
@@ -166,6 +178,7 @@ class WireBench final : public Bench {
   std::array<bool, 3> rate_limit_changed_{};
   std::array<drivers::TableMode, 3> modes_{};  // as last read or set
   std::array<AxisDemand, 3> demands_{};
+  std::vector<InjectedFault> faults_;  // sim-wire only
   std::string table_error_;                    // a refused demand while following: a table fault
   bool homed_ = false;
 };
