@@ -386,7 +386,7 @@ std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * un
 void WireBench::service(int max_wait_ms) {
   dr::ImuBatch batch;
   if (auto r = dev_->imu->poll(batch, std::chrono::milliseconds(max_wait_ms)); !r) {
-    imu_error_ = "IMU: " + r.error().message;
+    imu_error_ = r.error().message;  // names the IMU; the sequencer says "IMU:"
   } else {
     imu_error_.clear();
   }
@@ -522,8 +522,15 @@ void WireBench::read_table() {
   table_state_.interlock_closed = status->interlock == dr::InterlockState::closed;
   table_state_.moving = false;
   table_state_.fault.clear();
+  // While the program is followed the daemon alone changes the interlock and the modes: the
+  // interlock open (the emergency stop at the table) or an axis dropped to off means the table
+  // no longer does what the frames' program times say.
+  if (following_ && !table_state_.interlock_closed)
+    table_state_.fault = "the interlock opened at the table while following the program (emergency stop?)";
   for (std::size_t a = 0; a < 3; ++a) {
     const dr::AxisStatus& axis = status->axes[a];
+    if (following_ && table_state_.fault.empty() && modes_[a] != dr::TableMode::off && axis.mode == dr::TableMode::off)
+      table_state_.fault = std::string(motion::kAxisNames[a]) + " axis dropped to off while following the program";
     modes_[a] = axis.mode;
     table_state_.moving = table_state_.moving || axis.moving;
     if (axis.fault || axis.watchdog_expired)
@@ -660,7 +667,7 @@ DeviceResult WireBench::stop_motion() {
     if (!r) problems += std::string(problems.empty() ? "" : "; ") + motion::kAxisNames[i] + " axis: " + r.error().message;
   }
   read_table();
-  if (!problems.empty()) return DeviceResult::failure("stopping the table: " + problems);
+  if (!problems.empty()) return DeviceResult::failure(problems);  // the sequencer says what it was doing
   return DeviceResult::success();
 }
 
