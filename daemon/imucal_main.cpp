@@ -2,6 +2,7 @@
 // campaign run.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -13,12 +14,16 @@
 #include <string>
 #include <vector>
 
+#include <csignal>
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
 #include "daemon/service/campaign_runner.hpp"
+#include "daemon/service/config.hpp"
+#include "drivers/sim/sim_devices.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "drivers/sim/thermal_model.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -475,6 +480,69 @@ int cmd_compare(const std::string& model_path, const std::string& truth_path, co
   return 0;
 }
 
+struct SimDevicesArgs {
+  int table_port = 0, chamber_port = 0;
+  std::string imu_socket, truth = "ideal", serial, config_file, framing = "fd";
+  double rate_hz = 1000.0;
+  std::uint64_t seed = 1;
+};
+
+// The simulated bench as separate devices on real addresses, for imucald's `devices` object (an
+// operator's rehearsal, the tests of the configured-devices path). Runs until SIGINT/SIGTERM.
+int cmd_sim_devices(const SimDevicesArgs& a) {
+  // Taken by sigwait() below: blocked before the devices start their threads, which inherit it.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+
+  // The daemon's configuration, when given, says where the bench stands and what the table may
+  // do: the simulated IMU must sense the same site the daemon calibrates for.
+  const daemon::DaemonConfig config = a.config_file.empty() ? daemon::DaemonConfig{}
+                                                            : daemon::load_config_file(a.config_file);
+  drivers::sim::SimDevicesConfig c;
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    const motion::AxisLimits& l = config.table_limits.axis[axis];
+    drivers::AxisLimitSetting s;
+    // The ACL wire carries finite numbers: slip rings become a range no program reaches.
+    s.min_deg = std::isfinite(l.min_deg) ? l.min_deg : -1e9;
+    s.max_deg = std::isfinite(l.max_deg) ? l.max_deg : 1e9;
+    s.rate_dps = l.rate_dps;
+    s.accel_dps2 = l.accel_dps2;
+    c.servo.limits[axis].fill(s);
+  }
+  c.table_port = a.table_port;
+  c.chamber_port = a.chamber_port;
+  c.chamber_start_C = config.chamber.safe_setpoint_C;
+  c.chamber_tau_s = config.sim.chamber_tau_s;
+  c.imu_socket_path = a.imu_socket;
+  c.imu.framing = a.framing == "classic" ? drivers::can::Framing::classic : drivers::can::Framing::fd;
+  c.imu.rate_hz = a.rate_hz;
+  c.imu.seed = a.seed;
+  c.imu.truth = a.truth == "ideal" ? ImuModel{} : read_imu_model_file(a.truth);
+  c.imu.site = config.site;
+  c.imu.temperature_C = config.chamber.safe_setpoint_C;
+  c.imu_serial = a.serial.empty() ? "SIM-DEVICES-" + std::to_string(a.seed) : a.serial;
+  if (c.imu.framing == drivers::can::Framing::classic && a.rate_hz > drivers::can::kClassicMaxRate_hz)
+    throw std::invalid_argument("--framing classic carries at most 200 samples/s; --rate-hz is " + std::to_string(a.rate_hz));
+
+  drivers::sim::SimDevices devices(c);
+  // stdout: the configuration to paste (a complete file on its own); stderr: what is going on.
+  std::printf("{\"devices\": %s}\n", devices.devices_config_json().c_str());
+  std::fflush(stdout);
+  std::fprintf(stderr,
+               "imucal sim-devices: table controller on 127.0.0.1:%d, chamber controller (Modbus TCP, map %s) on "
+               "127.0.0.1:%d, IMU at %g Hz on %s (a new simulated IMU for each connection); SIGINT or SIGTERM stops\n",
+               devices.table_port(), c.chamber_map.c_str(), devices.chamber_port(), a.rate_hz, a.imu_socket.c_str());
+  int signal_number = 0;
+  sigwait(&signals, &signal_number);
+  std::fprintf(stderr, "imucal sim-devices: %s, stopping after %llu IMU link(s)\n",
+               signal_number == SIGTERM ? "SIGTERM" : "SIGINT", static_cast<unsigned long long>(devices.imu_links()));
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -582,6 +650,34 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   cmp->add_option("--json", cmp_json, "the table as JSON");
 
+  SimDevicesArgs simdev_args;
+  auto* simdev = app.add_subcommand(
+      "sim-devices", "Run the simulated table controller, chamber controller and IMU standalone on real addresses "
+                     "and print the imucald devices configuration that reaches them (until SIGINT/SIGTERM)");
+  simdev->add_option("--table-port", simdev_args.table_port, "TCP port of the table controller on 127.0.0.1 (0: any free)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 65535));
+  simdev->add_option("--chamber-port", simdev_args.chamber_port,
+                     "Modbus TCP port of the chamber controller on 127.0.0.1 (0: any free)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 65535));
+  simdev->add_option("--imu-socket", simdev_args.imu_socket,
+                     "Unix SOCK_SEQPACKET socket path the IMU listens on (CAN frame images; a new simulated IMU for "
+                     "each connection)")
+      ->required();
+  simdev->add_option("--rate-hz", simdev_args.rate_hz, "IMU sample rate, Hz")->capture_default_str()->check(
+      CLI::Range(1.0, 100000.0));
+  simdev->add_option("--framing", simdev_args.framing, "fd or classic (at most 200 Hz)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"fd", "classic"}));
+  simdev->add_option("--seed", simdev_args.seed, "noise seed of the simulated IMU")->capture_default_str();
+  simdev->add_option("--truth", simdev_args.truth, "the simulated IMU's imucal-imu-model/1 JSON, or 'ideal'")
+      ->capture_default_str();
+  simdev->add_option("--serial", simdev_args.serial, "the IMU serial in the printed configuration (default SIM-DEVICES-SEED)");
+  simdev->add_option("--config", simdev_args.config_file,
+                     "imucald configuration whose site, table limits and chamber defaults the devices take")
+      ->check(CLI::ExistingFile);
+
   // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
   imucal::bench::add_storage_bench_commands(*bench);
@@ -616,6 +712,7 @@ int main(int argc, char** argv) {
     if (cal->parsed()) return cmd_calibrate(cal_args);
     if (ev->parsed()) return cmd_evaluate(eval_db, eval_models, eval_out);
     if (cmp->parsed()) return cmd_compare(cmp_model, cmp_truth, cmp_json);
+    if (simdev->parsed()) return cmd_sim_devices(simdev_args);
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

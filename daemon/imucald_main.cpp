@@ -20,7 +20,9 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_file, "configuration JSON (see examples/imucald.json)")->check(CLI::ExistingFile);
   app.add_option("--listen", listen, "HTTP address HOST:PORT (default 127.0.0.1:8080; port 0: any free port)");
   app.add_option("--data-dir", data_dir, "data directory: daemon database, run files, logs (default ./data)");
-  app.add_option("--devices", devices, "sim (in-process simulated bench) or sim-wire (simulated devices on loopback)")
+  app.add_option("--devices", devices,
+                 "sim (in-process simulated bench) or sim-wire (simulated devices on loopback); a real bench is "
+                 "named only in the configuration file (its \"devices\" object, see examples/imucald.json)")
       ->check(CLI::IsMember({"sim", "sim-wire"}));
   app.add_option("--operator-token", operator_token, "API token with the operator role (at least 16 characters)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")

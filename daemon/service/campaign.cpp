@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 
@@ -289,7 +290,8 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   CampaignCheck check;
   auto& problems = check.problems;
   CampaignSpec spec;
-  spec.rate_hz = config.sim.rate_hz;
+  // Real devices: the IMU samples at its own configured rate, which the frame grid must follow.
+  spec.rate_hz = config.device_addresses ? config.device_addresses->imu.rate_hz : config.sim.rate_hz;
   spec.time_scale = config.sim.time_scale;
   spec.seed = config.sim.seed;
   spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
@@ -467,6 +469,19 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
     }
     if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+    if (config.device_addresses) {
+      if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {
+        char text[200];
+        std::snprintf(text, sizeof text,
+                      "campaign.rate_hz is %g Hz but the IMU runs at %g Hz (config.devices.imu.rate_hz): leave "
+                      "rate_hz out or set it to the IMU's rate",
+                      spec.rate_hz, config.device_addresses->imu.rate_hz);
+        problems.push_back(text);
+      }
+      if (faults != nullptr)
+        problems.push_back("campaign.sim_faults need simulated devices; the configured devices are real "
+                           "(config.devices names their addresses)");
+    }
   }
   check.malformed = form_problems > 0;
   if (!problems.empty()) return check;

@@ -191,11 +191,17 @@ DaemonConfig parse_config(const std::string& json_text, const std::string& sourc
       }
     }
     if (auto v = r.string("data_dir")) c.data_dir = *v;
-    if (auto v = r.string("devices")) {
-      if (*v != "sim" && *v != "sim-wire")
-        problems.push_back("config.devices must be \"sim\" or \"sim-wire\" (real devices come with the drivers)");
-      else
-        c.devices = *v;
+    if (const json* v = r.get("devices")) {
+      if (v->is_object()) {
+        c.devices = "real";
+        c.device_addresses = read_device_addresses(*v, "config.devices", problems);
+      } else if (v->is_string() && (*v == "sim" || *v == "sim-wire")) {
+        c.devices = v->get<std::string>();
+      } else {
+        problems.push_back("config.devices must be \"sim\", \"sim-wire\" or an object naming the real devices "
+                           "({\"table\": ..., \"chamber\": ..., \"imu\": ...}, docs/daemon.md), not " +
+                           (v->is_string() ? "\"" + v->get<std::string>() + "\"" : json_type_name(*v)));
+      }
     }
     if (const json* v = r.get("table")) read_table(*v, c, problems);
     if (const json* v = r.get("chamber")) read_chamber(*v, c, problems);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/recording.hpp"
+#include "daemon/service/device_config.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
@@ -88,7 +89,10 @@ struct DaemonConfig {
   std::string site_name = "simulated lab";
   Site site;
   std::string data_dir = "./data";
-  std::string devices = "sim";  // "sim" (in-process, accelerated) or "sim-wire"
+  // "sim" (in-process, accelerated), "sim-wire" (simulated devices on loopback through the real
+  // drivers) or "real" (the devices named in `device_addresses`, from a `devices` object).
+  std::string devices = "sim";
+  std::optional<DeviceAddresses> device_addresses;  // set when `devices` named real devices
   motion::TableLimits table_limits;
   ChamberLimits chamber;
   SimDefaults sim;

@@ -468,20 +468,25 @@ void Sequencer::run_campaign(std::int64_t id) {
       sb.faults = run.spec.faults;
       sb.thermal = campaign_thermal_model(run.spec, run.program.duration_s());
       run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
-    } else if (config_.devices == "sim-wire") {
-      if (!run.spec.faults.empty())
-        throw std::runtime_error("sim_faults need devices 'sim'; with 'sim-wire' faults are injected on the "
-                                 "simulated devices themselves (docs/drivers.md)");
+    } else if (config_.devices == "sim-wire" || (config_.devices == "real" && config_.device_addresses)) {
       WireBenchSettings wb;
       wb.site = config_.site;
       wb.rate_hz = run.spec.rate_hz;
-      wb.seed = run.spec.seed;
-      wb.truth = run.spec.truth;
       wb.limits = config_.table_limits;
-      wb.chamber_tau_s = config_.sim.chamber_tau_s;
-      wb.chamber_start_C = config_.chamber.safe_setpoint_C;
-      wb.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
-      run.bench = std::make_unique<WireBench>(run.program, wb);
+      if (config_.devices == "real") {
+        // check_campaign refuses them already; a campaign stored under another configuration
+        // is checked again above, so this cannot be reached with faults.
+        run.bench = std::make_unique<WireBench>(run.program, wb, *config_.device_addresses);
+      } else {
+        SimWireSettings sw;
+        sw.faults = run.spec.faults;
+        sw.seed = run.spec.seed;
+        sw.truth = run.spec.truth;
+        sw.chamber_tau_s = config_.sim.chamber_tau_s;
+        sw.chamber_start_C = config_.chamber.safe_setpoint_C;
+        sw.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
+        run.bench = std::make_unique<WireBench>(run.program, wb, sw);
+      }
     } else {
       throw std::runtime_error("devices '" + config_.devices + "' are not available in this build");
     }

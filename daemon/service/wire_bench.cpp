@@ -1,12 +1,14 @@
 #include "daemon/service/wire_bench.hpp"
 
 #include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <stdexcept>
 
 #include "core/units.hpp"
@@ -14,10 +16,7 @@
 #include "drivers/can_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/register_map.hpp"
-#include "drivers/sim/sim_chamber.hpp"
-#include "drivers/sim/sim_imu.hpp"
-#include "drivers/sim/sim_table.hpp"
-#include "drivers/sim/sim_world.hpp"
+#include "drivers/sim/sim_devices.hpp"
 
 namespace imucal::daemon {
 
@@ -47,22 +46,39 @@ dr::AxisLimitSetting limit_setting(const motion::AxisLimits& l) {
 
 template <class T>
 void require(const dr::Result<T>& r, const std::string& what) {
-  if (!r) throw std::runtime_error("sim-wire: " + what + ": " + r.error().message);
+  if (!r) throw std::runtime_error(what + ": " + r.error().message);
+}
+
+// The IMU's link as configured: a CAN_RAW socket on the interface, or a connection to a Unix
+// SOCK_SEQPACKET socket that carries the same frame images (a CAN gateway, `imucal sim-devices`).
+dr::Result<int> open_imu_link(const ImuDeviceConfig& imu) {
+  if (!imu.interface.empty()) return dr::open_socketcan(imu.interface, imu.framing == dr::can::Framing::fd);
+  const std::string who = "cannot connect to the IMU socket '" + imu.socket_path + "': ";
+  sockaddr_un addr{};
+  if (imu.socket_path.empty() || imu.socket_path.size() >= sizeof addr.sun_path)
+    return {dr::DriverErrc::invalid_argument, who + "not a usable socket path"};
+  const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+  if (fd < 0) return {dr::DriverErrc::connect_failed, who + "socket(AF_UNIX, SOCK_SEQPACKET): " + std::strerror(errno)};
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, imu.socket_path.data(), imu.socket_path.size());
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    const int e = errno;
+    ::close(fd);
+    return {dr::DriverErrc::connect_failed,
+            who + std::strerror(e) + " (is the CAN gateway or `imucal sim-devices` running there?)"};
+  }
+  return fd;
 }
 
 }  // namespace
 
 struct WireBench::Devices {
-  drsim::SimWorld world;
-  drsim::SimTable sim_table;
-  drsim::SimChamber sim_chamber;
-  std::unique_ptr<drsim::SimImu> sim_imu;
   std::unique_ptr<dr::AclTable> table;
   std::unique_ptr<dr::ModbusChamber> chamber;
   std::unique_ptr<dr::CanImu> imu;
-
-  Devices(const drsim::ServoConfig& servo, const drsim::SimChamberConfig& chamber_config)
-      : world(servo), sim_table(world, drsim::SimTableConfig{}), sim_chamber(chamber_config) {}
+  // How far the bring-up got: what a failed start must park.
+  bool table_connected = false;
+  bool chamber_active = false;
 };
 
 // ------------------------------------------------------------------------------------------------
@@ -83,6 +99,8 @@ class WireBench::TableFacade final : public Table {
   }
   DeviceResult open_interlock() override {
     b_.following_ = false;
+    // The safe hold takes over from a refused demand; what is still wrong shows in the status.
+    b_.table_error_.clear();
     if (auto r = b_.dev_->table->interlock_open(); !r) return DeviceResult::failure(r.error().message);
     b_.modes_.fill(dr::TableMode::off);
     b_.read_table();  // whoever looks next sees the interlock open
@@ -155,6 +173,7 @@ class WireBench::ImuFacade final : public Imu {
       b_.pending_.pop_front();
     }
     if (!out.frames.empty()) {
+      b_.fire_faults(b_.delivered_t_ns_);
       const std::int64_t last_ns = out.frames.back().t_ns;
       auto end = std::find_if(b_.pending_temps_.begin(), b_.pending_temps_.end(),
                               [&](const TempSample& t) { return t.t_ns > last_ns; });
@@ -167,13 +186,13 @@ class WireBench::ImuFacade final : public Imu {
   RecordingMeta recording_meta() const override {
     RecordingMeta m;
     m.site = b_.settings_.site;
-    m.imu_serial = "SIM-WIRE-" + std::to_string(b_.settings_.seed);
-    m.rate_hz = b_.settings_.rate_hz;
+    m.imu_serial = b_.addresses_.imu.serial;
+    m.rate_hz = b_.addresses_.imu.rate_hz;
     m.segments = b_.program_.segments();
-    m.gyro_lsb_rad = b_.dev_->sim_imu->gyro_lsb_rad();
-    m.accel_lsb_mps = b_.dev_->sim_imu->accel_lsb_mps();
+    m.gyro_lsb_rad = b_.addresses_.imu.gyro_lsb_rad;
+    m.accel_lsb_mps = b_.addresses_.imu.accel_lsb_mps;
     m.program_json = b_.program_.source_json;
-    m.truth_json = imu_model_to_json_text(b_.settings_.truth);
+    m.truth_json = b_.truth_json_;  // only a simulated IMU has a truth
     return m;
   }
 
@@ -183,71 +202,151 @@ class WireBench::ImuFacade final : public Imu {
 
 // ------------------------------------------------------------------------------------------------
 
-WireBench::WireBench(const motion::Program& program, const WireBenchSettings& settings)
-    : program_(program), settings_(settings), dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)) {
-  drsim::ServoConfig servo;
+WireBench::WireBench(const motion::Program& program, const WireBenchSettings& settings, const DeviceAddresses& devices)
+    : program_(program),
+      settings_(settings),
+      addresses_(devices),
+      dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)),
+      epoch_ns_(dr::host_time_ns()) {
+  imu_link_ = addresses_.imu.describe();
+  start(-1);
+}
+
+WireBench::WireBench(const motion::Program& program, const WireBenchSettings& settings, const SimWireSettings& simulated)
+    : program_(program),
+      settings_(settings),
+      dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)),
+      epoch_ns_(dr::host_time_ns()) {
+  drsim::SimDevicesConfig sim;
   for (std::size_t a = 0; a < 3; ++a)
-    for (auto& mode : servo.limits[a]) mode = limit_setting(settings.limits.axis[a]);
-  drsim::SimChamberConfig chamber_config;
-  chamber_config.map = dr::load_register_map(kChamberMap);
-  chamber_config.initial_C = settings.chamber_start_C;
-  chamber_config.ambient_C = settings.chamber_start_C;
-  chamber_config.time_constant_s = settings.chamber_tau_s;
-  dev_ = std::make_unique<Devices>(servo, chamber_config);
+    for (auto& mode : sim.servo.limits[a]) mode = limit_setting(settings.limits.axis[a]);
+  sim.chamber_map = kChamberMap;
+  sim.chamber_start_C = simulated.chamber_start_C;
+  sim.chamber_tau_s = simulated.chamber_tau_s;
+  sim.imu.framing = dr::can::Framing::fd;
+  sim.imu.rate_hz = settings.rate_hz;
+  sim.imu.seed = simulated.seed;
+  sim.imu.truth = simulated.truth;
+  sim.imu.site = settings.site;
+  sim.imu.temperature_C = simulated.chamber_start_C;
+  sim.imu_serial = "SIM-WIRE-" + std::to_string(simulated.seed);
+  sim_ = std::make_unique<drsim::SimDevices>(sim);
+
+  // The addresses an operator would configure for these devices.
+  addresses_.table.host = "127.0.0.1";
+  addresses_.table.port = sim_->table_port();
+  addresses_.chamber.host = "127.0.0.1";
+  addresses_.chamber.port = sim_->chamber_port();
+  addresses_.chamber.map = dr::load_register_map(kChamberMap);
+  addresses_.chamber.safe_setpoint_C = simulated.chamber_safe_setpoint_C;
+  addresses_.imu.framing = dr::can::Framing::fd;
+  addresses_.imu.rate_hz = settings.rate_hz;
+  addresses_.imu.gyro_lsb_rad = sim_->gyro_lsb_rad();
+  addresses_.imu.accel_lsb_mps = sim_->accel_lsb_mps();
+  addresses_.imu.serial = sim.imu_serial;
+  truth_json_ = imu_model_to_json_text(simulated.truth);
+  for (const SimFault& f : simulated.faults) faults_.push_back({f});
+  imu_link_ = "a socket pair";
 
   // The IMU's CAN link: a socket pair carrying struct canfd_frame images (no AF_CAN here).
   int sv[2];
   if (::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv) != 0)
-    throw std::runtime_error("sim-wire: socketpair(AF_UNIX, SOCK_SEQPACKET) for the IMU link failed");
-  drsim::SimImuConfig imu_config;
-  imu_config.framing = dr::can::Framing::fd;
-  imu_config.rate_hz = settings.rate_hz;
-  imu_config.seed = settings.seed;
-  imu_config.truth = settings.truth;
-  imu_config.site = settings.site;
-  imu_config.temperature_C = settings.chamber_start_C;
+    throw std::runtime_error(std::string("sim-wire: socketpair(AF_UNIX, SOCK_SEQPACKET) for the IMU link failed: ") +
+                             std::strerror(errno));
   try {
-    dev_->sim_imu = std::make_unique<drsim::SimImu>(dev_->world, sv[1], imu_config);
+    sim_->attach_imu(sv[1]);
   } catch (...) {
-    ::close(sv[0]);  // the driver's end, not yet owned by anyone
+    ::close(sv[0]);  // neither end is owned by anyone yet
+    ::close(sv[1]);
     throw;
   }
+  start(sv[0]);
+}
 
-  dr::AclTableConfig table_config;
-  table_config.port = dev_->sim_table.port();
+void WireBench::start(int imu_fd) {
+  const ImuDeviceConfig& imu = addresses_.imu;
+  if (std::abs(settings_.rate_hz - imu.rate_hz) > 1e-9 * imu.rate_hz) {
+    if (imu_fd >= 0) ::close(imu_fd);
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "the campaign's rate %g Hz is not the IMU's: it samples at %g Hz (config.devices.imu.rate_hz)",
+                  settings_.rate_hz, imu.rate_hz);
+    throw std::runtime_error(text);
+  }
+  // The controller enforces the program's limits wherever the device configuration names none.
   for (std::size_t a = 0; a < 3; ++a)
-    for (auto& mode : table_config.limits[a]) mode = limit_setting(settings.limits.axis[a]);
-  dev_->table = std::make_unique<dr::AclTable>(table_config);
+    for (auto& mode : addresses_.table.limits[a])
+      if (!mode) mode = limit_setting(settings_.limits.axis[a]);
+  // A quarter of the watchdog period leaves room for a late service step or two.
+  if (addresses_.table.watchdog_s > 0.0)
+    keep_alive_ns_ = std::max<std::int64_t>(50'000'000, std::llround(addresses_.table.watchdog_s * units::kNsPerS / 4));
 
-  dr::ModbusChamberConfig chamber_driver_config;
-  chamber_driver_config.port = dev_->sim_chamber.port();
-  chamber_driver_config.map = chamber_config.map;
-  chamber_driver_config.safe_setpoint_C = settings.chamber_safe_setpoint_C;
-  dev_->chamber = std::make_unique<dr::ModbusChamber>(chamber_driver_config);
+  dev_ = std::make_unique<Devices>();
+  // The IMU link first: opening it moves nothing, and without it no run can record.
+  if (imu_fd < 0) {
+    auto fd = open_imu_link(imu);
+    if (!fd)
+      throw std::runtime_error("IMU on " + imu_link_ + ": " + fd.error().message +
+                               "; nothing was moved (the table and the chamber were not contacted)");
+    imu_fd = *fd;
+  }
+  dr::CanImuConfig imu_config;
+  imu_config.name = imu.serial;
+  imu_config.framing = imu.framing;
+  imu_config.rate_hz = imu.rate_hz;
+  imu_config.gyro_lsb_rad = imu.gyro_lsb_rad;
+  imu_config.accel_lsb_mps = imu.accel_lsb_mps;
+  imu_config.stall_timeout = std::chrono::milliseconds(imu.stall_timeout_ms);
+  imu_config.transport_delay_ns = imu.transport_delay_ns;
+  dev_->imu = std::make_unique<dr::CanImu>(imu_fd, imu_config);
+  dev_->table = std::make_unique<dr::AclTable>(addresses_.table);
+  dev_->chamber = std::make_unique<dr::ModbusChamber>(addresses_.chamber);
 
-  dr::CanImuConfig imu_driver_config;
-  imu_driver_config.framing = dr::can::Framing::fd;
-  imu_driver_config.rate_hz = settings.rate_hz;
-  imu_driver_config.gyro_lsb_rad = dev_->sim_imu->gyro_lsb_rad();
-  imu_driver_config.accel_lsb_mps = dev_->sim_imu->accel_lsb_mps();
-  imu_driver_config.stall_timeout = std::chrono::milliseconds(500);
-  dev_->imu = std::make_unique<dr::CanImu>(sv[0], imu_driver_config);
-
-  require(dev_->table->connect(), "table: connect");
-  require(dev_->table->configure(), "table: configure");
-  require(dev_->chamber->connect(), "chamber: connect");
-  require(dev_->chamber->configure(), "chamber: configure");
-  require(dev_->chamber->activate(), "chamber: activate");
-  require(dev_->imu->connect(), "IMU: connect");
-  require(dev_->imu->configure(), "IMU: configure");
-  require(dev_->imu->activate(), "IMU: activate");
+  try {
+    require(dev_->table->connect(), "table: connect");
+    dev_->table_connected = true;
+    require(dev_->table->configure(), "table: configure");
+    require(dev_->chamber->connect(), "chamber: connect");
+    require(dev_->chamber->configure(), "chamber: configure");
+    require(dev_->chamber->activate(), "chamber: activate");
+    dev_->chamber_active = true;
+    // The chamber's state is what it reads, from the start (a real chamber is wherever it is).
+    auto reading = dev_->chamber->read();
+    require(reading, "chamber: first read");
+    chamber_state_.temperature_C = reading->process_C;
+    chamber_state_.setpoint_C = reading->setpoint_C;
+    chamber_state_.connected = true;
+    next_chamber_read_ns_ = dr::host_time_ns() + kChamberReadPeriod_ns;
+    require(dev_->imu->connect(), "IMU on " + imu_link_ + ": connect");
+    require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
+    require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
+  } catch (const std::exception& e) {
+    std::string message = e.what();
+    park_after_failed_start(message);
+    throw std::runtime_error(message);
+  }
 
   table_ = std::make_unique<TableFacade>(*this);
   chamber_ = std::make_unique<ChamberFacade>(*this);
   imu_ = std::make_unique<ImuFacade>(*this);
-  chamber_state_.setpoint_C = settings.chamber_start_C;
-  chamber_state_.temperature_C = settings.chamber_start_C;
   service(0);
+}
+
+// A start that failed half way leaves nothing running: the table's axes off with the interlock
+// open, the chamber at its safe set point, the IMU stream stopped. The message tells what was done.
+void WireBench::park_after_failed_start(std::string& message) {
+  (void)dev_->imu->safe_stop();
+  if (dev_->table_connected) {
+    if (auto r = dev_->table->safe_stop(); r)
+      message += "; the table was parked (axes off, interlock open)";
+    else
+      message += "; parking the table failed too: " + r.error().message;
+  } else {
+    message += "; the table was not moved";
+  }
+  if (dev_->chamber_active) {
+    if (auto r = dev_->chamber->safe_stop(); !r) message += "; the chamber's safe stop failed: " + r.error().message;
+  }
 }
 
 WireBench::~WireBench() {
@@ -261,7 +360,7 @@ WireBench::~WireBench() {
 Table& WireBench::table() { return *table_; }
 Chamber& WireBench::chamber() { return *chamber_; }
 Imu& WireBench::imu() { return *imu_; }
-double WireBench::now_s() const { return dev_->world.now_s(); }
+double WireBench::now_s() const { return static_cast<double>(dr::host_time_ns() - epoch_ns_) / units::kNsPerS; }
 
 void WireBench::wait(double seconds) {
   const auto deadline = dr::host_time_ns() + std::llround(seconds * units::kNsPerS);
@@ -275,8 +374,11 @@ void WireBench::wait(double seconds) {
 std::string WireBench::describe() const {
   char rate[32];
   std::snprintf(rate, sizeof rate, "%g Hz", settings_.rate_hz);
-  return "simulated devices on loopback through the real drivers, in real time: " + dev_->table->describe() + "; " +
-         dev_->chamber->describe() + "; " + dev_->imu->describe() + " on a socket pair at " + rate;
+  const std::string devices = dev_->table->describe() + "; " + dev_->chamber->describe() + "; " +
+                              dev_->imu->describe() + " on " + imu_link_ + " at " + rate;
+  if (sim_) return "simulated devices on loopback through the real drivers, in real time: " + devices;
+  return "devices at the configured addresses through the real drivers: " + devices + ", serial " +
+         addresses_.imu.serial;
 }
 
 std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * units::kNsPerS); }
@@ -284,7 +386,7 @@ std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * un
 void WireBench::service(int max_wait_ms) {
   dr::ImuBatch batch;
   if (auto r = dev_->imu->poll(batch, std::chrono::milliseconds(max_wait_ms)); !r) {
-    imu_error_ = "IMU: " + r.error().message;
+    imu_error_ = r.error().message;  // names the IMU; the sequencer says "IMU:"
   } else {
     imu_error_.clear();
   }
@@ -328,6 +430,77 @@ void WireBench::service(int max_wait_ms) {
     }
   }
   if (following_) follow_program();
+  keep_alive();
+  expire_faults();
+}
+
+// sim_faults of a sim-wire campaign, on the simulated devices' own injection points: the bench
+// then sees them as it would see a real fault, through the drivers only.
+void WireBench::fire_faults(std::int64_t program_t_ns) {
+  const std::int64_t now_ns = dr::host_time_ns();
+  for (InjectedFault& f : faults_) {
+    if (f.fired || program_t_ns < std::llround(f.fault.at_s * units::kNsPerS)) continue;
+    f.fired = true;
+    f.until_ns = now_ns + std::llround(f.fault.duration_s * units::kNsPerS);
+    const auto pause = std::chrono::milliseconds(std::llround(f.fault.duration_s * 1000.0));
+    switch (f.fault.kind) {
+      case SimFault::Kind::ChamberOffset:
+        sim_->chamber().set_reading_offset(f.fault.offset_C);
+        break;
+      case SimFault::Kind::ImuDropout:
+        sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+        break;
+      case SimFault::Kind::ImuCorrupt:
+        // Damaged frames on the link: the driver's CRC check drops them, the sequencer sees a gap.
+        sim_->with_imu([&](drsim::SimImu& imu) { imu.corrupt_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::Disconnect:
+        // A device that stops answering; the IMU's link cannot be reopened within a run, so the
+        // IMU goes silent rather than closing it.
+        if (f.fault.device == "table") {
+          sim_->table().set_silent(true);
+        } else if (f.fault.device == "chamber") {
+          sim_->chamber().set_silent(true);
+        } else {
+          sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+        }
+        break;
+      case SimFault::Kind::TableFault:
+        sim_->table().trip_interlock();  // the panel's emergency stop: the axes brake, demands are refused
+        break;
+    }
+  }
+}
+
+void WireBench::expire_faults() {
+  const std::int64_t now_ns = dr::host_time_ns();
+  for (InjectedFault& f : faults_) {
+    if (!f.fired || f.over || now_ns < f.until_ns) continue;
+    f.over = true;
+    if (f.fault.kind == SimFault::Kind::ChamberOffset) sim_->chamber().set_reading_offset(0.0);
+    if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "table") sim_->table().set_silent(false);
+    if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "chamber") sim_->chamber().set_silent(false);
+  }
+}
+
+dr::Result<void> WireBench::demand(int axis, dr::TableMode mode, double value) {
+  auto r = mode == dr::TableMode::position ? dev_->table->demand_position(axis, value)
+                                           : dev_->table->demand_rate(axis, value);
+  if (r) demands_[static_cast<std::size_t>(axis)] = {mode, value, dr::host_time_ns()};
+  return r;
+}
+
+// The table's watchdog drops an axis that hears nothing for its period: repeating the demand
+// under way feeds it without changing the motion (a hold stays a hold, a ramp goes on).
+void WireBench::keep_alive() {
+  if (keep_alive_ns_ == 0) return;
+  const std::int64_t now_ns = dr::host_time_ns();
+  for (int a = 0; a < 3; ++a) {
+    const AxisDemand d = demands_[static_cast<std::size_t>(a)];
+    if (modes_[static_cast<std::size_t>(a)] == dr::TableMode::off || d.mode != modes_[static_cast<std::size_t>(a)]) continue;
+    // A refused repeat shows in the next status read (watchdog expired, interlock open).
+    if (now_ns - d.sent_ns >= keep_alive_ns_) (void)demand(a, d.mode, d.value);
+  }
 }
 
 void WireBench::read_table() {
@@ -349,8 +522,15 @@ void WireBench::read_table() {
   table_state_.interlock_closed = status->interlock == dr::InterlockState::closed;
   table_state_.moving = false;
   table_state_.fault.clear();
+  // While the program is followed the daemon alone changes the interlock and the modes: the
+  // interlock open (the emergency stop at the table) or an axis dropped to off means the table
+  // no longer does what the frames' program times say.
+  if (following_ && !table_state_.interlock_closed)
+    table_state_.fault = "the interlock opened at the table while following the program (emergency stop?)";
   for (std::size_t a = 0; a < 3; ++a) {
     const dr::AxisStatus& axis = status->axes[a];
+    if (following_ && table_state_.fault.empty() && modes_[a] != dr::TableMode::off && axis.mode == dr::TableMode::off)
+      table_state_.fault = std::string(motion::kAxisNames[a]) + " axis dropped to off while following the program";
     modes_[a] = axis.mode;
     table_state_.moving = table_state_.moving || axis.moving;
     if (axis.fault || axis.watchdog_expired)
@@ -421,13 +601,13 @@ bool WireBench::demand_piece(std::size_t index) {
     dr::Result<void> r;
     switch (f.kind) {
       case motion::AxisFunc::Kind::Const:
-        r = dev_->table->demand_position(a, f.theta0 * units::kRadToDeg);
+        r = demand(a, dr::TableMode::position, f.theta0 * units::kRadToDeg);
         break;
       case motion::AxisFunc::Kind::Cycloid:
-        r = dev_->table->demand_position(a, (f.theta0 + f.delta) * units::kRadToDeg);
+        r = demand(a, dr::TableMode::position, (f.theta0 + f.delta) * units::kRadToDeg);
         break;
       case motion::AxisFunc::Kind::Quadratic:
-        r = dev_->table->demand_rate(a, (f.omega0 + f.alpha * (piece.t1_s - piece.t0_s)) * units::kRadToDeg);
+        r = demand(a, dr::TableMode::rate, (f.omega0 + f.alpha * (piece.t1_s - piece.t0_s)) * units::kRadToDeg);
         break;
       case motion::AxisFunc::Kind::Sine:
         break;  // track_sines()
@@ -453,7 +633,7 @@ void WireBench::track_sines() {
     const double limit_dps = settings_.limits.axis[i].rate_dps;
     const double demand_dps =
         std::clamp(ahead.rate_radps[e] * units::kRadToDeg + kTrackGain_per_s * error_deg, -limit_dps, limit_dps);
-    if (auto r = dev_->table->demand_rate(a, demand_dps); !r) {
+    if (auto r = demand(a, dr::TableMode::rate, demand_dps); !r) {
       table_error_ = "following segment '" + piece.segment + "', " + motion::kAxisNames[i] + " axis: " + r.error().message;
       return;
     }
@@ -482,12 +662,12 @@ DeviceResult WireBench::stop_motion() {
     auto r = dev_->table->set_mode(a, dr::TableMode::rate);
     if (r) {
       modes_[i] = dr::TableMode::rate;
-      r = dev_->table->demand_rate(a, 0.0);
+      r = demand(a, dr::TableMode::rate, 0.0);
     }
     if (!r) problems += std::string(problems.empty() ? "" : "; ") + motion::kAxisNames[i] + " axis: " + r.error().message;
   }
   read_table();
-  if (!problems.empty()) return DeviceResult::failure("stopping the table: " + problems);
+  if (!problems.empty()) return DeviceResult::failure(problems);  // the sequencer says what it was doing
   return DeviceResult::success();
 }
 
@@ -502,7 +682,7 @@ DeviceResult WireBench::reposition(const Eigen::Vector3d& target_deg) {
         return DeviceResult::failure(std::string(motion::kAxisNames[i]) + " axis: " + r.error().message);
       modes_[i] = dr::TableMode::position;
     }
-    if (auto r = dev_->table->demand_position(a, target_deg[static_cast<Eigen::Index>(a)]); !r)
+    if (auto r = demand(a, dr::TableMode::position, target_deg[static_cast<Eigen::Index>(a)]); !r)
       return DeviceResult::failure(std::string(motion::kAxisNames[i]) + " axis: " + r.error().message);
   }
   const std::int64_t deadline_ns = dr::host_time_ns() + std::llround(settings_.home_timeout_s * units::kNsPerS);

@@ -44,6 +44,7 @@ struct SimChamber::Impl {
   std::chrono::milliseconds delay{0};
   int corrupt = 0;
   bool silent = false;
+  double reading_offset_C = 0.0;  // a sensor fault: added to the process value served
 
   explicit Impl(SimChamberConfig c)
       : cfg(std::move(c)), pv_C(cfg.initial_C), sp_C(cfg.initial_C), wsp_C(cfg.initial_C), unit(cfg.unit) {
@@ -75,7 +76,7 @@ struct SimChamber::Impl {
 
   void write_registers() {
     const RegisterMap& m = cfg.map;
-    put_value(m.process_value, celsius_to_unit(pv_C, unit));
+    put_value(m.process_value, celsius_to_unit(pv_C + reading_offset_C, unit));
     put_value(m.setpoint, celsius_to_unit(sp_C, unit));
     if (m.working_setpoint) put_value(*m.working_setpoint, celsius_to_unit(wsp_C, unit));
     if (m.ramp_rate_per_min) put_value(*m.ramp_rate_per_min, celsius_delta_to_unit(ramp_rate_C_per_min, unit));
@@ -297,6 +298,10 @@ void SimChamber::corrupt_next_replies(int count) {
 void SimChamber::set_silent(bool silent) {
   std::lock_guard lock(impl_->mutex);
   impl_->silent = silent;
+}
+void SimChamber::set_reading_offset(double delta_C) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->reading_offset_C = delta_C;
 }
 
 }  // namespace imucal::drivers::sim

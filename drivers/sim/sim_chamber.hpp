@@ -50,6 +50,9 @@ class SimChamber {
   void set_reply_delay(std::chrono::milliseconds delay);  // each reply sent this late
   void corrupt_next_replies(int count);             // replies with a wrong transaction id
   void set_silent(bool silent);                     // read requests, never answer
+  // A sensor fault: the process value served reads this much off the air temperature (the
+  // control loop is not affected, so the reading stays off until the offset is removed).
+  void set_reading_offset(double delta_C);
 
  private:
   struct Impl;

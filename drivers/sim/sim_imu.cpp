@@ -58,8 +58,8 @@ struct SimImu::Impl {
 
   Impl(SimWorld& w, int f, SimImuConfig c) : world(w), fd(f), cfg(std::move(c)), temperature_C(cfg.temperature_C) {
     dt_s = 1.0 / cfg.rate_hz;
-    gyro_lsb = Simulator::kGyroLsbAt1kHz_rad * 1000.0 / cfg.rate_hz;
-    accel_lsb = Simulator::kAccelLsbAt1kHz_mps * 1000.0 / cfg.rate_hz;
+    gyro_lsb = SimImu::gyro_lsb_rad_at(cfg.rate_hz);
+    accel_lsb = SimImu::accel_lsb_mps_at(cfg.rate_hz);
     double max_delay = 0.0;
     for (int j = 0; j < 3; ++j) max_delay = std::max({max_delay, cfg.truth.gyro.delay_s[j], cfg.truth.accel.delay_s[j]});
     lead_frames = static_cast<std::int64_t>(std::ceil(max_delay / dt_s)) + 2;
@@ -262,6 +262,8 @@ SimImu::~SimImu() {
   ::close(impl_->fd);
 }
 
+double SimImu::gyro_lsb_rad_at(double rate_hz) noexcept { return Simulator::kGyroLsbAt1kHz_rad * 1000.0 / rate_hz; }
+double SimImu::accel_lsb_mps_at(double rate_hz) noexcept { return Simulator::kAccelLsbAt1kHz_mps * 1000.0 / rate_hz; }
 double SimImu::gyro_lsb_rad() const noexcept { return impl_->gyro_lsb; }
 double SimImu::accel_lsb_mps() const noexcept { return impl_->accel_lsb; }
 bool SimImu::streaming() const noexcept { return impl_->streaming; }

@@ -54,6 +54,10 @@ class SimImu {
 
   double gyro_lsb_rad() const noexcept;
   double accel_lsb_mps() const noexcept;
+  // The scale factors a simulated IMU at this rate uses (an increment's resolution scales with
+  // the sample period), known before one exists: what an operator configures for it.
+  static double gyro_lsb_rad_at(double rate_hz) noexcept;
+  static double accel_lsb_mps_at(double rate_hz) noexcept;
   bool streaming() const noexcept;
   std::uint64_t samples_sent() const noexcept;
   std::uint64_t samples_not_sent() const noexcept;  // dropped by injection or a full link

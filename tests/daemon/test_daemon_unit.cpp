@@ -99,6 +99,117 @@ TEST(Config, ListsEveryProblem) {
   EXPECT_THROW(parse_config("{not json", "x"), ConfigError);
 }
 
+// A `devices` object names real devices in the drivers' own configuration forms.
+TEST(Config, ADevicesObjectNamesRealDevices) {
+  const DaemonConfig c = parse_config(R"({"devices": {
+    "_comment": "the bench in room 2",
+    "table": {"format": "imucal-table/1", "host": "10.0.0.5", "port": 5001, "watchdog_s": 2, "reply_checksum": false,
+              "limits": [{"axis": "outer", "mode": "rate", "min_deg": -1e6, "max_deg": 1e6, "rate_dps": 100, "accel_dps2": 50}]},
+    "chamber": {"transport": "tcp", "host": "10.0.0.6", "port": 1502, "map": "csz-ezt570i", "safe_setpoint_C": 22},
+    "imu": {"socket": "/run/imucal/imu.sock", "framing": "fd", "rate_hz": 400, "gyro_lsb_rad": 2.5e-9,
+            "accel_lsb_mps": 2.5e-8, "serial": "FOG-0042", "transport_delay_ns": 1500, "stall_timeout_ms": 300}}})",
+                                      "test");
+  EXPECT_EQ(c.devices, "real");
+  ASSERT_TRUE(c.device_addresses);
+  const DeviceAddresses& d = *c.device_addresses;
+  EXPECT_EQ(d.table.host, "10.0.0.5");
+  EXPECT_EQ(d.table.port, 5001);
+  EXPECT_DOUBLE_EQ(d.table.watchdog_s, 2.0);
+  EXPECT_FALSE(d.table.reply_checksum);
+  ASSERT_TRUE(d.table.limits[0][2]);
+  EXPECT_DOUBLE_EQ(d.table.limits[0][2]->rate_dps, 100.0);
+  EXPECT_EQ(d.chamber.host, "10.0.0.6");
+  EXPECT_EQ(d.chamber.port, 1502);
+  EXPECT_EQ(d.chamber.map.name, "csz-ezt570i");
+  EXPECT_DOUBLE_EQ(d.chamber.safe_setpoint_C.value_or(0), 22.0);
+  EXPECT_EQ(d.imu.socket_path, "/run/imucal/imu.sock");
+  EXPECT_TRUE(d.imu.interface.empty());
+  EXPECT_DOUBLE_EQ(d.imu.rate_hz, 400.0);
+  EXPECT_DOUBLE_EQ(d.imu.gyro_lsb_rad, 2.5e-9);
+  EXPECT_EQ(d.imu.serial, "FOG-0042");
+  EXPECT_EQ(d.imu.transport_delay_ns, 1500);
+  EXPECT_EQ(d.imu.stall_timeout_ms, 300);
+
+  const DaemonConfig can = parse_config(R"({"devices": {"table": {"host": "t", "port": 5000},
+    "chamber": {"transport": "rtu", "serial_device": "/dev/ttyS1", "map": "watlow-f4t"},
+    "imu": {"interface": "can0", "framing": "classic", "rate_hz": 200, "gyro_lsb_rad": 1e-8, "accel_lsb_mps": 1e-7,
+            "serial": "X1"}}})", "test");
+  ASSERT_TRUE(can.device_addresses);
+  EXPECT_EQ(can.device_addresses->imu.interface, "can0");
+  EXPECT_EQ(can.device_addresses->chamber.transport, drivers::ModbusChamberConfig::Transport::rtu);
+  EXPECT_EQ(can.device_addresses->imu.framing, drivers::can::Framing::classic);
+}
+
+TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
+  std::string m;
+  try {
+    parse_config(R"({"devices": {
+      "table": {"host": "t", "port": 70000, "response_timeout_ms": -5, "watchdog": 1, "reply_checksum": "yes"},
+      "chamber": {"port": 1502, "map": "no-such-map", "parity": "X"},
+      "imu": {"interface": "can0", "socket": "/tmp/imu.sock", "framing": "flexray", "gyro_lsb_rad": 0,
+              "accel_lsb_mps": 1e-7, "serial": "", "rate": 100},
+      "spare": {}}})",
+                 "bench.json");
+    FAIL() << "accepted a bad devices object";
+  } catch (const ConfigError& e) {
+    m = e.what();
+  }
+  for (const char* part : {
+           "bench.json:",
+           "config.devices: unknown key \"spare\"",
+           "config.devices.table.port: 'port' must be 1..65535",
+           "config.devices.table.response_timeout_ms: 'response_timeout_ms' must be positive",
+           "config.devices.table: unknown key \"watchdog\"",
+           "config.devices.table.reply_checksum:",
+           "config.devices.chamber.host is required",
+           "config.devices.chamber.map: register map 'no-such-map': no such built-in map or file",
+           "config.devices.chamber.parity:",
+           "config.devices.imu: give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both",
+           "config.devices.imu.framing must be \"fd\" or \"classic\"",
+           "config.devices.imu.rate_hz is required",
+           "config.devices.imu.gyro_lsb_rad must be positive",
+           "config.devices.imu.serial must not be empty",
+           "config.devices.imu: unknown key \"rate\"",
+       })
+    EXPECT_NE(m.find(part), std::string::npos) << "missing: " << part << "\nin:\n" << m;
+  // The port is reported once, with its path; the driver's own prefix is gone.
+  EXPECT_EQ(m.find("table config:"), std::string::npos) << m;
+
+  // Missing devices, a classic-CAN rate too high for the framing, a string that names no bench.
+  try {
+    parse_config(R"({"devices": {"imu": {"interface": "can0", "framing": "classic", "rate_hz": 1000,
+                                          "gyro_lsb_rad": 1, "accel_lsb_mps": 1, "serial": "s"}}})", "x");
+    FAIL();
+  } catch (const ConfigError& e) {
+    m = e.what();
+  }
+  EXPECT_NE(m.find("config.devices.table is required"), std::string::npos) << m;
+  EXPECT_NE(m.find("config.devices.chamber is required"), std::string::npos) << m;
+  EXPECT_NE(m.find("config.devices.imu: classic CAN framing carries at most 200"), std::string::npos) << m;
+  EXPECT_THROW(parse_config(R"({"devices": "real"})", "x"), ConfigError);
+}
+
+// With real devices a campaign runs at the IMU's rate, and simulated faults make no sense.
+TEST(Campaign, RealDevicesSetTheRateAndRefuseSimFaults) {
+  const DaemonConfig config = parse_config(R"({"devices": {"table": {"host": "t", "port": 5000},
+    "chamber": {"host": "c", "port": 502, "map": "watlow-f4t"},
+    "imu": {"socket": "/tmp/imu.sock", "rate_hz": 200, "gyro_lsb_rad": 1e-8, "accel_lsb_mps": 1e-7, "serial": "S"}}})",
+                                           "test");
+  const CampaignCheck ok = check_campaign(json{{"name", "x"}, {"program", "direct"}}, config);
+  ASSERT_TRUE(ok.spec) << (ok.problems.empty() ? "" : ok.problems.front());
+  EXPECT_DOUBLE_EQ(ok.spec->rate_hz, 200.0);
+  const CampaignCheck bad = check_campaign(
+      json{{"name", "x"}, {"program", "direct"}, {"rate_hz", 100},
+           {"sim_faults", {{{"kind", "imu_dropout"}, {"at_s", 5}, {"duration_s", 1}}}}},
+      config);
+  ASSERT_FALSE(bad.spec);
+  std::string all;
+  for (const auto& p : bad.problems) all += p + "\n";
+  EXPECT_NE(all.find("campaign.rate_hz is 100 Hz but the IMU runs at 200 Hz (config.devices.imu.rate_hz)"),
+            std::string::npos) << all;
+  EXPECT_NE(all.find("campaign.sim_faults need simulated devices"), std::string::npos) << all;
+}
+
 TEST(Config, ListenAddress) {
   std::string host;
   std::uint16_t port = 1;
@@ -316,4 +427,12 @@ TEST(Config, TheCommentedExampleParses) {
   EXPECT_EQ(c.users[1].role, Role::Operator);
   EXPECT_EQ(c.http.port, 8080);
   EXPECT_TRUE(std::isinf(c.table_limits.axis[0].max_deg));
+  // Its real-devices example, put in place as the comment says, is a valid devices object.
+  std::ifstream in(std::string(IMUCAL_SOURCE_DIR) + "/examples/imucald.json");
+  json example = json::parse(in);
+  example["devices"] = example.at("_devices_real");
+  const DaemonConfig real = parse_config(example.dump(), "example");
+  ASSERT_TRUE(real.device_addresses);
+  EXPECT_EQ(real.device_addresses->imu.interface, "can0");
+  EXPECT_EQ(real.device_addresses->table.port, 5000);
 }

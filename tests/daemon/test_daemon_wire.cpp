@@ -92,13 +92,28 @@ TEST(SimWire, ACampaignThroughTheRealDriversRecordsEveryFrame) {
   EXPECT_FALSE(t.at("table").at("interlock_closed").get<bool>());
 }
 
-TEST(SimWire, SimFaultsAreRefusedWithAMessage) {
+// sim_faults on sim-wire are injected on the simulated devices: a chamber_offset makes the
+// simulated chamber controller serve a process value 6 C off, which the daemon reads over Modbus
+// like any other. The run must suspend on it, resume once the reading is back in band and settled,
+// redo the segment and still record every grid frame once.
+TEST(SimWire, AChamberOutOfBandOverTheWireSuspendsAndTheRunResumes) {
   LocalDaemon d("wire-faults", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
-  json campaign = wire_campaign();
-  campaign["sim_faults"] = {{{"kind", "imu_dropout"}, {"at_s", 5}, {"duration_s", 1}}};
+  const json program = json::parse(R"({"name": "wire-fault", "segments": [
+    {"type": "hold", "name": "start", "duration_s": 2},
+    {"type": "move", "name": "tilt", "to_deg": [0, 90, 0], "duration_s": 2},
+    {"type": "hold", "name": "level", "duration_s": 4}]})");
+  json campaign = {{"name", "wire-fault"}, {"program", program}, {"rate_hz", 100}, {"estimators", json::array()}};
+  campaign["sim_faults"] = {{{"kind", "chamber_offset"}, {"at_s", 5}, {"duration_s", 3}, {"offset_C", 6}}};
   const auto id = d.post_campaign(campaign);
   ASSERT_EQ(d.command(id, "start"), 200);
-  const json c = d.wait_final(id, 60.0);
-  EXPECT_EQ(c.at("state"), "failed");
-  EXPECT_TRUE(has_event(c, "error", "sim_faults need devices 'sim'")) << c.dump();
+  const json c = d.wait_final(id, 90.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "suspended", "chamber out of band")) << c.at("events").dump();
+  EXPECT_TRUE(has_event(c, "resumed", "redoing segment 2 'level'")) << c.at("events").dump();
+  EXPECT_TRUE(has_transition(c, "running", "suspended"));
+  const auto frames = run_frames(d.run_path(c));
+  ASSERT_EQ(frames.size(), 800u);
+  std::size_t off_grid = frames.front().t_ns != 10'000'000;
+  for (std::size_t i = 1; i < frames.size(); ++i) off_grid += frames[i].t_ns - frames[i - 1].t_ns != 10'000'000;
+  EXPECT_EQ(off_grid, 0u);
 }

@@ -1,0 +1,167 @@
+#include "drivers/sim/sim_devices.hpp"
+
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "drivers/register_map.hpp"
+
+namespace imucal::drivers::sim {
+
+namespace {
+
+SimChamberConfig chamber_config(const SimDevicesConfig& c) {
+  SimChamberConfig s;
+  s.map = load_register_map(c.chamber_map);
+  s.initial_C = c.chamber_start_C;
+  s.ambient_C = c.chamber_start_C;
+  s.time_constant_s = c.chamber_tau_s;
+  s.port = c.chamber_port;
+  return s;
+}
+
+SimTableConfig table_config(const SimDevicesConfig& c) {
+  SimTableConfig s;
+  s.port = c.table_port;
+  return s;
+}
+
+// A listening Unix SOCK_SEQPACKET socket on `path`. A socket file left behind by an earlier run is
+// replaced; any other file at the path is refused rather than deleted.
+int listen_unix(const std::string& path) {
+  const std::string who = "simulated IMU: cannot listen on '" + path + "': ";
+  sockaddr_un addr{};
+  if (path.empty() || path.size() >= sizeof addr.sun_path)
+    throw std::runtime_error(who + "a socket path has 1 to " + std::to_string(sizeof addr.sun_path - 1) + " characters");
+  struct stat st{};
+  if (::lstat(path.c_str(), &st) == 0) {
+    if (!S_ISSOCK(st.st_mode)) throw std::runtime_error(who + "the path exists and is not a socket");
+    ::unlink(path.c_str());
+  }
+  const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+  if (fd < 0) throw std::runtime_error(who + "socket(AF_UNIX, SOCK_SEQPACKET): " + std::strerror(errno));
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, path.data(), path.size());
+  if (::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0 || ::listen(fd, 4) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw std::runtime_error(who + std::strerror(e));
+  }
+  return fd;
+}
+
+}  // namespace
+
+struct SimDevices::Impl {
+  SimDevicesConfig cfg;
+  SimWorld world;
+  SimTable table;
+  SimChamber chamber;
+
+  mutable std::mutex imu_mutex;
+  std::unique_ptr<SimImu> imu;
+  std::atomic<std::uint64_t> links{0};
+
+  int listen_fd = -1;
+  std::atomic<bool> stop{false};
+  std::thread acceptor;
+
+  explicit Impl(SimDevicesConfig c)
+      : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {}
+
+  void attach(int fd) {
+    // The new IMU starts before the old one is dropped: dropping joins its thread, which must not
+    // happen under the lock that fault injection takes.
+    auto fresh = std::make_unique<SimImu>(world, fd, cfg.imu);
+    std::unique_ptr<SimImu> old;
+    {
+      std::lock_guard lock(imu_mutex);
+      old = std::move(imu);
+      imu = std::move(fresh);
+    }
+    ++links;
+  }
+
+  void accept_loop() {
+    while (!stop) {
+      pollfd p{listen_fd, POLLIN, 0};
+      // A bounded wait, so that the destructor's stop is seen promptly.
+      if (::poll(&p, 1, 100) <= 0) continue;
+      const int fd = ::accept4(listen_fd, nullptr, nullptr, SOCK_CLOEXEC);
+      if (fd < 0) continue;
+      try {
+        attach(fd);
+      } catch (const std::exception&) {
+        // The IMU could not be built (no thread): it never took the descriptor. Closing the link
+        // tells the daemon at once instead of through its stall timeout.
+        ::close(fd);
+      }
+    }
+  }
+};
+
+SimDevices::SimDevices(SimDevicesConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {
+  if (!impl_->cfg.imu_socket_path.empty()) {
+    impl_->listen_fd = listen_unix(impl_->cfg.imu_socket_path);
+    impl_->acceptor = std::thread([this] { impl_->accept_loop(); });
+  }
+}
+
+SimDevices::~SimDevices() {
+  impl_->stop = true;
+  if (impl_->acceptor.joinable()) impl_->acceptor.join();
+  if (impl_->listen_fd >= 0) {
+    ::close(impl_->listen_fd);
+    ::unlink(impl_->cfg.imu_socket_path.c_str());
+  }
+  std::lock_guard lock(impl_->imu_mutex);
+  impl_->imu.reset();
+}
+
+const SimDevicesConfig& SimDevices::config() const noexcept { return impl_->cfg; }
+int SimDevices::table_port() const noexcept { return impl_->table.port(); }
+int SimDevices::chamber_port() const noexcept { return impl_->chamber.port(); }
+double SimDevices::gyro_lsb_rad() const noexcept { return SimImu::gyro_lsb_rad_at(impl_->cfg.imu.rate_hz); }
+double SimDevices::accel_lsb_mps() const noexcept { return SimImu::accel_lsb_mps_at(impl_->cfg.imu.rate_hz); }
+void SimDevices::attach_imu(int socket_fd) { impl_->attach(socket_fd); }
+std::uint64_t SimDevices::imu_links() const noexcept { return impl_->links; }
+
+bool SimDevices::with_imu(const std::function<void(SimImu&)>& f) {
+  std::lock_guard lock(impl_->imu_mutex);
+  if (!impl_->imu) return false;
+  f(*impl_->imu);
+  return true;
+}
+
+SimWorld& SimDevices::world() noexcept { return impl_->world; }
+SimTable& SimDevices::table() noexcept { return impl_->table; }
+SimChamber& SimDevices::chamber() noexcept { return impl_->chamber; }
+
+std::string SimDevices::devices_config_json() const {
+  using nlohmann::json;
+  const SimDevicesConfig& c = impl_->cfg;
+  json imu = {{"socket", c.imu_socket_path},
+              {"framing", c.imu.framing == can::Framing::fd ? "fd" : "classic"},
+              {"rate_hz", c.imu.rate_hz},
+              {"gyro_lsb_rad", gyro_lsb_rad()},
+              {"accel_lsb_mps", accel_lsb_mps()},
+              {"serial", c.imu_serial}};
+  const json devices = {
+      {"table", {{"host", "127.0.0.1"}, {"port", table_port()}}},
+      {"chamber", {{"transport", "tcp"}, {"host", "127.0.0.1"}, {"port", chamber_port()}, {"map", c.chamber_map}}},
+      {"imu", imu}};
+  return devices.dump(2);
+}
+
+}  // namespace imucal::drivers::sim

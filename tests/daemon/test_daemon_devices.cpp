@@ -1,0 +1,305 @@
+// Real devices named in the configuration (`devices` as an object). The simulated devices run
+// outside the daemon, as an operator would rehearse: `imucal sim-devices` in a subprocess (table
+// controller and chamber controller on TCP ports, the IMU on a Unix socket carrying CAN frame
+// images), and the daemon reaches them only through the addresses of the configuration that
+// command printed. A short campaign must record every frame of its grid once, with the configured
+// IMU serial and no truth. A CAN interface this kernel cannot open, and a chamber that does not
+// answer, must fail the run with the reason, nothing recorded and the table parked.
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "drivers/acl_table.hpp"
+#include "drivers/register_map.hpp"
+#include "drivers/sim/sim_devices.hpp"
+#include "service_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+// `imucal sim-devices` as a subprocess, with the configuration it printed.
+struct SimDevicesProcess {
+  pid_t pid = -1;
+  json config;  // {"devices": {...}}
+
+  SimDevicesProcess(const std::vector<std::string>& args, const std::string& log_path) {
+    int out[2];
+    if (::pipe(out) != 0) return;
+    pid = ::fork();
+    if (pid == 0) {
+      ::dup2(out[1], STDOUT_FILENO);
+      const int err = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+      if (err >= 0) ::dup2(err, STDERR_FILENO);
+      ::close(out[0]);
+      ::close(out[1]);
+      std::vector<char*> argv = {const_cast<char*>(IMUCAL_IMUCAL), const_cast<char*>("sim-devices")};
+      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+      argv.push_back(nullptr);
+      ::execv(IMUCAL_IMUCAL, argv.data());
+      ::_exit(127);
+    }
+    ::close(out[1]);
+    // The configuration is one JSON document on stdout, printed once the devices listen.
+    std::string text;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (std::chrono::steady_clock::now() < deadline && config.is_null()) {
+      pollfd p{out[0], POLLIN, 0};
+      if (::poll(&p, 1, 200) <= 0) continue;
+      char buf[1024];
+      const auto n = ::read(out[0], buf, sizeof buf);
+      if (n <= 0) break;
+      text.append(buf, static_cast<std::size_t>(n));
+      config = json::parse(text, nullptr, false);
+      if (config.is_discarded()) config = json();
+    }
+    ::close(out[0]);
+  }
+
+  // SIGTERM, then the exit status (-1: had to be killed).
+  int stop() {
+    if (pid <= 0) return -1;
+    ::kill(pid, SIGTERM);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < deadline) {
+      int status = 0;
+      if (::waitpid(pid, &status, WNOHANG) == pid) {
+        pid = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+    pid = -1;
+    return -1;
+  }
+  ~SimDevicesProcess() { stop(); }
+};
+
+// About 10 s of program: holds, a move, a rate segment with ramps and a sine, so that every way
+// the bench follows a program is used. No rate_hz: a campaign runs at the IMU's configured rate.
+json short_campaign(const std::string& name) {
+  const json program = json::parse(R"({"name": "devices-short", "segments": [
+    {"type": "hold", "name": "start", "duration_s": 1.5},
+    {"type": "move", "name": "tilt", "to_deg": [0, 90, 0], "duration_s": 2},
+    {"type": "hold", "name": "x-level", "duration_s": 1},
+    {"type": "rate", "name": "spin", "axis": "outer", "rate_dps": 30, "duration_s": 3, "accel_dps2": 60},
+    {"type": "sine", "name": "swing", "axis": "inner", "amplitude_deg": 5, "period_s": 2, "cycles": 1,
+     "phase_deg": 90},
+    {"type": "hold", "name": "end", "duration_s": 0.5}]})");
+  return {{"name", name}, {"program", program}, {"estimators", json::array()}};
+}
+
+// Every instant of the grid once from the first period on; returns how many are off the grid.
+std::size_t off_grid(const std::vector<ImuFrame>& frames, std::int64_t dt_ns) {
+  std::size_t n = frames.empty() || frames.front().t_ns != dt_ns ? 1 : 0;
+  for (std::size_t i = 1; i < frames.size(); ++i) n += frames[i].t_ns - frames[i - 1].t_ns != dt_ns;
+  return n;
+}
+
+// The daemon's configuration from a file, as imucald reads it: the devices it names.
+void use_devices_of(const std::string& path, daemon::DaemonConfig& c) {
+  const daemon::DaemonConfig file = daemon::load_config_file(path);
+  c.devices = file.devices;
+  c.device_addresses = file.device_addresses;
+}
+
+void write_file(const std::string& path, const json& j) {
+  std::ofstream out(path);
+  out << j.dump(2) << "\n";
+}
+
+// A Unix socket path has at most 107 characters, less than the scratch directories here.
+std::string socket_path_for(const std::string& tag) {
+  return "/tmp/imucal-test-" + std::to_string(::getpid()) + "-" + tag + ".sock";
+}
+
+drivers::TableStatus table_truth(drivers::sim::SimDevices& sim) {
+  return sim.world().with_servo([](drivers::sim::TableServo& s, double t) { return s.status(t); });
+}
+
+}  // namespace
+
+TEST(ConfiguredDevices, ACampaignThroughTheConfiguredAddressesRecordsEveryFrame) {
+  const std::string dir = scratch_dir("devices");
+  const std::string socket_path = socket_path_for("run");
+  SimDevicesProcess devices({"--imu-socket", socket_path, "--rate-hz", "100", "--seed", "5", "--serial", "FOG-TEST-7",
+                             "--truth", "ideal"},
+                            dir + "/sim-devices.stderr");
+  ASSERT_TRUE(devices.config.is_object()) << "imucal sim-devices printed no configuration; see " << dir;
+  // The printed configuration as an operator would edit it: the table's watchdog armed, so the
+  // daemon must keep every axis under control fed through the hold segments.
+  json config = devices.config;
+  config["devices"]["table"]["watchdog_s"] = 1.5;
+  write_file(dir + "/imucald.json", config);
+
+  LocalDaemon d("devices-run", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  ASSERT_EQ(d.config.devices, "real");
+  EXPECT_EQ(d.get("/api/status").at("devices"), "real");
+
+  const auto id = d.post_campaign(short_campaign("configured"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 60.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "info", "devices at the configured addresses through the real drivers")) << c.dump();
+  EXPECT_TRUE(has_event(c, "info", socket_path)) << c.dump();
+  EXPECT_EQ(c.at("bad_frames"), 0);
+  // Real time: a machine overloaded by other jobs can stall the link long enough to suspend the
+  // run, which then redoes the segment; the file must be complete either way.
+  if (!has_event(c, "suspended")) {
+    EXPECT_EQ(c.at("lost_frames"), 0);
+  } else {
+    std::printf("note: the run was suspended on the way (machine load?): %s\n", c.at("events").dump().c_str());
+  }
+  EXPECT_EQ(c.at("spec").at("rate_hz"), 100.0);
+
+  const std::string path = d.run_path(c);
+  const auto frames = run_frames(path);
+  const double duration_s = c.at("duration_s").get<double>();
+  ASSERT_GE(static_cast<double>(frames.size()), duration_s * 100.0 - 1.0);
+  EXPECT_EQ(c.at("frames"), static_cast<std::int64_t>(frames.size()));
+  EXPECT_EQ(off_grid(frames, 10'000'000), 0u);
+  const auto db = storage::RunDb::open(path, storage::OpenMode::Read);
+  EXPECT_TRUE(db.dropped_spans().empty());
+  const RecordingMeta meta = db.meta();
+  EXPECT_EQ(meta.imu_serial, "FOG-TEST-7");
+  EXPECT_TRUE(meta.truth_json.empty()) << meta.truth_json.substr(0, 200);
+  EXPECT_DOUBLE_EQ(meta.gyro_lsb_rad.value_or(0), devices.config["devices"]["imu"]["gyro_lsb_rad"].get<double>());
+  EXPECT_DOUBLE_EQ(meta.rate_hz, 100.0);
+
+  // The frames show what the table did: middle axis at 90 deg on the level hold, and the IMU
+  // sensing the 30 deg/s of the spin's constant-rate part.
+  double rate_sum_dps = 0.0;
+  int rate_n = 0;
+  for (const ImuFrame& f : frames) {
+    const double t_s = static_cast<double>(f.t_ns) * 1e-9;
+    if (t_s > 3.7 && t_s < 4.4) {
+      EXPECT_NEAR(f.table_deg.y(), 90.0, 1e-3) << t_s;
+    }
+    if (t_s > 5.5 && t_s < 6.8) {
+      rate_sum_dps += f.dtheta_rad.norm() / 0.01 * 180.0 / M_PI;
+      ++rate_n;
+    }
+  }
+  ASSERT_GT(rate_n, 50);
+  EXPECT_NEAR(rate_sum_dps / rate_n, 30.0, 0.5);
+  // Parked at the end through the driver (and the watchdog never dropped an axis on the way).
+  EXPECT_FALSE(d.service->sequencer().telemetry().at("table").at("interlock_closed").get<bool>());
+  EXPECT_FALSE(has_event(c, "suspended", "watchdog")) << c.dump();
+
+  // A second run opens the IMU link again: the devices answer it with a new simulated IMU.
+  json again = short_campaign("again");
+  again["program"]["segments"] = json::parse(R"([{"type": "hold", "name": "a", "duration_s": 1},
+    {"type": "move", "name": "tilt", "to_deg": [0, 45, 0], "duration_s": 2}])");
+  const auto id2 = d.post_campaign(again);
+  ASSERT_EQ(d.command(id2, "start"), 200);
+  const json c2 = d.wait_final(id2, 60.0);
+  ASSERT_EQ(c2.at("state"), "done") << c2.dump();
+  const auto frames2 = run_frames(d.run_path(c2));
+  EXPECT_GE(frames2.size(), 299u);
+  EXPECT_EQ(off_grid(frames2, 10'000'000), 0u);
+
+  d.service->stop();
+  d.service.reset();
+  EXPECT_EQ(devices.stop(), 0);
+  std::ifstream log(dir + "/sim-devices.stderr");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("stopping after 2 IMU link(s)"), std::string::npos) << text;
+}
+
+// The simulated table and chamber of `imucal sim-devices`, in-process, so that the test can see
+// the table as it is.
+drivers::sim::SimDevicesConfig in_process_devices(const std::string& socket_path) {
+  drivers::sim::SimDevicesConfig c;
+  for (auto& axis : c.servo.limits) axis.fill(drivers::AxisLimitSetting{-1e9, 1e9, 300, 300});
+  c.imu_socket_path = socket_path;
+  c.imu.rate_hz = 100;
+  return c;
+}
+
+TEST(ConfiguredDevices, ACanInterfaceThisKernelCannotOpenFailsTheRunWithTheReason) {
+  const std::string dir = scratch_dir("devices-can");
+  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  json devices = json::parse(sim.devices_config_json());
+  devices["imu"].erase("socket");
+  devices["imu"]["interface"] = "can0";
+  write_file(dir + "/imucald.json", json{{"devices", devices}});
+
+  LocalDaemon d("devices-can0", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  const auto id = d.post_campaign(short_campaign("can0"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 30.0);
+  EXPECT_EQ(c.at("state"), "failed");
+  const std::string error = c.at("error").get<std::string>();
+  EXPECT_NE(error.find("CAN interface 'can0'"), std::string::npos) << error;
+  // This kernel has no AF_CAN; a kernel with SocketCAN but no can0 says so instead.
+  EXPECT_TRUE(error.find("no SocketCAN support") != std::string::npos ||
+              error.find("no such network interface") != std::string::npos)
+      << error;
+  EXPECT_NE(error.find("nothing was moved"), std::string::npos) << error;
+  EXPECT_EQ(c.at("frames"), 0);
+  // The table was never contacted: still parked (interlock open, every axis off), at rest.
+  const drivers::TableStatus s = table_truth(sim);
+  EXPECT_EQ(s.interlock, drivers::InterlockState::open);
+  for (const auto& axis : s.axes) EXPECT_EQ(axis.mode, drivers::TableMode::off);
+  EXPECT_EQ(sim.imu_links(), 0u);
+}
+
+TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) {
+  const std::string dir = scratch_dir("devices-chamber");
+  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  // Someone left the table spinning: a failed start must not leave it so once it took it over.
+  {
+    drivers::AclTableConfig tc;
+    tc.port = sim.table_port();
+    drivers::AclTable table(tc);
+    ASSERT_TRUE(table.connect());
+    ASSERT_TRUE(table.interlock_close());
+    ASSERT_TRUE(table.set_mode(0, drivers::TableMode::rate));
+    ASSERT_TRUE(table.demand_rate(0, 10.0));
+  }
+  // A port nothing listens on: bound, then released.
+  int closed_port = 0;
+  {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+    socklen_t len = sizeof addr;
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+    closed_port = ntohs(addr.sin_port);
+    ::close(fd);
+  }
+  json devices = json::parse(sim.devices_config_json());
+  devices["chamber"]["port"] = closed_port;
+  devices["chamber"]["response_timeout_ms"] = 300;
+  write_file(dir + "/imucald.json", json{{"devices", devices}});
+
+  LocalDaemon d("devices-nochamber", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  const auto id = d.post_campaign(short_campaign("no-chamber"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 60.0);
+  EXPECT_EQ(c.at("state"), "failed");
+  const std::string error = c.at("error").get<std::string>();
+  EXPECT_NE(error.find("chamber: connect"), std::string::npos) << error;
+  EXPECT_NE(error.find(":" + std::to_string(closed_port)), std::string::npos) << error;
+  EXPECT_NE(error.find("the table was parked (axes off, interlock open)"), std::string::npos) << error;
+  EXPECT_EQ(c.at("frames"), 0);
+  const drivers::TableStatus s = table_truth(sim);
+  EXPECT_EQ(s.interlock, drivers::InterlockState::open);
+  for (const auto& axis : s.axes) {
+    EXPECT_EQ(axis.mode, drivers::TableMode::off);
+    EXPECT_FALSE(axis.moving);
+  }
+}
