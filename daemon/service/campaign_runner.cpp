@@ -28,6 +28,10 @@ CampaignRunResult run_campaign_file(const std::string& campaign_file, const Camp
     return out;
   }
   config.data_dir = options.data_dir;
+  // The simulated bench always: the configuration given is for its limits and site, and a
+  // regression run must never reach the real devices a daemon's configuration names.
+  config.devices = "sim";
+  config.device_addresses.reset();
   config.sim.time_scale = 0.0;  // a regression run goes as fast as it can unless the campaign says otherwise
   config.operator_token = "campaign-run-local-operator";  // no HTTP here: keeps Auth from generating a token file
   config.queue_autostart = true;

@@ -377,8 +377,7 @@ std::string WireBench::describe() const {
   const std::string devices = dev_->table->describe() + "; " + dev_->chamber->describe() + "; " +
                               dev_->imu->describe() + " on " + imu_link_ + " at " + rate;
   if (sim_) return "simulated devices on loopback through the real drivers, in real time: " + devices;
-  return "devices at the configured addresses through the real drivers: " + devices + ", serial " +
-         addresses_.imu.serial;
+  return "devices at the configured addresses through the real drivers: " + devices;  // the IMU named by its serial
 }
 
 std::int64_t WireBench::anchor_ns() const { return std::llround(anchor_t_s_ * units::kNsPerS); }
