@@ -3,15 +3,12 @@
 // from its last checkpoint after homing and completes, bit for bit the run an uninterrupted
 // simulation gives. Then SIGTERM: a clean exit that parks the run. The same kill with sim-wire
 // devices (real time, through the drivers): nothing committed lost or doubled, the grid complete.
-#include <fcntl.h>
-#include <poll.h>
 #include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <gtest/gtest.h>
 
 #include "service_fixture.hpp"
+#include "subprocess.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -25,54 +22,20 @@ struct Daemon {
 
 // Starts imucald and reads its "listening on" line from stdout.
 Daemon spawn(const std::string& data_dir, const std::string& log_path, const char* devices = "sim") {
-  int out[2];
-  if (::pipe(out) != 0) return {};
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::dup2(out[1], STDOUT_FILENO);
-    const int err = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    if (err >= 0) ::dup2(err, STDERR_FILENO);
-    ::close(out[0]);
-    ::close(out[1]);
-    const std::string data_arg = data_dir;
-    ::execl(IMUCAL_IMUCALD, IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", data_arg.c_str(),
-            "--operator-token", kOperatorToken, "--log-level", "info", "--devices", devices, static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  ::close(out[1]);
+  Child child = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", data_dir, "--operator-token",
+                             kOperatorToken, "--log-level", "info", "--devices", devices},
+                            log_path);
+  constexpr const char* kListening = "listening on http://127.0.0.1:";
+  auto announced = [&](const std::string& t) {
+    const auto at = t.find(kListening);
+    return at != std::string::npos && t.find('\n', at) != std::string::npos;
+  };
+  const std::string text = read_stdout_until(child, announced, 60.0);
   Daemon d;
-  d.pid = pid;
-  std::string text;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (std::chrono::steady_clock::now() < deadline) {
-    pollfd p{out[0], POLLIN, 0};
-    if (::poll(&p, 1, 200) > 0) {
-      char buf[512];
-      const auto n = ::read(out[0], buf, sizeof buf);
-      if (n <= 0) break;
-      text.append(buf, static_cast<std::size_t>(n));
-      const auto at = text.find("listening on http://127.0.0.1:");
-      const auto eol = at == std::string::npos ? at : text.find('\n', at);
-      if (eol != std::string::npos) {
-        d.port = static_cast<std::uint16_t>(std::stoi(text.substr(at + 30, eol - at - 30)));
-        break;
-      }
-    }
-  }
-  ::close(out[0]);
+  d.pid = child.pid;
+  if (const auto at = text.find(kListening); at != std::string::npos)
+    d.port = static_cast<std::uint16_t>(std::stoi(text.substr(at + std::string(kListening).size())));
   return d;
-}
-
-int wait_exit(pid_t pid, double timeout_s) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (std::chrono::steady_clock::now() < deadline) {
-    int status = 0;
-    if (::waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ::kill(pid, SIGKILL);
-  ::waitpid(pid, nullptr, 0);
-  return -1;
 }
 
 }  // namespace

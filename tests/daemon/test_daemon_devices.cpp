@@ -21,6 +21,7 @@
 #include "drivers/register_map.hpp"
 #include "drivers/sim/sim_devices.hpp"
 #include "service_fixture.hpp"
+#include "subprocess.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -33,55 +34,28 @@ struct SimDevicesProcess {
   json config;  // {"devices": {...}}
 
   SimDevicesProcess(const std::vector<std::string>& args, const std::string& log_path) {
-    int out[2];
-    if (::pipe(out) != 0) return;
-    pid = ::fork();
-    if (pid == 0) {
-      ::dup2(out[1], STDOUT_FILENO);
-      const int err = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      if (err >= 0) ::dup2(err, STDERR_FILENO);
-      ::close(out[0]);
-      ::close(out[1]);
-      std::vector<char*> argv = {const_cast<char*>(IMUCAL_IMUCAL), const_cast<char*>("sim-devices")};
-      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-      argv.push_back(nullptr);
-      ::execv(IMUCAL_IMUCAL, argv.data());
-      ::_exit(127);
-    }
-    ::close(out[1]);
+    std::vector<std::string> argv = {IMUCAL_IMUCAL, "sim-devices"};
+    argv.insert(argv.end(), args.begin(), args.end());
+    Child child = spawn_child(argv, log_path);
+    pid = child.pid;
     // The configuration is one JSON document on stdout, printed once the devices listen.
-    std::string text;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (std::chrono::steady_clock::now() < deadline && config.is_null()) {
-      pollfd p{out[0], POLLIN, 0};
-      if (::poll(&p, 1, 200) <= 0) continue;
-      char buf[1024];
-      const auto n = ::read(out[0], buf, sizeof buf);
-      if (n <= 0) break;
-      text.append(buf, static_cast<std::size_t>(n));
-      config = json::parse(text, nullptr, false);
-      if (config.is_discarded()) config = json();
-    }
-    ::close(out[0]);
+    read_stdout_until(
+        child,
+        [&](const std::string& text) {
+          config = json::parse(text, nullptr, false);
+          if (config.is_discarded()) config = json();
+          return !config.is_null();
+        },
+        30.0);
   }
 
   // SIGTERM, then the exit status (-1: had to be killed).
   int stop() {
     if (pid <= 0) return -1;
     ::kill(pid, SIGTERM);
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (std::chrono::steady_clock::now() < deadline) {
-      int status = 0;
-      if (::waitpid(pid, &status, WNOHANG) == pid) {
-        pid = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    ::kill(pid, SIGKILL);
-    ::waitpid(pid, nullptr, 0);
+    const int status = wait_exit(pid, 10.0);
     pid = -1;
-    return -1;
+    return status;
   }
   ~SimDevicesProcess() { stop(); }
 };
