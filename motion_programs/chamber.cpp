@@ -213,6 +213,11 @@ json thermal_short_profile() {
 
 std::vector<std::string> builtin_chamber_names() { return {"thermal", "thermal-short"}; }
 
+bool is_builtin_chamber(const std::string& name) {
+  const auto names = builtin_chamber_names();
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
 std::string builtin_chamber_json(const std::string& name) {
   if (name == "thermal") return thermal_profile().dump(1);
   if (name == "thermal-short") return thermal_short_profile().dump(1);
@@ -220,8 +225,7 @@ std::string builtin_chamber_json(const std::string& name) {
 }
 
 ChamberProfile load_chamber_profile(const std::string& name_or_path) {
-  for (const auto& n : builtin_chamber_names())
-    if (n == name_or_path) return compile_chamber_profile(builtin_chamber_json(n));
+  if (is_builtin_chamber(name_or_path)) return compile_chamber_profile(builtin_chamber_json(name_or_path));
   std::ifstream in(name_or_path);
   if (!in) throw std::invalid_argument("chamber profile '" + name_or_path + "': neither a built-in nor a readable file");
   std::stringstream ss;

@@ -45,6 +45,7 @@ std::vector<std::string> validate_chamber_profile(const ChamberProfile& profile,
 
 // Built-in profiles: thermal (about 12 h over 15..35 C), thermal-short (about 2 h, for checks).
 std::vector<std::string> builtin_chamber_names();
+bool is_builtin_chamber(const std::string& name);
 std::string builtin_chamber_json(const std::string& name);  // throws for an unknown name
 // A built-in name or a path to a JSON file.
 ChamberProfile load_chamber_profile(const std::string& name_or_path);

@@ -147,8 +147,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
     }
     json entry = {{"name", name}, {"duration_s", duration_s}, {"segments", segments}, {"program", json::parse(text)}};
     // The built-in thermal campaigns bring their chamber profile: the builder shows its steps.
-    const auto chambers = motion::builtin_chamber_names();
-    if (std::find(chambers.begin(), chambers.end(), name) != chambers.end()) {
+    if (motion::is_builtin_chamber(name)) {
       const CampaignCheck check = check_campaign({{"name", name}, {"program", name}}, config);
       if (check.spec) entry["chamber"] = check.spec->normalized.at("chamber");
     }

@@ -316,6 +316,12 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       spec.name = *v;
     }
     const json* program_spec = r.get("program", true);
+    // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
+    // built-in thermal campaign: it brings its profile, and its table cycle has no rate segments
+    // for stage 1, so no estimator runs online unless asked; stage 2 runs on the whole run (GET
+    // .../thermal, `imucal calibrate --stage thermal`).
+    const bool builtin_thermal =
+        program_spec != nullptr && program_spec->is_string() && motion::is_builtin_chamber(program_spec->get<std::string>());
     if (auto v = r.number_in("rate_hz", 1e-3)) spec.rate_hz = *v;
     if (auto v = r.number_in("time_scale", 0, 1e6)) spec.time_scale = *v;
     if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) spec.seed = static_cast<std::uint64_t>(*v);
@@ -420,13 +426,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (check.duration_s > config.campaign.max_duration_s)
         problems.push_back("campaign.program lasts " + json(check.duration_s).dump() + " s, more than the limit of " +
                            json(config.campaign.max_duration_s).dump() + " s");
-      // A built-in thermal program's table cycle has no rate segments for stage 1: no estimator
-      // online unless asked; stage 2 runs on the whole run (GET .../thermal, `imucal calibrate
-      // --stage thermal`).
-      const auto thermal_names = motion::builtin_chamber_names();
-      if (estimators == nullptr && program_spec->is_string() &&
-          std::find(thermal_names.begin(), thermal_names.end(), program_spec->get<std::string>()) != thermal_names.end())
-        spec.estimators.clear();
+      if (estimators == nullptr && builtin_thermal) spec.estimators.clear();
       if (spec.has_estimator("direct")) {
         int statics = 0, rates = 0;
         for (const auto& s : check.segments) {
@@ -454,13 +454,8 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
     }
     if (chamber != nullptr) {
       check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
-    } else if (program_spec != nullptr && program_spec->is_string()) {
-      // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
-      // built-in thermal campaign: it brings its profile.
-      const auto names = motion::builtin_chamber_names();
-      const std::string name = program_spec->get<std::string>();
-      if (std::find(names.begin(), names.end(), name) != names.end())
-        check_chamber(json(name), config, check.duration_s, spec.chamber, problems);
+    } else if (builtin_thermal) {
+      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems);
     }
     if (suspenders != nullptr) {
       ObjectReader s(*suspenders, "campaign.suspenders", problems);

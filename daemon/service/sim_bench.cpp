@@ -109,9 +109,8 @@ class SimBench::SimChamber final : public Chamber {
   }
   ChamberState state() const override {
     ChamberState s;
-    s.temperature_C = b_.settings_.thermal ? b_.settings_.thermal->state(b_.program_time_s()).air_C : b_.chamber_C_;
-    for (const auto& f : b_.faults_)
-      if (f.fault.kind == SimFault::Kind::ChamberOffset && f.active(b_.world_s_)) s.temperature_C += f.fault.offset_C;
+    s.temperature_C = (b_.settings_.thermal ? b_.settings_.thermal->state(b_.program_time_s()).air_C : b_.chamber_C_) +
+                      b_.chamber_offset_C();
     s.setpoint_C = b_.setpoint_C_;
     s.connected = !b_.fault_active(SimFault::Kind::Disconnect, "chamber");
     return s;
@@ -178,6 +177,13 @@ bool SimBench::fault_active(SimFault::Kind kind, const char* device) const {
     if (device == nullptr || f.fault.device == device) return true;
   }
   return false;
+}
+
+double SimBench::chamber_offset_C() const {
+  double offset_C = 0.0;
+  for (const auto& f : faults_)
+    if (f.fault.kind == SimFault::Kind::ChamberOffset && f.active(world_s_)) offset_C += f.fault.offset_C;
+  return offset_C;
 }
 
 bool SimBench::table_blocked() const {
@@ -286,18 +292,17 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
     }
     while (next_temp_t_s_ <= t_s) {
       TempSample ts;
-      const ChamberState cs = chamber_->state();
       bool logged = true;
       if (settings_.thermal) {
-        // The thermal model's sensors and air at this instant, the chamber's faults on top.
+        // The thermal model's sensors and air at this instant.
         logged = settings_.thermal->temperatures(next_temp_t_s_, ts);
-        ts.chamber_C += cs.temperature_C - settings_.thermal->state(program_time_s()).air_C;
       } else {
         // The IMU sits in the chamber's air; its sensors follow it closely enough for a simulation.
-        ts.chamber_C = cs.temperature_C;
+        ts.chamber_C = chamber_C_;
         ts.gyro_C.setConstant(chamber_C_);
         ts.accel_C.setConstant(chamber_C_);
       }
+      ts.chamber_C += chamber_offset_C();  // the chamber reading's faults
       ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
       ts.chamber_setpoint_C = setpoint_C_;
       if (logged) out.temps.push_back(ts);

@@ -79,7 +79,8 @@ class SimBench final : public Bench {
   void advance_world(double seconds);  // chamber, fault expiry, pacing
   void pace();
   bool fault_active(SimFault::Kind kind, const char* device = nullptr) const;
-  bool table_blocked() const;  // disconnected or faulted: it cannot move
+  bool table_blocked() const;
+  double chamber_offset_C() const;  // what active chamber_offset faults add to the chamber's reading  // disconnected or faulted: it cannot move
   void position_simulator(std::int64_t frame_index);
   std::int64_t frames_up_to(double t_s) const;
   Eigen::Vector3d current_angles_deg() const;
