@@ -14,8 +14,6 @@
 #include <string>
 #include <vector>
 
-#include <csignal>
-
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -23,6 +21,8 @@
 #include "core/units.hpp"
 #include "daemon/service/campaign_runner.hpp"
 #include "daemon/service/config.hpp"
+#include "daemon/service/device_config.hpp"
+#include "daemon/service/service.hpp"
 #include "drivers/sim/sim_devices.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "drivers/sim/thermal_model.hpp"
@@ -491,28 +491,15 @@ struct SimDevicesArgs {
 // operator's rehearsal, the tests of the configured-devices path). Runs until SIGINT/SIGTERM.
 int cmd_sim_devices(const SimDevicesArgs& a) {
   // Taken by sigwait() below: blocked before the devices start their threads, which inherit it.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
+  const sigset_t signals = daemon::block_termination_signals();
 
   // The daemon's configuration, when given, says where the bench stands and what the table may
   // do: the simulated IMU must sense the same site the daemon calibrates for.
   const daemon::DaemonConfig config = a.config_file.empty() ? daemon::DaemonConfig{}
                                                             : daemon::load_config_file(a.config_file);
   drivers::sim::SimDevicesConfig c;
-  for (std::size_t axis = 0; axis < 3; ++axis) {
-    const motion::AxisLimits& l = config.table_limits.axis[axis];
-    drivers::AxisLimitSetting s;
-    // The ACL wire carries finite numbers: slip rings become a range no program reaches.
-    s.min_deg = std::isfinite(l.min_deg) ? l.min_deg : -1e9;
-    s.max_deg = std::isfinite(l.max_deg) ? l.max_deg : 1e9;
-    s.rate_dps = l.rate_dps;
-    s.accel_dps2 = l.accel_dps2;
-    c.servo.limits[axis].fill(s);
-  }
+  for (std::size_t axis = 0; axis < 3; ++axis)
+    c.servo.limits[axis].fill(daemon::table_limit_setting(config.table_limits.axis[axis]));
   c.table_port = a.table_port;
   c.chamber_port = a.chamber_port;
   c.chamber_start_C = config.chamber.safe_setpoint_C;

@@ -45,14 +45,8 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  // SIGTERM and SIGINT are taken by this thread with sigwait(): blocked before any other thread
-  // starts, so that no worker thread is interrupted by them.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
+  // SIGTERM and SIGINT are taken by this thread with sigwait(), before any other thread starts.
+  const sigset_t signals = block_termination_signals();
 
   try {
     std::filesystem::create_directories(config.data_dir);

@@ -3,6 +3,7 @@
 #include <sys/un.h>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <optional>
@@ -160,6 +161,16 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
 }
 
 }  // namespace
+
+dr::AxisLimitSetting table_limit_setting(const motion::AxisLimits& l) {
+  // The wire protocol carries finite numbers: slip rings become a range no program reaches.
+  dr::AxisLimitSetting s;
+  s.min_deg = std::isfinite(l.min_deg) ? l.min_deg : -1e9;
+  s.max_deg = std::isfinite(l.max_deg) ? l.max_deg : 1e9;
+  s.rate_dps = l.rate_dps;
+  s.accel_dps2 = l.accel_dps2;
+  return s;
+}
 
 std::string ImuDeviceConfig::describe() const {
   const char* framing_name = framing == dr::can::Framing::fd ? "CAN FD" : "classic CAN";

@@ -14,6 +14,7 @@
 #include "drivers/acl_table.hpp"
 #include "drivers/can_protocol.hpp"
 #include "drivers/modbus_chamber.hpp"
+#include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
 
@@ -38,6 +39,10 @@ struct DeviceAddresses {
   drivers::ModbusChamberConfig chamber;
   ImuDeviceConfig imu;
 };
+
+// One axis's program limits as the table controller takes them (its configure() and the
+// simulated controller's servo).
+drivers::AxisLimitSetting table_limit_setting(const motion::AxisLimits& limits);
 
 // Reads the `devices` object at `where` ("config.devices"): unknown keys, missing required keys
 // and every value the drivers' parsers refuse are listed in `problems`, each with its key path.

@@ -3,6 +3,8 @@
 // imucald's main and, in-process, by the tests and `imucal campaign run`.
 #pragma once
 
+#include <signal.h>
+
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -17,6 +19,12 @@
 namespace imucal::daemon {
 
 class HttpServer;
+
+// For a main thread that ends on SIGTERM or SIGINT taken with sigwait(): blocks both in the
+// calling thread, before it starts any other (threads inherit the mask, so no worker is ever
+// interrupted by them), and ignores SIGPIPE (a peer closing a socket fails that call, not the
+// process). Returns the set to sigwait() on.
+sigset_t block_termination_signals();
 
 class Service {
  public:

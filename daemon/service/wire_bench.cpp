@@ -34,16 +34,6 @@ constexpr double kTrackLookahead_s = 0.02;
 constexpr double kTrackGain_per_s = 2.0;
 constexpr double kAtTarget_deg = 1e-4;
 
-dr::AxisLimitSetting limit_setting(const motion::AxisLimits& l) {
-  // The wire protocol carries finite numbers: slip rings become a range no program reaches.
-  dr::AxisLimitSetting s;
-  s.min_deg = std::isfinite(l.min_deg) ? l.min_deg : -1e9;
-  s.max_deg = std::isfinite(l.max_deg) ? l.max_deg : 1e9;
-  s.rate_dps = l.rate_dps;
-  s.accel_dps2 = l.accel_dps2;
-  return s;
-}
-
 template <class T>
 void require(const dr::Result<T>& r, const std::string& what) {
   if (!r) throw std::runtime_error(what + ": " + r.error().message);
@@ -219,7 +209,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
       epoch_ns_(dr::host_time_ns()) {
   drsim::SimDevicesConfig sim;
   for (std::size_t a = 0; a < 3; ++a)
-    for (auto& mode : sim.servo.limits[a]) mode = limit_setting(settings.limits.axis[a]);
+    for (auto& mode : sim.servo.limits[a]) mode = table_limit_setting(settings.limits.axis[a]);
   sim.chamber_map = kChamberMap;
   sim.chamber_start_C = simulated.chamber_start_C;
   sim.chamber_tau_s = simulated.chamber_tau_s;
@@ -276,7 +266,7 @@ void WireBench::start(int imu_fd) {
   // The controller enforces the program's limits wherever the device configuration names none.
   for (std::size_t a = 0; a < 3; ++a)
     for (auto& mode : addresses_.table.limits[a])
-      if (!mode) mode = limit_setting(settings_.limits.axis[a]);
+      if (!mode) mode = table_limit_setting(settings_.limits.axis[a]);
   // A quarter of the watchdog period leaves room for a late service step or two.
   if (addresses_.table.watchdog_s > 0.0)
     keep_alive_ns_ = std::max<std::int64_t>(50'000'000, std::llround(addresses_.table.watchdog_s * units::kNsPerS / 4));
@@ -588,7 +578,7 @@ bool WireBench::demand_piece(std::size_t index) {
     // A ramp sets the rate-mode acceleration limit to its own; anything else runs at the limits.
     const bool ramp = f.kind == motion::AxisFunc::Kind::Quadratic && f.alpha != 0.0;
     if (ramp || rate_limit_changed_[i]) {
-      dr::AxisLimitSetting setting = limit_setting(limits);
+      dr::AxisLimitSetting setting = table_limit_setting(limits);
       if (ramp) setting.accel_dps2 = std::min(std::abs(f.alpha) * units::kRadToDeg, limits.accel_dps2);
       if (auto r = dev_->table->set_limits(a, dr::TableMode::rate, setting); !r) return fail(a, r.error());
       rate_limit_changed_[i] = ramp;
@@ -643,7 +633,7 @@ void WireBench::restore_limits() {
   for (int a = 0; a < 3; ++a) {
     const auto i = static_cast<std::size_t>(a);
     if (!rate_limit_changed_[i]) continue;
-    if (dev_->table->set_limits(a, dr::TableMode::rate, limit_setting(settings_.limits.axis[i])))
+    if (dev_->table->set_limits(a, dr::TableMode::rate, table_limit_setting(settings_.limits.axis[i])))
       rate_limit_changed_[i] = false;
   }
 }

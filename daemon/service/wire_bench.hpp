@@ -109,13 +109,14 @@ class WireBench final : public Bench {
     std::int64_t program_t_ns = 0;
     ImuFrame frame;  // increments; angles filled when a table read after it exists
   };
-  // The last demand sent to an axis, repeated as the watchdog's keep-alive.
+  // A campaign's sim_fault on the simulated devices (sim-wire).
   struct InjectedFault {
     SimFault fault;
     bool fired = false;         // once, on the first pass (a redo does not fire it again)
     std::int64_t until_ns = 0;  // host time its effect is taken back
     bool over = false;
   };
+  // The last demand sent to an axis, repeated as the watchdog's keep-alive.
   struct AxisDemand {
     drivers::TableMode mode = drivers::TableMode::off;
     double value = 0.0;  // deg (position) or deg/s (rate)

@@ -5,10 +5,7 @@
 // command printed. A short campaign must record every frame of its grid once, with the configured
 // IMU serial and no truth. A CAN interface this kernel cannot open, and a chamber that does not
 // answer, must fail the run with the reason, nothing recorded and the table parked.
-#include <fcntl.h>
-#include <poll.h>
 #include <signal.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
