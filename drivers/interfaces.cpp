@@ -51,8 +51,8 @@ ImuFrame ImuSample::to_frame() const {
   f.t_ns = t_ns;
   for (int j = 0; j < 3; ++j) {
     const auto i = static_cast<std::size_t>(j);
-    f.dtheta_rad[j] = static_cast<double>(gyro_counts[i]) * gyro_lsb_rad;
-    f.dv_mps[j] = static_cast<double>(accel_counts[i]) * accel_lsb_mps;
+    f.dtheta_rad[j] = dtheta_rad[i];
+    f.dv_mps[j] = dv_mps[i];
   }
   return f;
 }

@@ -1,6 +1,7 @@
 // The driver interfaces the daemon programs against: a three-axis rate table, a thermal chamber
 // and the IMU under test, each with the same lifecycle and the same typed errors. Real devices
-// (ACL over TCP, Modbus, CAN FD) and the simulated devices of drivers/sim/ sit behind these.
+// (ACL over TCP, Modbus, IMU links described as data over CAN, serial or UDP) and the simulated
+// devices of drivers/sim/ sit behind these.
 //
 // Rules every implementation keeps:
 // - No exception leaves a driver call (nor an Asio handler inside one): failures come back as
@@ -242,20 +243,20 @@ class Chamber : public Device {
 // ------------------------------------------------------------------------------------------------
 // IMU under test.
 
-// One sample as the IMU delivered it: integer counts of increments over (t_prev, t].
+// One sample as the IMU delivered it, decoded by its link description (imu_link.hpp): the
+// increments over (t_prev, t] in SI, whatever the IMU sends (scaled integers or floats, increments
+// or rates).
 struct ImuSample {
-  std::uint32_t sequence = 0;
+  std::uint32_t sequence = 0;       // running count of samples (the IMU's counter, unwrapped)
   std::int64_t t_ns = 0;            // sample instant on the host time base (clock model)
-  std::int64_t device_time_ns = 0;  // the IMU's own time tag of the sample instant
-  std::int64_t rx_ns = 0;           // kernel receive time (SO_TIMESTAMP) of the frame
+  std::int64_t device_time_ns = 0;  // the IMU's own time tag (or its sample count x period)
+  std::int64_t rx_ns = 0;           // receive time of the frame (kernel stamp where there is one)
   std::uint32_t latency_us = 0;     // sample instant to transmission, as the IMU reports it
-  std::array<std::int32_t, 3> gyro_counts{};
-  std::array<std::int32_t, 3> accel_counts{};
-  double gyro_lsb_rad = 0.0;
-  double accel_lsb_mps = 0.0;
-  std::uint16_t status = 0;  // raw status bits (docs/drivers.md)
+  std::array<double, 3> dtheta_rad{};
+  std::array<double, 3> dv_mps{};
+  std::uint64_t status = 0;  // raw status bits (the description says which mean invalid data)
   bool status_fault = false; // a fault bit is set: the data are delivered but suspect
-  double gyro_temp_C = 0.0;  // block temperatures carried in the sample frame
+  double gyro_temp_C = 0.0;  // block temperatures carried in the sample frame (NaN: none)
   double accel_temp_C = 0.0;
 
   // Increments in rad and m/s, table angles left zero (the daemon fills them from the table).
@@ -274,13 +275,16 @@ struct ImuTemperatures {
 
 // Counters since activate(): what went wrong on the wire, per run.
 struct ImuCounters {
-  std::uint64_t frames_received = 0;     // link-level frames read (CAN FD or classic)
+  std::uint64_t frames_received = 0;     // frames of the description decoded or refused
   std::uint64_t samples_delivered = 0;
   std::uint64_t temperature_messages = 0;
   std::uint64_t sequence_gaps = 0;       // events where the sequence jumped
   std::uint64_t samples_lost = 0;        // samples missing in those jumps
-  std::uint64_t crc_failures = 0;
-  std::uint64_t malformed_frames = 0;    // wrong length, type, id, or incomplete classic set
+  std::uint64_t crc_failures = 0;        // checksum mismatches (CRC, sum, XOR)
+  std::uint64_t malformed_frames = 0;    // wrong length or header, non-finite value, stale
+                                         // sequence, incomplete classic set or temperature set
+  std::uint64_t resyncs = 0;             // byte streams: runs of garbage skipped to a header
+  std::uint64_t bytes_discarded = 0;     // byte streams: bytes that belonged to no good frame
   std::uint64_t status_faults = 0;       // samples delivered with a fault status bit
   std::uint64_t stalls = 0;              // stream_stalled errors returned
 };

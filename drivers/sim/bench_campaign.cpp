@@ -13,7 +13,7 @@
 #include <sys/socket.h>
 
 #include "drivers/acl_table.hpp"
-#include "drivers/can_imu.hpp"
+#include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/sim/sim_chamber.hpp"
 #include "drivers/sim/sim_imu.hpp"
@@ -122,13 +122,9 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   cc.port = chamber.port();
   cc.map = chamber_cfg.map;
   ModbusChamber chamber_driver(cc);
-  CanImuConfig ic;
-  ic.framing = imu_cfg.framing;
-  ic.rate_hz = o.imu_rate_hz;
-  ic.gyro_lsb_rad = imu.gyro_lsb_rad();
-  ic.accel_lsb_mps = imu.accel_lsb_mps();
+  LinkImuConfig ic = imu.driver_config();
   ic.stall_timeout = std::chrono::milliseconds(500);
-  CanImu imu_driver(sv[0], ic);
+  LinkImu imu_driver(socketcan_transport(sv[0], ic.link, imu_cfg.framing, "a socket pair"), ic);
 
   for (Device* d : std::initializer_list<Device*>{&table_driver, &chamber_driver, &imu_driver}) {
     require(d->connect(), "connect");

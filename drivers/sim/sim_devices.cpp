@@ -1,6 +1,9 @@
 #include "drivers/sim/sim_devices.hpp"
 
+#include <fcntl.h>
 #include <poll.h>
+#include <pty.h>
+#include <termios.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -15,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "drivers/imu_link.hpp"
 #include "drivers/register_map.hpp"
 
 namespace imucal::drivers::sim {
@@ -76,9 +80,15 @@ struct SimDevices::Impl {
   int listen_fd = -1;
   std::atomic<bool> stop{false};
   std::thread acceptor;
+  // A serial IMU: the pseudo-terminal's slave side, held open so that the line stays up between
+  // the daemon's runs (each opens the device by its path), as a cable stays plugged in.
+  int pty_slave_fd = -1;
+  std::string pty_path;
 
   explicit Impl(SimDevicesConfig c)
-      : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {}
+      : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {
+    cfg.imu.link = link::load_imu_link(cfg.imu_link);
+  }
 
   void attach(int fd) {
     // The new IMU starts before the old one is dropped: dropping joins its thread, which must not
@@ -112,7 +122,22 @@ struct SimDevices::Impl {
 };
 
 SimDevices::SimDevices(SimDevicesConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {
-  if (!impl_->cfg.imu_socket_path.empty()) {
+  const link::Transport transport = impl_->cfg.imu.link.transport;
+  if (transport == link::Transport::udp)
+    throw std::runtime_error("simulated IMU: link '" + impl_->cfg.imu.link.name + "' is UDP; the bench serves CAN and serial IMUs");
+  if (transport == link::Transport::serial) {
+    // Raw from the start: a cooked line discipline would echo, translate CR and buffer lines.
+    termios raw{};
+    ::cfmakeraw(&raw);
+    int master = -1;
+    char name[128] = {};
+    if (::openpty(&master, &impl_->pty_slave_fd, name, &raw, nullptr) != 0)
+      throw std::runtime_error(std::string("simulated IMU: cannot open a pseudo-terminal: ") + std::strerror(errno));
+    impl_->pty_path = name;
+    ::fcntl(master, F_SETFD, FD_CLOEXEC);
+    ::fcntl(impl_->pty_slave_fd, F_SETFD, FD_CLOEXEC);
+    impl_->attach(master);
+  } else if (!impl_->cfg.imu_socket_path.empty()) {
     impl_->listen_fd = listen_unix(impl_->cfg.imu_socket_path);
     impl_->acceptor = std::thread([this] { impl_->accept_loop(); });
   }
@@ -125,9 +150,14 @@ SimDevices::~SimDevices() {
     ::close(impl_->listen_fd);
     ::unlink(impl_->cfg.imu_socket_path.c_str());
   }
-  std::lock_guard lock(impl_->imu_mutex);
-  impl_->imu.reset();
+  {
+    std::lock_guard lock(impl_->imu_mutex);
+    impl_->imu.reset();
+  }
+  if (impl_->pty_slave_fd >= 0) ::close(impl_->pty_slave_fd);
 }
+
+const std::string& SimDevices::imu_serial_device() const noexcept { return impl_->pty_path; }
 
 const SimDevicesConfig& SimDevices::config() const noexcept { return impl_->cfg; }
 int SimDevices::table_port() const noexcept { return impl_->table.port(); }
@@ -151,12 +181,15 @@ SimChamber& SimDevices::chamber() noexcept { return impl_->chamber; }
 std::string SimDevices::devices_config_json() const {
   using nlohmann::json;
   const SimDevicesConfig& c = impl_->cfg;
-  json imu = {{"socket", c.imu_socket_path},
-              {"framing", c.imu.framing == can::Framing::fd ? "fd" : "classic"},
-              {"rate_hz", c.imu.rate_hz},
-              {"gyro_lsb_rad", gyro_lsb_rad()},
-              {"accel_lsb_mps", accel_lsb_mps()},
-              {"serial", c.imu_serial}};
+  json imu = {{"link", c.imu_link}, {"rate_hz", c.imu.rate_hz}, {"serial", c.imu_serial}};
+  if (c.imu.link.transport == link::Transport::serial) {
+    imu["serial_device"] = impl_->pty_path;
+  } else {
+    imu["socket"] = c.imu_socket_path;
+    imu["framing"] = c.imu.framing == can::Framing::fd ? "fd" : "classic";
+  }
+  if (c.imu.link.gyro_lsb_per_unit()) imu["gyro_lsb_rad"] = gyro_lsb_rad();
+  if (c.imu.link.accel_lsb_per_unit()) imu["accel_lsb_mps"] = accel_lsb_mps();
   const json devices = {
       {"table", {{"host", "127.0.0.1"}, {"port", table_port()}}},
       {"chamber", {{"transport", "tcp"}, {"host", "127.0.0.1"}, {"port", chamber_port()}, {"map", c.chamber_map}}},

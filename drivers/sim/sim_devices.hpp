@@ -1,10 +1,11 @@
 // The three simulated devices of a bench together, as `imucal sim-devices` runs them standalone and
 // `imucald --devices sim-wire` runs them in-process: the table controller (ACL over TCP) and the
-// chamber controller (Modbus TCP) on 127.0.0.1 ports, and the IMU on a CAN link -- either a Unix
-// SOCK_SEQPACKET socket listening on a path (each connection gets a new simulated IMU, the old
-// one is dropped: the daemon opens the link once per run) or a link end handed over with
-// attach_imu() (a socket pair). Table and IMU share one SimWorld, so the IMU senses the motion the
-// table controller makes.
+// chamber controller (Modbus TCP) on 127.0.0.1 ports, and the IMU speaking its link description:
+// on CAN, either a Unix SOCK_SEQPACKET socket listening on a path (each connection gets a new
+// simulated IMU, the old one is dropped: the daemon opens the link once per run) or a link end
+// handed over with attach_imu() (a socket pair); on a serial line, a pseudo-terminal whose slave
+// device the daemon opens by its path (imu_serial_device()). Table and IMU share one SimWorld, so
+// the IMU senses the motion the table controller makes.
 #pragma once
 
 #include <cstdint>
@@ -26,8 +27,9 @@ struct SimDevicesConfig {
   std::string chamber_map = "watlow-f4t";  // a built-in register map or a map file
   double chamber_start_C = 25.0;      // initial air temperature, also the ambient
   double chamber_tau_s = 20.0;        // first-order time constant of the air
-  std::string imu_socket_path;        // empty: no listener, links come through attach_imu()
-  SimImuConfig imu;                   // rate, seed, truth, site, framing of every simulated IMU
+  std::string imu_socket_path;        // CAN: empty: no listener, links come through attach_imu()
+  std::string imu_link = "imucal-can";  // the IMU's link description: built-in name or file
+  SimImuConfig imu;                   // rate, seed, truth, site, framing (its link: imu_link)
   std::string imu_serial = "SIM-IMU"; // what the printed configuration names the IMU
 };
 
@@ -44,8 +46,11 @@ class SimDevices {
   const SimDevicesConfig& config() const noexcept;
   int table_port() const noexcept;
   int chamber_port() const noexcept;
+  // The per-unit LSBs of its increments (for a description that leaves them to the unit).
   double gyro_lsb_rad() const noexcept;
   double accel_lsb_mps() const noexcept;
+  // A serial IMU: the pseudo-terminal device to open (empty for CAN).
+  const std::string& imu_serial_device() const noexcept;
 
   // A new simulated IMU on this end of a link (it takes the descriptor); the previous one, if
   // any, stops and is dropped.

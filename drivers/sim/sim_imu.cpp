@@ -4,13 +4,16 @@
 #include <cerrno>
 #include <cmath>
 #include <mutex>
+#include <span>
 #include <thread>
 #include <vector>
 
+#include <fcntl.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "drivers/imu_codec.hpp"
 #include "drivers/sim/simulator.hpp"
 
 namespace imucal::drivers::sim {
@@ -36,8 +39,12 @@ struct SimImu::Impl {
   std::atomic<bool> streaming{false};
   std::atomic<bool> link_closed{false};
   std::atomic<std::uint64_t> sent{0}, not_sent{0}, restarts{0};
-  std::atomic<int> drop{0}, corrupt{0};
-  std::atomic<std::uint16_t> status_bits{0};
+  std::atomic<int> drop{0}, corrupt{0}, sequence_skip{0};
+  std::atomic<bool> drop_byte{false}, close_requested{false};
+  std::atomic<std::uint64_t> status_bits{0};
+  std::mutex garbage_mutex;
+  std::vector<std::uint8_t> garbage;
+  std::vector<std::uint8_t> command_bytes;  // a byte stream's input, searched for commands
   std::atomic<std::int64_t> pause_until_ns{0};
   std::atomic<double> temperature_C;
 
@@ -58,8 +65,13 @@ struct SimImu::Impl {
 
   Impl(SimWorld& w, int f, SimImuConfig c) : world(w), fd(f), cfg(std::move(c)), temperature_C(cfg.temperature_C) {
     dt_s = 1.0 / cfg.rate_hz;
-    gyro_lsb = SimImu::gyro_lsb_rad_at(cfg.rate_hz);
-    accel_lsb = SimImu::accel_lsb_mps_at(cfg.rate_hz);
+    link::resolve_per_unit_lsb(cfg.link,
+                               cfg.link.gyro_lsb_per_unit() ? std::optional(SimImu::gyro_lsb_rad_at(cfg.rate_hz)) : std::nullopt,
+                               cfg.link.accel_lsb_per_unit() ? std::optional(SimImu::accel_lsb_mps_at(cfg.rate_hz)) : std::nullopt);
+    gyro_lsb = cfg.link.gyro_increment_lsb_rad().value_or(0.0);
+    accel_lsb = cfg.link.accel_increment_lsb_mps().value_or(0.0);
+    // A description without a start command streams from power-on.
+    streaming = !cfg.link.start.has_value();
     double max_delay = 0.0;
     for (int j = 0; j < 3; ++j) max_delay = std::max({max_delay, cfg.truth.gyro.delay_s[j], cfg.truth.accel.delay_s[j]});
     lead_frames = static_cast<std::int64_t>(std::ceil(max_delay / dt_s)) + 2;
@@ -105,57 +117,119 @@ struct SimImu::Impl {
     return f;
   }
 
-  bool send_frame(const can::LinkFrame& frame) {
-    const auto wire = can::to_wire(frame);
-    const ssize_t n = ::send(fd, wire.data(), wire.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
-    if (n == static_cast<ssize_t>(wire.size())) return true;
+  // Writes all of `bytes` on a byte stream, waiting a little for room (a reader that is behind);
+  // what does not fit in time is lost, as on a real line whose receiver overran.
+  bool write_stream(std::span<const std::uint8_t> bytes) {
+    std::size_t done = 0;
+    for (int tries = 0; done < bytes.size() && tries < 50; ++tries) {
+      const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+      if (n > 0) {
+        done += static_cast<std::size_t>(n);
+        continue;
+      }
+      if (n < 0 && errno != EAGAIN && errno != EINTR) return false;  // EIO: no reader on the line
+      pollfd p{fd, POLLOUT, 0};
+      ::poll(&p, 1, 1);
+    }
+    return done == bytes.size();
+  }
+
+  bool send_datagram(std::span<const std::uint8_t> bytes) {
+    const ssize_t n = ::send(fd, bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n == static_cast<ssize_t>(bytes.size())) return true;
     if (n < 0 && (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) link_closed = true;
     return false;
   }
 
-  bool send_record(std::uint32_t fd_id, std::uint32_t classic_base, std::uint8_t seq_byte,
-                   const std::array<std::uint8_t, can::kRecordBytes>& rec) {
-    if (cfg.framing == can::Framing::fd) return send_frame(can::fd_frame(fd_id, rec));
-    bool ok = true;
-    for (const auto& part : can::classic_frames(classic_base, seq_byte, rec)) ok = send_frame(part) && ok;
-    return ok;
+  // One message of the description on this link: a CAN FD frame, classic CAN parts, a datagram
+  // or bytes on the line.
+  bool send_message(std::size_t message, std::span<const std::uint8_t> bytes, std::uint8_t sequence_byte) {
+    const link::Message& m = cfg.link.messages[message];
+    switch (cfg.link.transport) {
+      case link::Transport::socketcan:
+        if (cfg.framing == can::Framing::fd && m.can_id) return send_datagram(can::to_wire(can::fd_frame(*m.can_id, bytes)));
+        if (cfg.framing == can::Framing::classic && m.classic_base_id) {
+          bool ok = true;
+          for (const auto& part : can::classic_frames(*m.classic_base_id, sequence_byte, bytes))
+            ok = send_datagram(can::to_wire(part)) && ok;
+          return ok;
+        }
+        return false;
+      case link::Transport::udp: return send_datagram(bytes);
+      case link::Transport::serial: {
+        std::vector<std::uint8_t> junk;
+        {
+          std::lock_guard lock(garbage_mutex);
+          junk.swap(garbage);
+        }
+        if (!junk.empty()) (void)write_stream(junk);
+        return write_stream(bytes);
+      }
+    }
+    return false;
+  }
+
+  void command(std::span<const std::uint8_t> bytes) {
+    const auto is = [&](const std::optional<link::Command>& c) {
+      return c && bytes.size() >= c->bytes.size() && std::equal(c->bytes.begin(), c->bytes.end(), bytes.begin());
+    };
+    if (is(cfg.link.start) && !streaming) {
+      next_k = static_cast<std::int64_t>(std::floor(world.now_s() / dt_s)) + 1;
+      next_temperature_s = static_cast<double>(next_k) * dt_s;
+      streaming = true;
+    } else if (is(cfg.link.stop)) {
+      streaming = false;
+    }
   }
 
   void read_commands() {
     for (;;) {
-      std::uint8_t buf[can::kCanFdMtu];
-      const ssize_t n = ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+      std::uint8_t buf[512];
+      const ssize_t n = cfg.link.transport == link::Transport::serial ? ::read(fd, buf, sizeof buf)
+                                                                      : ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
       if (n <= 0) {
-        if (n == 0) link_closed = true;
+        if (n == 0 && cfg.link.transport == link::Transport::socketcan) link_closed = true;
         return;
       }
-      const auto f = can::parse_wire(std::span<const std::uint8_t>(buf, static_cast<std::size_t>(n)));
-      if (!f || f->can_id != can::kIdCommand || f->len < 1) continue;
-      if (f->data[0] == can::kCommandStart && !streaming) {
-        next_k = static_cast<std::int64_t>(std::floor(world.now_s() / dt_s)) + 1;
-        next_temperature_s = static_cast<double>(next_k) * dt_s;
-        streaming = true;
-      } else if (f->data[0] == can::kCommandStop) {
-        streaming = false;
+      const auto got = std::span<const std::uint8_t>(buf, static_cast<std::size_t>(n));
+      if (cfg.link.transport == link::Transport::socketcan) {
+        const auto f = can::parse_wire(got);
+        if (!f) continue;
+        for (const auto& c : {cfg.link.start, cfg.link.stop})
+          if (c && c->can_id == f->can_id) command(std::span<const std::uint8_t>(f->data.data(), f->len));
+      } else if (cfg.link.transport == link::Transport::udp) {
+        command(got);
+      } else {
+        // A byte stream: commands may arrive in pieces; look for each at every position.
+        command_bytes.insert(command_bytes.end(), got.begin(), got.end());
+        for (std::size_t p = 0; p < command_bytes.size(); ++p) command(std::span(command_bytes).subspan(p));
+        const std::size_t keep = 16;
+        if (command_bytes.size() > keep) command_bytes.erase(command_bytes.begin(), command_bytes.end() - keep);
       }
     }
   }
 
   void send_temperatures(double t_s) {
     const double base = temperature_C.load();
-    can::TemperatureRecord p0, p1;
-    p0.page = 0;
-    p1.page = 1;
-    p0.sequence = p1.sequence = temperature_sequence++;
-    p0.device_time_ns = p1.device_time_ns = device_time_ns(t_s);
+    link::Values v;
+    v.sequence = temperature_sequence++;
     // Coil sensors spread a little around the block temperature, accelerometers a bit warmer.
-    for (std::size_t j = 0; j < 24; ++j)
-      p0.values_cC[j] = static_cast<std::int16_t>(std::lround((base + 0.02 * static_cast<double>(j % 8) - 0.07) * 100.0));
-    p1.values_cC.fill(can::kNoTemperature);
-    for (std::size_t j = 0; j < 3; ++j) p1.values_cC[j] = static_cast<std::int16_t>(std::lround((base + 0.5) * 100.0));
-    const auto seq_byte = static_cast<std::uint8_t>(p0.sequence);
-    send_record(can::kIdTemperatureFd, can::kIdTemperatureClassic, seq_byte, can::encode(p0));
-    send_record(can::kIdTemperatureFd, can::kIdTemperatureClassic, seq_byte, can::encode(p1));
+    for (std::size_t j = 0; j < 24; ++j) v.coil_C[j] = base + 0.02 * static_cast<double>(j % 8) - 0.07;
+    v.accel_sensor_C.fill(base + 0.5);
+    for (std::size_t i = 0; i < cfg.link.messages.size(); ++i) {
+      const link::Message& m = cfg.link.messages[i];
+      if (m.kind != link::MessageKind::temperature) continue;
+      v.time_raw = time_counts(m, t_s);
+      send_message(i, link::encode(cfg.link, i, v), static_cast<std::uint8_t>(v.sequence));
+    }
+  }
+
+  // The device time of world time t_s in counts of the message's time field (wrapped as it is).
+  std::optional<std::uint64_t> time_counts(const link::Message& m, double t_s) const {
+    const link::Field* f = m.find(link::Role::time);
+    if (!f) return std::nullopt;
+    const auto counts = static_cast<std::uint64_t>(std::llround(static_cast<double>(device_time_ns(t_s)) / f->scale.value_or(1.0)));
+    return f->wrap ? counts % f->wrap : counts;
   }
 
   std::uint64_t device_time_ns(double world_s) const {
@@ -163,17 +237,21 @@ struct SimImu::Impl {
     return static_cast<std::uint64_t>(std::llround(ns) + cfg.clock_offset_ns);
   }
 
-  static std::int32_t to_counts(double value, double lsb, std::uint16_t& status) {
-    const double c = std::nearbyint(value / lsb);
-    if (c > static_cast<double>(INT32_MAX) || c < static_cast<double>(INT32_MIN)) {
-      status = static_cast<std::uint16_t>(status | can::status::kOverRange);
-      return c > 0 ? INT32_MAX : INT32_MIN;
-    }
-    return static_cast<std::int32_t>(c);
-  }
-
   void run() {
+    const std::size_t sample = cfg.link.sample_message();
+    const link::Message& sm = cfg.link.messages[sample];
+    const link::Field* gyro_x = sm.find(link::Role::gyro_x);
     while (!stop) {
+      if (close_requested && !link_closed) {
+        // The thread closes its own descriptor, so no write can race the close.
+        if (cfg.link.transport == link::Transport::serial) {
+          ::close(fd);
+          fd = -1;
+        } else {
+          ::shutdown(fd, SHUT_RDWR);
+        }
+        link_closed = true;
+      }
       if (link_closed) {
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
         continue;
@@ -191,49 +269,58 @@ struct SimImu::Impl {
       // Sleep until the transmission time in short steps, so that stop() is prompt at any rate.
       for (;;) {
         const std::int64_t left = send_at - host_time_ns();
-        if (left <= 0 || stop) break;
+        if (left <= 0 || stop || close_requested) break;
         std::this_thread::sleep_for(std::chrono::nanoseconds(std::min<std::int64_t>(left, 20'000'000)));
       }
       if (stop) break;
+      if (close_requested) continue;
       read_commands();
       if (!streaming || link_closed) continue;
 
       const ImuFrame f = produce(k);
       ++next_k;
+      next_sequence += static_cast<std::uint32_t>(sequence_skip.exchange(0));
       const std::uint32_t seq = next_sequence++;
-      can::SampleRecord r;
-      r.sequence = seq;
-      r.device_time_ns = device_time_ns(t_k);
-      r.status = status_bits.load();
+      link::Values v;
+      v.sequence = seq;
+      v.time_raw = time_counts(sm, t_k);
+      v.status = link::status_ok(sm) ^ status_bits.load();
+      std::array<double, 3> dtheta{}, dv{};
       for (std::size_t j = 0; j < 3; ++j) {
-        r.gyro_counts[j] = to_counts(f.dtheta_rad[static_cast<Eigen::Index>(j)], gyro_lsb, r.status);
-        r.accel_counts[j] = to_counts(f.dv_mps[static_cast<Eigen::Index>(j)], accel_lsb, r.status);
+        dtheta[j] = f.dtheta_rad[static_cast<Eigen::Index>(j)];
+        dv[j] = f.dv_mps[static_cast<Eigen::Index>(j)];
       }
+      link::from_increments(sm, dtheta, dv, dt_s, v);
       const double temp = temperature_C.load();
-      r.gyro_temp_cC = static_cast<std::int16_t>(std::lround(temp * 100.0));
-      r.accel_temp_cC = static_cast<std::int16_t>(std::lround((temp + 0.5) * 100.0));
+      v.gyro_temp_C = temp;
+      v.accel_temp_C = temp + 0.5;
+      const std::int64_t now = host_time_ns();
+      v.latency_ns = static_cast<double>(std::max<std::int64_t>(0, (now - sample_host_ns) / 1000) * 1000);
+      std::vector<std::uint8_t> bytes = link::encode(cfg.link, sample, v);
       {
+        // What the frame says, as the description decodes it: the truth the driver must deliver.
+        const link::Decoded d = link::decode(cfg.link, bytes, sample);
+        SampleTruth truth{seq, t_k, sample_host_ns, f.table_deg, {}, {}};
+        link::to_increments(sm, d.values, dt_s, truth.dtheta_rad, truth.dv_mps);
         std::lock_guard lock(truth_mutex);
         const std::size_t i = seq % truth_ring.size();
-        truth_ring[i] = SampleTruth{seq, t_k, sample_host_ns, f.table_deg, r.gyro_counts, r.accel_counts};
+        truth_ring[i] = truth;
         truth_valid[i] = true;
       }
-      const std::int64_t now = host_time_ns();
-      r.latency_us = static_cast<std::uint32_t>(std::max<std::int64_t>(0, (now - sample_host_ns) / 1000));
-      bool skip = now < pause_until_ns.load();
-      if (!skip && drop.load() > 0) {
+      bool skip_it = now < pause_until_ns.load();
+      if (!skip_it && drop.load() > 0) {
         --drop;
-        skip = true;
+        skip_it = true;
       }
-      if (skip) {
+      if (skip_it) {
         ++not_sent;
       } else {
-        auto rec = can::encode(r);
-        if (corrupt.load() > 0) {
+        if (corrupt.load() > 0 && gyro_x) {
           --corrupt;
-          rec[21] = static_cast<std::uint8_t>(rec[21] ^ 0x10);  // one bit of gyro x, after the CRC
+          bytes[gyro_x->offset + 1] = static_cast<std::uint8_t>(bytes[gyro_x->offset + 1] ^ 0x10);  // after the checksum
         }
-        if (send_record(can::kIdSampleFd, can::kIdSampleClassic, static_cast<std::uint8_t>(seq), rec))
+        if (drop_byte.exchange(false) && gyro_x) bytes.erase(bytes.begin() + static_cast<std::ptrdiff_t>(gyro_x->offset));
+        if (send_message(sample, bytes, static_cast<std::uint8_t>(seq)))
           ++sent;
         else
           ++not_sent;
@@ -247,24 +334,33 @@ struct SimImu::Impl {
   }
 };
 
-SimImu::SimImu(SimWorld& world, int socket_fd, SimImuConfig config)
-    : impl_(std::make_unique<Impl>(world, socket_fd, std::move(config))) {
+SimImu::SimImu(SimWorld& world, int link_fd, SimImuConfig config)
+    : impl_(std::make_unique<Impl>(world, link_fd, std::move(config))) {
   // On a socket pair the sender's buffer is the link's queue: room for seconds of frames, as a
   // CAN controller's receive queue plus the kernel's would hold (clamped by net.core.wmem_max).
+  // (A pseudo-terminal has no such option: its queue is the tty buffer.)
   const int bytes = 4 << 20;
-  (void)::setsockopt(socket_fd, SOL_SOCKET, SO_SNDBUF, &bytes, sizeof bytes);
+  (void)::setsockopt(link_fd, SOL_SOCKET, SO_SNDBUF, &bytes, sizeof bytes);
+  if (impl_->cfg.link.transport == link::Transport::serial)
+    (void)::fcntl(link_fd, F_SETFL, ::fcntl(link_fd, F_GETFL) | O_NONBLOCK);
   impl_->thread = std::thread([this] { impl_->run(); });
 }
 
 SimImu::~SimImu() {
   impl_->stop = true;
   if (impl_->thread.joinable()) impl_->thread.join();
-  ::close(impl_->fd);
+  if (impl_->fd >= 0) ::close(impl_->fd);
 }
 
 double SimImu::gyro_lsb_rad_at(double rate_hz) noexcept { return Simulator::kGyroLsbAt1kHz_rad * 1000.0 / rate_hz; }
 double SimImu::accel_lsb_mps_at(double rate_hz) noexcept { return Simulator::kAccelLsbAt1kHz_mps * 1000.0 / rate_hz; }
 double SimImu::gyro_lsb_rad() const noexcept { return impl_->gyro_lsb; }
+LinkImuConfig SimImu::driver_config() const {
+  LinkImuConfig c;
+  c.link = impl_->cfg.link;
+  c.rate_hz = impl_->cfg.rate_hz;
+  return c;
+}
 double SimImu::accel_lsb_mps() const noexcept { return impl_->accel_lsb; }
 bool SimImu::streaming() const noexcept { return impl_->streaming; }
 std::uint64_t SimImu::samples_sent() const noexcept { return impl_->sent; }
@@ -280,14 +376,17 @@ std::optional<SampleTruth> SimImu::truth(std::uint32_t sequence) const {
 
 void SimImu::drop_next_samples(int count) { impl_->drop = count; }
 void SimImu::corrupt_next_samples(int count) { impl_->corrupt = count; }
-void SimImu::set_status_bits(std::uint16_t bits) { impl_->status_bits = bits; }
+void SimImu::set_status_bits(std::uint64_t bits) { impl_->status_bits = bits; }
+void SimImu::skip_sequence(int count) { impl_->sequence_skip = count; }
+void SimImu::drop_byte_of_next_sample() { impl_->drop_byte = true; }
+void SimImu::send_garbage(std::vector<std::uint8_t> bytes) {
+  std::lock_guard lock(impl_->garbage_mutex);
+  impl_->garbage.insert(impl_->garbage.end(), bytes.begin(), bytes.end());
+}
 void SimImu::pause(std::chrono::milliseconds duration) {
   impl_->pause_until_ns = host_time_ns() + std::chrono::duration_cast<std::chrono::nanoseconds>(duration).count();
 }
-void SimImu::close_link() {
-  ::shutdown(impl_->fd, SHUT_RDWR);
-  impl_->link_closed = true;
-}
+void SimImu::close_link() { impl_->close_requested = true; }
 void SimImu::set_temperature(double celsius) { impl_->temperature_C = celsius; }
 
 }  // namespace imucal::drivers::sim

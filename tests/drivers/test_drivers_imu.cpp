@@ -1,19 +1,25 @@
-// The CAN IMU driver against the simulated IMU over socketpair(AF_UNIX, SOCK_SEQPACKET) carrying
-// struct can(fd)_frame bytes: streaming at rate (CAN FD and classic), content from the physics,
-// sample times through the clock model, and every fault (lost frames, bad CRC, status faults,
-// stall, closed link) counted or reported; a randomized fuzz of the link; and the message of a
-// real CAN interface that cannot be opened on this kernel.
+// The IMU driver (LinkImu) against the simulated IMU speaking the same link description: imucal's
+// CAN layout over socketpair(AF_UNIX, SOCK_SEQPACKET) carrying struct can(fd)_frame bytes, the
+// KVH 1750 frames over a pseudo-terminal pair (openpty) and over loopback UDP, and a description
+// only this test defines. Streaming at rate (CAN FD and classic), content from the physics, sample
+// times through the clock model, and every fault (lost frames, bad CRC, status faults, stall,
+// closed link; on the serial line a dropped byte, garbage, a sequence jump) counted or reported; a
+// randomized fuzz of the link; and the message of a real CAN interface this kernel cannot open.
 #include <cmath>
 #include <random>
 #include <thread>
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <pty.h>
 #include <sys/socket.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include "core/earth.hpp"
 #include "core/units.hpp"
-#include "drivers/can_imu.hpp"
+#include "drivers/imu_codec.hpp"
+#include "drivers/link_imu.hpp"
 #include "drivers/sim/sim_imu.hpp"
 #include "test_helpers.hpp"
 
@@ -32,23 +38,64 @@ sim::ServoConfig resting_table() {
   return c;
 }
 
+// A UDP port on 127.0.0.1 that was free a moment ago.
+int free_udp_port() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0)
+    throw std::runtime_error("cannot bind a UDP test socket");
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+// The simulated IMU and the driver on the link its description names: a socket pair (CAN), a
+// pseudo-terminal pair (serial: the device on the master, the driver opens the slave by its
+// path) or loopback UDP.
 struct Rig {
   sim::SimWorld world{resting_table()};
   std::unique_ptr<sim::SimImu> device;
-  std::unique_ptr<CanImu> driver;
+  std::unique_ptr<LinkImu> driver;
+  int pty_slave = -1;  // held open, as a plugged-in cable keeps the line up
 
-  explicit Rig(sim::SimImuConfig dc = {}, std::function<void(CanImuConfig&)> tweak = {}) {
-    int sv[2];
-    if (::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv) != 0) throw std::runtime_error("socketpair");
-    device = std::make_unique<sim::SimImu>(world, sv[1], dc);
-    CanImuConfig c;
-    c.framing = dc.framing;
-    c.rate_hz = dc.rate_hz;
-    c.gyro_lsb_rad = device->gyro_lsb_rad();
-    c.accel_lsb_mps = device->accel_lsb_mps();
+  explicit Rig(sim::SimImuConfig dc = {}, std::function<void(LinkImuConfig&)> tweak = {}) {
+    const link::ImuLink& l = dc.link;
+    int device_fd = -1;
+    std::unique_ptr<ImuTransport> transport;
+    if (l.transport == link::Transport::socketcan) {
+      int sv[2];
+      if (::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv) != 0) throw std::runtime_error("socketpair");
+      device_fd = sv[1];
+      transport = socketcan_transport(sv[0], l, dc.framing, "a socket pair");
+    } else if (l.transport == link::Transport::serial) {
+      termios raw{};
+      ::cfmakeraw(&raw);
+      char name[128] = {};
+      if (::openpty(&device_fd, &pty_slave, name, &raw, nullptr) != 0) throw std::runtime_error("openpty");
+      transport = serial_transport(name, l);
+    } else {
+      const int port = free_udp_port();
+      transport = udp_transport("127.0.0.1", port, "", 0);
+      device_fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+      sockaddr_in a{};
+      a.sin_family = AF_INET;
+      a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      a.sin_port = htons(static_cast<std::uint16_t>(port));
+      if (::connect(device_fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) throw std::runtime_error("connect");
+    }
+    device = std::make_unique<sim::SimImu>(world, device_fd, dc);
+    LinkImuConfig c = device->driver_config();
     c.stall_timeout = 300ms;
     if (tweak) tweak(c);
-    driver = std::make_unique<CanImu>(sv[0], c);
+    driver = std::make_unique<LinkImu>(std::move(transport), c);
+  }
+  ~Rig() {
+    driver.reset();
+    device.reset();
+    if (pty_slave >= 0) ::close(pty_slave);
   }
   void up() {
     ASSERT_TRUE(driver->connect());
@@ -65,7 +112,23 @@ struct Rig {
     }
     return all;
   }
+  // Every delivered sample is the one the device sent under its sequence number.
+  void expect_truth(const ImuBatch& b) const {
+    for (const ImuSample& s : b.samples) {
+      const auto t = device->truth(s.sequence);
+      ASSERT_TRUE(t) << s.sequence;
+      EXPECT_EQ(t->dtheta_rad, s.dtheta_rad) << s.sequence;
+      EXPECT_EQ(t->dv_mps, s.dv_mps) << s.sequence;
+    }
+  }
 };
+
+sim::SimImuConfig kvh(double rate_hz = 1000.0) {
+  sim::SimImuConfig c;
+  c.link = link::load_imu_link("kvh-1750");
+  c.rate_hz = rate_hz;
+  return c;
+}
 
 }  // namespace
 
@@ -92,12 +155,7 @@ TEST(CanImu, StreamsCanFdAtRateWithThePhysicsInIt) {
   EXPECT_NEAR(dv.z() / T, earth::site_gravity_mps2(site), 1e-6);
   EXPECT_NEAR(dth.z() / T, earth::w_ie_n(site.latitude_deg * units::kDegToRad).z(), 1e-9);
   // Each sample matches what the simulator produced.
-  for (const ImuSample& s : b.samples) {
-    const auto t = rig.device->truth(s.sequence);
-    ASSERT_TRUE(t);
-    EXPECT_EQ(t->gyro_counts, s.gyro_counts);
-    EXPECT_EQ(t->accel_counts, s.accel_counts);
-  }
+  rig.expect_truth(b);
   ASSERT_GE(b.temperatures.size(), 5u);
   EXPECT_NEAR(b.temperatures.back().coil_C[0], 25.0 - 0.07, 1e-9);
   EXPECT_NEAR(b.temperatures.back().accel_C[2], 25.5, 1e-9);
@@ -116,9 +174,9 @@ TEST(CanImu, ClassicCanFallbackAt200Hz) {
   EXPECT_EQ(c.sequence_gaps, 0u);
   EXPECT_EQ(c.malformed_frames, 0u);
   EXPECT_EQ(c.crc_failures, 0u);
-  EXPECT_GE(c.frames_received, 10 * b.samples.size());
+  EXPECT_GE(c.frames_received, b.samples.size());  // messages reassembled from ten parts each
   EXPECT_GE(b.temperatures.size(), 5u);
-  for (const ImuSample& s : b.samples) EXPECT_EQ(rig.device->truth(s.sequence)->accel_counts, s.accel_counts);
+  rig.expect_truth(b);
 }
 
 TEST(CanImu, ClassicCanIsRefusedAboveItsRate) {
@@ -188,15 +246,15 @@ TEST(CanImu, BadCrcFramesAreCountedAndNeverDelivered) {
   const ImuCounters c = rig.driver->counters();
   EXPECT_EQ(c.crc_failures, 3u);
   EXPECT_EQ(c.samples_lost, 3u);  // they are missing from the sequence as well
-  for (const ImuSample& s : b.samples) EXPECT_EQ(rig.device->truth(s.sequence)->gyro_counts, s.gyro_counts);
+  rig.expect_truth(b);
 }
 
 TEST(CanImu, StatusFaultsAreFlaggedAndCounted) {
   Rig rig;
   rig.up();
-  rig.device->set_status_bits(can::status::kGyroFault | can::status::kWarmingUp);
+  rig.device->set_status_bits(0x0001 | 0x0100);  // gyro fault, warming up
   const ImuBatch b = rig.collect(0.2);
-  rig.device->set_status_bits(can::status::kWarmingUp);  // information only, no fault
+  rig.device->set_status_bits(0x0100);  // warming up: information only, no fault
   const ImuBatch c2 = rig.collect(0.2);
   const ImuCounters c = rig.driver->counters();
   std::uint64_t flagged = 0;
@@ -256,7 +314,7 @@ TEST(CanImu, StreamsOnlyBetweenStartAndStop) {
 }
 
 TEST(CanImu, RealCanInterfaceFailsNamingTheInterfaceAndTheReason) {
-  const auto r = open_socketcan("can0", true);
+  const auto r = open_socketcan("can0", true);  // NOLINT
   if (r) {
     ::close(*r);
     GTEST_SKIP() << "this machine has a can0 interface";
@@ -270,15 +328,16 @@ TEST(CanImu, RealCanInterfaceFailsNamingTheInterfaceAndTheReason) {
   EXPECT_EQ(open_socketcan("a-name-longer-than-ifnamsiz", true).code(), DriverErrc::invalid_argument);
 }
 
-// Fuzz: random datagrams of every size, mutated valid frames and well-formed frames of every
-// record type are written into the link; the driver delivers exactly the intact samples, in
-// order, and counts the rest.
+// Fuzz: random datagrams of every size, mutated valid frames and well-formed frames are written
+// into the CAN link; the driver delivers exactly the intact samples, in order, and counts the rest.
 TEST(CanImuFuzz, RandomLinkTrafficIsCountedNeverDelivered) {
   int sv[2];
   ASSERT_EQ(::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv), 0);
-  CanImuConfig cfg;
+  LinkImuConfig cfg;
+  cfg.link = link::load_imu_link("imucal-can");
+  link::resolve_per_unit_lsb(cfg.link, 1e-9, 1e-8);
   cfg.stall_timeout = 10s;
-  CanImu driver(sv[0], cfg);
+  LinkImu driver(socketcan_transport(sv[0], cfg.link, can::Framing::fd, "a socket pair"), cfg);
   ASSERT_TRUE(driver.connect());
   ASSERT_TRUE(driver.configure());
   ASSERT_TRUE(driver.activate());
@@ -288,6 +347,7 @@ TEST(CanImuFuzz, RandomLinkTrafficIsCountedNeverDelivered) {
   std::uint32_t seq = 0;
   std::vector<std::uint32_t> sent_good;
   ImuBatch got;
+  const std::size_t sample = cfg.link.sample_message();
   for (int i = 0; i < 12000; ++i) {
     std::vector<std::uint8_t> bytes;
     const int kind = static_cast<int>(rng() % 5);
@@ -295,12 +355,11 @@ TEST(CanImuFuzz, RandomLinkTrafficIsCountedNeverDelivered) {
       bytes.resize(rng() % 100);
       for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
     } else {
-      can::SampleRecord r;
-      r.sequence = seq;
-      r.device_time_ns = 1'000'000ull * seq;
-      r.gyro_counts = {static_cast<std::int32_t>(seq), 0, 0};
-      const auto rec = can::encode(r);
-      bytes = can::to_wire(can::fd_frame(can::kIdSampleFd, rec));
+      link::Values v;
+      v.sequence = seq;
+      v.time_raw = 1'000'000ull * seq;
+      v.gyro = {static_cast<double>(seq) * 1e-9, 0, 0};
+      bytes = can::to_wire(can::fd_frame(0x100, link::encode(cfg.link, sample, v)));
       if (kind == 1) {
         bytes[8 + rng() % 64] ^= static_cast<std::uint8_t>(1 + rng() % 255);  // damaged payload
       } else if (kind == 2) {
@@ -322,16 +381,215 @@ TEST(CanImuFuzz, RandomLinkTrafficIsCountedNeverDelivered) {
     if (got.samples.size() == before) break;
   }
   // Every intact sample arrives (a damaged length code with the payload intact may still be a
-  // valid 64-byte record: those are intact samples too).
+  // valid 64-byte frame: those are intact samples too).
   ASSERT_GE(got.samples.size(), sent_good.size());
-  std::size_t j = 0;
-  for (const ImuSample& s : got.samples) {
-    EXPECT_EQ(static_cast<std::uint32_t>(s.gyro_counts[0]), s.sequence);  // content belongs to its sequence
-    while (j < sent_good.size() && sent_good[j] < s.sequence) ++j;
-  }
+  for (const ImuSample& s : got.samples)
+    EXPECT_EQ(std::llround(s.dtheta_rad[0] / 1e-9), static_cast<long long>(s.sequence));  // content belongs to its sequence
   for (std::size_t i = 1; i < got.samples.size(); ++i) EXPECT_GT(got.samples[i].sequence, got.samples[i - 1].sequence);
   const ImuCounters c = driver.counters();
   EXPECT_GT(c.crc_failures + c.malformed_frames, 2000u);
   EXPECT_EQ(c.samples_delivered, got.samples.size());
   ::close(sv[1]);
+}
+
+// ------------------------------------------------------------------------------------------------
+// The KVH 1750 frames (kvh-1750: float32 delta angles in rad, accelerations in g, a 7-bit counter,
+// CRC-32/MPEG-2) on a serial line: a pseudo-terminal pair.
+
+TEST(KvhSerial, StreamsOverAPseudoTerminalWithThePhysicsInIt) {
+  Rig rig(kvh());
+  rig.up();
+  const ImuBatch b = rig.collect(1.5);
+  ASSERT_GT(b.samples.size(), 700u);
+  // The 7-bit counter wraps every 128 samples; the driver's count runs on.
+  for (std::size_t i = 1; i < b.samples.size(); ++i) ASSERT_EQ(b.samples[i].sequence, b.samples[i - 1].sequence + 1);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_EQ(c.sequence_gaps, 0u);
+  EXPECT_EQ(c.crc_failures, 0u);
+  EXPECT_EQ(c.malformed_frames, 0u);
+  EXPECT_EQ(c.status_faults, 0u);
+  rig.expect_truth(b);
+  // Accelerations in g became velocity increments over the period: g on z at rest.
+  double dvz = 0.0;
+  for (const ImuSample& s : b.samples) dvz += s.dv_mps[2];
+  EXPECT_NEAR(dvz / (static_cast<double>(b.samples.size()) / 1000.0), earth::site_gravity_mps2(Site{}), 1e-4);
+  EXPECT_NEAR(b.samples.back().gyro_temp_C, 25.0, 0.01);
+  EXPECT_TRUE(b.temperatures.empty());  // the frame carries its one temperature
+  // No time tag in format A: the clock model runs on the sample count.
+  EXPECT_TRUE(rig.driver->clock_model().valid);
+}
+
+TEST(KvhSerial, ACorruptedCrcIsCountedAndTheSampleNeverDelivered) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.2);
+  rig.device->corrupt_next_samples(2);
+  const ImuBatch b = rig.collect(0.3);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_EQ(c.crc_failures, 2u);
+  EXPECT_EQ(c.sequence_gaps, 1u);
+  EXPECT_EQ(c.samples_lost, 2u);
+  rig.expect_truth(b);
+}
+
+TEST(KvhSerial, ADroppedByteResynchronisesAtTheNextHeader) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.2);
+  rig.device->drop_byte_of_next_sample();
+  const ImuBatch b = rig.collect(0.3);
+  const ImuCounters c = rig.driver->counters();
+  // The short frame runs into the next one's header: its CRC fails, the decoder steps over bytes
+  // to the next header, and the frame is missing from the sequence.
+  EXPECT_GE(c.crc_failures, 1u);
+  EXPECT_GE(c.resyncs, 1u);
+  EXPECT_GE(c.bytes_discarded, 35u);
+  EXPECT_EQ(c.sequence_gaps, 1u);
+  EXPECT_GE(c.samples_lost, 1u);
+  rig.expect_truth(b);
+}
+
+TEST(KvhSerial, GarbageOnTheLineIsSkippedAndCounted) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.2);
+  // Noise, a false header (FE 81 FF 55 followed by junk that fails the CRC) and more noise.
+  rig.device->send_garbage({0x00, 0x13, 0xFE, 0x81, 0xFF, 0x55, 0x01, 0x02, 0x03, 0xAA, 0xFE});
+  const ImuBatch b = rig.collect(0.3);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_GE(c.resyncs, 1u);
+  EXPECT_GE(c.bytes_discarded, 11u);
+  EXPECT_LE(c.crc_failures, 1u);       // at most the false header
+  EXPECT_EQ(c.sequence_gaps, 0u);      // no real frame was lost
+  rig.expect_truth(b);
+}
+
+TEST(KvhSerial, ASequenceJumpIsAGapEvenWithoutALostFrame) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.2);
+  rig.device->skip_sequence(5);
+  const ImuBatch b = rig.collect(0.3);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_EQ(c.sequence_gaps, 1u);
+  EXPECT_EQ(c.samples_lost, 5u);
+  EXPECT_EQ(c.crc_failures, 0u);
+}
+
+TEST(KvhSerial, ASilentLineStallsAndAGapLongerThanTheCounterIsCountedInFull) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.2);
+  rig.device->pause(1000ms);  // ~1000 samples: the 7-bit counter wraps about 8 times meanwhile
+  Stopwatch sw;
+  ImuBatch b;
+  Result<void> r;
+  while ((r = rig.driver->poll(b, 50ms)) && sw.seconds() < 5.0) {
+  }
+  EXPECT_EQ(r.code(), DriverErrc::stream_stalled);
+  ASSERT_TRUE(eventually([&] { return rig.driver->poll(b, 50ms).ok() && rig.driver->counters().sequence_gaps > 0; }));
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_GE(c.stalls, 1u);
+  // Counted from the time that passed, not modulo 128.
+  EXPECT_GT(c.samples_lost, 700u);
+  EXPECT_LT(c.samples_lost, 1400u);
+}
+
+TEST(KvhSerial, InvalidStatusBitsFlagTheSamples) {
+  Rig rig(kvh());
+  rig.up();
+  rig.device->set_status_bits(0x10);  // accelerometer x no longer valid
+  const ImuBatch b = rig.collect(0.2);
+  ASSERT_FALSE(b.samples.empty());
+  EXPECT_TRUE(b.samples.back().status_fault);
+  EXPECT_EQ(b.samples.back().status, 0x67u);
+  EXPECT_GT(rig.driver->counters().status_faults, 0u);
+}
+
+TEST(KvhSerial, AClosedLineIsConnectionLost) {
+  Rig rig(kvh());
+  rig.up();
+  (void)rig.collect(0.1);
+  rig.device->close_link();
+  ImuBatch b;
+  Result<void> r;
+  ASSERT_TRUE(eventually([&] { return (r = rig.driver->poll(b, 50ms)).code() == DriverErrc::connection_lost; }, 5s));
+  EXPECT_EQ(rig.driver->state(), DeviceState::faulted);
+}
+
+TEST(KvhSerial, ABaudRateTooSlowForTheRateIsRefused) {
+  sim::SimImuConfig dc = kvh();
+  dc.link.serial.baud = 115200;  // 36-byte frames: at most 320 per second
+  Rig rig(dc);
+  ASSERT_TRUE(rig.driver->connect());
+  const auto r = rig.driver->configure();
+  EXPECT_EQ(r.code(), DriverErrc::invalid_argument);
+  EXPECT_NE(r.error().message.find("at most 320"), std::string::npos) << r.error().message;
+}
+
+TEST(KvhSerial, AMissingDeviceFailsNamingIt) {
+  LinkImuConfig c;
+  c.link = link::load_imu_link("kvh-1750");
+  LinkImu driver(serial_transport("/dev/imucal-no-such-tty", c.link), c);
+  const auto r = driver.connect();
+  EXPECT_EQ(r.code(), DriverErrc::connect_failed);
+  EXPECT_NE(r.error().message.find("/dev/imucal-no-such-tty"), std::string::npos) << r.error().message;
+}
+
+TEST(KvhUdp, StreamsOverLoopbackUdpWithTheImusTimeTag) {
+  // Format B carries a 32-bit microsecond time tag: the clock model runs on it.
+  sim::SimImuConfig dc;
+  dc.link = link::load_imu_link("kvh-1775-b");
+  dc.link.transport = link::Transport::udp;
+  dc.clock_drift_ppm = 40.0;
+  Rig rig(dc);
+  rig.up();
+  const ImuBatch b = rig.collect(3.0);
+  ASSERT_GT(b.samples.size(), 1500u);
+  for (std::size_t i = 1; i < b.samples.size(); ++i) ASSERT_EQ(b.samples[i].sequence, b.samples[i - 1].sequence + 1);
+  EXPECT_EQ(rig.driver->counters().crc_failures, 0u);
+  rig.expect_truth(b);
+  EXPECT_NEAR(rig.driver->clock_model().drift_ppm, -40.0, 10.0);
+  rig.device->drop_next_samples(3);
+  (void)rig.collect(0.3);
+  EXPECT_EQ(rig.driver->counters().samples_lost, 3u);
+}
+
+// A lab's own IMU: a description only this test defines (little-endian scaled int16 rates in
+// deg/s, accelerations in m/s^2 as int32 micro-units, a 16-bit counter, CRC-16/MODBUS), streamed
+// over a pseudo-terminal by the same simulated IMU: nothing else changes.
+TEST(LabDescription, AnImuDescribedOnlyByThisTestStreams) {
+  const std::string text = R"({
+    "format": "imucal-imu-link/1", "name": "lab-test-imu", "source": "defined by test_drivers_imu",
+    "transport": {"type": "serial", "baud": 460800, "parity": "even", "stop_bits": 1},
+    "byte_order": "little",
+    "start": {"bytes": "A5 01"}, "stop": {"bytes": "A5 00"},
+    "messages": [{"name": "data", "kind": "sample", "header": "AA 55", "length": 26,
+      "checksum": {"type": "crc", "preset": "crc-16/modbus", "offset": 24},
+      "fields": [
+        {"role": "sequence", "offset": 2, "type": "uint16"},
+        {"role": "gyro_x", "offset": 4, "type": "int16", "unit": "deg/s", "lsb": 0.01},
+        {"role": "gyro_y", "offset": 6, "type": "int16", "unit": "deg/s", "lsb": 0.01},
+        {"role": "gyro_z", "offset": 8, "type": "int16", "unit": "deg/s", "lsb": 0.01},
+        {"role": "accel_x", "offset": 10, "type": "int32", "unit": "m/s^2", "lsb": 1e-6},
+        {"role": "accel_y", "offset": 14, "type": "int32", "unit": "m/s^2", "lsb": 1e-6},
+        {"role": "accel_z", "offset": 18, "type": "int32", "unit": "m/s^2", "lsb": 1e-6},
+        {"role": "status", "offset": 22, "type": "uint8", "fault_when_set": "0x0F"},
+        {"role": "temperature", "offset": 23, "type": "int8", "unit": "C"}
+      ]}]})";
+  sim::SimImuConfig dc;
+  dc.link = link::imu_link_from_json(text);
+  dc.rate_hz = 200.0;
+  Rig rig(dc);
+  rig.up();
+  ASSERT_TRUE(eventually([&] { return rig.device->streaming(); }));  // the start command arrived
+  const ImuBatch b = rig.collect(1.0);
+  ASSERT_GT(b.samples.size(), 100u);
+  rig.expect_truth(b);
+  double dvz = 0.0;
+  for (const ImuSample& s : b.samples) dvz += s.dv_mps[2];
+  EXPECT_NEAR(dvz / (static_cast<double>(b.samples.size()) / 200.0), earth::site_gravity_mps2(Site{}), 1e-5);
+  EXPECT_EQ(rig.driver->counters().crc_failures, 0u);
+  ASSERT_TRUE(rig.driver->safe_stop());
+  ASSERT_TRUE(eventually([&] { return !rig.device->streaming(); }));
 }

@@ -1,7 +1,10 @@
-// The pure wire layer: word-order helpers, register maps, the CAN record codec and classic-CAN
+// The pure wire layer: word-order helpers, register maps, IMU link descriptions and their codec
+// (checksums, frames, the resynchronising stream decoder, the sequence counter), classic-CAN
 // reassembly, the ACL command/reply codec, the clock model; plus randomized fuzz tests of every
 // parser (fixed seed, bounded iterations).
 #include <cmath>
+#include <algorithm>
+#include <bit>
 #include <cstring>
 #include <random>
 #include <string>
@@ -11,6 +14,8 @@
 #include "drivers/acl_protocol.hpp"
 #include "drivers/can_protocol.hpp"
 #include "drivers/clock_model.hpp"
+#include "drivers/imu_codec.hpp"
+#include "drivers/imu_link.hpp"
 #include "drivers/register_map.hpp"
 #include "drivers/word_order.hpp"
 
@@ -144,109 +149,290 @@ TEST(RegisterMapFuzz, RandomRegistersDecodeSafely) {
 // ------------------------------------------------------------------------------------------------
 // CAN records
 
-TEST(CanProtocol, Crc32CheckValue) {
-  const char* s = "123456789";
-  EXPECT_EQ(can::crc32(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(s), 9)), 0xCBF43926u);
+namespace {
+
+link::ImuLink imucal_can() {
+  link::ImuLink l = link::load_imu_link("imucal-can");
+  link::resolve_per_unit_lsb(l, 1e-9, 1e-8);
+  return l;
 }
 
-TEST(CanProtocol, SampleRecordLayoutIsBigEndianAsDocumented) {
-  can::SampleRecord r;
-  r.status = 0x0102;
-  r.sequence = 0x0A0B0C0D;
-  r.latency_us = 250;
-  r.device_time_ns = 0x0011223344556677ULL;
-  r.gyro_counts = {1, -1, 0x12345678};
-  r.accel_counts = {-2, 3, INT32_MIN};
-  r.gyro_temp_cC = 2534;
-  r.accel_temp_cC = -1;
-  const auto b = can::encode(r);
-  EXPECT_EQ(b[0], can::kTypeSample);
-  EXPECT_EQ(b[1], can::kLayoutVersion);
+std::span<const std::uint8_t> text_bytes(const char* s) {
+  return {reinterpret_cast<const std::uint8_t*>(s), std::strlen(s)};
+}
+
+link::Checksum preset(const std::string& name) {
+  const std::string text = R"({"format": "imucal-imu-link/1", "name": "p", "source": "test", "transport": {"type": "udp"},
+    "byte_order": "big", "messages": [{"name": "s", "kind": "sample", "header": "AA 55", "length": 16,
+    "checksum": {"type": "crc", "preset": ")" + name + R"(", "offset": 12},
+    "fields": [{"role": "gyro_x", "offset": 2, "type": "int8", "unit": "rad"}, {"role": "gyro_y", "offset": 3, "type": "int8", "unit": "rad"},
+      {"role": "gyro_z", "offset": 4, "type": "int8", "unit": "rad"}, {"role": "accel_x", "offset": 5, "type": "int8", "unit": "m/s"},
+      {"role": "accel_y", "offset": 6, "type": "int8", "unit": "m/s"}, {"role": "accel_z", "offset": 7, "type": "int8", "unit": "m/s"},
+      {"role": "sequence", "offset": 8, "type": "uint8"}]}]})";
+  return link::imu_link_from_json(text).messages[0].checksum;
+}
+
+}  // namespace
+
+// The check value of every CRC preset: CRC("123456789") from the CRC catalogue.
+TEST(ImuCodec, CrcPresetsGiveTheirCatalogueCheckValues) {
+  const auto nine = text_bytes("123456789");
+  EXPECT_EQ(link::checksum(preset("crc-32"), nine), 0xCBF43926u);
+  EXPECT_EQ(link::checksum(preset("crc-32/mpeg-2"), nine), 0x0376E6E7u);
+  EXPECT_EQ(link::checksum(preset("crc-32c"), nine), 0xE3069283u);
+  EXPECT_EQ(link::checksum(preset("crc-16/ibm-3740"), nine), 0x29B1u);
+  EXPECT_EQ(link::checksum(preset("crc-16/xmodem"), nine), 0x31C3u);
+  EXPECT_EQ(link::checksum(preset("crc-16/kermit"), nine), 0x2189u);
+  EXPECT_EQ(link::checksum(preset("crc-16/modbus"), nine), 0x4B37u);
+  EXPECT_EQ(link::checksum(preset("crc-8/smbus"), nine), 0xF4u);
+  link::Checksum sum;
+  sum.kind = link::ChecksumKind::sum8;
+  EXPECT_EQ(link::checksum(sum, nine), (0x31u + 0x32 + 0x33 + 0x34 + 0x35 + 0x36 + 0x37 + 0x38 + 0x39) & 0xFFu);
+  sum.kind = link::ChecksumKind::xor8;
+  EXPECT_EQ(link::checksum(sum, nine), 0x31u ^ 0x32 ^ 0x33 ^ 0x34 ^ 0x35 ^ 0x36 ^ 0x37 ^ 0x38 ^ 0x39);
+}
+
+// A KVH 1750 format A frame built by hand from the ICD's tables: header FE 81 FF 55, big-endian
+// IEEE-754 floats, status, sequence, temperature, then the CRC-32/MPEG-2 of bytes 0..31.
+TEST(ImuCodec, Kvh1750FrameDecodesAsTheManualLaysItOut) {
+  const link::ImuLink kvh = link::load_imu_link("kvh-1750");
+  std::vector<std::uint8_t> f = {0xFE, 0x81, 0xFF, 0x55};
+  auto put_float = [&](float v) {
+    const auto u = std::bit_cast<std::uint32_t>(v);
+    for (int i = 3; i >= 0; --i) f.push_back(static_cast<std::uint8_t>(u >> (8 * i)));
+  };
+  for (float v : {1e-5f, -2e-5f, 3e-5f, 0.0f, 0.5f, 1.0f}) put_float(v);
+  f.push_back(0x77);                 // status: every sensor valid
+  f.push_back(127);                  // sequence
+  f.push_back(0x09);                 // temperature 2345 x 0.01 C, big-endian
+  f.push_back(0x29);
+  const std::uint32_t crc = link::checksum(kvh.messages[0].checksum, f);
+  for (int i = 3; i >= 0; --i) f.push_back(static_cast<std::uint8_t>(crc >> (8 * i)));
+  ASSERT_EQ(f.size(), 36u);
+  const link::Decoded d = link::decode(kvh, f);
+  ASSERT_EQ(d.status, link::DecodeStatus::ok);
+  EXPECT_DOUBLE_EQ(d.values.gyro[0], static_cast<double>(1e-5f));
+  EXPECT_DOUBLE_EQ(d.values.gyro[1], static_cast<double>(-2e-5f));
+  EXPECT_DOUBLE_EQ(d.values.accel[2], 9.80665);  // 1 g
+  EXPECT_EQ(d.values.sequence, 127u);
+  EXPECT_NEAR(d.values.gyro_temp_C, 23.45, 1e-12);
+  EXPECT_FALSE(link::status_fault(kvh.messages[0], d.values.status));
+  EXPECT_TRUE(link::status_fault(kvh.messages[0], 0x76));  // gyro x invalid
+  // Accelerations in g are rates: over a 1 ms period they become velocity increments.
+  std::array<double, 3> dth{}, dv{};
+  link::to_increments(kvh.messages[0], d.values, 1e-3, dth, dv);
+  EXPECT_DOUBLE_EQ(dv[2], 9.80665e-3);
+  EXPECT_DOUBLE_EQ(dth[0], static_cast<double>(1e-5f));
+  // The encoder writes the same bytes.
+  EXPECT_EQ(link::encode(kvh, 0, d.values), f);
+  // A NaN in a float field with a valid CRC is refused, never a sample.
+  auto nan = f;
+  nan[4] = 0x7F;
+  nan[5] = 0xC0;
+  const std::uint32_t c2 = link::checksum(kvh.messages[0].checksum, std::span(nan).first(32));
+  for (int i = 0; i < 4; ++i) nan[static_cast<std::size_t>(32 + i)] = static_cast<std::uint8_t>(c2 >> (24 - 8 * i));
+  EXPECT_EQ(link::decode(kvh, nan).status, link::DecodeStatus::bad_value);
+}
+
+TEST(ImuCodec, ImucalCanLayoutIsBigEndianAsDocumented) {
+  const link::ImuLink l = imucal_can();
+  link::Values v;
+  v.status = 0x0102;
+  v.sequence = 0xA1B2C3D4;
+  v.latency_ns = 250'000.0;
+  v.time_raw = 0x0102030405060708ull;
+  v.gyro = {1e-9, -2e-9, 123456789e-9};
+  v.accel = {-1e-8, 0, 7e-8};
+  v.gyro_temp_C = 25.0;
+  v.accel_temp_C = std::nan("");
+  const auto b = link::encode(l, 0, v);
+  ASSERT_EQ(b.size(), 64u);
+  EXPECT_EQ(b[0], 0x01);
+  EXPECT_EQ(b[1], 0x01);
   EXPECT_EQ(b[2], 0x01);
   EXPECT_EQ(b[3], 0x02);
-  EXPECT_EQ(b[4], 0x0A);
-  EXPECT_EQ(b[7], 0x0D);
-  EXPECT_EQ(b[11], 250);
-  EXPECT_EQ(b[12], 0x00);
-  EXPECT_EQ(b[19], 0x77);
-  EXPECT_EQ(b[23], 0x01);                                  // gyro x = 1
-  EXPECT_EQ(b[24], 0xFF);                                  // gyro y = -1
-  EXPECT_EQ(b[28], 0x12);                                  // gyro z
-  EXPECT_EQ(b[32], 0xFF);                                  // accel x = -2
-  EXPECT_EQ(b[40], 0x80);                                  // accel z = INT32_MIN
-  EXPECT_EQ((b[44] << 8) | b[45], 2534);
-  for (std::size_t i = 48; i < 60; ++i) EXPECT_EQ(b[i], 0);  // reserved
+  EXPECT_EQ(b[4], 0xA1);
+  EXPECT_EQ(b[7], 0xD4);
+  EXPECT_EQ(b[8], 0x00);  // 250 us
+  EXPECT_EQ(b[11], 0xFA);
+  EXPECT_EQ(b[12], 0x01);
+  EXPECT_EQ(b[19], 0x08);
+  EXPECT_EQ(b[23], 0x01);  // gyro x = 1 count
+  EXPECT_EQ(b[24], 0xFF);  // gyro y = -2 counts
+  EXPECT_EQ(b[27], 0xFE);
+  EXPECT_EQ(b[44], 0x09);  // 2500 = 0x09C4
+  EXPECT_EQ(b[45], 0xC4);
+  EXPECT_EQ(b[46], 0x80);  // no sensor
+  EXPECT_EQ(b[47], 0x00);
   const std::uint32_t crc = (std::uint32_t{b[60]} << 24) | (std::uint32_t{b[61]} << 16) | (std::uint32_t{b[62]} << 8) | b[63];
-  EXPECT_EQ(crc, can::crc32(std::span<const std::uint8_t>(b.data(), 60)));
-  can::Record out;
-  ASSERT_EQ(can::decode(b, out), can::DecodeStatus::ok);
-  const auto& d = std::get<can::SampleRecord>(out);
-  EXPECT_EQ(d.sequence, r.sequence);
-  EXPECT_EQ(d.device_time_ns, r.device_time_ns);
-  EXPECT_EQ(d.gyro_counts, r.gyro_counts);
-  EXPECT_EQ(d.accel_counts, r.accel_counts);
-  EXPECT_EQ(d.accel_temp_cC, -1);
+  EXPECT_EQ(crc, link::checksum(l.messages[0].checksum, std::span(b).first(60)));
+  const link::Decoded d = link::decode(l, b);
+  ASSERT_EQ(d.status, link::DecodeStatus::ok);
+  EXPECT_EQ(d.values.sequence, 0xA1B2C3D4u);
+  EXPECT_EQ(d.values.gyro[2], 123456789.0 * 1e-9);  // count x LSB, bit for bit: what storage keeps
+  EXPECT_TRUE(std::isnan(d.values.accel_temp_C));
+  EXPECT_EQ(*d.values.time_raw, 0x0102030405060708ull);
+  EXPECT_TRUE(link::status_fault(l.messages[0], 0x0002));
+  EXPECT_FALSE(link::status_fault(l.messages[0], 0x0100));  // warming up: information
+  EXPECT_EQ(l.gyro_increment_lsb_rad(), 1e-9);
 }
 
-TEST(CanProtocol, TemperatureRecordRoundTrip) {
-  can::TemperatureRecord t;
-  t.page = 1;
-  t.sequence = 65535;
-  t.device_time_ns = 123456789;
-  t.values_cC.fill(can::kNoTemperature);
-  t.values_cC[0] = 2500;
-  t.values_cC[2] = -4000;
-  can::Record out;
-  ASSERT_EQ(can::decode(can::encode(t), out), can::DecodeStatus::ok);
-  const auto& d = std::get<can::TemperatureRecord>(out);
-  EXPECT_EQ(d.page, 1);
-  EXPECT_EQ(d.sequence, 65535);
-  EXPECT_EQ(d.values_cC, t.values_cC);
-}
-
-TEST(CanProtocol, EveryBitFlipIsCaughtByTheCrc) {
-  can::SampleRecord r;
-  r.sequence = 77;
-  r.gyro_counts = {100, 200, 300};
-  const auto good = can::encode(r);
-  for (std::size_t bit = 0; bit < 64 * 8; ++bit) {
+TEST(ImuCodec, EveryBitFlipIsCaughtAndNeverDecoded) {
+  const link::ImuLink l = imucal_can();
+  link::Values v;
+  v.sequence = 42;
+  v.gyro = {5e-9, 6e-9, 7e-9};
+  const auto good = link::encode(l, 0, v);
+  for (int bit = 0; bit < 512; ++bit) {
     auto b = good;
-    b[bit / 8] = static_cast<std::uint8_t>(b[bit / 8] ^ (1u << (bit % 8)));
-    can::Record out;
-    EXPECT_EQ(can::decode(b, out), can::DecodeStatus::bad_crc) << "bit " << bit;
+    b[static_cast<std::size_t>(bit / 8)] ^= static_cast<std::uint8_t>(1u << (bit % 8));
+    EXPECT_NE(link::decode(l, b, 0).status, link::DecodeStatus::ok) << "bit " << bit;
   }
+  // Found by header, a flipped header bit is no message at all, or a bad checksum: never data.
+  auto b = good;
+  b[0] ^= 0x04;
+  EXPECT_NE(link::decode(l, b).status, link::DecodeStatus::ok);
 }
 
-TEST(CanProtocol, WireFramesRoundTrip) {
-  can::SampleRecord r;
-  r.sequence = 5;
-  const auto rec = can::encode(r);
-  const auto fd = can::fd_frame(can::kIdSampleFd, rec);
-  const auto wire = can::to_wire(fd);
-  ASSERT_EQ(wire.size(), can::kCanFdMtu);
-  const auto back = can::parse_wire(wire);
-  ASSERT_TRUE(back);
-  EXPECT_TRUE(back->fd);
-  EXPECT_EQ(back->can_id, can::kIdSampleFd);
-  EXPECT_EQ(back->len, 64);
-  EXPECT_EQ(back->data, rec);
-  const auto cmd = can::to_wire(can::command_frame(can::kCommandStart));
-  ASSERT_EQ(cmd.size(), can::kCanMtu);
-  const auto c = can::parse_wire(cmd);
-  ASSERT_TRUE(c);
-  EXPECT_FALSE(c->fd);
-  EXPECT_EQ(c->data[0], can::kCommandStart);
-  EXPECT_FALSE(can::parse_wire(std::vector<std::uint8_t>(40, 0)));
+TEST(ImuCodec, TemperaturePagesRoundTrip) {
+  const link::ImuLink l = imucal_can();
+  link::Values v;
+  v.sequence = 7;
+  v.time_raw = 123456789;
+  for (std::size_t k = 0; k < 24; ++k) v.coil_C[k] = 20.0 + 0.01 * static_cast<double>(k);
+  v.coil_C[5] = std::nan("");
+  v.accel_sensor_C = {30.0, 31.0, 32.0};
+  const link::Decoded p0 = link::decode(l, link::encode(l, 1, v));
+  const link::Decoded p1 = link::decode(l, link::encode(l, 2, v));
+  ASSERT_EQ(p0.status, link::DecodeStatus::ok);
+  ASSERT_EQ(p1.status, link::DecodeStatus::ok);
+  EXPECT_EQ(p0.message, 1u);  // found by its header 02 00
+  EXPECT_EQ(p1.message, 2u);  // 02 01
+  EXPECT_NEAR(p0.values.coil_C[23], 20.23, 1e-9);
+  EXPECT_TRUE(std::isnan(p0.values.coil_C[5]));
+  EXPECT_NEAR(p1.values.accel_sensor_C[2], 32.0, 1e-9);
+  EXPECT_EQ(p1.values.sequence, 7u);
+}
+
+TEST(ImuCodec, StreamDecoderResynchronisesAfterGarbageABadCrcAndADroppedByte) {
+  const link::ImuLink kvh = link::load_imu_link("kvh-1750");
+  auto frame = [&](std::uint64_t seq) {
+    link::Values v;
+    v.sequence = seq;
+    v.status = 0x77;
+    v.gyro = {1e-6 * static_cast<double>(seq), 0, 0};
+    return link::encode(kvh, 0, v);
+  };
+  std::vector<std::uint8_t> stream = {0x01, 0xFE, 0x81, 0x00};  // garbage, with a half header
+  auto append = [&](const std::vector<std::uint8_t>& f) { stream.insert(stream.end(), f.begin(), f.end()); };
+  append(frame(1));
+  auto bad = frame(2);
+  bad[10] ^= 0x01;  // fails its CRC
+  append(bad);
+  auto short_frame = frame(3);
+  short_frame.erase(short_frame.begin() + 7);  // a byte lost on the line
+  append(short_frame);
+  append(frame(4));
+  link::StreamDecoder dec(kvh);
+  std::vector<std::uint64_t> good;
+  int bad_crc = 0;
+  // Fed in awkward pieces: one byte, then 7, ... (a header split across reads must still match).
+  for (std::size_t at = 0, n = 1; at < stream.size(); at += n, n = n % 9 + 2) {
+    dec.feed(std::span(stream).subspan(at, std::min(n, stream.size() - at)));
+    while (const auto d = dec.next()) {
+      if (d->status == link::DecodeStatus::ok) good.push_back(d->values.sequence);
+      if (d->status == link::DecodeStatus::bad_checksum) ++bad_crc;
+    }
+  }
+  EXPECT_EQ(good, (std::vector<std::uint64_t>{1, 4}));
+  EXPECT_EQ(bad_crc, 2);  // frame 2, and frame 3 running into frame 4's header
+  EXPECT_GE(dec.resyncs(), 2u);
+  EXPECT_GE(dec.bytes_discarded(), 4u + 36u + 35u);
+  EXPECT_EQ(dec.buffered(), 0u);
+}
+
+TEST(ImuCodec, SequenceTrackerUnwrapsShortCountersAndTellsGapsFromStaleFrames) {
+  link::SequenceTracker t(128);
+  EXPECT_EQ(t.feed(120, 0).kind, link::SequenceTracker::Kind::first);
+  for (std::uint64_t k = 121; k < 128; ++k) EXPECT_EQ(t.feed(k, 1).kind, link::SequenceTracker::Kind::next);
+  auto s = t.feed(0, 1);  // wraps
+  EXPECT_EQ(s.kind, link::SequenceTracker::Kind::next);
+  EXPECT_EQ(s.count, 128u);
+  s = t.feed(5, 5);  // 4 lost
+  EXPECT_EQ(s.kind, link::SequenceTracker::Kind::gap);
+  EXPECT_EQ(s.lost, 4u);
+  EXPECT_EQ(t.feed(5, 0.1).kind, link::SequenceTracker::Kind::stale);  // a repeat
+  EXPECT_EQ(t.feed(3, 0.1).kind, link::SequenceTracker::Kind::stale);  // older
+  // A silence of ~1000 periods: the counter wrapped 7 times; the time says how many.
+  s = t.feed((6 + 999) % 128, 1000);
+  EXPECT_EQ(s.kind, link::SequenceTracker::Kind::gap);
+  EXPECT_EQ(s.lost, 999u);
+  // A 32-bit counter needs no time: 2^31 ahead or more is stale.
+  link::SequenceTracker w(std::uint64_t{1} << 32);
+  (void)w.feed(0xFFFFFFFE, 0);
+  EXPECT_EQ(w.feed(0xFFFFFFFF, 0).kind, link::SequenceTracker::Kind::next);
+  EXPECT_EQ(w.feed(0, 0).count, 0x100000000u);
+  EXPECT_EQ(w.feed(0xFFFFFFF0, 0).kind, link::SequenceTracker::Kind::stale);
+}
+
+TEST(ImuLink, BuiltInDescriptionsLoadAndStateTheirSource) {
+  for (const std::string& name : link::builtin_imu_link_names()) {
+    const link::ImuLink l = link::load_imu_link(name);
+    EXPECT_EQ(l.name, name);
+    EXPECT_FALSE(l.source.empty());
+  }
+  EXPECT_NE(link::load_imu_link("kvh-1750").source.find("Rev B"), std::string::npos);
+  const link::ImuLink kvh = link::load_imu_link("kvh-1750");
+  EXPECT_EQ(kvh.transport, link::Transport::serial);
+  EXPECT_EQ(kvh.serial.baud, 921600u);
+  EXPECT_FALSE(kvh.gyro_increment_lsb_rad());  // floats: stored as doubles
+  EXPECT_TRUE(link::load_imu_link("imucal-can").gyro_lsb_per_unit());
+}
+
+TEST(ImuLink, RejectsBadDescriptionsNamingTheKeyPath) {
+  const std::string good = link::builtin_imu_link_json("kvh-1750");
+  auto error_of = [](const std::string& text) {
+    try {
+      (void)link::imu_link_from_json(text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  auto with = [&](const std::string& from, const std::string& to) {
+    std::string t = good;
+    const auto at = t.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return t.replace(at, from.size(), to);
+  };
+  EXPECT_NE(error_of(with("\"float32\", \"unit\": \"rad\"}", "\"float24\", \"unit\": \"rad\"}")).find("messages[0].fields[0].type"), std::string::npos);
+  EXPECT_NE(error_of(with("\"unit\": \"g\"", "\"unit\": \"furlong\"")).find("messages[0].fields[3].unit"), std::string::npos);
+  EXPECT_NE(error_of(with("\"offset\": 30", "\"offset\": 35")).find("beyond the frame's length"), std::string::npos);
+  EXPECT_NE(error_of(with("\"offset\": 30", "\"offset\": 29")).find("overlaps"), std::string::npos);
+  EXPECT_NE(error_of(with("\"wrap\": 128", "\"wrap\": 300")).find("fields[7].wrap"), std::string::npos);
+  EXPECT_NE(error_of(with("\"crc-32/mpeg-2\"", "\"crc-31\"")).find("checksum.preset"), std::string::npos);
+  EXPECT_NE(error_of(with("\"baud\": 921600", "\"baud\": 921600, \"bauds\": 1")).find("transport.bauds: unknown key"), std::string::npos);
+  EXPECT_NE(error_of(with("\"role\": \"sequence\", \"offset\": 29, \"type\": \"uint8\", \"wrap\": 128",
+                          "\"role\": \"latency\", \"offset\": 29, \"type\": \"uint8\", \"unit\": \"us\"")).find("needs a sequence field"), std::string::npos);
+  EXPECT_NE(error_of(with("\"header\": \"FE 81 FF 55\"", "\"header\": \"FE\"")).find("sync header of at least 2 bytes"), std::string::npos);
+  EXPECT_NE(error_of(with("\"lsb\": 0.01", "\"lsb\": \"per-unit\"")).find("integer gyro or accelerometer increments"), std::string::npos);
+  // Per-unit LSBs: required where the description leaves them to the unit, refused elsewhere.
+  link::ImuLink can = link::load_imu_link("imucal-can");
+  EXPECT_THROW(link::resolve_per_unit_lsb(can, std::nullopt, 1e-8), std::invalid_argument);
+  link::ImuLink kvh = link::load_imu_link("kvh-1750");
+  EXPECT_THROW(link::resolve_per_unit_lsb(kvh, 1e-9, std::nullopt), std::invalid_argument);
 }
 
 TEST(CanProtocol, ClassicFallbackReassemblesAndAbandonsBrokenSets) {
-  can::SampleRecord r;
-  r.sequence = 0x1234;
-  const auto rec = can::encode(r);
-  const auto parts = can::classic_frames(can::kIdSampleClassic, 0x34, rec);
+  const link::ImuLink l = imucal_can();
+  link::Values v;
+  v.sequence = 0x1234;
+  const auto rec = link::encode(l, 0, v);
+  const auto parts = can::classic_frames(0x110, 0x34, rec);
+  ASSERT_EQ(parts.size(), 10u);
   EXPECT_EQ(parts[9].len, 2);  // last slice carries one byte
-  can::ClassicAssembler as(can::kIdSampleClassic);
-  std::optional<std::array<std::uint8_t, 64>> got;
+  can::ClassicAssembler as(0x110, 64);
+  std::optional<std::vector<std::uint8_t>> got;
   for (const auto& p : parts) {
     ASSERT_FALSE(got);
     got = as.feed(p);
@@ -263,7 +449,7 @@ TEST(CanProtocol, ClassicFallbackReassemblesAndAbandonsBrokenSets) {
   }
   EXPECT_EQ(as.incomplete(), 1u);
   // Parts of another sample (different sequence byte) interleaved: abandoned as well.
-  const auto other = can::classic_frames(can::kIdSampleClassic, 0x35, rec);
+  const auto other = can::classic_frames(0x110, 0x35, rec);
   for (std::size_t i = 0; i < 5; ++i) EXPECT_FALSE(as.feed(parts[i]));
   for (std::size_t i = 5; i < 10; ++i) EXPECT_FALSE(as.feed(other[i]));
   EXPECT_EQ(as.incomplete(), 2u);
@@ -273,45 +459,103 @@ TEST(CanProtocol, ClassicFallbackReassemblesAndAbandonsBrokenSets) {
   EXPECT_EQ(*got, rec);
 }
 
-// Fuzz: random and mutated frames through the wire parser, the classic assembler and the record
-// decoder. Nothing crashes; a mutated record never decodes as valid with different content.
-TEST(CanProtocolFuzz, RandomAndMutatedFrames) {
+TEST(CanProtocol, WireFramesRoundTrip) {
+  const link::ImuLink l = imucal_can();
+  const auto rec = link::encode(l, 0, link::Values{});
+  const auto wire = can::to_wire(can::fd_frame(0x100, rec));
+  ASSERT_EQ(wire.size(), can::kCanFdMtu);
+  const auto back = can::parse_wire(wire);
+  ASSERT_TRUE(back);
+  EXPECT_TRUE(back->fd);
+  EXPECT_EQ(back->can_id, 0x100u);
+  EXPECT_EQ(back->len, 64);
+  EXPECT_TRUE(std::equal(rec.begin(), rec.end(), back->data.begin()));
+  const std::uint8_t start[] = {1, 0, 0, 0, 0, 0, 0, 0};
+  const auto cmd = can::to_wire(can::classic_frame(0x080, start));
+  ASSERT_EQ(cmd.size(), can::kCanMtu);
+  const auto c = can::parse_wire(cmd);
+  ASSERT_TRUE(c);
+  EXPECT_FALSE(c->fd);
+  EXPECT_EQ(c->data[0], 1);
+  EXPECT_FALSE(can::parse_wire(std::vector<std::uint8_t>(40, 0)));
+}
+
+// Fuzz: random and mutated frames through the CAN wire parser, the classic assembler and the
+// decoder. Nothing crashes; a mutated frame never decodes as valid with different content.
+TEST(ImuCodecFuzz, RandomAndMutatedCanFrames) {
   std::mt19937_64 rng(1234);
-  can::ClassicAssembler as(can::kIdSampleClassic);
-  can::SampleRecord base;
+  const link::ImuLink l = imucal_can();
+  can::ClassicAssembler as(0x110, 64);
+  link::Values base;
   base.sequence = 99;
-  base.gyro_counts = {1, 2, 3};
-  const auto good = can::encode(base);
+  base.gyro = {1e-9, 2e-9, 3e-9};
+  const auto good = link::encode(l, 0, base);
   int decoded_ok = 0;
   for (int i = 0; i < 30000; ++i) {
     std::vector<std::uint8_t> bytes;
     switch (rng() % 4) {
       case 0: bytes.resize(rng() % 100); for (auto& b : bytes) b = static_cast<std::uint8_t>(rng()); break;
-      case 1: bytes = can::to_wire(can::fd_frame(can::kIdSampleFd, good)); break;
-      case 2: bytes = can::to_wire(can::classic_frames(can::kIdSampleClassic, 99, good)[rng() % 10]); break;
+      case 1: bytes = can::to_wire(can::fd_frame(0x100, good)); break;
+      case 2: bytes = can::to_wire(can::classic_frames(0x110, 99, good)[rng() % 10]); break;
       default: bytes.resize(rng() % 2 ? can::kCanMtu : can::kCanFdMtu); for (auto& b : bytes) b = static_cast<std::uint8_t>(rng()); break;
     }
-    // Mutate a few bytes.
     const int flips = static_cast<int>(rng() % 3);
     for (int k = 0; k < flips && !bytes.empty(); ++k) bytes[rng() % bytes.size()] ^= static_cast<std::uint8_t>(1 + rng() % 255);
     const auto f = can::parse_wire(bytes);
     if (!f) continue;
-    std::optional<std::array<std::uint8_t, 64>> rec;
+    std::optional<std::vector<std::uint8_t>> rec;
     if (as.owns(f->can_id)) rec = as.feed(*f);
-    else if (f->fd && f->len == 64) rec = f->data;
+    else if (f->fd) rec = std::vector<std::uint8_t>(f->data.begin(), f->data.begin() + f->len);
     if (!rec) continue;
-    can::Record out;
-    if (can::decode(*rec, out) == can::DecodeStatus::ok) {
+    const link::Decoded d = link::decode(l, *rec);
+    if (d.status == link::DecodeStatus::ok && d.message == 0) {
       ++decoded_ok;
-      if (const auto* s = std::get_if<can::SampleRecord>(&out)) {
-        // The only valid record in play is `good` (a random 64-byte record passing CRC-32 and
-        // type checks is a 2^-32 event).
-        EXPECT_EQ(*rec, good);
-        EXPECT_EQ(s->sequence, 99u);
-      }
+      // The only valid frame in play is `good` (random bytes passing CRC-32 and the header are a
+      // 2^-48 event).
+      EXPECT_EQ(*rec, good);
+      EXPECT_EQ(d.values.sequence, 99u);
     }
   }
   EXPECT_GT(decoded_ok, 100);
+}
+
+// Fuzz: a KVH byte stream with random garbage, cut frames and bit flips, fed in random pieces.
+// Every frame the decoder accepts is one that was sent intact, in order.
+TEST(ImuCodecFuzz, RandomByteStreamsDecodeOnlyIntactFrames) {
+  std::mt19937_64 rng(4321);
+  const link::ImuLink kvh = link::load_imu_link("kvh-1750");
+  std::vector<std::uint8_t> stream;
+  std::vector<std::uint64_t> intact;
+  for (std::uint64_t seq = 0; seq < 4000; ++seq) {
+    link::Values v;
+    v.sequence = seq;
+    v.status = 0x77;
+    v.gyro = {static_cast<double>(seq), 0, 0};
+    auto f = link::encode(kvh, 0, v);
+    switch (rng() % 6) {
+      case 0: f[rng() % f.size()] ^= static_cast<std::uint8_t>(1 + rng() % 255); break;
+      case 1: f.erase(f.begin() + static_cast<std::ptrdiff_t>(rng() % f.size())); break;
+      case 2: for (int k = static_cast<int>(rng() % 20); k > 0; --k) stream.push_back(static_cast<std::uint8_t>(rng())); [[fallthrough]];
+      default: intact.push_back(seq); break;
+    }
+    stream.insert(stream.end(), f.begin(), f.end());
+  }
+  link::StreamDecoder dec(kvh);
+  std::vector<std::uint64_t> got;
+  for (std::size_t at = 0; at < stream.size();) {
+    const std::size_t n = std::min<std::size_t>(1 + rng() % 100, stream.size() - at);
+    dec.feed(std::span(stream).subspan(at, n));
+    at += n;
+    while (const auto d = dec.next())
+      if (d->status == link::DecodeStatus::ok) got.push_back(static_cast<std::uint64_t>(d->values.gyro[0]));
+  }
+  // Intact frames are all found (a cut frame may swallow the header of the one after it only
+  // when that one is damaged too; here each damaged frame is followed by whole bytes).
+  for (std::size_t i = 1; i < got.size(); ++i) EXPECT_GT(got[i], got[i - 1]);
+  std::size_t found = 0;
+  for (std::uint64_t s : intact) found += std::binary_search(got.begin(), got.end(), s) ? 1 : 0;
+  EXPECT_EQ(got.size(), found);                         // nothing but intact frames
+  EXPECT_GT(found, intact.size() * 95 / 100);           // and almost all of them
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -12,7 +12,7 @@
 #include "core/earth.hpp"
 #include "core/units.hpp"
 #include "drivers/acl_table.hpp"
-#include "drivers/can_imu.hpp"
+#include "drivers/link_imu.hpp"
 #include "drivers/sim/bench_campaign.hpp"
 #include "drivers/sim/sim_imu.hpp"
 #include "drivers/sim/sim_table.hpp"
@@ -37,11 +37,8 @@ TEST(TimeBase, ImuSensesTheTableMotionItsDriverReports) {
   AclTableConfig tc;
   tc.port = table.port();
   AclTable td(tc);
-  CanImuConfig cc;
-  cc.rate_hz = 500.0;
-  cc.gyro_lsb_rad = imu.gyro_lsb_rad();
-  cc.accel_lsb_mps = imu.accel_lsb_mps();
-  CanImu id(sv[0], cc);
+  const LinkImuConfig cc = imu.driver_config();
+  LinkImu id(socketcan_transport(sv[0], cc.link, ic.framing, "a socket pair"), cc);
   for (Device* d : std::initializer_list<Device*>{&td, &id}) {
     ASSERT_TRUE(d->connect());
     ASSERT_TRUE(d->configure());
