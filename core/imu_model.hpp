@@ -89,6 +89,24 @@ struct ImuModel {
 Eigen::Vector3d apply_gyro_scale_misalignment(const GyroErrors& g, const Eigen::Vector3d& w_io_o);
 Eigen::Vector3d apply_accel_scale_misalignment(const AccelErrors& a, const Eigen::Vector3d& f_o);
 
+// The body frame in the instrument frame, v_o = C_b_o v_b, from a model's
+// body_to_instrument rotation vector (formats.md: v_b = (I - [r x]) v_o to first order).
+Eigen::Matrix3d C_b_o_of(const Eigen::Vector3d& body_to_instrument_rad);
+
+// Size effect (seed eq. 3): accelerometer j senses the specific force at its own proof mass,
+// f_j = f_origin + w x (w x r_j) + dw/dt x r_j (r_x = 0: the origin is the x proof mass).
+// The proof-mass offsets of a model resolved in the model's frame, as columns x (zero), y, z: the
+// model keeps them in the instrument frame o (formats.md); a body-frame model turns them into b.
+Eigen::Matrix3d proof_mass_offsets_m(const ImuModel& model);
+// Rows j: f_j - f_origin for the rate w and its derivative dw, in the frame of the offsets.
+Eigen::Matrix3d size_effect_mps2(const Eigen::Matrix3d& offsets_m, const Eigen::Vector3d& w_radps,
+                                 const Eigen::Vector3d& dw_radps2);
+// What the size effect adds to the accelerometer outputs before the bias: channel j is row j of
+// D S applied to its own term (row j of size_effect), so removing this from the raw output and
+// then inverting D S is exact, where seed eq. 7 (removing the terms after the inverse) leaves
+// misalignment and scale errors times the size effect.
+Eigen::Vector3d accel_size_effect_output(const AccelErrors& a, const Eigen::Matrix3d& size_effect_mps2);
+
 // Inverse model (seed eq. 2) applied to increments over dt_s: i = S^-1 D^-1 (u - u0 dt).
 // Gyro scale is chosen by the sign of the corrected increment on each axis.
 Eigen::Vector3d compensate_gyro_increment(const GyroErrors& g, const Eigen::Vector3d& dtheta_rad,

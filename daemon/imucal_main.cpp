@@ -1,5 +1,8 @@
 // imucal: the command line. A thin shell over the libraries: simulate, navigate, export, import,
 // campaign run.
+#include <termios.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -22,6 +25,7 @@
 #include "daemon/service/campaign_runner.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/device_config.hpp"
+#include "daemon/service/password_hash.hpp"
 #include "daemon/service/service.hpp"
 #include "drivers/sim/sim_devices.hpp"
 #include "drivers/sim/simulator.hpp"
@@ -35,6 +39,8 @@
 #include "estimators/thermal.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
+#include "pipeline/pipeline.hpp"
+#include "plan/plan.hpp"
 #include "bench/storage_bench.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
@@ -236,158 +242,89 @@ struct CalibrateArgs {
   bool keep_shape = false;              // stage thermal: fit only the constants, keep the polynomials
 };
 
-// Stage 2 over a stored run: per-cycle estimates in one pass, the checks and fits, the report
-// stored with the run (plots' data included) and, if asked, written to a file.
-ImuModel run_thermal_stage(storage::RunDb& db, const ImuModel& model, const CalibrateArgs& a) {
-  const RecordingMeta meta = db.meta();
-  const std::vector<thermal::Cycle> cycles = thermal::find_cycles(meta.segments, a.statics_per_cycle);
-  if (cycles.size() < 3)
-    throw std::invalid_argument("the run has " + std::to_string(cycles.size()) +
-                                " table cycles (record the thermal program with a chamber profile)");
-  const auto t0 = Clock::now();
-  thermal::CycleEstimator estimator(meta, cycles, model);
-  Progress progress("stage thermal", db.frame_count());
-  std::int64_t n = 0;
-  db.for_each_frame([&](const ImuFrame& f) {
-    estimator.push(f);
-    if ((++n & 0xFFFF) == 0) progress.update(n);
-  });
-  progress.done();
-  thermal::Options opt;
-  opt.T_ref_C = a.t_ref_C;
-  opt.range_lo_C = a.range_C.at(0);
-  opt.range_hi_C = a.range_C.at(1);
-  const auto estimates = estimator.finish();
-  const thermal::Result r = a.keep_shape ? thermal::refit_constants(meta, estimates, db.temps(), model, opt)
-                                         : thermal::calibrate(meta, estimates, db.temps(), model, opt);
-  for (const auto& note : r.notes) std::printf("stage thermal: %s\n", note.c_str());
-  const auto report = nlohmann::json::parse(r.report_json);
-  std::printf("stage thermal: %d of %d cycles used, T_ref %.1f C, %.1f s; largest deviation over the run (%s):\n",
-              r.cycles_used, r.cycles_total, report.at("T_ref_C").get<double>(), seconds_since(t0),
-              report.at("residual_source").get<std::string>().c_str());
-  std::printf("  %-28s %14s %14s\n", "coefficient", "before", "compensated");
-  for (const char* g : thermal::groups())
-    std::printf("  %-28s %14.6g %14.6g\n", g, report.at("before").value(g, 0.0), report.at("residual").value(g, 0.0));
-  db.set_extra("thermal_report", r.report_json);
-  if (!a.report.empty()) {
-    std::ofstream out(a.report);
-    if (!out) throw std::runtime_error(a.report + ": cannot write");
-    out << report.dump(1) << "\n";
+// What each stage of the pipeline says, on stdout: its notes and its own figures.
+void print_outcome(const pipeline::Outcome& o) {
+  for (const auto& note : o.notes) std::printf("%s\n", note.c_str());
+  if (o.thermal) {
+    const thermal::Result& r = *o.thermal;
+    const auto report = nlohmann::json::parse(r.report_json);
+    std::printf("stage thermal: %d of %d cycles used, T_ref %.1f C; largest deviation over the run (%s):\n",
+                r.cycles_used, r.cycles_total, report.at("T_ref_C").get<double>(),
+                report.at("residual_source").get<std::string>().c_str());
+    std::printf("  %-28s %14s %14s\n", "coefficient", "before", "compensated");
+    for (const char* g : thermal::groups())
+      std::printf("  %-28s %14.6g %14.6g\n", g, report.at("before").value(g, 0.0), report.at("residual").value(g, 0.0));
   }
-  return r.model;
-}
-
-// Stage 3 over a stored run: the filter's report on stdout, its history stored with the run.
-ImuModel run_navigation_stage(storage::RunDb& db, const ImuModel& model, int passes) {
-  const RecordingMeta meta = db.meta();
-  const auto t0 = Clock::now();
-  // The run's temperatures drive the model's thermal compensation (stage 2), if it has a section.
-  const navfilter::Result r = navfilter::calibrate_offline(
-      meta, model, [&](const auto& fn) { db.for_each_frame(fn); }, passes, navfilter::Options{}, db.temps());
-  const double wall = seconds_since(t0);
-  std::printf("stage navigation: %s; %lld frames, %lld updates, %lld rejected, %lld restarts, %d pass(es) in %.1f s\n",
-              r.status.c_str(), static_cast<long long>(r.frames), static_cast<long long>(r.updates),
-              static_cast<long long>(r.rejected), static_cast<long long>(r.restarts), passes, wall);
-  std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
-  for (const navfilter::Block& b : navfilter::state::kAll) {
-    std::printf("    %-24s", b.name);
-    for (int i = 0; i < b.size; ++i) {
-      const double s0 = r.sigma0[b.index + i], s1 = r.sigma_final[b.index + i];
-      std::printf(" %8.1f", s1 > 0 ? s0 / s1 : 0.0);
+  if (o.navigation) {
+    const navfilter::Result& r = *o.navigation;
+    std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
+    for (const navfilter::Block& b : navfilter::state::kAll) {
+      std::printf("    %-24s", b.name);
+      for (int i = 0; i < b.size; ++i) {
+        const double s0 = r.sigma0[b.index + i], s1 = r.sigma_final[b.index + i];
+        std::printf(" %8.1f", s1 > 0 ? s0 / s1 : 0.0);
+      }
+      std::printf("\n");
     }
-    std::printf("\n");
+    std::printf("  relative gyro delays: tau_yx %.3f us (sigma %.3f), tau_zx %.3f us (sigma %.3f)\n", r.tau_yx_s * 1e6,
+                r.sigma_tau_yx_s * 1e6, r.tau_zx_s * 1e6, r.sigma_tau_zx_s * 1e6);
   }
-  std::printf("  relative gyro delays: tau_yx %.3f us (sigma %.3f), tau_zx %.3f us (sigma %.3f)\n", r.tau_yx_s * 1e6,
-              r.sigma_tau_yx_s * 1e6, r.tau_zx_s * 1e6, r.sigma_tau_zx_s * 1e6);
-  db.set_extra("navigation_history", r.history_json());
-  if (!r.converged)
-    throw std::runtime_error("stage navigation " + r.status + " (estimates up to then are in the run as history)");
-  return r.model;
 }
 
-// Stage 1 over a stored run: statics from the run's segments, or found from the table angles.
-direct::Result run_direct(const storage::RunDb& db, const ImuModel& seed) {
-  RecordingMeta meta = db.meta();
-  bool has_statics = false;
-  for (const auto& s : meta.segments) has_statics |= (s.kind == "static" || s.kind == "tilt");
-  if (!has_statics) {
-    direct::SegmentDetector detector;
-    db.for_each_frame([&](const ImuFrame& f) { detector.push(f); });
-    meta.segments = detector.finish();
-    std::fprintf(stderr, "stage direct: the run lists no statics; found %zu from the table angles\n",
-                 meta.segments.size());
-  }
-  direct::DirectCalibrator cal(meta);
-  // The calibrator refuses to integrate a rotation across a gap; list them so the operator knows why.
-  for (const auto& g : storage::stored_gaps(db))
-    std::fprintf(stderr, "gap in the frames: %.6f s .. %.6f s\n", g.t0_s, g.t1_s);
-  Progress progress("stage direct", db.frame_count());
-  std::int64_t n = 0;
-  db.for_each_frame([&](const ImuFrame& f) {
-    cal.push(f);
-    if ((++n & 0xFFFF) == 0) progress.update(n);
-  });
-  progress.done();
-  return cal.finish(seed);
-}
-
+// The calibration pipeline (pipeline/) over a stored run: the stages asked, in order, each from
+// the model of the ones before; what they leave (history, curves, reports) stored with the run.
 int cmd_calibrate(const CalibrateArgs& a) {
   auto db = storage::RunDb::open(a.db);
-  ImuModel model = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
-  if (model.frame != "instrument" && a.stage != "navigation")
-    throw std::invalid_argument(a.model + ": give the instrument-frame model (the body-frame form is an output)");
-  std::vector<std::string> ran, skipped;
+  const ImuModel start = a.model.empty() ? ImuModel{} : read_imu_model_file(a.model);
   const bool all = a.stage == "all";
-  // With --stage all, a stage the recording cannot support is skipped with its reason; asked for
-  // alone, the same reason is an error.
-  auto attempt = [&](const std::string& stage, const std::function<void()>& body) {
-    if (!all && a.stage != stage) return;
-    try {
-      body();
-      ran.push_back(stage);
-    } catch (const std::exception& e) {
-      if (!all) throw;
-      skipped.push_back(stage + ": " + e.what());
+  std::vector<pipeline::Stage> stages;
+  if (all) {
+    for (const pipeline::StageName& n : pipeline::stage_names()) stages.push_back(n.stage);
+  } else {
+    stages.push_back(pipeline::stage_named(a.stage).value());
+  }
+  pipeline::Settings settings;
+  settings.passes = a.passes;
+  settings.statics_per_cycle = a.statics_per_cycle;
+  settings.thermal_T_ref_C = a.t_ref_C;
+  settings.thermal_range_lo_C = a.range_C.at(0);
+  settings.thermal_range_hi_C = a.range_C.at(1);
+  settings.thermal_keep_shape = a.keep_shape;
+  // Stage 1 never integrates a rotation across a gap; list them so the operator knows why one is left out.
+  if (std::find(stages.begin(), stages.end(), pipeline::Stage::Direct) != stages.end())
+    for (const auto& g : storage::stored_gaps(db))
+      std::fprintf(stderr, "gap in the frames: %.6f s .. %.6f s\n", g.t0_s, g.t1_s);
+
+  const auto t0 = Clock::now();
+  pipeline::Pipeline run(db.meta(), stages, !all, start, settings);
+  run.advance(pipeline::RunDbSource(db), std::numeric_limits<std::int64_t>::max(), true);
+  std::vector<std::string> ran, skipped;
+  for (const pipeline::Outcome& o : run.outcomes()) {
+    const std::string name = pipeline::names_of(o.stage).name;
+    print_outcome(o);
+    for (const auto& [key, text] : o.extras) db.set_extra(key, text);
+    if (o.thermal && !a.report.empty()) {
+      std::ofstream out(a.report);
+      if (!out) throw std::runtime_error(a.report + ": cannot write");
+      out << nlohmann::json::parse(o.thermal->report_json).dump(1) << "\n";
     }
-  };
-  attempt("direct", [&] {
-    const direct::Result r = run_direct(db, model);
-    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
-    model = r.model;
-  });
-  attempt("lever-arm", [&] {
-    const RecordingMeta meta = db.meta();
-    if (std::none_of(meta.segments.begin(), meta.segments.end(), [](const SegmentInfo& s) { return s.kind == "sine"; }))
-      throw std::invalid_argument("the run has no oscillation segments (record the lever-arm program)");
-    lever::LeverArmFilter filter(meta, model);
-    db.for_each_frame([&](const ImuFrame& f) { filter.push(f); });
-    const lever::Result r = filter.finish();
-    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
-    model = r.model;
-  });
-  attempt("thermal", [&] { model = run_thermal_stage(db, model, a); });
-  attempt("navigation", [&] {
-    const RecordingMeta meta = db.meta();
-    if (all && std::none_of(meta.segments.begin(), meta.segments.end(), [](const SegmentInfo& s) {
-          return s.kind == "sine" && s.name.find("swing") != std::string::npos;
-        }))
-      throw std::invalid_argument("the run has no slow swings (record the navigation program)");
-    model = run_navigation_stage(db, model, a.passes);
-  });
-  attempt("noise", [&] {
-    noise::NoiseAnalyzer analyzer(db.meta());
-    db.for_each_frame([&](const ImuFrame& f) { analyzer.push(f); });
-    const noise::Result r = analyzer.finish();
-    for (const auto& note : r.notes) std::printf("%s\n", note.c_str());
-    model = r.apply(model);
-    db.set_extra("noise_curves", r.curves_json());  // Allan and PSD curves for the plots
-  });
+    if (o.status == pipeline::Status::Done) {
+      ran.push_back(name + " on " + o.source);
+    } else if (all) {
+      // With --stage all a stage the recording cannot support is skipped with its reason; asked
+      // for alone, the same reason is an error.
+      skipped.push_back(name + ": " + o.message);
+    } else {
+      throw std::runtime_error(o.message);
+    }
+  }
+  const ImuModel& model = run.model();
   // Stage 3 works and reports in the body frame: it sees gyro-to-accelerometer alignment only.
   const ImuModel out = (a.frame == "body" || model.frame == "body") ? direct::to_body_frame(model) : model;
   write_imu_model_file(out, a.out);
   for (const auto& s : ran) std::printf("ran stage %s\n", s.c_str());
   for (const auto& s : skipped) std::printf("skipped stage %s\n", s.c_str());
-  std::printf("wrote %s (%s frame)\n", a.out.c_str(), out.frame.c_str());
+  std::printf("wrote %s (%s frame) in %.1f s\n", a.out.c_str(), out.frame.c_str(), seconds_since(t0));
   return 0;
 }
 
@@ -403,9 +340,7 @@ int cmd_evaluate(const std::string& db_path, const std::vector<std::string>& mod
       path = path.substr(eq + 1);
     }
     const ImuModel model = read_imu_model_file(path);
-    const evaluate::Result r = evaluate::evaluate_model(
-        meta, model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); },
-        db.temps());
+    const evaluate::Result r = pipeline::evaluate_recording(meta, pipeline::RunDbSource(db), model);
     nlohmann::json segs = nlohmann::json::array();
     for (const auto& s : r.segments)
       segs.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},
@@ -482,7 +417,7 @@ int cmd_compare(const std::string& model_path, const std::string& truth_path, co
 
 struct SimDevicesArgs {
   int table_port = 0, chamber_port = 0;
-  std::string imu_socket, truth = "ideal", serial, config_file, framing = "fd";
+  std::string imu_socket, imu_link = "imucal-can", truth = "ideal", serial, config_file, framing = "fd";
   double rate_hz = 1000.0;
   std::uint64_t seed = 1;
 };
@@ -505,6 +440,7 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
   c.chamber_start_C = config.chamber.safe_setpoint_C;
   c.chamber_tau_s = config.sim.chamber_tau_s;
   c.imu_socket_path = a.imu_socket;
+  c.imu_link = a.imu_link;
   c.imu.framing = a.framing == "classic" ? drivers::can::Framing::classic : drivers::can::Framing::fd;
   c.imu.rate_hz = a.rate_hz;
   c.imu.seed = a.seed;
@@ -516,17 +452,103 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
     throw std::invalid_argument("--framing classic carries at most 200 samples/s; --rate-hz is " + std::to_string(a.rate_hz));
 
   drivers::sim::SimDevices devices(c);
+  if (devices.imu_serial_device().empty() && a.imu_socket.empty())
+    throw std::invalid_argument("--imu-socket is required for a CAN IMU link ('" + a.imu_link + "')");
+  const std::string imu_where = devices.imu_serial_device().empty()
+                                    ? a.imu_socket + " (a new simulated IMU for each connection)"
+                                    : "serial device " + devices.imu_serial_device() + " (a pseudo-terminal)";
   // stdout: the configuration to paste (a complete file on its own); stderr: what is going on.
   std::printf("{\"devices\": %s}\n", devices.devices_config_json().c_str());
   std::fflush(stdout);
   std::fprintf(stderr,
                "imucal sim-devices: table controller on 127.0.0.1:%d, chamber controller (Modbus TCP, map %s) on "
-               "127.0.0.1:%d, IMU at %g Hz on %s (a new simulated IMU for each connection); SIGINT or SIGTERM stops\n",
-               devices.table_port(), c.chamber_map.c_str(), devices.chamber_port(), a.rate_hz, a.imu_socket.c_str());
+               "127.0.0.1:%d, IMU (%s) at %g Hz on %s; SIGINT or SIGTERM stops\n",
+               devices.table_port(), c.chamber_map.c_str(), devices.chamber_port(), a.imu_link.c_str(), a.rate_hz,
+               imu_where.c_str());
   int signal_number = 0;
   sigwait(&signals, &signal_number);
   std::fprintf(stderr, "imucal sim-devices: %s, stopping after %llu IMU link(s)\n",
                signal_number == SIGTERM ? "SIGTERM" : "SIGINT", static_cast<unsigned long long>(devices.imu_links()));
+  return 0;
+}
+
+// `imucal plan`: the predicted 1-sigma of every coefficient after each stage the program feeds.
+int cmd_plan(const std::string& program_arg, const std::string& imu_path, double rate_hz, std::uint64_t seed,
+             const std::string& json_out) {
+  const motion::Program program = motion::load_program(program_arg, motion::TableLimits{});
+  const ImuModel imu = read_imu_model_file(imu_path);
+  plan::Options opt;
+  opt.rate_hz = rate_hz;
+  opt.seed = seed;
+  const auto t0 = std::chrono::steady_clock::now();
+  const plan::Prediction p = plan::predict(program, imu, opt);
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const nlohmann::json j = p.to_json();
+  std::printf("program %s: %.0f s (%.1f h) at %.0f Hz; predicted 1-sigma after each stage (%.1f s to compute)\n",
+              p.program.c_str(), p.duration_s, p.duration_s / 3600.0, p.rate_hz, wall_s);
+  // One row per coefficient, a column per stage.
+  std::vector<std::string> names;
+  for (const auto& [stage, e] : j.at("stages").items())
+    if (e.contains("estimates"))
+      for (const auto& [name, v] : e.at("estimates").items())
+        if (std::find(names.begin(), names.end(), name) == names.end()) names.push_back(name);
+  std::printf("  %-30s", "coefficient");
+  for (const auto& [stage, e] : j.at("stages").items()) std::printf(" %14s", stage.c_str());
+  std::printf("\n");
+  for (const std::string& name : names) {
+    std::printf("  %-30s", name.c_str());
+    for (const auto& [stage, e] : j.at("stages").items()) {
+      if (e.contains("estimates") && e.at("estimates").contains(name)) {
+        std::printf(" %14.4g", e.at("estimates").at(name).at(1).get<double>());
+      } else {
+        std::printf(" %14s", e.value("status", "-") == "done" ? "-" : e.value("status", "-").c_str());
+      }
+    }
+    std::printf("\n");
+  }
+  for (const auto& [stage, e] : j.at("stages").items())
+    if (e.contains("message")) std::printf("  %s: %s\n", stage.c_str(), e.at("message").get<std::string>().c_str());
+  if (!p.weak.empty()) std::printf("weakly observable or undetermined:\n");
+  for (const plan::Weak& w : p.weak)
+    std::printf("  %s %s: %s; needs %s\n", w.stage.c_str(), w.coefficient.c_str(), w.why.c_str(), w.fix.c_str());
+  if (!json_out.empty()) {
+    std::ofstream out(json_out);
+    out << j.dump(1) << "\n";
+    if (!out) throw std::runtime_error("cannot write " + json_out);
+    std::printf("-> %s\n", json_out.c_str());
+  }
+  return 0;
+}
+
+// One line from standard input; on a terminal without echo, after a prompt on stderr.
+std::string read_secret(const char* prompt) {
+  const bool tty = ::isatty(STDIN_FILENO) != 0;
+  termios saved{};
+  if (tty) {
+    std::fprintf(stderr, "%s", prompt);
+    ::tcgetattr(STDIN_FILENO, &saved);
+    termios quiet = saved;
+    quiet.c_lflag &= ~static_cast<tcflag_t>(ECHO);
+    ::tcsetattr(STDIN_FILENO, TCSANOW, &quiet);
+  }
+  std::string line;
+  const bool got = static_cast<bool>(std::getline(std::cin, line));
+  if (tty) {
+    ::tcsetattr(STDIN_FILENO, TCSANOW, &saved);
+    std::fprintf(stderr, "\n");
+  }
+  if (!got) throw std::runtime_error("no password on standard input");
+  if (!line.empty() && line.back() == '\r') line.pop_back();
+  return line;
+}
+
+// `imucal passwd`: the hash for a user's "password_hash" in imucald's configuration.
+int cmd_passwd() {
+  const std::string password = read_secret("password: ");
+  if (password.size() < 8) throw std::runtime_error("the password must have at least 8 characters");
+  if (::isatty(STDIN_FILENO) != 0 && read_secret("again: ") != password) throw std::runtime_error("the two do not match");
+  std::printf("%s\n", imucal::daemon::hash_password(password).c_str());
+  std::fprintf(stderr, "put it in imucald's configuration as a user's \"password_hash\" (docs/daemon.md)\n");
   return 0;
 }
 
@@ -649,9 +671,12 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 65535));
   simdev->add_option("--imu-socket", simdev_args.imu_socket,
-                     "Unix SOCK_SEQPACKET socket path the IMU listens on (CAN frame images; a new simulated IMU for "
-                     "each connection)")
-      ->required();
+                     "Unix SOCK_SEQPACKET socket path a CAN IMU listens on (CAN frame images; a new simulated IMU for "
+                     "each connection)");
+  simdev->add_option("--imu-link", simdev_args.imu_link,
+                     "the IMU's link description (imucal-can, kvh-1750, kvh-1775-b or an imucal-imu-link/1 file); a "
+                     "serial one is served on a pseudo-terminal")
+      ->capture_default_str();
   simdev->add_option("--rate-hz", simdev_args.rate_hz, "IMU sample rate, Hz")->capture_default_str()->check(
       CLI::Range(1.0, 100000.0));
   simdev->add_option("--framing", simdev_args.framing, "fd or classic (at most 200 Hz)")
@@ -664,6 +689,24 @@ int main(int argc, char** argv) {
   simdev->add_option("--config", simdev_args.config_file,
                      "imucald configuration whose site, table limits and chamber defaults the devices take")
       ->check(CLI::ExistingFile);
+
+  std::string plan_program, plan_imu, plan_json;
+  double plan_rate_hz = 100.0;
+  std::uint64_t plan_seed = 1;
+  auto* planc = app.add_subcommand(
+      "plan", "Predict the 1-sigma of every coefficient a program will give, before the table moves (the program "
+              "simulated with the IMU's noise through the calibration pipeline)");
+  planc->add_option("--program", plan_program, "built-in program name or a program JSON file")->required();
+  planc->add_option("--imu", plan_imu, "the unit's imucal-imu-model/1 with its noise section")
+      ->required()
+      ->check(CLI::ExistingFile);
+  planc->add_option("--rate", plan_rate_hz, "IMU rate, Hz")->capture_default_str()->check(CLI::PositiveNumber);
+  planc->add_option("--seed", plan_seed, "noise seed of the simulation")->capture_default_str();
+  planc->add_option("--json", plan_json, "write the prediction (imucal-plan/1) here");
+
+  auto* passwd = app.add_subcommand(
+      "passwd", "Print the hash of a password (read from standard input) for a user's password_hash in imucald's "
+                "configuration");
 
   // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
@@ -700,6 +743,8 @@ int main(int argc, char** argv) {
     if (ev->parsed()) return cmd_evaluate(eval_db, eval_models, eval_out);
     if (cmp->parsed()) return cmd_compare(cmp_model, cmp_truth, cmp_json);
     if (simdev->parsed()) return cmd_sim_devices(simdev_args);
+    if (passwd->parsed()) return cmd_passwd();
+    if (planc->parsed()) return cmd_plan(plan_program, plan_imu, plan_rate_hz, plan_seed, plan_json);
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

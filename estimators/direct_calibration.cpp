@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include <Eigen/Geometry>
 #include <Eigen/Dense>
 
 #include "core/earth.hpp"
@@ -179,6 +180,128 @@ const OffDiag kOffDiag[3][2] = {
 
 }  // namespace
 
+Selection select_intervals(const std::vector<Interval>& intervals, const Options& options) {
+  Selection sel;
+  for (const Interval& iv : intervals) {
+    if (iv.frames < 2) continue;
+    if (iv.is_static) {
+      sel.statics.push_back(&iv);
+      continue;
+    }
+    int moving = 0;
+    for (int k = 0; k < 3; ++k) moving += iv.moved_axes_rad[k] > 1e-8;
+    const double turned = iv.moved_axes_rad.maxCoeff();
+    if (iv.gap) {
+      sel.notes.push_back("rotation '" + iv.name + "' left out: a gap in the frames (never integrated across)");
+    } else if (moving > 1) {
+      sel.notes.push_back("rotation '" + iv.name + "' left out: several table axes moved together");
+    } else if (turned >= options.min_rotation_rad) {
+      sel.rotations.push_back(&iv);
+    }
+  }
+  return sel;
+}
+
+std::string SensorDesign::key(std::size_t c) const {
+  const Column& col = columns.at(c);
+  const std::string triad = gyro ? "gyro." : "accel.";
+  switch (col.kind) {
+    case Column::Kind::Bias: return triad + (gyro ? "bias_dph." : "bias_mps2.") + kAxis[axis];
+    case Column::Kind::ScalePos: return triad + "scale_pos_ppm." + kAxis[axis];
+    case Column::Kind::ScaleNeg: return triad + "scale_neg_ppm." + kAxis[axis];
+    case Column::Kind::Scale: return triad + "scale_ppm." + kAxis[axis];
+    case Column::Kind::Angle: return triad + "misalignment_arcsec." + col.angle_name;
+  }
+  return {};
+}
+
+namespace {
+
+// The two angles of row j of D, as columns (in kOffDiag's order).
+Column angle_column(int j, int c) {
+  const OffDiag& od = kOffDiag[j][c];
+  for (const MisalignmentKey& k : kMisalignmentKeys)
+    if (k.member == od.member) return {Column::Kind::Angle, k.member, k.name};
+  return {};
+}
+
+}  // namespace
+
+SensorDesign accel_design(int j, const Selection& sel, const AccelErrors& at) {
+  SensorDesign d;
+  d.gyro = false;
+  d.axis = j;
+  d.columns = {{Column::Kind::Bias}, {Column::Kind::Scale}, angle_column(j, 0), angle_column(j, 1)};
+  d.rows = sel.statics;
+  const auto n = static_cast<Eigen::Index>(d.rows.size());
+  d.A.resize(n, 4);
+  d.b.resize(n);
+  d.w.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Interval& s = *d.rows[static_cast<std::size_t>(i)];
+    const Vector3d& f = s.f_o_mps2;
+    d.A(i, 0) = 1.0;
+    d.A(i, 1) = f[j];
+    for (int c = 0; c < 2; ++c) {
+      const OffDiag& od = kOffDiag[j][c];
+      d.A(i, 2 + c) = od.sign * (1.0 + at.scale[od.k]) * f[od.k];
+    }
+    d.b(i) = s.sum_dv[j] / s.T_s - f[j];  // mean specific-force residual of the static
+    d.w(i) = s.T_s;                       // white noise: variance of the mean falls as 1/T
+  }
+  return d;
+}
+
+SensorDesign gyro_design(int j, const Selection& sel, const GyroErrors& at) {
+  SensorDesign d;
+  d.gyro = true;
+  d.axis = j;
+  d.columns = {{Column::Kind::Bias}, {Column::Kind::ScalePos}, {Column::Kind::ScaleNeg}, angle_column(j, 0),
+               angle_column(j, 1)};
+  d.rows = sel.statics;
+  d.rows.insert(d.rows.end(), sel.rotations.begin(), sel.rotations.end());
+  const auto n = static_cast<Eigen::Index>(d.rows.size());
+  d.A.resize(n, 5);
+  d.b.resize(n);
+  d.w.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Interval& e = *d.rows[static_cast<std::size_t>(i)];
+    // Input through the current scale factors of axis k, split by sign as the FOG sees it.
+    auto scaled = [&](int k) {
+      return (1.0 + at.scale_pos[k]) * e.ref_pos_rad[k] + (1.0 + at.scale_neg[k]) * e.ref_neg_rad[k];
+    };
+    d.A(i, 0) = e.T_s;
+    d.A(i, 1) = e.ref_pos_rad[j];
+    d.A(i, 2) = e.ref_neg_rad[j];
+    for (int c = 0; c < 2; ++c) d.A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
+    d.b(i) = e.sum_dtheta[j] - (e.ref_pos_rad[j] + e.ref_neg_rad[j]);  // summed-angle residual
+    d.w(i) = 1.0 / e.T_s;  // angle random walk: variance of the summed angle grows as T
+  }
+  return d;
+}
+
+double& coefficient(GyroErrors& g, const Column& c, int axis) {
+  switch (c.kind) {
+    case Column::Kind::Bias: return g.bias_radps[axis];
+    case Column::Kind::ScalePos: return g.scale_pos[axis];
+    case Column::Kind::ScaleNeg: return g.scale_neg[axis];
+    case Column::Kind::Angle: return g.misalignment_rad.*(c.angle);
+    case Column::Kind::Scale: break;
+  }
+  throw std::logic_error("stage direct: a gyro has no single scale factor column");
+}
+
+double& coefficient(AccelErrors& a, const Column& c, int axis) {
+  switch (c.kind) {
+    case Column::Kind::Bias: return a.bias_mps2[axis];
+    case Column::Kind::Scale: return a.scale[axis];
+    case Column::Kind::Angle: return a.misalignment_rad.*(c.angle);
+    case Column::Kind::ScalePos:
+    case Column::Kind::ScaleNeg: break;
+  }
+  throw std::logic_error("stage direct: an accelerometer has one scale factor, not one per sign");
+}
+
 Result DirectCalibrator::finish(const ImuModel& seed) const {
   if (seed.frame != "instrument")
     throw std::invalid_argument("stage direct: give the seed model in the instrument frame");
@@ -186,24 +309,10 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   res.model = seed;
   ImuErrorSet sigma = seed.sigma.value_or(ImuErrorSet{});
 
-  std::vector<const Interval*> statics, rotations;
-  for (const Interval& iv : intervals_) {
-    if (iv.frames < 2) continue;
-    if (iv.is_static) {
-      statics.push_back(&iv);
-      continue;
-    }
-    int moving = 0;
-    for (int k = 0; k < 3; ++k) moving += iv.moved_axes_rad[k] > 1e-8;
-    const double turned = iv.moved_axes_rad.maxCoeff();
-    if (iv.gap) {
-      res.notes.push_back("rotation '" + iv.name + "' left out: a gap in the frames (never integrated across)");
-    } else if (moving > 1) {
-      res.notes.push_back("rotation '" + iv.name + "' left out: several table axes moved together");
-    } else if (turned >= options_.min_rotation_rad) {
-      rotations.push_back(&iv);
-    }
-  }
+  Selection sel = select_intervals(intervals_, options_);
+  res.notes = std::move(sel.notes);
+  const std::vector<const Interval*>& statics = sel.statics;
+  const std::vector<const Interval*>& rotations = sel.rotations;
   res.statics = static_cast<int>(statics.size());
   res.rotations = static_cast<int>(rotations.size());
   for (const Interval* s : statics) res.static_time_s += s->T_s;
@@ -254,33 +363,16 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     AccelErrors next = acc;
     acc_rms_sq = 0;
     for (int j = 0; j < 3; ++j) {
-      Eigen::MatrixXd A(ns, 4);
-      Eigen::VectorXd b(ns), w(ns);
-      for (Eigen::Index i = 0; i < ns; ++i) {
-        const Interval& s = *statics[static_cast<std::size_t>(i)];
-        const Vector3d u = s.sum_dv / s.T_s;
-        const Vector3d& f = s.f_o_mps2;
-        A(i, 0) = 1.0;
-        A(i, 1) = f[j];
-        for (int c = 0; c < 2; ++c) {
-          const OffDiag& od = kOffDiag[j][c];
-          A(i, 2 + c) = od.sign * (1.0 + acc.scale[od.k]) * f[od.k];
-        }
-        b(i) = u[j] - f[j];
-        w(i) = s.T_s;  // white noise: variance of the mean falls as 1/T
-      }
-      if (min_scaled_eigenvalue(A, w) < 1e-10)
+      const SensorDesign d = accel_design(j, sel, acc);
+      if (min_scaled_eigenvalue(d.A, d.w) < 1e-10)
         throw UndeterminedError(std::string("stage direct: accelerometer ") + kAxis[j] +
                                 ": bias, scale and angles are not separable with these positions (add positions with "
                                 "each of the other axes vertical)");
-      const Fit fit = solve_wls(A, b, w);
-      next.bias_mps2[j] = fit.x[0];
-      next.scale[j] = fit.x[1];
-      sigma.accel.bias_mps2[j] = fit.sigma[0];
-      sigma.accel.scale[j] = fit.sigma[1];
-      for (int c = 0; c < 2; ++c) {
-        next.misalignment_rad.*(kOffDiag[j][c].member) = fit.x[2 + c];
-        sigma.accel.misalignment_rad.*(kOffDiag[j][c].member) = fit.sigma[2 + c];
+      const Fit fit = solve_wls(d.A, d.b, d.w);
+      for (std::size_t c = 0; c < d.columns.size(); ++c) {
+        const auto i = static_cast<Eigen::Index>(c);
+        coefficient(next, d.columns[c], j) = fit.x[i];
+        coefficient(sigma.accel, d.columns[c], j) = fit.sigma[i];
       }
       acc_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
     }
@@ -292,9 +384,6 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   res.accel_residual_rms_mps2 = std::sqrt(acc_rms_sq);
 
   // ---------------- gyros: statics against the Earth rate, rotations against the table
-  std::vector<const Interval*> eqs = statics;
-  eqs.insert(eqs.end(), rotations.begin(), rotations.end());
-  const auto ne = static_cast<Eigen::Index>(eqs.size());
   GyroErrors& gy = res.model.gyro;
   gy.bias_radps.setZero();
   gy.scale_pos.setZero();
@@ -305,35 +394,16 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     GyroErrors next = gy;
     gyro_rms_sq = 0;
     for (int j = 0; j < 3; ++j) {
-      Eigen::MatrixXd A(ne, 5);
-      Eigen::VectorXd b(ne), w(ne);
-      for (Eigen::Index i = 0; i < ne; ++i) {
-        const Interval& e = *eqs[static_cast<std::size_t>(i)];
-        // Input through the current scale factors of axis k, split by sign as the FOG sees it.
-        auto scaled = [&](int k) {
-          return (1.0 + gy.scale_pos[k]) * e.ref_pos_rad[k] + (1.0 + gy.scale_neg[k]) * e.ref_neg_rad[k];
-        };
-        A(i, 0) = e.T_s;
-        A(i, 1) = e.ref_pos_rad[j];
-        A(i, 2) = e.ref_neg_rad[j];
-        for (int c = 0; c < 2; ++c) A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
-        b(i) = e.sum_dtheta[j] - (e.ref_pos_rad[j] + e.ref_neg_rad[j]);
-        w(i) = 1.0 / e.T_s;  // angle random walk: variance of the summed angle grows as T
-      }
-      if (min_scaled_eigenvalue(A, w) < 1e-12)
+      const SensorDesign d = gyro_design(j, sel, gy);
+      if (min_scaled_eigenvalue(d.A, d.w) < 1e-12)
         throw UndeterminedError(std::string("stage direct: gyro ") + kAxis[j] +
                                 ": bias, scale factors and angles are not separable (add statics and single-axis "
                                 "rotations of both signs about every axis)");
-      const Fit fit = solve_wls(A, b, w);
-      next.bias_radps[j] = fit.x[0];
-      next.scale_pos[j] = fit.x[1];
-      next.scale_neg[j] = fit.x[2];
-      sigma.gyro.bias_radps[j] = fit.sigma[0];
-      sigma.gyro.scale_pos[j] = fit.sigma[1];
-      sigma.gyro.scale_neg[j] = fit.sigma[2];
-      for (int c = 0; c < 2; ++c) {
-        next.misalignment_rad.*(kOffDiag[j][c].member) = fit.x[3 + c];
-        sigma.gyro.misalignment_rad.*(kOffDiag[j][c].member) = fit.sigma[3 + c];
+      const Fit fit = solve_wls(d.A, d.b, d.w);
+      for (std::size_t c = 0; c < d.columns.size(); ++c) {
+        const auto i = static_cast<Eigen::Index>(c);
+        coefficient(next, d.columns[c], j) = fit.x[i];
+        coefficient(sigma.gyro, d.columns[c], j) = fit.sigma[i];
       }
       gyro_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
     }
@@ -373,22 +443,43 @@ ImuModel to_body_frame(const ImuModel& m) {
   if (m.frame == "body") return m;
   ImuModel b = m;
   b.frame = "body";
-  // r takes o onto b (v_b = (I - [r x]) v_o): X along accel x, Y in the accel x-y plane.
-  const Misalignment& a = m.accel.misalignment_rad;
-  const Vector3d r(a.yx, a.xy, a.xz);
-  auto shift = [&](Misalignment mis) {
-    mis.xz -= r.z();
-    mis.yz -= r.z();
-    mis.xy -= r.y();
-    mis.zy -= r.y();
-    mis.yx -= r.x();
-    mis.zx -= r.x();
-    return mis;
-  };
-  b.accel.misalignment_rad = shift(m.accel.misalignment_rad);
-  b.gyro.misalignment_rad = shift(m.gyro.misalignment_rad);
-  b.accel.misalignment_rad.xy = b.accel.misalignment_rad.xz = b.accel.misalignment_rad.yx = 0.0;  // exact zeros
-  b.body_to_instrument_rad = r;
+  // Exactly, not to first order: at 60" angles and 300 ppm scale errors the second-order terms
+  // (angle x angle, angle x scale) reach 0.02-0.05", the size of stage 3's sigmas. Channel j
+  // senses row j of D S (CONVENTIONS.md), so the accelerometers' sensitive axes are those rows:
+  // X along the x row, Y in the plane of the x and y rows, Z = X x Y.
+  const AccelErrors& a = m.accel;
+  const Matrix3d M_a = misalignment_matrix(a.misalignment_rad) * (Vector3d::Ones() + a.scale).asDiagonal();
+  const Vector3d X = M_a.row(0).transpose().normalized();
+  const Vector3d Z = X.cross(M_a.row(1).transpose()).normalized();
+  Matrix3d C_b_o;  // v_o = C_b_o v_b: the body axes are its columns
+  C_b_o << X, Z.cross(X), Z;
+  const Eigen::AngleAxisd aa(C_b_o);
+  b.body_to_instrument_rad = Vector3d(aa.angle() * aa.axis());
+  // In b the accelerometers' D S is lower triangular: D with unit diagonal times the scale.
+  const Matrix3d L_a = M_a * C_b_o;
+  b.accel.scale = L_a.diagonal() - Vector3d::Ones();
+  const Matrix3d D_a = L_a * L_a.diagonal().cwiseInverse().asDiagonal();
+  Misalignment am;
+  am.yz = -D_a(1, 0);
+  am.zy = D_a(2, 0);
+  am.zx = -D_a(2, 1);
+  b.accel.misalignment_rad = am;  // xy, xz, yx exactly zero
+  // The gyros the same way for each sign; D from the + scale (the - one differs by the scale
+  // asymmetry times an angle, 1e-9 rad).
+  const Matrix3d D_g = misalignment_matrix(m.gyro.misalignment_rad);
+  const Matrix3d L_pos = D_g * (Vector3d::Ones() + m.gyro.scale_pos).asDiagonal() * C_b_o;
+  const Matrix3d L_neg = D_g * (Vector3d::Ones() + m.gyro.scale_neg).asDiagonal() * C_b_o;
+  b.gyro.scale_pos = L_pos.diagonal() - Vector3d::Ones();
+  b.gyro.scale_neg = L_neg.diagonal() - Vector3d::Ones();
+  const Matrix3d D_gb = L_pos * L_pos.diagonal().cwiseInverse().asDiagonal();
+  Misalignment gm;
+  gm.xz = D_gb(0, 1);
+  gm.xy = -D_gb(0, 2);
+  gm.yz = -D_gb(1, 0);
+  gm.yx = D_gb(1, 2);
+  gm.zy = D_gb(2, 0);
+  gm.zx = -D_gb(2, 1);
+  b.gyro.misalignment_rad = gm;
   if (m.sigma) {
     // The body axes are themselves estimated: add their variance to the shifted angles.
     const Misalignment& sa = m.sigma->accel.misalignment_rad;

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,44 @@ struct Interval {
   Eigen::Vector3d moved_axes_rad = Eigen::Vector3d::Zero();  // |total angle change| per table axis
   bool gap = false;
 };
+
+// The intervals stage 1 solves with: the statics and the usable rest-to-rest rotations, and a
+// note for each rotation left out and why. One selection for the solution and for whoever needs
+// its design (stage 2 weighs each interval's temperature by it).
+struct Selection {
+  std::vector<const Interval*> statics, rotations;
+  std::vector<std::string> notes;
+};
+Selection select_intervals(const std::vector<Interval>& intervals, const Options& options = {});
+
+// One unknown of a sensor's least squares: a bias, a scale factor (gyro + and -, or the
+// accelerometer's), or a misalignment angle of the sensor's row of D.
+struct Column {
+  enum class Kind { Bias, ScalePos, ScaleNeg, Scale, Angle } kind = Kind::Bias;
+  double Misalignment::*angle = nullptr;  // Kind::Angle
+  const char* angle_name = "";            // "xy" .. "zy", Kind::Angle
+};
+
+// Stage 1's weighted least squares of one sensor (gyro or accelerometer `axis`), linearised at
+// the given errors: rows are intervals (accelerometers: the statics; gyros: the statics, then the
+// rotations), b the measured residual of each row, w its weight. Solving it at the errors it
+// returns is what DirectCalibrator::finish iterates to.
+struct SensorDesign {
+  bool gyro = true;
+  int axis = 0;
+  std::vector<Column> columns;
+  std::vector<const Interval*> rows;
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b, w;
+  // The coefficient behind column c, "gyro.bias_dph.x" as imucal names them everywhere (JSON
+  // units in the name; the design itself is SI).
+  std::string key(std::size_t c) const;
+};
+SensorDesign gyro_design(int axis, const Selection& selection, const GyroErrors& at);
+SensorDesign accel_design(int axis, const Selection& selection, const AccelErrors& at);
+// The SI value a column estimates, in the errors of its triad.
+double& coefficient(GyroErrors& g, const Column& c, int axis);
+double& coefficient(AccelErrors& a, const Column& c, int axis);
 
 struct Result {
   ImuModel model;                    // instrument frame, with sigma

@@ -60,17 +60,22 @@ void LeverArmFilter::process_middle() {
   const Vector3d dw_o = C_o_p.transpose() * (pr.dw_np_p - pr.w_np_p.cross(w_ie_p));
   const Matrix3d K = table::skew(w_o) * table::skew(w_o) + table::skew(dw_o);
   const Matrix3d C_o_n = C_p_n * C_o_p;
-  Vector3d g_o = C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
+  const Vector3d g_o = C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
   // Accelerometer j reports the specific force of tau_j ago: gravity as it stood then, to first
   // order g_o(t - tau) = g_o + tau (w_o x g_o) (gravity is fixed in n and turns by -w in o).
   const Vector3d g_rate_o = w_o.cross(g_o);
-  for (int j = 0; j < 3; ++j) g_o[j] += model_.accel.delay_s[j] * g_rate_o[j];
   const Vector3d w_n = C_o_n * w_o;
   block_horizontal_rate_radps_ = std::max(block_horizontal_rate_radps_, std::hypot(w_n.x(), w_n.y()));
-  // Stage-1 compensation (bias, scale, misalignment) of this interval's increments.
-  const Vector3d dv = compensate_accel_increment(model_.accel, f2.dv_mps, dt);
-  block_z_ += dv - g_o * dt;
-  block_H_ += K * dt;
+  // In sensor space, exactly (CONVENTIONS.md): channel j's output less its bias is row j of the
+  // stage-1 D S applied to the force at its own proof mass, g + K rho_j. Inverting D S first would
+  // mix the other channels' size effect into this one (1e-4 of it).
+  const Matrix3d DS = misalignment_matrix(model_.accel.misalignment_rad) *
+                      (Vector3d::Ones() + model_.accel.scale).asDiagonal();
+  const Vector3d u = f2.dv_mps - model_.accel.bias_mps2 * dt;
+  for (int j = 0; j < 3; ++j) {
+    block_z_[j] += u[j] - DS.row(j).dot(g_o + model_.accel.delay_s[j] * g_rate_o) * dt;
+    block_H_.row(j) += DS.row(j) * K * dt;
+  }
   block_T_ += dt;
   block_excitation_ = std::max(block_excitation_, std::max(dw_o.norm(), w_o.squaredNorm()));
   if (block_T_ >= options_.block_s - 1e-12) update_block();

@@ -53,7 +53,7 @@ class LeverArmFilter {
   std::deque<ImuFrame> window_;  // four frames: k-2, k-1, k, k+1 around the interval (k-1, k]
   // Current block: sum of (dv - gravity dt) and of K dt, per channel.
   Eigen::Vector3d block_z_ = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d block_H_ = Eigen::Matrix3d::Zero();  // row j: sum of K.row(j) dt
+  Eigen::Matrix3d block_H_ = Eigen::Matrix3d::Zero();  // row j: sum of (row j of D S) K dt
   double block_T_ = 0, block_excitation_ = 0, block_horizontal_rate_radps_ = 0;
   Eigen::Matrix<double, 9, 1> x_ = Eigen::Matrix<double, 9, 1>::Zero();
   Eigen::Matrix<double, 9, 9> P_;

@@ -36,12 +36,13 @@ Mat<3, 6> gyro_angle_jacobian(const Vector3d& w) {
   return J;
 }
 
-// The same for the accelerometer non-orthogonalities yz zx zy (x is the body reference).
-Mat<3, 3> accel_angle_jacobian(const Vector3d& f) {
+// The same for the accelerometer non-orthogonalities yz zx zy (x is the body reference); row j
+// of f_channels is the specific force at accelerometer j's proof mass.
+Mat<3, 3> accel_angle_jacobian(const Matrix3d& f_channels) {
   Mat<3, 3> J = Mat<3, 3>::Zero();
-  J(1, 0) = -f.x();  // yz
-  J(2, 1) = -f.y();  // zx
-  J(2, 2) = f.x();   // zy
+  J(1, 0) = -f_channels(1, 0);  // yz
+  J(2, 1) = -f_channels(2, 1);  // zx
+  J(2, 2) = f_channels(2, 0);   // zy
   return J;
 }
 
@@ -70,6 +71,10 @@ StateVector model_to_state(const ImuModel& m) {
   for (int i = 0; i < 3; ++i) x[kAccelAngles.index + i] = m.accel.misalignment_rad.*kAccelAngleKeys[static_cast<std::size_t>(i)];
   seg(x, kGyroDelay) = m.gyro.delay_s;
   seg(x, kAccelDelay) = m.accel.delay_s;
+  const Matrix3d offsets = proof_mass_offsets_m(m);  // in the model's frame, as the filter sees them
+  seg(x, kLeverArmY) = offsets.col(1);
+  seg(x, kLeverArmZ) = offsets.col(2);
+  seg(x, kBodyAlignment) = m.body_to_instrument_rad.value_or(Vector3d::Zero());
   return x;
 }
 
@@ -102,9 +107,10 @@ struct NavCalibrationFilter::Impl {
   Matrix3d S_Cwdot = Matrix3d::Zero(), S_Cf = Matrix3d::Zero(), S_Cfdot = Matrix3d::Zero();
   Matrix3d S_fn = Matrix3d::Zero(), S_CMa = Matrix3d::Zero();
   Mat<3, 6> S_CMg = Mat<3, 6>::Zero();
+  Matrix3d S_CKy = Matrix3d::Zero(), S_CKz = Matrix3d::Zero();  // proof-mass offsets y, z
   double S_dt = 0;
   double since_update_s = 0;
-  Vector3d prev_w = Vector3d::Zero(), prev_f = Vector3d::Zero();
+  Vector3d prev_f = Vector3d::Zero();
   bool have_prev_rates = false;
   bool stopped = false;
   std::size_t next_restart = 0;
@@ -142,15 +148,34 @@ struct NavCalibrationFilter::Impl {
     seg(s0, kAccelAngles).setConstant(o.sigma_accel_angle_rad);
     seg(s0, kGyroDelay).setConstant(o.sigma_gyro_delay_s);
     seg(s0, kAccelDelay).setConstant(o.sigma_accel_delay_s);
+    seg(s0, kLeverArmY).setConstant(o.sigma_lever_arm_m);
+    seg(s0, kLeverArmZ).setConstant(o.sigma_lever_arm_m);
+    seg(s0, kBodyAlignment).setConstant(o.sigma_body_alignment_rad);
+    if (model.sigma) {
+      seg(s0, kLeverArmY) = seg(s0, kLeverArmY).cwiseMax(model.sigma->accel.lever_arm_y_m);
+      seg(s0, kLeverArmZ) = seg(s0, kLeverArmZ).cwiseMax(model.sigma->accel.lever_arm_z_m);
+    }
+    if (model_in.sigma && model_in.frame == "instrument") {
+      // to_body_frame: the rotation is (yx, xy, xz) of the instrument-frame accelerometer angles.
+      const Misalignment& sa = model_in.sigma->accel.misalignment_rad;
+      seg(s0, kBodyAlignment) = seg(s0, kBodyAlignment).cwiseMax(Vector3d(sa.yx, sa.xy, sa.xz));
+    }
     sigma0 = s0;
     P = s0.cwiseAbs2().asDiagonal();
     result.sigma0 = s0;
   }
 
-  void reset_navigation_covariance() {
+  // A restart takes the attitude from the table: its error is then the body alignment's error
+  // turned into n, plus the table's reading (C_hat = (I - [phi x]) C, phi = C_b_n delta + e).
+  void reset_navigation_covariance(const Matrix3d& C_b_n) {
     P.topRows(9).setZero();
     P.leftCols(9).setZero();
-    for (int i = 0; i < 9; ++i) P(i, i) = sigma0[i] * sigma0[i];
+    const Mat<3, kSize> P_align = P.middleRows(kBodyAlignment.index, kBodyAlignment.size);
+    P.middleRows(kAttitude.index, 3) = C_b_n * P_align;
+    P.middleCols(kAttitude.index, 3) = P.middleRows(kAttitude.index, 3).transpose();
+    P.block<3, 3>(kAttitude.index, kAttitude.index) =
+        C_b_n * P_align.middleCols(kBodyAlignment.index, 3) * C_b_n.transpose();
+    for (int i = 0; i < 9; ++i) P(i, i) += sigma0[i] * sigma0[i];
   }
 
   void push_temp(const TempSample& temp) {
@@ -196,27 +221,30 @@ struct NavCalibrationFilter::Impl {
       if (nav) {
         nav.reset();
         ++result.restarts;
+        result.restart_times_s.push_back(t_s);
       }
     }
     if (!nav) {
       // The vertical channel runs free here: its velocity and height are measured, which is what
       // makes a scale error common to the three accelerometers (seen only along g) observable.
-      nav = std::make_unique<nav::Strapdown>(ref.initial_state(ref.at(window, k - 1)), g_mps2, false);
-      reset_navigation_covariance();
+      const nav::TableReference::Sample start = ref.at(window, k - 1);
+      nav = std::make_unique<nav::Strapdown>(ref.initial_state(start), g_mps2, false);
+      reset_navigation_covariance(start.C_b_n);
       x.head(9).setZero();
       have_prev_rates = false;
     }
     const double dt = static_cast<double>(window[k].t_ns - window[k - 1].t_ns) * 1e-9;
-    Vector3d dtheta, dv;
-    comp.compensate(window, dt, dtheta, dv);
+    const nav::CompensatedSample c = comp.compensate(window);
     const nav::TableReference::Sample r = ref.at(window, k);
-    nav->update(dtheta, dv, dt, r.v_n.z(), ref.h_ref_m(r));
+    nav->update(c.dtheta_rad, c.dv_mps, dt, r.v_n.z(), ref.h_ref_m(r));
     ++result.frames;
 
-    const Vector3d w = dtheta / dt, fb = dv / dt;
-    const Vector3d wdot = have_prev_rates ? Vector3d((w - prev_w) / dt) : Vector3d::Zero();
+    const Vector3d w = c.w_radps;
+    // Each accelerometer's errors act on the specific force at its own proof mass (row j).
+    const Matrix3d f_channels = c.size_effect_mps2.rowwise() + (c.dv_mps / dt).transpose();
+    const Vector3d fb = f_channels.diagonal();
+    const Vector3d& wdot = c.dw_radps2;
     const Vector3d fdot = have_prev_rates ? Vector3d((fb - prev_f) / dt) : Vector3d::Zero();
-    prev_w = w;
     prev_f = fb;
     have_prev_rates = true;
     const Matrix3d C = nav->state().q_b_n.toRotationMatrix();
@@ -228,7 +256,11 @@ struct NavCalibrationFilter::Impl {
     S_Cfdot += C * fdot.asDiagonal() * dt;
     S_fn += table::skew(C * fb) * dt;
     S_CMg += C * gyro_angle_jacobian(w) * dt;
-    S_CMa += C * accel_angle_jacobian(fb) * dt;
+    S_CMa += C * accel_angle_jacobian(f_channels) * dt;
+    // Channel j's size effect is row j of ([w x]^2 + [dw x]) r_j: an offset error moves only it.
+    const Matrix3d K = table::skew(w) * table::skew(w) + table::skew(c.dw_radps2);
+    S_CKy += C.col(1) * K.row(1) * dt;
+    S_CKz += C.col(2) * K.row(2) * dt;
     S_dt += dt;
     if (S_dt >= opt.propagate_interval_s - 1e-9) {
       propagate();
@@ -266,6 +298,8 @@ struct NavCalibrationFilter::Impl {
     blk(kVelocity, kAccelScale) = S_Cf;
     blk(kVelocity, kAccelAngles) = S_CMa;
     blk(kVelocity, kAccelDelay) = -S_Cfdot;
+    blk(kVelocity, kLeverArmY) = S_CKy;
+    blk(kVelocity, kLeverArmZ) = S_CKz;
     blk(kPosition, kVelocity) = Matrix3d::Identity() * T;
     const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
     P = Phi * P * Phi.transpose();
@@ -292,6 +326,28 @@ struct NavCalibrationFilter::Impl {
     S_fn.setZero();
     S_CMa.setZero();
     S_CMg.setZero();
+    S_CKy.setZero();
+    S_CKz.setZero();
+  }
+
+  // One scalar measurement z = H x + noise (variance R), gated; Joseph form.
+  bool scalar_update(const StateVector& H, double z, double R, MeasurementRecord& rec, std::size_t m) {
+    const StateVector PH = P * H;
+    const double innovation = z - H.dot(x), S = H.dot(PH) + R;
+    const double ratio = innovation * innovation / (opt.gate_sigma * opt.gate_sigma * S);
+    rec.innovation[m] = innovation;
+    rec.variance[m] = S;
+    rec.test_ratio[m] = ratio;
+    rec.accepted[m] = ratio <= 1.0;
+    if (!rec.accepted[m]) {
+      ++result.rejected;
+      return false;
+    }
+    const StateVector K = PH / S;
+    x += K * innovation;
+    const StateMatrix IKH = StateMatrix::Identity() - K * H.transpose();
+    P = IKH * P * IKH.transpose() + K * R * K.transpose();
+    return true;
   }
 
   void update(const nav::TableReference::Sample& r) {
@@ -301,26 +357,23 @@ struct NavCalibrationFilter::Impl {
     MeasurementRecord rec{t_s, {}, {}, {}, {}};
     int accepted = 0;
     for (std::size_t m = 0; m < 6; ++m) {
-      const int i = kVelocity.index + static_cast<int>(m);  // velocity and position blocks are adjacent
+      StateVector H = StateVector::Zero();
+      H[kVelocity.index + static_cast<int>(m)] = 1.0;  // velocity and position blocks are adjacent
       const double R = m < 3 ? opt.velocity_noise_mps * opt.velocity_noise_mps : opt.position_noise_m * opt.position_noise_m;
-      const double innovation = z[m] - x[i];
-      const double S = P(i, i) + R;
-      const double ratio = innovation * innovation / (opt.gate_sigma * opt.gate_sigma * S);
-      rec.innovation[m] = innovation;
-      rec.variance[m] = S;
-      rec.test_ratio[m] = ratio;
-      rec.accepted[m] = ratio <= 1.0;
-      if (!rec.accepted[m]) {
-        ++result.rejected;
-        continue;
+      accepted += scalar_update(H, z[m], R, rec, m);
+    }
+    if (opt.attitude_noise_rad > 0) {
+      // The table's attitude: C_ref C_hat^T = I + [(phi - C_b_n delta) x], delta the error of the
+      // body frame's alignment on the platform (at a restart the navigation takes it over).
+      const Eigen::AngleAxisd aa(r.C_b_n * s.q_b_n.toRotationMatrix().transpose());
+      const Vector3d z_att = aa.angle() * aa.axis();
+      for (int m = 0; m < 3; ++m) {
+        StateVector H = StateVector::Zero();
+        H[kAttitude.index + m] = 1.0;
+        seg(H, kBodyAlignment) = -r.C_b_n.row(m).transpose();
+        accepted += scalar_update(H, z_att[m], opt.attitude_noise_rad * opt.attitude_noise_rad, rec,
+                                  static_cast<std::size_t>(6 + m));
       }
-      ++accepted;
-      const StateVector K = P.col(i) / S;
-      x += K * innovation;
-      // Joseph form for a scalar measurement of state i.
-      StateMatrix IKH = StateMatrix::Identity();
-      IKH.col(i) -= K;
-      P = IKH * P * IKH.transpose() + K * R * K.transpose();
     }
     result.measurements.push_back(rec);
     ++result.updates;
@@ -377,6 +430,12 @@ struct NavCalibrationFilter::Impl {
       model.accel.misalignment_rad.*kAccelAngleKeys[i] += x[kAccelAngles.index + static_cast<int>(i)];
     model.gyro.delay_s += seg(x, kGyroDelay);
     model.accel.delay_s += seg(x, kAccelDelay);
+    // The filter sees the offsets in its (body) frame; the model keeps them in o: v_o = C_b_o v_b.
+    const Matrix3d C_b_o = C_b_o_of(model.body_to_instrument_rad.value_or(Vector3d::Zero()));
+    model.accel.lever_arm_y_m += C_b_o * seg(x, kLeverArmY);
+    model.accel.lever_arm_z_m += C_b_o * seg(x, kLeverArmZ);
+    model.body_to_instrument_rad = model.body_to_instrument_rad.value_or(Vector3d::Zero()) + seg(x, kBodyAlignment);
+    ref.set_body_to_instrument(*model.body_to_instrument_rad);
     x.setZero();
     refresh_compensation();
   }
@@ -392,24 +451,10 @@ struct NavCalibrationFilter::Impl {
     stopped = true;
   }
 
-  Result finish() {
-    Result r = std::move(result);
-    r.model = model;
-    if (r.converged) r.status = "converged";
-    if (r.updates == 0 && r.converged) {
-      r.converged = false;
-      r.status = "not converged: no measurement update (the recording is too short)";
-    }
-    r.sigma_final = P.diagonal().cwiseMax(0.0).cwiseSqrt();
-    r.P_calibration = P.block<30, 30>(kFirstCalibration, kFirstCalibration);
-    r.model_values = model_to_state(model);
-    const int gx = kGyroDelay.index;
-    r.tau_yx_s = model.gyro.delay_s[1] - model.gyro.delay_s[0];
-    r.tau_zx_s = model.gyro.delay_s[2] - model.gyro.delay_s[0];
-    r.sigma_tau_yx_s = std::sqrt(std::max(0.0, P(gx + 1, gx + 1) + P(gx, gx) - 2 * P(gx, gx + 1)));
-    r.sigma_tau_zx_s = std::sqrt(std::max(0.0, P(gx + 2, gx + 2) + P(gx, gx) - 2 * P(gx, gx + 2)));
+  // The model with the sigma of the calibration states (the others as the input model had them).
+  ImuModel model_with_sigma(const StateVector& sd) const {
+    ImuModel m = model;
     ImuErrorSet sg = model.sigma.value_or(ImuErrorSet{});
-    const StateVector& sd = r.sigma_final;
     sg.gyro.bias_radps = seg(sd, kGyroBias);
     sg.accel.bias_mps2 = seg(sd, kAccelBias);
     sg.gyro.scale_pos = seg(sd, kGyroScalePos);
@@ -420,7 +465,54 @@ struct NavCalibrationFilter::Impl {
     for (std::size_t i = 0; i < 3; ++i) sg.accel.misalignment_rad.*kAccelAngleKeys[i] = sd[kAccelAngles.index + static_cast<int>(i)];
     sg.gyro.delay_s = seg(sd, kGyroDelay);
     sg.accel.delay_s = seg(sd, kAccelDelay);
-    r.model.sigma = sg;
+    sg.accel.lever_arm_y_m = seg(sd, kLeverArmY);
+    sg.accel.lever_arm_z_m = seg(sd, kLeverArmZ);
+    m.sigma = sg;
+    return m;
+  }
+
+  Progress progress() const {
+    Progress p;
+    const StateVector sd = P.diagonal().cwiseMax(0.0).cwiseSqrt();
+    p.model = model_with_sigma(sd);
+    p.t_s = t_s;
+    p.frames = result.frames;
+    p.updates = result.updates;
+    p.rejected = result.rejected;
+    p.restarts = result.restarts;
+    p.restart_times_s = result.restart_times_s;
+    if (!result.measurements.empty()) p.last_measurement = result.measurements.back();
+    p.gate_sigma = opt.gate_sigma;
+    p.sigma0 = sigma0;
+    p.sigma = sd;
+    if (!result.converged) {
+      p.status = result.status;
+    } else if (consecutive_rejections > 0) {
+      p.status = "rejecting: " + std::to_string(consecutive_rejections) + " update(s) in a row with every innovation outside the " +
+                 std::to_string(static_cast<int>(opt.gate_sigma)) + "-sigma gate (diverged at " +
+                 std::to_string(opt.divergence_rejections) + ")";
+    } else {
+      p.status = "running";
+    }
+    return p;
+  }
+
+  Result finish() {
+    Result r = std::move(result);
+    if (r.converged) r.status = "converged";
+    if (r.updates == 0 && r.converged) {
+      r.converged = false;
+      r.status = "not converged: no measurement update (the recording is too short)";
+    }
+    r.sigma_final = P.diagonal().cwiseMax(0.0).cwiseSqrt();
+    r.P_calibration = P.block<kCalibrationSize, kCalibrationSize>(kFirstCalibration, kFirstCalibration);
+    r.model_values = model_to_state(model);
+    const int gx = kGyroDelay.index;
+    r.tau_yx_s = model.gyro.delay_s[1] - model.gyro.delay_s[0];
+    r.tau_zx_s = model.gyro.delay_s[2] - model.gyro.delay_s[0];
+    r.sigma_tau_yx_s = std::sqrt(std::max(0.0, P(gx + 1, gx + 1) + P(gx, gx) - 2 * P(gx, gx + 1)));
+    r.sigma_tau_zx_s = std::sqrt(std::max(0.0, P(gx + 2, gx + 2) + P(gx, gx) - 2 * P(gx, gx + 2)));
+    r.model = model_with_sigma(r.sigma_final);
     nlohmann::json extra = r.model.extra_json.empty() ? nlohmann::json::object() : nlohmann::json::parse(r.model.extra_json);
     extra["status"] = r.status;
     r.model.extra_json = extra.dump();
@@ -433,6 +525,7 @@ NavCalibrationFilter::NavCalibrationFilter(const RecordingMeta& meta, const ImuM
 NavCalibrationFilter::~NavCalibrationFilter() = default;
 void NavCalibrationFilter::push(const ImuFrame& frame) { impl_->push(frame); }
 void NavCalibrationFilter::push_temp(const TempSample& temp) { impl_->push_temp(temp); }
+Progress NavCalibrationFilter::progress() const { return impl_->progress(); }
 Result NavCalibrationFilter::finish() { return impl_->finish(); }
 
 std::string Result::history_json() const {

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <deque>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,11 +41,20 @@ inline constexpr Block kGyroAngles{24, 6, "gyro_misalignment_rad"};   // xy xz y
 inline constexpr Block kAccelAngles{30, 3, "accel_misalignment_rad"}; // yz zx zy (x is the reference)
 inline constexpr Block kGyroDelay{33, 3, "gyro_delay_s"};
 inline constexpr Block kAccelDelay{36, 3, "accel_delay_s"};
-inline constexpr int kSize = 39;
-inline constexpr int kFirstCalibration = 9;  // 30 calibration states follow the 9 navigation states
-inline constexpr std::array<Block, 12> kAll = {kAttitude, kVelocity,     kPosition,     kGyroBias,
-                                               kAccelBias, kGyroScalePos, kGyroScaleNeg, kAccelScale,
-                                               kGyroAngles, kAccelAngles, kGyroDelay,   kAccelDelay};
+// Beyond the seed's 39: the y and z proof-mass offsets (body frame). The lever-arm stage leaves
+// them known to ~0.1 mm, and 0.1 mm is 1e-4 m/s^2 during a fast oscillation (1 rad/s): far more
+// than the accelerometer errors stage 3 is after (docs/stage3.md).
+inline constexpr Block kLeverArmY{39, 3, "accel_lever_arm_y_m"};
+inline constexpr Block kLeverArmZ{42, 3, "accel_lever_arm_z_m"};
+// How the body frame sits on the platform (the body_to_instrument rotation, the nominal mount
+// being exact by convention): what the table's attitude measurement needs beside the gyro delays.
+inline constexpr Block kBodyAlignment{45, 3, "body_alignment_rad"};
+inline constexpr int kSize = 48;
+inline constexpr int kFirstCalibration = 9;  // the calibration states follow the 9 navigation states
+inline constexpr int kCalibrationSize = kSize - kFirstCalibration;
+inline constexpr std::array<Block, 15> kAll = {kAttitude,     kVelocity,     kPosition,   kGyroBias,   kAccelBias,
+                                               kGyroScalePos, kGyroScaleNeg, kAccelScale, kGyroAngles, kAccelAngles,
+                                               kGyroDelay,    kAccelDelay,   kLeverArmY,  kLeverArmZ,  kBodyAlignment};
 }  // namespace state
 
 using StateVector = Eigen::Matrix<double, state::kSize, 1>;
@@ -55,6 +65,10 @@ struct Options {
   double update_interval_s = 1.0;     // velocity and position measurements
   double velocity_noise_mps = 1e-4;   // 1-sigma of the table reference
   double position_noise_m = 1e-3;
+  // 1-sigma of the attitude the table's encoders give (encoder accuracy, axis wobble and
+  // orthogonality together; 0 = no attitude measurement). It is what sees the gyros' delay
+  // against the table's time base: a lag tau turns the attitude by tau w (docs/stage3.md).
+  double attitude_noise_rad = 2.0 * 4.84813681109536e-6;
   double gate_sigma = 5.0;            // innovations beyond this many sigma are rejected
   int divergence_rejections = 20;     // this many consecutive rejections end the run as diverged
   double max_delay_s = 0.01;          // the largest delay the compensation window can follow
@@ -69,17 +83,25 @@ struct Options {
   double sigma_gyro_angle_rad = 3.0 * 4.84813681109536e-6;      // 3"
   double sigma_accel_angle_rad = 3.0 * 4.84813681109536e-6;
   double sigma_gyro_delay_s = 20e-6, sigma_accel_delay_s = 3e-3;
+  // Proof-mass offsets: the model's own sigma when it carries one (the lever-arm stage writes it),
+  // never below this; this alone when it does not.
+  double sigma_lever_arm_m = 0.3e-3;
+  // The body frame on the platform: the model's sigma of the accelerometer angles xy xz yx when it
+  // carries one (stage 1), never below this; this alone when it does not.
+  double sigma_body_alignment_rad = 3.0 * 4.84813681109536e-6;
   double gyro_bias_rw_radps_rts = 0.0;   // 0: from the model's noise, else this
   double accel_bias_rw_mps2_rts = 0.0;
   double scale_rw_rts = 1e-9;
 };
 
 struct MeasurementRecord {
+  static constexpr int kCount = 9;
   double t_s;
-  std::array<double, 6> innovation;  // dv_E, dv_N, dv_U (m/s), dp_E, dp_N, dp_U (m)
-  std::array<double, 6> variance;
-  std::array<double, 6> test_ratio;  // innovation^2 / (gate^2 variance): > 1 is rejected
-  std::array<bool, 6> accepted;
+  // dv_E, dv_N, dv_U (m/s), dp_E, dp_N, dp_U (m), attitude E, N, U (rad; zero when not measured)
+  std::array<double, kCount> innovation;
+  std::array<double, kCount> variance;
+  std::array<double, kCount> test_ratio;  // innovation^2 / (gate^2 variance): > 1 is rejected
+  std::array<bool, kCount> accepted;
 };
 
 struct HistoryRecord {
@@ -93,16 +115,29 @@ struct Result {
   bool converged = true;
   std::string status;  // "converged" or what went wrong and when
   StateVector sigma0, sigma_final;
-  Eigen::Matrix<double, 30, 30> P_calibration;  // covariance of the 30 calibration states
+  Eigen::Matrix<double, state::kCalibrationSize, state::kCalibrationSize> P_calibration;  // of the calibration states
   StateVector model_values;  // calibration states' final values in the layout of the error state
   std::int64_t updates = 0, rejected = 0, restarts = 0, frames = 0;
   double covariance_time_s = 0;  // wall-clock share is measured by the caller; this counts steps
   std::int64_t covariance_steps = 0;
   std::vector<MeasurementRecord> measurements;
   std::vector<HistoryRecord> history;
+  std::vector<double> restart_times_s;  // program time of each restart of the navigation
   // Gyro delays of y and z relative to gyro x, and their sigmas (seed: tau_yx, tau_zx).
   double tau_yx_s = 0, tau_zx_s = 0, sigma_tau_yx_s = 0, sigma_tau_zx_s = 0;
   std::string history_json() const;
+};
+
+// What the filter knows so far, for a live display while the frames come (cheap: no history copied).
+struct Progress {
+  ImuModel model;      // body frame, with the current sigma
+  std::string status;  // "running", "rejecting: ..." or "not converged: ..." (then it has stopped)
+  double t_s = 0;      // program time of the last frame processed
+  std::int64_t frames = 0, updates = 0, rejected = 0, restarts = 0;
+  std::vector<double> restart_times_s;
+  std::optional<MeasurementRecord> last_measurement;
+  double gate_sigma = 0;  // the gate of the innovations, in their sigmas
+  StateVector sigma0, sigma;
 };
 
 // Calibration-state values of a model in the filter's layout (for tests and NEES).
@@ -119,6 +154,7 @@ class NavCalibrationFilter {
   // temperatures and rates (stage 2); the filter estimates and feeds back the constants at T_ref,
   // which is what the result's model carries beside the unchanged section.
   void push_temp(const TempSample& temp);
+  Progress progress() const;
   Result finish();
 
  private:

@@ -32,6 +32,17 @@ struct NavSummary {
   double max_attitude_error_rad = 0;
 };
 
+// One sample interval reduced to its compensated input, in the model's frame.
+struct CompensatedSample {
+  Eigen::Vector3d dtheta_rad = Eigen::Vector3d::Zero();  // rotation increment
+  Eigen::Vector3d dv_mps = Eigen::Vector3d::Zero();      // specific-force increment at the origin
+  Eigen::Vector3d w_radps = Eigen::Vector3d::Zero();     // mean inertial rate over the interval
+  Eigen::Vector3d dw_radps2 = Eigen::Vector3d::Zero();   // its derivative (central difference)
+  // Row j: f_j - f_origin, the specific force accelerometer j's proof mass adds (seed eq. 3),
+  // mean over the interval; the error model of channel j acts on f_origin + this row.
+  Eigen::Matrix3d size_effect_mps2 = Eigen::Matrix3d::Zero();
+};
+
 // Reduces raw increments to the compensated input over each sample interval. Needs a few frames
 // of look-ahead to undo channel delays; the runner feeds it a window of frames.
 class Compensator {
@@ -43,11 +54,13 @@ class Compensator {
   int lookahead() const { return lookahead_; }
   int lookback() const { return lookback_; }
   // window[lookback()] is the frame being compensated; window holds lookback()+1+lookahead() frames.
-  void compensate(const std::deque<ImuFrame>& window, double dt_s, Eigen::Vector3d& dtheta_b,
-                  Eigen::Vector3d& dv_b) const;
+  CompensatedSample compensate(const std::deque<ImuFrame>& window) const;
 
  private:
-  Eigen::Vector3d shifted(const std::deque<ImuFrame>& window, bool gyro) const;
+  // Channel outputs over the interval `offset` frames from the current one, moved back by each
+  // channel's delay onto the interval of its input.
+  Eigen::Vector3d shifted(const std::deque<ImuFrame>& window, bool gyro, int offset) const;
+  Eigen::Vector3d rate_radps(const std::deque<ImuFrame>& window, int offset, double dt_s) const;
   const ImuModel& model_;
   int lookahead_ = 1, lookback_ = 1;
   double dt_nominal_s_ = 0;
@@ -65,6 +78,9 @@ class TableReference {
   // Reference at window[i]; the platform rate by central differences of the encoder angles.
   Sample at(const std::deque<ImuFrame>& window, std::size_t i) const;
   NavState initial_state(const Sample& s) const;
+  // How the body frame sits in the instrument frame (formats.md body_to_instrument_arcsec), for a
+  // filter that refines it.
+  void set_body_to_instrument(const Eigen::Vector3d& rot_rad);
   double h_ref_m(const Sample& s) const { return h0_ + s.r_n.z(); }
   // Position error of a navigation state, ENU metres (Up is zero when the vertical is held).
   Eigen::Vector3d position_error_m(const NavState& nav, const Sample& s) const;

@@ -84,92 +84,45 @@ CycleEstimator::CycleEstimator(const RecordingMeta& meta, std::vector<Cycle> cyc
 
 namespace {
 
-// Off-diagonal entries of row j of D, as the stage-1 calibrator orders them: (column k, sign,
-// index of the angle in xy, xz, yx, yz, zx, zy).
-struct OffDiag {
-  int k;
-  double sign;
-  int mis;
-};
-constexpr OffDiag kOffDiag[3][2] = {{{1, +1.0, 1}, {2, -1.0, 0}}, {{0, -1.0, 3}, {2, +1.0, 2}}, {{0, +1.0, 5}, {1, -1.0, 4}}};
+// The coefficient a column of stage 1's design estimates, by its name.
+int coefficient_index(const direct::SensorDesign& d, std::size_t column) {
+  const std::string key = d.key(column);
+  for (const Coefficient& k : coefficients())
+    if (full_key(k) == key) return k.index;
+  throw std::logic_error("stage thermal: stage 1 estimates " + key + ", which has no thermal coefficient");
+}
 
-// Influence of each interval on each coefficient: the stage-1 design at the solution, so that
-// the temperature an estimate refers to is the same weighted mean of the intervals' temperatures
-// that the estimate itself is of the coefficient's values (exact for a coefficient linear in T).
-void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, double min_rotation_rad, CycleEstimate& e) {
-  // Each row's measurements, as stage 1 forms them: the mean specific-force residual of a static,
-  // the summed-angle residual of an interval.
-  std::array<std::vector<double>, 6> b;
-  std::vector<const direct::Interval*> statics, rotations;
-  for (const direct::Interval& iv : ivs) {
-    if (iv.frames < 2) continue;
-    if (iv.is_static) {
-      statics.push_back(&iv);
-      continue;
-    }
-    int moving = 0;
-    for (int k = 0; k < 3; ++k) moving += iv.moved_axes_rad[k] > 1e-8;
-    if (!iv.gap && moving == 1 && iv.moved_axes_rad.maxCoeff() >= min_rotation_rad) rotations.push_back(&iv);
-  }
-  std::vector<const direct::Interval*> eqs = statics;
-  eqs.insert(eqs.end(), rotations.begin(), rotations.end());
+// Influence of each interval on each coefficient: stage 1's own design at the solution
+// (direct::gyro_design, accel_design), so that the temperature an estimate refers to is the same
+// weighted mean of the intervals' temperatures that the estimate itself is of the coefficient's
+// values (exact for a coefficient linear in T).
+void influence(const std::vector<direct::Interval>& ivs, const ImuModel& m, const direct::Options& options,
+               CycleEstimate& e) {
+  const direct::Selection sel = direct::select_intervals(ivs, options);
+  // Every interval stage 1 used, in the gyros' row order (statics, then rotations): the
+  // accelerometers' rows are the statics, its first rows.
+  std::vector<const direct::Interval*> eqs = sel.statics;
+  eqs.insert(eqs.end(), sel.rotations.begin(), sel.rotations.end());
   e.spans.clear();
   for (const auto* iv : eqs) e.spans.push_back({iv->t0_s, iv->t1_s});
   for (auto& w : e.weight) w.assign(eqs.size(), 0.0);
-  auto spread = [&](CycleEstimate::Design& d, const Eigen::VectorXd& w) {
-    d.K = (d.A.transpose() * w.asDiagonal() * d.A).ldlt().solve(d.A.transpose() * w.asDiagonal());
+  // Design rows: gyro x y z, accel x y z.
+  for (std::size_t row = 0; row < 6; ++row) {
+    const int j = static_cast<int>(row % 3);
+    const direct::SensorDesign sd = row < 3 ? direct::gyro_design(j, sel, m.gyro) : direct::accel_design(j, sel, m.accel);
+    CycleEstimate::Design& d = e.design[row];
+    d.coefficient.clear();
+    for (std::size_t c = 0; c < sd.columns.size(); ++c) d.coefficient.push_back(coefficient_index(sd, c));
+    d.interval.resize(sd.rows.size());
+    for (std::size_t i = 0; i < sd.rows.size(); ++i) d.interval[i] = i;
+    d.A = sd.A;
+    d.K = (sd.A.transpose() * sd.w.asDiagonal() * sd.A).ldlt().solve(sd.A.transpose() * sd.w.asDiagonal());
     for (std::size_t c = 0; c < d.coefficient.size(); ++c)
       for (std::size_t i = 0; i < d.interval.size(); ++i)
         e.weight[static_cast<std::size_t>(d.coefficient[c])][d.interval[i]] =
             d.K(static_cast<Eigen::Index>(c), static_cast<Eigen::Index>(i)) *
             d.A(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(c));
-  };
-  const auto ns = static_cast<Eigen::Index>(statics.size());
-  for (int j = 0; j < 3; ++j) {
-    CycleEstimate::Design& d = e.design[static_cast<std::size_t>(3 + j)];
-    d.coefficient = {15 + j, 18 + j, 21 + kOffDiag[j][0].mis, 21 + kOffDiag[j][1].mis};
-    d.A.resize(ns, 4);
-    d.interval.clear();
-    Eigen::VectorXd w(ns);
-    for (Eigen::Index i = 0; i < ns; ++i) {
-      const direct::Interval& s = *statics[static_cast<std::size_t>(i)];
-      d.interval.push_back(static_cast<std::size_t>(i));
-      d.A(i, 0) = 1.0;
-      d.A(i, 1) = s.f_o_mps2[j];
-      for (int c = 0; c < 2; ++c) {
-        const OffDiag& od = kOffDiag[j][c];
-        d.A(i, 2 + c) = od.sign * (1.0 + m.accel.scale[od.k]) * s.f_o_mps2[od.k];
-      }
-      w[i] = s.T_s;
-      b[static_cast<std::size_t>(3 + j)].push_back(s.sum_dv[j] / s.T_s - s.f_o_mps2[j]);
-    }
-    spread(d, w);
-  }
-  const auto ne = static_cast<Eigen::Index>(eqs.size());
-  for (int j = 0; j < 3; ++j) {
-    CycleEstimate::Design& d = e.design[static_cast<std::size_t>(j)];
-    d.coefficient = {j, 3 + j, 6 + j, 9 + kOffDiag[j][0].mis, 9 + kOffDiag[j][1].mis};
-    d.A.resize(ne, 5);
-    d.interval.clear();
-    Eigen::VectorXd w(ne);
-    for (Eigen::Index i = 0; i < ne; ++i) {
-      const direct::Interval& v = *eqs[static_cast<std::size_t>(i)];
-      auto scaled = [&](int k) {
-        return (1.0 + m.gyro.scale_pos[k]) * v.ref_pos_rad[k] + (1.0 + m.gyro.scale_neg[k]) * v.ref_neg_rad[k];
-      };
-      d.interval.push_back(static_cast<std::size_t>(i));
-      d.A(i, 0) = v.T_s;
-      d.A(i, 1) = v.ref_pos_rad[j];
-      d.A(i, 2) = v.ref_neg_rad[j];
-      for (int c = 0; c < 2; ++c) d.A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
-      w[i] = 1.0 / v.T_s;
-      b[static_cast<std::size_t>(j)].push_back(v.sum_dtheta[j] - (v.ref_pos_rad[j] + v.ref_neg_rad[j]));
-    }
-    spread(d, w);
-  }
-  for (std::size_t row = 0; row < 6; ++row) {
-    const CycleEstimate::Design& d = e.design[row];
-    const Eigen::VectorXd x = d.K * Eigen::Map<const Eigen::VectorXd>(b[row].data(), static_cast<Eigen::Index>(b[row].size()));
+    const Eigen::VectorXd x = d.K * sd.b;
     for (std::size_t c = 0; c < d.coefficient.size(); ++c) {
       const Coefficient& k = coefficients()[static_cast<std::size_t>(d.coefficient[c])];
       e.design_mismatch[static_cast<std::size_t>(k.index)] =
@@ -193,7 +146,7 @@ void CycleEstimator::close(Active& a) {
       e.value[static_cast<std::size_t>(k.index)] = get(r.model.gyro, r.model.accel, k);
       e.sigma[static_cast<std::size_t>(k.index)] = get(sig.gyro, sig.accel, k);
     }
-    influence(a.calibrator->intervals(), r.model, direct::Options{}.min_rotation_rad, e);
+    influence(a.calibrator->intervals(), r.model, direct::Options{}, e);
     e.ok = true;
   } catch (const std::exception& ex) {
     e.ok = false;

@@ -13,6 +13,7 @@
 #include "estimators/evaluate.hpp"
 #include "estimators/noise.hpp"
 #include "estimators/thermal.hpp"
+#include "pipeline/pipeline.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
 
@@ -74,21 +75,23 @@ void write_tar_entry(std::ofstream& out, const std::string& name, const fs::path
   if (const auto rest = size % 512; rest != 0) out.write(zeros, static_cast<std::streamsize>(512 - rest));
 }
 
+// One stage of the calibration pipeline on the finished run, as `imucal calibrate --stage X`
+// runs it; a stage the run cannot support is NotAvailable with the stage's reason.
+pipeline::Outcome stage_on_run(const storage::RunDb& db, pipeline::Stage stage, const ImuModel& input,
+                               const std::string& what, const AnalysisProgress& progress) {
+  const RecordingMeta meta = db.meta();
+  const pipeline::RunDbSource run(db);
+  const pipeline::ProgressSource source(run, pipeline::end_of_program_s(meta), progress);
+  pipeline::Outcome o = pipeline::run_to_end(meta, source, {stage}, true, input).front();
+  if (o.status != pipeline::Status::Done) throw NotAvailable("not available for this run: " + what + o.message);
+  return o;
+}
+
 }  // namespace
 
-json allan_from_run(const std::string& run_path) {
+json allan_from_run(const std::string& run_path, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
-  const RecordingMeta meta = db.meta();
-  noise::NoiseAnalyzer analyzer(meta);
-  db.for_each_frame([&](const ImuFrame& f) { analyzer.push(f); });
-  noise::Result r;
-  try {
-    r = analyzer.finish();
-  } catch (const std::exception&) {
-    throw NotAvailable(
-        "not available for this run: the Allan deviation needs static segments of at least 10 s (program "
-        "'noise' holds still for 7500 s)");
-  }
+  const noise::Result r = *stage_on_run(db, pipeline::Stage::Noise, ImuModel{}, "the Allan deviation: ", progress).noise;
   json out = json::parse(r.curves_json());
   for (const char* c : {"gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"}) {
     out[c].erase("psd");  // the PSD is not plotted; keep the answer small
@@ -112,31 +115,10 @@ json allan_from_run(const std::string& run_path) {
   return out;
 }
 
-json thermal_from_run(const std::string& run_path, const ImuModel& input) {
+json thermal_from_run(const std::string& run_path, const ImuModel& input, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
-  RecordingMeta meta = db.meta();
-  // A campaign of several programs prefixes the segment names with the program's
-  // ("thermal/cycle-001/pos-1"); the stage looks for names starting with "cycle-NNN/".
-  for (SegmentInfo& s : meta.segments)
-    if (const auto p = s.name.find("/cycle-"); p != std::string::npos) s.name = s.name.substr(p + 1);
-  std::vector<thermal::Cycle> cycles;
-  try {
-    cycles = thermal::find_cycles(meta.segments);
-  } catch (const std::exception&) {
-  }
-  if (cycles.size() < 3)
-    throw NotAvailable("not available for this run: the thermal plots need the table cycles of program 'thermal' "
-                       "(or 'thermal-short') run with a chamber profile; this run has " +
-                       std::to_string(cycles.size()) + " cycles");
-  thermal::CycleEstimator estimator(meta, cycles, input);
-  db.for_each_frame([&](const ImuFrame& f) { estimator.push(f); });
-  const auto estimates = estimator.finish();
-  thermal::Result r;
-  try {
-    r = thermal::calibrate(meta, estimates, db.temps(), input, thermal::Options{});
-  } catch (const std::exception& e) {
-    throw NotAvailable(std::string("not available for this run: the thermal stage failed: ") + e.what());
-  }
+  const thermal::Result r =
+      *stage_on_run(db, pipeline::Stage::Thermal, input, "the thermal plots: ", progress).thermal;
   const json report = json::parse(r.report_json);
   // report.plots: {"columns": [...], "series": {coefficient: [[row], ...]}} (docs/thermal.md).
   const json& plots = report.at("plots");
@@ -163,7 +145,8 @@ json thermal_from_run(const std::string& run_path, const ImuModel& input) {
           {"coefficients", coefficients}};
 }
 
-json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants) {
+json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants,
+                         const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
   const RecordingMeta meta = db.meta();
   bool judged = false;
@@ -172,9 +155,14 @@ json evaluation_from_run(const std::string& run_path, const std::vector<Variant>
     throw NotAvailable("not available for this run: the Schuler test needs the tilt and coning segments of program "
                        "'evaluate'");
   json out = {{"variants", json::array()}};
-  for (const Variant& v : variants) {
-    const evaluate::Result r = evaluate::evaluate_model(
-        meta, v.model, [&](const auto& fn, std::int64_t t0, std::int64_t t1) { db.for_each_frame(fn, t0, t1); });
+  const pipeline::RunDbSource run(db);
+  const double n = static_cast<double>(std::max<std::size_t>(1, variants.size()));
+  for (std::size_t k = 0; k < variants.size(); ++k) {
+    const Variant& v = variants[k];
+    // Each variant reads the run once: its share of the progress is 1/n.
+    const pipeline::ProgressSource source(run, pipeline::end_of_program_s(meta), progress, static_cast<double>(k) / n,
+                                          1.0 / n);
+    const evaluate::Result r = pipeline::evaluate_recording(meta, source, v.model);
     json segments = json::array();
     for (const auto& s : r.segments) {
       json speed = json::array();

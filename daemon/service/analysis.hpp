@@ -2,9 +2,11 @@
 // library code of `imucal calibrate` and `imucal evaluate` (docs/api.md): the Allan deviation
 // (estimators/noise), the thermal plots (estimators/thermal), the Schuler test of model variants
 // (estimators/evaluate), and the recording bundle as one tar file (storage/bundle). Each reads the
-// run on its own read-only connection; none writes to it. No HTTP in here.
+// run on its own read-only connection; none writes to it. No HTTP in here. `progress`, when given,
+// hears the share done (0..1) now and then (AnalysisJobs shows it).
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -26,19 +28,22 @@ struct NotAvailable : std::runtime_error {
 // {"gyro_x": {"tau_s": [...], "adev": [...], "unit": "deg/h"}, ... "accel_z": {...},
 //  "arw_deg_rth": [x, y, z], "vrw_mps_rth": [x, y, z], "bias_instability_dph": [...],
 //  "bias_instability_mps2": [...], "longest_static_s", "total_static_s", "notes": [...]}.
-nlohmann::json allan_from_run(const std::string& run_path);
+using AnalysisProgress = std::function<void(double fraction)>;
+nlohmann::json allan_from_run(const std::string& run_path, const AnalysisProgress& progress = {});
 
 // Stage 2 on a run of the thermal program (table cycles named cycle-NNN/ and a chamber profile):
 // per coefficient, per used cycle, the temperature, the stage-1 estimate ("before") and the
 // estimate less the fitted thermal part ("after"). `input`: the campaign's stage-1 model.
-nlohmann::json thermal_from_run(const std::string& run_path, const ImuModel& input);
+nlohmann::json thermal_from_run(const std::string& run_path, const ImuModel& input,
+                                const AnalysisProgress& progress = {});
 
 struct Variant {
   std::string name, source;
   ImuModel model;
 };
 // The Schuler test (the evaluate program's tilt and coning segments) of each variant.
-nlohmann::json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants);
+nlohmann::json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants,
+                                   const AnalysisProgress& progress = {});
 
 // The run's truth model (simulated runs), if the run file carries one.
 std::optional<ImuModel> truth_of_run(const std::string& run_path);

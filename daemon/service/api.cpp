@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include "daemon/service/analysis.hpp"
+#include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -67,7 +68,7 @@ std::vector<std::string> split_path(const std::string& path) {
   return parts;
 }
 
-constexpr std::size_t kAnalysisCacheEntries = 60;  // 20 campaigns' three results
+constexpr std::size_t kAnalysisAnswersKept = 60;  // 20 campaigns' three results
 
 json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
@@ -133,24 +134,40 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
       programs_(json::array()),
       started_ms_(now_unix_ms()),
       started_(std::chrono::steady_clock::now()) {
-  for (const auto& name : motion::builtin_program_names()) {
-    const std::string text = motion::builtin_program_json(name);
+  // Two threads: one long analysis (a 12 h thermal run) does not hold up every other.
+  // The listener is called under its mutex, so that once set_event_listener({}) has returned no
+  // job is still inside it (the HTTP server it points to may then go).
+  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) {
+    std::lock_guard lock(listener_mutex_);
+    if (event_listener_) event_listener_(e);
+  });
+  // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
+  // joined program, duration, segments, and the estimators a campaign of it runs by default (the
+  // builder offers those, so the rule lives in one place: check_campaign).
+  std::vector<std::string> names = motion::builtin_program_names();
+  names.push_back("full");
+  for (const auto& name : names) {
+    const CampaignCheck check = check_campaign({{"name", name}, {"program", name}}, config);
+    if (!check.spec) {
+      std::string why;
+      for (const auto& p : check.problems) why += (why.empty() ? "" : "; ") + p;
+      spdlog::warn("built-in program '{}' does not pass the campaign check with the configured limits: {}", name, why);
+      continue;
+    }
     json segments = json::array();
-    double duration_s = 0.0;
-    try {
-      const motion::Program p = motion::compile_program(text, config.table_limits);
-      duration_s = p.duration_s();
-      for (const auto& s : p.segments())
-        segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
-    } catch (const std::exception& e) {
-      spdlog::warn("built-in program '{}' does not compile with the configured table limits: {}", name, e.what());
-    }
-    json entry = {{"name", name}, {"duration_s", duration_s}, {"segments", segments}, {"program", json::parse(text)}};
+    for (const auto& s : check.segments)
+      segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
+    json program = json::parse(check.spec->program_json);
+    if (name == "full")
+      program["comment"] = "The whole method in one run: direct, lever-arm, navigation and evaluate, each stage from "
+                           "the models before, the Schuler test of every stage's model.";
+    json entry = {{"name", name},
+                  {"duration_s", check.duration_s},
+                  {"segments", segments},
+                  {"program", program},
+                  {"estimators", check.spec->estimators}};
     // The built-in thermal campaigns bring their chamber profile: the builder shows its steps.
-    if (motion::is_builtin_chamber(name)) {
-      const CampaignCheck check = check_campaign({{"name", name}, {"program", name}}, config);
-      if (check.spec) entry["chamber"] = check.spec->normalized.at("chamber");
-    }
+    if (motion::is_builtin_chamber(name)) entry["chamber"] = check.spec->normalized.at("chamber");
     programs_.push_back(std::move(entry));
   }
 }
@@ -258,6 +275,16 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
   if (path == "/api/programs") {
     if (auto r = only("GET")) return *r;
     return json_reply(200, {{"programs", programs_}});
+  }
+  if (path == "/api/suspenders") {
+    // The conditions that hold a run, with the daemon's settings (a campaign may set its own:
+    // `suspenders` in its JSON).
+    if (auto r = only("GET")) return *r;
+    return json_reply(200, {{"suspenders", Suspenders(config_.suspenders).describe()},
+                            {"settings",
+                             {{"settle_s", config_.suspenders.settle_s},
+                              {"frame_timeout_s", config_.suspenders.frame_timeout_s},
+                              {"chamber_persist_s", config_.suspenders.chamber_persist_s}}}});
   }
   if (path == "/api/campaigns/validate") {
     if (auto r = only("POST")) return *r;
@@ -461,6 +488,15 @@ HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::
     return error_reply(404, "campaign " + std::to_string(id) + " has no model (state " +
                                 std::string(to_string(row->state)) + ")");
   std::string text = *row->model_json;
+  if (const auto stage = query.find("stage"); stage != query.end()) {
+    // One calibration stage's model, as the campaign kept it with its results.
+    const json results = row->results_json ? json::parse(*row->results_json, nullptr, false) : json::object();
+    if (!pipeline::stage_of_estimator(stage->second))
+      return error_reply(400, "stage must be one of direct, lever-arm, stage3");
+    if (!results.is_object() || !results.contains(stage->second) || !results.at(stage->second).contains("model"))
+      return error_reply(404, "campaign " + std::to_string(id) + " has no model of stage " + stage->second);
+    text = results.at(stage->second).at("model").dump();
+  }
   if (const auto it = query.find("frame"); it != query.end()) {
     if (it->second == "body") {
       text = imu_model_to_json_text(direct::to_body_frame(imu_model_from_json_text(text, "stored model")));
@@ -548,6 +584,11 @@ HttpReply Api::campaign_recording(std::int64_t id, bool head) {
   return r;
 }
 
+void Api::set_event_listener(std::function<void(const json&)> listener) {
+  std::lock_guard lock(listener_mutex_);
+  event_listener_ = std::move(listener);
+}
+
 HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
@@ -558,44 +599,74 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
     return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) + ": the " +
                                 label + " is computed when the run has ended",
                        {{"state", to_string(row->state)}});
-  const auto key = std::make_pair(id, what);
-  std::lock_guard lock(analysis_mutex_);
-  if (const auto it = analysis_cache_.find(key); it != analysis_cache_.end()) {
-    HttpReply r = json_reply(it->second.first, json::object());
-    r.body = it->second.second;
+  // A job off the I/O thread (AnalysisJobs): the row is copied, the request answered at once.
+  auto compute = [this, id, what, row = *row](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    const std::string path = run_path(row);
+    std::optional<ImuModel> model;
+    if (row.model_json) model = imu_model_from_json_text(*row.model_json, "campaign " + std::to_string(id) + "'s model");
+    int status = 200;
+    json body;
+    try {
+      if (what == "allan") {
+        body = allan_from_run(path, progress);
+      } else if (what == "thermal") {
+        // Stage 2 starts from stage 1's model (instrument frame): the campaign's, or the one its
+        // direct stage kept when later stages (stage 3: body frame) followed it.
+        std::optional<ImuModel> stage1 = model && model->frame == "instrument" ? model : std::nullopt;
+        if (row.results_json) {
+          const json results = json::parse(*row.results_json, nullptr, false);
+          if (results.is_object() && results.contains("direct") && results.at("direct").contains("model"))
+            stage1 = imu_model_from_json_text(results.at("direct").at("model").dump(), "the direct stage's model");
+        }
+        body = thermal_from_run(path, stage1.value_or(ImuModel{}), progress);
+        body["input_model"] = stage1 ? "the campaign's stage-1 model" : "ideal (the campaign has no stage-1 model)";
+      } else {
+        std::vector<Variant> variants;
+        variants.push_back({"uncalibrated", "no compensation (the nominal sensor)", ImuModel{}});
+        // Each calibration stage's model when the campaign kept several (a `full` campaign: direct,
+        // lever-arm, stage3), else its one model.
+        std::vector<Variant> stages;
+        if (row.results_json) {
+          const json results = json::parse(*row.results_json, nullptr, false);
+          for (const pipeline::StageName& n : pipeline::stage_names()) {
+            if (!results.is_object() || !results.contains(n.estimator)) continue;
+            const json& r = results.at(n.estimator);
+            if (!r.is_object() || !r.contains("model")) continue;
+            stages.push_back({std::string("stage ") + n.estimator, std::string("this campaign's model after stage ") + n.name,
+                              imu_model_from_json_text(r.at("model").dump(), std::string("the ") + n.estimator + " model")});
+          }
+        }
+        if (stages.size() > 1) {
+          variants.insert(variants.end(), stages.begin(), stages.end());
+        } else if (model) {
+          variants.push_back({"campaign " + std::to_string(id), "this campaign's model", *model});
+        }
+        const CampaignCheck check = check_campaign_text(row.spec_json, config_);
+        if (check.spec && check.spec->navigation_model)
+          variants.push_back({"navigation_model", "the campaign's navigation_model", *check.spec->navigation_model});
+        if (const auto truth = truth_of_run(path)) variants.push_back({"truth", "the simulation's truth (the best any calibration can do)", *truth});
+        body = evaluation_from_run(path, variants, progress);
+      }
+    } catch (const NotAvailable& e) {
+      status = 404;
+      body = {{"error", e.what()}};
+    }
+    return {status, body};
+  };
+  AnalysisJobs::Key key;
+  key.campaign = id;
+  key.analysis = what;
+  key.state = to_string(row->state);
+  const AnalysisJobs::Answer a = jobs_->request(key, std::move(compute));
+  if (a.ready) {
+    HttpReply r = json_reply(a.status, json::object());
+    r.body = a.body;
     return r;
   }
-  const std::string path = run_path(*row);
-  std::optional<ImuModel> model;
-  if (row->model_json) model = imu_model_from_json_text(*row->model_json, "campaign " + std::to_string(id) + "'s model");
-  int status = 200;
-  json body;
-  try {
-    if (what == "allan") {
-      body = allan_from_run(path);
-    } else if (what == "thermal") {
-      body = thermal_from_run(path, model.value_or(ImuModel{}));
-      body["input_model"] = model ? "the campaign's stage-1 model" : "ideal (the campaign has no model)";
-    } else {
-      std::vector<Variant> variants;
-      variants.push_back({"uncalibrated", "no compensation (the nominal sensor)", ImuModel{}});
-      if (model) variants.push_back({"campaign " + std::to_string(id), "this campaign's model (direct estimator)", *model});
-      const CampaignCheck check = check_campaign_text(row->spec_json, config_);
-      if (check.spec && check.spec->navigation_model)
-        variants.push_back({"navigation_model", "the campaign's navigation_model", *check.spec->navigation_model});
-      if (const auto truth = truth_of_run(path)) variants.push_back({"truth", "the simulation's truth (the best any calibration can do)", *truth});
-      body = evaluation_from_run(path, variants);
-    }
-  } catch (const NotAvailable& e) {
-    status = 404;
-    body = {{"error", e.what()}};
-  }
-  if (is_final(row->state)) {
-    // Bounded: the oldest campaigns' answers go first (they are computed again when asked).
-    if (analysis_cache_.size() >= kAnalysisCacheEntries) analysis_cache_.erase(analysis_cache_.begin());
-    analysis_cache_[key] = {status, body.dump()};
-  }
-  return json_reply(status, body);
+  // 202: computing (or queued); ask again. The live WebSocket carries the same progress.
+  HttpReply r = json_reply(202, a.pending);
+  r.headers.emplace_back("Retry-After", "1");
+  return r;
 }
 
 }  // namespace imucal::daemon

@@ -5,6 +5,8 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
+#include <memory>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -12,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/service/analysis_jobs.hpp"
 #include "daemon/service/auth.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/daemon_db.hpp"
@@ -44,6 +47,8 @@ class Api {
   bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
   // From now on every change is refused with 503.
   void set_shutting_down() { shutting_down_ = true; }
+  // Where the analyses' progress is published ({"type": "analysis", ...}, docs/api.md).
+  void set_event_listener(std::function<void(const nlohmann::json&)> listener);
 
  private:
   HttpReply route(const ApiRequest& request, const std::string& path, const std::map<std::string, std::string>& query);
@@ -72,13 +77,15 @@ class Api {
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;
   std::atomic<bool> shutting_down_{false};
-  // Results of campaign_analysis for runs that cannot change any more (final states), and the
-  // IMU serial of each run file: (id, what) -> reply body and status.
-  std::mutex analysis_mutex_;  // held while computing: one analysis at a time
-  std::map<std::pair<std::int64_t, std::string>, std::pair<int, std::string>> analysis_cache_;
   std::mutex export_mutex_;    // one recording export at a time
+  // The IMU serial of each run file.
   std::mutex serial_mutex_;
   std::map<std::int64_t, std::string> serial_cache_;
+  // Where analysis progress goes (the live WebSocket), once the HTTP server exists.
+  std::mutex listener_mutex_;
+  std::function<void(const nlohmann::json&)> event_listener_;
+  // Last: its threads stop (and its running jobs are cancelled) before the rest goes.
+  std::unique_ptr<AnalysisJobs> jobs_;
 };
 
 // The session id in a Cookie header, or empty.

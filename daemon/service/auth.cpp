@@ -1,5 +1,7 @@
 #include "daemon/service/auth.hpp"
 
+#include "daemon/service/password_hash.hpp"
+
 #include <sys/stat.h>
 
 #include <filesystem>
@@ -48,7 +50,7 @@ Auth::Auth(const DaemonConfig& config, const std::string& data_dir)
   }
   for (const UserEntry& u : config.users) {
     if (!u.token.empty()) tokens_.push_back({u.token, {u.name, u.role, "token", ""}});
-    if (u.role == Role::Operator && (!u.token.empty() || !u.password.empty())) have_operator = true;
+    if (u.role == Role::Operator && (!u.token.empty() || !u.password_hash.empty())) have_operator = true;
   }
   if (!have_operator) {
     // Nobody could ever change anything: use (or make) the generated operator token.
@@ -128,14 +130,29 @@ Auth::Login Auth::start_session(const Principal& p) {
   return login;
 }
 
+namespace {
+// A hash no password matches in practice, verified for unknown users (made once, lazily).
+const std::string& unknown_user_hash() {
+  static const std::string hash = hash_password("imucal: no such user, a fixed random-looking text 7f3a9c");
+  return hash;
+}
+}  // namespace
+
 Auth::Login Auth::login_password(const std::string& user, const std::string& password) {
-  std::lock_guard lock(mutex_);
-  if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
-  const UserEntry* match = nullptr;
-  for (const UserEntry& u : users_) {
-    const bool ok = !u.password.empty() && constant_time_equal(u.name, user) && constant_time_equal(u.password, password);
-    if (ok && match == nullptr) match = &u;
+  std::vector<UserEntry> candidates;
+  {
+    std::lock_guard lock(mutex_);
+    if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
+    for (const UserEntry& u : users_)
+      if (!u.password_hash.empty() && constant_time_equal(u.name, user)) candidates.push_back(u);
   }
+  // Outside the lock: a hash takes a fraction of a second by design, other requests go on.
+  // An unknown user costs a hash too, so the time does not tell which users exist.
+  const UserEntry* match = nullptr;
+  for (const UserEntry& u : candidates)
+    if (match == nullptr && verify_password(u.password_hash, password)) match = &u;
+  if (candidates.empty()) (void)verify_password(unknown_user_hash(), password);
+  std::lock_guard lock(mutex_);
   if (match == nullptr) {
     failed();
     return {401, "wrong user or password", {}, {}};

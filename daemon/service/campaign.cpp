@@ -1,6 +1,7 @@
 #include "daemon/service/campaign.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -9,10 +10,18 @@
 #include "core/units.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "motion_programs/chamber.hpp"
+#include "pipeline/pipeline.hpp"
 
 namespace imucal::daemon {
 
 using nlohmann::json;
+
+namespace {
+// The calibration stages imucald runs online, as the run file grows; thermal and noise are
+// analyses of the finished run (GET .../thermal, .../allan), on request.
+constexpr std::array<pipeline::Stage, 3> kOnlineStages = {pipeline::Stage::Direct, pipeline::Stage::LeverArm,
+                                                          pipeline::Stage::Navigation};
+}  // namespace
 
 // ------------------------------------------------------------------------------------------------
 // Chamber profile
@@ -47,6 +56,16 @@ bool ChamberProfile::ramps_within(double t0_s, double t1_s) const {
     if (ramp_end_s > s.at_s && s.at_s < t1_s && ramp_end_s > t0_s) return true;
   }
   return false;
+}
+
+const std::vector<std::string>& known_estimators() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const auto stage : kOnlineStages) n.emplace_back(pipeline::names_of(stage).estimator);
+    n.emplace_back("navigation");
+    return n;
+  }();
+  return names;
 }
 
 bool CampaignSpec::has_estimator(const std::string& estimator) const {
@@ -296,9 +315,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   spec.seed = config.sim.seed;
   spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
   spec.chamber.tolerance_C = config.chamber.tolerance_C;
-  spec.suspenders = {config.suspenders.settle_s, config.suspenders.frame_timeout_s,
-                     config.suspenders.chamber_persist_s};
-  spec.estimators = {"direct"};
+  spec.suspenders = config.suspenders;
 
   // Form first: a problem here is the client's JSON (400), not the campaign's content (422).
   std::size_t form_problems = 0;
@@ -316,6 +333,11 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       spec.name = *v;
     }
     const json* program_spec = r.get("program", true);
+    // The built-in campaign `full`: the whole method in one run, each program made for its stage
+    // (stage 1, lever arms, stage 3 from their models, then the Schuler test of every stage's model).
+    const json full_programs = json::array({"direct", "lever-arm", "navigation", "evaluate"});
+    const bool builtin_full = program_spec != nullptr && *program_spec == "full";
+    if (builtin_full) program_spec = &full_programs;
     // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
     // built-in thermal campaign: it brings its profile, and its table cycle has no rate segments
     // for stage 1, so no estimator runs online unless asked; stage 2 runs on the whole run (GET
@@ -328,6 +350,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
     const json* estimators = r.get("estimators");
     const json* truth = r.get("truth");
     const json* nav_model = r.get("navigation_model");
+    const json* start_model = r.get("model");
     const json* chamber = r.get("chamber");
     const json* suspenders = r.get("suspenders");
     const json* faults = r.get("sim_faults");
@@ -347,7 +370,9 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
           const auto name = e.get<std::string>();
           const auto& known = known_estimators();
           if (std::find(known.begin(), known.end(), name) == known.end()) {
-            problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: direct, navigation)");
+            std::string list;
+            for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+            problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: " + list + ")");
           } else if (spec.has_estimator(name)) {
             problems.push_back("campaign.estimators: \"" + name + "\" is listed twice");
           } else {
@@ -389,7 +414,9 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
           program = motion::compile_program(program_json->dump(), config.table_limits);
           have_program = true;
           spec.program_json = program_json->dump();
-          if (program_spec->is_string()) {
+          if (builtin_full) {
+            spec.program_label = "full";
+          } else if (program_spec->is_string()) {
             spec.program_label = program_spec->get<std::string>();
           } else if (program_spec->is_array()) {
             spec.program_label = program.name;
@@ -400,7 +427,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
           problems.push_back(std::string("campaign.program: ") + e.what());
         }
       }
-      normalized["program"] = *program_spec;
+      normalized["program"] = builtin_full ? json("full") : *program_spec;
     }
     if (have_program) {
       // The motion library reports a limit at every instant it is exceeded; one line per
@@ -426,16 +453,21 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (check.duration_s > config.campaign.max_duration_s)
         problems.push_back("campaign.program lasts " + json(check.duration_s).dump() + " s, more than the limit of " +
                            json(config.campaign.max_duration_s).dump() + " s");
-      if (estimators == nullptr && builtin_thermal) spec.estimators.clear();
-      if (spec.has_estimator("direct")) {
-        int statics = 0, rates = 0;
-        for (const auto& s : check.segments) {
-          statics += s.kind == "static";
-          rates += s.kind == "rate";
-        }
-        if (statics < 6 || rates < 3)
-          problems.push_back("estimator \"direct\" needs at least 6 static segments and 3 rate segments; the program has " +
-                             std::to_string(statics) + " and " + std::to_string(rates));
+      // What the program's parts were made for decides the estimators unless the campaign lists
+      // them ({"program": "navigation"} runs stage 3); a listed one needs what its stage needs.
+      RecordingMeta meta;
+      meta.segments = check.segments;
+      meta.program_json = spec.program_json;
+      if (estimators == nullptr) {
+        for (const pipeline::Stage stage : pipeline::stages_for_parts(meta))
+          if (std::find(kOnlineStages.begin(), kOnlineStages.end(), stage) != kOnlineStages.end())
+            spec.estimators.emplace_back(pipeline::names_of(stage).estimator);
+      }
+      for (const std::string& name : spec.estimators) {
+        const auto stage = pipeline::stage_of_estimator(name);
+        if (!stage) continue;
+        if (const auto why = pipeline::requirement_unmet(*stage, pipeline::feed(*stage, meta, true).segments))
+          problems.push_back("estimator \"" + name + "\": " + *why);
       }
     }
     if (spec.rate_hz > config.campaign.max_rate_hz)
@@ -451,6 +483,19 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (!spec.has_estimator("navigation"))
         problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
       if (auto m = read_model(*nav_model, "campaign.navigation_model", problems)) spec.navigation_model = *m;
+    }
+    if (start_model != nullptr) {
+      if (std::none_of(spec.estimators.begin(), spec.estimators.end(),
+                       [](const std::string& e) { return pipeline::stage_of_estimator(e).has_value(); }))
+        problems.push_back("campaign.model is given but no calibration estimator (direct, lever-arm, stage3) runs");
+      if (start_model->is_number_integer()) {
+        spec.start_model_campaign = start_model->get<std::int64_t>();
+      } else if (auto m = read_model(*start_model, "campaign.model", problems)) {
+        spec.start_model = *m;
+        if (m->frame != "instrument" && (spec.has_estimator("direct") || spec.has_estimator("lever-arm")))
+          problems.push_back("campaign.model is in the " + m->frame +
+                             " frame: stages direct and lever-arm start from an instrument-frame model");
+      }
     }
     if (chamber != nullptr) {
       check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
@@ -488,6 +533,8 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   normalized["seed"] = spec.seed;
   normalized["truth"] = model_json(spec.truth);
   if (spec.navigation_model) normalized["navigation_model"] = model_json(*spec.navigation_model);
+  if (spec.start_model_campaign) normalized["model"] = *spec.start_model_campaign;
+  if (spec.start_model) normalized["model"] = model_json(*spec.start_model);
   json steps = json::array();
   for (const auto& s : spec.chamber.steps)
     steps.push_back({{"at_s", s.at_s}, {"setpoint_C", s.setpoint_C}, {"ramp_C_per_min", s.ramp_C_per_min}});
@@ -517,28 +564,6 @@ CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConf
 
 motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config) {
   return motion::compile_program(spec.program_json, config.table_limits);
-}
-
-json model_estimates_json(const ImuModel& model) {
-  json out = json::object();
-  const ImuErrorSet zero{};
-  const ImuErrorSet& sigma = model.sigma ? *model.sigma : zero;
-  const char* axes[3] = {"x", "y", "z"};
-  auto vec = [&](const std::string& prefix, const Eigen::Vector3d& est, const Eigen::Vector3d& sig, double scale) {
-    for (int j = 0; j < 3; ++j) out[prefix + "." + axes[j]] = json::array({est[j] * scale, sig[j] * scale});
-  };
-  auto mis = [&](const std::string& prefix, const Misalignment& est, const Misalignment& sig) {
-    for (const auto& [name, k] : kMisalignmentKeys)
-      out[prefix + "." + name] = json::array({est.*k * units::kRadToArcsec, sig.*k * units::kRadToArcsec});
-  };
-  vec("gyro.bias_dph", model.gyro.bias_radps, sigma.gyro.bias_radps, units::kRadpsToDph);
-  vec("gyro.scale_pos_ppm", model.gyro.scale_pos, sigma.gyro.scale_pos, 1e6);
-  vec("gyro.scale_neg_ppm", model.gyro.scale_neg, sigma.gyro.scale_neg, 1e6);
-  mis("gyro.misalignment_arcsec", model.gyro.misalignment_rad, sigma.gyro.misalignment_rad);
-  vec("accel.bias_mps2", model.accel.bias_mps2, sigma.accel.bias_mps2, 1.0);
-  vec("accel.scale_ppm", model.accel.scale, sigma.accel.scale, 1e6);
-  mis("accel.misalignment_arcsec", model.accel.misalignment_rad, sigma.accel.misalignment_rad);
-  return out;
 }
 
 }  // namespace imucal::daemon

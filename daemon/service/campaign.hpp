@@ -46,12 +46,6 @@ struct SimFault {
   std::int64_t frames = 1;  // ImuCorrupt
 };
 
-struct SuspenderSettings {
-  double settle_s = 10.0;
-  double frame_timeout_s = 1.0;
-  double chamber_persist_s = 2.0;
-};
-
 struct CampaignSpec {
   std::string name;
   std::string program_label;  // "direct", "direct+navigation", or "inline:<name>"
@@ -62,6 +56,11 @@ struct CampaignSpec {
   std::uint64_t seed = 1;
   ImuModel truth;                            // resolved (files are read when the campaign is posted)
   std::optional<ImuModel> navigation_model;  // for the "navigation" estimator (default: ideal)
+  // The model the first calibration estimator starts from (stage 3 alone: the stage-1 model it
+  // refines): a model file or object, or a previous campaign's model by its id (resolved when the
+  // run starts). Ideal by default.
+  std::optional<ImuModel> start_model;
+  std::optional<std::int64_t> start_model_campaign;
   ChamberProfile chamber;
   SuspenderSettings suspenders;
   std::vector<SimFault> faults;
@@ -78,10 +77,9 @@ struct CampaignCheck {
   std::vector<SegmentInfo> segments;
 };
 
-inline const std::vector<std::string>& known_estimators() {
-  static const std::vector<std::string> names = {"direct", "navigation"};
-  return names;
-}
+// The calibration stages that run online (pipeline::StageName::estimator: direct, lever-arm,
+// stage3) and the free-inertial display `navigation`.
+const std::vector<std::string>& known_estimators();
 
 // Parses and validates a campaign against the configuration (limits, defaults). Never throws for
 // bad input; reads truth and model files named in it.
@@ -91,7 +89,5 @@ CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConf
 // The program of a checked campaign, compiled (cannot fail for a spec from check_campaign).
 motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config);
 
-// Flat "gyro.bias_dph.x" -> [estimate, sigma] map of a model, in the units the names carry.
-nlohmann::json model_estimates_json(const ImuModel& model);
 
 }  // namespace imucal::daemon

@@ -8,6 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/service/password_hash.hpp"
+
 #include "daemon/service/json_reader.hpp"
 
 namespace imucal::daemon {
@@ -124,7 +126,7 @@ void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems
 
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
   if (!j.is_array()) {
-    problems.push_back("config.users must be an array of {name, role, password, token}");
+    problems.push_back("config.users must be an array of {name, role, password_hash, token}");
     return;
   }
   std::size_t index = 0;
@@ -140,11 +142,20 @@ void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& proble
         problems.push_back(where + ".role must be \"operator\" or \"viewer\"");
       }
     }
-    if (auto v = r.string("password")) e.password = *v;
+    // Only hashes: a configuration file that is read by someone else gives no password away.
+    if (r.has("password")) {
+      (void)r.get("password");
+      problems.push_back(where + ".password: plain-text passwords are not accepted; make a hash with `imucal passwd` "
+                                 "and give it as \"password_hash\"");
+    }
+    if (auto v = r.string("password_hash")) {
+      e.password_hash = *v;
+      if (!is_password_hash(*v))
+        problems.push_back(where + ".password_hash is not a hash made by `imucal passwd` (it starts with $argon2id$)");
+    }
     if (auto v = r.string("token")) e.token = *v;
     // Short secrets are guessable over the network.
     if (!e.token.empty() && e.token.size() < 16) problems.push_back(where + ".token must have at least 16 characters");
-    if (!e.password.empty() && e.password.size() < 8) problems.push_back(where + ".password must have at least 8 characters");
     if (e.name.empty() && r.has("name")) problems.push_back(where + ".name must not be empty");
     c.users.push_back(std::move(e));
   }

@@ -11,6 +11,7 @@
 
 #include "core/recording.hpp"
 #include "daemon/service/device_config.hpp"
+#include "daemon/service/suspenders.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
@@ -27,7 +28,7 @@ const char* to_string(Role role);
 struct UserEntry {
   std::string name;
   Role role = Role::Viewer;
-  std::string password;  // for the browser sign-in (empty: no password sign-in)
+  std::string password_hash;  // for the browser sign-in, made by `imucal passwd` (empty: none)
   std::string token;     // for `Authorization: Bearer` (empty: none)
 };
 
@@ -50,11 +51,7 @@ struct SimDefaults {
   double home_time_s = 5.0;    // simulated homing time
 };
 
-struct SuspenderDefaults {
-  double settle_s = 10.0;          // a cleared condition must stay clear this long before resuming
-  double frame_timeout_s = 1.0;    // no IMU frame for this long (device time): frames missing
-  double chamber_persist_s = 2.0;  // out of band for this long before suspending (noise immunity)
-};
+using SuspenderDefaults = SuspenderSettings;  // daemon/service/suspenders.hpp
 
 struct RecorderConfig {
   double commit_interval_s = 1.0;

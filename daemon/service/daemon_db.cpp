@@ -288,6 +288,8 @@ bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason
     from = parse_run_state(s.text(0));
   }
   if (expected && from != expected) return false;
+  // Every change, the operator's and the sequencer's, against the one table.
+  if (from && !transition_allowed(*from, to)) throw InvalidTransition(id, *from, to);
   const std::int64_t now = now_unix_ms();
   {
     Stmt s(db_, path_,

@@ -105,17 +105,67 @@ std::optional<dr::ModbusChamberConfig> read_chamber(const json& j, const std::st
                                                      dr::modbus_chamber_config_from_json, problems);
 }
 
+// The keys of `devices.imu` that say where the link is, by transport.
+bool key_belongs_to(const std::string& key, dr::link::Transport t) {
+  if (key == "interface" || key == "socket" || key == "framing") return t == dr::link::Transport::socketcan;
+  if (key == "serial_device") return t == dr::link::Transport::serial;
+  if (key == "udp_port" || key == "udp_bind" || key == "udp_peer") return t == dr::link::Transport::udp;
+  return true;
+}
+
+// "host:port" with a port 1..65535.
+bool split_host_port(const std::string& text, std::string& host, int& port) {
+  const auto colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0) return false;
+  host = text.substr(0, colon);
+  try {
+    std::size_t used = 0;
+    port = std::stoi(text.substr(colon + 1), &used);
+    return used == text.size() - colon - 1 && port >= 1 && port <= 65535;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<std::string>& problems) {
   ImuDeviceConfig c;
   ObjectReader r(j, where, problems);
   if (!r.is_object()) return c;
+  // The link description first: it decides which address keys apply.
+  bool have_link = false;
+  try {
+    if (const json* v = r.get("link")) {
+      if (v->is_string()) {
+        c.link_name = v->get<std::string>();
+        c.link = dr::link::load_imu_link(c.link_name);
+      } else if (v->is_object()) {
+        c.link = dr::link::imu_link_from_json(v->dump());
+        c.link_name = c.link.name + " (inline)";
+      } else {
+        throw std::invalid_argument("must be a built-in description's name, a file path or an imucal-imu-link/1 object");
+      }
+    } else {
+      c.link = dr::link::load_imu_link(c.link_name);
+    }
+    have_link = true;
+  } catch (const std::exception& e) {
+    problems.push_back(r.at("link") + ": " + e.what());
+  }
+  const dr::link::Transport transport = c.link.transport;
+  if (have_link) {
+    for (const char* key : {"interface", "socket", "framing", "serial_device", "udp_port", "udp_bind", "udp_peer"})
+      if (r.has(key) && !key_belongs_to(key, transport))
+        problems.push_back(r.at(key) + " does not apply: the link '" + c.link.name + "' is " + dr::link::to_string(transport));
+  }
   const auto interface = r.string("interface");
   const auto socket = r.string("socket");
-  if (interface && socket) {
-    problems.push_back(where + ": give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both");
-  } else if (!interface && !socket && !r.has("interface") && !r.has("socket")) {
-    problems.push_back(where + ".interface (a CAN interface such as \"can0\") or " + where +
-                       ".socket (a Unix SOCK_SEQPACKET socket path) is required");
+  if (have_link && transport == dr::link::Transport::socketcan) {
+    if (interface && socket) {
+      problems.push_back(where + ": give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both");
+    } else if (!interface && !socket && !r.has("interface") && !r.has("socket")) {
+      problems.push_back(where + ".interface (a CAN interface such as \"can0\") or " + where +
+                         ".socket (a Unix SOCK_SEQPACKET socket path) is required");
+    }
   }
   if (interface) {
     // IFNAMSIZ is 16 with the terminating zero.
@@ -138,14 +188,37 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
       problems.push_back(r.at("framing") + " must be \"fd\" or \"classic\"");
     }
   }
+  if (auto v = r.string("serial_device", have_link && transport == dr::link::Transport::serial)) {
+    if (v->empty()) problems.push_back(r.at("serial_device") + " must name a device such as /dev/ttyUSB0");
+    c.serial_device = *v;
+  }
+  if (auto v = r.integer("udp_port", 1, 65535, have_link && transport == dr::link::Transport::udp)) c.udp_port = static_cast<int>(*v);
+  if (auto v = r.string("udp_bind")) c.udp_bind = *v;
+  if (auto v = r.string("udp_peer")) {
+    if (!split_host_port(*v, c.udp_peer_host, c.udp_peer_port))
+      problems.push_back(r.at("udp_peer") + " must be \"host:port\" (the IMU's address), not \"" + *v + "\"");
+  }
+  if (have_link && transport == dr::link::Transport::udp && c.link.start && c.udp_peer_host.empty())
+    problems.push_back(r.at("udp_peer") + " is required: the link '" + c.link.name + "' sends the IMU a start command");
   if (auto v = r.number_in("rate_hz", 1, 100000, true)) c.rate_hz = *v;
-  for (const auto& [key, target] : {std::pair<const char*, double*>{"gyro_lsb_rad", &c.gyro_lsb_rad},
-                                    {"accel_lsb_mps", &c.accel_lsb_mps}}) {
-    if (auto v = r.number(key, true)) {
-      if (*v <= 0.0)
+  // The LSBs of a description that leaves them to the unit (imucal-can): one place decides.
+  std::optional<double> gyro_lsb, accel_lsb;
+  bool lsb_ok = true;
+  for (const auto& [key, target] : {std::pair<const char*, std::optional<double>*>{"gyro_lsb_rad", &gyro_lsb},
+                                    {"accel_lsb_mps", &accel_lsb}}) {
+    if (auto v = r.number(key)) {
+      *target = *v;
+      if (*v <= 0.0) {
         problems.push_back(r.at(key) + " must be positive (one count of the increments)");
-      else
-        *target = *v;
+        lsb_ok = false;
+      }
+    }
+  }
+  if (have_link && lsb_ok) {
+    try {
+      dr::link::resolve_per_unit_lsb(c.link, gyro_lsb, accel_lsb);
+    } catch (const std::exception& e) {
+      problems.push_back(where + ": " + e.what());
     }
   }
   if (auto v = r.string("serial", true)) {
@@ -154,7 +227,8 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
   }
   if (auto v = r.integer("transport_delay_ns", 0, 1'000'000'000)) c.transport_delay_ns = *v;
   if (auto v = r.integer("stall_timeout_ms", 1, 60'000)) c.stall_timeout_ms = *v;
-  if (c.framing == dr::can::Framing::classic && c.rate_hz > dr::can::kClassicMaxRate_hz)
+  if (have_link && transport == dr::link::Transport::socketcan && c.framing == dr::can::Framing::classic &&
+      c.rate_hz > dr::can::kClassicMaxRate_hz)
     problems.push_back(where + ": classic CAN framing carries at most " + json(dr::can::kClassicMaxRate_hz).dump() +
                        " samples/s; rate_hz is " + json(c.rate_hz).dump() + " (use \"framing\": \"fd\")");
   return c;
@@ -173,9 +247,16 @@ dr::AxisLimitSetting table_limit_setting(const motion::AxisLimits& l) {
 }
 
 std::string ImuDeviceConfig::describe() const {
-  const char* framing_name = framing == dr::can::Framing::fd ? "CAN FD" : "classic CAN";
-  if (!interface.empty()) return "CAN interface '" + interface + "' (" + framing_name + ")";
-  return "socket " + socket_path + " (" + framing_name + " frames)";
+  switch (link.transport) {
+    case dr::link::Transport::socketcan: {
+      const std::string what = std::string(framing == dr::can::Framing::fd ? "CAN FD" : "classic CAN") + ", " + link.name;
+      if (!interface.empty()) return "CAN interface '" + interface + "' (" + what + ")";
+      return "socket " + socket_path + " (" + what + " frames)";
+    }
+    case dr::link::Transport::serial: return "serial device " + serial_device + " (" + link.name + ")";
+    case dr::link::Transport::udp: return "UDP port " + std::to_string(udp_port) + " (" + link.name + ")";
+  }
+  return link.name;
 }
 
 DeviceAddresses read_device_addresses(const json& devices, const std::string& where,

@@ -1,16 +1,18 @@
 #include "daemon/service/estimator_worker.hpp"
 
 #include <chrono>
-#include <deque>
+#include <algorithm>
+#include <cmath>
 #include <limits>
+#include <map>
 #include <memory>
 
 #include <spdlog/spdlog.h>
 
 #include "core/units.hpp"
 #include "daemon/service/campaign.hpp"
-#include "estimators/direct_calibration.hpp"
 #include "estimators/navigation_run.hpp"
+#include "pipeline/pipeline.hpp"
 #include "storage/run_db.hpp"
 
 namespace imucal::daemon {
@@ -18,13 +20,8 @@ namespace imucal::daemon {
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
-EstimatorWorker::EstimatorWorker(std::string run_db_path, std::vector<std::string> estimators,
-                                 std::optional<ImuModel> navigation_model, std::optional<std::int64_t> committed_t_ns,
-                                 Sink sink)
-    : path_(std::move(run_db_path)),
-      estimators_(std::move(estimators)),
-      navigation_model_(std::move(navigation_model)),
-      sink_(std::move(sink)) {
+EstimatorWorker::EstimatorWorker(std::string run_db_path, Spec spec, std::optional<std::int64_t> committed_t_ns, Sink sink)
+    : path_(std::move(run_db_path)), spec_(std::move(spec)), sink_(std::move(sink)) {
   if (committed_t_ns) target_t_ns_ = *committed_t_ns;
   thread_ = std::thread([this] { run(); });
 }
@@ -65,11 +62,61 @@ bool listed(const std::vector<std::string>& names, const char* name) {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
+// Free-inertial navigation of the whole run against the table reference (the `navigation`
+// estimator): the largest horizontal errors so far.
+class NavigationMonitor {
+ public:
+  NavigationMonitor(const RecordingMeta& meta, const ImuModel& model)
+      : run_(meta, model, 1.0, [this](const nav::NavErrorSample& e) {
+          t_s_ = e.t_s;
+          max_v_ = std::max(max_v_, std::hypot(e.dv_n_mps.x(), e.dv_n_mps.y()));
+          max_p_ = std::max(max_p_, std::hypot(e.dp_n_m.x(), e.dp_n_m.y()));
+        }) {}
+  void feed(const pipeline::FrameSource& source, std::int64_t available_t_ns) {
+    if (state_["status"] == "failed") return;
+    try {
+      feeder_.feed(
+          source, available_t_ns, [&](const TempSample& t) { run_.push_temp(t); }, [&](const ImuFrame& f) { run_.push(f); });
+      if (feeder_.fed_t_ns()) state_["status"] = "running";
+    } catch (const std::exception& e) {
+      state_["status"] = "failed";
+      state_["message"] = e.what();
+    }
+  }
+  const json& progress() {
+    state_["program_time_s"] = t_s_;
+    state_["max_velocity_error_mps"] = max_v_;
+    state_["max_position_error_m"] = max_p_;
+    return state_;
+  }
+  json finish() {
+    if (state_["status"] == "failed") return {{"status", "failed"}, {"message", state_["message"]}};
+    try {
+      const nav::NavSummary s = run_.finish();
+      state_["status"] = "done";
+      return {{"status", "done"},
+              {"duration_s", s.duration_s},
+              {"frames", s.frames},
+              {"max_velocity_error_mps", s.max_velocity_error_mps},
+              {"max_position_error_m", s.max_position_error_m},
+              {"max_attitude_error_arcsec", s.max_attitude_error_rad * units::kRadToArcsec}};
+    } catch (const std::exception& e) {
+      state_["status"] = "failed";
+      state_["message"] = e.what();
+      return {{"status", "failed"}, {"message", e.what()}};
+    }
+  }
+
+ private:
+  nav::NavigationRun run_;
+  pipeline::Feeder feeder_;
+  double max_v_ = 0.0, max_p_ = 0.0, t_s_ = 0.0;
+  json state_ = {{"status", "waiting"}, {"message", nullptr}};
+};
+
 }  // namespace
 
 void EstimatorWorker::run() {
-  const bool want_direct = listed(estimators_, "direct");
-  const bool want_nav = listed(estimators_, "navigation");
   std::unique_ptr<storage::RunDb> db;
   RecordingMeta meta;
   try {
@@ -79,95 +126,50 @@ void EstimatorWorker::run() {
   } catch (const std::exception& e) {
     spdlog::error("estimators: cannot open the run: {}", e.what());
     std::lock_guard lock(mutex_);
-    for (const auto& name : estimators_) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+    return;
+  }
+  const pipeline::RunDbSource source(*db);
+
+  // The calibration stages asked for, as one pipeline: each starts from the model of the ones before.
+  std::vector<pipeline::Stage> stages;
+  for (const auto& name : spec_.estimators)
+    if (const auto stage = pipeline::stage_of_estimator(name)) stages.push_back(*stage);
+  std::unique_ptr<pipeline::Pipeline> calibration;
+  std::unique_ptr<NavigationMonitor> monitor;
+  try {
+    if (!stages.empty())
+      calibration = std::make_unique<pipeline::Pipeline>(meta, stages, true, spec_.start_model);
+    if (listed(spec_.estimators, "navigation"))
+      monitor = std::make_unique<NavigationMonitor>(meta, spec_.navigation_model.value_or(ImuModel{}));
+  } catch (const std::exception& e) {
+    spdlog::error("estimators: {}", e.what());
+    std::lock_guard lock(mutex_);
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
     return;
   }
 
-  std::unique_ptr<direct::DirectCalibrator> direct_cal;
-  json direct_state = {{"status", "waiting"}, {"statics", 0}, {"rotations", 0}, {"program_time_s", 0.0},
-                       {"estimates", json::object()}, {"message", nullptr}};
-  if (want_direct) direct_cal = std::make_unique<direct::DirectCalibrator>(meta);
-
-  std::unique_ptr<nav::NavigationRun> nav_run;
-  const ImuModel nav_model = navigation_model_.value_or(ImuModel{});
-  double nav_max_v = 0.0, nav_max_p = 0.0, nav_t_s = 0.0;
-  json nav_state = {{"status", "waiting"}, {"program_time_s", 0.0}, {"max_velocity_error_mps", 0.0},
-                    {"max_position_error_m", 0.0}, {"message", nullptr}};
-  if (want_nav) {
-    nav_run = std::make_unique<nav::NavigationRun>(meta, nav_model, 1.0, [&](const nav::NavErrorSample& e) {
-      nav_t_s = e.t_s;
-      nav_max_v = std::max(nav_max_v, std::hypot(e.dv_n_mps.x(), e.dv_n_mps.y()));
-      nav_max_p = std::max(nav_max_p, std::hypot(e.dp_n_m.x(), e.dp_n_m.y()));
-    });
-  }
-
   std::optional<std::int64_t> fed_t_ns;
-  // The navigation model's thermal section (stage 2) needs the temperatures with the frames: read
-  // as far as the frames, each pushed before the frames after it.
-  const bool nav_thermal = nav_run && !nav_model.thermal_json.empty();
-  std::deque<TempSample> pending_temps;
-  std::optional<std::int64_t> temps_read_to_ns;
-  std::size_t intervals_reported = 0;
   auto last_report = Clock::now() - std::chrono::seconds(10);
-
-  // Builds the progress of each estimator; `force`: also when little changed (at the end).
-  auto report = [&](bool force) {
+  double last_report_t_s = -std::numeric_limits<double>::infinity();
+  // Progress of each estimator, when it changed (a finished or waiting stage stays quiet).
+  std::map<std::string, json> sent;
+  auto report = [&] {
     const double t_s = fed_t_ns ? static_cast<double>(*fed_t_ns) / units::kNsPerS : 0.0;
-    if (direct_cal && (force || direct_cal->intervals().size() != intervals_reported)) {
-      intervals_reported = direct_cal->intervals().size();
-      int statics = 0, rotations = 0;
-      for (const auto& iv : direct_cal->intervals()) (iv.is_static ? statics : rotations) += 1;
-      direct_state["statics"] = statics;
-      direct_state["rotations"] = rotations;
-      direct_state["program_time_s"] = t_s;
-      try {
-        const direct::Result r = direct_cal->finish();
-        direct_state["status"] = "running";
-        direct_state["estimates"] = model_estimates_json(r.model);
-        direct_state["message"] = nullptr;
-      } catch (const std::exception& e) {
-        // Until every orientation has been seen some coefficient is undetermined; say which.
-        direct_state["status"] = statics == 0 ? "waiting" : "undetermined";
-        direct_state["message"] = e.what();
-      }
-      sink_("direct", t_s, direct_state);
-    }
-    if (nav_run && nav_state["status"] != "failed") {
-      nav_state["status"] = fed_t_ns ? "running" : "waiting";
-      nav_state["program_time_s"] = nav_t_s;
-      nav_state["max_velocity_error_mps"] = nav_max_v;
-      nav_state["max_position_error_m"] = nav_max_p;
-      sink_("navigation", t_s, nav_state);
-    }
+    auto send = [&](const std::string& name, const json& progress) {
+      json& last = sent[name];
+      if (last == progress) return;
+      last = progress;
+      sink_(name, t_s, progress);
+    };
+    if (calibration)
+      for (pipeline::Stage stage : stages) send(pipeline::names_of(stage).estimator, calibration->progress(stage));
+    if (monitor) send("navigation", monitor->progress());
   };
-
-  auto feed = [&](std::int64_t upto_t_ns) {
-    const std::int64_t from = fed_t_ns ? *fed_t_ns + 1 : std::numeric_limits<std::int64_t>::min();
-    if (from > upto_t_ns) return;
-    if (nav_thermal && (!temps_read_to_ns || upto_t_ns > *temps_read_to_ns)) {
-      const std::int64_t t0 = temps_read_to_ns ? *temps_read_to_ns + 1 : std::numeric_limits<std::int64_t>::min();
-      for (const TempSample& t : db->temps(t0, upto_t_ns)) pending_temps.push_back(t);
-      temps_read_to_ns = upto_t_ns;
-    }
-    db->for_each_frame(
-        [&](const ImuFrame& f) {
-          if (direct_cal) direct_cal->push(f);
-          if (nav_run && nav_state["status"] != "failed") {
-            try {
-              while (!pending_temps.empty() && pending_temps.front().t_ns <= f.t_ns) {
-                nav_run->push_temp(pending_temps.front());
-                pending_temps.pop_front();
-              }
-              nav_run->push(f);
-            } catch (const std::exception& e) {
-              nav_state["status"] = "failed";
-              nav_state["message"] = e.what();
-              sink_("navigation", static_cast<double>(f.t_ns) / units::kNsPerS, nav_state);
-            }
-          }
-          fed_t_ns = f.t_ns;
-        },
-        from, upto_t_ns);
+  auto feed = [&](std::int64_t upto_t_ns, bool final) {
+    if (calibration) calibration->advance(source, upto_t_ns, final);
+    if (monitor) monitor->feed(source, upto_t_ns);
+    fed_t_ns = upto_t_ns;
   };
 
   try {
@@ -184,67 +186,38 @@ void EstimatorWorker::run() {
         target = target_t_ns_;
         finishing = finishing_;
       }
-      if (target != std::numeric_limits<std::int64_t>::min()) feed(target);
-      if (finishing) break;
-      if (Clock::now() - last_report >= std::chrono::milliseconds(500)) {
-        report(false);
+      if (finishing) {
+        feed(target, true);
+        break;
+      }
+      if (target != std::numeric_limits<std::int64_t>::min()) feed(target, false);
+      // At most every 500 ms of wall time and 5 s of program time: each report is stored in the
+      // daemon's database (stage 3's holds every state: about 5 kB), so a real-time run of the
+      // navigation program stores about 1700, not 17 000.
+      const double fed_s = static_cast<double>(target) / units::kNsPerS;
+      if (Clock::now() - last_report >= std::chrono::milliseconds(500) && fed_s - last_report_t_s >= 5.0) {
+        report();
         last_report = Clock::now();
+        last_report_t_s = fed_s;
       }
     }
-    // Final results.
+    // Final results: each stage's report (its model included) under its estimator's name.
     Results out;
-    if (direct_cal) {
-      try {
-        direct::Result r = direct_cal->finish();
-        out.model = r.model;
-        out.results["direct"] = {{"status", "done"},        {"statics", r.statics},
-                                 {"rotations", r.rotations}, {"static_time_s", r.static_time_s},
-                                 {"accel_residual_rms_mps2", r.accel_residual_rms_mps2},
-                                 {"gyro_residual_rms_rad", r.gyro_residual_rms_rad},
-                                 {"notes", r.notes}};
-        direct_state["status"] = "done";
-        direct_state["estimates"] = model_estimates_json(r.model);
-        direct_state["message"] = nullptr;
-      } catch (const std::exception& e) {
-        out.results["direct"] = {{"status", "undetermined"}, {"message", e.what()}};
-        direct_state["status"] = "undetermined";
-        direct_state["message"] = e.what();
-      }
-      intervals_reported = static_cast<std::size_t>(-1);
+    if (calibration) {
+      for (const pipeline::Outcome& o : calibration->outcomes())
+        out.results[pipeline::names_of(o.stage).estimator] = o.report();
+      if (std::any_of(calibration->outcomes().begin(), calibration->outcomes().end(),
+                      [](const pipeline::Outcome& o) { return o.status == pipeline::Status::Done; }))
+        out.model = calibration->model();
     }
-    if (nav_run) {
-      if (nav_state["status"] != "failed") {
-        try {
-          const nav::NavSummary s = nav_run->finish();
-          out.results["navigation"] = {{"status", "done"},
-                                       {"duration_s", s.duration_s},
-                                       {"frames", s.frames},
-                                       {"max_velocity_error_mps", s.max_velocity_error_mps},
-                                       {"max_position_error_m", s.max_position_error_m},
-                                       {"max_attitude_error_arcsec", s.max_attitude_error_rad * units::kRadToArcsec}};
-          nav_state["status"] = "done";
-        } catch (const std::exception& e) {
-          nav_state["status"] = "failed";
-          nav_state["message"] = e.what();
-        }
-      }
-      if (nav_state["status"] == "failed") out.results["navigation"] = {{"status", "failed"}, {"message", nav_state["message"]}};
-    }
-    // Final progress with the finished states (report() would recompute the direct estimate).
-    const double t_s = fed_t_ns ? static_cast<double>(*fed_t_ns) / units::kNsPerS : 0.0;
-    if (direct_cal) sink_("direct", t_s, direct_state);
-    if (nav_run) {
-      nav_state["program_time_s"] = nav_t_s;
-      nav_state["max_velocity_error_mps"] = nav_max_v;
-      nav_state["max_position_error_m"] = nav_max_p;
-      sink_("navigation", t_s, nav_state);
-    }
+    if (monitor) out.results["navigation"] = monitor->finish();
+    report();
     std::lock_guard lock(mutex_);
     results_ = std::move(out);
   } catch (const std::exception& e) {
     spdlog::error("estimators: {}", e.what());
     std::lock_guard lock(mutex_);
-    for (const auto& name : estimators_) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
   }
 }
 

@@ -2,7 +2,9 @@
 // tails the run database (its own read connection, WAL) up to what the recorder has committed.
 // So it never blocks recording whatever its speed, its memory stays bounded, and after a restart
 // it replays the committed frames with the same code before following the new ones. The
-// estimators are the library code of `imucal calibrate` (estimators/), fed frame by frame.
+// calibration estimators (direct, lever-arm, stage3) are the calibration pipeline of
+// `imucal calibrate` (pipeline/), advanced as the file grows; `navigation` is the free-inertial
+// navigation against the table reference, a display of how well a given model navigates.
 #pragma once
 
 #include <atomic>
@@ -29,13 +31,20 @@ class EstimatorWorker {
   using Sink = std::function<void(const std::string& estimator, double program_time_s, const nlohmann::json& progress)>;
 
   struct Results {
-    std::optional<ImuModel> model;  // the direct estimator's result (instrument frame, with sigma)
-    nlohmann::json results = nlohmann::json::object();  // per estimator: summary or why there is none
+    // The last calibration stage's model (stage 1: instrument frame; stage 3: body frame), with
+    // sigma; each stage's own is in its results entry ("model").
+    std::optional<ImuModel> model;
+    nlohmann::json results = nlohmann::json::object();  // per estimator: its report or why there is none
+  };
+
+  struct Spec {
+    std::vector<std::string> estimators;
+    std::optional<ImuModel> navigation_model;  // the free-inertial display's model (ideal by default)
+    ImuModel start_model;                      // the first calibration stage's (ideal by default)
   };
 
   // `committed_t_ns`: frames already committed in the file (replayed first); nothing when empty.
-  EstimatorWorker(std::string run_db_path, std::vector<std::string> estimators, std::optional<ImuModel> navigation_model,
-                  std::optional<std::int64_t> committed_t_ns, Sink sink);
+  EstimatorWorker(std::string run_db_path, Spec spec, std::optional<std::int64_t> committed_t_ns, Sink sink);
   ~EstimatorWorker();
   EstimatorWorker(const EstimatorWorker&) = delete;
   EstimatorWorker& operator=(const EstimatorWorker&) = delete;
@@ -51,8 +60,7 @@ class EstimatorWorker {
   void run();
 
   std::string path_;
-  std::vector<std::string> estimators_;
-  std::optional<ImuModel> navigation_model_;
+  Spec spec_;
   Sink sink_;
 
   std::mutex mutex_;

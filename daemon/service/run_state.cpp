@@ -1,6 +1,7 @@
 #include "daemon/service/run_state.hpp"
 
 #include <array>
+#include <string>
 #include <utility>
 
 namespace imucal::daemon {
@@ -73,6 +74,39 @@ bool is_active(RunState state) {
       return false;
   }
 }
+
+bool transition_allowed(RunState from, RunState to) {
+  using S = RunState;
+  // The end of an active run: done (completed, or stopped with results), failed, or interrupted
+  // (the daemon shut down); aborted only through aborting.
+  const auto ends = [&](bool can_finish) {
+    return (can_finish && to == S::Done) || to == S::Failed || to == S::Interrupted;
+  };
+  switch (from) {
+    case S::Created: return to == S::Queued || to == S::Aborted;
+    case S::Queued: return to == S::Running || to == S::Aborted;
+    case S::Running:
+      return to == S::Pausing || to == S::Suspended || to == S::Stopping || to == S::Aborting || ends(true);
+    case S::Pausing:
+      return to == S::Paused || to == S::Stopping || to == S::Aborting || ends(true);
+    case S::Paused: return to == S::Running || to == S::Stopping || to == S::Aborting || ends(false);
+    case S::Suspended: return to == S::Running || to == S::Stopping || to == S::Aborting || ends(false);
+    case S::Stopping: return to == S::Aborting || ends(true);
+    case S::Aborting: return to == S::Aborted || to == S::Failed || to == S::Interrupted;
+    case S::Interrupted: return to == S::Queued || to == S::Aborted;
+    case S::Done:
+    case S::Failed:
+    case S::Aborted: return false;  // final: nothing more happens
+  }
+  return false;
+}
+
+InvalidTransition::InvalidTransition(std::int64_t id, RunState f, RunState t)
+    : std::logic_error("campaign " + std::to_string(id) + ": no transition from " + std::string(to_string(f)) + " to " +
+                       std::string(to_string(t)) + " (the run's transition table, docs/daemon.md)"),
+      campaign(id),
+      from(f),
+      to(t) {}
 
 std::optional<RunState> command_target(RunState from, Command command) {
   switch (command) {

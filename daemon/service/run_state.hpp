@@ -1,10 +1,12 @@
 // The run state machine of a campaign: one enum shared by the API, the UI (as strings) and the
-// daemon database, the operator commands, and which command is allowed in which state. The
-// sequencer owns the transitions it makes itself (running <-> suspended, -> done/failed/...);
-// this file only answers "may an operator do this now, and what state follows".
+// daemon database, the operator commands, and which command is allowed in which state; and the
+// table of every transition a run may make, the operator's and the sequencer's alike
+// (running <-> suspended, -> done/failed/...), which the daemon database enforces on every change.
 #pragma once
 
+#include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 
@@ -36,6 +38,18 @@ std::optional<Command> parse_command(std::string_view text);
 bool is_final(RunState state);
 // The sequencer owns the devices in these states (the run is "active").
 bool is_active(RunState state);
+
+// Whether a run may go from `from` to `to` (the table in run_state.cpp; docs/daemon.md draws it).
+bool transition_allowed(RunState from, RunState to);
+
+// A state change the table does not allow: a defect of the code that asked for it, never silently
+// written.
+class InvalidTransition : public std::logic_error {
+ public:
+  InvalidTransition(std::int64_t campaign, RunState from, RunState to);
+  std::int64_t campaign;
+  RunState from, to;
+};
 
 // The state an operator command leads to from `from`, or nothing when the command does not apply.
 // Only the immediate state: pause gives Pausing (the sequencer makes Paused), stop Stopping, ...

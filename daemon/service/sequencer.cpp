@@ -92,7 +92,7 @@ struct RunContext {
   std::int64_t prev_delivered_t_ns = 0;        // last frame the IMU delivered in this pass
   std::int64_t delivered = 0;
   double last_frame_world_s = 0.0;
-  std::optional<double> out_of_band_since_s;
+  std::unique_ptr<Suspenders> suspenders;  // from the campaign's settings, at the run's start
   double program_time_s = 0.0;
   std::optional<double> commanded_setpoint_C;
 
@@ -450,6 +450,7 @@ void Sequencer::run_campaign(std::int64_t id) {
     }
     run.spec = *check.spec;
   }
+  run.suspenders = std::make_unique<Suspenders>(run.spec.suspenders);
   try {
     run.program = compile_campaign_program(run.spec, config_);
     run.segments = run.program.segments();
@@ -499,8 +500,18 @@ void Sequencer::run_campaign(std::int64_t id) {
     if (!resuming) db_.set_run_db(id, relative);
     open_recorder(run);
     const auto committed_t = run.last_t_ns;
+    EstimatorWorker::Spec estimators{run.spec.estimators, run.spec.navigation_model, run.spec.start_model.value_or(ImuModel{})};
+    if (run.spec.start_model_campaign) {
+      // A previous campaign's model: the one it has now (a campaign id is resolved when the run starts).
+      const auto source = db_.campaign(*run.spec.start_model_campaign);
+      if (!source || !source->model_json)
+        throw std::runtime_error("campaign.model names campaign " + std::to_string(*run.spec.start_model_campaign) +
+                                 ", which " + (source ? "has no model" : "does not exist"));
+      estimators.start_model = imu_model_from_json_text(
+          *source->model_json, "campaign " + std::to_string(*run.spec.start_model_campaign) + "'s model");
+    }
     run.estimators = std::make_unique<EstimatorWorker>(
-        run.run_db_path, run.spec.estimators, run.spec.navigation_model, committed_t,
+        run.run_db_path, std::move(estimators), committed_t,
         [this, id](const std::string& name, double t_s, const json& progress) {
           json all;
           {
@@ -571,6 +582,23 @@ Sequencer::Outcome Sequencer::prepare_devices(RunContext& run) {
 // Before the table moves (start, redo): the chamber at the profile's set point of the
 // checkpoint, every device answering. After a suspension the condition must stay clear for the
 // settle time; at the start the chamber only has to be in its band.
+// What the suspenders look at: the devices' states now, against the chamber band given.
+DeviceReadings Sequencer::readings(RunContext& run, double setpoint_C, double tolerance_C) {
+  DeviceReadings r;
+  r.now_s = run.bench->now_s();
+  const TableState ts = run.bench->table().state();
+  r.table_connected = ts.connected;
+  r.table_fault = ts.fault;
+  const ChamberState cs = run.bench->chamber().state();
+  r.chamber_connected = cs.connected;
+  r.chamber_C = cs.temperature_C;
+  r.setpoint_C = setpoint_C;
+  r.tolerance_C = tolerance_C;
+  r.imu_connected = run.bench->imu().state().connected;
+  r.last_frame_s = run.last_frame_world_s;
+  return r;
+}
+
 Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) {
   const double setpoint_C = run.spec.chamber.setpoint_at(run.checkpoint_s());
   const double tolerance_C = run.spec.chamber.tolerance_C;
@@ -583,11 +611,9 @@ Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) 
     if (!run.commanded_setpoint_C || std::abs(*run.commanded_setpoint_C - setpoint_C) > 1e-9) {
       if (run.bench->chamber().set_setpoint(setpoint_C).ok) run.commanded_setpoint_C = setpoint_C;
     }
-    const TableState ts = run.bench->table().state();
-    const ChamberState cs = run.bench->chamber().state();
-    const bool clear = ts.connected && ts.fault.empty() && cs.connected && run.bench->imu().state().connected &&
-                       std::abs(cs.temperature_C - setpoint_C) <= tolerance_C;
-    const double now_s = run.bench->now_s();
+    const DeviceReadings r = readings(run, setpoint_C, tolerance_C);
+    const bool clear = run.suspenders->clear(r);
+    const double now_s = r.now_s;
     if (clear) {
       if (!clear_since_s) clear_since_s = now_s;
       if (now_s - *clear_since_s >= settle_s) break;
@@ -596,7 +622,7 @@ Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) 
       if (!suspended && !announced) {
         char text[160];
         std::snprintf(text, sizeof text, "waiting for the chamber to reach %.2f C (now %.2f C) before moving",
-                      setpoint_C, cs.temperature_C);
+                      setpoint_C, r.chamber_C);
         note_event(run, "info", text);
         announced = true;
       }
@@ -628,7 +654,7 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
   if (auto r = run.bench->table().start_program_at(t0_s); !r.ok) return hold(run, "table: " + r.message);
   run.prev_delivered_t_ns = std::llround(t0_s * units::kNsPerS);
   run.last_frame_world_s = run.bench->now_s();
-  run.out_of_band_since_s.reset();
+  run.suspenders->reset();
 
   FrameBatch batch;
   std::vector<ImuFrame> accepted;
@@ -690,42 +716,24 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
       }
     }
     if (!temps.empty()) (void)run.recorder->push_temps(temps);  // a failure shows as an alarm below
-    if (auto why = recorder_problem(run)) return hold(run, *why);
-    if (auto error = run.recorder->error()) {  // before its alarm has arrived
-      run.recorder_failed = true;
-      return hold(run, "recording failed: " + *error);
-    }
-    if (!problem.empty()) return hold(run, problem);
 
-    // Suspenders.
-    const double now_s = run.bench->now_s();
-    const TableState ts = run.bench->table().state();
-    if (!ts.connected) return hold(run, "table disconnected");
-    if (!ts.fault.empty()) return hold(run, "table fault: " + ts.fault);
-    const ChamberState cs = run.bench->chamber().state();
-    if (!cs.connected) return hold(run, "chamber disconnected");
-    const double band_setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
-    if (std::abs(cs.temperature_C - band_setpoint_C) > run.spec.chamber.tolerance_C) {
-      if (!run.out_of_band_since_s) run.out_of_band_since_s = now_s;
-      if (now_s - *run.out_of_band_since_s >= run.spec.suspenders.chamber_persist_s) {
-        char text[200];
-        std::snprintf(text, sizeof text, "chamber out of band: %.2f C, set point %.2f C +- %.2f C", cs.temperature_C,
-                      band_setpoint_C, run.spec.chamber.tolerance_C);
-        return hold(run, text);
-      }
-    } else {
-      run.out_of_band_since_s.reset();
+    // Suspenders (daemon/service/suspenders.*): the recorder, the frames, the devices.
+    DeviceReadings r = readings(run, run.spec.chamber.setpoint_at(run.program_time_s), run.spec.chamber.tolerance_C);
+    if (auto why = recorder_problem(run)) {
+      r.recorder_problem = *why;
+    } else if (auto error = run.recorder->error()) {  // before its alarm has arrived
+      run.recorder_failed = true;
+      r.recorder_problem = "recording failed: " + *error;
     }
-    if (now_s - run.last_frame_world_s > run.spec.suspenders.frame_timeout_s) {
-      char text[160];
-      std::snprintf(text, sizeof text, "IMU frames missing: none for %.2f s", now_s - run.last_frame_world_s);
-      ++run.lost;  // at least one; the exact count shows as a gap when frames return
-      return hold(run, text);
+    r.frame_problem = problem;
+    if (const auto trip = run.suspenders->trip(r)) {
+      if (trip->suspender == "imu-frames-missing") ++run.lost;  // at least one; the exact count shows as a gap
+      return hold(run, trip->reason);
     }
 
     publish(run, false);
     const bool reached_end = run.prev_delivered_t_ns > end_ns - run.dt_ns;
-    if (reached_end && (!last || !ts.moving)) return Outcome::Completed;
+    if (reached_end && (!last || !run.bench->table().state().moving)) return Outcome::Completed;
   }
 }
 

@@ -26,6 +26,7 @@
 #include "daemon/service/config.hpp"
 #include "daemon/service/daemon_db.hpp"
 #include "daemon/service/run_state.hpp"
+#include "daemon/service/suspenders.hpp"
 #include "storage/recorder.hpp"
 
 namespace imucal::daemon {
@@ -94,6 +95,7 @@ class Sequencer {
   Outcome hold(RunContext& run, const std::string& reason);
   Outcome paused(RunContext& run);
   Outcome wait_until_ready(RunContext& run, bool suspended);
+  DeviceReadings readings(RunContext& run, double setpoint_C, double tolerance_C);
   void safe_hold(RunContext& run);
   void safe_exit(RunContext& run);
   void finish_run(RunContext& run, Outcome outcome, const std::string& reason);

@@ -96,6 +96,7 @@ void Service::start(bool http) {
     server_ = std::make_unique<HttpServer>(config_.http, *api_, *sequencer_, *files_);
     HttpServer* server = server_.get();
     sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
+    api_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
     server_->start(config_.http.host, config_.http.port);
   }
   sequencer_->start();
@@ -104,7 +105,10 @@ void Service::start(bool http) {
 void Service::stop() {
   if (stopped_) return;
   stopped_ = true;
-  if (api_) api_->set_shutting_down();
+  if (api_) {
+    api_->set_shutting_down();
+    api_->set_event_listener({});  // the analyses' progress no longer reaches the server
+  }
   if (sequencer_) sequencer_->shutdown();
   if (server_) server_->stop();
   spdlog::default_logger()->flush();

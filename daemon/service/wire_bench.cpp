@@ -13,7 +13,7 @@
 
 #include "core/units.hpp"
 #include "drivers/acl_table.hpp"
-#include "drivers/can_imu.hpp"
+#include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/register_map.hpp"
 #include "drivers/sim/sim_devices.hpp"
@@ -39,25 +39,38 @@ void require(const dr::Result<T>& r, const std::string& what) {
   if (!r) throw std::runtime_error(what + ": " + r.error().message);
 }
 
-// The IMU's link as configured: a CAN_RAW socket on the interface, or a connection to a Unix
-// SOCK_SEQPACKET socket that carries the same frame images (a CAN gateway, `imucal sim-devices`).
-dr::Result<int> open_imu_link(const ImuDeviceConfig& imu) {
-  if (!imu.interface.empty()) return dr::open_socketcan(imu.interface, imu.framing == dr::can::Framing::fd);
+// The IMU's transport as configured: a CAN_RAW socket on the interface or a connection to a Unix
+// SOCK_SEQPACKET socket that carries the same frame images (a CAN gateway, `imucal sim-devices`),
+// a serial device, or a UDP port. Only the CAN descriptor is opened here; the driver's connect()
+// opens the others.
+dr::Result<std::unique_ptr<dr::ImuTransport>> imu_transport(const ImuDeviceConfig& imu) {
+  using Transport = std::unique_ptr<dr::ImuTransport>;
+  switch (imu.link.transport) {
+    case dr::link::Transport::serial: return Transport(dr::serial_transport(imu.serial_device, imu.link));
+    case dr::link::Transport::udp:
+      return Transport(dr::udp_transport(imu.udp_bind, imu.udp_port, imu.udp_peer_host, imu.udp_peer_port));
+    case dr::link::Transport::socketcan: break;
+  }
+  if (!imu.interface.empty()) {
+    auto fd = dr::open_socketcan(imu.interface, imu.framing == dr::can::Framing::fd);
+    if (!fd) return fd.error();
+    return Transport(dr::socketcan_transport(*fd, imu.link, imu.framing, "CAN interface '" + imu.interface + "'"));
+  }
   const std::string who = "cannot connect to the IMU socket '" + imu.socket_path + "': ";
   sockaddr_un addr{};
   if (imu.socket_path.empty() || imu.socket_path.size() >= sizeof addr.sun_path)
-    return {dr::DriverErrc::invalid_argument, who + "not a usable socket path"};
+    return dr::DriverError{dr::DriverErrc::invalid_argument, who + "not a usable socket path"};
   const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
-  if (fd < 0) return {dr::DriverErrc::connect_failed, who + "socket(AF_UNIX, SOCK_SEQPACKET): " + std::strerror(errno)};
+  if (fd < 0) return dr::DriverError{dr::DriverErrc::connect_failed, who + "socket(AF_UNIX, SOCK_SEQPACKET): " + std::strerror(errno)};
   addr.sun_family = AF_UNIX;
   std::memcpy(addr.sun_path, imu.socket_path.data(), imu.socket_path.size());
   if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
     const int e = errno;
     ::close(fd);
-    return {dr::DriverErrc::connect_failed,
-            who + std::strerror(e) + " (is the CAN gateway or `imucal sim-devices` running there?)"};
+    return dr::DriverError{dr::DriverErrc::connect_failed,
+                           who + std::strerror(e) + " (is the CAN gateway or `imucal sim-devices` running there?)"};
   }
-  return fd;
+  return Transport(dr::socketcan_transport(fd, imu.link, imu.framing, "socket " + imu.socket_path));
 }
 
 }  // namespace
@@ -65,7 +78,7 @@ dr::Result<int> open_imu_link(const ImuDeviceConfig& imu) {
 struct WireBench::Devices {
   std::unique_ptr<dr::AclTable> table;
   std::unique_ptr<dr::ModbusChamber> chamber;
-  std::unique_ptr<dr::CanImu> imu;
+  std::unique_ptr<dr::LinkImu> imu;
   // How far the bring-up got: what a failed start must park.
   bool table_connected = false;
   bool chamber_active = false;
@@ -179,8 +192,9 @@ class WireBench::ImuFacade final : public Imu {
     m.imu_serial = b_.addresses_.imu.serial;
     m.rate_hz = b_.addresses_.imu.rate_hz;
     m.segments = b_.program_.segments();
-    m.gyro_lsb_rad = b_.addresses_.imu.gyro_lsb_rad;
-    m.accel_lsb_mps = b_.addresses_.imu.accel_lsb_mps;
+    // Counts under the LSB when the IMU sends integer increments; doubles otherwise.
+    m.gyro_lsb_rad = b_.addresses_.imu.link.gyro_increment_lsb_rad();
+    m.accel_lsb_mps = b_.addresses_.imu.link.accel_increment_lsb_mps();
     m.program_json = b_.program_.source_json;
     m.truth_json = b_.truth_json_;  // only a simulated IMU has a truth
     return m;
@@ -230,9 +244,10 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   addresses_.chamber.map = dr::load_register_map(kChamberMap);
   addresses_.chamber.safe_setpoint_C = simulated.chamber_safe_setpoint_C;
   addresses_.imu.framing = dr::can::Framing::fd;
+  addresses_.imu.link_name = sim.imu_link;
+  addresses_.imu.link = dr::link::load_imu_link(sim.imu_link);
+  dr::link::resolve_per_unit_lsb(addresses_.imu.link, sim_->gyro_lsb_rad(), sim_->accel_lsb_mps());
   addresses_.imu.rate_hz = settings.rate_hz;
-  addresses_.imu.gyro_lsb_rad = sim_->gyro_lsb_rad();
-  addresses_.imu.accel_lsb_mps = sim_->accel_lsb_mps();
   addresses_.imu.serial = sim.imu_serial;
   truth_json_ = imu_model_to_json_text(simulated.truth);
   for (const SimFault& f : simulated.faults) faults_.push_back({f});
@@ -272,23 +287,25 @@ void WireBench::start(int imu_fd) {
     keep_alive_ns_ = std::max<std::int64_t>(50'000'000, std::llround(addresses_.table.watchdog_s * units::kNsPerS / 4));
 
   dev_ = std::make_unique<Devices>();
-  // The IMU link first: opening it moves nothing, and without it no run can record.
-  if (imu_fd < 0) {
-    auto fd = open_imu_link(imu);
-    if (!fd)
-      throw std::runtime_error("IMU on " + imu_link_ + ": " + fd.error().message +
-                               "; nothing was moved (the table and the chamber were not contacted)");
-    imu_fd = *fd;
-  }
-  dr::CanImuConfig imu_config;
+  dr::LinkImuConfig imu_config;
   imu_config.name = imu.serial;
-  imu_config.framing = imu.framing;
+  imu_config.link = imu.link;
   imu_config.rate_hz = imu.rate_hz;
-  imu_config.gyro_lsb_rad = imu.gyro_lsb_rad;
-  imu_config.accel_lsb_mps = imu.accel_lsb_mps;
   imu_config.stall_timeout = std::chrono::milliseconds(imu.stall_timeout_ms);
   imu_config.transport_delay_ns = imu.transport_delay_ns;
-  dev_->imu = std::make_unique<dr::CanImu>(imu_fd, imu_config);
+  // The IMU link first: opening it moves nothing, and without it no run can record.
+  {
+    auto transport = imu_fd >= 0 ? dr::Result<std::unique_ptr<dr::ImuTransport>>(
+                                       dr::socketcan_transport(imu_fd, imu.link, imu.framing, imu_link_))
+                                 : imu_transport(imu);
+    if (transport) {
+      dev_->imu = std::make_unique<dr::LinkImu>(std::move(*transport), imu_config);
+      if (auto r = dev_->imu->connect(); !r) transport = r.error();
+    }
+    if (!transport)
+      throw std::runtime_error("IMU on " + imu_link_ + ": " + transport.error().message +
+                               "; nothing was moved (the table and the chamber were not contacted)");
+  }
   dev_->table = std::make_unique<dr::AclTable>(addresses_.table);
   dev_->chamber = std::make_unique<dr::ModbusChamber>(addresses_.chamber);
 
@@ -307,7 +324,6 @@ void WireBench::start(int imu_fd) {
     chamber_state_.setpoint_C = reading->setpoint_C;
     chamber_state_.connected = true;
     next_chamber_read_ns_ = dr::host_time_ns() + kChamberReadPeriod_ns;
-    require(dev_->imu->connect(), "IMU on " + imu_link_ + ": connect");
     require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
     require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
   } catch (const std::exception& e) {

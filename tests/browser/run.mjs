@@ -9,7 +9,7 @@
 //
 // Usage: node run.mjs --imucald build/release/bin/imucald [--web web] [--out build/release/screenshots]
 // Exit codes: 0 passed, 1 failed, 77 skipped (no Chromium, no imucald; CTest SKIP_RETURN_CODE).
-import { spawn } from 'node:child_process';
+import { execFileSync, spawn } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
@@ -63,10 +63,16 @@ fs.mkdirSync(outDir, { recursive: true });
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'imucal-browser-'));
 const dataDir = path.join(tmp, 'data');
 const VIEWER = { user: 'vera', password: 'viewer-pass-1' };
+function passwordHash(password) {
+  const imucal = path.join(path.dirname(imucald), 'imucal');
+  if (!fs.existsSync(imucal)) skip(`no ${imucal} to make the viewer's password hash (build the release preset)`);
+  return execFileSync(imucal, ['passwd'], { input: `${password}\n` }).toString().trim();
+}
 fs.writeFileSync(path.join(tmp, 'imucald.json'), JSON.stringify({
   _comment: 'browser test: simulated devices, one viewer; the operator signs in with the generated token',
   site: { name: 'browser test lab' },
-  users: [{ name: VIEWER.user, role: 'viewer', password: VIEWER.password }],
+  // Only hashes go into a configuration: made by `imucal passwd` (beside imucald), as a lab would.
+  users: [{ name: VIEWER.user, role: 'viewer', password_hash: passwordHash(VIEWER.password) }],
   http: { web_dir: webDir },
 }, null, 1));
 
@@ -379,6 +385,56 @@ try {
   await page.$eval('#plot-thermal', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14-results-thermal');
   log('Schuler test (three variants) and thermal plots drawn from campaigns that ran evaluate and thermal-short');
+
+  // ---- the whole method from the builder: the built-in campaign `full` ----
+  // direct, lever-arm, navigation, evaluate; stage 1, the lever arms and stage 3 online. Stage 3's
+  // states converge on the live page with its innovations; the results page shows what each stage
+  // contributed and the Schuler test of every stage's model.
+  await page.goto(`${base}/#/new`);
+  await page.waitForSelector('#segments tr.segment');
+  await page.selectOption('#template', 'full');
+  await page.click('#load-template');
+  await waitText(page, '#template-info', /Built-in program "full"/);
+  for (const e of ['direct', 'lever-arm', 'stage3'])
+    assert.equal(await page.isChecked(`#c-est-${e}`), true, `the builder ticks ${e} for full`);
+  await page.fill('#c-name', 'browser test: full');
+  await page.fill('#c-rate', '50');
+  await page.fill('#c-time-scale', '1000');
+  await page.selectOption('#c-truth-kind', 'path');
+  await page.fill('#c-truth-path', path.join(repo, 'examples', 'truth-nav-grade.json'));
+  await waitText(page, '#verdict', /^Valid/, 30000);
+  await page.click('#create-start');
+  await page.waitForSelector('#confirm-dialog[open]');
+  await page.click('#confirm-ok');
+  await page.waitForURL(/#\/live$/);
+  const fullId = (await apiCall('GET', '/api/campaigns')).body.campaigns.find((c) => c.name === 'browser test: full').id;
+  // Stage 3 running: its convergence shown (the delays are stage-3 states), its innovations drawn.
+  await page.waitForSelector('#innovations-card:not([hidden]) #innovations .conv-chart .uplot', { timeout: 180000 });
+  await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart[data-coefficient^="gyro."] .uplot')?.dataset.points) >= 2
+    && document.querySelector('#conv-estimator [aria-selected="true"]')?.dataset.estimator === 'stage3', null, { timeout: 60000 });
+  const conv0 = await page.$eval('#innovations .conv-chart .uplot', (u) => Number(u.dataset.points));
+  await page.waitForFunction((n) => Number(document.querySelector('#innovations .conv-chart .uplot')?.dataset.points) > n, conv0, { timeout: 60000 });
+  await waitText(page, '#estimator-status [data-estimator="stage3"]', /filter running|filter rejecting/);
+  await page.$eval('#convergence', (el) => el.scrollIntoView());
+  await shot(page, '15-live-stage3');
+  await page.$eval('#innovations-card', (el) => el.scrollIntoView());
+  await shot(page, '15b-live-stage3-innovations');
+  log(`campaign ${fullId} (full) from the builder: stage 3's states converging live, innovations against their gates`);
+  await page.goto(`${base}/#/campaigns/${fullId}`);
+  await waitText(page, '#campaign-state', /done/, 300000);
+  await page.waitForSelector('#contributions tbody tr[data-coefficient="gyro.delay_us.x"]', { timeout: 30000 });
+  const reduction = await page.$eval('#contributions tr[data-coefficient="gyro.bias_dph.x"] td.reduction', (td) => Number(td.textContent));
+  assert.ok(reduction > 1, `stage 3 shrank the gyro bias uncertainty (sqrt(P0/Pk) = ${reduction})`);
+  await waitText(page, '#relative-delays', /τ_yx = .* µs/);
+  await page.waitForSelector('#plot-evaluation .uplot', { timeout: 60000 });
+  const fullVariants = await page.$$eval('#evaluation-table tbody tr', (rows) => rows.map((r) => r.dataset.variant));
+  for (const v of ['stage direct', 'stage lever-arm', 'stage stage3'])
+    assert.ok(fullVariants.includes(v), `the Schuler test compares ${v} (${fullVariants.join(', ')})`);
+  await page.$eval('#contributions', (el) => el.scrollIntoView());
+  await shot(page, '16-results-full-contributions');
+  await page.$eval('#plot-evaluation', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '16b-results-full-schuler');
+  log('results of full: each stage\'s contribution with sqrt(P0/Pk), relative gyro delays, Schuler test of every stage');
 
   // ---- the campaigns list ----
   await page.goto(`${base}/#/campaigns`);

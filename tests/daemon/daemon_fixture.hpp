@@ -118,6 +118,16 @@ struct Client {
     return http_request(port, "POST", target, body, auth());
   }
   json get_json(const std::string& target) const { return get(target).json_body(); }
+  // A result computed as a job (allan, thermal, evaluation): 202 while it computes, then the answer.
+  HttpResult get_computed(const std::string& target, double timeout_s = 600.0) const {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    HttpResult r = get(target);
+    while (r.status == 202 && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      r = get(target);
+    }
+    return r;
+  }
   // Polls GET /api/campaigns/{id} until `pred` holds or the timeout passes; returns the last body.
   json wait_for(std::int64_t id, const std::function<bool(const json&)>& pred, double timeout_s = 60.0) const {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);

@@ -8,6 +8,7 @@
 #include <spdlog/spdlog.h>
 
 #include "daemon/service/campaign.hpp"
+#include "daemon/service/password_hash.hpp"
 #include "daemon/service/service.hpp"
 #include "daemon_fixture.hpp"
 #include "drivers/sim/simulator.hpp"
@@ -31,7 +32,9 @@ inline daemon::DaemonConfig test_config(const std::string& dir) {
   c.data_dir = dir;
   c.http.port = 0;
   c.operator_token = kOperatorToken;
-  c.users = {{"viewer", daemon::Role::Viewer, "viewer-password", kViewerToken}};
+  // One hash for every daemon of a test executable: Argon2id takes a fraction of a second by design.
+  static const std::string viewer_hash = daemon::hash_password("viewer-password");
+  c.users = {{"viewer", daemon::Role::Viewer, viewer_hash, kViewerToken}};
   c.log.file = "";
   c.suspenders.settle_s = 5.0;
   return c;
@@ -61,6 +64,16 @@ struct LocalDaemon {
     return service->api().handle(r);
   }
   json get(const std::string& target) { return json::parse(call("GET", target).body); }
+  // A result computed as a job (allan, thermal, evaluation): 202 while it computes, then the answer.
+  daemon::HttpReply get_computed(const std::string& target, double timeout_s = 600.0) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    daemon::HttpReply r = call("GET", target);
+    while (r.status == 202 && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      r = call("GET", target);
+    }
+    return r;
+  }
   std::int64_t post_campaign(const json& campaign) {
     const auto r = call("POST", "/api/campaigns", campaign.dump());
     EXPECT_EQ(r.status, 201) << r.body;

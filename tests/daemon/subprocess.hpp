@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <thread>
@@ -78,6 +79,32 @@ inline int wait_exit(pid_t pid, double timeout_s) {
   ::kill(pid, SIGKILL);
   ::waitpid(pid, nullptr, 0);
   return -1;
+}
+
+// The real imucald as a subprocess on a free loopback port (its "listening on" line read from its
+// stdout; port 0 when it did not start), signed with the tests' operator token.
+struct DaemonProcess {
+  pid_t pid = -1;
+  std::uint16_t port = 0;
+};
+inline DaemonProcess spawn_imucald(const std::string& imucald, const std::string& data_dir, const std::string& log_path,
+                                   const std::string& operator_token, const char* devices = "sim") {
+  Child child = spawn_child({imucald, "--listen", "127.0.0.1:0", "--data-dir", data_dir, "--operator-token",
+                             operator_token, "--log-level", "info", "--devices", devices},
+                            log_path);
+  constexpr const char* kListening = "listening on http://127.0.0.1:";
+  const std::string text = read_stdout_until(
+      child,
+      [&](const std::string& t) {
+        const auto at = t.find(kListening);
+        return at != std::string::npos && t.find('\n', at) != std::string::npos;
+      },
+      60.0);
+  DaemonProcess d;
+  d.pid = child.pid;
+  if (const auto at = text.find(kListening); at != std::string::npos)
+    d.port = static_cast<std::uint16_t>(std::stoi(text.substr(at + std::string(kListening).size())));
+  return d;
 }
 
 }  // namespace imucal::daemontest

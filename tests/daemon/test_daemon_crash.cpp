@@ -15,27 +15,9 @@ using namespace imucal::daemontest;
 
 namespace {
 
-struct Daemon {
-  pid_t pid = -1;
-  std::uint16_t port = 0;
-};
-
-// Starts imucald and reads its "listening on" line from stdout.
+using Daemon = DaemonProcess;
 Daemon spawn(const std::string& data_dir, const std::string& log_path, const char* devices = "sim") {
-  Child child = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", data_dir, "--operator-token",
-                             kOperatorToken, "--log-level", "info", "--devices", devices},
-                            log_path);
-  constexpr const char* kListening = "listening on http://127.0.0.1:";
-  auto announced = [&](const std::string& t) {
-    const auto at = t.find(kListening);
-    return at != std::string::npos && t.find('\n', at) != std::string::npos;
-  };
-  const std::string text = read_stdout_until(child, announced, 60.0);
-  Daemon d;
-  d.pid = child.pid;
-  if (const auto at = text.find(kListening); at != std::string::npos)
-    d.port = static_cast<std::uint16_t>(std::stoi(text.substr(at + std::string(kListening).size())));
-  return d;
+  return spawn_imucald(IMUCAL_IMUCALD, data_dir, log_path, kOperatorToken, devices);
 }
 
 }  // namespace

@@ -274,3 +274,68 @@ TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) 
     EXPECT_FALSE(axis.moving);
   }
 }
+
+// A KVH-style serial IMU (the built-in kvh-1750 description: float32 delta angles, accelerations in
+// g, a 7-bit counter, CRC-32/MPEG-2) on a pseudo-terminal, reached by the daemon through the
+// serial device path in its configuration. A campaign records every frame of its grid once; a
+// corrupted CRC, a dropped byte and a sequence jump on the line each suspend the run (a gap: the
+// frame is never recorded wrong), which redoes the segment and still records every frame once.
+TEST(ConfiguredDevices, AKvhSerialImuOverAPseudoTerminalRecordsEveryFrameOnceThroughFaults) {
+  const std::string dir = scratch_dir("devices-kvh-config");
+  drivers::sim::SimDevicesConfig sc = in_process_devices("");
+  sc.imu_link = "kvh-1750";
+  sc.imu_serial = "KVH-TEST-1";
+  drivers::sim::SimDevices sim(sc);
+  ASSERT_FALSE(sim.imu_serial_device().empty());
+  json devices = json::parse(sim.devices_config_json());
+  EXPECT_EQ(devices["imu"]["link"], "kvh-1750");
+  EXPECT_FALSE(devices["imu"].contains("gyro_lsb_rad"));  // the description fixes the units
+  write_file(dir + "/imucald.json", json{{"devices", devices}});
+
+  LocalDaemon d("devices-kvh", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  const auto id = d.post_campaign(short_campaign("kvh"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  // Faults on the line while it runs, one after the other, each once the run is going again.
+  using Fault = std::function<void(drivers::sim::SimImu&)>;
+  const std::vector<std::pair<std::string, Fault>> faults = {
+      {"corrupted CRC", [](drivers::sim::SimImu& imu) { imu.corrupt_next_samples(1); }},
+      {"dropped byte", [](drivers::sim::SimImu& imu) { imu.drop_byte_of_next_sample(); }},
+      {"sequence jump", [](drivers::sim::SimImu& imu) { imu.skip_sequence(3); }},
+  };
+  std::size_t suspensions = 0;
+  for (const auto& [name, fault] : faults) {
+    d.wait_for(id, [](const json& c) { return c.value("state", "") == "running" && c.value("frames", 0) > 50; }, 60.0);
+    ASSERT_TRUE(sim.with_imu(fault)) << name;
+    const json c = d.wait_for(id, [&](const json& x) {
+      return x.value("state", "") == "suspended" || x.value("state", "") == "done";
+    }, 60.0);
+    if (c.value("state", "") == "done") break;  // the program ended first (a loaded machine)
+    ++suspensions;
+  }
+  const json c = d.wait_final(id, 120.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_GE(suspensions, 1u) << c.dump();
+  EXPECT_TRUE(has_event(c, "suspended")) << c.dump();
+  EXPECT_EQ(c.at("bad_frames"), 0);
+  EXPECT_TRUE(has_event(c, "info", sim.imu_serial_device())) << c.dump();
+
+  const auto frames = run_frames(d.run_path(c));
+  const double duration_s = c.at("duration_s").get<double>();
+  ASSERT_GE(static_cast<double>(frames.size()), duration_s * 100.0 - 1.0);
+  EXPECT_EQ(off_grid(frames, 10'000'000), 0u);  // every instant once, none wrong, none twice
+  const RecordingMeta meta = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read).meta();
+  EXPECT_EQ(meta.imu_serial, "KVH-TEST-1");
+  EXPECT_FALSE(meta.gyro_lsb_rad.has_value());  // float increments: stored as doubles
+  // The IMU senses the 30 deg/s spin through the float32 delta angles.
+  double rate_sum_dps = 0.0;
+  int rate_n = 0;
+  for (const ImuFrame& f : frames) {
+    const double t_s = static_cast<double>(f.t_ns) * 1e-9;
+    if (t_s > 5.5 && t_s < 6.8) {
+      rate_sum_dps += f.dtheta_rad.norm() / 0.01 * 180.0 / M_PI;
+      ++rate_n;
+    }
+  }
+  ASSERT_GT(rate_n, 50);
+  EXPECT_NEAR(rate_sum_dps / rate_n, 30.0, 0.5);
+}

@@ -27,9 +27,22 @@ TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
   const Client op{d.service->port(), kOperatorToken};
   ASSERT_NE(op.port, 0);
   const json programs = op.get_json("/api/programs");
-  bool found = false;
-  for (const auto& p : programs.at("programs")) found = found || p.at("name") == "direct-short";
-  ASSERT_TRUE(found);
+  // Every built-in program and the campaign `full`, each with the estimators a campaign of it runs
+  // by default (the builder offers those).
+  std::map<std::string, json> by_name;
+  for (const auto& p : programs.at("programs")) by_name[p.at("name").get<std::string>()] = p;
+  ASSERT_TRUE(by_name.count("direct-short"));
+  ASSERT_TRUE(by_name.count("full")) << programs.dump().substr(0, 500);
+  EXPECT_EQ(by_name.at("full").at("estimators"), json({"direct", "lever-arm", "stage3"}));
+  // Its four programs, with a move to each one's start pose inserted between them.
+  const double parts_s = by_name.at("direct").at("duration_s").get<double>() +
+                         by_name.at("lever-arm").at("duration_s").get<double>() +
+                         by_name.at("navigation").at("duration_s").get<double>() +
+                         by_name.at("evaluate").at("duration_s").get<double>();
+  EXPECT_GE(by_name.at("full").at("duration_s").get<double>(), parts_s);
+  EXPECT_LT(by_name.at("full").at("duration_s").get<double>(), parts_s + 60.0);
+  EXPECT_EQ(by_name.at("navigation").at("estimators"), json({"stage3"}));
+  EXPECT_EQ(by_name.at("direct").at("estimators"), json({"direct"}));
 
   const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
                                                     "time_scale": 100})");
@@ -338,19 +351,27 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   EXPECT_EQ(head.headers.at("content-length"), std::to_string(tar.body.size()));
   EXPECT_TRUE(head.body.empty());
 
-  const json allan = op.get_json(base + "/allan");
+  // Computed as a job: the first request starts it (202, with its progress), a later one gets it.
+  const auto first = op.get(base + "/allan");
+  if (first.status == 202) {
+    EXPECT_TRUE(first.json_body().contains("progress")) << first.body;
+    EXPECT_EQ(first.headers.at("retry-after"), "1");
+  } else {
+    EXPECT_EQ(first.status, 200) << first.body.substr(0, 300);
+  }
+  const json allan = op.get_computed(base + "/allan").json_body();
   ASSERT_TRUE(allan.contains("gyro_x")) << allan.dump().substr(0, 500);
   EXPECT_GT(allan.at("gyro_x").at("tau_s").size(), 5u);
   EXPECT_EQ(allan.at("gyro_x").at("tau_s").size(), allan.at("gyro_x").at("adev").size());
   EXPECT_EQ(allan.at("gyro_x").at("unit"), "deg/h");
   EXPECT_EQ(allan.at("arw_deg_rth").size(), 3u);
 
-  const auto thermal = op.get(base + "/thermal");
+  const auto thermal = op.get_computed(base + "/thermal");
   EXPECT_EQ(thermal.status, 404);
   EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("not available for this run"), std::string::npos);
   EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("thermal"), std::string::npos);
 
-  const auto evaluation = op.get(base + "/evaluation");
+  const auto evaluation = op.get_computed(base + "/evaluation");
   ASSERT_EQ(evaluation.status, 200) << evaluation.body.substr(0, 500);
   const json variants = evaluation.json_body().at("variants");
   ASSERT_EQ(variants.size(), 3u);  // uncalibrated, this campaign's model, the truth

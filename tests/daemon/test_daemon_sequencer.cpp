@@ -309,7 +309,7 @@ TEST(CampaignRun, RunsAFileInProcessAndWritesTheModel) {
   EXPECT_EQ(r.exit_code, 0) << r.error;
   EXPECT_EQ(r.state, "done");
   EXPECT_EQ(r.frames, 40260);
-  EXPECT_GT(r.wall_s, 0.0);  // the speed figure is test_daemon_speed's (release only)
+  EXPECT_GT(r.wall_s, 0.0);  // the speed figure is a benchmark (bench/README.md)
   EXPECT_EQ(r.results.at("navigation").at("status"), "done");
   EXPECT_NO_THROW(read_imu_model_file(options.model_out));
 

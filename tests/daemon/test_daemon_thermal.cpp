@@ -45,7 +45,7 @@ TEST(DaemonThermal, TheBuiltInThermalCampaignFollowsItsChamberProfileAndFeedsSta
   const json done = d.wait_final(id, 600.0);
   ASSERT_EQ(done.at("state"), "done") << done.dump().substr(0, 2000);
 
-  const auto reply = d.call("GET", "/api/campaigns/" + std::to_string(id) + "/thermal");
+  const auto reply = d.get_computed("/api/campaigns/" + std::to_string(id) + "/thermal");
   ASSERT_EQ(reply.status, 200) << reply.body.substr(0, 1000);
   const json thermal = json::parse(reply.body);
   EXPECT_EQ(thermal.at("residual_source"), "truth");

@@ -10,7 +10,10 @@
 #include "daemon/service/auth.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/config.hpp"
+#include "daemon/service/daemon_db.hpp"
+#include "daemon/service/password_hash.hpp"
 #include "daemon/service/run_state.hpp"
+#include "daemon/service/suspenders.hpp"
 #include "daemon/service/static_files.hpp"
 #include "daemon_fixture.hpp"
 
@@ -49,6 +52,51 @@ TEST(RunState, CommandsApplyOnlyInTheirStates) {
   EXPECT_FALSE(command_target(RunState::Done, Command::Abort));
 }
 
+// One table for every change: each operator command's target is in it, nothing leaves a final
+// state, and the database refuses (with a typed error) what the table does not hold.
+TEST(RunState, EveryChangeFollowsTheTransitionTable) {
+  const RunState all[] = {RunState::Created, RunState::Queued,   RunState::Running, RunState::Pausing,
+                          RunState::Paused,  RunState::Suspended, RunState::Stopping, RunState::Aborting,
+                          RunState::Done,    RunState::Failed,   RunState::Aborted, RunState::Interrupted};
+  for (const RunState from : all) {
+    for (const Command c : {Command::Start, Command::Pause, Command::Resume, Command::Stop, Command::Abort}) {
+      if (const auto to = command_target(from, c)) {
+        EXPECT_TRUE(transition_allowed(from, *to)) << to_string(from) << " --" << to_string(c) << "--> " << to_string(*to);
+      }
+    }
+    for (const RunState to : all) {
+      if (is_final(from)) {
+        EXPECT_FALSE(transition_allowed(from, to)) << to_string(from) << " -> " << to_string(to);
+      }
+    }
+    // Only through aborting does an active run end aborted; only the queue (and a resume or a
+    // cleared suspender) sets a run running.
+    if (is_active(from) && from != RunState::Aborting) {
+      EXPECT_FALSE(transition_allowed(from, RunState::Aborted)) << to_string(from);
+    }
+    if (from != RunState::Queued && from != RunState::Paused && from != RunState::Suspended) {
+      EXPECT_FALSE(transition_allowed(from, RunState::Running)) << to_string(from);
+    }
+    // A crash or a shutdown can meet any active run.
+    if (is_active(from)) {
+      EXPECT_TRUE(transition_allowed(from, RunState::Interrupted)) << to_string(from);
+    }
+  }
+  DaemonDb db(daemontest::scratch_dir("transitions") + "/imucald.db");
+  const auto id = db.insert_campaign("t", "{}", "direct", 10.0, "created by the test");
+  EXPECT_TRUE(db.set_state(id, RunState::Queued, "start"));
+  try {
+    db.set_state(id, RunState::Done, "skipping the run");
+    FAIL() << "queued -> done was written";
+  } catch (const InvalidTransition& e) {
+    EXPECT_EQ(e.from, RunState::Queued);
+    EXPECT_EQ(e.to, RunState::Done);
+    EXPECT_NE(std::string(e.what()).find("no transition from queued to done"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(db.campaign(id)->state, RunState::Queued);  // nothing written
+  EXPECT_EQ(db.transitions(id).size(), 2u);
+}
+
 TEST(Config, DefaultsRunWithNoFile) {
   const DaemonConfig c = parse_config("{}", "test");
   EXPECT_EQ(c.http.host, "127.0.0.1");
@@ -64,7 +112,8 @@ TEST(Config, ReadsEveryBlockAndIgnoresComments) {
     "site": {"_comment": "x", "name": "lab", "latitude_deg": 45.0},
     "table": {"limits": {"middle": {"min_deg": -100, "max_deg": 100, "rate_dps": 50}}},
     "chamber": {"min_C": -20, "max_C": 70, "safe_setpoint_C": 23},
-    "users": [{"name": "ann", "role": "viewer", "password": "long enough"}],
+    "users": [{"name": "ann", "role": "viewer",
+               "password_hash": "$argon2id$v=19$m=65536,t=2,p=1$c2FsdHNhbHRzYWx0c2FsdA$3o2mUAVEDnX4+1eLybYZKJwPGm3tO9mPz6s2n5Zj1vI"}],
     "http": {"body_limit_bytes": 4096, "live_queue": 8},
     "log": {"level": "debug", "file": ""}
   })", "test");
@@ -79,6 +128,31 @@ TEST(Config, ReadsEveryBlockAndIgnoresComments) {
   EXPECT_EQ(c.users[0].role, Role::Viewer);
   EXPECT_EQ(c.http.body_limit_bytes, 4096);
   EXPECT_EQ(c.log.level, "debug");
+}
+
+TEST(Config, APlainTextPasswordIsRefusedAndAHashSignsIn) {
+  try {
+    parse_config(R"({"users": [{"name": "ann", "role": "viewer", "password": "long enough"},
+                               {"name": "bob", "role": "viewer", "password_hash": "md5:abc"}]})", "cfg.json");
+    FAIL() << "accepted a plain-text password";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("config.users[0].password: plain-text passwords are not accepted"), std::string::npos) << m;
+    EXPECT_NE(m.find("imucal passwd"), std::string::npos) << m;
+    EXPECT_NE(m.find("config.users[1].password_hash is not a hash made by `imucal passwd`"), std::string::npos) << m;
+  }
+  const std::string hash = hash_password("correct horse");
+  EXPECT_TRUE(is_password_hash(hash)) << hash;
+  EXPECT_NE(hash, hash_password("correct horse")) << "salted: two hashes of one password differ";
+  EXPECT_TRUE(verify_password(hash, "correct horse"));
+  EXPECT_FALSE(verify_password(hash, "correct horse "));
+  EXPECT_FALSE(verify_password("not a hash", "correct horse"));
+  const DaemonConfig c = parse_config(json{{"users", {{{"name", "ann"}, {"role", "viewer"}, {"password_hash", hash}}}}}.dump(),
+                                      "cfg.json");
+  Auth auth(c, daemontest::scratch_dir("hash-signin"));
+  EXPECT_EQ(auth.login_password("ann", "correct horse").status, 200);
+  EXPECT_EQ(auth.login_password("ann", "wrong").status, 401);
+  EXPECT_EQ(auth.login_password("nobody", "correct horse").status, 401);
 }
 
 TEST(Config, ListsEveryProblem) {
@@ -125,7 +199,7 @@ TEST(Config, ADevicesObjectNamesRealDevices) {
   EXPECT_EQ(d.imu.socket_path, "/run/imucal/imu.sock");
   EXPECT_TRUE(d.imu.interface.empty());
   EXPECT_DOUBLE_EQ(d.imu.rate_hz, 400.0);
-  EXPECT_DOUBLE_EQ(d.imu.gyro_lsb_rad, 2.5e-9);
+  EXPECT_DOUBLE_EQ(d.imu.link.gyro_increment_lsb_rad().value_or(0), 2.5e-9);  // imucal-can, per unit
   EXPECT_EQ(d.imu.serial, "FOG-0042");
   EXPECT_EQ(d.imu.transport_delay_ns, 1500);
   EXPECT_EQ(d.imu.stall_timeout_ms, 300);
@@ -395,7 +469,8 @@ TEST(Auth, GeneratesTheOperatorTokenOnceAndKeepsIt) {
 
 TEST(Auth, SessionsAndThrottling) {
   DaemonConfig config;
-  config.users = {{"vic", Role::Viewer, "viewer-password", ""}, {"ops", Role::Operator, "operator-password", ""}};
+  config.users = {{"vic", Role::Viewer, hash_password("viewer-password"), ""},
+                  {"ops", Role::Operator, hash_password("operator-password"), ""}};
   Auth auth(config, daemontest::scratch_dir("sessions"));
   const auto ok = auth.login_password("vic", "viewer-password");
   ASSERT_EQ(ok.status, 200);
@@ -435,4 +510,57 @@ TEST(Config, TheCommentedExampleParses) {
   ASSERT_TRUE(real.device_addresses);
   EXPECT_EQ(real.device_addresses->imu.interface, "can0");
   EXPECT_EQ(real.device_addresses->table.port, 5000);
+}
+
+// The suspenders as objects: each trips on its condition, the chamber only after its persistence,
+// the same objects say when it is clear to move again, and they describe themselves for the API.
+TEST(Suspenders, TripOnTheirConditionAndClearOnTheSameRule) {
+  SuspenderSettings settings;
+  settings.chamber_persist_s = 2.0;
+  settings.frame_timeout_s = 1.0;
+  Suspenders s(settings);
+  DeviceReadings r;
+  r.now_s = 100.0;
+  r.last_frame_s = 100.0;
+  r.chamber_C = 25.0;
+  r.setpoint_C = 25.0;
+  r.tolerance_C = 2.0;
+  EXPECT_FALSE(s.trip(r));
+  EXPECT_TRUE(s.clear(r));
+  // Out of band: held only after 2 s of it.
+  r.chamber_C = 28.0;
+  EXPECT_FALSE(s.trip(r));
+  EXPECT_FALSE(s.clear(r)) << "not clear to move while out of band";
+  r.now_s = r.last_frame_s = 101.5;
+  EXPECT_FALSE(s.trip(r));
+  r.now_s = r.last_frame_s = 102.1;
+  const auto chamber = s.trip(r);
+  ASSERT_TRUE(chamber);
+  EXPECT_EQ(chamber->suspender, "chamber-out-of-band");
+  EXPECT_NE(chamber->reason.find("chamber out of band: 28.00 C, set point 25.00 C +- 2.00 C"), std::string::npos);
+  r.chamber_C = 25.5;
+  EXPECT_TRUE(s.clear(r));
+  // Frames missing after the timeout; before a segment the IMU's link is what must be up.
+  r.now_s = 104.0;
+  const auto frames = s.trip(r);
+  ASSERT_TRUE(frames);
+  EXPECT_EQ(frames->suspender, "imu-frames-missing");
+  r.imu_connected = false;
+  EXPECT_FALSE(s.clear(r));
+  r.imu_connected = true;
+  r.last_frame_s = 104.0;
+  // The recorder comes first, whatever else is wrong.
+  r.table_connected = false;
+  r.recorder_problem = "recording failed: disk full";
+  EXPECT_EQ(s.trip(r)->suspender, "recorder");
+  r.recorder_problem.clear();
+  EXPECT_EQ(s.trip(r)->reason, "table disconnected");
+  const nlohmann::json list = s.describe();
+  ASSERT_EQ(list.size(), 7u);
+  for (const auto& e : list) {
+    EXPECT_FALSE(e.at("condition").get<std::string>().empty()) << e.dump();
+    EXPECT_FALSE(e.at("resume").get<std::string>().empty()) << e.dump();
+    EXPECT_EQ(e.at("severity"), "suspend");
+  }
+  EXPECT_NE(list.dump().find("for 2 s"), std::string::npos) << "the condition states the configured persistence";
 }

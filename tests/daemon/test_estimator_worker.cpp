@@ -37,7 +37,7 @@ TEST(EstimatorWorker, NavigationAppliesTheThermalSection) {
   // The recorder's commits arrive in steps while the worker tails the file: temperatures after the
   // last frame of one step must wait for the frames of the next.
   auto max_velocity_error = [&](const ImuModel& model) {
-    daemon::EstimatorWorker worker(path, {"navigation"}, model, std::nullopt, [](auto&&...) {});
+    daemon::EstimatorWorker worker(path, {{"navigation"}, model, {}}, std::nullopt, [](auto&&...) {});
     for (std::int64_t t_ns = 0; t_ns < last_t_ns; t_ns += 97'300'000'000) worker.committed(t_ns);
     const auto r = worker.finish(last_t_ns);
     EXPECT_EQ(r.results["navigation"]["status"], "done") << r.results.dump();

@@ -25,8 +25,11 @@ export function setReauthenticate(fn) {
  * Sends a request; resolves with the parsed JSON body, rejects with ApiError (status 0 when the
  * daemon cannot be reached). With `auth: false` a 401 is returned as an error instead of asking
  * the user to sign in (the sign-in request itself, the start-up check).
+ * `onPending`: for a result computed as a job (202 while it computes, docs/api.md): called with
+ * the job's state and progress, and the request is sent again a second later until the answer
+ * is there.
  */
-export async function api(method, path, body, { auth = true, signal } = {}) {
+export async function api(method, path, body, { auth = true, signal, onPending } = {}) {
   const headers = { Accept: 'application/json' };
   const init = { method, headers, credentials: 'same-origin', cache: 'no-store', signal };
   if (body !== undefined) {
@@ -52,7 +55,12 @@ export async function api(method, path, body, { auth = true, signal } = {}) {
   if (response.status === 401 && auth && reauthenticate) {
     if (!pendingReauth) pendingReauth = reauthenticate().finally(() => { pendingReauth = null; });
     await pendingReauth;
-    return api(method, path, body, { auth, signal });
+    return api(method, path, body, { auth, signal, onPending });
+  }
+  if (response.status === 202 && onPending) {
+    if (onPending(data) === false) throw new ApiError(202, { error: 'no longer wanted' });
+    await new Promise((resolve) => setTimeout(resolve, 1000));
+    return api(method, path, body, { auth, signal, onPending });
   }
   if (!response.ok) throw new ApiError(response.status, data || { error: `${response.status} ${response.statusText}` });
   return data;

@@ -10,6 +10,10 @@ export const GROUPS = [
   { key: 'accel.bias_mps2', title: 'Accelerometer bias' },
   { key: 'accel.scale_ppm', title: 'Accelerometer scale factor' },
   { key: 'accel.misalignment_arcsec', title: 'Accelerometer misalignment' },
+  // The lever-arm stage and stage 3 estimate these too.
+  { key: 'gyro.delay_us', title: 'Gyro delay' },
+  { key: 'accel.delay_us', title: 'Accelerometer delay' },
+  { key: 'accel.lever_arm_mm', title: 'Proof-mass offsets' },
 ];
 
 const UNITS = {

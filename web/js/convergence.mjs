@@ -11,8 +11,9 @@ const AXIS_COLOR = { x: COLORS[0], y: COLORS[1], z: COLORS[2], xy: COLORS[0], xz
 /**
  * @param {HTMLElement} el
  * @param {() => Map<string, import('./series.mjs').Series>} getSeries  coefficient -> [est, lo, hi]
+ * markers: () => program times drawn as vertical lines (stage 3's restarts).
  */
-export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 150 } = {}) {
+export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 150, markers = null } = {}) {
   const tabs = h('div', { class: 'tabs small', role: 'tablist', id: `${idPrefix}-tabs` });
   const grid = h('div', { class: 'conv-grid', id: `${idPrefix}-grid` });
   const empty = h('p', { class: 'muted', id: `${idPrefix}-empty` }, 'No estimates yet: the estimator waits for enough static positions and rotations.');
@@ -70,6 +71,7 @@ export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 15
           series: [{ label: 'estimate', color }, { label: '−σ', band: true }, { label: '+σ', band: true }],
           bands: [[3, 2, `${color}33`]],
           legend: false,
+          markers: markers || undefined,
         });
         charts.set(name, chart);
       }
@@ -82,6 +84,7 @@ export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 15
 
   return {
     update: () => schedule(update),
+    rebuild: () => schedule(rebuild),  // another set of coefficients (another estimator)
     destroy() {
       for (const c of charts.values()) c.destroy();
       charts.clear();

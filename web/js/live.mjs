@@ -148,6 +148,18 @@ export class LiveClient extends EventTarget {
 // once per program second, so its bound is smaller than the telemetry's.
 const ESTIMATE_OPTIONS = { recentCapacity: 1500, historyCapacity: 1000 };
 
+// Appends a sample to the named series of `map` (created on first use), unless it is not newer
+// than the last one (telemetry repeats the latest progress).
+function push(map, name, t, values) {
+  let s = map.get(name);
+  if (!s) {
+    s = new Series(3, ESTIMATE_OPTIONS);
+    map.set(name, s);
+  }
+  if (t <= s.lastTime) return;
+  s.push(t, values);
+}
+
 /**
  * What the page keeps of the telemetry: the latest message, bounded series for the plots and a
  * bounded event log. Listeners get 'telemetry', 'event' and 'run' (the active run changed).
@@ -164,7 +176,9 @@ export class LiveStore extends EventTarget {
     // temperature, set point, set point - tolerance, set point + tolerance
     this.chamber = new Series(4, opts);
     this.frameRate = new Series(1, opts);
-    this.estimators = new Map();  // name -> {coefficients: Map(name -> Series[est, lo, hi]), latest}
+    // name -> {coefficients: Map(name -> Series[est, lo, hi]), innovations: Map(name -> Series[value,
+    // -gate, +gate]) (stage 3), restarts: program times, latest}
+    this.estimators = new Map();
     this.events = new BoundedList(500);
     this.droppedMessages = 0;
     this.messages = 0;
@@ -215,7 +229,7 @@ export class LiveStore extends EventTarget {
   estimator(name) {
     let e = this.estimators.get(name);
     if (!e) {
-      e = { coefficients: new Map(), latest: null };
+      e = { coefficients: new Map(), innovations: new Map(), restarts: [], latest: null };
       this.estimators.set(name, e);
     }
     return e;
@@ -224,18 +238,17 @@ export class LiveStore extends EventTarget {
   addEstimate(name, progress) {
     const e = this.estimator(name);
     e.latest = progress;
+    if (Array.isArray(progress.restart_times_s)) e.restarts = progress.restart_times_s;
+    // Stage 3: the last update's innovations, each against its gate.
+    const inn = progress.innovations;
+    if (inn && Number.isFinite(inn.t_s))
+      for (const [name, [v, gate]] of Object.entries(inn.values || {})) push(e.innovations, name, inn.t_s, [v, -gate, gate]);
     const t = progress.program_time_s;
     if (!Number.isFinite(t) || !progress.estimates) return;
     for (const [coef, pair] of Object.entries(progress.estimates)) {
       if (!Array.isArray(pair)) continue;
-      let s = e.coefficients.get(coef);
-      if (!s) {
-        s = new Series(3, ESTIMATE_OPTIONS);
-        e.coefficients.set(coef, s);
-      }
-      if (t <= s.lastTime) continue;  // the same estimate again (telemetry repeats it)
       const [v, sigma] = pair;
-      s.push(t, [v, v - sigma, v + sigma]);
+      push(e.coefficients, coef, t, [v, v - sigma, v + sigma]);
     }
   }
 
@@ -249,20 +262,20 @@ export class LiveStore extends EventTarget {
         if (!Array.isArray(list)) continue;
         const e = this.estimator(name);
         const latest = e.latest;  // the live message is newer than any of the history
-        const fresh = new Map();
-        const keep = e.coefficients;
-        e.coefficients = fresh;
+        const keep = { coefficients: e.coefficients, innovations: e.innovations };
+        e.coefficients = new Map();
+        e.innovations = new Map();
         for (const p of list) this.addEstimate(name, p);
-        if (latest) e.latest = latest;
-        // Live samples that arrived while the history loaded come after it.
-        for (const [coef, s] of keep) {
-          const [times, est, lo, hi] = s.view(Infinity, Infinity);
-          const target = fresh.get(coef) || (fresh.set(coef, new Series(3, ESTIMATE_OPTIONS)), fresh.get(coef));
-          for (let i = 0; i < times.length; i++) {
-            const v = est[i];
-            target.push(times[i], [v ?? NaN, lo[i] ?? NaN, hi[i] ?? NaN]);
-          }
+        if (latest) {
+          e.latest = latest;
+          if (Array.isArray(latest.restart_times_s)) e.restarts = latest.restart_times_s;
         }
+        // Live samples that arrived while the history loaded come after it.
+        for (const key of ['coefficients', 'innovations'])
+          for (const [coef, s] of keep[key]) {
+            const [times, a, b, c] = s.view(Infinity, Infinity);
+            for (let i = 0; i < times.length; i++) push(e[key], coef, times[i], [a[i] ?? NaN, b[i] ?? NaN, c[i] ?? NaN]);
+          }
       }
       this.dispatchEvent(new CustomEvent('progress', { detail: { id } }));
     } catch {

@@ -36,7 +36,8 @@ export function schedule(fn) {
  * @param {{title?: string, y?: string, x?: 'time'|string, height?: number,
  *          series: {label: string, color?: string, dash?: number[], width?: number, band?: boolean}[],
  *          bands?: [number, number, string][], yRange?: (u, min, max) => [number, number],
- *          log?: boolean, points?: boolean}} spec
+ *          log?: boolean, points?: boolean, markers?: () => number[]}} spec
+ *   markers: x positions drawn as dashed vertical lines (e.g. the restarts of stage 3's navigation).
  */
 export function lineChart(el, spec) {
   const time = (spec.x ?? 'time') === 'time';
@@ -73,6 +74,7 @@ export function lineChart(el, spec) {
     ],
     legend: { show: spec.legend ?? true, live: true },
     cursor: { drag: { x: !time, y: false } },
+    hooks: spec.markers ? { draw: [(u) => drawMarkers(u, spec.markers())] } : {},
   };
   const empty = [[], ...spec.series.map(() => [])];
   const chart = new uPlot(opts, empty, el);
@@ -99,6 +101,23 @@ export function lineChart(el, spec) {
       chart.destroy();
     },
   };
+}
+
+function drawMarkers(u, xs) {
+  const { ctx, bbox } = u;
+  ctx.save();
+  ctx.strokeStyle = '#888';
+  ctx.setLineDash([4, 4]);
+  ctx.lineWidth = 1;
+  for (const x of xs || []) {
+    if (x < u.scales.x.min || x > u.scales.x.max) continue;
+    const px = Math.round(u.valToPos(x, 'x', true)) + 0.5;
+    ctx.beginPath();
+    ctx.moveTo(px, bbox.top);
+    ctx.lineTo(px, bbox.top + bbox.height);
+    ctx.stroke();
+  }
+  ctx.restore();
 }
 
 export function formatTick(v) {

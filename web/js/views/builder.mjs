@@ -112,15 +112,15 @@ export function mount(root, ctx) {
     if (!p) return;
     if (confirmLoss && draft?.modified && !window.confirm('Replace the edited segments with the built-in program?')) return;
     templateSelect.value = name;
-    const estimators = limits?.campaign?.estimators?.includes('direct') ? ['direct'] : [];
+    const known = limits?.campaign?.estimators || [];
     draft = {
       template: name,
       modified: false,
       campaign: {
         name: `${name} check`,
-        // direct needs statics and rotations about each axis; navigation suits the slow swings.
-        estimators: name.startsWith('direct') ? estimators
-          : ['navigation', 'evaluate'].includes(name) && limits?.campaign?.estimators?.includes('navigation') ? ['navigation'] : [],
+        // The estimators a campaign of this program runs by default (imucald's campaign check
+        // chooses them from the program's parts: GET /api/programs).
+        estimators: (p.estimators || []).filter((e) => known.includes(e)),
         rate_hz: 100,
         time_scale: 10,
         seed: 1,

@@ -8,6 +8,7 @@ import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../
 import { commandBar } from '../dialogs.mjs';
 import { coefficientRows, unitOf, groupOf } from '../coefficients.mjs';
 import { convergencePanel } from '../convergence.mjs';
+import { contributionRows } from '../contributions.mjs';
 import { Series } from '../series.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
 
@@ -140,6 +141,23 @@ export function mount(root, ctx) {
       results.append(h('p', { class: 'form-error' }, `Cannot load the model: ${model._error.message}`));
     }
 
+    // What each calibration stage contributed (a campaign of several stages, e.g. `full`).
+    const stageNames = ['direct', 'lever-arm', 'stage3'].filter((n) => d.results?.[n]?.status === 'done' && d.results[n].model);
+    if (stageNames.length >= 2) {
+      const models = await Promise.all(stageNames.map((n) => get(`/api/campaigns/${id}/model?stage=${n}&frame=body`).catch(() => null)));
+      if (stopped) return;
+      if (models.every(Boolean)) {
+        const stages = stageNames.map((stage, k) => ({ stage, model: models[k] }));
+        results.append(contributionsTable(stages, d.results.stage3?.uncertainty_reduction || null));
+      }
+    }
+    const delays = d.results?.stage3?.relative_gyro_delays_us;
+    if (delays) {
+      results.append(h('p', { id: 'relative-delays' }, 'Relative gyro delays (stage 3): ',
+        `τ_yx = ${num(delays.tau_yx, 3)} ± ${num(delays.sigma_tau_yx, 2)} µs, τ_zx = ${num(delays.tau_zx, 3)} ± ${num(delays.sigma_tau_zx, 2)} µs `,
+        h('span', { class: 'muted' }, '(gyro y and z against gyro x: what coning sees; their sigma is smaller than each delay\'s own).')));
+    }
+
     // What the estimators said
     const notes = h('div', { class: 'stage-results', id: 'stage-results' });
     for (const [name, r] of Object.entries(d.results || {})) {
@@ -152,7 +170,9 @@ export function mount(root, ctx) {
 
     // Convergence over the run
     if (progress && Object.keys(progress).length) {
-      const name = progress.direct ? 'direct' : Object.keys(progress)[0];
+      // Stage 3's convergence when it ran (the final refinement), else stage 1's, else the first.
+      const name = progress.stage3 ? 'stage3' : progress.direct ? 'direct' : Object.keys(progress)[0];
+      const restarts = (progress[name] || []).reduce((r, p) => (Array.isArray(p.restart_times_s) ? p.restart_times_s : r), []);
       const map = new Map();
       for (const p of progress[name] || []) {
         for (const [coef, pair] of Object.entries(p.estimates || {})) {
@@ -165,7 +185,7 @@ export function mount(root, ctx) {
       if (map.size) {
         const box = h('div', { id: 'results-convergence' });
         results.append(h('h3', {}, `Convergence of the ${name} estimator (estimate ± σ over program time)`), box);
-        const panel = convergencePanel(box, () => map, { idPrefix: 'res-conv', height: 150 });
+        const panel = convergencePanel(box, () => map, { idPrefix: 'res-conv', height: 150, markers: () => restarts });
         panel.update();
         cleanups.push(() => panel.destroy());
       }
@@ -206,7 +226,14 @@ export function mount(root, ctx) {
       el.append(note);
       box.append(el);
       try {
-        const data = await get(`/api/campaigns/${id}/${s.key}`);
+        // Computed as a job on imucald (202 until ready): say how far it is meanwhile.
+        const data = await get(`/api/campaigns/${id}/${s.key}`, { onPending: (p) => {
+          if (stopped) return false;
+          note.textContent = p?.state === 'queued' ? `Queued behind ${Math.max(0, (p.queue_position ?? 1) - 1)} other computation(s)…`
+            : `Computing from the recording… ${Math.round(100 * (p?.progress ?? 0))} %`;
+          note.dataset.progress = String(p?.progress ?? 0);
+          return true;
+        } });
         if (stopped) return;
         note.remove();
         el.dataset.available = 'true';
@@ -304,6 +331,36 @@ export function mount(root, ctx) {
         : (simulated ? h('p', { class: 'muted' }, 'The truth of this simulated run is a file on the daemon\'s machine; the error is not shown.') : null),
       h('div', { class: 'coefficient-columns', id: 'coefficient-table' }, table(left, withTruth), table(right, withTruth)),
       skipped.length ? h('p', { class: 'muted' }, `Not estimated by this campaign (zero with zero σ in the model): ${skipped.join(', ')}.`) : null);
+  }
+
+  // Each stage's contribution, in the body frame: the first stage's value, what each later stage
+  // changed, the final value and σ, and the filter's sqrt(P0/Pk) for stage 3's states.
+  function contributionsTable(stages, reduction) {
+    const rows = contributionRows(stages, reduction);
+    const body = h('tbody');
+    let group = null;
+    for (const r of rows) {
+      if (r.group !== group) {
+        group = r.group;
+        body.append(h('tr', { class: 'group-row' }, h('th', { colspan: stages.length + 4 }, group)));
+      }
+      body.append(h('tr', { dataset: { coefficient: r.name } },
+        h('td', { class: 'coef' }, r.name.split('.').slice(1).join('.')),
+        h('td', { class: 'unit' }, r.unit),
+        ...r.changes.map((c, k) => h('td', { class: 'num' }, c === null ? '—' : (k > 0 && c > 0 ? '+' : '') + num(c, 4))),
+        h('td', { class: 'num final' }, num(r.final, 5)),
+        h('td', { class: 'num sigma' }, r.sigma === null ? '—' : num(r.sigma, 2)),
+        h('td', { class: 'num reduction', title: 'sqrt(P0/Pk): how much stage 3 shrank this state\'s uncertainty' }, r.reduction === null ? '—' : num(r.reduction, 3))));
+    }
+    return h('div', { class: 'contributions', id: 'contributions' },
+      h('h3', {}, 'What each stage contributed (body frame)'),
+      h('p', { class: 'muted' }, `The value after ${stages[0].stage}, the change each later stage made, the final value and its σ; ` +
+        'sqrt(P0/Pk): the factor by which stage 3 reduced the state\'s uncertainty (large: the program observes it well).'),
+      h('table', { class: 'list compact contribution-table' },
+        h('thead', {}, h('tr', {}, h('th', {}, 'coefficient'), h('th', {}, 'unit'),
+          ...stages.map((s, k) => h('th', { class: 'num' }, k === 0 ? s.stage : `Δ ${s.stage}`)),
+          h('th', { class: 'num' }, 'final'), h('th', { class: 'num' }, 'σ'), h('th', { class: 'num' }, '√(P0/Pk)'))),
+        body));
   }
 
   function table(rows, withTruth) {

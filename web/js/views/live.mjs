@@ -6,6 +6,7 @@ import { h, clear, duration, num, fixed, stateBadge, timeOfDay } from '../format
 import { lineChart, schedule, AXIS_COLORS, COLORS } from '../plots.mjs';
 import { commandBar } from '../dialogs.mjs';
 import { convergencePanel } from '../convergence.mjs';
+import { unitOf } from '../coefficients.mjs';
 import { AXES } from '../live.mjs';
 
 const WINDOWS = [['60', '1 min'], ['600', '10 min'], ['3600', '1 h'], ['Infinity', 'whole run']];
@@ -65,10 +66,18 @@ export function mount(root, ctx) {
   plotGrid.append(anglesEl, ratesEl, chamberEl, rateEl);
 
   const convEl = h('div', { id: 'convergence' });
+  // Which estimator's convergence is shown: the operator's pick, else the one running now.
+  const convPick = h('div', { class: 'tabs small', role: 'tablist', id: 'conv-estimator' });
+  let pickedEstimator = null;
+  const innovationsCard = h('section', { class: 'card', id: 'innovations-card', hidden: true },
+    h('h2', {}, 'Stage 3: innovations against their gates'),
+    h('p', { class: 'muted', id: 'innovations-note' }),
+    h('div', { class: 'conv-grid', id: 'innovations' }));
   const eventsBody = h('tbody', { id: 'events' });
   root.append(runBox, cards,
     h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Table, chamber and IMU'), windowSel), plotGrid),
-    h('section', { class: 'card' }, h('h2', {}, 'Estimators converging (estimate ± σ over program time)'), convEl),
+    h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Estimators converging (estimate ± σ over program time)'), convPick), convEl),
+    innovationsCard,
     h('section', { class: 'card' }, h('h2', {}, 'Events, alarms and suspensions'),
       h('table', { class: 'list events' }, h('thead', {}, h('tr', {}, h('th', {}, 'time'), h('th', {}, 'campaign'), h('th', {}, 'event'), h('th', {}, 'reason'))), eventsBody),
       h('p', { class: 'muted', id: 'events-empty' }, 'Nothing has happened since this page connected.')));
@@ -81,10 +90,59 @@ export function mount(root, ctx) {
       { label: '−tol', band: true }, { label: '+tol', band: true }],
     bands: [[4, 3, 'rgba(46,125,50,0.12)']] });
   const frameRate = lineChart(rateEl, { height, title: 'IMU frame rate', y: 'Hz', series: [{ label: 'frames/s', color: COLORS[3] }] });
+  // The estimator whose convergence is shown (those with estimates: direct, lever-arm, stage3).
+  function shownEstimator() {
+    const withEstimates = [...store.estimators.entries()].filter(([, e]) => e.coefficients.size > 0).map(([n]) => n);
+    if (pickedEstimator && withEstimates.includes(pickedEstimator)) return pickedEstimator;
+    const running = withEstimates.filter((n) => store.estimators.get(n).latest?.status === 'running');
+    return running.length ? running[running.length - 1] : withEstimates[withEstimates.length - 1] || null;
+  }
+  function drawPick() {
+    const names = [...store.estimators.entries()].filter(([, e]) => e.coefficients.size > 0).map(([n]) => n);
+    const shown = shownEstimator();
+    const sig = `${names.join('|')}/${shown}`;
+    if (convPick.dataset.sig === sig) return;
+    if (convPick.dataset.shown !== undefined && convPick.dataset.shown !== String(shown)) conv.rebuild();
+    convPick.dataset.sig = sig;
+    convPick.dataset.shown = String(shown);
+    clear(convPick).append(...(names.length > 1 ? names : []).map((n) => h('button', {
+      type: 'button', role: 'tab', dataset: { estimator: n }, 'aria-selected': String(n === shown),
+      onclick: () => { pickedEstimator = n; drawPick(); } }, n)));
+  }
+  const restartsOf = (name) => store.estimators.get(name)?.restarts || [];
   const conv = convergencePanel(convEl, () => {
-    const name = store.estimators.has('direct') ? 'direct' : [...store.estimators.keys()][0];
+    const name = shownEstimator();
     return name ? store.estimators.get(name).coefficients : new Map();
-  }, { idPrefix: 'live-conv' });
+  }, { idPrefix: 'live-conv', markers: () => restartsOf(shownEstimator()) });
+
+  // Stage 3's innovations: one small chart per measured quantity, its ±gate as a band, the
+  // navigation's restarts as dashed lines.
+  const innovationCharts = new Map();
+  function drawInnovations() {
+    const e = store.estimators.get('stage3');
+    const names = e ? [...e.innovations.keys()] : [];
+    innovationsCard.hidden = names.length === 0;
+    if (!names.length) return;
+    const latest = e.latest || {};
+    const note = `${latest.updates ?? 0} updates, ${latest.rejected ?? 0} innovations rejected; ` +
+      `navigation restarted ${latest.restarts ?? 0} time(s)${e.restarts.length ? ` (at ${e.restarts.map((t) => duration(t)).join(', ')})` : ''}. ` +
+      'An innovation outside its gate (5 σ) is rejected.';
+    const noteEl = root.querySelector('#innovations-note');
+    if (noteEl.textContent !== note) noteEl.textContent = note;
+    const grid = root.querySelector('#innovations');
+    for (const name of names) {
+      let chart = innovationCharts.get(name);
+      if (!chart) {
+        const box = h('div', { class: 'conv-chart', dataset: { innovation: name } });
+        grid.append(box);
+        chart = lineChart(box, { title: `${name}  [${unitOf(name)}]`, x: 'program s', height: 130, legend: false,
+          series: [{ label: 'innovation', color: COLORS[0] }, { label: '−gate', band: true }, { label: '+gate', band: true }],
+          bands: [[3, 2, 'rgba(46,125,50,0.12)']], markers: () => store.estimators.get('stage3')?.restarts || [] });
+        innovationCharts.set(name, chart);
+      }
+      chart.setData(e.innovations.get(name).view(Infinity, 1500));
+    }
+  }
 
   function drawPlots() {
     angles.setData(store.angles.view(windowS));
@@ -178,7 +236,7 @@ export function mount(root, ctx) {
     ]);
     const estBox = root.querySelector('#estimator-status');
     const est = m.estimators || {};
-    const sig = JSON.stringify(Object.entries(est).map(([k, e]) => [k, e.status, e.statics, e.rotations, e.message, e.max_velocity_error_mps, e.max_position_error_m, Math.round(e.program_time_s || 0)]));
+    const sig = JSON.stringify(Object.entries(est).map(([k, e]) => [k, e.status, e.statics, e.rotations, e.message, e.max_velocity_error_mps, e.max_position_error_m, e.filter_status, e.updates, Math.round(e.program_time_s || 0)]));
     if (estBox.dataset.sig !== sig) {
       estBox.dataset.sig = sig;
       clear(estBox);
@@ -188,6 +246,8 @@ export function mount(root, ctx) {
           h('strong', {}, name), ' ', h('span', { class: `badge est-${e.status}` }, e.status),
           e.statics !== undefined ? h('div', { class: 'muted' }, `${e.statics} statics, ${e.rotations ?? 0} rotations, at ${duration(e.program_time_s)}`) : null,
           e.max_velocity_error_mps !== undefined ? h('div', { class: 'muted' }, `max velocity error ${num(e.max_velocity_error_mps, 3)} m/s, position ${num(e.max_position_error_m, 3)} m`) : null,
+          e.filter_status !== undefined ? h('div', { class: `muted filter-status${e.filter_status === 'running' ? '' : ' warn'}`, dataset: { filterStatus: e.filter_status.split(':')[0] } },
+            `filter ${e.filter_status}; ${e.updates ?? 0} updates, ${e.rejected ?? 0} rejected, ${e.restarts ?? 0} restart(s), at ${duration(e.program_time_s)}`) : null,
           e.message ? h('div', { class: 'estimator-message' }, e.message.split('\n')[0]) : null));
       }
     }
@@ -207,10 +267,16 @@ export function mount(root, ctx) {
   const onTelemetry = () => {
     schedule(drawNumbers);
     schedule(drawPlots);
+    schedule(drawPick);
+    schedule(drawInnovations);
     conv.update();
   };
   const onEvent = (ev) => addEvent(ev.detail);
-  const onProgress = () => conv.update();
+  const onProgress = () => {
+    schedule(drawPick);
+    schedule(drawInnovations);
+    conv.update();
+  };
   store.addEventListener('telemetry', onTelemetry);
   store.addEventListener('event', onEvent);
   store.addEventListener('progress', onProgress);
@@ -225,5 +291,6 @@ export function mount(root, ctx) {
     chamber.destroy();
     frameRate.destroy();
     conv.destroy();
+    for (const c of innovationCharts.values()) c.destroy();
   };
 }

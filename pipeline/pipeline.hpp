@@ -1,0 +1,233 @@
+// The calibration pipeline: the one place that decides which stages run, in which order, on which
+// part of a recording, from which model each starts, when one is skipped and why, and what each
+// reports. `imucal calibrate`, the daemon's estimator worker and its analyses all run it, so the
+// same recording gives the same model whichever of them asks. The estimators stay pure (frames in,
+// results out); the pipeline sequences them over a frame source and never reads a clock.
+//
+// Parts: a campaign of several programs run in a row names its segments "PROGRAM/segment"
+// (imucald joins them so); each program is a part. A recording whose segment names do not all
+// carry such a prefix is one part, named by its program (RecordingMeta::program_json).
+// Which part feeds which stage: the parts of the built-in program made for that stage (direct and
+// direct-short: stage direct; lever-arm; thermal and thermal-short; navigation; noise). A part of
+// an unknown program feeds every stage whose segment requirement it meets. A stage asked for by
+// name (`imucal calibrate --stage X`, a campaign's estimator) that no part feeds takes the whole
+// recording, as the estimator alone would; with `--stage all` it is skipped with the reason.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "estimators/evaluate.hpp"
+#include "estimators/lever_arm.hpp"
+#include "estimators/nav_filter.hpp"
+#include "estimators/noise.hpp"
+#include "estimators/thermal.hpp"
+
+namespace imucal::storage {
+class RunDb;
+}
+
+namespace imucal::pipeline {
+
+enum class Stage { Direct, LeverArm, Thermal, Navigation, Noise };
+
+struct StageName {
+  Stage stage;
+  const char* name;       // `imucal calibrate --stage NAME`, reports
+  const char* estimator;  // the campaign's estimator that runs it online in imucald
+  const char* program;    // the built-in program made for it (docs/programs.md)
+};
+// In pipeline order: each stage starts from the model of the stages before it.
+const std::array<StageName, 5>& stage_names();
+const StageName& names_of(Stage stage);
+std::optional<Stage> stage_named(std::string_view name);
+std::optional<Stage> stage_of_estimator(std::string_view estimator);
+
+// The stage a built-in program was made for, or nothing (evaluate, an inline program).
+std::optional<Stage> purpose_of_program(std::string_view program);
+
+struct Part {
+  std::string program;  // "" when the recording names none
+  std::vector<SegmentInfo> segments;
+  double t0_s = 0, t1_s = 0;
+};
+std::vector<Part> parts(const RecordingMeta& meta);
+
+struct Settings {
+  int passes = 1;                        // stage navigation: passes, each starting from the last model
+  navfilter::Options navigation;
+  int statics_per_cycle = 0;             // stage thermal: for statics without "cycle-NNN/" names
+  double thermal_T_ref_C = std::numeric_limits<double>::quiet_NaN();
+  double thermal_range_lo_C = 15.0, thermal_range_hi_C = 35.0;
+  bool thermal_keep_shape = false;       // fit only the constants, keep the model's polynomials
+};
+
+// Why these segments cannot feed the stage (naming the program that would), or nothing.
+std::optional<std::string> requirement_unmet(Stage stage, const std::vector<SegmentInfo>& segments,
+                                             const Settings& settings = {});
+
+// What feeds a stage: its segments and the frames' time window, or why nothing does.
+struct Feed {
+  std::vector<SegmentInfo> segments;
+  std::int64_t t0_ns = std::numeric_limits<std::int64_t>::min(), t1_ns = std::numeric_limits<std::int64_t>::max();
+  std::string source;   // "part 'direct' (t=0..2330 s)", "the whole recording"
+  std::string skipped;  // set when nothing feeds it
+};
+// `asked`: the stage was named (a part-less stage then takes the whole recording).
+Feed feed(Stage stage, const RecordingMeta& meta, bool asked, const Settings& settings = {});
+
+// The stages the recording's parts were made for, in pipeline order (a campaign's default
+// estimators: {"program": "navigation"} runs stage 3).
+std::vector<Stage> stages_for_parts(const RecordingMeta& meta);
+
+// Frames and temperatures of a recording, by time range (both ends included, time order).
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  virtual void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const = 0;
+  virtual std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const = 0;
+};
+
+class RunDbSource final : public FrameSource {
+ public:
+  explicit RunDbSource(const storage::RunDb& db) : db_(db) {}
+  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override;
+  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override;
+
+ private:
+  const storage::RunDb& db_;
+};
+
+// Feeds the frames of a window of a source in steps, as they become available, each temperature
+// before the frames after it (all temperatures from the recording's start: a compensation's
+// rate looks back). Fed in any number of steps, a consumer sees the same sequence.
+class Feeder {
+ public:
+  Feeder(std::int64_t t0_ns = std::numeric_limits<std::int64_t>::min(),
+         std::int64_t t1_ns = std::numeric_limits<std::int64_t>::max())
+      : t0_ns_(t0_ns), t1_ns_(t1_ns) {}
+  void feed(const FrameSource& source, std::int64_t available_t_ns, const std::function<void(const TempSample&)>& temp,
+            const std::function<void(const ImuFrame&)>& frame);
+  // Every frame of the window is available.
+  bool complete(std::int64_t available_t_ns) const { return available_t_ns >= t1_ns_; }
+  void rewind();  // from the window's start again
+  std::optional<std::int64_t> fed_t_ns() const { return fed_t_ns_; }
+
+ private:
+  std::int64_t t0_ns_, t1_ns_;
+  std::optional<std::int64_t> fed_t_ns_;   // the last frame fed
+  std::vector<TempSample> pending_temps_;  // read, not yet pushed (after the last frame fed)
+  std::optional<std::int64_t> temps_read_to_ns_;
+};
+
+// The Schuler test of a model on a recording of the evaluate program (its tilt and coning
+// segments), compensated at the run's temperatures when the model has a thermal section.
+evaluate::Result evaluate_recording(const RecordingMeta& meta, const FrameSource& source, const ImuModel& model);
+
+// Flat "gyro.bias_dph.x" -> [estimate, sigma] of a model, in the units the names carry (live
+// progress, reports).
+nlohmann::json estimates_json(const ImuModel& model);
+
+// Undetermined: the recording cannot determine some coefficient (the message names it).
+enum class Status { Pending, Running, Done, Skipped, Undetermined, Failed };
+const char* to_string(Status status);
+
+// One stage's outcome: its model (the input's other coefficients carried over), its estimator's
+// own result for the shells to print, the run extras it leaves (history, curves, report) and its
+// report for the daemon's results.
+struct Outcome {
+  Stage stage = Stage::Direct;
+  Status status = Status::Pending;
+  std::string source;   // what fed it
+  std::string message;  // skipped or failed: why
+  std::vector<std::string> notes;
+  std::optional<ImuModel> model;  // Done (and a navigation pass that did not converge: its estimates)
+  std::optional<direct::Result> direct;
+  std::optional<lever::Result> lever_arm;
+  std::optional<thermal::Result> thermal;
+  std::optional<navfilter::Result> navigation;
+  std::optional<noise::Result> noise;
+  std::vector<std::pair<std::string, std::string>> extras;  // run extras: key, JSON text
+  std::int64_t frames = 0;
+  double program_time_s = 0;  // of the last frame fed
+  // {"status", "source", "notes", per-stage figures, "model"} (docs/api.md, results).
+  nlohmann::json report() const;
+};
+
+class Pipeline {
+ public:
+  // `stages`: in any order (run in pipeline order); `asked` as for feed(). `start`: the model the
+  // first stage starts from (ideal by default); a body-frame start model is refused unless the only
+  // stages are navigation (stage 3 works in the body frame) and noise.
+  Pipeline(const RecordingMeta& meta, std::vector<Stage> stages, bool asked, ImuModel start = {},
+           Settings settings = {});
+  ~Pipeline();
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  // Feeds the stages every frame of `source` up to `available_t_ns` they have not seen, finishing
+  // each whose window is complete (`final`: the recording ends here). The same calls in any
+  // number of steps give the same results. Returns true when every stage has finished.
+  bool advance(const FrameSource& source, std::int64_t available_t_ns, bool final);
+  bool finished() const;
+
+  const std::vector<Outcome>& outcomes() const { return outcomes_; }
+  // The model after the last stage that finished (the start model before any).
+  const ImuModel& model() const { return model_; }
+  // The live progress of stage `stage` ({"status", "program_time_s", ...}, docs/api.md).
+  nlohmann::json progress(Stage stage) const;
+
+  // One stage over its window (pipeline.cpp).
+  class Run;
+
+ private:
+  RecordingMeta meta_;
+  Settings settings_;
+  std::vector<Feed> feeds_;
+  std::vector<Outcome> outcomes_;
+  ImuModel model_;
+  std::size_t active_ = 0;
+  std::unique_ptr<Run> run_;
+  Feeder feeder_;
+};
+
+// Convenience for a stored recording read to its end (the command line, the analyses).
+std::vector<Outcome> run_to_end(const storage::RunDb& db, std::vector<Stage> stages, bool asked, const ImuModel& start,
+                                const Settings& settings = {});
+// The same through any frame source (e.g. one that reports how far the reading has come).
+std::vector<Outcome> run_to_end(const RecordingMeta& meta, const FrameSource& source, std::vector<Stage> stages,
+                                bool asked, const ImuModel& start, const Settings& settings = {});
+
+// A frame source that passes another's frames on and reports the share of the recording read so
+// far (by the frames' program time against `end_s`, mapped onto [from, from + span]) every 65 536
+// frames: the daemon's analyses show it as their progress.
+class ProgressSource final : public FrameSource {
+ public:
+  ProgressSource(const FrameSource& inner, double end_s, std::function<void(double)> report, double from = 0.0,
+                 double span = 1.0)
+      : inner_(inner), end_s_(end_s), report_(std::move(report)), from_(from), span_(span) {}
+  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override;
+  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override { return inner_.temps(t0_ns, t1_ns); }
+
+ private:
+  const FrameSource& inner_;
+  double end_s_;
+  std::function<void(double)> report_;
+  double from_, span_;
+};
+// The program time at which a recording ends (its last segment's end; 0 without segments).
+double end_of_program_s(const RecordingMeta& meta);
+
+}  // namespace imucal::pipeline
