@@ -1,0 +1,226 @@
+#include "plan/plan.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/units.hpp"
+#include "drivers/sim/simulator.hpp"
+#include "estimators/nav_filter.hpp"
+#include "pipeline/pipeline.hpp"
+
+namespace imucal::plan {
+
+using nlohmann::json;
+
+namespace {
+
+// The simulated frames of the program, as a recording the pipeline reads.
+class MemorySource final : public pipeline::FrameSource {
+ public:
+  MemorySource(std::vector<ImuFrame> frames, std::vector<TempSample> temps)
+      : frames_(std::move(frames)), temps_(std::move(temps)) {}
+  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override {
+    auto it = std::lower_bound(frames_.begin(), frames_.end(), t0_ns,
+                               [](const ImuFrame& f, std::int64_t t) { return f.t_ns < t; });
+    for (; it != frames_.end() && it->t_ns <= t1_ns; ++it) fn(*it);
+  }
+  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override {
+    std::vector<TempSample> out;
+    for (const TempSample& t : temps_)
+      if (t.t_ns >= t0_ns && t.t_ns <= t1_ns) out.push_back(t);
+    return out;
+  }
+
+ private:
+  std::vector<ImuFrame> frames_;
+  std::vector<TempSample> temps_;
+};
+
+// A stage-3 state block as the model's coefficients: name prefix, unit scale, the axes' labels,
+// and the motion that makes it observable (method.md, stage 3; docs/programs.md).
+struct BlockName {
+  navfilter::Block block;
+  const char* prefix;
+  double scale;
+  std::array<const char*, 6> axes;
+  const char* fix;
+};
+
+const std::vector<BlockName>& block_names() {
+  using namespace navfilter::state;
+  static const std::vector<BlockName> names = {
+      {kGyroBias, "gyro.bias_dph", units::kRadpsToDph, {"x", "y", "z"},
+       "statics in several orientations, or the slow 360 deg swings about each table axis"},
+      {kAccelBias, "accel.bias_mps2", 1.0, {"x", "y", "z"}, "each axis horizontal in both directions (swings, tilts)"},
+      {kGyroScalePos, "gyro.scale_pos_ppm", 1e6, {"x", "y", "z"}, "rotation at rate about the axis, positive direction"},
+      {kGyroScaleNeg, "gyro.scale_neg_ppm", 1e6, {"x", "y", "z"}, "rotation at rate about the axis, negative direction"},
+      {kAccelScale, "accel.scale_ppm", 1e6, {"x", "y", "z"}, "the axis turned through up and down (swings through +-g)"},
+      {kGyroAngles, "gyro.misalignment_arcsec", units::kRadToArcsec, {"xy", "xz", "yx", "yz", "zx", "zy"},
+       "rotation about the other two axes"},
+      {kAccelAngles, "accel.misalignment_arcsec", units::kRadToArcsec, {"yz", "zx", "zy"},
+       "the axis pair turned through g (swings about the third axis)"},
+      {kGyroDelay, "gyro.delay_us", 1e6, {"x", "y", "z"},
+       "fast oscillations about each axis, and in phase about two axes (coning) for the relative delays"},
+      {kAccelDelay, "accel.delay_us", 1e6, {"x", "y", "z"}, "fast oscillations with the axis horizontal"},
+      {kLeverArmY, "accel.lever_arm_mm.y", 1e3, {"x", "y", "z"}, "fast oscillations about each axis (program lever-arm)"},
+      {kLeverArmZ, "accel.lever_arm_mm.z", 1e3, {"x", "y", "z"}, "fast oscillations about each axis (program lever-arm)"},
+  };
+  return names;
+}
+
+json state_sigma_json(const navfilter::StateVector& sigma) {
+  json out = json::object();
+  for (const BlockName& b : block_names())
+    for (int i = 0; i < b.block.size; ++i)
+      out[std::string(b.prefix) + "." + b.axes[static_cast<std::size_t>(i)]] = sigma[b.block.index + i] * b.scale;
+  return out;
+}
+
+const char* stage_key(pipeline::Stage s) {
+  switch (s) {
+    case pipeline::Stage::Direct: return "direct";
+    case pipeline::Stage::LeverArm: return "lever-arm";
+    case pipeline::Stage::Navigation: return "navigation";
+    default: return "other";
+  }
+}
+
+// Every number of a model's sigma section replaced by the RMS over `models` (leaf by leaf).
+void rms_sigma(json& acc, const json& add, int n_added) {
+  if (acc.is_number() && add.is_number()) {
+    const double a = acc.get<double>(), b = add.get<double>();
+    acc = std::sqrt((a * a * (n_added - 1) + b * b) / n_added);
+  } else if (acc.is_object() && add.is_object()) {
+    for (auto& [k, v] : acc.items())
+      if (add.contains(k)) rms_sigma(v, add.at(k), n_added);
+  } else if (acc.is_array() && add.is_array() && acc.size() == add.size()) {
+    for (std::size_t i = 0; i < acc.size(); ++i) rms_sigma(acc[i], add[i], n_added);
+  }
+}
+
+std::vector<ImuFrame> simulate(const motion::Program& program, const ImuModel& imu, double rate_hz, std::uint64_t seed,
+                               RecordingMeta& meta, std::vector<TempSample>& temps) {
+  sim::SimConfig cfg;
+  cfg.rate_hz = rate_hz;
+  cfg.seed = seed;
+  sim::Simulator sim(program, imu, cfg);
+  meta = sim.meta();
+  std::vector<ImuFrame> frames;
+  frames.reserve(static_cast<std::size_t>(sim.frame_count()));
+  ImuFrame f;
+  while (sim.next(f)) frames.push_back(f);
+  temps = sim.take_temps();
+  return frames;
+}
+
+bool has_noise(const ImuModel& m) {
+  return m.gyro.noise.arw_rad_rts > 0 || m.accel.noise.vrw_mps_rts > 0;
+}
+
+}  // namespace
+
+Prediction predict(const motion::Program& program, const ImuModel& imu, const Options& options) {
+  if (!has_noise(imu))
+    throw std::invalid_argument(
+        "the IMU model has no noise: give gyro.noise.arw_deg_rth and accel.noise.vrw_mps_rth (the prediction "
+        "scales with them)");
+  RecordingMeta meta;
+  std::vector<TempSample> temps;
+  std::vector<ImuFrame> frames = simulate(program, imu, options.rate_hz, options.seed, meta, temps);
+  const MemorySource source(std::move(frames), std::move(temps));
+
+  std::vector<pipeline::Stage> stages;
+  for (const pipeline::Stage s : pipeline::stages_for_parts(meta))
+    if (s == pipeline::Stage::Direct || s == pipeline::Stage::LeverArm || s == pipeline::Stage::Navigation)
+      stages.push_back(s);
+  if (stages.empty())
+    throw std::invalid_argument("program '" + program.name +
+                                "' feeds no calibration stage (direct, lever-arm or navigation): nothing to predict");
+  // Without stage 1 the later stages start from the unit's model (what stage 1 would have given).
+  const bool with_direct = std::find(stages.begin(), stages.end(), pipeline::Stage::Direct) != stages.end();
+  const ImuModel start = with_direct ? ImuModel{} : imu;
+
+  Prediction p;
+  p.program = program.name;
+  p.duration_s = program.duration_s();
+  p.rate_hz = options.rate_hz;
+  std::vector<pipeline::Outcome> outcomes = pipeline::run_to_end(meta, source, stages, false, start);
+  // The stages whose sigma comes from residuals, again on other seeds: their RMS sigma.
+  std::vector<pipeline::Stage> residual_stages;
+  for (const pipeline::Stage s : stages)
+    if (s != pipeline::Stage::Navigation) residual_stages.push_back(s);
+  std::vector<json> sigma_rms(outcomes.size());
+  for (std::size_t i = 0; i < outcomes.size(); ++i)
+    if (outcomes[i].model) sigma_rms[i] = json::parse(imu_model_to_json_text(*outcomes[i].model)).value("sigma", json());
+  for (int run = 1; run < options.residual_stage_runs && !residual_stages.empty(); ++run) {
+    RecordingMeta m;
+    std::vector<TempSample> t;
+    std::vector<ImuFrame> f = simulate(program, imu, options.rate_hz, options.seed + static_cast<std::uint64_t>(run), m, t);
+    const MemorySource again(std::move(f), std::move(t));
+    for (const pipeline::Outcome& o : pipeline::run_to_end(m, again, residual_stages, false, start))
+      for (std::size_t i = 0; i < outcomes.size(); ++i)
+        if (outcomes[i].stage == o.stage && o.model && !sigma_rms[i].is_null())
+          rms_sigma(sigma_rms[i], json::parse(imu_model_to_json_text(*o.model)).value("sigma", json()), run + 1);
+  }
+  for (std::size_t i = 0; i < outcomes.size(); ++i)
+    if (outcomes[i].model && outcomes[i].stage != pipeline::Stage::Navigation && !sigma_rms[i].is_null()) {
+      json m = json::parse(imu_model_to_json_text(*outcomes[i].model));
+      m["sigma"] = sigma_rms[i];
+      outcomes[i].model = imu_model_from_json_text(m.dump(), "the predicted model");
+    }
+  for (const pipeline::Outcome& o : outcomes) {
+    StagePrediction sp;
+    sp.stage = stage_key(o.stage);
+    sp.status = pipeline::to_string(o.status);
+    sp.message = o.message;
+    sp.model = o.model;
+    if (o.status == pipeline::Status::Undetermined || o.status == pipeline::Status::Failed)
+      p.weak.push_back({sp.stage, "(the stage)", o.message, "see the message: it names the motion that is missing"});
+    if (o.navigation) {
+      const navfilter::Result& r = *o.navigation;
+      json t = json::array(), sig = json::object();
+      for (const navfilter::HistoryRecord& h : r.history) {
+        t.push_back(h.t_s);
+        const json row = state_sigma_json(h.sigma);  // named: items() of a temporary would dangle
+        for (const auto& [name, v] : row.items()) sig[name].push_back(v);
+      }
+      sp.history = {{"t_s", t}, {"sigma", sig}};
+      for (const BlockName& b : block_names())
+        for (int i = 0; i < b.block.size; ++i) {
+          const int k = b.block.index + i;
+          const double reduction = r.sigma_final[k] > 0 ? r.sigma0[k] / r.sigma_final[k] : 0.0;
+          if (reduction >= options.weak_reduction) continue;
+          char why[160];
+          std::snprintf(why, sizeof why, "sigma only %.2fx smaller than at the start (%.3g -> %.3g)", reduction,
+                        r.sigma0[k] * b.scale, r.sigma_final[k] * b.scale);
+          p.weak.push_back({sp.stage, std::string(b.prefix) + "." + b.axes[static_cast<std::size_t>(i)], why, b.fix});
+        }
+    }
+    p.stages.push_back(std::move(sp));
+  }
+  return p;
+}
+
+json Prediction::to_json() const {
+  json st = json::object();
+  for (const StagePrediction& s : stages) {
+    json e = {{"status", s.status}};
+    if (!s.message.empty()) e["message"] = s.message;
+    if (s.model) {
+      const json m = json::parse(imu_model_to_json_text(*s.model));
+      e["frame"] = m.value("frame", "instrument");
+      e["sigma"] = m.value("sigma", json::object());
+      e["estimates"] = pipeline::estimates_json(*s.model);
+    }
+    if (!s.history.is_null()) e["history"] = s.history;
+    st[s.stage] = e;
+  }
+  json w = json::array();
+  for (const Weak& x : weak) w.push_back({{"stage", x.stage}, {"coefficient", x.coefficient}, {"why", x.why}, {"fix", x.fix}});
+  return {{"format", "imucal-plan/1"}, {"program", program}, {"duration_s", duration_s}, {"rate_hz", rate_hz},
+          {"stages", st}, {"weak", w}};
+}
+
+}  // namespace imucal::plan

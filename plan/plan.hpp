@@ -1,0 +1,60 @@
+// What a calibration program will deliver, before the table moves (issue 16, `imucal plan`):
+// the program's motion simulated with the IMU's own noise (its model's `noise` keys) and run
+// through the same calibration pipeline as a recording, so the prediction is the sigma each
+// estimator will report on data of that program: stage 1's least squares from its residuals and
+// design, stage 3's filter from its covariance (which depends on the motion, not on the noise
+// drawn). Also what the program leaves weakly observable, by name, and the motion that would fix it.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "motion_programs/program.hpp"
+
+namespace imucal::plan {
+
+struct Options {
+  double rate_hz = 100.0;
+  std::uint64_t seed = 1;
+  // A stage-3 state whose sigma the program shrinks by less than this factor is weakly observable.
+  double weak_reduction = 2.0;
+  // Stage 1 and the lever arms report a sigma from their residuals, which scatters from run to
+  // run (about 13 % with the direct program's 34 statics): the prediction is the RMS of this many
+  // simulated runs' sigmas. Stage 3's sigma is its covariance, the same for every run: one run.
+  int residual_stage_runs = 4;
+};
+
+struct Weak {
+  std::string stage;        // "direct", "navigation"
+  std::string coefficient;  // "gyro.delay_us.y" (a model's key with its unit), or the stage's message
+  std::string why;
+  std::string fix;          // the motion that would determine it
+};
+
+struct StagePrediction {
+  std::string stage;   // direct, lever-arm, navigation
+  std::string status;  // done, undetermined, failed
+  std::string message;
+  std::optional<ImuModel> model;  // its sigma section is the prediction (instrument frame for direct)
+  nlohmann::json history;         // navigation: {"t_s": [...], "sigma": {coefficient: [...]}}
+};
+
+struct Prediction {
+  std::string program;
+  double duration_s = 0.0;
+  double rate_hz = 0.0;
+  std::vector<StagePrediction> stages;
+  std::vector<Weak> weak;
+  nlohmann::json to_json() const;
+};
+
+// `imu`: the unit's model, its `noise` section required (the prediction scales with it); for a
+// program without stage 1 (navigation alone) it is also the model stage 3 starts from.
+Prediction predict(const motion::Program& program, const ImuModel& imu, const Options& options = {});
+
+}  // namespace imucal::plan

@@ -1,0 +1,175 @@
+// The prediction agrees with reality (issue 16): for the built-in `direct` and `navigation`
+// programs, 20 calibrations simulated with other seeds (the navigation-grade truth of examples/),
+// each through the same pipeline as a recording: the RMS error of each coefficient lies within
+// 0.7-1.4x its predicted sigma for at least 90 % of the coefficients, and the sigma the runs report
+// (their RMS) lies within 20 % of the prediction. Each run's own sigma is printed too: stage 1's
+// comes from its residuals and scatters by up to about 30 % run to run (issue 16's "each run within
+// 20 %" holds for stage 3, not for stage 1; said in the closing note). Stage 3 starts each run from the truth with the seed's
+// residual errors of stage 1 (and the proof masses off by 0.3 mm), drawn anew per run: what its
+// initial covariance assumes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <algorithm>
+#include <map>
+#include <random>
+
+#include "../estimators/nav_calib_fixture.hpp"
+#include "pipeline/pipeline.hpp"
+#include "plan/plan.hpp"
+
+using namespace imucal;
+using nlohmann::json;
+
+namespace {
+
+constexpr int kRuns = 20;
+
+ImuModel nav_grade() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
+
+class MemorySource final : public pipeline::FrameSource {
+ public:
+  explicit MemorySource(std::vector<ImuFrame> f) : frames_(std::move(f)) {}
+  void frames(std::int64_t t0, std::int64_t t1, const std::function<void(const ImuFrame&)>& fn) const override {
+    for (const ImuFrame& f : frames_)
+      if (f.t_ns >= t0 && f.t_ns <= t1) fn(f);
+  }
+  std::vector<TempSample> temps(std::int64_t, std::int64_t) const override { return {}; }
+
+ private:
+  std::vector<ImuFrame> frames_;
+};
+
+// One calibration of `program` on data simulated with `seed`: the stage's model (with its sigma).
+ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeline::Stage stage, double rate_hz,
+                   std::uint64_t seed, const ImuModel& start) {
+  sim::SimConfig cfg;
+  cfg.rate_hz = rate_hz;
+  cfg.seed = seed;
+  sim::Simulator sim(program, truth, cfg);
+  std::vector<ImuFrame> frames;
+  ImuFrame f;
+  while (sim.next(f)) frames.push_back(f);
+  const auto outcomes = pipeline::run_to_end(sim.meta(), MemorySource(std::move(frames)), {stage}, true, start);
+  EXPECT_EQ(outcomes.front().status, pipeline::Status::Done) << outcomes.front().message;
+  return outcomes.front().model.value_or(ImuModel{});
+}
+
+void expect_prediction_holds(const std::string& program_name, pipeline::Stage stage, double rate_hz,
+                             const std::function<ImuModel(std::mt19937_64&)>& start_of_run, const ImuModel& reference) {
+  const ImuModel truth = nav_grade();
+  const motion::Program program = motion::load_program(program_name, motion::TableLimits{});
+  plan::Options opt;
+  opt.rate_hz = rate_hz;
+  opt.seed = 1000;
+  const plan::Prediction prediction = plan::predict(program, truth, opt);
+  ASSERT_EQ(prediction.stages.size(), 1u);
+  ASSERT_TRUE(prediction.stages[0].model) << prediction.stages[0].message;
+  const json predicted = pipeline::estimates_json(*prediction.stages[0].model);
+  ImuModel reference_named = reference;  // every coefficient the prediction names (estimates_json
+  reference_named.sigma = prediction.stages[0].model->sigma;  // lists those with a sigma)
+  const json truth_values = pipeline::estimates_json(reference_named);
+  std::map<std::string, double> sum_sq, sigma_ratio_worst, reported_sq;
+  std::mt19937_64 rng(77);
+  for (int run = 0; run < kRuns; ++run) {
+    const ImuModel m = calibrate(program, truth, stage, rate_hz, 1 + static_cast<std::uint64_t>(run), start_of_run(rng));
+    const json got = pipeline::estimates_json(m);
+    for (const auto& [name, pair] : predicted.items()) {
+      const double sigma_pred = pair.at(1).get<double>();
+      if (!(sigma_pred > 0) || !got.contains(name)) continue;
+      const double err = got.at(name).at(0).get<double>() - truth_values.at(name).at(0).get<double>();
+      sum_sq[name] += err * err;
+      const double reported = got.at(name).at(1).get<double>();
+      reported_sq[name] += reported * reported;
+      sigma_ratio_worst[name] = std::max(sigma_ratio_worst[name], std::abs(reported / sigma_pred - 1.0));
+    }
+  }
+  int inside = 0, every_run_within = 0, rms_within = 0;
+  double worst_run = 0;
+  for (const auto& [name, ss] : sum_sq) {
+    const double rms = std::sqrt(ss / kRuns), sigma_pred = predicted.at(name).at(1).get<double>();
+    const double ratio = rms / sigma_pred;
+    const double reported_rms = std::sqrt(reported_sq[name] / kRuns);
+    const bool in = ratio >= 0.7 && ratio <= 1.4;
+    inside += in ? 1 : 0;
+    every_run_within += sigma_ratio_worst[name] <= 0.2 ? 1 : 0;
+    const bool rms_in = std::abs(reported_rms / sigma_pred - 1.0) <= 0.2;
+    rms_within += rms_in ? 1 : 0;
+    worst_run = std::max(worst_run, sigma_ratio_worst[name]);
+    EXPECT_TRUE(rms_in) << name << ": the runs report " << reported_rms << " (RMS), predicted " << sigma_pred;
+    std::printf("  %-30s predicted %10.4g  rms error %10.4g  ratio %5.2f%s  reported: rms %10.4g, each within %4.1f %%\n",
+                name.c_str(), sigma_pred, rms, ratio, in ? "" : "  <-- outside 0.7-1.4", reported_rms,
+                100.0 * sigma_ratio_worst[name]);
+  }
+  const double n = static_cast<double>(sum_sq.size());
+  std::printf("%s: %d of %.0f coefficients with their RMS error within 0.7-1.4 sigma; reported sigma: RMS over the "
+              "runs within 20 %% for %d, every run within 20 %% for %d (worst run %.0f %%)\n",
+              program_name.c_str(), inside, n, rms_within, every_run_within, 100.0 * worst_run);
+  EXPECT_GE(inside, 0.9 * n);
+}
+
+}  // namespace
+
+TEST(PlanLong, TheDirectProgramDeliversWhatWasPredicted) {
+  const ImuModel truth = nav_grade();
+  expect_prediction_holds("direct", pipeline::Stage::Direct, 100.0, [](std::mt19937_64&) { return ImuModel{}; }, truth);
+}
+
+TEST(PlanLong, TheNavigationProgramDeliversWhatWasPredicted) {
+  const ImuModel truth = nav_grade();
+  const ImuModel truth_body = direct::to_body_frame(truth);
+  expect_prediction_holds("navigation", pipeline::Stage::Navigation, 50.0,
+                          [&](std::mt19937_64& rng) {
+                            ImuModel start = truth_body;
+                            navcaltest::add_seed_residuals(start, rng);
+                            std::normal_distribution<double> n01;
+                            for (int j = 0; j < 3; ++j) {
+                              start.accel.lever_arm_y_m[j] += 0.3e-3 * n01(rng);
+                              start.accel.lever_arm_z_m[j] += 0.3e-3 * n01(rng);
+                            }
+                            start.sigma.reset();
+                            return start;
+                          },
+                          truth_body);
+}
+
+// The navigation program without its fast oscillations (parts 2 and 3): what the slow swings leave
+// almost at its initial sigma plan names, with the motion that would determine it; the whole
+// program leaves nothing weak.
+TEST(PlanLong, WithoutTheFastOscillationsPlanNamesWhatIsLeftWeak) {
+  json program = json::parse(motion::builtin_program_json("navigation"));
+  json kept = json::array();
+  for (const json& s : program.at("segments")) {
+    const std::string name = s.value("name", "");
+    if (name.find("osc") == std::string::npos && name.find("diagonal") == std::string::npos) kept.push_back(s);
+  }
+  ASSERT_LT(kept.size(), program.at("segments").size());
+  program["segments"] = kept;
+  program["name"] = "navigation-swings-only";
+  const motion::Program p = motion::compile_program(program.dump(), motion::TableLimits{});
+  plan::Options opt;
+  opt.rate_hz = 20.0;
+  const plan::Prediction prediction = plan::predict(p, nav_grade(), opt);
+  const auto nav = std::find_if(prediction.stages.begin(), prediction.stages.end(),
+                                [](const plan::StagePrediction& s) { return s.stage == "navigation"; });
+  ASSERT_NE(nav, prediction.stages.end());
+  EXPECT_EQ(nav->status, "done") << nav->message;
+  std::map<std::string, std::string> weak;
+  for (const plan::Weak& w : prediction.weak)
+    if (w.stage == "navigation") {
+      weak[w.coefficient] = w.fix;
+      std::printf("  weak: %s: %s\n", w.coefficient.c_str(), w.why.c_str());
+    }
+  // The swings alone leave the y gyro's delay and a proof-mass offset almost where they started.
+  for (const char* name : {"gyro.delay_us.y", "accel.lever_arm_mm.z.x"}) {
+    ASSERT_TRUE(weak.count(name)) << name << " not named weak";
+    EXPECT_NE(weak[name].find("fast oscillations"), std::string::npos) << weak[name];
+  }
+  // The whole program (with its fast oscillations) determines them: nothing is named.
+  const plan::Prediction whole = plan::predict(motion::load_program("navigation", motion::TableLimits{}), nav_grade(), opt);
+  for (const plan::Weak& w : whole.weak) ADD_FAILURE() << "the navigation program leaves " << w.coefficient << " weak: " << w.why;
+  // What the swings do determine is not named.
+  EXPECT_FALSE(weak.count("gyro.bias_dph.x"));
+  EXPECT_FALSE(weak.count("accel.scale_ppm.z"));
+}
+
