@@ -486,12 +486,13 @@ int cmd_plan(const std::string& program_arg, const std::string& imu_path, double
   const nlohmann::json j = p.to_json();
   std::printf("program %s: %.0f s (%.1f h) at %.0f Hz; predicted 1-sigma after each stage (%.1f s to compute)\n",
               p.program.c_str(), p.duration_s, p.duration_s / 3600.0, p.rate_hz, wall_s);
-  // One row per coefficient, a column per stage.
+  // One row per coefficient a stage predicts (a sigma above zero), a column per stage.
   std::vector<std::string> names;
   for (const auto& [stage, e] : j.at("stages").items())
     if (e.contains("estimates"))
       for (const auto& [name, v] : e.at("estimates").items())
-        if (std::find(names.begin(), names.end(), name) == names.end()) names.push_back(name);
+        if (v.at(1).get<double>() > 0 && std::find(names.begin(), names.end(), name) == names.end())
+          names.push_back(name);
   std::printf("  %-30s", "coefficient");
   for (const auto& [stage, e] : j.at("stages").items()) std::printf(" %14s", stage.c_str());
   std::printf("\n");
