@@ -473,13 +473,10 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
 }
 
 // `imucal plan`: the predicted 1-sigma of every coefficient after each stage the program feeds.
-int cmd_plan(const std::string& program_arg, const std::string& imu_path, double rate_hz, std::uint64_t seed,
+int cmd_plan(const std::string& program_arg, const std::string& imu_path, const plan::Options& opt,
              const std::string& json_out) {
   const motion::Program program = motion::load_program(program_arg, motion::TableLimits{});
   const ImuModel imu = read_imu_model_file(imu_path);
-  plan::Options opt;
-  opt.rate_hz = rate_hz;
-  opt.seed = seed;
   const auto t0 = std::chrono::steady_clock::now();
   const plan::Prediction p = plan::predict(program, imu, opt);
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -692,8 +689,8 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
 
   std::string plan_program, plan_imu, plan_json;
-  double plan_rate_hz = 100.0;
-  std::uint64_t plan_seed = 1;
+  plan::Options plan_opt;
+  double plan_table_attitude_arcsec = plan_opt.settings.navigation.attitude_noise_rad * units::kRadToArcsec;
   auto* planc = app.add_subcommand(
       "plan", "Predict the 1-sigma of every coefficient a program will give, before the table moves (the program "
               "simulated with the IMU's noise through the calibration pipeline)");
@@ -701,8 +698,22 @@ int main(int argc, char** argv) {
   planc->add_option("--imu", plan_imu, "the unit's imucal-imu-model/1 with its noise section")
       ->required()
       ->check(CLI::ExistingFile);
-  planc->add_option("--rate", plan_rate_hz, "IMU rate, Hz")->capture_default_str()->check(CLI::PositiveNumber);
-  planc->add_option("--seed", plan_seed, "noise seed of the simulation")->capture_default_str();
+  planc->add_option("--rate", plan_opt.rate_hz, "IMU rate, Hz")->capture_default_str()->check(CLI::PositiveNumber);
+  planc->add_option("--seed", plan_opt.seed, "noise seed of the simulation")->capture_default_str();
+  // The table's reference accuracy, as stage 3 is told it (docs/stage3.md): it bounds the delays
+  // and proof masses the program can determine.
+  planc->add_option("--table-attitude-arcsec", plan_table_attitude_arcsec,
+                    "1-sigma of the attitude the table's encoders give, arcsec")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  planc->add_option("--table-velocity-mps", plan_opt.settings.navigation.velocity_noise_mps,
+                    "1-sigma of the table's reference velocity, m/s")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  planc->add_option("--table-position-m", plan_opt.settings.navigation.position_noise_m,
+                    "1-sigma of the table's reference position, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   planc->add_option("--json", plan_json, "write the prediction (imucal-plan/1) here");
 
   auto* passwd = app.add_subcommand(
@@ -745,7 +756,10 @@ int main(int argc, char** argv) {
     if (cmp->parsed()) return cmd_compare(cmp_model, cmp_truth, cmp_json);
     if (simdev->parsed()) return cmd_sim_devices(simdev_args);
     if (passwd->parsed()) return cmd_passwd();
-    if (planc->parsed()) return cmd_plan(plan_program, plan_imu, plan_rate_hz, plan_seed, plan_json);
+    if (planc->parsed()) {
+      plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
+      return cmd_plan(plan_program, plan_imu, plan_opt, plan_json);
+    }
     if (exp->parsed()) {
       const auto db = storage::RunDb::open(exp_db);
       storage::export_bundle(db, exp_dir);

@@ -146,7 +146,17 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
   p.program = program.name;
   p.duration_s = program.duration_s();
   p.rate_hz = options.rate_hz;
-  std::vector<pipeline::Outcome> outcomes = pipeline::run_to_end(meta, source, stages, false, start);
+  // Progress: each simulated run an equal share, read through ProgressSource.
+  const int extra_runs = std::any_of(stages.begin(), stages.end(), [](pipeline::Stage s) { return s != pipeline::Stage::Navigation; })
+                             ? std::max(0, options.residual_stage_runs - 1)
+                             : 0;
+  const double share = 1.0 / (1 + extra_runs);
+  const auto report = [&options](double f) {
+    if (options.progress) options.progress(f);
+  };
+  const double end_s = pipeline::end_of_program_s(meta);
+  std::vector<pipeline::Outcome> outcomes = pipeline::run_to_end(
+      meta, pipeline::ProgressSource(source, end_s, report, 0.0, share), stages, false, start, options.settings);
   // The stages whose sigma comes from residuals, again on other seeds: their RMS sigma.
   std::vector<pipeline::Stage> residual_stages;
   for (const pipeline::Stage s : stages)
@@ -159,7 +169,8 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     std::vector<TempSample> t;
     std::vector<ImuFrame> f = simulate(program, imu, options.rate_hz, options.seed + static_cast<std::uint64_t>(run), m, t);
     const MemorySource again(std::move(f), std::move(t));
-    for (const pipeline::Outcome& o : pipeline::run_to_end(m, again, residual_stages, false, start))
+    const pipeline::ProgressSource reported(again, end_s, report, share * run, share);
+    for (const pipeline::Outcome& o : pipeline::run_to_end(m, reported, residual_stages, false, start, options.settings))
       for (std::size_t i = 0; i < outcomes.size(); ++i)
         if (outcomes[i].stage == o.stage && o.model && !sigma_rms[i].is_null())
           rms_sigma(sigma_rms[i], json::parse(imu_model_to_json_text(*o.model)).value("sigma", json()), run + 1);
@@ -200,6 +211,7 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     }
     p.stages.push_back(std::move(sp));
   }
+  report(1.0);
   return p;
 }
 

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 
 #include "core/imu_model.hpp"
 #include "motion_programs/program.hpp"
+#include "pipeline/pipeline.hpp"
 
 namespace imucal::plan {
 
@@ -27,6 +29,12 @@ struct Options {
   // run (about 13 % with the direct program's 34 statics): the prediction is the RMS of this many
   // simulated runs' sigmas. Stage 3's sigma is its covariance, the same for every run: one run.
   int residual_stage_runs = 4;
+  // What the stages are told, as on the bench: above all the table's reference accuracy
+  // (settings.navigation: attitude, velocity and position noise), which bounds what stage 3 can
+  // see of the delays and proof masses. The defaults are a real table's (docs/stage3.md).
+  pipeline::Settings settings;
+  // Called with the fraction done (0..1) as the simulated runs are read; may throw to cancel.
+  std::function<void(double fraction)> progress;
 };
 
 struct Weak {

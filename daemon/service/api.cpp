@@ -13,6 +13,8 @@
 #include "estimators/direct_calibration.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
+#include "core/units.hpp"
+#include "plan/plan.hpp"
 
 #ifndef IMUCAL_VERSION
 #define IMUCAL_VERSION "0.0.0"
@@ -259,8 +261,9 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"imucald\"");
     return r;
   }
-  // Every POST changes something except validation (a read with a body).
-  const bool mutation = method != "GET" && method != "HEAD" && path != "/api/campaigns/validate";
+  // Every POST changes something except validation and prediction (reads with a body).
+  const bool mutation = method != "GET" && method != "HEAD" && path != "/api/campaigns/validate" &&
+                        path != "/api/campaigns/plan";
   if (mutation && who->role != Role::Operator) return error_reply(403, "operator role required");
   if (mutation && shutting_down_) return error_reply(503, "the daemon is shutting down");
 
@@ -289,6 +292,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
   if (path == "/api/campaigns/validate") {
     if (auto r = only("POST")) return *r;
     return validate_campaign(request);
+  }
+  if (path == "/api/campaigns/plan") {
+    if (auto r = only("POST")) return *r;
+    return plan_campaign(request);
   }
   if (path == "/api/campaigns") {
     if (method == "GET" || method == "HEAD") return list_campaigns(query);
@@ -657,7 +664,10 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
   key.campaign = id;
   key.analysis = what;
   key.state = to_string(row->state);
-  const AnalysisJobs::Answer a = jobs_->request(key, std::move(compute));
+  return job_reply(jobs_->request(key, std::move(compute)));
+}
+
+HttpReply Api::job_reply(const AnalysisJobs::Answer& a) {
   if (a.ready) {
     HttpReply r = json_reply(a.status, json::object());
     r.body = a.body;
@@ -667,6 +677,51 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
   HttpReply r = json_reply(202, a.pending);
   r.headers.emplace_back("Retry-After", "1");
   return r;
+}
+
+// What the campaign's program will deliver, before it runs (`imucal plan`, docs/programs.md): the
+// body is a campaign as for validation, with an optional `plan` object: `rate_hz` (default 20: a
+// few seconds for the `navigation` program), `arw_deg_rth` and `vrw_mps_rth` (the unit's noise;
+// default the campaign's truth's). A job like the analyses: 202 with progress until ready; the
+// same body again finds the answer kept.
+HttpReply Api::plan_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  json options = json::object();
+  if (body.is_object() && body.contains("plan")) {
+    options = body.at("plan");
+    body.erase("plan");
+    if (!options.is_object()) return error_reply(400, "plan must be an object");
+  }
+  const CampaignCheck check = check_campaign(body, config_);
+  if (check.malformed) return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
+  if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
+  ImuModel unit = check.spec->truth;
+  double rate_hz = 20.0;
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(options, "plan", problems);
+    if (auto v = r.number_in("rate_hz", 1.0, 1000.0)) rate_hz = *v;
+    if (auto v = r.number_in("arw_deg_rth", 0.0)) unit.gyro.noise.arw_rad_rts = *v * units::kDegRthToRadRts;
+    if (auto v = r.number_in("vrw_mps_rth", 0.0)) unit.accel.noise.vrw_mps_rts = *v * units::kMpsRthToMpsRts;
+  }
+  if (!problems.empty()) return error_reply(422, problems.front(), {{"problems", problems}});
+  const motion::Program program = compile_campaign_program(*check.spec, config_);
+  auto compute = [program, unit, rate_hz](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    plan::Options o;
+    o.rate_hz = rate_hz;
+    o.progress = progress;
+    try {
+      return {200, plan::predict(program, unit, o).to_json()};
+    } catch (const std::invalid_argument& e) {
+      return {422, {{"error", e.what()}}};
+    }
+  };
+  AnalysisJobs::Key key;
+  key.analysis = "plan";
+  key.state = json{{"campaign", check.spec->normalized}, {"plan", {{"rate_hz", rate_hz},
+              {"arw", unit.gyro.noise.arw_rad_rts}, {"vrw", unit.accel.noise.vrw_mps_rts}}}}.dump();
+  return job_reply(jobs_->request(key, std::move(compute)));
 }
 
 }  // namespace imucal::daemon

@@ -57,6 +57,9 @@ class Api {
   HttpReply list_campaigns(const std::map<std::string, std::string>& query);
   HttpReply create_campaign(const ApiRequest& request);
   HttpReply validate_campaign(const ApiRequest& request);
+  HttpReply plan_campaign(const ApiRequest& request);
+  // An analysis job's answer when ready, else 202 with its progress.
+  static HttpReply job_reply(const AnalysisJobs::Answer& answer);
   HttpReply campaign_detail(std::int64_t id);
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_progress(std::int64_t id);

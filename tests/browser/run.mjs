@@ -407,6 +407,15 @@ try {
   await page.selectOption('#c-truth-kind', 'path');
   await page.fill('#c-truth-path', path.join(repo, 'examples', 'truth-nav-grade.json'));
   await waitText(page, '#verdict', /^Valid/, 30000);
+  // The prediction beside the program (issue 16): every coefficient's 1-sigma against the seed's
+  // targets, stage 3's where it refines stage 1.
+  await waitText(page, '#plan-status', /targets met/, 90000);
+  const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.children[3].textContent]));
+  assert.ok(predicted.length >= 36, `${predicted.length} coefficients predicted`);
+  assert.deepEqual(predicted.find(([n]) => n === 'gyro.bias_dph.x'), ['gyro.bias_dph.x', 'navigation']);
+  await page.$eval('#plan-table', (e) => e.scrollIntoView());
+  await shot(page, '15a-builder-prediction');
+  log(`the builder predicts ${predicted.length} coefficients before launch: ${await page.textContent('#plan-status')}`);
   await page.click('#create-start');
   await page.waitForSelector('#confirm-dialog[open]');
   await page.click('#confirm-ok');

@@ -145,3 +145,29 @@ test("each stage's contribution to the final model, with stage 3's uncertainty r
   assert.equal(byName.has('accel.lever_arm_mm.z.x'), false, 'never estimated, zero everywhere: left out');
   assert.ok(rows.findIndex((r) => r.name.startsWith('gyro.bias')) < rows.findIndex((r) => r.name.startsWith('gyro.delay')));
 });
+
+test('the builder\'s prediction: each coefficient from the last stage that has it, judged against its target', async () => {
+  const { predictionRows, summary, SEED_TARGETS, groupOfName } = await import('../../web/js/plan.mjs');
+  assert.equal(groupOfName('accel.lever_arm_mm.y.z'), 'accel.lever_arm_mm.y');
+  const prediction = { stages: {
+    direct: { estimates: { 'gyro.bias_dph.x': [0, 0.02], 'accel.scale_ppm.x': [0, 2], 'gyro.delay_us.x': [0, 0] } },
+    navigation: { estimates: { 'gyro.bias_dph.x': [0, 0.0004], 'gyro.delay_us.x': [0, 1.5], 'accel.lever_arm_mm.y.x': [0, 0.01] } },
+  } };
+  const rows = predictionRows(prediction);
+  assert.deepEqual(rows.map((r) => r.name), ['accel.lever_arm_mm.y.x', 'accel.scale_ppm.x', 'gyro.bias_dph.x', 'gyro.delay_us.x']);
+  const byName = Object.fromEntries(rows.map((r) => [r.name, r]));
+  assert.equal(byName['gyro.bias_dph.x'].stage, 'navigation', 'stage 3 refines stage 1');
+  assert.equal(byName['gyro.bias_dph.x'].sigma, 0.0004);
+  assert.equal(byName['gyro.bias_dph.x'].meets, true);
+  assert.equal(byName['accel.scale_ppm.x'].stage, 'direct', 'kept from stage 1 when stage 3 does not have it');
+  assert.equal(byName['accel.scale_ppm.x'].meets, false);
+  assert.equal(byName['gyro.delay_us.x'].ratio, 1.5 / SEED_TARGETS['gyro.delay_us']);
+  assert.equal(byName['accel.lever_arm_mm.y.x'].target, null, 'no target: no verdict');
+  assert.equal(byName['accel.lever_arm_mm.y.x'].meets, null);
+  const s = summary(rows);
+  assert.deepEqual([s.met, s.judged], [1, 3]);
+  assert.equal(s.worst.name, 'accel.scale_ppm.x');
+  // Edited targets take over.
+  const relaxed = predictionRows(prediction, { ...SEED_TARGETS, 'accel.scale_ppm': 5, 'gyro.delay_us': 2 });
+  assert.equal(summary(relaxed).met, 3);
+});

@@ -422,3 +422,49 @@ TEST(Http, LiveWebSocketClosesWhenItsSessionEnds) {
   EXPECT_EQ(static_cast<int>(ws.reason().code), 4001);
   EXPECT_NE(std::string(ws.reason().reason.c_str()).find("session ended"), std::string::npos);
 }
+
+// The builder's prediction (issue 16): POST /api/campaigns/plan answers, for a viewer too, with the
+// 1-sigma each stage will report, as a job (202 with progress, then the answer kept); the unit's
+// noise is required and a bad plan option is named.
+TEST(Http, ACampaignIsPredictedBeforeItRuns) {
+  LocalDaemon d("plan", true);
+  const Client viewer{d.service->port(), kViewerToken};
+  const std::string campaign = R"({"name": "p", "program": "direct-short", "rate_hz": 20)";
+  const std::string with_noise = campaign + R"(, "plan": {"arw_deg_rth": 0.0005, "vrw_mps_rth": 0.002}})";
+  HttpResult r = viewer.post("/api/campaigns/plan", with_noise);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  bool saw_pending = false;
+  while (r.status == 202 && std::chrono::steady_clock::now() < deadline) {
+    saw_pending = true;
+    EXPECT_TRUE(r.json_body().contains("progress")) << r.body;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    r = viewer.post("/api/campaigns/plan", with_noise);
+  }
+  ASSERT_EQ(r.status, 200) << r.body;
+  EXPECT_TRUE(saw_pending) << "the first request starts a job: 202";
+  const json p = r.json_body();
+  EXPECT_EQ(p.at("format"), "imucal-plan/1");
+  EXPECT_EQ(p.at("rate_hz").get<double>(), 20.0);
+  const json direct = p.at("stages").at("direct");
+  EXPECT_EQ(direct.at("status"), "done") << direct.dump();
+  EXPECT_GT(direct.at("sigma").at("gyro").at("bias_dph").at(0).get<double>(), 0.0);
+  EXPECT_GT(direct.at("estimates").at("accel.scale_ppm.z").at(1).get<double>(), 0.0);
+  // The same body again: the kept answer at once.
+  EXPECT_EQ(viewer.post("/api/campaigns/plan", with_noise).status, 200);
+
+  const auto no_noise = viewer.post("/api/campaigns/plan", campaign + "}");
+  HttpResult refused = no_noise;
+  while (refused.status == 202 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    refused = viewer.post("/api/campaigns/plan", campaign + "}");
+  }
+  EXPECT_EQ(refused.status, 422) << refused.body;
+  EXPECT_NE(refused.body.find("no noise"), std::string::npos) << refused.body;
+
+  const auto bad = viewer.post("/api/campaigns/plan", campaign + R"(, "plan": {"rate_hz": 0}})");
+  EXPECT_EQ(bad.status, 422);
+  EXPECT_NE(bad.body.find("plan.rate_hz"), std::string::npos) << bad.body;
+  const auto typo = viewer.post("/api/campaigns/plan", campaign + R"(, "plan": {"arw": 1}})");
+  EXPECT_EQ(typo.status, 422);
+  EXPECT_NE(typo.body.find(R"(plan: unknown key \"arw\")"), std::string::npos) << typo.body;
+}

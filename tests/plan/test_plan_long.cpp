@@ -8,13 +8,15 @@
 // residual errors of stage 1 (and the proof masses off by 0.3 mm), drawn anew per run: what its
 // initial covariance assumes.
 //
-// Open (issue 16): stage 3's errors do not yet spread as its sigma says for every coefficient. On
-// imucal's simulator (a table with perfect encoders) 26 of 36 coefficients have their RMS error
-// within 0.7-1.4 sigma: the gyro delays at 0.3 sigma (the filter assumes 2" of encoder noise the
-// simulated table does not have; the delays are seen through that attitude), the z accelerometer's
-// delay at 1.75 sigma and a proof-mass offset at 1.5 sigma (over-confident). That check is
-// DISABLED_ below until the filter's tuning is settled; the enabled test holds the half that does
-// hold: every run reports the predicted sigma.
+// Open (issue 16): stage 3's errors do not yet spread as its sigma says for every coefficient.
+// With the filter's real-table tuning (2" of encoder attitude, which the simulated table does not
+// have) 24-26 of 36 coefficients have their RMS error within 0.7-1.4 sigma, the gyro delays at 0.3
+// sigma. Told the simulated table's accuracy (the strapdown floor, as NavFilterConsistency),
+// 27 of 36: the gyro delays at 0.95-1.06, but the y and z accelerometers' delays at 3.0 and 1.8
+// sigma and two proof-mass offsets (y.z, z.y) at 2.4 and 4.5 sigma: over-confident; five others
+// at 0.56-0.67 (conservative). That check is DISABLED_ below until the filter's model of the
+// accelerometer delays and offsets is settled; the enabled test holds the half that does hold:
+// every run reports the predicted sigma (within 2 %).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -23,6 +25,7 @@
 #include <random>
 
 #include "../estimators/nav_calib_fixture.hpp"
+#include "core/units.hpp"
 #include "pipeline/pipeline.hpp"
 #include "plan/plan.hpp"
 
@@ -49,7 +52,7 @@ class MemorySource final : public pipeline::FrameSource {
 
 // One calibration of `program` on data simulated with `seed`: the stage's model (with its sigma).
 ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeline::Stage stage, double rate_hz,
-                   std::uint64_t seed, const ImuModel& start) {
+                   std::uint64_t seed, const ImuModel& start, const pipeline::Settings& settings) {
   sim::SimConfig cfg;
   cfg.rate_hz = rate_hz;
   cfg.seed = seed;
@@ -57,7 +60,7 @@ ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeli
   std::vector<ImuFrame> frames;
   ImuFrame f;
   while (sim.next(f)) frames.push_back(f);
-  const auto outcomes = pipeline::run_to_end(sim.meta(), MemorySource(std::move(frames)), {stage}, true, start);
+  const auto outcomes = pipeline::run_to_end(sim.meta(), MemorySource(std::move(frames)), {stage}, true, start, settings);
   EXPECT_EQ(outcomes.front().status, pipeline::Status::Done) << outcomes.front().message;
   return outcomes.front().model.value_or(ImuModel{});
 }
@@ -66,12 +69,14 @@ ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeli
 enum class Check { ErrorsAndSigmas, SigmasOnly };
 
 void expect_prediction_holds(const std::string& program_name, pipeline::Stage stage, double rate_hz, int runs, Check check,
+                             const pipeline::Settings& settings,
                              const std::function<ImuModel(std::mt19937_64&)>& start_of_run, const ImuModel& reference) {
   const ImuModel truth = nav_grade();
   const motion::Program program = motion::load_program(program_name, motion::TableLimits{});
   plan::Options opt;
   opt.rate_hz = rate_hz;
   opt.seed = 1000;
+  opt.settings = settings;
   const plan::Prediction prediction = plan::predict(program, truth, opt);
   ASSERT_EQ(prediction.stages.size(), 1u);
   ASSERT_TRUE(prediction.stages[0].model) << prediction.stages[0].message;
@@ -82,7 +87,7 @@ void expect_prediction_holds(const std::string& program_name, pipeline::Stage st
   std::map<std::string, double> sum_sq, sigma_ratio_worst, reported_sq;
   std::mt19937_64 rng(77);
   for (int run = 0; run < runs; ++run) {
-    const ImuModel m = calibrate(program, truth, stage, rate_hz, 1 + static_cast<std::uint64_t>(run), start_of_run(rng));
+    const ImuModel m = calibrate(program, truth, stage, rate_hz, 1 + static_cast<std::uint64_t>(run), start_of_run(rng), settings);
     const json got = pipeline::estimates_json(m);
     for (const auto& [name, pair] : predicted.items()) {
       const double sigma_pred = pair.at(1).get<double>();
@@ -127,7 +132,7 @@ void expect_prediction_holds(const std::string& program_name, pipeline::Stage st
 
 TEST(PlanLong, TheDirectProgramDeliversWhatWasPredicted) {
   const ImuModel truth = nav_grade();
-  expect_prediction_holds("direct", pipeline::Stage::Direct, 100.0, 20, Check::ErrorsAndSigmas,
+  expect_prediction_holds("direct", pipeline::Stage::Direct, 100.0, 20, Check::ErrorsAndSigmas, {},
                           [](std::mt19937_64&) { return ImuModel{}; }, truth);
 }
 
@@ -150,15 +155,23 @@ ImuModel navigation_start(const ImuModel& truth_body, std::mt19937_64& rng) {
 
 TEST(PlanLong, EveryNavigationRunReportsThePredictedSigma) {
   const ImuModel truth_body = direct::to_body_frame(nav_grade());
-  expect_prediction_holds("navigation", pipeline::Stage::Navigation, 50.0, 10, Check::SigmasOnly,
+  expect_prediction_holds("navigation", pipeline::Stage::Navigation, 50.0, 10, Check::SigmasOnly, {},
                           [&](std::mt19937_64& rng) { return navigation_start(truth_body, rng); }, truth_body);
 }
 
-// The acceptance's other half for stage 3, not met yet (see the top of this file): run it with
+// The errors' spread, with the filter (and so the prediction) told the table the simulator gives:
+// an exact reference, whose noise is the strapdown algorithm's floor (as in
+// NavFilterConsistency, docs/stage3.md "Honest sigmas"). `imucal plan --table-...` takes a real
+// table's accuracy the same way. Not met yet (see the top of this file): run it with
 // --gtest_also_run_disabled_tests.
 TEST(PlanLong, DISABLED_TheNavigationErrorsSpreadAsPredicted) {
   const ImuModel truth_body = direct::to_body_frame(nav_grade());
-  expect_prediction_holds("navigation", pipeline::Stage::Navigation, 50.0, 20, Check::ErrorsAndSigmas,
+  pipeline::Settings simulated_table;
+  simulated_table.navigation.velocity_noise_mps = 1e-5;
+  simulated_table.navigation.position_noise_m = 1e-4;
+  simulated_table.navigation.attitude_noise_rad = 0.05 * units::kArcsecToRad;
+  expect_prediction_holds("navigation", pipeline::Stage::Navigation, 100.0, 20, Check::ErrorsAndSigmas,
+                          simulated_table,
                           [&](std::mt19937_64& rng) { return navigation_start(truth_body, rng); }, truth_body);
 }
 

@@ -9,8 +9,12 @@ import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog } from '../dialogs.mjs';
 import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress } from '../program_edit.mjs';
+import { SEED_TARGETS, predictionRows, summary } from '../plan.mjs';
 
 const DRAFT_KEY = 'imucal.builder.draft';
+// The prediction's unit noise and targets outlive a draft: they describe the lab's units.
+const PLAN_KEY = 'imucal.builder.plan';
+const PLAN_DEFAULTS = { arw_deg_rth: 0.0005, vrw_mps_rth: 0.002, targets: { ...SEED_TARGETS } };
 const FAULT_KINDS = ['chamber_offset', 'imu_dropout', 'imu_corrupt', 'disconnect', 'table_fault'];
 const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10 }, disconnect: { device: 'imu' } };
 
@@ -24,6 +28,10 @@ export function mount(root, ctx) {
   let validation = { state: 'idle', problems: [], duration_s: null, segments: [] };
   let validateTimer = null;
   let validateSeq = 0;
+  let planTimer = null;
+  let planSeq = 0;
+  let lastPrediction = null;
+  let planSettings = loadPlanSettings();
   let destroyed = false;
 
   const pageError = h('div', { class: 'form-error', role: 'alert', id: 'builder-error' });
@@ -40,6 +48,20 @@ export function mount(root, ctx) {
   const createButton = h('button', { type: 'button', id: 'create', class: 'operator-only' }, 'Create campaign');
   const startButton = h('button', { type: 'button', id: 'create-start', class: 'primary operator-only' }, 'Create and start…');
   const viewerNote = h('p', { class: 'hint viewer-only' }, 'You are signed in as a viewer: you can build and check a campaign, but only an operator can create or start one.');
+  // The prediction (POST /api/campaigns/plan): the program simulated with the unit's noise through
+  // the calibration stages, redone a moment after each valid edit.
+  const planStatus = h('p', { class: 'plan-status', id: 'plan-status', 'aria-live': 'polite' }, 'Predicted once the campaign is valid.');
+  const planBody = h('tbody', { id: 'plan-rows' });
+  const planWeak = h('ul', { class: 'problems', id: 'plan-weak' });
+  const planNoise = h('div', { class: 'grid-form', id: 'plan-noise' },
+    h('label', { for: 'plan-arw' }, 'Gyro ARW, deg/√h'),
+    h('input', { id: 'plan-arw', inputmode: 'decimal', value: String(planSettings.arw_deg_rth), onchange: planInputChanged }),
+    h('label', { for: 'plan-vrw' }, 'Accel VRW, m/s/√h'),
+    h('input', { id: 'plan-vrw', inputmode: 'decimal', value: String(planSettings.vrw_mps_rth), onchange: planInputChanged }));
+  const planTargets = h('div', { class: 'grid-form', id: 'plan-targets' },
+    ...Object.keys(SEED_TARGETS).flatMap((g) => [
+      h('label', { for: targetId(g) }, g),
+      h('input', { id: targetId(g), inputmode: 'decimal', value: String(planSettings.targets[g] ?? SEED_TARGETS[g]), onchange: planInputChanged })]));
 
   root.append(
     h('div', { class: 'page-head' }, h('h1', {}, 'New campaign'),
@@ -65,7 +87,15 @@ export function mount(root, ctx) {
       h('aside', { class: 'builder-side card' },
         h('h2', {}, 'Check'), verdict, problemsList, serverMessage, viewerNote,
         h('div', { class: 'actions' }, createButton, startButton),
-        h('details', {}, h('summary', {}, 'JSON sent to imucald'), preview))));
+        h('details', {}, h('summary', {}, 'JSON sent to imucald'), preview),
+        h('h2', {}, 'Predicted accuracy'), planStatus,
+        h('details', { id: 'plan-settings' }, h('summary', {}, 'Unit noise and 1-sigma targets (default: the seed\'s figures)'),
+          planNoise, planTargets),
+        h('table', { class: 'plan-table', id: 'plan-table' },
+          h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
+            h('th', {}, 'Stage'))),
+          planBody),
+        planWeak)));
 
   createButton.addEventListener('click', () => submit(false));
   startButton.addEventListener('click', () => submit(true));
@@ -503,6 +533,12 @@ export function mount(root, ctx) {
     preview.textContent = JSON.stringify(body(), null, 1).slice(0, 20000);
     serverMessage.textContent = '';
     clearTimeout(validateTimer);
+    clearTimeout(planTimer);
+    planSeq++;  // a prediction under way is for the previous program
+    if (lastPrediction) {
+      planStatus.dataset.state = 'checking';
+      planStatus.textContent = 'Edited: predicted again once the campaign is valid.';
+    }
     const local = clientProblems();
     if (local.length) {
       validation = { state: 'local', problems: local, duration_s: null, segments: [] };
@@ -520,11 +556,91 @@ export function mount(root, ctx) {
       const r = await post('/api/campaigns/validate', body());
       if (seq !== validateSeq || destroyed) return;  // a newer edit is being checked
       validation = { state: r.valid ? 'valid' : 'invalid', problems: r.problems || [], duration_s: r.duration_s, segments: r.segments || [] };
+      if (r.valid) schedulePlan();
     } catch (e) {
       if (seq !== validateSeq || destroyed) return;
       validation = { state: 'error', problems: e instanceof ApiError ? (e.problems.length ? e.problems : [e.message]) : [String(e)], duration_s: null, segments: [] };
     }
     renderVerdict();
+  }
+
+  // ---- the prediction ----
+
+  function targetId(group) { return `target-${group.replace(/\./g, '-')}`; }
+
+  function loadPlanSettings() {
+    try {
+      const saved = JSON.parse(localStorage.getItem(PLAN_KEY) || 'null');
+      if (saved && typeof saved === 'object')
+        return { ...PLAN_DEFAULTS, ...saved, targets: { ...PLAN_DEFAULTS.targets, ...(saved.targets || {}) } };
+    } catch { /* unreadable: the defaults */ }
+    return { ...PLAN_DEFAULTS, targets: { ...PLAN_DEFAULTS.targets } };
+  }
+
+  // The noise inputs change the prediction (asked again); the targets only its verdicts.
+  function planInputChanged() {
+    const read = (id) => parseNumber(root.querySelector(`#${id}`).value);
+    const arw = read('plan-arw'), vrw = read('plan-vrw');
+    const targets = {};
+    for (const g of Object.keys(SEED_TARGETS)) {
+      const t = read(targetId(g));
+      if (Number.isFinite(t) && t > 0) targets[g] = t;
+    }
+    if (!(arw > 0) || !(vrw > 0)) {
+      planStatus.textContent = 'The unit noise must be two positive numbers.';
+      planStatus.dataset.state = 'error';
+      return;
+    }
+    const noiseChanged = arw !== planSettings.arw_deg_rth || vrw !== planSettings.vrw_mps_rth;
+    planSettings = { arw_deg_rth: arw, vrw_mps_rth: vrw, targets };
+    try { localStorage.setItem(PLAN_KEY, JSON.stringify(planSettings)); } catch { /* private mode */ }
+    if (noiseChanged && validation.state === 'valid') schedulePlan();
+    else if (lastPrediction) renderPrediction(lastPrediction);
+  }
+
+  function schedulePlan() {
+    clearTimeout(planTimer);
+    planTimer = setTimeout(predict, 600);
+  }
+
+  async function predict() {
+    const seq = ++planSeq;
+    planStatus.dataset.state = 'checking';
+    planStatus.textContent = 'Predicting…';
+    const request = { ...body(), plan: { arw_deg_rth: planSettings.arw_deg_rth, vrw_mps_rth: planSettings.vrw_mps_rth } };
+    try {
+      const r = await post('/api/campaigns/plan', request, { onPending: (p) => {
+        if (seq !== planSeq || destroyed) return false;  // edited since: this one is no longer wanted
+        planStatus.textContent = `Predicting… ${Math.round(100 * (p.progress || 0))} %`;
+        return true;
+      } });
+      if (seq !== planSeq || destroyed) return;
+      lastPrediction = r;
+      renderPrediction(r);
+    } catch (e) {
+      if (seq !== planSeq || destroyed) return;
+      lastPrediction = null;
+      clear(planBody);
+      clear(planWeak);
+      planStatus.dataset.state = 'error';
+      planStatus.textContent = `No prediction: ${e.message}`;
+    }
+  }
+
+  function renderPrediction(p) {
+    const rows = predictionRows(p, planSettings.targets);
+    const s = summary(rows);
+    planStatus.dataset.state = s.judged && s.met === s.judged ? 'valid' : 'invalid';
+    planStatus.textContent = `${duration(p.duration_s)} of program at ${num(p.rate_hz, 3)} Hz: ${s.met} of ${s.judged} targets met` +
+      (s.worst && !s.worst.meets ? `; worst ${s.worst.name} at ${num(s.worst.ratio, 2)}× its target.` : '.');
+    clear(planBody);
+    for (const row of rows)
+      planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name } },
+        h('td', {}, row.name), h('td', { class: 'num' }, num(row.sigma, 3)),
+        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage)));
+    clear(planWeak);
+    for (const w of p.weak || [])
+      planWeak.append(h('li', { class: 'problem' }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
   }
 
   function renderVerdict() {
@@ -649,6 +765,7 @@ export function mount(root, ctx) {
   return () => {
     destroyed = true;
     clearTimeout(validateTimer);
+    clearTimeout(planTimer);
     offSession();
   };
 }

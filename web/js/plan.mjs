@@ -1,0 +1,58 @@
+// The prediction of a campaign (POST /api/campaigns/plan, `imucal plan`, issue 16) as the builder
+// shows it: each coefficient's predicted 1-sigma after the last stage that determines it, against a
+// target. Pure: the daemon's answer and the targets come in, rows go out.
+
+/**
+ * The seed's figures (method.md, stage 3): the default targets, by coefficient group (the name
+ * without its axis). Groups without a target are shown without a verdict.
+ */
+export const SEED_TARGETS = Object.freeze({
+  'gyro.bias_dph': 0.001,
+  'gyro.scale_pos_ppm': 0.5,
+  'gyro.scale_neg_ppm': 0.5,
+  'gyro.misalignment_arcsec': 0.1,
+  'gyro.delay_us': 1,
+  'accel.bias_mps2': 5e-6,
+  'accel.scale_ppm': 0.3,
+  'accel.misalignment_arcsec': 0.3,
+});
+
+// Later stages refine earlier ones: a coefficient's prediction is the last of these that has it.
+const STAGE_ORDER = ['direct', 'lever-arm', 'navigation'];
+
+/** "gyro.bias_dph.x" -> "gyro.bias_dph"; "accel.lever_arm_mm.y.z" -> "accel.lever_arm_mm.y". */
+export function groupOfName(name) {
+  return name.slice(0, name.lastIndexOf('.'));
+}
+
+/**
+ * @param {object} prediction  the daemon's imucal-plan/1 answer
+ * @param {object} targets     group -> 1-sigma target (SEED_TARGETS by default)
+ * @returns {{name, group, stage, sigma, target: number|null, ratio: number|null, meets: boolean|null}[]}
+ *   sorted by name; ratio = sigma / target.
+ */
+export function predictionRows(prediction, targets = SEED_TARGETS) {
+  const best = new Map();
+  for (const stage of STAGE_ORDER) {
+    const estimates = prediction?.stages?.[stage]?.estimates;
+    if (!estimates) continue;
+    for (const [name, pair] of Object.entries(estimates)) {
+      const sigma = Array.isArray(pair) ? pair[1] : null;
+      if (Number.isFinite(sigma) && sigma > 0) best.set(name, { stage, sigma });
+    }
+  }
+  return [...best.entries()].sort(([a], [b]) => a.localeCompare(b)).map(([name, { stage, sigma }]) => {
+    const group = groupOfName(name);
+    const t = targets[group];
+    const target = Number.isFinite(t) && t > 0 ? t : null;
+    const ratio = target === null ? null : sigma / target;
+    return { name, group, stage, sigma, target, ratio, meets: ratio === null ? null : ratio <= 1 };
+  });
+}
+
+/** How many rows with a target meet it, of how many, and the worst ratio (null without targets). */
+export function summary(rows) {
+  const judged = rows.filter((r) => r.ratio !== null);
+  const worst = judged.reduce((w, r) => (w === null || r.ratio > w.ratio ? r : w), null);
+  return { met: judged.filter((r) => r.meets).length, judged: judged.length, worst };
+}
