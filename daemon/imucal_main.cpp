@@ -40,6 +40,7 @@
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
+#include "plan/optimize.hpp"
 #include "plan/plan.hpp"
 #include "bench/storage_bench.hpp"
 #include "storage/bundle.hpp"
@@ -518,6 +519,66 @@ int cmd_plan(const std::string& program_arg, const std::string& imu_path, const 
   return 0;
 }
 
+// `imucal plan --optimize`: the shortest program of the given one's family that meets the targets.
+int cmd_plan_optimize(const std::string& program_arg, const std::string& imu_path, const plan::OptimizeOptions& opt,
+                      const std::string& target_arg, const std::string& program_out, const std::string& json_out) {
+  const motion::TableLimits limits{};
+  const std::string program_text = motion::load_program(program_arg, limits).source_json;
+  const nlohmann::json program = nlohmann::json::parse(program_text);
+  const ImuModel imu = read_imu_model_file(imu_path);
+  plan::Targets targets;
+  if (target_arg == "seed") {
+    targets = plan::seed_targets();
+  } else {
+    std::ifstream in(target_arg);
+    if (!in) throw std::runtime_error("cannot read the targets file " + target_arg);
+    const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+    if (j.is_discarded()) throw std::runtime_error(target_arg + " is not JSON");
+    targets = plan::targets_from_json(j);
+  }
+  std::printf("optimizing %s (%s) for %zu targets at %.0f Hz, budget %.0f s\n", program.value("name", "").c_str(),
+              program_arg.c_str(), targets.size(), opt.predict.rate_hz, opt.budget_s);
+  plan::OptimizeOptions o = opt;
+  o.progress = [](const plan::Candidate& c, int n) {
+    std::printf("  [%2d] swings x%.3f, oscillations x%.3f: %6.0f s, worst %.2f of its target (%s)\n", n,
+                c.swing_period_factor, c.oscillation_factor, c.duration_s, c.worst_ratio, c.worst_coefficient.c_str());
+    std::fflush(stdout);
+  };
+  const plan::OptimizeResult r = plan::optimize(program, imu, targets, limits, o);
+  std::printf("front (duration against the worst sigma/target):\n");
+  for (const plan::Candidate& c : r.front) std::printf("  %6.0f s  %.2f\n", c.duration_s, c.worst_ratio);
+  for (const std::string& u : r.unmet) std::printf("unmet: %s\n", u.c_str());
+  const plan::Candidate& chosen = r.best ? *r.best : r.closest;
+  if (r.best)
+    std::printf("best: %.0f s (%.0f %% of %.0f s), every target met, worst %.2f (%s); %d programs in %.0f s\n",
+                chosen.duration_s, 100.0 * chosen.duration_s / r.reference.duration_s, r.reference.duration_s,
+                chosen.worst_ratio, chosen.worst_coefficient.c_str(), r.evaluated, r.wall_s);
+  else
+    std::printf("no program tried meets every target; closest: %.0f s, worst %.2f (%s)\n", chosen.duration_s,
+                chosen.worst_ratio, chosen.worst_coefficient.c_str());
+  if (!program_out.empty()) {
+    std::ofstream out(program_out);
+    out << chosen.program_json << "\n";
+    if (!out) throw std::runtime_error("cannot write " + program_out);
+    std::printf("-> %s (accepted by simulate, campaign and the builder)\n", program_out.c_str());
+  }
+  if (!json_out.empty()) {
+    nlohmann::json front = nlohmann::json::array();
+    for (const plan::Candidate& c : r.front)
+      front.push_back({{"duration_s", c.duration_s}, {"worst_ratio", c.worst_ratio}, {"worst", c.worst_coefficient},
+                       {"swing_period_factor", c.swing_period_factor}, {"oscillation_factor", c.oscillation_factor}});
+    const nlohmann::json j = {{"format", "imucal-plan-optimize/1"}, {"reference_duration_s", r.reference.duration_s},
+                              {"met", r.best.has_value()}, {"duration_s", chosen.duration_s},
+                              {"worst_ratio", chosen.worst_ratio}, {"ratio_by_group", chosen.ratio_by_group},
+                              {"front", front}, {"unmet", r.unmet}, {"evaluated", r.evaluated},
+                              {"program", nlohmann::json::parse(chosen.program_json)}};
+    std::ofstream out(json_out);
+    out << j.dump(1) << "\n";
+    if (!out) throw std::runtime_error("cannot write " + json_out);
+  }
+  return r.best ? 0 : 2;
+}
+
 // One line from standard input; on a terminal without echo, after a prompt on stderr.
 std::string read_secret(const char* prompt) {
   const bool tty = ::isatty(STDIN_FILENO) != 0;
@@ -714,7 +775,19 @@ int main(int argc, char** argv) {
                     "1-sigma of the table's reference position, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  planc->add_option("--json", plan_json, "write the prediction (imucal-plan/1) here");
+  planc->add_option("--json", plan_json, "write the prediction (imucal-plan/1), or with --optimize the search, here");
+  bool plan_optimize = false;
+  std::string plan_target = "seed", plan_program_out;
+  plan::OptimizeOptions plan_search;
+  planc->add_flag("--optimize", plan_optimize,
+                  "search the program's swing periods and oscillation cycles for the shortest that meets the targets");
+  planc->add_option("--target", plan_target, "with --optimize: 'seed' (the seed's stage-3 figures) or a JSON file "
+                                             "{\"gyro.bias_dph\": 0.001, ...}")
+      ->capture_default_str();
+  planc->add_option("--budget-s", plan_search.budget_s, "with --optimize: wall time for the search, s")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  planc->add_option("--write-program", plan_program_out, "with --optimize: write the best program here");
 
   auto* passwd = app.add_subcommand(
       "passwd", "Print the hash of a password (read from standard input) for a user's password_hash in imucald's "
@@ -758,6 +831,12 @@ int main(int argc, char** argv) {
     if (passwd->parsed()) return cmd_passwd();
     if (planc->parsed()) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
+      if (plan_optimize) {
+        plan_search.predict = plan_opt;
+        // Many programs are predicted: 20 Hz unless a rate is given.
+        if (planc->count("--rate") == 0) plan_search.predict.rate_hz = 20.0;
+        return cmd_plan_optimize(plan_program, plan_imu, plan_search, plan_target, plan_program_out, plan_json);
+      }
       return cmd_plan(plan_program, plan_imu, plan_opt, plan_json);
     }
     if (exp->parsed()) {

@@ -3,10 +3,13 @@
 // predict from.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 
 #include <nlohmann/json.hpp>
 
 #include "motion_programs/program.hpp"
+#include "plan/optimize.hpp"
 #include "plan/plan.hpp"
 
 using namespace imucal;
@@ -40,5 +43,44 @@ TEST(Plan, AModelWithoutNoiseIsRefusedWithWhatToGive) {
     FAIL() << "predicted from a model without noise";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("arw_deg_rth"), std::string::npos) << e.what();
+  }
+}
+
+// The optimizer's family: the slow swings' periods and the fast oscillations' cycles scale, the
+// rest of the program is kept, and the result is a program the table's limits accept.
+TEST(Plan, TheOptimizerScalesSwingsAndOscillationsAndKeepsTheRest) {
+  const json navigation = json::parse(motion::builtin_program_json("navigation"));
+  const json scaled = json::parse(plan::scaled_program(navigation, 0.5, 0.25, 100.0));
+  ASSERT_EQ(scaled.at("segments").size(), navigation.at("segments").size());
+  EXPECT_EQ(scaled.at("name"), "navigation-optimized");
+  for (std::size_t i = 0; i < navigation.at("segments").size(); ++i) {
+    const json& a = navigation.at("segments")[i];
+    const json& b = scaled.at("segments")[i];
+    if (a.at("type") != "sine") {
+      EXPECT_EQ(a, b) << "segment " << a.at("name") << " changed";
+    } else if (a.at("period_s").get<double>() >= 100.0) {
+      EXPECT_DOUBLE_EQ(b.at("period_s").get<double>(), 0.5 * a.at("period_s").get<double>()) << a.at("name");
+      EXPECT_EQ(b.at("cycles"), a.at("cycles"));
+    } else {
+      EXPECT_EQ(b.at("period_s"), a.at("period_s"));
+      EXPECT_EQ(b.at("cycles").get<int>(), std::max(2, static_cast<int>(std::lround(0.25 * a.at("cycles").get<int>()))))
+          << a.at("name");
+    }
+  }
+  const motion::Program p = motion::compile_program(scaled.dump(), motion::TableLimits{});
+  EXPECT_TRUE(motion::validate_program(p, motion::TableLimits{}).empty());
+  EXPECT_LT(p.duration_s(), 0.6 * motion::load_program("navigation", motion::TableLimits{}).duration_s());
+}
+
+TEST(Plan, TargetsMustBePositiveNumbersByGroup) {
+  EXPECT_EQ(plan::targets_from_json(json{{"gyro.bias_dph", 0.002}}).at("gyro.bias_dph"), 0.002);
+  EXPECT_EQ(plan::seed_targets().at("gyro.misalignment_arcsec"), 0.1);
+  for (const json& bad : {json::array(), json::object(), json{{"gyro.bias_dph", -1}}, json{{"gyro.bias_dph", "x"}}}) {
+    try {
+      plan::targets_from_json(bad);
+      ADD_FAILURE() << "accepted " << bad.dump();
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("target"), std::string::npos) << e.what();
+    }
   }
 }
