@@ -187,8 +187,24 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     sp.status = pipeline::to_string(o.status);
     sp.message = o.message;
     sp.model = o.model;
-    if (o.status == pipeline::Status::Undetermined || o.status == pipeline::Status::Failed)
-      p.weak.push_back({sp.stage, "(the stage)", o.message, "see the message: it names the motion that is missing"});
+    if (o.status == pipeline::Status::Undetermined || o.status == pipeline::Status::Failed) {
+      // The stage's message lists what it cannot determine, one "  - what: why (fix)" per line.
+      bool listed = false;
+      std::size_t at = 0;
+      while ((at = o.message.find("\n  - ", at)) != std::string::npos) {
+        at += 5;
+        const std::string line = o.message.substr(at, o.message.find('\n', at) - at);
+        const std::size_t colon = line.find(": "), open = line.rfind(" (");
+        Weak w{sp.stage, line.substr(0, colon), line, "see why"};
+        const bool has_fix = colon != std::string::npos && open != std::string::npos && open > colon && line.back() == ')';
+        if (colon != std::string::npos)
+          w.why = line.substr(colon + 2, has_fix ? open - colon - 2 : std::string::npos);
+        if (has_fix) w.fix = line.substr(open + 2, line.size() - open - 3);
+        p.weak.push_back(std::move(w));
+        listed = true;
+      }
+      if (!listed) p.weak.push_back({sp.stage, "(the stage)", o.message, "see why: it names the motion that is missing"});
+    }
     if (o.navigation) {
       const navfilter::Result& r = *o.navigation;
       json t = json::array(), sig = json::object();

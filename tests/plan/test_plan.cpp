@@ -84,3 +84,25 @@ TEST(Plan, TargetsMustBePositiveNumbersByGroup) {
     }
   }
 }
+
+// A program without a negative rotation about z cannot determine the z gyro's negative scale
+// factor: plan names the coefficient and the motion that would fix it (stage 1's own check).
+TEST(Plan, AProgramWithoutANegativeRotationIsNamedWithTheFix) {
+  // Named `direct`: the recording says which stage a part feeds by its program's name.
+  const json program = {{"name", "direct"},
+                        {"segments",
+                         {{{"type", "hold"}, {"name", "start"}, {"duration_s", 36}},
+                          {{"type", "rate"}, {"name", "rate-z+"}, {"axis", "outer"}, {"rate_dps", 20},
+                           {"revolutions", 2}, {"accel_dps2", 20}},
+                          {{"type", "hold"}, {"name", "end"}, {"duration_s", 36}}}}};
+  const plan::Prediction p = plan::predict(motion::compile_program(program.dump(), motion::TableLimits{}), nav_grade());
+  std::string said;
+  for (const plan::Weak& w : p.weak) said += w.stage + " " + w.coefficient + ": " + w.why + "; " + w.fix + "\n";
+  ASSERT_FALSE(p.weak.empty()) << "nothing named weak";
+  const auto it = std::find_if(p.weak.begin(), p.weak.end(),
+                               [](const plan::Weak& w) { return w.coefficient == "gyro z scale_neg_ppm"; });
+  ASSERT_NE(it, p.weak.end()) << said;
+  EXPECT_EQ(it->why, "no negative rotation about the z axis") << said;
+  EXPECT_EQ(it->fix, "add a single-axis rate run with negative rate about it") << said;
+  EXPECT_EQ(p.weak.front().stage, "direct");
+}
