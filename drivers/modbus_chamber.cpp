@@ -144,7 +144,7 @@ struct ModbusChamber::Impl {
 
   // Turns the errno of a failed libmodbus call into a typed error; closes the link unless the
   // device itself answered with an exception (the link is fine then).
-  DriverError fail(const char* what) {
+  DriverError fail(const std::string& what) {
     const int e = errno;
     const std::string text = who() + ": " + what + ": " + modbus_strerror(e);
     DriverErrc code = DriverErrc::io_error;
@@ -170,13 +170,21 @@ struct ModbusChamber::Impl {
       // be taken for the answer to the next request: start over on a fresh connection. The
       // first reconnection is tried at once, later ones back off.
       close_link();
-      last_link_error = std::string(what) + ": " + modbus_strerror(e);
+      last_link_error = what + ": " + modbus_strerror(e);
       next_attempt = Clock::now();
     }
     return {code, text};
   }
 
-  Result<std::vector<std::uint16_t>> read_regs(int address, int count, const char* what) {
+  // "what (register 2782..2783)": an exception reply names the register the controller refused,
+  // so a wrong map entry is found from the message alone.
+  static std::string at_register(const std::string& what, int address, int count) {
+    std::string s = what + " (register " + std::to_string(address);
+    if (count > 1) s += ".." + std::to_string(address + count - 1);
+    return s + ")";
+  }
+
+  Result<std::vector<std::uint16_t>> read_regs(int address, int count, const std::string& what) {
     if (auto r = ensure_link(false); !r) return r.error();
     std::vector<std::uint16_t> regs(static_cast<std::size_t>(count));
     errno = 0;
@@ -185,12 +193,12 @@ struct ModbusChamber::Impl {
       if (n >= 0) {
         errno = EMBBADDATA;
       }
-      return fail(what);
+      return fail(at_register(what, address, count));
     }
     return regs;
   }
 
-  Result<void> write_regs(int address, const std::vector<std::uint16_t>& regs, const char* what) {
+  Result<void> write_regs(int address, const std::vector<std::uint16_t>& regs, const std::string& what) {
     if (auto r = ensure_link(false); !r) return r.error();
     errno = 0;
     const int n = regs.size() == 1 ? modbus_write_register(ctx, address, regs[0])
@@ -199,7 +207,7 @@ struct ModbusChamber::Impl {
       if (n >= 0) {
         errno = EMBBADDATA;
       }
-      return fail(what);
+      return fail(at_register(what, address, static_cast<int>(regs.size())));
     }
     return success();
   }
@@ -237,7 +245,7 @@ struct ModbusChamber::Impl {
   Result<std::vector<ChamberAlarm>> read_alarms() {
     std::vector<ChamberAlarm> out;
     for (const AlarmRegister& a : cfg.map.alarms) {
-      auto r = read_regs(a.address, 1, "reading an alarm register");
+      auto r = read_regs(a.address, 1, "reading alarm '" + a.name + "'");
       if (!r) return r.error();
       if (a.active((*r)[0])) out.push_back({a.name, (*r)[0]});
     }

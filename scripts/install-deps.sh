@@ -13,6 +13,10 @@ packages=(
 # installed another way (NodeSource's nodejs bundles npm and conflicts with Debian's npm) is kept.
 # Debian 12's nodejs is v18: tests/browser pins playwright-core 1.61, the last for Node 18.
 packages+=(chromium fonts-dejavu-core)
+# The chamber driver's conformance tests (tests/drivers/test_drivers_pymodbus.cpp) run it against a
+# Modbus TCP and RTU server imucal did not write: Debian's pymodbus (3.0), with python3-serial-asyncio
+# for its RTU server (a Recommends of python3-pymodbus, which --no-install-recommends would skip).
+packages+=(python3-pymodbus python3-serial-asyncio)
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 
