@@ -1,6 +1,7 @@
 #include "daemon/service/api.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 
@@ -10,6 +11,7 @@
 #include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/json_reader.hpp"
+#include "daemon/service/unit_registry.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
@@ -68,6 +70,23 @@ std::vector<std::string> split_path(const std::string& path) {
   }
   if (!parts.empty() && parts.back().empty()) parts.pop_back();
   return parts;
+}
+
+// The unit a campaign names, as its campaign JSON gave it (null when it names none).
+json unit_json(const CampaignRow& row) {
+  if (!row.imu_serial) return nullptr;
+  const json spec = json::parse(row.spec_json, nullptr, false);
+  if (spec.is_object() && spec.contains("imu")) return spec.at("imu");
+  return {{"serial", *row.imu_serial}, {"part_number", row.imu_part_number.value_or("")}};
+}
+
+// A serial as part of a download's file name: what is not a letter, digit, '-', '_' or '.'
+// becomes '_'.
+std::string file_name_part(const std::string& text) {
+  std::string out = text;
+  for (char& c : out)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_' && c != '.') c = '_';
+  return out;
 }
 
 constexpr std::size_t kAnalysisAnswersKept = 60;  // 20 campaigns' three results
@@ -305,6 +324,25 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     return r;
   }
   const auto parts = split_path(path);
+  if (path == "/api/imus") {
+    if (auto r = only("GET")) return *r;
+    return json_reply(200, unit_list_json(db_.unit_campaigns(std::nullopt)));
+  }
+  if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "imus") {
+    if (auto r = only("GET")) return *r;
+    std::string serial;
+    if (!percent_decode(parts[2], serial, false)) return error_reply(400, "malformed serial in the URL");
+    const auto rows = db_.unit_campaigns(serial);
+    if (rows.empty()) return error_reply(404, "no campaign names the unit '" + serial + "'");
+    if (parts.size() == 3) return json_reply(200, unit_detail_json(serial, rows));
+    if (parts[3] != "history.csv") return error_reply(404, "no such endpoint: " + path);
+    HttpReply r;
+    r.body = unit_history_csv(rows);
+    r.content_type = "text/csv; charset=utf-8";
+    r.headers.emplace_back("Cache-Control", "no-store");
+    r.headers.emplace_back("Content-Disposition", "attachment; filename=\"imu-" + file_name_part(serial) + "-history.csv\"");
+    return r;
+  }
   if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "campaigns") {
     const auto id = parse_id(parts[2]);
     if (!id) return error_reply(404, "no campaign '" + parts[2] + "'");
@@ -328,6 +366,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     if (action == "allan" || action == "thermal" || action == "evaluation") {
       if (auto r = only("GET")) return *r;
       return campaign_analysis(*id, action);
+    }
+    if (action == "accept") {
+      if (auto r = only("POST")) return *r;
+      return campaign_accept(*id, request, *who);
     }
     if (parse_command(action)) {
       if (auto r = only("POST")) return *r;
@@ -383,7 +425,31 @@ json Api::summary(const CampaignRow& row) {
           {"progress", progress},
           {"queue_position", row.queue_position ? json(*row.queue_position) : json(nullptr)},
           {"has_model", row.model_json.has_value()},
-          {"error", row.error ? json(*row.error) : json(nullptr)}};
+          {"error", row.error ? json(*row.error) : json(nullptr)},
+          {"imu", unit_json(row)},
+          {"complete", row.complete.value_or(false)},
+          {"accepted", completeness_json(row).at("accepted")}};
+}
+
+HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::optional<std::string> reason;
+  {
+    ObjectReader r(body, "body", problems);
+    reason = r.string("reason", true);
+  }
+  if (problems.empty() && reason->find_first_not_of(" \t\r\n") == std::string::npos)
+    problems.push_back("body.reason must say why the partial run is accepted");
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (const std::string why = cannot_accept(*row); !why.empty())
+    return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
+  db_.accept(id, *reason, who.user);
+  spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, *reason);
+  return json_reply(200, summary(*db_.campaign(id)));
 }
 
 HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
@@ -421,8 +487,7 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
   if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
   const CampaignSpec& spec = *check.spec;
   const auto who = authenticate(request, false);
-  const std::int64_t id = db_.insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s,
-                                              "posted by " + (who ? who->user : std::string("?")));
+  const std::int64_t id = store_campaign(db_, check, "posted by " + (who ? who->user : std::string("?")));
   spdlog::info("campaign {} '{}' posted ({}, {:.1f} s)", id, spec.name, spec.program_label, check.duration_s);
   HttpReply r = json_reply(201, {{"id", id}, {"state", "created"}, {"duration_s", check.duration_s}});
   r.headers.emplace_back("Location", "/api/campaigns/" + std::to_string(id));
@@ -515,8 +580,14 @@ HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::
   r.body = text;
   r.content_type = "application/json";
   r.headers.emplace_back("Cache-Control", "no-store");
-  r.headers.emplace_back("Content-Disposition",
-                         "inline; filename=\"campaign-" + std::to_string(id) + "-model.json\"");
+  // Each download its own name: the instrument- and body-frame models (and each stage's) must
+  // not overwrite each other in a downloads folder.
+  std::string file = "campaign-" + std::to_string(id);
+  if (const auto stage = query.find("stage"); stage != query.end()) file += "-" + stage->second;
+  // Named by the frame of what is sent (a stage-3 model is in the body frame already).
+  const json sent = json::parse(text, nullptr, false);
+  file += "-model-" + (sent.is_object() ? sent.value("frame", std::string("instrument")) : std::string("instrument"));
+  r.headers.emplace_back("Content-Disposition", "inline; filename=\"" + file + ".json\"");
   return r;
 }
 

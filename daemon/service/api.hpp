@@ -71,6 +71,8 @@ class Api {
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
   nlohmann::json summary(const CampaignRow& row);
+  // An operator's acceptance of a partial run as its unit's calibration.
+  HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
 
   const DaemonConfig& config_;
   DaemonDb& db_;

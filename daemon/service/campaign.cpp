@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "core/units.hpp"
+#include "daemon/service/daemon_db.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "motion_programs/chamber.hpp"
 #include "pipeline/pipeline.hpp"
@@ -153,6 +154,38 @@ std::optional<json> join_programs(const std::vector<json>& parts, const motion::
   joined["name"] = name;
   joined["comment"] = "joined by imucald: " + name;
   return joined;
+}
+
+// `imu`: {"serial", "part_number", "firmware", "customer", "notes"}, the serial required. A serial
+// names the unit in file names, URLs and certificates: printable, without slashes, at most 64
+// characters.
+void check_imu(const json& j, ImuIdentity& imu, std::vector<std::string>& problems) {
+  ObjectReader r(j, "campaign.imu", problems);
+  if (auto v = r.string("serial", true)) {
+    const bool printable = std::all_of(v->begin(), v->end(), [](char c) {
+      return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f && c != '/' && c != '\\';
+    });
+    const bool padded = !v->empty() && (v->front() == ' ' || v->back() == ' ');
+    // "." and ".." would be path steps in the unit's URL (GET /api/imus/{serial}).
+    const bool dots = v->find_first_not_of('.') == std::string::npos;
+    if (v->empty() || v->size() > 64 || !printable || padded || dots)
+      problems.push_back("campaign.imu.serial must have 1 to 64 printable characters, no slash, not only dots and "
+                         "no leading or trailing space");
+    else
+      imu.serial = *v;
+  }
+  constexpr std::size_t kMaxText = 2000;
+  auto text = [&](const char* key, std::string& out) {
+    if (auto v = r.string(key)) {
+      if (v->size() > kMaxText) problems.push_back(std::string("campaign.imu.") + key + " is longer than 2000 characters");
+      out = *v;
+    }
+  };
+  text("part_number", imu.part_number);
+  text("firmware", imu.firmware);
+  text("customer", imu.customer);
+  text("notes", imu.notes);
+  r.finish();
 }
 
 // The tolerance of a campaign run along a chamber profile that ramps, unless it gives its own: a
@@ -354,6 +387,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
     const json* chamber = r.get("chamber");
     const json* suspenders = r.get("suspenders");
     const json* faults = r.get("sim_faults");
+    const json* imu = r.get("imu");
     r.finish();
     form_problems = problems.size();
 
@@ -509,6 +543,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
     }
     if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+    if (imu != nullptr) check_imu(*imu, spec.imu, problems);
     if (config.device_addresses) {
       if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {
         char text[200];
@@ -544,6 +579,10 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
                               {"frame_timeout_s", spec.suspenders.frame_timeout_s},
                               {"chamber_persist_s", spec.suspenders.chamber_persist_s}};
   if (campaign.contains("sim_faults")) normalized["sim_faults"] = campaign.at("sim_faults");
+  if (!spec.imu.serial.empty())
+    normalized["imu"] = {{"serial", spec.imu.serial},     {"part_number", spec.imu.part_number},
+                         {"firmware", spec.imu.firmware}, {"customer", spec.imu.customer},
+                         {"notes", spec.imu.notes}};
   spec.normalized = std::move(normalized);
   check.spec = std::move(spec);
   return check;
@@ -560,6 +599,13 @@ CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConf
     return check;
   }
   return check_campaign(j, config);
+}
+
+std::int64_t store_campaign(DaemonDb& db, const CampaignCheck& check, const std::string& reason) {
+  const CampaignSpec& spec = check.spec.value();
+  std::optional<CampaignUnit> unit;
+  if (!spec.imu.serial.empty()) unit = CampaignUnit{spec.imu.serial, spec.imu.part_number};
+  return db.insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s, reason, unit);
 }
 
 motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config) {

@@ -46,8 +46,16 @@ struct SimFault {
   std::int64_t frames = 1;  // ImuCorrupt
 };
 
+// The unit a campaign calibrates (docs/api.md, "Campaign JSON", `imu`). Empty serial: the campaign
+// names no unit (the run file then records the serial the bench reports) and no unit's history
+// holds it.
+struct ImuIdentity {
+  std::string serial, part_number, firmware, customer, notes;
+};
+
 struct CampaignSpec {
   std::string name;
+  ImuIdentity imu;
   std::string program_label;  // "direct", "direct+navigation", or "inline:<name>"
   std::string program_json;   // the program actually run (several joined into one), JSON text
   std::vector<std::string> estimators;
@@ -85,6 +93,11 @@ const std::vector<std::string>& known_estimators();
 // bad input; reads truth and model files named in it.
 CampaignCheck check_campaign(const nlohmann::json& campaign, const DaemonConfig& config);
 CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config);
+
+class DaemonDb;
+// Stores a checked campaign in state `created` with its unit's identity (the one way the API and
+// `imucal campaign run` store campaigns). Returns its id.
+std::int64_t store_campaign(DaemonDb& db, const CampaignCheck& check, const std::string& reason);
 
 // The program of a checked campaign, compiled (cannot fail for a spec from check_campaign).
 motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config);

@@ -70,9 +70,7 @@ CampaignRunResult run_campaign_file(const std::string& campaign_file, const Camp
     if (options.progress) spdlog::set_level(spdlog::level::warn);
     Service service(config);
     service.start(false);
-    const auto& spec = *check.spec;
-    out.id = service.db().insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s,
-                                          "imucal campaign run " + campaign_file);
+    out.id = store_campaign(service.db(), check, "imucal campaign run " + campaign_file);
     const auto t0 = Clock::now();
     const auto started = service.sequencer().command(out.id, Command::Start, "imucal", "campaign run");
     if (started.http_status != 200) throw std::runtime_error(started.error);

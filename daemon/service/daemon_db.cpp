@@ -134,7 +134,23 @@ constexpr const char* kCampaignColumns =
     "c.id, c.name, c.spec_json, c.program_label, c.duration_s, c.state, c.created_ms, c.started_ms, c.ended_ms, "
     "c.checkpoint_segment, c.checkpoint_s, c.program_time_s, c.frames, c.lost_frames, c.bad_frames, c.run_db, "
     "c.model_json, c.results_json, c.estimators_json, c.error, "
-    "(SELECT COUNT(*) FROM queue q2 WHERE q2.position < q.position) AS queue_position, q.position IS NOT NULL";
+    "(SELECT COUNT(*) FROM queue q2 WHERE q2.position < q.position) AS queue_position, q.position IS NOT NULL, "
+    "c.imu_serial, c.imu_part_number, c.complete, c.accepted_reason, c.accepted_by, c.accepted_ms";
+
+// Version 1 -> 2, in the transaction that opens the database. A fresh database gets version 1's
+// tables from kSchema and then these, so there is one path to the current schema. Runs that ended
+// before version 2 count as complete when they ended done with the whole program's time.
+const char* const kMigrationTo2 = R"sql(
+ALTER TABLE campaign ADD COLUMN imu_serial TEXT;
+ALTER TABLE campaign ADD COLUMN imu_part_number TEXT;
+ALTER TABLE campaign ADD COLUMN complete INTEGER;
+ALTER TABLE campaign ADD COLUMN accepted_reason TEXT;
+ALTER TABLE campaign ADD COLUMN accepted_by TEXT;
+ALTER TABLE campaign ADD COLUMN accepted_ms INTEGER;
+CREATE INDEX IF NOT EXISTS campaign_imu ON campaign(imu_serial);
+UPDATE campaign SET complete = (state = 'done' AND program_time_s >= duration_s - 1e-6)
+  WHERE state IN ('done', 'failed', 'aborted');
+)sql";
 
 }  // namespace
 
@@ -167,6 +183,7 @@ DaemonDb::DaemonDb(const std::string& path) : path_(path) {
     }
     exec("BEGIN IMMEDIATE");
     exec(kSchema);
+    if (version < 2) exec(kMigrationTo2);
     exec(("PRAGMA user_version=" + std::to_string(kSchemaVersion)).c_str());
     exec("COMMIT");
   } catch (...) {
@@ -235,18 +252,31 @@ CampaignRow DaemonDb::read_campaign_row(void* raw) {
   r.estimators_json = s.opt_text(18);
   r.error = s.opt_text(19);
   if (s.i64(21) != 0) r.queue_position = s.i64(20);
+  r.imu_serial = s.opt_text(22);
+  r.imu_part_number = s.opt_text(23);
+  if (const auto c = s.opt_i64(24)) r.complete = *c != 0;
+  r.accepted_reason = s.opt_text(25);
+  r.accepted_by = s.opt_text(26);
+  r.accepted_ms = s.opt_i64(27);
   return r;
 }
 
 std::int64_t DaemonDb::insert_campaign(const std::string& name, const std::string& spec_json,
-                                       const std::string& program_label, double duration_s, const std::string& reason) {
+                                       const std::string& program_label, double duration_s, const std::string& reason,
+                                       const std::optional<CampaignUnit>& unit) {
   std::lock_guard lock(mutex_);
   Txn txn(db_);
   const std::int64_t now = now_unix_ms();
   Stmt s(db_, path_,
-         "INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms) VALUES (?1,?2,?3,?4,?5,?6)");
+         "INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms, imu_serial, "
+         "imu_part_number) VALUES (?1,?2,?3,?4,?5,?6,?7,?8)");
   s.bind(1, name).bind(2, spec_json).bind(3, program_label).bind(4, duration_s);
   s.bind(5, std::string(to_string(RunState::Created))).bind(6, now);
+  if (unit) {
+    s.bind(7, unit->serial).bind(8, unit->part_number);
+  } else {
+    s.bind_null(7).bind_null(8);
+  }
   s.run();
   const std::int64_t id = sqlite3_last_insert_rowid(db_);
   Stmt t(db_, path_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,NULL,?3,?4)");
@@ -275,6 +305,32 @@ std::vector<CampaignRow> DaemonDb::campaigns(std::int64_t limit) {
   std::vector<CampaignRow> rows;
   while (s.step()) rows.push_back(read_campaign_row(&s));
   return rows;
+}
+
+std::vector<CampaignRow> DaemonDb::unit_campaigns(const std::optional<std::string>& serial) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.imu_serial IS NOT NULL" +
+                          (serial ? " AND c.imu_serial = ?1" : "") + " ORDER BY c.created_ms, c.id";
+  Stmt s(db_, path_, sql.c_str());
+  if (serial) s.bind(1, *serial);
+  std::vector<CampaignRow> rows;
+  while (s.step()) rows.push_back(read_campaign_row(&s));
+  return rows;
+}
+
+void DaemonDb::set_complete(std::int64_t id, bool complete) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "UPDATE campaign SET complete = ?2 WHERE id = ?1");
+  s.bind(1, id).bind(2, std::int64_t{complete ? 1 : 0});
+  s.run();
+}
+
+void DaemonDb::accept(std::int64_t id, const std::string& reason, const std::string& who) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "UPDATE campaign SET accepted_reason = ?2, accepted_by = ?3, accepted_ms = ?4 WHERE id = ?1");
+  s.bind(1, id).bind(2, reason).bind(3, who).bind(4, now_unix_ms());
+  s.run();
 }
 
 bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {

@@ -39,6 +39,18 @@ struct CampaignRow {
   std::string run_db;          // relative to the data directory; empty before the first start
   std::optional<std::string> model_json, results_json, estimators_json, error;
   std::optional<std::int64_t> queue_position;  // 0 = head
+  // The unit it calibrates (campaign.imu; none for campaigns that name no unit).
+  std::optional<std::string> imu_serial, imu_part_number;
+  // Set when the run ends: true only when the whole program ran and the run ended done. A partial
+  // run (stopped, aborted, failed) is no calibration of its unit unless an operator accepted it.
+  std::optional<bool> complete;
+  std::optional<std::string> accepted_reason, accepted_by;
+  std::optional<std::int64_t> accepted_ms;
+};
+
+// What identifies a campaign's unit in the registry (GET /api/imus).
+struct CampaignUnit {
+  std::string serial, part_number;
 };
 
 struct TransitionRow {
@@ -68,7 +80,9 @@ std::string iso8601_utc(std::int64_t unix_ms);
 
 class DaemonDb {
  public:
-  static constexpr int kSchemaVersion = 1;
+  // 2: the unit (imu_serial, imu_part_number), `complete` and the operator's acceptance of a
+  // partial run; databases of version 1 are migrated when opened.
+  static constexpr int kSchemaVersion = 2;
   explicit DaemonDb(const std::string& path);
   ~DaemonDb();
   DaemonDb(const DaemonDb&) = delete;
@@ -78,9 +92,16 @@ class DaemonDb {
 
   // Stores a checked campaign in state `created` (with its first transition). Returns its id.
   std::int64_t insert_campaign(const std::string& name, const std::string& spec_json, const std::string& program_label,
-                               double duration_s, const std::string& reason);
+                               double duration_s, const std::string& reason,
+                               const std::optional<CampaignUnit>& unit = std::nullopt);
   std::optional<CampaignRow> campaign(std::int64_t id);
   std::vector<CampaignRow> campaigns(std::int64_t limit);  // newest first
+  // The campaigns that name a unit (one unit's with `serial`), oldest first.
+  std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial);
+  // Whether the run that ended ran its whole program (set before its final transition).
+  void set_complete(std::int64_t id, bool complete);
+  // An operator's acceptance of a partial run as a calibration of its unit.
+  void accept(std::int64_t id, const std::string& reason, const std::string& who);
 
   // Changes the state and records the transition, in one transaction; sets started/ended times.
   // With `expected`, only when the current state is that one (returns false otherwise).

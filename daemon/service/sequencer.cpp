@@ -142,6 +142,15 @@ void Sequencer::set_recorder_hooks(RecorderHooks hooks) {
   recorder_hooks_ = std::move(hooks);
 }
 
+// What the run file records about the run: the bench's description, with the campaign's unit as
+// the IMU's serial when the campaign names one (the bench reports its configured or simulated
+// serial; no IMU link reports its own, so there is nothing to check the campaign's against).
+static RecordingMeta recording_meta(const RunContext& run) {
+  RecordingMeta meta = run.bench->imu().recording_meta();
+  if (!run.spec.imu.serial.empty()) meta.imu_serial = run.spec.imu.serial;
+  return meta;
+}
+
 // Opens the run file (creating it on the first start, recovering it after a crash or a failed
 // write), takes up from what it holds, and starts a recorder on it.
 void Sequencer::open_recorder(RunContext& run) {
@@ -152,7 +161,7 @@ void Sequencer::open_recorder(RunContext& run) {
   }
   const bool exists = fs::exists(run.run_db_path);
   storage::RunDb db = exists ? storage::RunDb::open(run.run_db_path)
-                             : storage::RunDb::create(run.run_db_path, run.bench->imu().recording_meta());
+                             : storage::RunDb::create(run.run_db_path, recording_meta(run));
   run.last_t_ns.reset();
   run.last_temp_t_ns.reset();
   if (exists) committed_times(run.run_db_path, run.last_t_ns, run.last_temp_t_ns);
@@ -892,6 +901,7 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     }
   }
   db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
+  if (is_final(final_state)) db_.set_complete(run.id, outcome == Outcome::Completed && final_state == RunState::Done);
   transition(run.id, final_state, why, std::nullopt);
   sync_run_record(db_, run);
   publish(run, true);

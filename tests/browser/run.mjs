@@ -257,7 +257,11 @@ try {
   await page.fill('#fault-0-at_s', '100');
   await page.fill('#fault-0-duration_s', '60');
   await page.fill('#fault-0-offset_C', '6');
+  // The unit under test (issue 17): its serial names the run and the unit's history.
+  await page.fill('#c-imu-serial', 'FOG-BROWSER-1');
+  await page.fill('#c-imu-part', 'PN-BROWSER');
   await waitText(page, '#verdict', /^Valid/);
+  assert.deepEqual(JSON.parse(await page.textContent('#json-preview')).imu, { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' });
   await page.click('#create-start');
   await page.waitForSelector('#confirm-dialog[open]');
   await waitText(page, '#confirm-dialog', /table will move/);
@@ -268,6 +272,7 @@ try {
   const list = await apiCall('GET', '/api/campaigns');
   assert.equal(list.body.campaigns.length, 1);
   const id = list.body.campaigns[0].id;
+  assert.equal(list.body.campaigns[0].imu.serial, 'FOG-BROWSER-1', 'the campaign names the unit typed in the builder');
   log(`campaign ${id} created and started from the builder`);
 
   // ---- live plots move ----
@@ -327,6 +332,7 @@ try {
   const model = JSON.parse(fs.readFileSync(modelFile, 'utf8'));
   assert.equal(model.format, 'imucal-imu-model/1');
   assert.ok(model.sigma, 'the model carries its sigmas');
+  assert.match(download.suggestedFilename(), /-model-instrument\.json$/, 'the instrument-frame model has its own file name');
   log(`results page with ${coefRows} coefficients; model downloaded (${download.suggestedFilename()})`);
   const [bundle] = await Promise.all([page.waitForEvent('download'), page.click('#download-recording')]);
   const bundleFile = path.join(outDir, `campaign-${id}-recording.tar`);
@@ -348,7 +354,7 @@ try {
   const [cert] = await Promise.all([page.context().waitForEvent('page'), page.click('#certificate')]);
   await cert.waitForSelector('#certificate[data-ready="true"]');
   const certText = await cert.textContent('#certificate');
-  for (const expected of ['Calibration certificate', 'browser test lab', `IMUCAL-${id}-`, 'SIM-', 'browser test: direct-short', 'Gyro bias', 'bias_dph.x', 'Accelerometer scale factor'])
+  for (const expected of ['Calibration certificate', 'browser test lab', `IMUCAL-${id}-`, 'FOG-BROWSER-1', 'PN-BROWSER', 'browser test: direct-short', 'Gyro bias', 'bias_dph.x', 'Accelerometer scale factor'])
     assert.ok(certText.includes(expected), `the certificate shows ${expected}`);
   await cert.setViewportSize({ width: 1366, height: 768 });
   await shot(cert, '08-certificate');
@@ -402,6 +408,8 @@ try {
   for (const e of ['direct', 'lever-arm', 'stage3'])
     assert.equal(await page.isChecked(`#c-est-${e}`), true, `the builder ticks ${e} for full`);
   await page.fill('#c-name', 'browser test: full');
+  // The serial typed for the first campaign is offered now.
+  await page.waitForSelector('#known-serials option[value="FOG-BROWSER-1"]', { state: 'attached' });
   await page.fill('#c-rate', '50');
   await page.fill('#c-time-scale', '1000');
   await page.selectOption('#c-truth-kind', 'path');
@@ -453,6 +461,15 @@ try {
   await page.goto(`${base}/#/campaigns`);
   await page.waitForSelector(`#history-campaigns tr[data-id="${id}"][data-state="done"]`);
   await shot(page, '09-campaigns');
+
+  // ---- the unit's page, from the campaigns list (issue 17) ----
+  await page.click(`#history-campaigns tr[data-id="${id}"] a.unit-link`);
+  await page.waitForURL(/#\/imus\/FOG-BROWSER-1$/);
+  await page.waitForSelector(`#unit-calibrations tr[data-id="${id}"]`);
+  await page.waitForSelector('#unit-trend .uplot');
+  assert.match(await page.textContent('#unit-info'), /Part number PN-BROWSER/);
+  await shot(page, '09b-unit-page');
+  log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');
 
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });

@@ -3,7 +3,7 @@
 // "Download HTML" saves it as one self-contained file (styles inlined, no scripts), so it can be
 // archived or mailed and still print the same.
 import { api, ApiError } from './api.mjs';
-import { h, clear, dateTime, num } from './format.mjs';
+import { h, clear, dateTime, num, FINAL_STATES } from './format.mjs';
 import { coefficientRows } from './coefficients.mjs';
 
 const sheet = document.getElementById('certificate');
@@ -39,8 +39,10 @@ function render(d, model, status) {
   const number = `IMUCAL-${d.id}-${day}`;
   const site = status.site || {};
   const simulated = (status.devices || '').startsWith('sim');
-  // The serial the run file records (GET /api/campaigns/{id}: imu_serial).
-  const serial = d.imu_serial || null;
+  // The serial the run file records (GET /api/campaigns/{id}: imu_serial): the campaign's unit's
+  // when it names one.
+  const serial = d.imu_serial || d.imu?.serial || null;
+  const unit = d.imu || {};
   document.title = `Calibration certificate ${number}`;
   const rows = coefficientRows(model, null).filter((r) => r.estimated && (r.sigma !== null || r.group === 'Noise'));
   const body = h('tbody');
@@ -56,13 +58,15 @@ function render(d, model, status) {
   const facts = [
     ['Certificate number', number],
     ['IMU serial number', serial || 'not recorded (the campaign was never started)'],
+    ...[['Part number', unit.part_number], ['Firmware', unit.firmware], ['Customer', unit.customer]].filter(([, v]) => v),
     ['Date of calibration', `${dateTime(d.started)} – ${dateTime(d.ended)} (local time)`],
     ['Date of issue', dateTime(new Date().toISOString())],
     ['Site', `${site.name || '—'}; latitude ${num(site.latitude_deg, 6)}°, longitude ${num(site.longitude_deg, 6)}°, height ${num(site.height_m, 4)} m; middle axis azimuth ${num(site.middle_axis_azimuth_deg, 4)}°`],
     ['Campaign', `${d.id} "${d.name}", program ${d.program}, ${d.frames ?? '—'} frames (${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad)`],
     ['Chamber', d.spec?.chamber ? `${d.spec.chamber.setpoint_C} °C ± ${d.spec.chamber.tolerance_C} °C${d.spec.chamber.steps?.length ? `, ${d.spec.chamber.steps.length} set-point steps` : ''}` : '—'],
     ['Method', `${(d.spec?.estimators || []).join(', ') || '—'} estimation on a three-axis rate table (imucald ${status.version || ''}); model ${model.format || ''}, ${model.frame || 'instrument'} frame`],
-    ['Final state', d.state + (d.error ? ` (${d.error})` : '')],
+    ['Final state', d.state + (d.error ? ` (${d.error})` : '') +
+      (FINAL_STATES.has(d.state) && !d.complete ? ` — partial: ended at ${Math.round(100 * (d.progress || 0))} % of the program${d.accepted ? `, accepted by ${d.accepted.by}: ${d.accepted.reason}` : ''}` : '')],
   ];
   clear(sheet).append(
     simulated ? h('div', { class: 'watermark', 'aria-hidden': 'true' }, 'SIMULATION') : null,

@@ -10,6 +10,7 @@ import * as campaignsView from './views/campaigns.mjs';
 import * as builderView from './views/builder.mjs';
 import * as liveView from './views/live.mjs';
 import * as campaignView from './views/campaign.mjs';
+import * as unitView from './views/unit.mjs';
 
 const viewRoot = document.getElementById('view');
 const banner = document.getElementById('banner');
@@ -39,6 +40,7 @@ const routes = [
   { re: /^#\/campaigns\/?$/, view: campaignsView, nav: 'campaigns' },
   { re: /^#\/new(?:\/([\w.-]+))?$/, view: builderView, nav: 'new', params: (m) => ({ template: m[1] || null }) },
   { re: /^#\/live$/, view: liveView, nav: 'live' },
+  { re: /^#\/imus\/([^/]+)$/, view: unitView, nav: 'campaigns', params: (m) => ({ serial: decodeURIComponent(m[1]) }) },
 ];
 
 let unmount = null;

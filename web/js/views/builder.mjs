@@ -22,6 +22,7 @@ const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10
 
 export function mount(root, ctx) {
   let programs = [];
+  let units = [];            // GET /api/imus: the serials already known, offered as you type
   let limits = null;
   let draft = null;          // {template, modified, campaign: {...}, program: {...}}
   let fieldErrors = new Map();  // input id -> message (client-side)
@@ -38,6 +39,8 @@ export function mount(root, ctx) {
   const templateSelect = h('select', { id: 'template' });
   const templateInfo = h('p', { class: 'muted', id: 'template-info' });
   const campaignBox = h('div', { class: 'grid-form', id: 'campaign-fields' });
+  const unitBox = h('div', { class: 'grid-form', id: 'unit-fields' });
+  const serialList = h('datalist', { id: 'known-serials' });
   const chamberBox = h('div', { id: 'chamber-fields' });
   const faultsBox = h('div', { id: 'fault-fields' });
   const segmentsBody = h('tbody', { id: 'segments' });
@@ -73,6 +76,7 @@ export function mount(root, ctx) {
     h('div', { class: 'builder' },
       h('div', { class: 'builder-main' },
         h('section', { class: 'card' }, h('h2', {}, 'Campaign'), templateInfo, campaignBox),
+        h('section', { class: 'card', dataset: { field: 'imu' } }, h('h2', {}, 'Unit under test'), unitBox, serialList),
         h('section', { class: 'card' }, h('h2', {}, 'Chamber profile'), chamberBox),
         h('section', { class: 'card', dataset: { field: 'sim_faults' } }, h('h2', {}, 'Simulated faults (tests and demonstrations)'), faultsBox),
         h('section', { class: 'card' },
@@ -108,6 +112,7 @@ export function mount(root, ctx) {
       const [p, status] = await Promise.all([get('/api/programs'), ctx.status()]);
       if (destroyed) return;
       programs = p.programs || [];
+      loadUnits();
       limits = status.limits || null;
       clear(templateSelect).append(...programs.map((pr) => h('option', { value: pr.name }, `${pr.name} (${duration(pr.duration_s)})`)));
       const saved = readDraft();
@@ -123,6 +128,19 @@ export function mount(root, ctx) {
       pageError.textContent = `Cannot load the built-in programs: ${e.message}`;
     }
   })();
+
+  // The known serials: a failure only loses the suggestions, never the builder.
+  async function loadUnits() {
+    try {
+      const r = await get('/api/imus');
+      if (destroyed) return;
+      units = r.imus || [];
+      clear(serialList).append(...units.map((u) => h('option', { value: u.serial },
+        [u.part_number, `${u.calibrations} calibration${u.calibrations === 1 ? '' : 's'}`].filter(Boolean).join(', '))));
+    } catch {
+      units = [];
+    }
+  }
 
   function readDraft() {
     try {
@@ -167,12 +185,57 @@ export function mount(root, ctx) {
 
   // ---- rendering ----
 
+  // The unit (campaign.imu): a serial picked from the known ones brings its part number.
+  function renderUnit() {
+    const u = draft.campaign.imu || (draft.campaign.imu = {});
+    clear(unitBox);
+    const text = (id, key, attrs = {}) => {
+      const el = input(id, `imu.${key}`, u[key], { type: 'text', maxlength: 2000, ...attrs });
+      el.addEventListener('input', () => {
+        u[key] = el.value;
+        if (key === 'serial') {
+          const known = units.find((x) => x.serial === el.value.trim());
+          const partEl = unitBox.querySelector('#c-imu-part');
+          if (known && partEl && !partEl.value.trim() && known.part_number) {
+            partEl.value = known.part_number;
+            u.part_number = known.part_number;
+          }
+        }
+        setError(unitBox.querySelector('#c-imu-serial'), serialProblem(u));
+        changed();
+      });
+      return el;
+    };
+    const serial = text('c-imu-serial', 'serial', { maxlength: 64, list: 'known-serials', autocomplete: 'off', placeholder: 'FOG-0042' });
+    const notes = h('textarea', { id: 'c-imu-notes', dataset: { path: 'imu.notes' }, rows: 2, maxlength: 2000 });
+    notes.value = u.notes || '';
+    notes.addEventListener('input', () => { u.notes = notes.value; changed(); });
+    unitBox.append(
+      fieldRow('serial', serial, 'imu.serial', 'the unit\'s serial number; known serials are offered as you type'),
+      fieldRow('part number', text('c-imu-part', 'part_number'), 'imu.part_number'),
+      fieldRow('firmware', text('c-imu-firmware', 'firmware'), 'imu.firmware'),
+      fieldRow('customer', text('c-imu-customer', 'customer'), 'imu.customer'),
+      fieldRow('notes', notes, 'imu.notes'));
+    setError(serial, serialProblem(u));
+  }
+
+  /** What is wrong with the unit's serial as typed (the daemon checks the same). */
+  function serialProblem(u) {
+    const serial = (u.serial || '').trim();
+    const others = ['part_number', 'firmware', 'customer', 'notes'].some((k) => (u[k] || '').trim());
+    if (!serial) return others ? 'The unit needs a serial.' : null;
+    if (serial.length > 64 || /[\/\\\u0000-\u001f\u007f]/.test(serial) || /^\.+$/.test(serial))
+      return 'At most 64 printable characters, no slash, not only dots.';
+    return null;
+  }
+
   function renderAll() {
     const p = programs.find((x) => x.name === draft.template);
     clear(templateInfo).append(
       p ? `Built-in program "${p.name}": ${p.program?.comment || ''} ${p.segments.length} segments, ${duration(p.duration_s)}.` : '',
       draft.modified ? h('strong', { class: 'modified' }, ' Edited: sent as an inline program.') : '');
     renderCampaign();
+    renderUnit();
     renderChamber();
     renderFaults();
     renderSegments();
@@ -509,6 +572,12 @@ export function mount(root, ctx) {
     if (Array.isArray(c.estimators)) out.estimators = c.estimators;
     for (const k of ['rate_hz', 'time_scale', 'seed']) if (c[k] !== undefined) out[k] = c[k];
     if (c.truth !== undefined) out.truth = c.truth;
+    // The unit: its serial and whichever of the other fields are filled in.
+    const unit = c.imu || {};
+    if ((unit.serial || '').trim()) {
+      out.imu = { serial: unit.serial.trim() };
+      for (const k of ['part_number', 'firmware', 'customer', 'notes']) if ((unit[k] || '').trim()) out.imu[k] = unit[k].trim();
+    }
     if (c.sim_faults?.length) out.sim_faults = c.sim_faults;
     const ch = c.chamber || {};
     if (ch.setpoint_C !== undefined) {

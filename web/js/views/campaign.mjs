@@ -123,7 +123,7 @@ export function mount(root, ctx) {
     const downloads = h('div', { class: 'downloads', id: 'downloads' });
     if (d.has_model) {
       downloads.append(
-        h('a', { class: 'button primary', id: 'download-model', href: `/api/campaigns/${id}/model`, download: `campaign-${id}-model.json` }, 'Model JSON (instrument frame)'),
+        h('a', { class: 'button primary', id: 'download-model', href: `/api/campaigns/${id}/model`, download: `campaign-${id}-model-instrument.json` }, 'Model JSON (instrument frame)'),
         h('a', { class: 'button', id: 'download-model-body', href: `/api/campaigns/${id}/model?frame=body`, download: `campaign-${id}-model-body.json` }, 'Model JSON (body frame)'),
         h('a', { class: 'button', id: 'certificate', href: `certificate.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Calibration certificate (print)'));
     } else {

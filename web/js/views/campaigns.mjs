@@ -10,7 +10,7 @@ export function mount(root, ctx) {
   const updated = h('span', { class: 'muted' });
   const table = (body, id) => h('table', { class: 'list', id },
     h('thead', {}, h('tr', {},
-      h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Program'), h('th', {}, 'State'),
+      h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Unit'), h('th', {}, 'Program'), h('th', {}, 'State'),
       h('th', {}, 'Created'), h('th', {}, 'Started'), h('th', { class: 'num' }, 'Program length'),
       h('th', { class: 'num' }, 'Wall time'), h('th', {}, 'Progress / result'))),
     body);
@@ -69,6 +69,8 @@ export function mount(root, ctx) {
     return h('tr', { dataset: { id: c.id, state: c.state }, class: `state-row-${c.state}` },
       h('td', { class: 'num' }, c.id),
       h('td', {}, h('a', { href: `#/campaigns/${c.id}` }, c.name)),
+      // The unit's page: its calibrations and their trends.
+      h('td', {}, c.imu ? h('a', { class: 'unit-link', href: `#/imus/${encodeURIComponent(c.imu.serial)}` }, c.imu.serial) : ''),
       h('td', {}, c.program),
       h('td', {}, stateBadge(c.state), c.queue_position != null ? h('span', { class: 'muted' }, ` #${c.queue_position + 1} in queue`) : ''),
       h('td', {}, dateTime(c.created)),
@@ -79,6 +81,10 @@ export function mount(root, ctx) {
   }
 
   function result(c) {
+    // A run stopped early ends done all the same: it is partial, and says so.
+    if (c.state === 'done' && !c.complete)
+      return h('span', { class: c.accepted ? 'result-ok' : 'muted', title: c.accepted ? `accepted: ${c.accepted.reason}` : '' },
+        `partial: stopped at ${Math.round(100 * (c.progress || 0))} %${c.has_model ? ', model kept' : ''}${c.accepted ? ', accepted' : ''}`);
     if (c.state === 'done')
       return c.has_model ? h('a', { class: 'result-ok', href: `#/campaigns/${c.id}` }, 'model ready — see results')
         : h('span', { class: 'muted' }, 'finished without a model');

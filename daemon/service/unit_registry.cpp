@@ -1,0 +1,183 @@
+#include "daemon/service/unit_registry.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <optional>
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+namespace {
+
+bool ended(const CampaignRow& row) { return is_final(row.state); }
+
+json model_or_null(const CampaignRow& row) {
+  if (!row.model_json) return nullptr;
+  json m = json::parse(*row.model_json, nullptr, false);
+  return m.is_discarded() ? json(nullptr) : m;
+}
+
+// The numeric leaves of a model's triads by flat name: triples become .x .y .z (the names the
+// browser's coefficient tables use, web/js/coefficients.mjs).
+void flatten(const json& value, const std::string& prefix, std::vector<std::pair<std::string, double>>& out) {
+  static constexpr const char* kAxes[] = {"x", "y", "z"};
+  if (value.is_number()) {
+    out.emplace_back(prefix, value.get<double>());
+  } else if (value.is_array() && value.size() == 3 &&
+             std::all_of(value.begin(), value.end(), [](const json& v) { return v.is_number(); })) {
+    for (std::size_t i = 0; i < 3; ++i) out.emplace_back(prefix + "." + kAxes[i], value[i].get<double>());
+  } else if (value.is_object()) {
+    for (const auto& [key, v] : value.items())
+      if (!key.empty() && key.front() != '_') flatten(v, prefix + "." + key, out);
+  }
+}
+
+std::vector<std::pair<std::string, double>> flatten_triads(const json& model) {
+  std::vector<std::pair<std::string, double>> out;
+  for (const char* triad : {"gyro", "accel"})
+    if (model.is_object() && model.contains(triad)) flatten(model.at(triad), triad, out);
+  return out;
+}
+
+std::string csv_field(const std::string& text) {
+  if (text.find_first_of(",\"\n\r") == std::string::npos) return text;
+  std::string out = "\"";
+  for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return out + "\"";
+}
+
+std::string number_text(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", v);  // round-trips: the CSV agrees with the model exactly
+  return buf;
+}
+
+}  // namespace
+
+bool counts_as_calibration(const CampaignRow& row) {
+  return ended(row) && row.model_json.has_value() && (row.complete.value_or(false) || row.accepted_reason.has_value());
+}
+
+std::string cannot_accept(const CampaignRow& row) {
+  if (!ended(row)) return "it has not ended (state " + std::string(to_string(row.state)) + ")";
+  if (row.complete.value_or(false)) return "it is complete: it counts without acceptance";
+  if (!row.model_json) return "it has no model";
+  return {};
+}
+
+json completeness_json(const CampaignRow& row) {
+  json accepted = nullptr;
+  if (row.accepted_reason)
+    accepted = {{"reason", *row.accepted_reason},
+                {"by", row.accepted_by.value_or("")},
+                {"t", row.accepted_ms ? json(iso8601_utc(*row.accepted_ms)) : json(nullptr)}};
+  return {{"complete", row.complete.value_or(false)}, {"accepted", accepted}, {"counts", counts_as_calibration(row)}};
+}
+
+json unit_list_json(const std::vector<CampaignRow>& rows) {
+  struct Unit {
+    std::string part_number;
+    std::int64_t campaigns = 0, calibrations = 0;
+    const CampaignRow* last = nullptr;
+  };
+  std::map<std::string, Unit> units;
+  for (const CampaignRow& row : rows) {
+    Unit& u = units[*row.imu_serial];
+    ++u.campaigns;
+    // The part number the unit was last named with (a unit keeps its part number; a typo fixed
+    // in a later campaign wins).
+    if (row.imu_part_number && !row.imu_part_number->empty()) u.part_number = *row.imu_part_number;
+    if (counts_as_calibration(row)) {
+      ++u.calibrations;
+      u.last = &row;
+    }
+  }
+  json list = json::array();
+  for (const auto& [serial, u] : units) {
+    json last = nullptr;
+    if (u.last)
+      last = {{"campaign_id", u.last->id},
+              {"program", u.last->program_label},
+              {"date", iso8601_utc(u.last->ended_ms.value_or(u.last->created_ms))},
+              {"verdict", nullptr}};
+    list.push_back({{"serial", serial},
+                    {"part_number", u.part_number},
+                    {"campaigns", u.campaigns},
+                    {"calibrations", u.calibrations},
+                    {"last_calibration", last},
+                    {"verdict", nullptr}});
+  }
+  return {{"imus", list}};
+}
+
+json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>& rows) {
+  json calibrations = json::array(), pending = json::array();
+  std::string part_number;
+  std::int64_t counted = 0;
+  for (const CampaignRow& row : rows) {
+    if (row.imu_part_number && !row.imu_part_number->empty()) part_number = *row.imu_part_number;
+    if (!ended(row)) {
+      pending.push_back({{"campaign_id", row.id}, {"state", to_string(row.state)}});
+      continue;
+    }
+    json c = {{"campaign_id", row.id},
+              {"name", row.name},
+              {"program", row.program_label},
+              {"state", to_string(row.state)},
+              {"date", iso8601_utc(row.ended_ms.value_or(row.created_ms))},
+              {"progress", row.duration_s > 0 ? std::clamp(row.program_time_s / row.duration_s, 0.0, 1.0) : 0.0},
+              {"verdict", nullptr},
+              {"model", model_or_null(row)}};
+    c.update(completeness_json(row));
+    if (c.at("counts").get<bool>()) ++counted;
+    calibrations.push_back(std::move(c));
+  }
+  return {{"serial", serial},
+          {"part_number", part_number},
+          {"calibrations_counted", counted},
+          {"calibrations", calibrations},
+          {"not_ended", pending}};
+}
+
+std::string unit_history_csv(const std::vector<CampaignRow>& rows) {
+  struct Line {
+    const CampaignRow* row;
+    std::map<std::string, double> values, sigmas;
+  };
+  std::vector<Line> lines;
+  std::vector<std::string> columns;  // in the order the models first name them
+  for (const CampaignRow& row : rows) {
+    if (!ended(row)) continue;
+    const json model = model_or_null(row);
+    if (model.is_null()) continue;
+    Line line{&row, {}, {}};
+    for (const auto& [name, v] : flatten_triads(model)) {
+      if (std::find(columns.begin(), columns.end(), name) == columns.end()) columns.push_back(name);
+      line.values[name] = v;
+    }
+    if (model.contains("sigma"))
+      for (const auto& [name, v] : flatten_triads(model.at("sigma"))) line.sigmas[name] = v;
+    lines.push_back(std::move(line));
+  }
+  std::string out = "campaign_id,name,program,date,state,complete,counts";
+  for (const auto& c : columns) out += "," + csv_field(c) + "," + csv_field(c + ".sigma");
+  out += "\n";
+  for (const Line& l : lines) {
+    const CampaignRow& r = *l.row;
+    out += std::to_string(r.id) + "," + csv_field(r.name) + "," + csv_field(r.program_label) + "," +
+           iso8601_utc(r.ended_ms.value_or(r.created_ms)) + "," + std::string(to_string(r.state)) + "," +
+           (r.complete.value_or(false) ? "true" : "false") + "," + (counts_as_calibration(r) ? "true" : "false");
+    for (const auto& c : columns) {
+      const auto v = l.values.find(c);
+      const auto s = l.sigmas.find(c);
+      out += "," + (v != l.values.end() ? number_text(v->second) : std::string());
+      out += "," + (s != l.sigmas.end() ? number_text(s->second) : std::string());
+    }
+    out += "\n";
+  }
+  return out;
+}
+
+}  // namespace imucal::daemon

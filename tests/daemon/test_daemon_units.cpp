@@ -1,0 +1,238 @@
+// The production line through the API on the simulated bench (issue 17): campaigns name their
+// unit, the registry lists each unit's calibrations, a stopped run is partial and counts only once
+// an operator accepts it, and a unit's history exports as CSV agreeing with the models.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include <sqlite3.h>
+
+#include "daemon/service/campaign_runner.hpp"
+#include "service_fixture.hpp"
+#include "storage/run_db.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+json unit_campaign(const std::string& name, const std::string& serial, double time_scale) {
+  return {{"name", name},
+          {"program", "direct-short"},
+          {"rate_hz", 20},
+          {"seed", 7},
+          {"time_scale", time_scale},
+          {"truth", noisy_truth()},
+          {"estimators", {"direct"}},
+          {"imu", {{"serial", serial}, {"part_number", "PN-100"}, {"firmware", "2.1"}, {"customer", "ACME"}}}};
+}
+
+std::vector<std::string> split(const std::string& line, char sep) {
+  std::vector<std::string> out;
+  std::stringstream s(line);
+  std::string field;
+  while (std::getline(s, field, sep)) out.push_back(field);
+  if (!line.empty() && line.back() == sep) out.emplace_back();
+  return out;
+}
+
+const json* find_unit(const json& list, const std::string& serial) {
+  for (const json& u : list.at("imus"))
+    if (u.at("serial") == serial) return &u;
+  return nullptr;
+}
+
+}  // namespace
+
+TEST(Units, RegistryHistoryPartialRunsAndAcceptance) {
+  LocalDaemon d("units");
+  // FOG-7 twice (the second stopped early), FOG-8 once; the stopped one runs slowly enough to stop.
+  const auto a = d.post_campaign(unit_campaign("fog7-first", "FOG-7", 0));
+  const auto b = d.post_campaign(unit_campaign("fog7-stopped", "FOG-7", 40));
+  const auto c = d.post_campaign(unit_campaign("fog8", "FOG-8", 0));
+  ASSERT_EQ(d.command(a, "start"), 200);
+  ASSERT_EQ(d.wait_final(a).at("state"), "done");
+  ASSERT_EQ(d.command(b, "start"), 200);
+  const double duration_s = d.campaign(b).at("duration_s").get<double>();
+  d.wait_for(b, [&](const json& j) { return j.at("program_time_s").get<double>() > 0.8 * duration_s; });
+  ASSERT_EQ(d.command(b, "stop"), 200);
+  const json stopped = d.wait_final(b);
+  ASSERT_EQ(stopped.at("state"), "done");
+  ASSERT_TRUE(stopped.at("has_model").get<bool>()) << stopped.at("results").dump();
+  ASSERT_EQ(d.command(c, "start"), 200);
+  ASSERT_EQ(d.wait_final(c).at("state"), "done");
+
+  // Each campaign names its unit; the run file records the unit's serial.
+  const json first = d.campaign(a);
+  EXPECT_EQ(first.at("imu").at("serial"), "FOG-7");
+  EXPECT_EQ(first.at("imu").at("customer"), "ACME");
+  EXPECT_EQ(first.at("imu_serial"), "FOG-7");
+  EXPECT_TRUE(first.at("complete").get<bool>());
+  EXPECT_FALSE(stopped.at("complete").get<bool>());
+  EXPECT_TRUE(stopped.at("accepted").is_null());
+  EXPECT_EQ(d.campaign(c).at("imu_serial"), "FOG-8");
+
+  // The unit's calibrations in time order, the stopped one partial.
+  json fog7 = d.get("/api/imus/FOG-7");
+  ASSERT_EQ(fog7.at("calibrations").size(), 2u) << fog7.dump().substr(0, 2000);
+  EXPECT_EQ(fog7.at("part_number"), "PN-100");
+  EXPECT_EQ(fog7.at("calibrations")[0].at("campaign_id"), a);
+  EXPECT_EQ(fog7.at("calibrations")[0].at("program"), "direct-short");
+  EXPECT_TRUE(fog7.at("calibrations")[0].at("complete").get<bool>());
+  EXPECT_TRUE(fog7.at("calibrations")[0].at("verdict").is_null());
+  EXPECT_EQ(fog7.at("calibrations")[1].at("campaign_id"), b);
+  EXPECT_FALSE(fog7.at("calibrations")[1].at("complete").get<bool>());
+  EXPECT_FALSE(fog7.at("calibrations")[1].at("counts").get<bool>());
+  EXPECT_EQ(fog7.at("calibrations_counted"), 1);
+  EXPECT_EQ(d.call("GET", "/api/imus/FOG-9").status, 404);
+
+  // The registry: the stopped run does not count until accepted.
+  json units = d.get("/api/imus");
+  ASSERT_NE(find_unit(units, "FOG-7"), nullptr) << units.dump();
+  ASSERT_NE(find_unit(units, "FOG-8"), nullptr) << units.dump();
+  EXPECT_EQ(find_unit(units, "FOG-7")->at("calibrations"), 1);
+  EXPECT_EQ(find_unit(units, "FOG-7")->at("last_calibration").at("campaign_id"), a);
+  EXPECT_EQ(find_unit(units, "FOG-8")->at("calibrations"), 1);
+  EXPECT_EQ(find_unit(units, "FOG-8")->at("part_number"), "PN-100");
+
+  // Acceptance: operators only, with a reason, only of a partial run.
+  const std::string accept = "/api/campaigns/" + std::to_string(b) + "/accept";
+  EXPECT_EQ(d.call("POST", accept, R"({"reason": "enough positions"})", kViewerToken).status, 403);
+  EXPECT_EQ(d.call("POST", accept, R"({})").status, 400);
+  EXPECT_EQ(d.call("POST", accept, R"({"reason": "  "})").status, 400);
+  EXPECT_EQ(d.call("POST", "/api/campaigns/" + std::to_string(a) + "/accept", R"({"reason": "x"})").status, 409);
+  const auto accepted = d.call("POST", accept, R"({"reason": "stopped after the last rate segment"})");
+  ASSERT_EQ(accepted.status, 200) << accepted.body;
+  EXPECT_EQ(json::parse(accepted.body).at("accepted").at("reason"), "stopped after the last rate segment");
+  units = d.get("/api/imus");
+  EXPECT_EQ(find_unit(units, "FOG-7")->at("calibrations"), 2);
+  EXPECT_EQ(find_unit(units, "FOG-7")->at("last_calibration").at("campaign_id"), b);
+  fog7 = d.get("/api/imus/FOG-7");
+  EXPECT_FALSE(fog7.at("calibrations")[1].at("complete").get<bool>());  // still partial, but counted
+  EXPECT_TRUE(fog7.at("calibrations")[1].at("counts").get<bool>());
+  EXPECT_EQ(fog7.at("calibrations")[1].at("accepted").at("reason"), "stopped after the last rate segment");
+
+  // The history as CSV: one row per calibration, its values those of the models.
+  const auto csv = d.call("GET", "/api/imus/FOG-7/history.csv");
+  ASSERT_EQ(csv.status, 200);
+  EXPECT_EQ(csv.content_type.rfind("text/csv", 0), 0u);
+  std::vector<std::string> lines = split(csv.body, '\n');
+  while (!lines.empty() && lines.back().empty()) lines.pop_back();
+  ASSERT_EQ(lines.size(), 3u) << csv.body.substr(0, 2000);
+  const auto header = split(lines[0], ',');
+  std::map<std::string, std::size_t> col;
+  for (std::size_t i = 0; i < header.size(); ++i) col[header[i]] = i;
+  ASSERT_TRUE(col.count("gyro.bias_dph.x")) << lines[0];
+  ASSERT_TRUE(col.count("gyro.bias_dph.x.sigma")) << lines[0];
+  ASSERT_TRUE(col.count("accel.scale_ppm.z")) << lines[0];
+  const std::int64_t ids[] = {a, b};
+  for (std::size_t r = 0; r < 2; ++r) {
+    const auto row = split(lines[r + 1], ',');
+    ASSERT_EQ(row.size(), header.size()) << lines[r + 1];
+    EXPECT_EQ(std::stoll(row[col.at("campaign_id")]), ids[r]);
+    const json model = json::parse(d.call("GET", "/api/campaigns/" + std::to_string(ids[r]) + "/model").body);
+    EXPECT_DOUBLE_EQ(std::strtod(row[col.at("gyro.bias_dph.x")].c_str(), nullptr),
+                     model.at("gyro").at("bias_dph")[0].get<double>());
+    EXPECT_DOUBLE_EQ(std::strtod(row[col.at("accel.scale_ppm.z")].c_str(), nullptr),
+                     model.at("accel").at("scale_ppm")[2].get<double>());
+    ASSERT_TRUE(model.contains("sigma"));
+    EXPECT_DOUBLE_EQ(std::strtod(row[col.at("gyro.bias_dph.x.sigma")].c_str(), nullptr),
+                     model.at("sigma").at("gyro").at("bias_dph")[0].get<double>());
+  }
+  EXPECT_EQ(split(lines[2], ',')[col.at("complete")], "false");
+  EXPECT_EQ(split(lines[2], ',')[col.at("counts")], "true");
+}
+
+TEST(Units, ModelDownloadsHaveTheirOwnFileNames) {
+  LocalDaemon d("units-downloads");
+  const auto id = d.post_campaign(unit_campaign("names", "FOG-1", 0));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  ASSERT_EQ(d.wait_final(id).at("state"), "done");
+  auto disposition = [&](const std::string& query) {
+    const auto r = d.call("GET", "/api/campaigns/" + std::to_string(id) + "/model" + query);
+    EXPECT_EQ(r.status, 200) << r.body;
+    for (const auto& [k, v] : r.headers)
+      if (k == "Content-Disposition") return v;
+    return std::string();
+  };
+  const std::string base = "campaign-" + std::to_string(id);
+  EXPECT_NE(disposition("").find(base + "-model-instrument.json"), std::string::npos) << disposition("");
+  EXPECT_NE(disposition("?frame=body").find(base + "-model-body.json"), std::string::npos);
+  EXPECT_NE(disposition("?stage=direct&frame=body").find(base + "-direct-model-body.json"), std::string::npos);
+}
+
+TEST(Units, AnInvalidUnitIsRefusedWithItsProblem) {
+  LocalDaemon d("units-invalid");
+  json campaign = unit_campaign("bad", "FOG/1", 0);
+  auto r = d.call("POST", "/api/campaigns", campaign.dump());
+  EXPECT_EQ(r.status, 422) << r.body;
+  EXPECT_NE(r.body.find("campaign.imu.serial"), std::string::npos) << r.body;
+  campaign["imu"] = {{"part_number", "PN-1"}};
+  r = d.call("POST", "/api/campaigns", campaign.dump());
+  EXPECT_NE(r.status, 201) << r.body;
+  EXPECT_NE(r.body.find("serial"), std::string::npos) << r.body;
+  campaign["imu"] = {{"serial", "FOG-2"}, {"colour", "red"}};
+  r = d.call("POST", "/api/campaigns", campaign.dump());
+  EXPECT_NE(r.status, 201) << r.body;
+  EXPECT_NE(r.body.find("colour"), std::string::npos) << r.body;
+}
+
+// A database of schema version 1 (before units) opens, keeps its campaigns and gains the columns:
+// a run that ended done at its program's end counts as complete, one stopped early does not.
+TEST(Units, AVersion1DatabaseIsMigrated) {
+  const std::string dir = scratch_dir("units-migration");
+  const std::string path = dir + "/imucald.db";
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  const char* v1 = R"sql(
+CREATE TABLE campaign(id INTEGER PRIMARY KEY, name TEXT NOT NULL, spec_json TEXT NOT NULL,
+  program_label TEXT NOT NULL, duration_s REAL NOT NULL, state TEXT NOT NULL, created_ms INTEGER NOT NULL,
+  started_ms INTEGER, ended_ms INTEGER, checkpoint_segment INTEGER, checkpoint_s REAL,
+  program_time_s REAL NOT NULL DEFAULT 0, frames INTEGER NOT NULL DEFAULT 0, lost_frames INTEGER NOT NULL DEFAULT 0,
+  bad_frames INTEGER NOT NULL DEFAULT 0, run_db TEXT NOT NULL DEFAULT '', model_json TEXT, results_json TEXT,
+  estimators_json TEXT, error TEXT);
+INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms, program_time_s)
+  VALUES ('whole', '{}', 'direct-short', 100, 'done', 1, 100), ('stopped', '{}', 'direct-short', 100, 'done', 2, 60);
+PRAGMA user_version=1;
+)sql";
+  ASSERT_EQ(sqlite3_exec(db, v1, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  sqlite3_close(db);
+
+  daemon::DaemonDb migrated(path);
+  const auto whole = migrated.campaign(1);
+  const auto stopped = migrated.campaign(2);
+  ASSERT_TRUE(whole && stopped);
+  EXPECT_EQ(whole->name, "whole");
+  EXPECT_EQ(whole->complete, true);
+  EXPECT_EQ(stopped->complete, false);
+  EXPECT_FALSE(whole->imu_serial.has_value());
+  EXPECT_TRUE(migrated.unit_campaigns(std::nullopt).empty());
+  // New campaigns name their unit.
+  const auto id = migrated.insert_campaign("new", "{}", "direct-short", 100, "test", daemon::CampaignUnit{"FOG-1", "PN"});
+  EXPECT_EQ(migrated.unit_campaigns(std::string("FOG-1")).at(0).id, id);
+}
+
+// `imucal campaign run` takes the same `imu` key: the run file records the unit's serial and the
+// data directory's database keeps the unit.
+TEST(Units, CampaignRunFilesNameTheirUnit) {
+  const std::string dir = scratch_dir("units-campaign-run");
+  const std::string file = dir + "/campaign.json";
+  {
+    std::ofstream out(file);
+    out << unit_campaign("from a file", "FOG-FILE-3", 0).dump();
+  }
+  daemon::CampaignRunOptions options;
+  options.data_dir = dir + "/data";
+  options.progress = false;
+  const auto r = daemon::run_campaign_file(file, options);
+  ASSERT_EQ(r.exit_code, 0) << r.error;
+  EXPECT_EQ(storage::RunDb::open(r.run_db, storage::OpenMode::Read).meta().imu_serial, "FOG-FILE-3");
+  daemon::DaemonDb db(options.data_dir + "/imucald.db");
+  const auto rows = db.unit_campaigns(std::string("FOG-FILE-3"));
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].imu_part_number, "PN-100");
+  EXPECT_EQ(rows[0].complete, true);
+}
