@@ -152,6 +152,9 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
       db_(db),
       sequencer_(sequencer),
       auth_(auth),
+      limits_(std::filesystem::path(config.limits_file).is_absolute()
+                  ? config.limits_file
+                  : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
       programs_(json::array()),
       started_ms_(now_unix_ms()),
       started_(std::chrono::steady_clock::now()) {
@@ -323,10 +326,25 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     r.headers.emplace_back("Allow", "GET, POST");
     return r;
   }
+  if (path == "/api/limits") {
+    if (method == "GET" || method == "HEAD") {
+      json doc = limits_.document();
+      doc["source"] = limits_.current().source;
+      return json_reply(200, doc);
+    }
+    if (method == "PUT") return replace_limits(request, *who);
+    HttpReply r = error_reply(405, method + " is not allowed on " + path);
+    r.headers.emplace_back("Allow", "GET, PUT");
+    return r;
+  }
+  if (path == "/api/compare") {
+    if (auto r = only("GET")) return *r;
+    return compare_campaigns(query);
+  }
   const auto parts = split_path(path);
   if (path == "/api/imus") {
     if (auto r = only("GET")) return *r;
-    return json_reply(200, unit_list_json(db_.unit_campaigns(std::nullopt)));
+    return json_reply(200, unit_list_json(db_.unit_campaigns(std::nullopt), limits_.current()));
   }
   if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "imus") {
     if (auto r = only("GET")) return *r;
@@ -334,7 +352,7 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     if (!percent_decode(parts[2], serial, false)) return error_reply(400, "malformed serial in the URL");
     const auto rows = db_.unit_campaigns(serial);
     if (rows.empty()) return error_reply(404, "no campaign names the unit '" + serial + "'");
-    if (parts.size() == 3) return json_reply(200, unit_detail_json(serial, rows));
+    if (parts.size() == 3) return json_reply(200, unit_detail_json(serial, rows, limits_.current()));
     if (parts[3] != "history.csv") return error_reply(404, "no such endpoint: " + path);
     HttpReply r;
     r.body = unit_history_csv(rows);
@@ -494,10 +512,55 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
   return r;
 }
 
+HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
+  try {
+    limits_.replace(body);
+  } catch (const std::invalid_argument& e) {
+    return error_reply(400, e.what());
+  } catch (const std::exception& e) {
+    return error_reply(500, std::string("the limits were not saved: ") + e.what());
+  }
+  spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
+  json doc = limits_.document();
+  doc["source"] = limits_.current().source;
+  return json_reply(200, doc);
+}
+
+HttpReply Api::compare_campaigns(const std::map<std::string, std::string>& query) {
+  std::optional<CampaignRow> rows[2];
+  json models[2];
+  const char* names[2] = {"a", "b"};
+  for (int i = 0; i < 2; ++i) {
+    const auto it = query.find(names[i]);
+    const auto id = it == query.end() ? std::nullopt : parse_id(it->second);
+    if (!id) return error_reply(400, std::string("query ") + names[i] + " must be a campaign id (/api/compare?a=ID&b=ID)");
+    rows[i] = db_.campaign(*id);
+    if (!rows[i]) return error_reply(404, "no campaign " + std::to_string(*id));
+    if (!rows[i]->model_json) return error_reply(409, "campaign " + std::to_string(*id) + " has no model to compare");
+    models[i] = parse_or_null(*rows[i]->model_json);
+  }
+  // Misalignments of an instrument-frame model and a body-frame one are different angles.
+  if (models[0].value("frame", std::string("instrument")) != models[1].value("frame", std::string("instrument")))
+    return error_reply(409, "the two models are in different frames (" + models[0].value("frame", std::string("instrument")) +
+                                ", " + models[1].value("frame", std::string("instrument")) + ")");
+  json out = compare_json(models[0], models[1]);
+  for (int i = 0; i < 2; ++i)
+    out[names[i]] = {{"campaign_id", rows[i]->id},
+                     {"name", rows[i]->name},
+                     {"serial", rows[i]->imu_serial ? json(*rows[i]->imu_serial) : json(nullptr)},
+                     {"date", iso8601_utc(rows[i]->ended_ms.value_or(rows[i]->created_ms))},
+                     {"frame", models[i].value("frame", std::string("instrument"))}};
+  return json_reply(200, out);
+}
+
 HttpReply Api::campaign_detail(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   json out = summary(*row);
+  out["verdict"] = run_verdict(*row, limits_.current());
   json spec = parse_or_null(row->spec_json);
   out["spec"] = spec;
   json segments = json::array();

@@ -18,6 +18,7 @@
 #include "daemon/service/auth.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/daemon_db.hpp"
+#include "daemon/service/limits_file.hpp"
 #include "daemon/service/sequencer.hpp"
 #include "daemon/service/static_files.hpp"
 
@@ -73,11 +74,16 @@ class Api {
   nlohmann::json summary(const CampaignRow& row);
   // An operator's acceptance of a partial run as its unit's calibration.
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
+  // GET /api/compare?a=ID&b=ID: two runs' models side by side (acceptance.hpp compare_json).
+  HttpReply compare_campaigns(const std::map<std::string, std::string>& query);
+  // PUT /api/limits: the whole limits file replaced by an operator.
+  HttpReply replace_limits(const ApiRequest& request, const Principal& who);
 
   const DaemonConfig& config_;
   DaemonDb& db_;
   Sequencer& sequencer_;
   Auth& auth_;
+  LimitsFile limits_;
   nlohmann::json programs_;  // built once: the built-in programs do not change
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;

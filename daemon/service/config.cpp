@@ -202,6 +202,10 @@ DaemonConfig parse_config(const std::string& json_text, const std::string& sourc
       }
     }
     if (auto v = r.string("data_dir")) c.data_dir = *v;
+    if (auto v = r.string("limits_file")) {
+      if (v->empty()) problems.push_back("config.limits_file must name a file (relative to data_dir or absolute)");
+      else c.limits_file = *v;
+    }
     if (const json* v = r.get("devices")) {
       if (v->is_object()) {
         c.devices = "real";

@@ -86,6 +86,9 @@ struct DaemonConfig {
   std::string site_name = "simulated lab";
   Site site;
   std::string data_dir = "./data";
+  // Acceptance limits per part number (imucal-limits/1, daemon/service/acceptance.hpp); relative
+  // to the data directory. A missing file means no limits; the UI writes it (PUT /api/limits).
+  std::string limits_file = "limits.json";
   // "sim" (in-process, accelerated), "sim-wire" (simulated devices on loopback through the real
   // drivers) or "real" (the devices named in `device_addresses`, from a `devices` object).
   std::string devices = "sim";

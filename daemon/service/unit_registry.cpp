@@ -5,6 +5,8 @@
 #include <map>
 #include <optional>
 
+#include "daemon/service/acceptance.hpp"
+
 namespace imucal::daemon {
 
 using nlohmann::json;
@@ -17,28 +19,6 @@ json model_or_null(const CampaignRow& row) {
   if (!row.model_json) return nullptr;
   json m = json::parse(*row.model_json, nullptr, false);
   return m.is_discarded() ? json(nullptr) : m;
-}
-
-// The numeric leaves of a model's triads by flat name: triples become .x .y .z (the names the
-// browser's coefficient tables use, web/js/coefficients.mjs).
-void flatten(const json& value, const std::string& prefix, std::vector<std::pair<std::string, double>>& out) {
-  static constexpr const char* kAxes[] = {"x", "y", "z"};
-  if (value.is_number()) {
-    out.emplace_back(prefix, value.get<double>());
-  } else if (value.is_array() && value.size() == 3 &&
-             std::all_of(value.begin(), value.end(), [](const json& v) { return v.is_number(); })) {
-    for (std::size_t i = 0; i < 3; ++i) out.emplace_back(prefix + "." + kAxes[i], value[i].get<double>());
-  } else if (value.is_object()) {
-    for (const auto& [key, v] : value.items())
-      if (!key.empty() && key.front() != '_') flatten(v, prefix + "." + key, out);
-  }
-}
-
-std::vector<std::pair<std::string, double>> flatten_triads(const json& model) {
-  std::vector<std::pair<std::string, double>> out;
-  for (const char* triad : {"gyro", "accel"})
-    if (model.is_object() && model.contains(triad)) flatten(model.at(triad), triad, out);
-  return out;
 }
 
 std::string csv_field(const std::string& text) {
@@ -76,7 +56,12 @@ json completeness_json(const CampaignRow& row) {
   return {{"complete", row.complete.value_or(false)}, {"accepted", accepted}, {"counts", counts_as_calibration(row)}};
 }
 
-json unit_list_json(const std::vector<CampaignRow>& rows) {
+json run_verdict(const CampaignRow& row, const AcceptanceLimits& limits) {
+  if (!ended(row)) return nullptr;
+  return verdict_or_null(model_or_null(row), row.imu_part_number.value_or(""), limits);
+}
+
+json unit_list_json(const std::vector<CampaignRow>& rows, const AcceptanceLimits& limits) {
   struct Unit {
     std::string part_number;
     std::int64_t campaigns = 0, calibrations = 0;
@@ -96,26 +81,33 @@ json unit_list_json(const std::vector<CampaignRow>& rows) {
   }
   json list = json::array();
   for (const auto& [serial, u] : units) {
-    json last = nullptr;
-    if (u.last)
+    json last = nullptr, pass = nullptr;
+    if (u.last) {
+      const json verdict = run_verdict(*u.last, limits);
+      if (!verdict.is_null()) pass = verdict.at("pass");
       last = {{"campaign_id", u.last->id},
               {"program", u.last->program_label},
               {"date", iso8601_utc(u.last->ended_ms.value_or(u.last->created_ms))},
-              {"verdict", nullptr}};
+              {"verdict", verdict}};
+    }
+    // The unit passes or fails by its last calibration (null: no limits for it, or none yet).
     list.push_back({{"serial", serial},
                     {"part_number", u.part_number},
                     {"campaigns", u.campaigns},
                     {"calibrations", u.calibrations},
                     {"last_calibration", last},
-                    {"verdict", nullptr}});
+                    {"pass", pass}});
   }
   return {{"imus", list}};
 }
 
-json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>& rows) {
+json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>& rows,
+                      const AcceptanceLimits& limits) {
   json calibrations = json::array(), pending = json::array();
   std::string part_number;
   std::int64_t counted = 0;
+  std::vector<json> counted_models;
+  const CampaignRow* previous = nullptr;  // the previous calibration that counts
   for (const CampaignRow& row : rows) {
     if (row.imu_part_number && !row.imu_part_number->empty()) part_number = *row.imu_part_number;
     if (!ended(row)) {
@@ -128,16 +120,37 @@ json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>&
               {"state", to_string(row.state)},
               {"date", iso8601_utc(row.ended_ms.value_or(row.created_ms))},
               {"progress", row.duration_s > 0 ? std::clamp(row.program_time_s / row.duration_s, 0.0, 1.0) : 0.0},
-              {"verdict", nullptr},
+              {"verdict", run_verdict(row, limits)},
               {"model", model_or_null(row)}};
     c.update(completeness_json(row));
-    if (c.at("counts").get<bool>()) ++counted;
+    // The change since the previous calibration in combined sigmas, for every run with a model
+    // (a partial one too: an operator deciding whether to accept it wants to see it).
+    json change = nullptr;
+    if (previous && !c.at("model").is_null()) {
+      const json cmp = compare_json(model_or_null(*previous), c.at("model"));
+      json in_sigmas = json::object();
+      std::vector<std::string> significant;
+      for (const json& r : cmp.at("coefficients")) {
+        if (r.at("in_sigmas").is_null()) continue;
+        in_sigmas[r.at("key").get<std::string>()] = r.at("in_sigmas");
+        if (r.at("significant").get<bool>()) significant.push_back(r.at("key").get<std::string>());
+      }
+      change = {{"since_campaign_id", previous->id}, {"in_sigmas", in_sigmas}, {"significant", significant}};
+    }
+    c["change"] = change;
+    if (c.at("counts").get<bool>()) {
+      ++counted;
+      counted_models.push_back(c.at("model"));
+      previous = &row;
+    }
     calibrations.push_back(std::move(c));
   }
   return {{"serial", serial},
           {"part_number", part_number},
+          {"limits", limits.parts.count(part_number) ? json(limits.source) : json(nullptr)},
           {"calibrations_counted", counted},
           {"calibrations", calibrations},
+          {"repeatability", repeatability_json(counted_models)},
           {"not_ended", pending}};
 }
 
@@ -153,12 +166,12 @@ std::string unit_history_csv(const std::vector<CampaignRow>& rows) {
     const json model = model_or_null(row);
     if (model.is_null()) continue;
     Line line{&row, {}, {}};
-    for (const auto& [name, v] : flatten_triads(model)) {
+    for (const auto& [name, v] : flat_coefficients(model)) {
       if (std::find(columns.begin(), columns.end(), name) == columns.end()) columns.push_back(name);
       line.values[name] = v;
     }
     if (model.contains("sigma"))
-      for (const auto& [name, v] : flatten_triads(model.at("sigma"))) line.sigmas[name] = v;
+      for (const auto& [name, v] : flat_coefficients(model.at("sigma"))) line.sigmas[name] = v;
     lines.push_back(std::move(line));
   }
   std::string out = "campaign_id,name,program,date,state,complete,counts";

@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/service/acceptance.hpp"
 #include "daemon/service/daemon_db.hpp"
 
 namespace imucal::daemon {
@@ -22,10 +23,18 @@ std::string cannot_accept(const CampaignRow& row);
 // {"complete", "accepted", "counts"} of one campaign, as every campaign reply carries them.
 nlohmann::json completeness_json(const CampaignRow& row);
 
-// GET /api/imus from the campaigns that name a unit (oldest first).
-nlohmann::json unit_list_json(const std::vector<CampaignRow>& rows);
-// GET /api/imus/{serial} from that unit's campaigns (oldest first).
-nlohmann::json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>& rows);
+// A run's verdict against its part number's limits (acceptance.hpp); null when the run has not
+// ended, has no model or its part number no limits.
+nlohmann::json run_verdict(const CampaignRow& row, const AcceptanceLimits& limits);
+
+// GET /api/imus from the campaigns that name a unit (oldest first); a unit passes or fails by its
+// last calibration.
+nlohmann::json unit_list_json(const std::vector<CampaignRow>& rows, const AcceptanceLimits& limits);
+// GET /api/imus/{serial} from that unit's campaigns (oldest first): each calibration with its
+// verdict and its change since the previous calibration that counts, and the unit's repeatability
+// over the calibrations that count.
+nlohmann::json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>& rows,
+                                const AcceptanceLimits& limits);
 // GET /api/imus/{serial}/history.csv: one row per ended campaign with a model, one column per
 // coefficient of the models (their JSON keys flattened, "gyro.bias_dph.x") and one for its sigma.
 std::string unit_history_csv(const std::vector<CampaignRow>& rows);

@@ -151,6 +151,8 @@ const expectedStatus = /status of (401|403|404|409|422)/;
 // While the test has stopped imucald on purpose, the page's probes (GET /api/me before each
 // reconnect) are refused: expected then, and only then (how many depends on the machine's load).
 let daemonDownOnPurpose = false;
+// While the test saves limits with a typo on purpose, imucald's 400 is expected (and only then).
+let badRequestOnPurpose = false;
 
 async function newPage(name) {
   const context = await browser.newContext({ viewport: { width: 1366, height: 768 }, acceptDownloads: true });
@@ -159,7 +161,7 @@ async function newPage(name) {
   page.on('pageerror', (e) => problems.push(`${name}: page error: ${e.message}`));
   page.on('console', (m) => {
     if (m.type() === 'error' && !expectedStatus.test(m.text()) && !/WebSocket connection to .* failed/.test(m.text()) &&
-        !(daemonDownOnPurpose && /ERR_CONNECTION_REFUSED/.test(m.text())))
+        !(daemonDownOnPurpose && /ERR_CONNECTION_REFUSED/.test(m.text())) && !(badRequestOnPurpose && /status of 400/.test(m.text())))
       problems.push(`${name}: console: ${m.text()}`);
   });
   return { context, page };
@@ -470,6 +472,56 @@ try {
   assert.match(await page.textContent('#unit-info'), /Part number PN-BROWSER/);
   await shot(page, '09b-unit-page');
   log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');
+
+  // ---- a second calibration of the unit, its part number's limits, verdicts, the comparison ----
+  const again = await apiCall('POST', '/api/campaigns', { name: 'browser test: FOG-BROWSER-1 again', program: 'direct-short', rate_hz: 20,
+    seed: 11, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
+  assert.equal(again.status, 201, JSON.stringify(again.body));
+  assert.equal((await apiCall('POST', `/api/campaigns/${again.body.id}/start`, {})).status, 200);
+  for (let i = 0; ; i++) {
+    const c = (await apiCall('GET', `/api/campaigns/${again.body.id}`)).body;
+    if (c.state === 'done') break;
+    assert.ok(i < 1200 && !['failed', 'aborted'].includes(c.state), `the second calibration ended ${c.state}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  await page.click('#nav a[data-nav="units"]');
+  await page.waitForSelector('#units-rows tr[data-serial="FOG-BROWSER-1"]');
+  await page.waitForFunction(() => document.querySelector('#limits-text').value.includes('imucal-limits/1'));
+  const limits = (extra) => JSON.stringify({ format: 'imucal-limits/1', part_numbers: { 'PN-BROWSER': {
+    'gyro.bias_dph': { max_abs: 1.0, max_sigma: 0.1 }, 'accel.bias_mps2': { max_abs: 0.01 }, ...extra } } }, null, 2);
+  await page.fill('#limits-text', limits({ 'gyro.bias': { max_abs: 1 } }));
+  badRequestOnPurpose = true;
+  await page.click('#limits-save');
+  await waitText(page, '#limits-message', /Not saved: .*gyro\.bias/);
+  await page.evaluate(() => new Promise((r) => setTimeout(r, 200)));  // the console message arrives
+  badRequestOnPurpose = false;
+  await page.fill('#limits-text', limits({}));
+  await page.click('#limits-save');
+  await waitText(page, '#limits-message', /^Saved/);
+  await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /PASS/);
+  await shot(page, '09c-units-and-limits');
+  log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits typed in the limits editor (a typo refused by name)');
+  // A limit on what a direct run does not determine: the gyro delays fail, with the reason.
+  await page.fill('#limits-text', limits({ 'gyro.delay_us': { max_abs: 10 } }));
+  await page.click('#limits-save');
+  await waitText(page, '#limits-message', /^Saved/);
+  await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /FAIL/);
+  await page.click('#units-rows tr[data-serial="FOG-BROWSER-1"] a');
+  await page.waitForSelector(`#unit-calibrations tr[data-id="${again.body.id}"]`);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${again.body.id}"]`), /FAIL.*gyro\.delay_us\.x: not determined by this run/);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${again.body.id}"]`), /significant|none significant/);
+  await page.click('#compare-go');
+  await page.waitForSelector('#compare-table tr[data-key="gyro.bias_dph.x"]');
+  assert.match(await page.textContent('#compare-summary'), /significant difference/);
+  await page.$eval('#unit-compare', (el) => { el.scrollIntoView(); window.scrollBy(0, -120); });
+  await shot(page, '09d-unit-verdicts-and-comparison');
+  log(`unit page: verdicts per calibration, change since the previous, ${await page.textContent('#compare-summary')}`);
+  await page.goto(`${base}/#/campaigns/${again.body.id}`);
+  await page.waitForSelector('#verdict-table tr[data-key="gyro.delay_us.z"].result-bad');
+  assert.match(await page.textContent('#acceptance-verdict'), /FAIL part number PN-BROWSER/);
+  await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '09e-results-verdict');
+  log('results: the verdict per coefficient against PN-BROWSER\'s limits');
 
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });

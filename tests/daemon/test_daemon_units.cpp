@@ -3,6 +3,7 @@
 // an operator accepts it, and a unit's history exports as CSV agreeing with the models.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <map>
@@ -144,6 +145,92 @@ TEST(Units, RegistryHistoryPartialRunsAndAcceptance) {
   }
   EXPECT_EQ(split(lines[2], ',')[col.at("complete")], "false");
   EXPECT_EQ(split(lines[2], ',')[col.at("counts")], "true");
+
+  // The two calibrations side by side, the change since the previous one and the repeatability
+  // agree with the two models.
+  auto model_of = [&](std::int64_t id) {
+    return json::parse(d.call("GET", "/api/campaigns/" + std::to_string(id) + "/model").body);
+  };
+  const json ma = model_of(a), mb = model_of(b);
+  const double xa = ma.at("gyro").at("bias_dph")[0], xb = mb.at("gyro").at("bias_dph")[0];
+  const double sa = ma.at("sigma").at("gyro").at("bias_dph")[0], sb = mb.at("sigma").at("gyro").at("bias_dph")[0];
+  const json cmp = d.get("/api/compare?a=" + std::to_string(a) + "&b=" + std::to_string(b));
+  ASSERT_TRUE(cmp.contains("coefficients")) << cmp.dump().substr(0, 1000);
+  EXPECT_EQ(cmp.at("a").at("campaign_id"), a);
+  EXPECT_EQ(cmp.at("b").at("serial"), "FOG-7");
+  const json* cx = nullptr;
+  for (const json& r : cmp.at("coefficients"))
+    if (r.at("key") == "gyro.bias_dph.x") cx = &r;
+  ASSERT_NE(cx, nullptr);
+  EXPECT_DOUBLE_EQ(cx->at("difference").get<double>(), xb - xa);
+  EXPECT_DOUBLE_EQ(cx->at("combined_sigma").get<double>(), std::hypot(sa, sb));
+  EXPECT_EQ(cx->at("significant").get<bool>(), std::abs(xb - xa) > 3 * std::hypot(sa, sb));
+  EXPECT_EQ(d.call("GET", "/api/compare?a=" + std::to_string(a)).status, 400);
+  EXPECT_EQ(d.call("GET", "/api/compare?a=" + std::to_string(a) + "&b=999").status, 404);
+  fog7 = d.get("/api/imus/FOG-7");
+  const json& change = fog7.at("calibrations")[1].at("change");
+  EXPECT_EQ(change.at("since_campaign_id"), a);
+  EXPECT_DOUBLE_EQ(change.at("in_sigmas").at("gyro.bias_dph.x").get<double>(), cx->at("in_sigmas").get<double>());
+  EXPECT_TRUE(fog7.at("calibrations")[0].at("change").is_null());
+  const json& rep = fog7.at("repeatability").at("gyro.bias_dph.x");
+  EXPECT_EQ(rep.at("n"), 2);
+  EXPECT_NEAR(rep.at("std").get<double>(), std::abs(xb - xa) / std::sqrt(2.0), 1e-12 * (1 + std::abs(xa)));
+
+  // Acceptance limits for PN-100: none yet, so no verdict; limits twice the larger of the two
+  // runs' values and sigmas pass both; one coefficient's limit made tighter than run a's value
+  // fails a on it, naming why.
+  EXPECT_TRUE(d.campaign(a).at("verdict").is_null());
+  auto twice_the_larger = [&](const char* triad, const char* key) {
+    double value = 0, sigma = 0;
+    for (const json* m : {&ma, &mb})
+      for (int i = 0; i < 3; ++i) {
+        value = std::max(value, std::abs(m->at(triad).at(key)[i].get<double>()));
+        sigma = std::max(sigma, m->at("sigma").at(triad).at(key)[i].get<double>());
+      }
+    return json{{"max_abs", 2 * value}, {"max_sigma", 2 * sigma}};
+  };
+  json limits = {{"format", "imucal-limits/1"},
+                 {"part_numbers",
+                  {{"PN-100",
+                    {{"gyro.bias_dph", twice_the_larger("gyro", "bias_dph")},
+                     {"gyro.scale_pos_ppm", twice_the_larger("gyro", "scale_pos_ppm")},
+                     {"accel.bias_mps2", twice_the_larger("accel", "bias_mps2")}}}}}};
+  EXPECT_EQ(d.call("PUT", "/api/limits", limits.dump(), kViewerToken).status, 403);
+  json bad = limits;
+  bad["part_numbers"]["PN-100"]["gyro.bias"] = {{"max_abs", 1}};
+  auto r = d.call("PUT", "/api/limits", bad.dump());
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(r.body.find("gyro.bias"), std::string::npos) << r.body;
+  EXPECT_TRUE(d.get("/api/limits").at("part_numbers").empty());  // nothing changed
+  r = d.call("PUT", "/api/limits", limits.dump());
+  ASSERT_EQ(r.status, 200) << r.body;
+  for (const std::int64_t id : {a, b}) {
+    const json v = d.campaign(id).at("verdict");
+    ASSERT_FALSE(v.is_null());
+    EXPECT_TRUE(v.at("pass").get<bool>()) << v.dump();
+    EXPECT_EQ(v.at("part_number"), "PN-100");
+    EXPECT_EQ(v.at("coefficients").size(), 9u);
+  }
+  EXPECT_TRUE(find_unit(d.get("/api/imus"), "FOG-7")->at("pass").get<bool>());
+  limits["part_numbers"]["PN-100"]["gyro.bias_dph.x"] = {{"max_abs", std::abs(xa) / 2}};
+  ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+  const json fail = d.campaign(a).at("verdict");
+  EXPECT_FALSE(fail.at("pass").get<bool>());
+  EXPECT_EQ(fail.at("failures"), 1);
+  for (const json& limited : fail.at("coefficients"))
+    if (limited.at("key") == "gyro.bias_dph.x") {
+      EXPECT_FALSE(limited.at("pass").get<bool>());
+      EXPECT_NE(limited.at("reason").get<std::string>().find("|value|"), std::string::npos) << limited;
+    } else {
+      EXPECT_TRUE(limited.at("pass").get<bool>()) << limited;
+    }
+  fog7 = d.get("/api/imus/FOG-7");
+  EXPECT_FALSE(fog7.at("calibrations")[0].at("verdict").at("pass").get<bool>());
+  EXPECT_EQ(fog7.at("limits"), "limits.json");
+  // The limits outlive the daemon: the file is in the data directory.
+  std::ifstream saved(d.config.data_dir + "/limits.json");
+  ASSERT_TRUE(saved.good());
+  EXPECT_EQ(json::parse(saved).at("part_numbers").at("PN-100").at("gyro.bias_dph.x").at("max_abs"), std::abs(xa) / 2);
 }
 
 TEST(Units, ModelDownloadsHaveTheirOwnFileNames) {

@@ -11,6 +11,7 @@ import * as builderView from './views/builder.mjs';
 import * as liveView from './views/live.mjs';
 import * as campaignView from './views/campaign.mjs';
 import * as unitView from './views/unit.mjs';
+import * as unitsView from './views/units.mjs';
 
 const viewRoot = document.getElementById('view');
 const banner = document.getElementById('banner');
@@ -40,7 +41,8 @@ const routes = [
   { re: /^#\/campaigns\/?$/, view: campaignsView, nav: 'campaigns' },
   { re: /^#\/new(?:\/([\w.-]+))?$/, view: builderView, nav: 'new', params: (m) => ({ template: m[1] || null }) },
   { re: /^#\/live$/, view: liveView, nav: 'live' },
-  { re: /^#\/imus\/([^/]+)$/, view: unitView, nav: 'campaigns', params: (m) => ({ serial: decodeURIComponent(m[1]) }) },
+  { re: /^#\/imus\/?$/, view: unitsView, nav: 'units' },
+  { re: /^#\/imus\/([^/]+)$/, view: unitView, nav: 'units', params: (m) => ({ serial: decodeURIComponent(m[1]) }) },
 ];
 
 let unmount = null;

@@ -1,7 +1,11 @@
 // One unit's page (issue 17): its calibrations from the registry (GET /api/imus/{serial}), partial
-// runs marked as such, and a chosen coefficient over the calibrations as a trend with its sigma.
+// runs marked as such, each one's verdict against its part number's limits and its change since
+// the previous calibration in sigmas, a chosen coefficient over the calibrations as a trend with
+// its sigma, the turn-on to turn-on repeatability, and two calibrations side by side
+// (GET /api/compare).
 import { get } from '../api.mjs';
-import { h, clear, dateTime, stateBadge } from '../format.mjs';
+import { h, clear, dateTime, stateBadge, num } from '../format.mjs';
+import { verdictBadge } from './units.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
 import { flatten, orderOf, unitOf } from '../coefficients.mjs';
 
@@ -13,6 +17,10 @@ export function mount(root, ctx) {
   const body = h('tbody', { id: 'unit-calibrations' });
   const select = h('select', { id: 'unit-coefficient' });
   const plotBox = h('div', { class: 'plot', id: 'unit-trend' });
+  const repeatBody = h('tbody', { id: 'unit-repeatability' });
+  const pickA = h('select', { id: 'compare-a' });
+  const pickB = h('select', { id: 'compare-b' });
+  const compareOut = h('div', { id: 'unit-compare' });
   let chart = null;
   let calibrations = [];
 
@@ -24,11 +32,21 @@ export function mount(root, ctx) {
     h('section', { class: 'card' }, h('h2', {}, 'Calibrations'),
       h('table', { class: 'list', id: 'unit-table' },
         h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Program'),
-          h('th', {}, 'Ended'), h('th', {}, 'State'), h('th', {}, 'Counts as a calibration'))),
+          h('th', {}, 'Ended'), h('th', {}, 'State'), h('th', {}, 'Counts as a calibration'), h('th', {}, 'Verdict'),
+          h('th', {}, 'Change since the previous'))),
         body)),
     h('section', { class: 'card' }, h('h2', {}, 'Trend'),
       h('div', { class: 'actions' }, h('label', { for: 'unit-coefficient' }, 'Coefficient'), select),
-      h('p', { class: 'hint' }, 'Each calibration with a model, oldest first; the band is ±1 sigma.'), plotBox));
+      h('p', { class: 'hint' }, 'Each calibration with a model, oldest first; the band is ±1 sigma.'), plotBox),
+    h('section', { class: 'card' }, h('h2', {}, 'Two calibrations side by side'),
+      h('div', { class: 'actions' }, h('label', { for: 'compare-a' }, 'From'), pickA, h('label', { for: 'compare-b' }, 'to'), pickB,
+        h('button', { type: 'button', id: 'compare-go', onclick: () => compare() }, 'Compare')),
+      h('p', { class: 'hint' }, 'A difference is significant beyond 3 combined sigmas (the two runs\' 1σ added in quadrature).'),
+      compareOut),
+    h('section', { class: 'card' }, h('h2', {}, 'Repeatability'),
+      h('p', { class: 'hint' }, 'Turn-on to turn-on (IEEE Std 952): the sample standard deviation of each coefficient over the calibrations that count and determined it.'),
+      h('table', { class: 'list' }, h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, 'Runs'),
+        h('th', { class: 'num' }, 'Mean'), h('th', { class: 'num' }, 'Standard deviation'), h('th', {}, 'Unit'))), repeatBody)));
 
   select.addEventListener('change', () => plot(select.value));
 
@@ -37,6 +55,43 @@ export function mount(root, ctx) {
     if (c.counts) return `yes, partial run accepted: ${c.accepted?.reason || ''}`;
     if (!c.model) return 'no: no model';
     return `no: partial (${Math.round(100 * (c.progress || 0))} % of the program), not accepted`;
+  }
+
+  function verdictCell(v) {
+    if (!v) return verdictBadge(null);
+    const failing = v.coefficients.filter((c) => !c.pass);
+    return h('span', {}, verdictBadge(v.pass, failing.map((c) => `${c.key}: ${c.reason}`).join('\n')),
+      failing.length ? h('span', { class: 'small' }, ` ${failing.map((c) => `${c.key}: ${c.reason}`).join('; ')}`) : '');
+  }
+
+  function changeCell(ch) {
+    if (!ch) return '—';
+    const values = Object.values(ch.in_sigmas || {});
+    const largest = values.length ? Math.max(...values.map(Math.abs)) : null;
+    return h('span', { class: ch.significant.length ? 'result-bad' : '', title: Object.entries(ch.in_sigmas).map(([k, v]) => `${k}: ${num(v, 2)} σ`).join('\n') },
+      ch.significant.length ? `${ch.significant.length} significant (${ch.significant.join(', ')})` : 'none significant',
+      largest !== null ? `, largest ${num(largest, 2)} σ` : '');
+  }
+
+  async function compare() {
+    if (!pickA.value || !pickB.value) return;
+    clear(compareOut).append(h('p', { class: 'muted' }, 'Comparing…'));
+    try {
+      const c = await get(`/api/compare?a=${pickA.value}&b=${pickB.value}`);
+      const rows = c.coefficients.slice().sort((x, y) => orderOf(x.key) - orderOf(y.key) || x.key.localeCompare(y.key));
+      const sig = (s) => (s == null ? '' : ` ± ${num(s, 2)}`);
+      clear(compareOut).append(
+        h('p', { id: 'compare-summary' }, `${c.significant} significant difference${c.significant === 1 ? '' : 's'} between #${c.a.campaign_id} and #${c.b.campaign_id}.`),
+        h('table', { class: 'list', id: 'compare-table' },
+          h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, `#${c.a.campaign_id}`), h('th', { class: 'num' }, `#${c.b.campaign_id}`),
+            h('th', { class: 'num' }, 'Difference'), h('th', { class: 'num' }, 'In combined σ'), h('th', {}, 'Unit'))),
+          h('tbody', {}, ...rows.map((r) => h('tr', { class: r.significant ? 'result-bad' : '', dataset: { key: r.key } },
+            h('td', {}, r.key), h('td', { class: 'num' }, `${num(r.a, 5)}${sig(r.sigma_a)}`), h('td', { class: 'num' }, `${num(r.b, 5)}${sig(r.sigma_b)}`),
+            h('td', { class: 'num' }, num(r.difference, 3)), h('td', { class: 'num' }, r.in_sigmas == null ? '—' : num(r.in_sigmas, 2)),
+            h('td', {}, unitOf(r.key)))))));
+    } catch (e) {
+      clear(compareOut).append(h('p', { class: 'form-error' }, `Cannot compare: ${e.message}`));
+    }
   }
 
   function plot(name) {
@@ -57,12 +112,24 @@ export function mount(root, ctx) {
     try {
       const u = await get(url);
       calibrations = u.calibrations || [];
-      info.textContent = `${u.part_number ? `Part number ${u.part_number}. ` : ''}${u.calibrations_counted} calibration${u.calibrations_counted === 1 ? '' : 's'} counted of ${calibrations.length} ended campaign${calibrations.length === 1 ? '' : 's'}.`;
+      info.textContent = `${u.part_number ? `Part number ${u.part_number}${u.limits ? ` (limits from ${u.limits})` : ', no acceptance limits'}. ` : ''}${u.calibrations_counted} calibration${u.calibrations_counted === 1 ? '' : 's'} counted of ${calibrations.length} ended campaign${calibrations.length === 1 ? '' : 's'}.`;
       clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
         h('td', { class: 'num' }, h('a', { href: `#/campaigns/${c.campaign_id}` }, c.campaign_id)),
         h('td', {}, c.name), h('td', {}, c.program), h('td', {}, dateTime(c.date)),
         h('td', {}, stateBadge(c.state), c.complete ? '' : h('span', { class: 'result-bad' }, ' partial')),
-        h('td', {}, counts(c)))));
+        h('td', {}, counts(c)), h('td', {}, verdictCell(c.verdict)), h('td', {}, changeCell(c.change)))));
+      const withModel = calibrations.filter((c) => c.model);
+      const option = (c) => h('option', { value: c.campaign_id }, `#${c.campaign_id} ${c.name} (${dateTime(c.date)})`);
+      clear(pickA).append(...withModel.map(option));
+      clear(pickB).append(...withModel.map(option));
+      if (withModel.length >= 2) {
+        pickA.value = String(withModel[withModel.length - 2].campaign_id);
+        pickB.value = String(withModel[withModel.length - 1].campaign_id);
+      }
+      const rep = Object.entries(u.repeatability || {}).sort(([a], [b]) => orderOf(a) - orderOf(b) || a.localeCompare(b));
+      clear(repeatBody).append(...rep.map(([k, r]) => h('tr', { dataset: { key: k } }, h('td', {}, k), h('td', { class: 'num' }, r.n),
+        h('td', { class: 'num' }, num(r.mean, 5)), h('td', { class: 'num' }, num(r.std, 3)), h('td', {}, unitOf(k)))));
+      if (!rep.length) repeatBody.append(h('tr', {}, h('td', { colspan: 5, class: 'muted' }, 'Needs two calibrations that count.')));
       const names = new Set();
       for (const c of calibrations) if (c.model) for (const n of flatten(c.model).keys()) names.add(n);
       const sorted = [...names].sort((a, b) => orderOf(a) - orderOf(b) || a.localeCompare(b));
