@@ -20,7 +20,7 @@ enum class RunState {
   Paused,
   Suspended,    // safe hold because a suspender tripped; resumes by itself
   Stopping,     // ending early with results from the data so far
-  Aborting,     // ending at once, no results
+  Aborting,     // ending at once; then the estimators finish on the data so far (partial)
   Done,
   Failed,
   Aborted,

@@ -696,6 +696,10 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
       }
       run.prev_delivered_t_ns = f.t_ns;
       ++run.delivered;
+      // The program's grid ends at its last instant: in the last segment the IMU goes on
+      // delivering (the sequencer waits for the table to come to rest, and a loaded machine may
+      // hand over frames past the end in one batch); those are not part of the run.
+      if (last && f.t_ns > end_ns) continue;
       if (!run.last_t_ns || f.t_ns > *run.last_t_ns) {
         accepted.push_back(f);
         run.last_t_ns = f.t_ns;
@@ -870,8 +874,12 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
       results = true;
       break;
     case Outcome::Abort:
+      // The table is parked first (safe_exit above); the estimators then finish on the data so
+      // far, as for a stop: a partial run keeps its model (complete: false, counts only when an
+      // operator accepts it).
       final_state = RunState::Aborted;
-      why = "aborted; table parked, no results";
+      why = "aborted at " + std::to_string(run.program_time_s) + " s; table parked, results from the data so far";
+      results = true;
       break;
     case Outcome::Shutdown:
       final_state = RunState::Interrupted;
@@ -880,6 +888,7 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     default:
       final_state = RunState::Failed;
       if (why.empty()) why = "failed";
+      results = true;  // what was recorded before the failure still calibrates (partial)
       break;
   }
   if (run.recorder && !run.recorder->commit_and_wait() && final_state != RunState::Failed) {
@@ -888,13 +897,20 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     db_.set_error(run.id, why);
   }
   if (run.estimators) {
-    if (results && final_state == RunState::Done) {
-      const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns);
-      if (r.model) db_.set_model(run.id, imu_model_to_json_text(*r.model));
-      db_.set_results(run.id, r.results.dump());
-      if (run.recorder) {
-        run.recorder->set_extra("imucald_results", r.results.dump());
-        if (r.model) run.recorder->set_extra("imucald_model", imu_model_to_json_text(*r.model));
+    if (results && is_final(final_state)) {
+      try {
+        const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns);
+        if (r.model) db_.set_model(run.id, imu_model_to_json_text(*r.model));
+        db_.set_results(run.id, r.results.dump());
+        // A recorder that failed refuses these (the model stays in the daemon's database).
+        if (run.recorder) {
+          run.recorder->set_extra("imucald_results", r.results.dump());
+          if (r.model) run.recorder->set_extra("imucald_model", imu_model_to_json_text(*r.model));
+        }
+      } catch (const std::exception& e) {
+        // A run ending on an error must still end: the error is kept with the run.
+        spdlog::error("campaign {}: the estimators could not finish: {}", run.id, e.what());
+        db_.set_results(run.id, json{{"error", std::string("the estimators could not finish: ") + e.what()}}.dump());
       }
     } else {
       run.estimators->cancel();

@@ -45,7 +45,7 @@ const COMMANDS = {
   stop: { label: 'Stop', confirm: true, cls: '',
     text: (c) => [`Stop campaign ${c.id} "${c.name}" early?`, 'The table goes to rest; the estimators finish on the data recorded so far. The campaign cannot be continued afterwards.'] },
   abort: { label: 'Abort', confirm: true, danger: true, cls: 'danger',
-    text: (c) => [`Abort campaign ${c.id} "${c.name}"?`, 'It ends at once with no results. The table goes to rest with its interlock open and the chamber to its safe set point.'] },
+    text: (c) => [`Abort campaign ${c.id} "${c.name}"?`, 'It ends at once: the table goes to rest with its interlock open and the chamber to its safe set point; then the estimators finish on the data so far (a partial model, which counts as a calibration only if accepted).'] },
 };
 
 /**

@@ -88,8 +88,11 @@ export function mount(root, ctx) {
     if (c.state === 'done')
       return c.has_model ? h('a', { class: 'result-ok', href: `#/campaigns/${c.id}` }, 'model ready — see results')
         : h('span', { class: 'muted' }, 'finished without a model');
-    if (c.state === 'failed') return h('span', { class: 'result-bad', title: c.error || '' }, c.error || 'failed');
-    if (c.state === 'aborted') return h('span', { class: 'muted' }, 'aborted, no results');
+    // Aborted and failed runs keep what the data so far gave: partial, never a calibration
+    // unless accepted.
+    const kept = `${c.has_model ? ', model kept (partial)' : ''}${c.accepted ? ', accepted' : ''}`;
+    if (c.state === 'failed') return h('span', { class: 'result-bad', title: c.error || '' }, `${c.error || 'failed'}${kept}`);
+    if (c.state === 'aborted') return h('span', { class: 'muted' }, `aborted at ${Math.round(100 * (c.progress || 0))} %${kept}`);
     const pct = Math.round(100 * (c.progress || 0));
     return h('div', { class: 'progress', title: `${pct} % of the program` },
       h('div', { class: 'bar', style: `width:${pct}%` }), h('span', {}, `${pct} %`));
