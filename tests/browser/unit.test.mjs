@@ -5,7 +5,7 @@ import test from 'node:test';
 import assert from 'node:assert/strict';
 import { Series, BoundedList } from '../../web/js/series.mjs';
 import { parseField, SEGMENT_TYPES, mapProblems, compress } from '../../web/js/program_edit.mjs';
-import { flatten, coefficientRows, unitOf } from '../../web/js/coefficients.mjs';
+import { flatten, coefficientRows, unitOf, labelOf } from '../../web/js/coefficients.mjs';
 
 test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
   const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
@@ -111,6 +111,12 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.equal(unitOf('gyro.bias_dph.x'), '°/h');
   assert.equal(unitOf('accel.bias_mps2.x'), 'm/s²');
   assert.equal(unitOf('gyro.noise.arw_deg_rth'), '°/√h');
+  // Names for people: the unit suffix goes (unitOf shows it), underscores become spaces.
+  assert.equal(labelOf('accel_residual_rms_mps2'), 'accel residual rms');
+  assert.equal(labelOf('static_time_s'), 'static time');
+  assert.equal(labelOf('arw_deg_rth'), 'arw');
+  assert.equal(labelOf('statics'), 'statics');
+  assert.equal(labelOf('source'), 'source');
   const truth = { gyro: { bias_dph: [0, 2, 0] }, accel: { bias_mps2: [0, 0, 0] } };
   const rows = coefficientRows(model, truth);
   const x = rows.find((r) => r.name === 'gyro.bias_dph.x');

@@ -36,6 +36,13 @@ export function unitOf(name) {
   return '';
 }
 
+/** A quantity's name for people, its unit left to unitOf: "accel_residual_rms_mps2" -> "accel residual rms". */
+export function labelOf(key) {
+  const m = /^(.*?)_(deg_rth|mps_rth|dph_rth|mps2_rth|[A-Za-z0-9]+)$/.exec(key);
+  const bare = m && (UNITS[m[2]] || m[2].endsWith('_rth')) ? m[1] : key;
+  return bare.replace(/_/g, ' ');
+}
+
 export function groupOf(name) {
   return GROUPS.find((g) => name.startsWith(`${g.key}.`)) || null;
 }

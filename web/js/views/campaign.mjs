@@ -7,7 +7,7 @@ import { get, ApiError } from '../api.mjs';
 import { verdictBadge } from './units.mjs';
 import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
 import { commandBar } from '../dialogs.mjs';
-import { coefficientRows, unitOf, groupOf } from '../coefficients.mjs';
+import { coefficientRows, unitOf, groupOf, labelOf } from '../coefficients.mjs';
 import { convergencePanel } from '../convergence.mjs';
 import { contributionRows } from '../contributions.mjs';
 import { Series } from '../series.mjs';
@@ -165,7 +165,9 @@ export function mount(root, ctx) {
     for (const [name, r] of Object.entries(d.results || {})) {
       const facts = Object.entries(r).filter(([k, v]) => typeof v === 'number' || typeof v === 'string');
       notes.append(h('div', { class: 'stage', dataset: { estimator: name } }, h('h3', {}, `${name}`),
-        h('dl', { class: 'meta compact' }, ...facts.flatMap(([k, v]) => [h('dt', {}, k.replace(/_/g, ' ')), h('dd', {}, typeof v === 'number' ? `${num(v)} ${unitOf(k)}` : v)])),
+        // Counts as integers ("22 statics"), quantities with their unit, names without it.
+        h('dl', { class: 'meta compact' }, ...facts.flatMap(([k, v]) => [h('dt', {}, labelOf(k)),
+          h('dd', {}, typeof v === 'number' ? (Number.isInteger(v) ? String(v) : `${num(v)} ${unitOf(k)}`.trim()) : v)])),
         Array.isArray(r.notes) && r.notes.length ? h('ul', { class: 'notes' }, ...r.notes.map((n) => h('li', {}, n))) : null));
     }
     if (notes.childElementCount) results.append(h('h3', {}, 'Estimators'), notes);
