@@ -34,7 +34,8 @@ double raw_to_number(FieldType t, std::uint64_t raw) noexcept {
     case FieldType::u8:
     case FieldType::u16:
     case FieldType::u32:
-    case FieldType::u64: return static_cast<double>(raw);
+    case FieldType::u64:
+    case FieldType::ascii: return static_cast<double>(raw);
     case FieldType::i8: return static_cast<std::int8_t>(raw);
     case FieldType::i16: return static_cast<std::int16_t>(raw);
     case FieldType::i32: return static_cast<std::int32_t>(raw);
@@ -192,8 +193,18 @@ Decoded decode(const ImuLink& link, std::span<const std::uint8_t> frame, std::op
         case Role::accel_temperature: v.accel_temp_C = value; break;
         case Role::coil_temperature: v.coil_C[f.index + k] = value; break;
         case Role::accel_sensor_temperature: v.accel_sensor_C[f.index + k] = value; break;
+        case Role::serial: v.serial.push_back(static_cast<char>(raw)); break;
       }
     }
+  }
+  if (const Field* f = m.find(Role::serial)) {
+    // Padded with NULs or spaces to the field's length; a character outside printable ASCII is a
+    // damaged frame, never a serial number.
+    const auto end = v.serial.find('\0');
+    if (end != std::string::npos) v.serial.resize(end);
+    while (!v.serial.empty() && v.serial.back() == ' ') v.serial.pop_back();
+    const bool printable = std::all_of(v.serial.begin(), v.serial.end(), [](char c) { return c >= 0x20 && c < 0x7f; });
+    if (!printable || v.serial.empty() || f->count == 0) d.status = DecodeStatus::bad_value;
   }
   return d;
 }
@@ -227,6 +238,7 @@ std::vector<std::uint8_t> encode(const ImuLink& link, std::size_t message, const
         case Role::accel_temperature: raw = temperature(v.accel_temp_C); break;
         case Role::coil_temperature: raw = temperature(v.coil_C[f.index + k]); break;
         case Role::accel_sensor_temperature: raw = temperature(v.accel_sensor_C[f.index + k]); break;
+        case Role::serial: raw = k < v.serial.size() ? static_cast<std::uint8_t>(v.serial[k]) : 0; break;
       }
       put_raw(out.data() + f.offset + k * size, size, f.byte_order, raw);
     }

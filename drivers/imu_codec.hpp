@@ -10,6 +10,7 @@
 #include <deque>
 #include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "drivers/imu_link.hpp"
@@ -30,6 +31,7 @@ struct Values {
   double accel_temp_C;
   std::array<double, 24> coil_C;
   std::array<double, 3> accel_sensor_C;
+  std::string serial;  // an identity message's serial number, without its padding
   Values();
 };
 
@@ -38,7 +40,7 @@ enum class DecodeStatus {
   bad_length,    // not the message's length
   bad_header,    // no message of the description starts with these bytes
   bad_checksum,
-  bad_value,     // a float field that is not finite: never a sample
+  bad_value,     // a float field that is not finite, a serial not printable: never a value
 };
 const char* to_string(DecodeStatus s) noexcept;
 

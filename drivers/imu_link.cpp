@@ -28,17 +28,18 @@ struct NamedType {
   const char* name;
   FieldType type;
 };
-constexpr std::array<NamedType, 10> kTypes = {{{"uint8", FieldType::u8},   {"int8", FieldType::i8},
+constexpr std::array<NamedType, 11> kTypes = {{{"uint8", FieldType::u8},   {"int8", FieldType::i8},
                                                {"uint16", FieldType::u16}, {"int16", FieldType::i16},
                                                {"uint32", FieldType::u32}, {"int32", FieldType::i32},
                                                {"uint64", FieldType::u64}, {"int64", FieldType::i64},
-                                               {"float32", FieldType::f32}, {"float64", FieldType::f64}}};
+                                               {"float32", FieldType::f32}, {"float64", FieldType::f64},
+                                               {"ascii", FieldType::ascii}}};
 
 struct NamedRole {
   const char* name;
   Role role;
 };
-constexpr std::array<NamedRole, 15> kRoles = {{{"gyro_x", Role::gyro_x},
+constexpr std::array<NamedRole, 16> kRoles = {{{"gyro_x", Role::gyro_x},
                                                {"gyro_y", Role::gyro_y},
                                                {"gyro_z", Role::gyro_z},
                                                {"accel_x", Role::accel_x},
@@ -52,7 +53,8 @@ constexpr std::array<NamedRole, 15> kRoles = {{{"gyro_x", Role::gyro_x},
                                                {"gyro_temperature", Role::gyro_temperature},
                                                {"accel_temperature", Role::accel_temperature},
                                                {"coil_temperature", Role::coil_temperature},
-                                               {"accel_sensor_temperature", Role::accel_sensor_temperature}}};
+                                               {"accel_sensor_temperature", Role::accel_sensor_temperature},
+                                               {"serial", Role::serial}}};
 
 // A unit: SI factor and whether the quantity is an increment or a rate.
 struct Unit {
@@ -222,16 +224,24 @@ Field read_field(const json& j, const std::string& where, const std::string& who
   if (kind == MessageKind::temperature && f.role != Role::sequence && f.role != Role::time &&
       f.role != Role::coil_temperature && f.role != Role::accel_sensor_temperature)
     r.fail(r.at("role"), "a temperature message carries sequence, time, coil_temperature and accel_sensor_temperature");
+  if ((kind == MessageKind::identity) != (f.role == Role::serial))
+    r.fail(r.at("role"), "an identity message carries the serial field, and only it");
   f.offset = static_cast<std::size_t>(*r.unsigned_int("offset", 1 << 16, true));
   f.type = r.choice("type", kTypes, true)->type;
+  if ((f.type == FieldType::ascii) != (f.role == Role::serial))
+    r.fail(r.at("type"), "the serial field is ascii, and only it");
   f.byte_order = read_byte_order(r, "byte_order", default_order);
-  const std::size_t slots = f.role == Role::coil_temperature ? 24 : f.role == Role::accel_sensor_temperature ? 3 : 1;
+  // A serial number is up to 64 characters (NUL- or space-padded to `count`).
+  const std::size_t slots = f.role == Role::coil_temperature ? 24
+                            : f.role == Role::accel_sensor_temperature ? 3
+                            : f.role == Role::serial ? 64 : 1;
   if (const auto c = r.unsigned_int("count", slots)) {
-    if (slots == 1 && *c != 1) r.fail(r.at("count"), "only coil and accelerometer sensor temperatures repeat");
+    if (slots == 1 && *c != 1) r.fail(r.at("count"), "only temperatures and the serial's characters repeat");
     if (*c == 0) r.fail(r.at("count"), "must be at least 1");
     f.count = static_cast<std::size_t>(*c);
   }
   if (const auto i = r.unsigned_int("index", slots - 1)) f.index = static_cast<std::size_t>(*i);
+  if (f.role == Role::serial && !r.has("count")) r.fail(where, "the serial field needs count (its characters)");
   if (f.index + f.count > slots)
     r.fail(where, "index + count must stay within the " + std::to_string(slots) + " " + to_string(f.role) + " slots");
 
@@ -363,8 +373,10 @@ Message read_message(const json& j, const std::string& where, const std::string&
     m.kind = MessageKind::sample;
   } else if (*kind == "temperature") {
     m.kind = MessageKind::temperature;
+  } else if (*kind == "identity") {
+    m.kind = MessageKind::identity;
   } else {
-    r.fail(r.at("kind"), "must be \"sample\" or \"temperature\"");
+    r.fail(r.at("kind"), "must be \"sample\", \"temperature\" or \"identity\"");
   }
   if (const auto h = r.string("header")) m.header = parse_hex_bytes(*h, r, r.at("header"));
   if (t != Transport::socketcan && m.header.size() < 2)
@@ -402,6 +414,8 @@ Message read_message(const json& j, const std::string& where, const std::string&
       r.fail(fw, std::string("a second ") + to_string(f.role) + " field");
     m.fields.push_back(f);
   }
+  if (m.kind == MessageKind::identity && !m.find(Role::serial))
+    r.fail(r.at("fields"), "an identity message needs a serial field");
   if (m.kind == MessageKind::sample) {
     for (Role need : {Role::gyro_x, Role::gyro_y, Role::gyro_z, Role::accel_x, Role::accel_y, Role::accel_z, Role::sequence})
       if (!m.find(need)) r.fail(r.at("fields"), std::string("a sample message needs a ") + to_string(need) + " field");
@@ -432,6 +446,12 @@ std::size_t ImuLink::sample_message() const noexcept {
   for (std::size_t i = 0; i < messages.size(); ++i)
     if (messages[i].kind == MessageKind::sample) return i;
   return 0;  // the parser guarantees one
+}
+
+bool ImuLink::reports_serial() const noexcept {
+  for (const Message& m : messages)
+    if (m.kind == MessageKind::identity) return true;
+  return false;
 }
 
 std::size_t ImuLink::max_length() const noexcept {
@@ -489,7 +509,8 @@ const char* to_string(Role r) noexcept {
 std::size_t type_size(FieldType t) noexcept {
   switch (t) {
     case FieldType::u8:
-    case FieldType::i8: return 1;
+    case FieldType::i8:
+    case FieldType::ascii: return 1;
     case FieldType::u16:
     case FieldType::i16: return 2;
     case FieldType::u32:

@@ -20,7 +20,8 @@ namespace imucal::drivers::link {
 inline constexpr const char* kFormat = "imucal-imu-link/1";
 
 enum class Transport { socketcan, serial, udp };
-enum class FieldType { u8, i8, u16, i16, u32, i32, u64, i64, f32, f64 };
+// ascii: one character a byte (an identity message's serial number).
+enum class FieldType { u8, i8, u16, i16, u32, i32, u64, i64, f32, f64, ascii };
 enum class ByteOrder { big, little };
 
 // What a field carries. Sample messages: the six inertial channels, status, sequence, the IMU's
@@ -33,13 +34,16 @@ enum class Role {
   gyro_temperature, accel_temperature,
   coil_temperature,    // temperature messages, `count` values from `index`
   accel_sensor_temperature,
+  serial,              // identity messages: the unit's serial number, `count` ASCII characters
 };
 
 // A gyro or accelerometer field is an increment over the sample period (rad, m/s) or a rate
 // (rad/s, m/s^2) by its unit; rates are turned into increments with the nominal sample period.
 enum class Measures { increment, rate, other };
 
-enum class MessageKind { sample, temperature };
+// identity: what the IMU says it is (its serial number), which the daemon checks against the
+// campaign's unit before anything moves.
+enum class MessageKind { sample, temperature, identity };
 
 struct Field {
   Role role = Role::status;
@@ -111,6 +115,7 @@ struct ImuLink {
   std::optional<Command> start, stop;
 
   std::size_t sample_message() const noexcept;  // index of the one sample message
+  bool reports_serial() const noexcept;         // an identity message is described
   std::size_t max_length() const noexcept;
   // Datagrams (CAN, UDP) carry one frame each; a serial line is a byte stream to resynchronise.
   bool stream() const noexcept { return transport == Transport::serial; }

@@ -311,6 +311,9 @@ class Imu : public Device {
   virtual Result<void> poll(ImuBatch& out, std::chrono::milliseconds max_wait) = 0;
   virtual ImuCounters counters() const = 0;
   virtual ClockModelState clock_model() const = 0;
+  // The serial number the IMU reported over its link (an identity message), once it has; never
+  // for an IMU whose link carries none.
+  virtual std::optional<std::string> reported_serial() const { return std::nullopt; }
 };
 
 }  // namespace imucal::drivers

@@ -57,6 +57,7 @@ struct LinkImu::Impl {
   mutable std::mutex published_mutex;  // what other threads may read
   ImuCounters published_counts;
   ClockModelState published_clock;
+  std::optional<std::string> serial;  // as the IMU last reported it (under published_mutex)
 
   Impl(std::unique_ptr<ImuTransport> t, LinkImuConfig c)
       : cfg(std::move(c)),
@@ -88,10 +89,14 @@ struct LinkImu::Impl {
       ++counts.malformed_frames;
       return;
     }
-    if (cfg.link.messages[d.message].kind == link::MessageKind::sample) {
-      handle_sample(d.values, rx_ns, out);
-    } else {
-      handle_temperature(d.message, d.values, rx_ns, out);
+    switch (cfg.link.messages[d.message].kind) {
+      case link::MessageKind::sample: handle_sample(d.values, rx_ns, out); break;
+      case link::MessageKind::temperature: handle_temperature(d.message, d.values, rx_ns, out); break;
+      case link::MessageKind::identity: {
+        std::lock_guard lock(published_mutex);
+        serial = d.values.serial;
+        break;
+      }
     }
   }
 
@@ -237,6 +242,11 @@ DeviceState LinkImu::state() const {
 ImuCounters LinkImu::counters() const {
   std::lock_guard lock(impl_->published_mutex);
   return impl_->published_counts;
+}
+
+std::optional<std::string> LinkImu::reported_serial() const {
+  std::lock_guard lock(impl_->published_mutex);
+  return impl_->serial;
 }
 
 ClockModelState LinkImu::clock_model() const {

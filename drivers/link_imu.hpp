@@ -50,6 +50,7 @@ class LinkImu final : public Imu {
   Result<void> poll(ImuBatch& out, std::chrono::milliseconds max_wait) override;
   ImuCounters counters() const override;
   ClockModelState clock_model() const override;
+  std::optional<std::string> reported_serial() const override;
 
  private:
   struct Impl;

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -83,6 +84,13 @@ class Imu {
   virtual ImuState state() const = 0;
   // What the run database records about the IMU and the set-up (rate, LSBs, site, segments).
   virtual RecordingMeta recording_meta() const = 0;
+  // Whether the IMU's link carries its serial number (an identity message), and the serial it
+  // reported, waiting up to wait_s of device time for it (empty: none arrived).
+  virtual bool reports_serial() const { return false; }
+  virtual std::optional<std::string> reported_serial(double wait_s) {
+    (void)wait_s;
+    return std::nullopt;
+  }
 };
 
 class Bench {

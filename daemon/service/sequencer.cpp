@@ -95,6 +95,7 @@ struct RunContext {
   std::unique_ptr<Suspenders> suspenders;  // from the campaign's settings, at the run's start
   double program_time_s = 0.0;
   std::optional<double> commanded_setpoint_C;
+  std::optional<std::string> reported_serial;  // what the IMU said it is (check_unit)
 
   Clock::time_point last_publish{}, last_db_update{}, window_wall{};
   double window_program_s = 0.0, window_world_s = 0.0;
@@ -142,13 +143,34 @@ void Sequencer::set_recorder_hooks(RecorderHooks hooks) {
   recorder_hooks_ = std::move(hooks);
 }
 
-// What the run file records about the run: the bench's description, with the campaign's unit as
-// the IMU's serial when the campaign names one (the bench reports its configured or simulated
-// serial; no IMU link reports its own, so there is nothing to check the campaign's against).
+// What the run file records about the run: the bench's description, with the IMU's serial that
+// of the campaign's unit when it names one (checked against what the IMU reported, check_unit),
+// else the one the IMU reported, else the bench's configured or simulated serial.
 static RecordingMeta recording_meta(const RunContext& run) {
   RecordingMeta meta = run.bench->imu().recording_meta();
+  if (run.reported_serial) meta.imu_serial = *run.reported_serial;
   if (!run.spec.imu.serial.empty()) meta.imu_serial = run.spec.imu.serial;
   return meta;
+}
+
+// The unit on the link must be the campaign's (issue 17): an IMU whose link carries its serial
+// number is asked for it before anything moves or is recorded; a different serial stops the start
+// with both values. One that says nothing within the wait is noted, and the run goes on.
+void Sequencer::check_unit(RunContext& run) {
+  Imu& imu = run.bench->imu();
+  if (!imu.reports_serial()) return;
+  constexpr double kWait_s = 3.0;
+  run.reported_serial = imu.reported_serial(kWait_s);
+  if (!run.reported_serial) {
+    note_event(run, "alarm", "the IMU did not report its serial number within 3 s: the unit on the link is not checked");
+    return;
+  }
+  if (!run.spec.imu.serial.empty() && *run.reported_serial != run.spec.imu.serial)
+    throw std::runtime_error("the IMU on the link reports serial number '" + *run.reported_serial +
+                             "', but the campaign names the unit '" + run.spec.imu.serial +
+                             "': not started, nothing recorded (mount the named unit, or correct campaign.imu.serial)");
+  note_event(run, "info", "the IMU reports serial number '" + *run.reported_serial + "'" +
+                              (run.spec.imu.serial.empty() ? std::string() : ", the campaign's unit"));
 }
 
 // Opens the run file (creating it on the first start, recovering it after a crash or a failed
@@ -495,11 +517,14 @@ void Sequencer::run_campaign(std::int64_t id) {
         sw.chamber_tau_s = config_.sim.chamber_tau_s;
         sw.chamber_start_C = config_.chamber.safe_setpoint_C;
         sw.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
+        sw.imu_serial = run.spec.imu.serial;
         run.bench = std::make_unique<WireBench>(run.program, wb, sw);
       }
     } else {
       throw std::runtime_error("devices '" + config_.devices + "' are not available in this build");
     }
+
+    check_unit(run);
 
     // The run file: created on the first start, reopened to resume.
     const std::string relative = "runs/" + std::to_string(id) + ".db";

@@ -88,6 +88,7 @@ class Sequencer {
   std::optional<Outcome> pending_command();
   RunState active_state() const;
 
+  void check_unit(RunContext& run);
   void open_recorder(RunContext& run);
   std::optional<std::string> recorder_problem(RunContext& run);
   Outcome prepare_devices(RunContext& run);

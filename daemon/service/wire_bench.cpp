@@ -186,6 +186,12 @@ class WireBench::ImuFacade final : public Imu {
     return DeviceResult::success();
   }
   ImuState state() const override { return {b_.dev_->imu->state() != dr::DeviceState::faulted && b_.imu_error_.empty()}; }
+  bool reports_serial() const override { return b_.addresses_.imu.link.reports_serial(); }
+  std::optional<std::string> reported_serial(double wait_s) override {
+    const std::int64_t deadline_ns = dr::host_time_ns() + std::llround(wait_s * units::kNsPerS);
+    while (!b_.dev_->imu->reported_serial() && dr::host_time_ns() < deadline_ns) b_.wait(0.05);
+    return b_.dev_->imu->reported_serial();
+  }
   RecordingMeta recording_meta() const override {
     RecordingMeta m;
     m.site = b_.settings_.site;
@@ -233,7 +239,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   sim.imu.truth = simulated.truth;
   sim.imu.site = settings.site;
   sim.imu.temperature_C = simulated.chamber_start_C;
-  sim.imu_serial = "SIM-WIRE-" + std::to_string(simulated.seed);
+  sim.imu_serial = simulated.imu_serial.empty() ? "SIM-WIRE-" + std::to_string(simulated.seed) : simulated.imu_serial;
   sim_ = std::make_unique<drsim::SimDevices>(sim);
 
   // The addresses an operator would configure for these devices.

@@ -66,6 +66,9 @@ struct SimWireSettings {
   // A campaign's sim_faults, injected on the simulated devices themselves when the program first
   // reaches them (docs/daemon.md): the daemon sees them only through the drivers.
   std::vector<SimFault> faults;
+  // The serial the simulated IMU reports over its link: the campaign's unit when it names one
+  // (the simulated IMU is that unit), else SIM-WIRE-<seed>.
+  std::string imu_serial;
 };
 
 class WireBench final : public Bench {

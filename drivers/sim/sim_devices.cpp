@@ -88,6 +88,7 @@ struct SimDevices::Impl {
   explicit Impl(SimDevicesConfig c)
       : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {
     cfg.imu.link = link::load_imu_link(cfg.imu_link);
+    if (cfg.imu.serial.empty()) cfg.imu.serial = cfg.imu_serial;  // what it reports, if its link can
   }
 
   void attach(int fd) {

@@ -58,6 +58,7 @@ struct SimImu::Impl {
   std::uint32_t next_sequence = 0;
   std::uint16_t temperature_sequence = 0;
   double next_temperature_s = 0.0;
+  double next_identity_s = 0.0;  // world time of the next identity message
 
   mutable std::mutex truth_mutex;
   std::vector<SampleTruth> truth_ring;
@@ -176,6 +177,7 @@ struct SimImu::Impl {
     if (is(cfg.link.start) && !streaming) {
       next_k = static_cast<std::int64_t>(std::floor(world.now_s() / dt_s)) + 1;
       next_temperature_s = static_cast<double>(next_k) * dt_s;
+      next_identity_s = next_temperature_s;  // say who it is first
       streaming = true;
     } else if (is(cfg.link.stop)) {
       streaming = false;
@@ -207,6 +209,14 @@ struct SimImu::Impl {
         if (command_bytes.size() > keep) command_bytes.erase(command_bytes.begin(), command_bytes.end() - keep);
       }
     }
+  }
+
+  void send_identity() {
+    if (cfg.serial.empty()) return;
+    link::Values v;
+    v.serial = cfg.serial;
+    for (std::size_t i = 0; i < cfg.link.messages.size(); ++i)
+      if (cfg.link.messages[i].kind == link::MessageKind::identity) send_message(i, link::encode(cfg.link, i, v), 0);
   }
 
   void send_temperatures(double t_s) {
@@ -324,6 +334,10 @@ struct SimImu::Impl {
           ++sent;
         else
           ++not_sent;
+      }
+      if (t_k >= next_identity_s && cfg.identity_period_s > 0.0) {
+        if (now >= pause_until_ns.load()) send_identity();
+        next_identity_s = t_k + cfg.identity_period_s;
       }
       if (cfg.temp_rate_hz > 0.0 && t_k >= next_temperature_s) {
         if (now >= pause_until_ns.load()) send_temperatures(t_k);

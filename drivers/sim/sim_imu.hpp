@@ -42,6 +42,10 @@ struct SimImuConfig {
   std::int64_t clock_offset_ns = 0;
   double temp_rate_hz = 10.0;
   double temperature_C = 25.0;
+  // Sent in the description's identity message (if it has one) when streaming starts and then
+  // every identity_period_s; empty: none sent.
+  std::string serial;
+  double identity_period_s = 1.0;
 };
 
 // What the simulator put in one sample, kept for tests and benchmarks.

@@ -168,8 +168,13 @@ TEST(ConfiguredDevices, ACampaignThroughTheConfiguredAddressesRecordsEveryFrame)
   EXPECT_FALSE(d.service->sequencer().telemetry().at("table").at("interlock_closed").get<bool>());
   EXPECT_FALSE(has_event(c, "suspended", "watchdog")) << c.dump();
 
-  // A second run opens the IMU link again: the devices answer it with a new simulated IMU.
+  // The IMU says who it is over imucal's CAN layout (its identity message).
+  EXPECT_TRUE(has_event(c, "info", "the IMU reports serial number 'FOG-TEST-7'")) << c.dump();
+
+  // A second run opens the IMU link again: the devices answer it with a new simulated IMU. It
+  // names the unit on the link: checked, and it runs.
   json again = short_campaign("again");
+  again["imu"] = {{"serial", "FOG-TEST-7"}};
   again["program"]["segments"] = json::parse(R"([{"type": "hold", "name": "a", "duration_s": 1},
     {"type": "move", "name": "tilt", "to_deg": [0, 45, 0], "duration_s": 2}])");
   const auto id2 = d.post_campaign(again);
@@ -179,13 +184,29 @@ TEST(ConfiguredDevices, ACampaignThroughTheConfiguredAddressesRecordsEveryFrame)
   const auto frames2 = run_frames(d.run_path(c2));
   EXPECT_GE(frames2.size(), 299u);
   EXPECT_EQ(off_grid(frames2, 10'000'000), 0u);
+  EXPECT_TRUE(has_event(c2, "info", "'FOG-TEST-7', the campaign's unit")) << c2.dump();
+
+  // A campaign naming another unit than the one on the link does not start (issue 17): the
+  // error gives both serials, nothing is recorded, and the table is left parked.
+  json other = short_campaign("another unit");
+  other["imu"] = {{"serial", "FOG-OTHER"}};
+  const auto id3 = d.post_campaign(other);
+  ASSERT_EQ(d.command(id3, "start"), 200);
+  const json c3 = d.wait_final(id3, 60.0);
+  EXPECT_EQ(c3.at("state"), "failed") << c3.dump();
+  const std::string why = c3.value("error", "");
+  EXPECT_NE(why.find("reports serial number 'FOG-TEST-7'"), std::string::npos) << why;
+  EXPECT_NE(why.find("names the unit 'FOG-OTHER'"), std::string::npos) << why;
+  EXPECT_EQ(c3.at("frames"), 0);
+  EXPECT_FALSE(c3.at("has_model").get<bool>());
+  EXPECT_FALSE(d.service->sequencer().telemetry().at("table").at("interlock_closed").get<bool>());
 
   d.service->stop();
   d.service.reset();
   EXPECT_EQ(devices.stop(), 0);
   std::ifstream log(dir + "/sim-devices.stderr");
   const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
-  EXPECT_NE(text.find("stopping after 2 IMU link(s)"), std::string::npos) << text;
+  EXPECT_NE(text.find("stopping after 3 IMU link(s)"), std::string::npos) << text;
 }
 
 // The simulated table and chamber of `imucal sim-devices`, in-process, so that the test can see

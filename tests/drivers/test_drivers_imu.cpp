@@ -162,6 +162,23 @@ TEST(CanImu, StreamsCanFdAtRateWithThePhysicsInIt) {
   EXPECT_NEAR(b.temperatures.back().to_temp_sample().gyro_C.x(), 25.0, 0.01);
 }
 
+// imucal's CAN layout carries the unit's serial (its identity message, when streaming starts and
+// once a second): the driver reports it; a simulated IMU given none sends none.
+TEST(CanImu, ReportsTheSerialNumberItsIdentityMessageCarries) {
+  sim::SimImuConfig dc;
+  dc.serial = "FOG-0042";
+  Rig rig(dc);
+  rig.up();
+  EXPECT_FALSE(rig.driver->reported_serial());  // nothing has been read yet
+  (void)rig.collect(0.3);
+  EXPECT_EQ(rig.driver->reported_serial().value_or("(none)"), "FOG-0042");
+  EXPECT_EQ(rig.driver->counters().malformed_frames, 0u);
+  Rig silent;
+  silent.up();
+  (void)silent.collect(0.3);
+  EXPECT_FALSE(silent.driver->reported_serial());
+}
+
 TEST(CanImu, ClassicCanFallbackAt200Hz) {
   sim::SimImuConfig dc;
   dc.framing = can::Framing::classic;

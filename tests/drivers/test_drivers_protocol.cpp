@@ -423,6 +423,51 @@ TEST(ImuLink, RejectsBadDescriptionsNamingTheKeyPath) {
   EXPECT_THROW(link::resolve_per_unit_lsb(kvh, 1e-9, std::nullopt), std::invalid_argument);
 }
 
+// An identity message carries the unit's serial number (ascii, padded) and nothing else; a
+// character that is not printable ASCII makes the frame damaged, never a serial.
+TEST(ImuLink, AnIdentityMessageCarriesTheSerialNumber) {
+  const link::ImuLink l = imucal_can();
+  ASSERT_TRUE(l.reports_serial());
+  EXPECT_FALSE(link::load_imu_link("kvh-1750").reports_serial());
+  std::size_t identity = l.messages.size();
+  for (std::size_t i = 0; i < l.messages.size(); ++i)
+    if (l.messages[i].kind == link::MessageKind::identity) identity = i;
+  ASSERT_LT(identity, l.messages.size());
+  link::Values v;
+  v.serial = "FOG-0042";
+  std::vector<std::uint8_t> frame = link::encode(l, identity, v);
+  link::Decoded d = link::decode(l, frame, identity);
+  ASSERT_EQ(d.status, link::DecodeStatus::ok);
+  EXPECT_EQ(d.values.serial, "FOG-0042");
+  // Found by its header too, as a stream or CAN id lookup would.
+  EXPECT_EQ(link::decode(l, frame).values.serial, "FOG-0042");
+  // A serial as long as the field, then a control character with a valid checksum.
+  v.serial = std::string(18, 'A');
+  EXPECT_EQ(link::decode(l, link::encode(l, identity, v), identity).values.serial, std::string(18, 'A'));
+  v.serial = "FOG\x01";
+  EXPECT_EQ(link::decode(l, link::encode(l, identity, v), identity).status, link::DecodeStatus::bad_value);
+
+  auto error_of = [](const std::string& text) {
+    try {
+      (void)link::imu_link_from_json(text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  std::string text = link::builtin_imu_link_json("imucal-can");
+  auto with = [&](const std::string& from, const std::string& to) {
+    std::string t = text;
+    const auto at = t.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return t.replace(at, from.size(), to);
+  };
+  EXPECT_NE(error_of(with("\"type\": \"ascii\", \"count\": 18", "\"type\": \"uint8\", \"count\": 18")).find("the serial field is ascii"), std::string::npos);
+  EXPECT_NE(error_of(with("\"type\": \"ascii\", \"count\": 18", "\"type\": \"ascii\"")).find("needs count"), std::string::npos);
+  EXPECT_NE(error_of(with("\"role\": \"serial\"", "\"role\": \"sequence\"")).find("identity message carries the serial field"), std::string::npos);
+  EXPECT_NE(error_of(with("\"kind\": \"identity\"", "\"kind\": \"who\"")).find("\"identity\""), std::string::npos);
+}
+
 TEST(CanProtocol, ClassicFallbackReassemblesAndAbandonsBrokenSets) {
   const link::ImuLink l = imucal_can();
   link::Values v;
