@@ -172,6 +172,23 @@ link::Checksum preset(const std::string& name) {
   return link::imu_link_from_json(text).messages[0].checksum;
 }
 
+// The error a description is refused with, or "(accepted)".
+std::string link_error_of(const std::string& text) {
+  try {
+    (void)link::imu_link_from_json(text);
+  } catch (const std::invalid_argument& e) {
+    return std::string(e.what());
+  }
+  return std::string("(accepted)");
+}
+
+// `text` with its first `from` replaced by `to` (a test failure when there is none).
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const auto at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return at == std::string::npos ? text : text.replace(at, from.size(), to);
+}
+
 }  // namespace
 
 // The check value of every CRC preset: CRC("123456789") from the CRC catalogue.
@@ -391,20 +408,8 @@ TEST(ImuLink, BuiltInDescriptionsLoadAndStateTheirSource) {
 
 TEST(ImuLink, RejectsBadDescriptionsNamingTheKeyPath) {
   const std::string good = link::builtin_imu_link_json("kvh-1750");
-  auto error_of = [](const std::string& text) {
-    try {
-      (void)link::imu_link_from_json(text);
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string("(accepted)");
-  };
-  auto with = [&](const std::string& from, const std::string& to) {
-    std::string t = good;
-    const auto at = t.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    return t.replace(at, from.size(), to);
-  };
+  auto error_of = link_error_of;
+  auto with = [&](const std::string& from, const std::string& to) { return replaced(good, from, to); };
   EXPECT_NE(error_of(with("\"float32\", \"unit\": \"rad\"}", "\"float24\", \"unit\": \"rad\"}")).find("messages[0].fields[0].type"), std::string::npos);
   EXPECT_NE(error_of(with("\"unit\": \"g\"", "\"unit\": \"furlong\"")).find("messages[0].fields[3].unit"), std::string::npos);
   EXPECT_NE(error_of(with("\"offset\": 30", "\"offset\": 35")).find("beyond the frame's length"), std::string::npos);
@@ -447,21 +452,9 @@ TEST(ImuLink, AnIdentityMessageCarriesTheSerialNumber) {
   v.serial = "FOG\x01";
   EXPECT_EQ(link::decode(l, link::encode(l, identity, v), identity).status, link::DecodeStatus::bad_value);
 
-  auto error_of = [](const std::string& text) {
-    try {
-      (void)link::imu_link_from_json(text);
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string("(accepted)");
-  };
-  std::string text = link::builtin_imu_link_json("imucal-can");
-  auto with = [&](const std::string& from, const std::string& to) {
-    std::string t = text;
-    const auto at = t.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    return t.replace(at, from.size(), to);
-  };
+  auto error_of = link_error_of;
+  const std::string text = link::builtin_imu_link_json("imucal-can");
+  auto with = [&](const std::string& from, const std::string& to) { return replaced(text, from, to); };
   EXPECT_NE(error_of(with("\"type\": \"ascii\", \"count\": 18", "\"type\": \"uint8\", \"count\": 18")).find("the serial field is ascii"), std::string::npos);
   EXPECT_NE(error_of(with("\"type\": \"ascii\", \"count\": 18", "\"type\": \"ascii\"")).find("needs count"), std::string::npos);
   EXPECT_NE(error_of(with("\"role\": \"serial\"", "\"role\": \"sequence\"")).find("identity message carries the serial field"), std::string::npos);
