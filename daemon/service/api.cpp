@@ -155,6 +155,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
       limits_(std::filesystem::path(config.limits_file).is_absolute()
                   ? config.limits_file
                   : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
+      certificate_sequence_(certificate_sequence_path(config)),
       programs_(json::array()),
       started_ms_(now_unix_ms()),
       started_(std::chrono::steady_clock::now()) {
@@ -165,6 +166,10 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
     std::lock_guard lock(listener_mutex_);
     if (event_listener_) event_listener_(e);
   });
+  // Without a configuration file the sequence can only live in the data directory.
+  if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
+    spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
+                 "again from 1; name certificates.sequence_file in a configuration file (--config)", certificate_sequence_path(config));
   // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
   // joined program, duration, segments, and the estimators a campaign of it runs by default (the
   // builder offers those, so the rule lives in one place: check_campaign).
@@ -384,6 +389,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     if (action == "allan" || action == "thermal" || action == "evaluation") {
       if (auto r = only("GET")) return *r;
       return campaign_analysis(*id, action);
+    }
+    if (action == "certificate") {
+      if (auto r = only("GET")) return *r;
+      return campaign_certificate(*id);
     }
     if (action == "accept") {
       if (auto r = only("POST")) return *r;
@@ -614,6 +623,41 @@ HttpReply Api::campaign_detail(std::int64_t id) {
   }
   out["imu_serial"] = serial;
   return json_reply(200, out);
+}
+
+HttpReply Api::campaign_certificate(std::int64_t id) {
+  const auto reply = [](const CertificateRow& c) {
+    json out = {{"campaign_id", c.campaign_id}, {"number", c.number}, {"sequence", c.sequence},
+                {"issued", iso8601_utc(c.issued_ms)}};
+    const json bench = parse_or_null(c.bench_json);
+    if (bench.is_object()) out.update(bench);
+    return json_reply(200, out);
+  };
+  std::lock_guard lock(certificate_mutex_);
+  if (const auto existing = db_.certificate(id)) return reply(*existing);
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  // A number is for a run whose results are final: one still running (or interrupted, which can
+  // resume) could change after its certificate was signed.
+  if (!is_final(row->state) || !row->ended_ms)
+    return error_reply(409, "campaign " + std::to_string(id) + " has not ended (state " + std::string(to_string(row->state)) +
+                                "): a certificate is issued only for an ended run with a model");
+  if (!row->model_json)
+    return error_reply(409, "campaign " + std::to_string(id) + " ended without a model: there is nothing to certify");
+  CertificateRow c;
+  c.campaign_id = id;
+  try {
+    c.sequence = certificate_sequence_.next(db_.max_certificate_sequence());
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: no certificate number: {}", id, e.what());
+    return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
+  }
+  c.issued_ms = now_unix_ms();
+  c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
+  c.bench_json = certificate_bench_json(config_, *row->ended_ms).dump();
+  db_.insert_certificate(c);
+  spdlog::info("campaign {}: certificate {} issued (sequence file {})", id, c.number, certificate_sequence_.path());
+  return reply(c);
 }
 
 HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {

@@ -16,6 +16,7 @@
 
 #include "daemon/service/analysis_jobs.hpp"
 #include "daemon/service/auth.hpp"
+#include "daemon/service/certificates.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/daemon_db.hpp"
 #include "daemon/service/limits_file.hpp"
@@ -76,6 +77,9 @@ class Api {
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
   // GET /api/compare?a=ID&b=ID: two runs' models side by side (acceptance.hpp compare_json).
   HttpReply compare_campaigns(const std::map<std::string, std::string>& query);
+  // GET /api/campaigns/{id}/certificate: the campaign's certificate number, issued on the first
+  // request (ended runs with a model only), then always the same.
+  HttpReply campaign_certificate(std::int64_t id);
   // PUT /api/limits: the whole limits file replaced by an operator.
   HttpReply replace_limits(const ApiRequest& request, const Principal& who);
 
@@ -84,6 +88,8 @@ class Api {
   Sequencer& sequencer_;
   Auth& auth_;
   LimitsFile limits_;
+  CertificateSequence certificate_sequence_;
+  std::mutex certificate_mutex_;  // a campaign's number is looked up and issued as one step
   nlohmann::json programs_;  // built once: the built-in programs do not change
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;

@@ -1,6 +1,8 @@
 #include "daemon/service/config.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <sstream>
@@ -124,6 +126,68 @@ void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems
   if (auto v = r.integer("max_files", 1, 1000)) c.log.max_files = static_cast<int>(*v);
 }
 
+// "YYYY-MM-DD" naming a day of the Gregorian calendar.
+bool is_date(const std::string& text) {
+  if (text.size() != 10 || text[4] != '-' || text[7] != '-') return false;
+  for (std::size_t i : {0, 1, 2, 3, 5, 6, 8, 9})
+    if (text[i] < '0' || text[i] > '9') return false;
+  const int year = std::stoi(text.substr(0, 4)), month = std::stoi(text.substr(5, 2)), day = std::stoi(text.substr(8, 2));
+  if (month < 1 || month > 12 || day < 1) return false;
+  const bool leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+  constexpr int kDays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+  return day <= kDays[month - 1] + (month == 2 && leap ? 1 : 0);
+}
+
+ReferenceInstrument read_instrument(const json& j, const std::string& where, std::vector<std::string>& problems) {
+  ObjectReader r(j, where, problems);
+  ReferenceInstrument out;
+  // A certificate must identify the instrument completely: each of these is required.
+  for (const auto& [key, target] : {std::pair<const char*, std::string*>{"make", &out.make},
+                                    {"model", &out.model},
+                                    {"serial", &out.serial},
+                                    {"calibration_due", &out.calibration_due}}) {
+    if (auto v = r.string(key, true)) {
+      if (v->find_first_not_of(" \t") == std::string::npos) problems.push_back(r.at(key) + " must not be empty");
+      else *target = *v;
+    }
+  }
+  if (!out.calibration_due.empty() && !is_date(out.calibration_due)) {
+    problems.push_back(r.at("calibration_due") + " must be a date YYYY-MM-DD, not \"" + out.calibration_due + "\"");
+    out.calibration_due.clear();
+  }
+  if (auto v = r.string("calibration_certificate")) out.calibration_certificate = *v;
+  return out;
+}
+
+void read_reference_equipment(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.reference_equipment", problems);
+  if (const json* v = r.get("table")) c.reference_equipment.table = read_instrument(*v, r.at("table"), problems);
+  if (const json* v = r.get("chamber")) c.reference_equipment.chamber = read_instrument(*v, r.at("chamber"), problems);
+}
+
+// Letters, digits and '-', starting with a letter or digit: it goes into file names and
+// certificate numbers as it is.
+bool is_prefix(const std::string& text) {
+  if (text.empty() || text.size() > 20 || !std::isalnum(static_cast<unsigned char>(text.front()))) return false;
+  return std::all_of(text.begin(), text.end(),
+                     [](char ch) { return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-'; });
+}
+
+void read_certificates(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.certificates", problems);
+  if (auto v = r.string("prefix")) {
+    if (!is_prefix(*v))
+      problems.push_back(r.at("prefix") + " must be 1 to 20 letters, digits or '-', starting with a letter or digit, not \"" +
+                         *v + "\"");
+    else
+      c.certificates.prefix = *v;
+  }
+  if (auto v = r.string("sequence_file")) {
+    if (v->empty()) problems.push_back(r.at("sequence_file") + " must name a file (relative to the configuration file or absolute)");
+    else c.certificates.sequence_file = *v;
+  }
+}
+
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
   if (!j.is_array()) {
     problems.push_back("config.users must be an array of {name, role, password_hash, token}");
@@ -239,6 +303,8 @@ DaemonConfig parse_config(const std::string& json_text, const std::string& sourc
       c.operator_token = *v;
     }
     if (const json* v = r.get("users")) read_users(*v, c, problems);
+    if (const json* v = r.get("reference_equipment")) read_reference_equipment(*v, c, problems);
+    if (const json* v = r.get("certificates")) read_certificates(*v, c, problems);
   }
   if (!problems.empty()) {
     std::string message = source + ": " + std::to_string(problems.size()) + " problem(s):";
@@ -253,7 +319,28 @@ DaemonConfig load_config_file(const std::string& path) {
   if (!in) throw ConfigError(path + ": cannot read the configuration file");
   std::stringstream text;
   text << in.rdbuf();
-  return parse_config(text.str(), path);
+  DaemonConfig c = parse_config(text.str(), path);
+  c.config_dir = std::filesystem::absolute(path).parent_path().string();
+  return c;
+}
+
+std::string certificate_prefix(const DaemonConfig& config) {
+  if (!config.certificates.prefix.empty()) return config.certificates.prefix;
+  std::string out;
+  for (char ch : config.site_name) {
+    if (std::isalnum(static_cast<unsigned char>(ch))) out += static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+    else if (!out.empty() && out.back() != '-') out += '-';
+  }
+  if (out.size() > 20) out.resize(20);
+  while (!out.empty() && out.back() == '-') out.pop_back();
+  return out.empty() ? "IMUCAL" : out;
+}
+
+std::string certificate_sequence_path(const DaemonConfig& config) {
+  const std::filesystem::path file = config.certificates.sequence_file.empty() ? CertificateConfig::kDefaultSequenceFile
+                                                                               : config.certificates.sequence_file;
+  if (file.is_absolute()) return file.string();
+  return (std::filesystem::path(config.config_dir.empty() ? config.data_dir : config.config_dir) / file).string();
 }
 
 }  // namespace imucal::daemon

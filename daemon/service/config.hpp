@@ -82,8 +82,32 @@ struct CampaignLimits {
   double max_rate_hz = 4000.0;
 };
 
+// One instrument of the bench's reference equipment, as a calibration certificate names it.
+struct ReferenceInstrument {
+  std::string make, model, serial;
+  std::string calibration_due;          // "YYYY-MM-DD": when its own calibration runs out
+  std::string calibration_certificate;  // optional: its own certificate's number
+};
+
+// The reference equipment of the bench (`reference_equipment`): printed on every certificate.
+struct ReferenceEquipment {
+  std::optional<ReferenceInstrument> table, chamber;
+};
+
+// Certificate numbers (`certificates`, docs/daemon.md "Certificates"): PREFIX-YYYY-NNNNNN, the
+// sequence kept in a small file outside the data directory, so that a new data directory never
+// hands out a number again.
+struct CertificateConfig {
+  std::string prefix;         // empty: derived from the site's name (default_certificate_prefix)
+  std::string sequence_file;  // empty: kDefaultSequenceFile; relative: to the configuration file's directory
+  static constexpr const char* kDefaultSequenceFile = "imucal-certificate-sequence.json";
+};
+
 struct DaemonConfig {
   std::string site_name = "simulated lab";
+  // The directory of the configuration file this came from (empty: none was read); relative
+  // paths that belong to the site rather than to one data directory are resolved against it.
+  std::string config_dir;
   Site site;
   std::string data_dir = "./data";
   // Acceptance limits per part number (imucal-limits/1, daemon/service/acceptance.hpp); relative
@@ -104,11 +128,22 @@ struct DaemonConfig {
   std::string operator_token;
   std::vector<UserEntry> users;
   bool queue_autostart = true;  // run queued campaigns after a restart without an operator
+  ReferenceEquipment reference_equipment;
+  CertificateConfig certificates;
 };
 
 // Parses the configuration; throws ConfigError listing every problem. `source` names it in messages.
 DaemonConfig parse_config(const std::string& json_text, const std::string& source);
 DaemonConfig load_config_file(const std::string& path);
+
+// The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
+// every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most
+// 20 characters, else "IMUCAL".
+std::string certificate_prefix(const DaemonConfig& config);
+// The certificate sequence file: `certificates.sequence_file` (default kDefaultSequenceFile)
+// resolved against the configuration file's directory, or the data directory when the daemon
+// runs without a configuration file.
+std::string certificate_sequence_path(const DaemonConfig& config);
 
 // "HOST:PORT" (port 0: any free port). Throws ConfigError.
 void parse_listen(const std::string& text, std::string& host, std::uint16_t& port);

@@ -76,6 +76,16 @@ CREATE TABLE IF NOT EXISTS progress(
   json TEXT NOT NULL);
 CREATE INDEX IF NOT EXISTS progress_campaign ON progress(campaign_id);
 CREATE TABLE IF NOT EXISTS setting(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+-- A campaign's certificate number, issued once (docs/api.md "Certificates"); bench_json is what the
+-- certificate states about the bench as configured then. A table of its own, created where
+-- missing, so that databases of schema version 2 take it without a migration.
+CREATE TABLE IF NOT EXISTS certificate(
+  campaign_id INTEGER PRIMARY KEY REFERENCES campaign(id),
+  number TEXT NOT NULL UNIQUE,
+  sequence INTEGER NOT NULL,
+  issued_ms INTEGER NOT NULL,
+  bench_json TEXT NOT NULL
+);
 )sql";
 
 // A prepared statement, finalized when it goes out of scope. The daemon database sees a few
@@ -539,6 +549,28 @@ void DaemonDb::set_setting(const std::string& key, const std::string& value) {
   Stmt s(db_, path_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
   s.bind(1, key).bind(2, value);
   s.run();
+}
+
+std::optional<CertificateRow> DaemonDb::certificate(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE campaign_id = ?1");
+  s.bind(1, campaign_id);
+  if (!s.step()) return std::nullopt;
+  return CertificateRow{s.i64(0), s.text(1), s.i64(2), s.i64(3), s.text(4)};
+}
+
+void DaemonDb::insert_certificate(const CertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_,
+         "INSERT INTO certificate(campaign_id, number, sequence, issued_ms, bench_json) VALUES (?1, ?2, ?3, ?4, ?5)");
+  s.bind(1, row.campaign_id).bind(2, row.number).bind(3, row.sequence).bind(4, row.issued_ms).bind(5, row.bench_json);
+  s.run();
+}
+
+std::int64_t DaemonDb::max_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
+  return s.step() ? s.i64(0) : 0;
 }
 
 }  // namespace imucal::daemon

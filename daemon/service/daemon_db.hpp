@@ -53,6 +53,15 @@ struct CampaignUnit {
   std::string serial, part_number;
 };
 
+// The certificate number a campaign was given (issued once, then always the same).
+struct CertificateRow {
+  std::int64_t campaign_id = 0;
+  std::string number;         // "LAB-2026-000123"
+  std::int64_t sequence = 0;  // its site-wide sequence number (123)
+  std::int64_t issued_ms = 0;
+  std::string bench_json;     // certificate_bench_json() when it was issued
+};
+
 struct TransitionRow {
   std::int64_t t_ms = 0;
   std::optional<RunState> from;
@@ -134,6 +143,11 @@ class DaemonDb {
   void set_results(std::int64_t id, const std::string& results_json);
   void set_estimators(std::int64_t id, const std::string& estimators_json);
   void set_error(std::int64_t id, const std::string& error);
+
+  std::optional<CertificateRow> certificate(std::int64_t campaign_id);
+  void insert_certificate(const CertificateRow& row);
+  // The highest certificate sequence number this database has recorded (0: none).
+  std::int64_t max_certificate_sequence();
 
   std::optional<std::string> setting(const std::string& key);
   void set_setting(const std::string& key, const std::string& value);

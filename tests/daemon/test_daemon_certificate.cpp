@@ -1,0 +1,199 @@
+// Calibration certificates (issue 17, deliverable 5): numbers with the site's prefix that never
+// repeat (not across campaigns, not across a new data directory, not between two daemons sharing
+// the sequence file), the same number every time a campaign's certificate is asked for, no number
+// for a run that has not ended, and the bench a certificate states (reference equipment, gravity),
+// with the configuration's errors naming the field at fault.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <set>
+#include <thread>
+
+#include "core/earth.hpp"
+#include "daemon/service/certificates.hpp"
+#include "service_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+using imucal::daemon::CertificateSequence;
+using imucal::daemon::ConfigError;
+using imucal::daemon::parse_config;
+
+namespace {
+
+json certificate_campaign(const std::string& name, const std::string& serial) {
+  return {{"name", name},
+          {"program", "direct-short"},
+          {"rate_hz", 20},
+          {"seed", 7},
+          {"time_scale", 0},
+          {"truth", noisy_truth()},
+          {"estimators", {"direct"}},
+          {"imu", {{"serial", serial}, {"part_number", "PN-100"}}}};
+}
+
+// A campaign run to its end on the simulated bench.
+std::int64_t run_campaign(LocalDaemon& d, const std::string& name, const std::string& serial) {
+  const auto id = d.post_campaign(certificate_campaign(name, serial));
+  EXPECT_EQ(d.command(id, "start"), 200);
+  EXPECT_EQ(d.wait_final(id).at("state"), "done");
+  return id;
+}
+
+std::string certificate_target(std::int64_t id) { return "/api/campaigns/" + std::to_string(id) + "/certificate"; }
+
+// The configuration's message for `text` (empty when it is accepted).
+std::string config_error(const std::string& text) {
+  try {
+    parse_config(text, "test.json");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return {};
+}
+
+void configure(daemon::DaemonConfig& c, const std::string& sequence_file) {
+  c.certificates.prefix = "LAB";
+  c.certificates.sequence_file = sequence_file;
+  c.reference_equipment.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123"};
+  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", ""};
+  c.site.gravity_mps2 = 9.81912;
+}
+
+}  // namespace
+
+TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
+  const std::string sequence_file = scratch_dir("certificate-site") + "/sequence.json";
+  std::string first_number, second_number;
+  {
+    LocalDaemon d("certificate-a", false, [&](daemon::DaemonConfig& c) { configure(c, sequence_file); });
+    const auto a = run_campaign(d, "first", "FOG-7");
+    const auto b = run_campaign(d, "second", "FOG-8");
+
+    const auto ra = d.call("GET", certificate_target(a));
+    ASSERT_EQ(ra.status, 200) << ra.body;
+    const json ca = json::parse(ra.body);
+    first_number = ca.at("number");
+    EXPECT_TRUE(std::regex_match(first_number, std::regex("LAB-\\d{4}-\\d{6}"))) << first_number;
+    EXPECT_EQ(ca.at("campaign_id"), a);
+
+    // Asked again (by a viewer too): the same number, the same date of issue.
+    const auto again = d.call("GET", certificate_target(a), "", kViewerToken);
+    ASSERT_EQ(again.status, 200) << again.body;
+    EXPECT_EQ(json::parse(again.body).at("number"), first_number);
+    EXPECT_EQ(json::parse(again.body).at("issued"), ca.at("issued"));
+
+    const json cb = d.get(certificate_target(b));
+    second_number = cb.at("number");
+    EXPECT_NE(second_number, first_number);
+    EXPECT_EQ(cb.at("sequence").get<std::int64_t>(), ca.at("sequence").get<std::int64_t>() + 1);
+
+    // What the certificate states about the bench: the equipment with its due date judged against
+    // the day of the run, the simulated devices, the configured gravity.
+    EXPECT_TRUE(ca.at("simulated").get<bool>());
+    EXPECT_EQ(ca.at("reference_equipment").at("table").at("serial"), "T-0815");
+    EXPECT_EQ(ca.at("reference_equipment").at("table").at("calibration_certificate"), "DKD-123");
+    EXPECT_TRUE(ca.at("reference_equipment").at("table").at("overdue").get<bool>());
+    EXPECT_FALSE(ca.at("reference_equipment").at("chamber").at("overdue").get<bool>());
+    EXPECT_TRUE(ca.at("reference_equipment").at("chamber").at("calibration_certificate").is_null());
+    EXPECT_EQ(ca.at("gravity").at("source"), "configured");
+    EXPECT_DOUBLE_EQ(ca.at("gravity").at("value_mps2").get<double>(), 9.81912);
+
+    // No number for a run that has not ended, nor for a campaign that does not exist.
+    const auto pending = d.post_campaign(certificate_campaign("not run", "FOG-9"));
+    const auto refused = d.call("GET", certificate_target(pending));
+    EXPECT_EQ(refused.status, 409);
+    EXPECT_NE(json::parse(refused.body).at("error").get<std::string>().find("has not ended (state created)"),
+              std::string::npos)
+        << refused.body;
+    EXPECT_EQ(d.call("GET", certificate_target(9999)).status, 404);
+    EXPECT_EQ(d.call("POST", certificate_target(a)).status, 405);
+  }
+  // A new data directory, the same site's sequence file: the count goes on.
+  LocalDaemon fresh("certificate-b", false, [&](daemon::DaemonConfig& c) {
+    configure(c, sequence_file);
+    c.site.gravity_mps2.reset();
+  });
+  const auto c = run_campaign(fresh, "after a new data directory", "FOG-7");
+  const json cc = fresh.get(certificate_target(c));
+  const std::string third_number = cc.at("number");
+  EXPECT_NE(third_number, first_number);
+  EXPECT_NE(third_number, second_number);
+  EXPECT_EQ(third_number.substr(third_number.size() - 6), "000003") << third_number;
+  EXPECT_EQ(cc.at("gravity").at("source"), "normal_gravity");
+  EXPECT_DOUBLE_EQ(cc.at("gravity").at("value_mps2").get<double>(), earth::site_gravity_mps2(fresh.config.site));
+}
+
+TEST(Certificate, SequenceFileIsSharedSafelyAndNeverGoesBack) {
+  const std::string dir = scratch_dir("certificate-sequence");
+  const std::string path = dir + "/sequence.json";
+  // Two daemons on one site: each takes numbers through its own descriptor of the lock file.
+  CertificateSequence one(path), two(path);
+  std::vector<std::int64_t> got_one, got_two;
+  std::thread t1([&] { for (int i = 0; i < 40; ++i) got_one.push_back(one.next(0)); });
+  std::thread t2([&] { for (int i = 0; i < 40; ++i) got_two.push_back(two.next(0)); });
+  t1.join();
+  t2.join();
+  std::set<std::int64_t> all(got_one.begin(), got_one.end());
+  all.insert(got_two.begin(), got_two.end());
+  EXPECT_EQ(all.size(), 80u);
+  EXPECT_EQ(*all.rbegin(), 80);
+  EXPECT_EQ(one.last(), 80);
+
+  // A sequence file behind the database (restored from an old backup) does not go back.
+  EXPECT_EQ(one.next(500), 501);
+  EXPECT_EQ(one.next(0), 502);
+
+  // A damaged file stops the numbering and says which file.
+  std::ofstream(path) << "{\"last\": ";
+  try {
+    one.next(0);
+    ADD_FAILURE() << "a damaged sequence file was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(daemon::certificate_number("LAB", 2026, 123), "LAB-2026-000123");
+  EXPECT_EQ(daemon::certificate_number("LAB", 2026, 1234567), "LAB-2026-1234567");
+}
+
+TEST(Certificate, ConfigurationNamesTheFieldAtFault) {
+  const std::string good_table =
+      R"("table": {"make": "Acme", "model": "ATS-3", "serial": "T-1", "calibration_due": "2027-02-28"})";
+  const daemon::DaemonConfig ok = parse_config(R"({"reference_equipment": {)" + good_table +
+                                                   R"(}, "certificates": {"prefix": "LAB-1"}})", "ok.json");
+  ASSERT_TRUE(ok.reference_equipment.table.has_value());
+  EXPECT_EQ(ok.reference_equipment.table->calibration_due, "2027-02-28");
+  EXPECT_FALSE(ok.reference_equipment.chamber.has_value());
+  EXPECT_EQ(daemon::certificate_prefix(ok), "LAB-1");
+
+  const std::string missing = config_error(
+      R"({"reference_equipment": {"chamber": {"make": "ClimaCo", "model": "CC", "calibration_due": "2027-01-01"}}})");
+  EXPECT_NE(missing.find("config.reference_equipment.chamber.serial is required"), std::string::npos) << missing;
+  const std::string bad_date = config_error(
+      R"({"reference_equipment": {"table": {"make": "A", "model": "B", "serial": "C", "calibration_due": "2027-02-30"}}})");
+  EXPECT_NE(bad_date.find("config.reference_equipment.table.calibration_due must be a date YYYY-MM-DD, not \"2027-02-30\""),
+            std::string::npos)
+      << bad_date;
+  const std::string empty = config_error(
+      R"({"reference_equipment": {"table": {"make": " ", "model": "B", "serial": "C", "calibration_due": "2027-01-01"}}})");
+  EXPECT_NE(empty.find("config.reference_equipment.table.make must not be empty"), std::string::npos) << empty;
+  const std::string typo = config_error(R"({"reference_equipment": {"tabel": {}}})");
+  EXPECT_NE(typo.find("tabel"), std::string::npos) << typo;
+  const std::string prefix = config_error(R"({"certificates": {"prefix": "LAB 1"}})");
+  EXPECT_NE(prefix.find("config.certificates.prefix must be"), std::string::npos) << prefix;
+
+  // Defaults: the prefix from the site's name, the sequence file beside the configuration file.
+  daemon::DaemonConfig d = parse_config(R"({"site": {"name": "Lab 2 / hall B"}})", "x");
+  EXPECT_EQ(daemon::certificate_prefix(d), "LAB-2-HALL-B");
+  d.site_name = "";
+  EXPECT_EQ(daemon::certificate_prefix(d), "IMUCAL");
+  const std::string dir = scratch_dir("certificate-config");
+  std::ofstream(dir + "/imucald.json") << R"({"certificates": {"sequence_file": "seq/numbers.json"}})";
+  EXPECT_EQ(daemon::certificate_sequence_path(daemon::load_config_file(dir + "/imucald.json")),
+            (std::filesystem::absolute(dir) / "seq/numbers.json").string());
+  std::ofstream(dir + "/plain.json") << "{}";
+  EXPECT_EQ(daemon::certificate_sequence_path(daemon::load_config_file(dir + "/plain.json")),
+            (std::filesystem::absolute(dir) / "imucal-certificate-sequence.json").string());
+}
