@@ -71,6 +71,9 @@ function passwordHash(password) {
 fs.writeFileSync(path.join(tmp, 'imucald.json'), JSON.stringify({
   _comment: 'browser test: simulated devices, one viewer; the operator signs in with the generated token',
   site: { name: 'browser test lab' },
+  // Certificate numbers BROWSER-LAB-YYYY-NNNNNN, the sequence beside this file.
+  certificates: { prefix: 'BROWSER-LAB' },
+  reference_equipment: { table: { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: '2020-01-31' } },
   // Only hashes go into a configuration: made by `imucal passwd` (beside imucald), as a lab would.
   users: [{ name: VIEWER.user, role: 'viewer', password_hash: passwordHash(VIEWER.password) }],
   http: { web_dir: webDir },
@@ -356,18 +359,36 @@ try {
   const [cert] = await Promise.all([page.context().waitForEvent('page'), page.click('#certificate')]);
   await cert.waitForSelector('#certificate[data-ready="true"]');
   const certText = await cert.textContent('#certificate');
-  for (const expected of ['Calibration certificate', 'browser test lab', `IMUCAL-${id}-`, 'FOG-BROWSER-1', 'PN-BROWSER', 'browser test: direct-short', 'Gyro bias', 'bias_dph.x', 'Accelerometer scale factor'])
+  for (const expected of ['Calibration certificate', 'browser test lab', 'FOG-BROWSER-1', 'PN-BROWSER', 'browser test: direct-short',
+    'Gyro bias, x axis', 'gyro.bias_dph.x', 'Accelerometer scale factor', 'u (k = 1)', 'U (k = 2)', 'coverage factor k = 2',
+    'not determined', 'Simulated three-axis rate table', 'normal gravity formula at latitude',
+    'No acceptance limits for part number PN-BROWSER', 'u = D · S · i + b + n', 'right-handed', 'instrument frame'])
     assert.ok(certText.includes(expected), `the certificate shows ${expected}`);
+  assert.ok(!certText.includes('CONVENTIONS.md'), 'the conventions are stated, not referred to');
+  const certNumber = (await cert.textContent('#certificate-number')).trim();
+  assert.match(certNumber, /^BROWSER-LAB-\d{4}-\d{6}$/, 'the number carries the configured prefix');
+  // The expanded uncertainty beside the standard one: twice it (both printed to two digits).
+  const [u1, u2] = await cert.$$eval('#certificate-coefficients tr[data-key="gyro.bias_dph.x"] td.num',
+    (tds) => [Number(tds[1].textContent), Number(tds[2].textContent)]);
+  assert.ok(u1 > 0 && Math.abs(u2 / u1 - 2) < 0.1, `U (k = 2) ${u2} is twice u (k = 1) ${u1}`);
+  assert.equal(await cert.$('#certificate-verdict'), null, 'no PASS or FAIL without limits');
+  // Opened again: the same number.
+  await cert.reload();
+  await cert.waitForSelector('#certificate[data-ready="true"]');
+  assert.equal((await cert.textContent('#certificate-number')).trim(), certNumber, 'the same campaign keeps its number');
   await cert.setViewportSize({ width: 1366, height: 768 });
   await shot(cert, '08-certificate');
-  await cert.pdf({ path: path.join(outDir, `certificate-campaign-${id}.pdf`), format: 'A4', printBackground: true });
   const [certDownload] = await Promise.all([cert.waitForEvent('download'), cert.click('#save-html')]);
   const certFile = path.join(outDir, `certificate-campaign-${id}.html`);
   await certDownload.saveAs(certFile);
   const certHtml = fs.readFileSync(certFile, 'utf8');
   assert.ok(certHtml.includes('Calibration certificate') && certHtml.includes('@page') && !certHtml.includes('<script'), 'the saved certificate is self-contained');
+  const pdfFile = path.join(outDir, `certificate-campaign-${id}.pdf`);
+  await cert.pdf({ path: pdfFile, format: 'A4', printBackground: true, preferCSSPageSize: true });
+  const pdfPages = (fs.readFileSync(pdfFile, 'latin1').match(/\/Type\s*\/Page\b/g) || []).length;
+  assert.equal(pdfPages, 1, 'the certificate of a direct run prints on one A4 page');
   await cert.close();
-  log('certificate rendered and saved as self-contained HTML');
+  log(`certificate ${certNumber} rendered, printed to one A4 page and saved as self-contained HTML`);
 
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
   // Posted with the API (the builder was covered above), as fast as the machine goes, at a low
@@ -522,6 +543,42 @@ try {
   await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '09e-results-verdict');
   log('results: the verdict per coefficient against PN-BROWSER\'s limits');
+  // Its certificate: FAIL in the title block, the limits and the result per limited coefficient.
+  await page.goto(`${base}/certificate.html?id=${again.body.id}`);
+  await page.waitForSelector('#certificate[data-ready="true"]');
+  assert.equal((await page.textContent('#certificate-verdict')).trim(), 'FAIL');
+  assert.match(await page.textContent('#certificate-verdict-text'), /outside the acceptance limits of part number PN-BROWSER/);
+  assert.match(await page.textContent('#certificate-coefficients tr[data-key="gyro.delay_us.x"]'), /not determined.*FAIL: not determined by this run/);
+  assert.match(await page.textContent('#certificate-coefficients tr[data-key="gyro.bias_dph.x"]'), /\|value\| ≤ 1\.000; u ≤ 0\.1000\s*pass/);
+  const againNumber = (await page.textContent('#certificate-number')).trim();
+  assert.notEqual(againNumber, certNumber, 'another campaign, another number');
+  await shot(page, '08b-certificate-verdict');
+  log(`certificate ${againNumber}: FAIL against PN-BROWSER's limits, per coefficient`);
+
+  // A run stopped early: its certificate says partial in the title block, with why and when.
+  const stoppedRun = await apiCall('POST', '/api/campaigns', { name: 'browser test: stopped early', program: 'direct-short', rate_hz: 20,
+    seed: 12, time_scale: 40, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-2', part_number: 'PN-BROWSER' } });
+  assert.equal(stoppedRun.status, 201, JSON.stringify(stoppedRun.body));
+  assert.equal((await apiCall('POST', `/api/campaigns/${stoppedRun.body.id}/start`, {})).status, 200);
+  for (let i = 0; ; i++) {
+    const c = (await apiCall('GET', `/api/campaigns/${stoppedRun.body.id}`)).body;
+    if (c.program_time_s > 0.8 * c.duration_s) break;
+    assert.ok(i < 2400 && !['done', 'failed', 'aborted'].includes(c.state), `the run to stop is ${c.state} at try ${i}`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  assert.equal((await apiCall('POST', `/api/campaigns/${stoppedRun.body.id}/stop`, {})).status, 200);
+  for (let i = 0; ; i++) {
+    const c = (await apiCall('GET', `/api/campaigns/${stoppedRun.body.id}`)).body;
+    if (c.state === 'done') break;
+    assert.ok(i < 1200 && !['failed', 'aborted'].includes(c.state), `the stopped run ended ${c.state}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  await page.goto(`${base}/certificate.html?id=${stoppedRun.body.id}`);
+  await page.waitForSelector('#certificate[data-ready="true"]');
+  assert.equal((await page.textContent('#certificate-partial')).trim(), 'PARTIAL');
+  assert.match(await page.textContent('#certificate-partial-reason'), /^Partial run: stopped at \d+ % of the program \(stop by /);
+  await shot(page, '08c-certificate-partial');
+  log('certificate of a stopped run: PARTIAL in its title block, with why and when');
 
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });

@@ -177,3 +177,110 @@ test('the builder\'s prediction: each coefficient from the last stage that has i
   const relaxed = predictionRows(prediction, { ...SEED_TARGETS, 'accel.scale_ppm': 5, 'gyro.delay_us': 2 });
   assert.equal(summary(relaxed).met, 3);
 });
+
+test('certificate rows: names with units, k = 2 beside k = 1, "not determined" instead of zeros, the verdict per coefficient', async () => {
+  const { certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText, COVERAGE_K } =
+    await import('../../web/js/certificate_rows.mjs');
+  const { coefficientName } = await import('../../web/js/coefficients.mjs');
+  assert.equal(coefficientName('gyro.bias_dph.x'), 'Gyro bias, x axis');
+  assert.equal(coefficientName('accel.misalignment_arcsec.yz'), 'Accelerometer misalignment, sensor y about z');
+  assert.equal(coefficientName('accel.lever_arm_mm.y.z'), 'Proof-mass offset of accelerometer y, z component');
+  assert.equal(coefficientName('gyro.noise.bias_instability_dph'), 'Gyro bias instability');
+  // A direct run: delays and proof-mass offsets carried over (sigma 0), bias instability not
+  // estimated (0, noise terms have no sigma), one misalignment whose sigma is null.
+  const model = {
+    format: 'imucal-imu-model/1', frame: 'instrument',
+    gyro: { bias_dph: [0.06, -0.03, 0.02], scale_pos_ppm: [20, -10, 5], delay_us: [0, 0, 0],
+      noise: { arw_deg_rth: 0.0005, bias_instability_dph: 0 } },
+    accel: { bias_mps2: [1e-4, 2e-4, -1e-4], misalignment_arcsec: { xy: 3, xz: 4 }, lever_arm_mm: { y: [0, 0, 0], z: [0, 0, 0] } },
+    sigma: { gyro: { bias_dph: [0.001, 0.001, 0.002], scale_pos_ppm: [1, 1, 1], delay_us: [0, 0, 0] },
+      accel: { bias_mps2: [1e-6, 1e-6, 1e-6], misalignment_arcsec: { xy: 0.5, xz: null }, lever_arm_mm: { y: [0, 0, 0], z: [0, 0, 0] } } },
+  };
+  const verdict = { part_number: 'PN-1', pass: false, limits: 'limits.json', failures: 2, coefficients: [
+    { key: 'gyro.bias_dph.x', value: 0.06, sigma: 0.001, limit_value: 0.05, limit_sigma: 0.002, pass: false, reason: '|value| 0.06 > limit 0.05' },
+    { key: 'gyro.bias_dph.y', value: -0.03, sigma: 0.001, limit_value: 0.05, limit_sigma: null, pass: true, reason: '' },
+    { key: 'accel.lever_arm_mm.y.x', value: 0, sigma: 0, limit_value: 1, limit_sigma: null, pass: false, reason: 'not determined by this run' },
+  ] };
+  const rows = certificateRows(model, verdict);
+  const byKey = Object.fromEntries(rows.map((r) => [r.key, r]));
+  const bx = byKey['gyro.bias_dph.x'];
+  assert.equal(bx.name, 'Gyro bias, x axis');
+  assert.equal(bx.unit, '°/h');
+  assert.equal(COVERAGE_K, 2);
+  assert.equal(bx.u, 0.001);
+  assert.equal(bx.U, 0.002, 'expanded uncertainty is 2 u');
+  assert.equal(byKey['gyro.bias_dph.z'].U, 0.004);
+  // Not determined: never a zero.
+  assert.equal(byKey['gyro.noise.bias_instability_dph'].value, null);
+  assert.equal(byKey['gyro.noise.bias_instability_dph'].determined, false);
+  assert.equal(byKey['gyro.noise.arw_deg_rth'].value, 0.0005);
+  assert.equal(byKey['gyro.noise.arw_deg_rth'].u, null, 'noise terms carry no uncertainty');
+  assert.equal(byKey['accel.misalignment_arcsec.xz'].value, null, 'no sigma: not determined');
+  assert.equal(byKey['accel.misalignment_arcsec.xz'].U, null);
+  assert.equal(byKey['accel.misalignment_arcsec.xy'].U, 1);
+  // A group the run determined nothing of is one row, unless a limit applies to one of its members.
+  assert.equal(byKey['gyro.delay_us'].collapsed, true);
+  assert.equal(byKey['gyro.delay_us'].count, 3);
+  assert.equal(byKey['gyro.delay_us.x'], undefined);
+  assert.equal(byKey['accel.lever_arm_mm'], undefined);
+  assert.equal(byKey['accel.lever_arm_mm.y.x'].value, null);
+  assert.equal(byKey['accel.lever_arm_mm.y.x'].pass, false);
+  assert.equal(byKey['accel.lever_arm_mm.y.x'].reason, 'not determined by this run');
+  // The verdict per coefficient, with its limits.
+  assert.equal(bx.pass, false);
+  assert.equal(bx.limit, '|value| ≤ 0.05000; u ≤ 0.002000');
+  assert.equal(byKey['gyro.bias_dph.y'].pass, true);
+  assert.equal(byKey['gyro.bias_dph.y'].limit, '|value| ≤ 0.05000');
+  assert.equal(byKey['gyro.bias_dph.z'].pass, null, 'no limit: not judged');
+  assert.deepEqual(verdictStatement(verdict, 'PN-1'),
+    { status: 'FAIL', text: '2 coefficients outside the acceptance limits of part number PN-1 (limits: limits.json)' });
+  assert.equal(verdictStatement({ ...verdict, pass: true, failures: 0 }, 'PN-1').status, 'PASS');
+  assert.deepEqual(verdictStatement(null, 'PN-7'), { status: null, text: 'No acceptance limits for part number PN-7' });
+  assert.match(verdictStatement(null, '').text, /No part number/);
+  // Without a verdict nothing is judged.
+  assert.ok(certificateRows(model, null).every((r) => r.pass === null && r.limit === ''));
+
+  // A partial run says why, a complete one nothing.
+  assert.equal(partialStatement({ state: 'done', complete: true }), null);
+  assert.equal(partialStatement({ state: 'running', complete: false }), null);
+  const stopped = partialStatement({ state: 'done', complete: false, progress: 0.594,
+    transitions: [{ to: 'running', reason: 'start by alice', t: '2026-01-01T10:00:00Z' },
+      { to: 'stopping', reason: 'stop by alice', t: '2026-01-01T14:03:00Z' }] });
+  assert.match(stopped, /^stopped at 59 % of the program \(stop by alice, \d\d:\d\d:\d\d\)$/);
+  assert.match(partialStatement({ state: 'failed', complete: false, progress: 0.2, error: 'table fault' }), /failed at 20 % .*table fault/);
+
+  // Reference equipment: simulated said so; real with an overdue instrument marked.
+  assert.match(equipmentLines({ simulated: true, devices: 'sim' })[0].text, /Simulated three-axis rate table/);
+  const real = equipmentLines({ simulated: false, devices: 'real', reference_equipment: {
+    table: { make: 'Acme', model: 'ATS-3', serial: 'T-1', calibration_due: '2020-01-31', calibration_certificate: null, overdue: true },
+    chamber: null } });
+  assert.equal(real[0].overdue, true);
+  assert.match(real[0].text, /Acme ATS-3, serial number T-1; calibration due 2020-01-31 — OVERDUE/);
+  assert.equal(real[1].missing, true);
+  assert.match(gravityStatement({ value_mps2: 9.81912, source: 'configured' }), /^9\.8191200 m\/s², configured/);
+  assert.match(gravityStatement({ value_mps2: 9.8191, source: 'normal_gravity', latitude_deg: 59.94, height_m: 10 }), /normal gravity formula at latitude 59\.94/);
+  const conventions = conventionsText('instrument').join(' ');
+  for (const words of ['u = D · S · i + b + n', 'instrument frame', 'right-handed', 'ppm', 'arc seconds'])
+    assert.ok(conventions.includes(words), words);
+  assert.ok(!conventions.includes('CONVENTIONS.md'), 'stated, not referred to');
+});
+
+test('certificate numbers: uncertainties to two significant digits, the estimate to the same decimal place', async () => {
+  const { roundedNumbers } = await import('../../web/js/certificate_rows.mjs');
+  assert.deepEqual(roundedNumbers({ value: 0.0123456, u: 0.000345, U: 0.00069 }), { value: '0.01235', u: '0.00035', U: '0.00069' });
+  assert.deepEqual(roundedNumbers({ value: 12.3456, u: 1.234, U: 2.468 }), { value: '12.3', u: '1.2', U: '2.5' });
+  assert.deepEqual(roundedNumbers({ value: -153.7, u: 12.5, U: 25 }), { value: '-154', u: '13', U: '25' });
+  // Below six decimals: exponent form, the estimate at u's place, never fewer digits than u's two.
+  assert.deepEqual(roundedNumbers({ value: 9.8364e-12, u: 1.3e-11, U: 2.6e-11 }), { value: '1.0e-11', u: '1.3e-11', U: '2.6e-11' });
+  assert.deepEqual(roundedNumbers({ value: 3.5e-3, u: 1.2e-9, U: 2.4e-9 }), { value: '3.5000000e-3', u: '1.2e-9', U: '2.4e-9' });
+  assert.deepEqual(roundedNumbers({ value: -4.2e-9, u: 3.1e-8, U: 6.2e-8 }), { value: '-0.4e-8', u: '3.1e-8', U: '6.2e-8' });
+  // No uncertainty (a noise term): three significant digits; not determined: nothing.
+  assert.deepEqual(roundedNumbers({ value: 0.00183361, u: null, U: null }), { value: '0.00183', u: null, U: null });
+  assert.deepEqual(roundedNumbers({ value: null, u: null, U: null }), { value: null, u: null, U: null });
+});
+
+test('certificate numbers: a row is in one form, fixed or exponent', async () => {
+  const { roundedNumbers } = await import('../../web/js/certificate_rows.mjs');
+  // u needs exponent form (its second digit below the sixth decimal), so U does too, although it alone would not.
+  assert.deepEqual(roundedNumbers({ value: 1.96e-5, u: 5.5e-6, U: 1.1e-5 }), { value: '1.96e-5', u: '5.5e-6', U: '1.1e-5' });
+});

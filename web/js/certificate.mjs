@@ -1,10 +1,16 @@
-// A printable calibration certificate for one campaign (certificate.html?id=N): the IMU, date,
-// site, campaign and coefficients with their 1-sigma uncertainties, laid out for an A4 page.
+// A printable calibration certificate for one campaign (certificate.html?id=N), laid out for one
+// A4 page: its number (issued by the daemon), the unit, the dates, the site and its gravity, the
+// reference equipment, the coefficients by name with standard (k = 1) and expanded (k = 2)
+// uncertainties, the verdict against the part number's limits, a partial run marked as such, and
+// the conventions. What it says is built by certificate_rows.mjs (pure, unit-tested).
 // "Download HTML" saves it as one self-contained file (styles inlined, no scripts), so it can be
 // archived or mailed and still print the same.
 import { api, ApiError } from './api.mjs';
-import { h, clear, dateTime, num, FINAL_STATES } from './format.mjs';
-import { coefficientRows } from './coefficients.mjs';
+import { h, clear, dateTime, num } from './format.mjs';
+import {
+  certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText,
+  roundedNumbers, UNCERTAINTY_TEXT, COVERAGE_K, NOT_DETERMINED,
+} from './certificate_rows.mjs';
 
 const sheet = document.getElementById('certificate');
 const message = document.getElementById('toolbar-message');
@@ -19,10 +25,12 @@ async function load() {
     return;
   }
   const get = (path) => api('GET', path, undefined, { auth: false });
-  let detail, model, status;
+  let detail, model, status, cert;
   try {
     [detail, status] = await Promise.all([get(`/api/campaigns/${id}`), get('/api/status')]);
     model = await get(`/api/campaigns/${id}/model`);
+    // The number is issued on the first request and the same ever after (docs/api.md "Certificates").
+    cert = await get(`/api/campaigns/${id}/certificate`);
   } catch (e) {
     const text = e instanceof ApiError && e.status === 401
       ? 'Sign in to imucal first (in the main page), then reload this page.'
@@ -30,56 +38,99 @@ async function load() {
     clear(sheet).append(h('p', { class: 'error', id: 'certificate-error' }, text));
     return;
   }
-  render(detail, model, status);
+  render(detail, model, status, cert);
 }
 
-function render(d, model, status) {
-  const ended = d.ended || d.created;
-  const day = (ended || '').slice(0, 10).replace(/-/g, '');
-  const number = `IMUCAL-${d.id}-${day}`;
+function coefficientTable(rows, judged) {
+  const head = ['Coefficient', 'Estimate', 'u (k = 1)', `U (k = ${COVERAGE_K})`, 'Unit', ...(judged ? ['Limit', 'Result'] : [])];
+  const body = h('tbody');
+  for (const r of rows) {
+    const name = h('td', { class: 'name' }, r.name, ' ', h('span', { class: 'key' }, r.collapsed ? `${r.key}.*` : r.key));
+    // What the run did not estimate is said once across the three number columns.
+    // Rounded as certificates round (roundedNumbers); what the run did not estimate is said once
+    // across the three number columns, a noise term's missing uncertainty once across two.
+    const n = roundedNumbers(r);
+    const numbers = !r.determined
+      ? [h('td', { class: 'nd', colspan: 3 }, r.collapsed ? `${NOT_DETERMINED} (all ${r.count})` : NOT_DETERMINED)]
+      : n.u === null ? [h('td', { class: 'num' }, n.value), h('td', { class: 'nd', colspan: 2 }, 'no uncertainty (noise term)')]
+        : [h('td', { class: 'num' }, n.value), h('td', { class: 'num' }, n.u), h('td', { class: 'num' }, n.U)];
+    const tr = h('tr', { dataset: { key: r.key }, class: r.pass === false ? 'fail' : null }, name, ...numbers, h('td', {}, r.unit));
+    if (judged) {
+      // Each limit on one line at most: a wrap comes only between the value's and u's.
+      const parts = r.limit ? r.limit.split('; ') : [];
+      tr.append(h('td', { class: 'limit' }, ...parts.flatMap((t, i) => [i ? '; ' : null, h('span', {}, t)])),
+        h('td', { class: `result ${r.pass === null ? '' : r.pass ? 'pass' : 'fail'}` },
+          r.pass === null ? '' : r.pass ? 'pass' : `FAIL${r.reason ? `: ${r.reason}` : ''}`));
+    }
+    body.append(tr);
+  }
+  return h('table', { class: judged ? 'coefficients judged' : 'coefficients', id: 'certificate-coefficients' },
+    h('thead', {}, h('tr', {}, ...head.map((t, i) => h('th', { class: i >= 1 && i <= 3 ? 'num' : null }, t)))), body);
+}
+
+function factsTable(facts) {
+  const body = h('tbody');
+  const cells = ([k, v], span) => [h('th', {}, k), h('td', { dataset: { fact: k }, colspan: span }, v)];
+  for (let i = 0; i < facts.length; i++) {
+    const [, , cls, wide] = facts[i];
+    const next = facts[i + 1];
+    if (!wide && next && !next[3]) {
+      body.append(h('tr', { class: cls }, ...cells(facts[i]), ...cells(next)));
+      i++;
+    } else {
+      body.append(h('tr', { class: cls }, ...cells(facts[i], 3)));
+    }
+  }
+  return h('table', { class: 'facts' }, body);
+}
+
+function render(d, model, status, cert) {
+  const number = cert.number;
   const site = status.site || {};
-  const simulated = (status.devices || '').startsWith('sim');
   // The serial the run file records (GET /api/campaigns/{id}: imu_serial): the campaign's unit's
   // when it names one.
   const serial = d.imu_serial || d.imu?.serial || null;
   const unit = d.imu || {};
   document.title = `Calibration certificate ${number}`;
-  const rows = coefficientRows(model, null).filter((r) => r.estimated && (r.sigma !== null || r.group === 'Noise'));
-  const body = h('tbody');
-  let group = null;
-  for (const r of rows) {
-    if (r.group !== group) {
-      group = r.group;
-      body.append(h('tr', { class: 'group' }, h('th', { colspan: 4 }, group)));
-    }
-    body.append(h('tr', {}, h('td', {}, r.name.split('.').slice(1).join('.')), h('td', { class: 'num' }, num(r.estimate, 5)),
-      h('td', { class: 'num' }, r.sigma === null ? '—' : `± ${num(r.sigma, 2)}`), h('td', {}, r.unit)));
-  }
+  const rows = certificateRows(model, d.verdict);
+  const verdict = verdictStatement(d.verdict, unit.part_number);
+  const partial = partialStatement(d);
+  const equipment = equipmentLines(cert);
+  // [label, text, class, wide]: short facts share a line two by two, wide ones take a line.
   const facts = [
-    ['Certificate number', number],
     ['IMU serial number', serial || 'not recorded (the campaign was never started)'],
     ...[['Part number', unit.part_number], ['Firmware', unit.firmware], ['Customer', unit.customer]].filter(([, v]) => v),
-    ['Date of calibration', `${dateTime(d.started)} – ${dateTime(d.ended)} (local time)`],
-    ['Date of issue', dateTime(new Date().toISOString())],
-    ['Site', `${site.name || '—'}; latitude ${num(site.latitude_deg, 6)}°, longitude ${num(site.longitude_deg, 6)}°, height ${num(site.height_m, 4)} m; middle axis azimuth ${num(site.middle_axis_azimuth_deg, 4)}°`],
-    ['Campaign', `${d.id} "${d.name}", program ${d.program}, ${d.frames ?? '—'} frames (${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad)`],
+    ['Date of calibration', `${dateTime(d.started)} – ${dateTime(d.ended)} (local time)`, null, true],
+    ['Date of issue', dateTime(cert.issued)],
+    ['Final state', d.state + (d.error ? ` (${d.error})` : '')],
+    ['Site', `${site.name || '—'}; latitude ${num(site.latitude_deg, 6)}°, longitude ${num(site.longitude_deg, 6)}°, height ${num(site.height_m, 4)} m; table azimuth ${num(site.middle_axis_azimuth_deg, 4)}°`, null, true],
+    ['Gravity', gravityStatement(cert.gravity), null, true],
+    ...equipment.map((e) => [e.role, e.text, e.overdue ? 'overdue' : e.missing ? 'missing' : null, true]),
+    ['Campaign', `${d.id} "${d.name}", ${d.program}, ${d.frames ?? '—'} frames (${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad)`, null, true],
     ['Chamber', d.spec?.chamber ? `${d.spec.chamber.setpoint_C} °C ± ${d.spec.chamber.tolerance_C} °C${d.spec.chamber.steps?.length ? `, ${d.spec.chamber.steps.length} set-point steps` : ''}` : '—'],
-    ['Method', `${(d.spec?.estimators || []).join(', ') || '—'} estimation on a three-axis rate table (imucald ${status.version || ''}); model ${model.format || ''}, ${model.frame || 'instrument'} frame`],
-    ['Final state', d.state + (d.error ? ` (${d.error})` : '') +
-      (FINAL_STATES.has(d.state) && !d.complete ? ` — partial: ended at ${Math.round(100 * (d.progress || 0))} % of the program${d.accepted ? `, accepted by ${d.accepted.by}: ${d.accepted.reason}` : ''}` : '')],
+    ['Method', `${(d.spec?.estimators || []).join(', ') || '—'} estimation, three-axis rate table; imucald ${status.version || ''}, ${model.format || ''}, ${model.frame || 'instrument'} frame`, null, true],
   ];
+  const badges = h('div', { class: 'badges' },
+    verdict.status ? h('span', { class: `badge ${verdict.status.toLowerCase()}`, id: 'certificate-verdict' }, verdict.status) : null,
+    partial ? h('span', { class: 'badge partial', id: 'certificate-partial' }, 'PARTIAL') : null);
   clear(sheet).append(
-    simulated ? h('div', { class: 'watermark', 'aria-hidden': 'true' }, 'SIMULATION') : null,
-    h('header', {}, h('h1', {}, 'Calibration certificate'), h('p', { class: 'number' }, number)),
-    simulated ? h('p', { class: 'sim-note' }, 'Made with simulated devices: this documents a simulation, not a physical instrument.') : null,
-    h('table', { class: 'facts' }, h('tbody', {}, ...facts.map(([k, v]) => h('tr', {}, h('th', {}, k), h('td', { dataset: { fact: k } }, v))))),
+    cert.simulated ? h('div', { class: 'watermark', 'aria-hidden': 'true' }, 'SIMULATION') : null,
+    h('header', {}, h('h1', {}, 'Calibration certificate'),
+      h('div', { class: 'title-right' }, h('p', { class: 'number', id: 'certificate-number' }, number), badges)),
+    h('div', { class: 'title-block' },
+      partial ? h('p', { class: 'partial-note', id: 'certificate-partial-reason' }, `Partial run: ${partial}.`) : null,
+      h('p', { class: `verdict-note ${verdict.status ? verdict.status.toLowerCase() : 'none'}`, id: 'certificate-verdict-text' },
+        verdict.status ? `${verdict.status}: ${verdict.text}` : verdict.text)),
+    cert.simulated ? h('p', { class: 'sim-note' }, 'Made with simulated devices: this documents a simulation, not a physical instrument.') : null,
+    factsTable(facts),
     h('h2', {}, 'Coefficients'),
-    h('p', { class: 'small' }, 'Estimates with their standard uncertainties (1 σ, k = 1) from the estimator\'s covariance. Sensor error model and sign conventions: imucal CONVENTIONS.md (seed eq. 1).'),
-    h('table', { class: 'coefficients', id: 'certificate-coefficients' },
-      h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, 'Estimate'), h('th', { class: 'num' }, 'Uncertainty (1 σ)'), h('th', {}, 'Unit'))), body),
+    h('p', { class: 'small', id: 'certificate-uncertainty' }, UNCERTAINTY_TEXT),
+    coefficientTable(rows, Boolean(d.verdict)),
+    h('h2', {}, 'Conventions'),
+    h('div', { class: 'conventions', id: 'certificate-conventions' }, ...conventionsText(model.frame).map((t) => h('p', {}, t))),
     h('div', { class: 'signatures' },
       h('div', {}, h('span', { class: 'line' }), 'Operator'), h('div', {}, h('span', { class: 'line' }), 'Checked by'), h('div', {}, h('span', { class: 'line' }), 'Date')),
-    h('footer', {}, `Generated by imucal from campaign ${d.id} on ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.`));
+    h('footer', {}, `Certificate ${number}, issued ${dateTime(cert.issued)} by imucal for campaign ${d.id}; printed ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.`));
   sheet.dataset.ready = 'true';
 }
 

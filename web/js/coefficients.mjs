@@ -96,3 +96,45 @@ export function coefficientRows(model, truth) {
   rows.sort((a, b) => orderOf(a.name) - orderOf(b.name) || 0);
   return rows;
 }
+
+// Names of the noise terms and of the proof-mass offsets, which GROUPS does not cover.
+const NOISE_NAMES = {
+  arw_deg_rth: 'angle random walk', vrw_mps_rth: 'velocity random walk',
+  bias_instability_dph: 'bias instability', bias_instability_mps2: 'bias instability',
+  bias_corr_time_s: 'bias correlation time', bias_rw_dph_rth: 'rate random walk', bias_rw_mps2_rth: 'bias random walk',
+};
+const TRIADS = { gyro: 'Gyro', accel: 'Accelerometer' };
+
+/**
+ * A coefficient's name for people, without its unit (unitOf gives that): "gyro.bias_dph.x" ->
+ * "Gyro bias, x axis"; "gyro.misalignment_arcsec.xy" -> "Gyro misalignment, sensor x about y";
+ * "accel.lever_arm_mm.y.z" -> "Proof-mass offset of accelerometer y, z component";
+ * "gyro.noise.arw_deg_rth" -> "Gyro angle random walk". Unknown names come back as they are.
+ */
+export function coefficientName(key) {
+  const parts = key.split('.');
+  const triad = TRIADS[parts[0]];
+  if (!triad) return key;
+  if (parts[1] === 'noise' && parts.length === 3)
+    return `${triad} ${NOISE_NAMES[parts[2]] || labelOf(parts[2])}`;
+  const group = groupOf(key);
+  if (!group) return key;
+  const rest = key.slice(group.key.length + 1).split('.');
+  if (group.key === 'accel.lever_arm_mm' && rest.length === 2)
+    return `Proof-mass offset of accelerometer ${rest[0]}, ${rest[1]} component`;
+  if (group.key.endsWith('.misalignment_arcsec') && rest.length === 1 && rest[0].length === 2)
+    return `${group.title}, sensor ${rest[0][0]} about ${rest[0][1]}`;
+  if (rest.length === 1 && AXES.includes(rest[0])) return `${group.title}, ${rest[0]} axis`;
+  return `${group.title}, ${rest.join('.')}`;
+}
+
+/**
+ * Whether a run determined a coefficient: the daemon's rule (daemon/service/acceptance.hpp,
+ * determined()), so that the certificate says "not determined" exactly where a verdict does.
+ * A run determines a coefficient when it gives it a positive sigma; noise terms carry no sigma
+ * and are determined when positive. What a stage carried over unestimated has sigma 0 or none.
+ */
+export function determined(key, value, sigma) {
+  if (key.includes('.noise.')) return typeof value === 'number' && value > 0;
+  return typeof sigma === 'number' && Number.isFinite(sigma) && sigma > 0;
+}
