@@ -23,6 +23,7 @@
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
 #include "daemon/service/campaign_runner.hpp"
+#include "daemon/service/command_line.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/device_config.hpp"
 #include "daemon/service/password_hash.hpp"
@@ -385,7 +386,8 @@ int cmd_compare(const std::string& model_path, const std::string& truth_path, co
   std::printf("%-26s %14s %14s %12s %10s %7s\n", "coefficient", "estimate", "truth", "error", "sigma", "err/sig");
   auto row = [&](const std::string& name, double e, double t, double s, double scale) {
     const double err = (e - t) * scale, sig = s * scale;
-    std::printf("%-26s %14.6f %14.6f %12.6f %10.6f %7.2f\n", name.c_str(), e * scale, t * scale, err, sig,
+    // %g: a delay of 0.3 us and a bias of 2e-6 m/s^2 both keep their digits.
+    std::printf("%-26s %14.7g %14.7g %12.4g %10.3g %7.2f\n", name.c_str(), e * scale, t * scale, err, sig,
                 sig > 0 ? err / sig : 0.0);
     rows.push_back({{"name", name}, {"estimate", e * scale}, {"truth", t * scale}, {"error", err}, {"sigma", sig}});
   };
@@ -614,7 +616,7 @@ int cmd_passwd() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"imucal: calibration of strapdown IMUs on a three-axis table"};
+  CLI::App app{"imucal: calibration of strapdown IMUs on a three-axis table", "imucal"};
   app.require_subcommand(1);
 
   SimulateArgs sim_args;
@@ -797,7 +799,7 @@ int main(int argc, char** argv) {
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
   imucal::bench::add_storage_bench_commands(*bench);
 
-  CLI11_PARSE(app, argc, argv);
+  if (const int status = imucal::daemon::parse_command_line(app, argc, argv); status >= 0) return status;
   if (camp_run->parsed()) {
     if (camp_time_scale >= 0) camp_opts.time_scale = camp_time_scale;
     camp_opts.progress = !camp_json;

@@ -9,13 +9,14 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "daemon/service/command_line.hpp"
 #include "daemon/service/config.hpp"
 #include "daemon/service/service.hpp"
 
 using namespace imucal::daemon;
 
 int main(int argc, char** argv) {
-  CLI::App app{"imucald: runs calibration campaigns on the bench (table, chamber, IMU) and serves the API and UI"};
+  CLI::App app{"imucald: runs calibration campaigns on the bench (table, chamber, IMU) and serves the API and UI", "imucald"};
   std::string config_file, listen, data_dir, devices, operator_token, log_level;
   app.add_option("--config", config_file, "configuration JSON (see examples/imucald.json)")->check(CLI::ExistingFile);
   app.add_option("--listen", listen, "HTTP address HOST:PORT (default 127.0.0.1:8080; port 0: any free port)");
@@ -27,7 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--operator-token", operator_token, "API token with the operator role (at least 16 characters)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-  CLI11_PARSE(app, argc, argv);
+  if (const int status = imucal::daemon::parse_command_line(app, argc, argv); status >= 0) return status;
 
   DaemonConfig config;
   try {

@@ -6,6 +6,8 @@
 #include <sstream>
 #include <string>
 
+#include <sys/wait.h>
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -52,6 +54,43 @@ TEST(Cli, HelpAndBadArguments) {
   EXPECT_NE(unknown.output.find("neither a built-in"), std::string::npos) << unknown.output;
 }
 
+// Mistakes in the words of a command line: exit 2, the unknown word named first, the nearest known
+// one offered (docs/cli.md, docs/daemon.md).
+TEST(Cli, UnknownWordsAreNamedFirstAndExitWithStatusTwo) {
+  const auto exit_status = [](const CliRun& r) { return WIFEXITED(r.status) ? WEXITSTATUS(r.status) : -1; };
+  CliRun r = run("calibrat --db x.db");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("unknown subcommand 'calibrat'; did you mean 'calibrate'?"), std::string::npos) << r.output;
+  // The typo is reported, not the missing database beside it.
+  r = run("calibrate --db /no/such/run.db --stge all");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("unknown option '--stge'; did you mean '--stage'?"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("such"), std::string::npos) << r.output;
+  // Any other command-line error: 2 as well, with CLI11's words.
+  r = run("simulate --program direct --db x.db --rate -5");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  r = run("");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  // imucald follows the same rule.
+  const auto daemon = [](const std::string& args) {
+    CliRun d{0, {}};
+    FILE* p = popen((std::string(IMUCALD_BIN) + " " + args + " 2>&1").c_str(), "r");
+    std::array<char, 4096> buf{};
+    while (std::fgets(buf.data(), buf.size(), p)) d.output += buf.data();
+    d.status = pclose(p);
+    return d;
+  };
+  r = daemon("--bogus");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("imucald: unknown option '--bogus'"), std::string::npos) << r.output;
+  r = daemon("--devies sim");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("did you mean '--devices'?"), std::string::npos) << r.output;
+  r = daemon("--devices real");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_EQ(exit_status(daemon("--help")), 0);
+}
+
 TEST(Cli, ProgramOutsideTheLimitsIsRefusedWithTheSegment) {
   const fs::path d = fresh_dir("cli-limits");
   std::ofstream(d / "fast.json") << R"({"name":"fast","segments":[{"type":"hold","duration_s":1},
@@ -74,6 +113,19 @@ TEST(Cli, SimulateCalibrateNavigateExportImport) {
   const imucal::ImuModel m = imucal::read_imu_model_file((d / "model.json").string());
   ASSERT_TRUE(m.sigma.has_value());
   EXPECT_LT(std::abs(m.gyro.bias_radps[0]), 1e-7);  // ideal IMU: small, not NaN
+  // compare keeps a small value's digits (an ideal IMU's accelerometer bias is ~1e-11 m/s^2).
+  r = run("compare " + (d / "model.json").string() + " " + (d / "model.json").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  {
+    const auto at = r.output.find("accel.bias_mps2.x");
+    ASSERT_NE(at, std::string::npos) << r.output;
+    std::istringstream line(r.output.substr(at));
+    std::string name;
+    double printed = 0;
+    line >> name >> printed;
+    ASSERT_NE(m.accel.bias_mps2[0], 0.0);
+    EXPECT_NEAR(printed / m.accel.bias_mps2[0], 1.0, 1e-6) << r.output;
+  }
   r = run("navigate --db " + db + " --model " + (d / "model.json").string() + " --out " + (d / "nav.csv").string() +
           " --summary-json " + (d / "summary.json").string());
   ASSERT_EQ(r.status, 0) << r.output;
