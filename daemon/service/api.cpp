@@ -282,6 +282,13 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     return logout(request);
   }
 
+  // For monitoring and systemd: no authentication, no details (whoever can reach the port may ask).
+  if (path == "/api/health") {
+    if (auto r = only("GET")) return *r;
+    if (shutting_down_) return json_reply(503, {{"status", "shutting down"}});
+    return json_reply(200, {{"status", "ok"}});
+  }
+
   const auto who = authenticate(request, false);
   if (!who) {
     HttpReply r = error_reply(401, "authentication required");
