@@ -275,16 +275,21 @@ struct Builder {
     if (w == 0) fail(where, "rate_dps must not be zero");
     const double acc = number_or(seg, "accel_dps2", 0.5 * limits.axis[static_cast<std::size_t>(a)].accel_dps2, where) * kDegToRad;
     if (acc <= 0) fail(where, "accel_dps2 must be positive");
+    // Beyond the table's limits the ramps are not judged: validate_program names the rate or the
+    // acceleration, which is the problem to fix (not the revolutions its ramps would need).
+    const AxisLimits& lim = limits.axis[static_cast<std::size_t>(a)];
+    const bool beyond_limits = std::abs(w) * kRadToDeg > lim.rate_dps * (1 + 1e-9) || acc * kRadToDeg > lim.accel_dps2 * (1 + 1e-9);
     const double t_ramp = std::abs(w) / acc;
     double t_cruise;
     if (seg.contains("revolutions")) {
       const double revs = number(seg, "revolutions", where);
       const double ramp_angle = w * w / acc;  // both ramps together
       t_cruise = (revs * 2.0 * kPi - ramp_angle) / std::abs(w);
-      if (revs <= 0 || t_cruise < 0) fail(where, "too few revolutions for the ramps at this rate and acceleration");
+      if (revs <= 0) fail(where, "revolutions must be positive");
+      if (t_cruise < 0 && !beyond_limits) fail(where, "too few revolutions for the ramps at this rate and acceleration");
     } else {
       t_cruise = number(seg, "duration_s", where) - 2.0 * t_ramp;
-      if (t_cruise < 0) fail(where, "duration_s shorter than the two ramps");
+      if (t_cruise < 0 && !beyond_limits) fail(where, "duration_s shorter than the two ramps");
     }
     const double sign = w > 0 ? 1.0 : -1.0;
     Piece up = make_piece(t_ramp, name, "rate");
@@ -425,13 +430,13 @@ std::vector<std::string> validate_program(const Program& program, const TableLim
       }
       const char* axis = kAxisNames[static_cast<std::size_t>(a)];
       if (max_rate * kRadToDeg > lim.rate_dps * (1 + 1e-9)) {
-        std::snprintf(buf, sizeof buf, "segment '%s' (t=%.1f s) axis %s: rate %.3f deg/s exceeds the limit %.3f deg/s",
+        std::snprintf(buf, sizeof buf, "segment '%s' (t=%.1f s) axis %s: rate %.4g deg/s exceeds the limit %.4g deg/s",
                       p.segment.c_str(), p.t0_s, axis, max_rate * kRadToDeg, lim.rate_dps);
         problems.emplace_back(buf);
       }
       if (max_accel * kRadToDeg > lim.accel_dps2 * (1 + 1e-9)) {
         std::snprintf(buf, sizeof buf,
-                      "segment '%s' (t=%.1f s) axis %s: acceleration %.3f deg/s^2 exceeds the limit %.3f deg/s^2",
+                      "segment '%s' (t=%.1f s) axis %s: acceleration %.4g deg/s^2 exceeds the limit %.4g deg/s^2",
                       p.segment.c_str(), p.t0_s, axis, max_accel * kRadToDeg, lim.accel_dps2);
         problems.emplace_back(buf);
       }

@@ -1,4 +1,5 @@
 #include "daemon/service/campaign.hpp"
+#include "core/number_text.hpp"
 
 #include <algorithm>
 #include <array>
@@ -234,8 +235,8 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
   const ChamberLimits& lim = config.chamber;
   auto in_limits = [&](double c, const std::string& where) {
     if (c < lim.min_C || c > lim.max_C)
-      problems.push_back(where + " " + json(c).dump() + " C is outside the chamber's limits " + json(lim.min_C).dump() +
-                         " .. " + json(lim.max_C).dump() + " C");
+      problems.push_back(where + ": " + celsius_text(c) + " is outside the chamber's limits " + celsius_text(lim.min_C) +
+                         " .. " + celsius_text(lim.max_C));
   };
   std::string where_steps = "campaign.chamber.steps";
   if (j.is_string()) {
@@ -287,11 +288,11 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
     const std::string where = where_steps + "[" + std::to_string(i) + "]";
     in_limits(step.setpoint_C, where + ".setpoint_C");
     if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
-      problems.push_back(where + ".ramp_C_per_min " + json(step.ramp_C_per_min).dump() + " exceeds the chamber's limit " +
-                         json(lim.max_ramp_C_per_min).dump());
+      problems.push_back(where + ".ramp_C_per_min: " + number_text(step.ramp_C_per_min) + " °C/min exceeds the chamber's limit " +
+                         number_text(lim.max_ramp_C_per_min) + " °C/min");
     if (step.at_s > duration_s)
-      problems.push_back(where + ".at_s " + json(step.at_s).dump() + " s is after the program's end (" +
-                         json(duration_s).dump() + " s)");
+      problems.push_back(where + ".at_s: " + number_text(step.at_s) + " s is after the program's end (" +
+                         number_text(duration_s) + " s)");
     if (i > 0 && step.at_s <= profile.steps[i - 1].at_s)
       problems.push_back(where + ".at_s must be later than the previous step's");
   }
@@ -485,8 +486,8 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       check.duration_s = program.duration_s();
       check.segments = program.segments();
       if (check.duration_s > config.campaign.max_duration_s)
-        problems.push_back("campaign.program lasts " + json(check.duration_s).dump() + " s, more than the limit of " +
-                           json(config.campaign.max_duration_s).dump() + " s");
+        problems.push_back("campaign.program lasts " + number_text(check.duration_s) + " s, more than the limit of " +
+                           number_text(config.campaign.max_duration_s) + " s");
       // What the program's parts were made for decides the estimators unless the campaign lists
       // them ({"program": "navigation"} runs stage 3); a listed one needs what its stage needs.
       RecordingMeta meta;
@@ -505,8 +506,8 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       }
     }
     if (spec.rate_hz > config.campaign.max_rate_hz)
-      problems.push_back("campaign.rate_hz " + json(spec.rate_hz).dump() + " exceeds the limit of " +
-                         json(config.campaign.max_rate_hz).dump() + " Hz");
+      problems.push_back("campaign.rate_hz: " + number_text(spec.rate_hz) + " Hz exceeds the limit of " +
+                         number_text(config.campaign.max_rate_hz) + " Hz");
     if (truth != nullptr) {
       if (auto m = read_model(*truth, "campaign.truth", problems)) spec.truth = *m;
     } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", problems)) {

@@ -1,4 +1,5 @@
 #include "daemon/service/sequencer.hpp"
+#include "core/number_text.hpp"
 
 #include <sqlite3.h>
 
@@ -98,7 +99,7 @@ struct RunContext {
   std::optional<std::string> reported_serial;  // what the IMU said it is (check_unit)
 
   Clock::time_point last_publish{}, last_db_update{}, window_wall{};
-  double window_program_s = 0.0, window_world_s = 0.0;
+  double window_world_s = 0.0;
   std::int64_t window_delivered = 0;
   double speed_factor = 0.0, frame_rate_hz = 0.0;
 
@@ -654,15 +655,13 @@ Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) 
     } else {
       clear_since_s.reset();
       if (!suspended && !announced) {
-        char text[160];
-        std::snprintf(text, sizeof text, "waiting for the chamber to reach %.2f C (now %.2f C) before moving",
-                      setpoint_C, r.chamber_C);
-        note_event(run, "info", text);
+        note_event(run, "info", "waiting for the chamber to reach " + celsius_text(setpoint_C) + " (now " +
+                                    celsius_text(r.chamber_C) + ") before moving");
         announced = true;
       }
       if (!suspended && now_s - start_s > config_.chamber.wait_timeout_s)
         throw std::runtime_error("the chamber did not reach its set point within " +
-                                 std::to_string(config_.chamber.wait_timeout_s) + " s");
+                                 number_text(config_.chamber.wait_timeout_s) + " s");
     }
     run.bench->wait(0.1);
     // As fast as possible still must not spin a core while nothing changes.
@@ -708,7 +707,7 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
       const bool finite = f.dtheta_rad.allFinite() && f.dv_mps.allFinite() && f.table_deg.allFinite();
       if (!finite || f.t_ns <= run.prev_delivered_t_ns) {
         ++run.bad;
-        problem = "corrupt IMU frame at " + std::to_string(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+        problem = "corrupt IMU frame at " + number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
         break;
       }
       const std::int64_t step_ns = f.t_ns - run.prev_delivered_t_ns;
@@ -716,7 +715,7 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
         const std::int64_t missing = (step_ns + run.dt_ns / 2) / run.dt_ns - 1;
         run.lost += missing;
         problem = std::to_string(missing) + " IMU frame(s) missing before " +
-                  std::to_string(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+                  number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
         break;
       }
       run.prev_delivered_t_ns = f.t_ns;
@@ -820,13 +819,13 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
     (void)recorder_problem(run);
   }
   const bool ramp = run.spec.chamber.ramps_within(run.segments[run.segment].t0_s, run.segments[run.segment].t1_s);
-  char text[400];
-  std::snprintf(text, sizeof text, "condition cleared and settled %.1f s; redoing segment %zu '%s' from %.3f s%s",
-                run.spec.suspenders.settle_s, run.segment, run.segments[run.segment].name.c_str(), run.checkpoint_s(),
-                ramp ? " (not redoable as it was: it overlaps a chamber ramp, which restarts from the checkpoint's "
-                       "set point)"
-                     : "");
-  if (!transition(run.id, RunState::Running, "resumed: " + reason + " cleared", RunState::Suspended)) {
+  const std::string text =
+      "condition cleared and settled " + number_text(run.spec.suspenders.settle_s) + " s; redoing segment " +
+      std::to_string(run.segment) + " '" + run.segments[run.segment].name + "' from " + number_text(run.checkpoint_s()) +
+      " s" +
+      (ramp ? " (not redoable as it was: it overlaps a chamber ramp, which restarts from the checkpoint's set point)" : "");
+  // The transition says what cleared; the UI says "resumed" itself.
+  if (!transition(run.id, RunState::Running, reason + " cleared", RunState::Suspended)) {
     if (auto c = pending_command()) return *c;
   }
   note_event(run, "resumed", text);
@@ -857,7 +856,7 @@ Sequencer::Outcome Sequencer::paused(RunContext& run) {
   const Outcome waited = wait_until_ready(run, false);
   if (waited != Outcome::Completed) return waited;
   note_event(run, "resumed", "redoing segment " + std::to_string(run.segment) + " '" + run.segments[run.segment].name +
-                                 "' from " + std::to_string(run.checkpoint_s()) + " s");
+                                 "' from " + number_text(run.checkpoint_s()) + " s");
   return Outcome::Redo;
 }
 
@@ -895,7 +894,7 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
       break;
     case Outcome::Stop:
       final_state = RunState::Done;
-      why = "stopped early at " + std::to_string(run.program_time_s) + " s; results from the data so far";
+      why = "stopped early at " + number_text(run.program_time_s) + " s; results from the data so far";
       results = true;
       break;
     case Outcome::Abort:
@@ -903,7 +902,7 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
       // far, as for a stop: a partial run keeps its model (complete: false, counts only when an
       // operator accepts it).
       final_state = RunState::Aborted;
-      why = "aborted at " + std::to_string(run.program_time_s) + " s; table parked, results from the data so far";
+      why = "aborted at " + number_text(run.program_time_s) + " s; table parked, results from the data so far";
       results = true;
       break;
     case Outcome::Shutdown:
@@ -960,15 +959,15 @@ void Sequencer::publish(RunContext& run, bool force) {
   const double window_s = seconds(now - run.window_wall);
   if (run.window_wall == Clock::time_point{} || window_s > 5.0) {
     run.window_wall = now;
-    run.window_program_s = run.program_time_s;
     run.window_world_s = run.bench->now_s();
     run.window_delivered = run.delivered;
   } else if (window_s >= 0.5) {
     const double world_s = run.bench->now_s() - run.window_world_s;
-    run.speed_factor = (run.program_time_s - run.window_program_s) / window_s;
+    // The bench's time, not the program's: a redone segment sets the program time back (a
+    // negative "speed" after a resume), the bench's clock only goes forward.
+    run.speed_factor = world_s / window_s;
     run.frame_rate_hz = world_s > 0 ? static_cast<double>(run.delivered - run.window_delivered) / world_s : 0.0;
     run.window_wall = now;
-    run.window_program_s = run.program_time_s;
     run.window_world_s = run.bench->now_s();
     run.window_delivered = run.delivered;
   }

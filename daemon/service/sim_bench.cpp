@@ -1,4 +1,5 @@
 #include "daemon/service/sim_bench.hpp"
+#include "core/number_text.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -165,7 +166,7 @@ std::string SimBench::describe() const {
   char buf[160];
   std::snprintf(buf, sizeof buf, "simulated bench (in-process, %.0f Hz, seed %llu, time scale %s)",
                 settings_.sim.rate_hz, static_cast<unsigned long long>(settings_.sim.seed),
-                settings_.time_scale <= 0 ? "as fast as possible" : (std::to_string(settings_.time_scale) + "x").c_str());
+                settings_.time_scale <= 0 ? "as fast as possible" : (number_text(settings_.time_scale) + "x").c_str());
   return buf;
 }
 

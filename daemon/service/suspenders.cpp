@@ -1,4 +1,5 @@
 #include "daemon/service/suspenders.hpp"
+#include "core/number_text.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -6,12 +7,6 @@
 namespace imucal::daemon {
 
 namespace {
-
-std::string number(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%g", v);
-  return text;
-}
 
 // A device suspender: trips while its condition holds; clear when it does not (the settle time is
 // the sequencer's: every suspender clear for settle_s).
@@ -38,10 +33,10 @@ class ChamberOutOfBand final : public Suspender {
   explicit ChamberOutOfBand(const SuspenderSettings& s) : persist_s_(s.chamber_persist_s), settle_s_(s.settle_s) {}
   const char* name() const override { return "chamber-out-of-band"; }
   std::string condition() const override {
-    return "the chamber's temperature outside the set point +- the campaign's tolerance for " + number(persist_s_) + " s";
+    return "the chamber's temperature outside the set point ± the campaign's tolerance for " + number_text(persist_s_) + " s";
   }
   std::string resume_rule() const override {
-    return "back in band for " + number(settle_s_) + " s; the segment is redone from its start";
+    return "back in band for " + number_text(settle_s_) + " s; the segment is redone from its start";
   }
   std::optional<std::string> trip(const DeviceReadings& r) override {
     if (!out_of_band(r)) {
@@ -50,10 +45,8 @@ class ChamberOutOfBand final : public Suspender {
     }
     if (!since_s_) since_s_ = r.now_s;
     if (r.now_s - *since_s_ < persist_s_) return std::nullopt;
-    char text[200];
-    std::snprintf(text, sizeof text, "chamber out of band: %.2f C, set point %.2f C +- %.2f C", r.chamber_C,
-                  r.setpoint_C, r.tolerance_C);
-    return text;
+    return "chamber out of band: " + celsius_text(r.chamber_C) + ", set point " + celsius_text(r.setpoint_C) + " ± " +
+           celsius_text(r.tolerance_C);
   }
   bool clear(const DeviceReadings& r) const override { return !out_of_band(r); }
   void reset() override { since_s_.reset(); }
@@ -70,9 +63,9 @@ class FramesMissing final : public Suspender {
  public:
   explicit FramesMissing(const SuspenderSettings& s) : timeout_s_(s.frame_timeout_s), settle_s_(s.settle_s) {}
   const char* name() const override { return "imu-frames-missing"; }
-  std::string condition() const override { return "no IMU frame for " + number(timeout_s_) + " s"; }
+  std::string condition() const override { return "no IMU frame for " + number_text(timeout_s_) + " s"; }
   std::string resume_rule() const override {
-    return "the IMU connected for " + number(settle_s_) + " s; the segment is redone from its start";
+    return "the IMU connected for " + number_text(settle_s_) + " s; the segment is redone from its start";
   }
   std::optional<std::string> trip(const DeviceReadings& r) override {
     if (r.now_s - r.last_frame_s <= timeout_s_) return std::nullopt;
@@ -90,7 +83,7 @@ class FramesMissing final : public Suspender {
 }  // namespace
 
 Suspenders::Suspenders(const SuspenderSettings& s) {
-  const std::string settle = "clear for " + number(s.settle_s) + " s; the segment is redone from its start";
+  const std::string settle = "clear for " + number_text(s.settle_s) + " s; the segment is redone from its start";
   // Recording first: a run that cannot record must hold whatever the devices do.
   list_.push_back(std::make_unique<Simple>(
       "recorder", "the run file cannot be written, or its writer falls behind a device that cannot wait",

@@ -220,10 +220,16 @@ try {
   await page.fill(`#seg-${rateRow}-rate_dps`, 'fast');  // not a number: caught here, nothing sent
   await waitText(page, `#seg-${rateRow}-rate_dps-error`, /not a number/);
   await waitText(page, '#verdict', /Fix the marked fields/);
+  // The side panel names the field as the form does (issue 18, item 3).
+  await waitText(page, '#problems', new RegExp(`segment ${rateRow + 1} rate[^:]*: not a number`));
   await page.fill(`#seg-${rateRow}-rate_dps`, '400');
-  await page.fill(`#seg-${rateRow}-revolutions`, '30');
+  // One revolution is too few for the ramps at 400 deg/s, but the table's limit is what to fix.
+  await page.fill(`#seg-${rateRow}-revolutions`, '1');
   await waitText(page, '#verdict', /^Refused/);
-  await waitText(page, `#seg-${rateRow}-problems`, /rate 400(\.0+)? deg\/s exceeds the limit 300/);
+  await waitText(page, `#seg-${rateRow}-problems`, /rate 400 deg\/s exceeds the limit 300 deg\/s/);
+  assert.ok(!(await page.textContent('#problems')).includes('too few revolutions'), 'the limit is named, not the ramps');
+  await page.fill(`#seg-${rateRow}-revolutions`, '30');
+  await waitText(page, `#seg-${rateRow}-problems`, /rate 400 deg\/s exceeds the limit 300 deg\/s/);
   assert.ok(await page.$eval(`#segment-${rateRow}`, (tr) => tr.classList.contains('has-problems')), 'the offending segment is marked');
   await page.click('#create');
   await waitText(page, '#server-message', /refused the campaign: campaign is invalid/);
@@ -292,6 +298,8 @@ try {
   assert.ok(moved, 'the table angles change during the run');
   await page.waitForSelector('#suspended-banner:not([hidden])', { timeout: 20000 });
   await waitText(page, '#alerts', /campaign \d+: suspended — chamber out of band/);
+  // Temperatures as people write them: "31 °C, set point 25 °C ± 2 °C", not "31.00 C ... +- 2.00 C".
+  await waitText(page, '#alerts', /chamber out of band: [\d.]+ °C, set point 25 °C ± 2 °C/);
   await shot(page, '04-live-suspended');
   await waitText(page, '#run-state', /running/, 20000);
   await waitText(page, '#events', /resumed/);
@@ -318,6 +326,12 @@ try {
   await waitText(page, '#run-state', /running/);
   log('paused and resumed (resume confirmed: it moves the table)');
   await waitText(page, '#events', /paused/);
+  // After a resume: the redo's start with sensible digits, never a negative speed, no "resumed: resumed:".
+  await waitText(page, '#events', /redoing segment \d+ '[^']+' from \d+(\.\d{1,3})? s/);
+  await page.waitForTimeout(1500);
+  const speedAfterResume = await page.textContent('#run-speed');
+  assert.ok(!/×-/.test(speedAfterResume), `the speed after a resume is not negative: ${speedAfterResume}`);
+  assert.ok(!/resumed: resumed/.test(await page.textContent('body')), 'no "resumed: resumed:"');
 
   // ---- results ----
   await page.goto(`${base}/#/campaigns/${id}`);

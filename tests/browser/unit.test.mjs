@@ -284,3 +284,18 @@ test('certificate numbers: a row is in one form, fixed or exponent', async () =>
   // u needs exponent form (its second digit below the sixth decimal), so U does too, although it alone would not.
   assert.deepEqual(roundedNumbers({ value: 1.96e-5, u: 5.5e-6, U: 1.1e-5 }), { value: '1.96e-5', u: '5.5e-6', U: '1.1e-5' });
 });
+
+test('numbers and times for people: durations rounded once, time ticks with hours and minutes', async () => {
+  const { duration, clockTick } = await import('../../web/js/format.mjs');
+  assert.equal(duration(119.6), '2 min 00 s', 'never "1 min 60 s"');
+  assert.equal(duration(59.7), '1 min 00 s');
+  assert.equal(duration(9.96), '10 s');
+  assert.equal(duration(4.25), '4.3 s');
+  assert.equal(duration(403), '6 min 43 s');
+  assert.equal(duration(7199.9), '2 h 00 min');
+  assert.equal(duration(-90), '-1 min 30 s');
+  const t = new Date(2026, 2, 1, 14, 3, 25).getTime() / 1000;
+  assert.equal(clockTick(t, 5), '14:03:25');
+  assert.equal(clockTick(t, 300), '14:03');
+  assert.equal(clockTick(t, 2 * 86400), '03-01 14:03');
+});

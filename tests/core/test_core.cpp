@@ -7,6 +7,7 @@
 
 #include "core/earth.hpp"
 #include "core/imu_model.hpp"
+#include "core/number_text.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
 
@@ -167,4 +168,17 @@ TEST(ModelJson, ReadsTheIndependentSimulatorsTruth) {
   EXPECT_NEAR(m.gyro.bias_radps[0] * units::kRadpsToDph, 0.03721472649399559, 1e-15);
   EXPECT_NEAR(m.accel.misalignment_rad.zy * units::kRadToArcsec, 20.657489403031462, 1e-12);
   EXPECT_NEAR(m.gyro.noise.arw_rad_rts / units::kDegRthToRadRts, 0.0005, 1e-15);
+}
+
+// Numbers in messages for people (issue 18, item 3): no noise digits, units as people write them.
+TEST(NumberText, ShortestFormWithoutNoiseDigits) {
+  EXPECT_EQ(imucal::number_text(46.6), "46.6");           // was "46.600000" (resumed ... from 46.6 s)
+  EXPECT_EQ(imucal::number_text(4.0), "4");               // was "4.000000x" (time scale 4x)
+  EXPECT_EQ(imucal::number_text(5000.0), "5000");         // was "5000.0" (campaign.rate_hz)
+  EXPECT_EQ(imucal::number_text(0.25), "0.25");
+  EXPECT_EQ(imucal::number_text(1234.56789), "1234.57");
+  EXPECT_EQ(imucal::number_text(62.8319, 4), "62.83");
+  EXPECT_EQ(imucal::celsius_text(31.0), "31 °C");          // was "31.00 C"
+  EXPECT_EQ(imucal::celsius_text(31.4321), "31.43 °C");
+  EXPECT_EQ(imucal::celsius_text(-40.0), "-40 °C");
 }

@@ -153,7 +153,7 @@ TEST(Http, BadInputGetsAClearErrorAndChangesNothing) {
   const auto problems = limits.json_body().at("problems");
   EXPECT_GE(problems.size(), 2u) << limits.body;  // the table rate and the chamber, both listed
   EXPECT_NE(limits.body.find("exceeds the limit 25"), std::string::npos) << limits.body;
-  EXPECT_NE(limits.body.find("300.0 C is outside"), std::string::npos) << limits.body;
+  EXPECT_NE(limits.body.find("300 °C is outside"), std::string::npos) << limits.body;
 
   const auto valid = op.post("/api/campaigns/validate", R"({"name": "x", "program": "direct-short"})");
   EXPECT_EQ(valid.status, 200);

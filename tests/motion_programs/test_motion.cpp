@@ -90,7 +90,16 @@ TEST(Program, LimitViolationsNameSegmentAxisAndLimit) {
   TableLimits limits;
   const auto problems = validate_program(compile_program(json, limits), limits);
   EXPECT_TRUE(contains(problems, "segment 'too-fast'")) << problems.size();
-  EXPECT_TRUE(contains(problems, "axis middle: rate 400.000 deg/s exceeds the limit 300.000 deg/s"));
+  EXPECT_TRUE(contains(problems, "axis middle: rate 400 deg/s exceeds the limit 300 deg/s"));
+  // Beyond the table's rate, too few revolutions for the ramps is not the problem named: the rate is.
+  const std::string few = R"({"name":"few","segments":[
+    {"type":"rate","name":"spin","axis":"outer","rate_dps":400,"revolutions":1,"accel_dps2":100}]})";
+  const auto few_problems = validate_program(compile_program(few, limits), limits);
+  EXPECT_TRUE(contains(few_problems, "axis outer: rate 400 deg/s exceeds the limit 300 deg/s"));
+  // Within the limits the ramps are judged as before.
+  const std::string within = R"({"name":"few","segments":[
+    {"type":"rate","name":"spin","axis":"outer","rate_dps":290,"revolutions":0.5,"accel_dps2":100}]})";
+  EXPECT_THROW(compile_program(within, limits), std::exception);
 
   limits.axis[2].min_deg = -90;
   limits.axis[2].max_deg = 90;

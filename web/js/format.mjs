@@ -35,11 +35,13 @@ export function duration(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return '—';
   const sign = s < 0 ? '-' : '';
   s = Math.abs(s);
-  if (s < 60) return `${sign}${s < 10 ? s.toFixed(1) : Math.round(s)} s`;
-  const m = Math.floor(s / 60), sec = Math.round(s % 60);
-  if (m < 60) return `${sign}${m} min ${String(sec).padStart(2, '0')} s`;
-  const hr = Math.floor(m / 60);
-  return `${sign}${hr} h ${String(m % 60).padStart(2, '0')} min`;
+  if (s < 9.95) return `${sign}${s.toFixed(1)} s`;
+  // Rounded once, at the precision shown, so that 119.6 s is "2 min 00 s", never "1 min 60 s".
+  const whole_s = Math.round(s);
+  if (whole_s < 60) return `${sign}${whole_s} s`;
+  if (whole_s < 3600) return `${sign}${Math.floor(whole_s / 60)} min ${String(whole_s % 60).padStart(2, '0')} s`;
+  const whole_min = Math.round(s / 60);
+  return `${sign}${Math.floor(whole_min / 60)} h ${String(whole_min % 60).padStart(2, '0')} min`;
 }
 
 /** ISO time as local "2025-03-01 21:04:05". */
@@ -93,4 +95,18 @@ export function allowedCommands(state) {
     interrupted: ['resume', 'abort'],
   };
   return table[state] || [];
+}
+
+/**
+ * A time axis's tick (unix seconds, local time) at the precision of the tick spacing `step_s`:
+ * "14:03:25" below a minute, "14:03" below a day, "03-01 14:00" beyond. uPlot's own ticks show a
+ * bare ":25" for most spacings, which reads as a number of seconds.
+ */
+export function clockTick(unix_s, step_s) {
+  const d = new Date(unix_s * 1000);
+  const two = (n) => String(n).padStart(2, '0');
+  const hm = `${two(d.getHours())}:${two(d.getMinutes())}`;
+  if (step_s < 60) return `${hm}:${two(d.getSeconds())}`;
+  if (step_s < 86400) return hm;
+  return `${two(d.getMonth() + 1)}-${two(d.getDate())} ${hm}`;
 }

@@ -3,6 +3,7 @@
 // telemetry never makes more than one redraw per chart per frame, and none while the tab is
 // hidden, since browsers pause animation frames then).
 import uPlot from '../vendor/uPlot.esm.js';
+import { clockTick } from './format.mjs';
 
 export const COLORS = ['#1565c0', '#c62828', '#2e7d32', '#6a1b9a', '#ef6c00', '#00838f'];
 export const AXIS_COLORS = { outer: COLORS[0], middle: COLORS[1], inner: COLORS[2], x: COLORS[0], y: COLORS[1], z: COLORS[2] };
@@ -68,7 +69,8 @@ export function lineChart(el, spec) {
     },
     axes: [
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: time ? undefined : spec.x,
-        size: time ? 30 : 40, values: time ? undefined : (u, vals) => vals.map(formatTick) },
+        size: time ? 30 : 40,
+        values: time ? (u, vals, axis, space, incr) => vals.map((v) => clockTick(v, incr)) : (u, vals) => vals.map(formatTick) },
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: spec.y, size: 62,
         values: (u, vals) => vals.map(formatTick) },
     ],

@@ -532,7 +532,19 @@ export function mount(root, ctx) {
     const box = root.querySelector(`#${CSS.escape(id)}`);
     if (box) box.textContent = message || '';
     if (el.setAttribute) el.setAttribute('aria-invalid', message ? 'true' : 'false');
-    if (message) fieldErrors.set(id, message); else fieldErrors.delete(id);
+    // The side panel lists these away from their fields: each names its field as the form does.
+    const name = fieldName(el, id);
+    if (message) fieldErrors.set(id, name ? `${name}: ${message}` : message); else fieldErrors.delete(id);
+  }
+
+  // The name the form gives a field: its label, or "segment 3 rate (deg/s)" in the program table.
+  function fieldName(el, id) {
+    const aria = el.getAttribute?.('aria-label');
+    if (aria) return aria;
+    const label = el.id && root.querySelector(`label[for="${CSS.escape(el.id)}"]`);
+    if (label) return label.textContent.trim();
+    const segment = /^seg-(\d+)-/.exec(id);
+    return segment ? `segment ${Number(segment[1]) + 1}` : null;
   }
 
   function dropErrors(prefix) {

@@ -248,7 +248,8 @@ export function mount(root, ctx) {
           e.max_velocity_error_mps !== undefined ? h('div', { class: 'muted' }, `max velocity error ${num(e.max_velocity_error_mps, 3)} m/s, position ${num(e.max_position_error_m, 3)} m`) : null,
           e.filter_status !== undefined ? h('div', { class: `muted filter-status${e.filter_status === 'running' ? '' : ' warn'}`, dataset: { filterStatus: e.filter_status.split(':')[0] } },
             `filter ${e.filter_status}; ${e.updates ?? 0} updates, ${e.rejected ?? 0} rejected, ${e.restarts ?? 0} restart(s), at ${duration(e.program_time_s)}`) : null,
-          e.message ? h('div', { class: 'estimator-message' }, e.message.split('\n')[0]) : null));
+          // The whole message: a stage that cannot determine something lists what, one per line.
+          e.message ? h('div', { class: 'estimator-message' }, e.message) : null));
       }
     }
   }
