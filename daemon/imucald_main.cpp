@@ -53,7 +53,14 @@ int main(int argc, char** argv) {
     std::filesystem::create_directories(config.data_dir);
     setup_logging(config.log, config.data_dir);
     Service service(config);
-    service.start(true);
+    try {
+      service.start(true);
+    } catch (...) {
+      // A token generated for a start that failed (e.g. the port in use) was never printed: take it
+      // back, so that the next start generates one and prints it.
+      if (!service.auth().generated_token().empty()) std::filesystem::remove(service.auth().token_file());
+      throw;
+    }
     spdlog::info("imucald {}: devices '{}', data in '{}', web UI from '{}'", IMUCAL_VERSION, config.devices,
                  config.data_dir, service.web_dir().empty() ? "(none)" : service.web_dir());
     // On stdout for scripts and tests (the actual port when 0 was asked for).

@@ -179,7 +179,8 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "direct-short") {
     json j = direct_program(10.0, {0, 180}, 30.0, 2.0);
     j["name"] = "direct-short";
-    j["comment"] = "A 10-minute version of direct for quick checks (not enough statics for full accuracy)";
+    // No duration in words: the builder shows the compiled one beside it.
+    j["comment"] = "A short version of direct for quick checks: 10 s dwells, 2 headings, 2 revolutions at 30 deg/s (not enough statics for full accuracy)";
     return j.dump(1);
   }
   if (name == "lever-arm") return lever_arm_program().dump(1);

@@ -610,7 +610,9 @@ try {
   await vpage.waitForURL(/#\/campaigns$/);
   await waitText(vpage, '#who', /viewer/);
   assert.equal(await vpage.isVisible('#new-campaign'), false, 'a viewer gets no "New campaign" button');
-  await vpage.waitForSelector(`#active-campaigns tr[data-id="${queued.body.id}"]`);
+  // Created and not started: under "Not started", not among the running and queued ones.
+  await vpage.waitForSelector(`#created-campaigns tr[data-id="${queued.body.id}"]`);
+  assert.equal(await vpage.$(`#active-campaigns tr[data-id="${queued.body.id}"]`), null);
   await vpage.goto(`${base}/#/campaigns/${queued.body.id}`);
   await waitText(vpage, '#campaign-state', /created/);
   const startButton = vpage.locator('.command-bar .cmd-start');

@@ -51,3 +51,34 @@ TEST(RunScript, ServesTheUiAndHealthOnTheSimulatedBenchAndStopsOnCtrlC) {
   ::kill(child.pid, SIGINT);
   EXPECT_EQ(wait_exit(child.pid, 60.0), 0);
 }
+
+// A start that fails (its port in use) prints no token, so it must keep none: the next start
+// generates one and prints it (issue 18, item 5).
+TEST(RunScript, AStartThatFailsKeepsNoTokenItNeverPrinted) {
+  const std::string dir = scratch_dir("failed-start");
+  const int busy = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(busy, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(busy, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  ASSERT_EQ(::listen(busy, 1), 0);
+  socklen_t len = sizeof addr;
+  ::getsockname(busy, reinterpret_cast<sockaddr*>(&addr), &len);
+  const std::string port = std::to_string(ntohs(addr.sin_port));
+
+  Child failed = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:" + port, "--data-dir", dir + "/data"}, dir + "/stderr-1.log");
+  const std::string said = read_stdout_until(failed, [](const std::string&) { return false; }, 30.0);
+  EXPECT_NE(wait_exit(failed.pid, 30.0), 0);
+  EXPECT_EQ(said.find("use it as"), std::string::npos) << said;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/data/operator-token")) << "a token nobody was shown";
+  ::close(busy);
+
+  Child ok = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", dir + "/data"}, dir + "/stderr-2.log");
+  const std::string shown =
+      read_stdout_until(ok, [](const std::string& t) { return t.find("use it as") != std::string::npos; }, 60.0);
+  EXPECT_NE(shown.find("generated a one-time operator token"), std::string::npos) << shown;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/data/operator-token"));
+  ::kill(ok.pid, SIGTERM);
+  EXPECT_EQ(wait_exit(ok.pid, 60.0), 0);
+}

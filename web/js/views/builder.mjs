@@ -828,7 +828,11 @@ export function mount(root, ctx) {
           ctx.navigate(`#/campaigns/${created.id}`);
           return;
         }
-        ctx.navigate('#/live');
+        // Another campaign on the bench: this one waits in the queue, and its own page says so
+        // (the live view would show the other run).
+        const status = await get('/api/status').catch(() => null);
+        const other = status?.active && status.active.id !== created.id;
+        ctx.navigate(other ? `#/campaigns/${created.id}` : '#/live');
       } else {
         ctx.navigate(`#/campaigns/${created.id}`);
       }

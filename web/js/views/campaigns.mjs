@@ -1,4 +1,5 @@
-// Campaigns: what runs and waits (the queue), and the history with state, duration and result.
+// Campaigns: what runs and waits (the queue), what was created and not started yet, and the
+// history with state, duration and result.
 import { get } from '../api.mjs';
 import { h, clear, duration, dateTime, stateBadge, FINAL_STATES } from '../format.mjs';
 import { isOperator } from '../session.mjs';
@@ -6,6 +7,7 @@ import { isOperator } from '../session.mjs';
 export function mount(root, ctx) {
   const status = h('div', { class: 'form-error', role: 'alert' });
   const activeBody = h('tbody');
+  const createdBody = h('tbody');
   const historyBody = h('tbody');
   const updated = h('span', { class: 'muted' });
   const table = (body, id) => h('table', { class: 'list', id },
@@ -24,6 +26,10 @@ export function mount(root, ctx) {
     h('section', { class: 'card' }, h('h2', {}, 'Running and queued'), table(activeBody, 'active-campaigns'),
       h('p', { class: 'muted empty-note', id: 'active-empty', hidden: true }, 'Nothing runs or waits. ',
         isOperator() ? h('a', { href: '#/new' }, 'Build a campaign') : 'An operator can start one.', '.')),
+    // Created but never started: not in the queue, so not under "Running and queued".
+    h('section', { class: 'card', id: 'created-section', hidden: true }, h('h2', {}, 'Not started'),
+      h('p', { class: 'muted' }, 'Created and waiting for an operator to start them (they are not in the queue).'),
+      table(createdBody, 'created-campaigns')),
     h('section', { class: 'card' }, h('h2', {}, 'History'), table(historyBody, 'history-campaigns'),
       h('p', { class: 'muted empty-note', id: 'history-empty', hidden: true }, 'No finished campaigns yet.')));
 
@@ -47,11 +53,14 @@ export function mount(root, ctx) {
   }
 
   function render(list) {
-    const active = list.filter((c) => !FINAL_STATES.has(c.state))
-      // the head of the queue first after whatever runs, then the ones not started yet
+    const active = list.filter((c) => !FINAL_STATES.has(c.state) && c.state !== 'created')
+      // the head of the queue first after whatever runs
       .sort((a, b) => rank(a) - rank(b) || a.id - b.id);
+    const created = list.filter((c) => c.state === 'created').sort((a, b) => a.id - b.id);
     const history = list.filter((c) => FINAL_STATES.has(c.state));
     clear(activeBody).append(...active.map(row));
+    clear(createdBody).append(...created.map(row));
+    root.querySelector('#created-section').hidden = created.length === 0;
     clear(historyBody).append(...history.map(row));
     root.querySelector('#active-empty').hidden = active.length > 0;
     root.querySelector('#history-empty').hidden = history.length > 0;
@@ -59,7 +68,6 @@ export function mount(root, ctx) {
 
   function rank(c) {
     if (c.queue_position !== null && c.queue_position !== undefined) return 10 + c.queue_position;
-    if (c.state === 'created') return 100000;
     if (c.state === 'interrupted') return 50000;
     return 0;  // running, paused, suspended, ...
   }
@@ -93,6 +101,8 @@ export function mount(root, ctx) {
     const kept = `${c.has_model ? ', model kept (partial)' : ''}${c.accepted ? ', accepted' : ''}`;
     if (c.state === 'failed') return h('span', { class: 'result-bad', title: c.error || '' }, `${c.error || 'failed'}${kept}`);
     if (c.state === 'aborted') return h('span', { class: 'muted' }, `aborted at ${Math.round(100 * (c.progress || 0))} %${kept}`);
+    if (c.state === 'created') return h('span', { class: 'muted' }, 'not started');
+    if (c.state === 'queued') return h('span', { class: 'muted' }, 'waits for the bench');
     const pct = Math.round(100 * (c.progress || 0));
     return h('div', { class: 'progress', title: `${pct} % of the program` },
       h('div', { class: 'bar', style: `width:${pct}%` }), h('span', {}, `${pct} %`));
