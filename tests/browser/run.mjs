@@ -341,6 +341,23 @@ try {
   assert.ok(coefRows >= 27, `the coefficient table lists every coefficient (${coefRows})`);
   assert.ok(await page.$('#coefficient-table td.truth'), 'a simulated run shows the truth beside the estimate');
   assert.ok(await page.$('#coefficient-table td.error'), 'and the error');
+  // The run from its recording (issue 18, item 2): table, rates, temperatures; drag to zoom.
+  await page.waitForSelector('#recording-table_deg .uplot');
+  await page.waitForSelector('#recording-temperature_C .uplot');
+  const recordedFrames = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  assert.equal(recordedFrames, (await apiCall('GET', `/api/campaigns/${id}`)).body.frames, 'the plots hold every recorded frame');
+  await page.$eval('#recording-plots', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  const over = await (await page.$('#recording-table_deg .u-over')).boundingBox();
+  await page.mouse.move(over.x + over.width * 0.3, over.y + over.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(over.x + over.width * 0.45, over.y + over.height / 2, { steps: 5 });
+  await page.mouse.up();
+  await waitText(page, '#recording-plots-status', /^Zoomed: /);
+  await page.waitForSelector('#recording-table_deg .uplot');
+  await shot(page, '07c-results-recording-zoomed');
+  await page.click('#recording-whole');
+  await waitText(page, '#recording-plots-status', /^Whole run: /);
+  log('results: table angles, IMU rates and temperatures from the recording; zoomed by dragging, read again');
   await page.waitForSelector('#results-convergence .conv-chart .uplot');
   await shot(page, '06-results');
   await page.$eval('#results-convergence', (el) => el.scrollIntoView());

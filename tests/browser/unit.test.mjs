@@ -299,3 +299,12 @@ test('numbers and times for people: durations rounded once, time ticks with hour
   assert.equal(clockTick(t, 300), '14:03');
   assert.equal(clockTick(t, 2 * 86400), '03-01 14:03');
 });
+
+test('the recording as plots: x in program seconds, each channel its maximum and minimum', async () => {
+  const { chartData } = await import('../../web/js/recording_plots.mjs');
+  const series = { t_s: [0, 1, 2], table_deg: { outer: { min: [0, 1, null], max: [0.5, 2, null] }, inner: { min: [5, 5, 5], max: [6, 6, 6] } } };
+  const { labels, data } = chartData(series, 'table_deg', ['outer', 'middle', 'inner']);
+  assert.deepEqual(labels, ['outer max', 'outer min', 'inner max', 'inner min'], 'channels the run lacks are left out');
+  assert.deepEqual(data, [[0, 1, 2], [0.5, 2, null], [0, 1, null], [6, 6, 6], [5, 5, 5]]);
+  assert.deepEqual(chartData(series, 'temperature_C', ['chamber']).labels, []);
+});

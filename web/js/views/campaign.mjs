@@ -12,6 +12,7 @@ import { convergencePanel } from '../convergence.mjs';
 import { contributionRows } from '../contributions.mjs';
 import { Series } from '../series.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
+import { recordingPlots } from '../recording_plots.mjs';
 
 export function mount(root, ctx) {
   const id = ctx.params.id;
@@ -193,6 +194,13 @@ export function mount(root, ctx) {
         panel.update();
         cleanups.push(() => panel.destroy());
       }
+    }
+
+    // The run itself, from its recording: table, rates and temperatures, zoomable.
+    if (d.run_db) {
+      const box = h('div', { class: 'recording-plots', id: 'recording-plots' });
+      results.append(h('h3', {}, 'The run: table, IMU and temperatures from the recording'), box);
+      cleanups.push(recordingPlots(box, id));
     }
 
     // Plots whose data the API may provide (docs/web.md lists what it lacks today).
