@@ -311,6 +311,19 @@ try {
   await page.evaluate(() => window.scrollTo(0, 0));
   log('live plots move (angles, rates, chamber, frame rate, estimator convergence)');
 
+  // "Whole run" after a reload: the run so far, from its recording (issue 18, item 2).
+  await page.click('#window-tabs button[data-window="Infinity"]');
+  await page.waitForSelector('#live-recording:not([hidden]) #recording-table_deg .uplot');
+  const framesBefore = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  await page.reload();
+  await page.waitForSelector('#live-recording:not([hidden]) #recording-table_deg .uplot', { timeout: 20000 });
+  const framesAfter = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  assert.ok(framesBefore > 0 && framesAfter >= framesBefore, `the whole run so far after a reload (${framesBefore} -> ${framesAfter} frames)`);
+  await shot(page, '04c-live-whole-run-after-reload');
+  await page.click('#window-tabs button[data-window="600"]');
+  await page.waitForSelector('#live-recording[hidden]', { state: 'attached' });
+  log('a reload during the run: "whole run" shows the run so far from its recording');
+
   // ---- pause and resume ----
   await page.click('.command-bar .cmd-pause');
   await waitText(page, '#run-state', /paused/, 20000);
@@ -483,6 +496,13 @@ try {
   await page.click('#confirm-ok');
   await page.waitForURL(/#\/live$/);
   const fullId = (await apiCall('GET', '/api/campaigns')).body.campaigns.find((c) => c.name === 'browser test: full').id;
+  // A second campaign's plots start empty: none of the first run's samples (issue 18, item 2).
+  {
+    await page.waitForFunction(() => window.imucal.store.runId !== null && window.imucal.store.angles.view(Infinity)[0].length > 0, null, { timeout: 60000 });
+    const started = Date.parse((await apiCall('GET', `/api/campaigns/${fullId}`)).body.started) / 1000;
+    const firstX = await page.evaluate(() => window.imucal.store.angles.view(Infinity)[0][0]);
+    assert.ok(firstX >= started - 1, `the angle plot starts with this campaign (${firstX} vs started ${started})`);
+  }
   // Stage 3 running: its convergence shown (the delays are stage-3 states), its innovations drawn.
   await page.waitForSelector('#innovations-card:not([hidden]) #innovations .conv-chart .uplot', { timeout: 180000 });
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart[data-coefficient^="gyro."] .uplot')?.dataset.points) >= 2

@@ -33,15 +33,20 @@ export function chartData(series, key, channels) {
   return { labels, data };
 }
 
-/** Mounts the plots in `box`; returns a function that removes them. */
+/**
+ * Mounts the plots in `box`; returns a function that removes them, with `.reload()` to read the
+ * recording again (a running campaign's grows) unless the operator has zoomed in.
+ */
 export function recordingPlots(box, campaignId) {
   const status = h('p', { class: 'muted', id: 'recording-plots-status' }, 'Reading the recording…');
   const whole = h('button', { type: 'button', class: 'small', id: 'recording-whole', hidden: true }, 'Whole run');
   box.append(h('div', { class: 'recording-toolbar' }, status, whole));
   const charts = [];
   let stopped = false;
+  let zoomed = false;
 
   async function load(from_s, to_s) {
+    zoomed = from_s !== undefined;
     const q = new URLSearchParams({ points: String(POINTS) });
     if (from_s !== undefined) { q.set('from_s', String(Math.max(0, from_s))); q.set('to_s', String(to_s)); }
     let series;
@@ -80,8 +85,8 @@ export function recordingPlots(box, campaignId) {
   }
   whole.addEventListener('click', () => load());
   load();
-  return () => {
+  return Object.assign(() => {
     stopped = true;
     for (const c of charts) c.destroy();
-  };
+  }, { reload: () => (zoomed || stopped ? undefined : load()) });
 }
