@@ -394,6 +394,8 @@ try {
   log(`recording bundle downloaded (${bundle.suggestedFilename()}, ${tar.length} bytes)`);
   // direct-short has 10 s statics: enough for a short Allan curve; no thermal cycles, no tilts.
   await page.waitForSelector('#plot-allan .uplot');
+  // The model's noise terms beside the Allan figures, and why they differ (issue 18, item 4).
+  await waitText(page, '#allan-vs-model', /The model's noise terms: angle random walk .* quantisation dominates/);
   await waitText(page, '#plot-thermal-status', /Not available for this run: .*program 'thermal'/);
   await waitText(page, '#plot-evaluation-status', /Not available for this run: .*program 'evaluate'/);
   await page.$eval('#optional-plots', (el) => el.scrollIntoView());
