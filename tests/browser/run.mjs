@@ -263,6 +263,9 @@ try {
   await page.fill(`#seg-${rateRow}-rate_dps`, '30');
   await page.fill(`#seg-${rateRow}-revolutions`, '2');
   await waitText(page, '#verdict', /^Valid/);
+  // Back to direct-short's own values: no longer "Edited", the campaign names the built-in program.
+  assert.equal(await page.$('#template-info .modified'), null, '"Edited" goes when the edit is undone');
+  assert.equal(JSON.parse(await page.textContent('#json-preview')).program, 'direct-short');
   // A simulated chamber fault: the run must suspend by itself and resume when it clears.
   await page.click('#add-fault');
   await page.fill('#fault-0-at_s', '100');

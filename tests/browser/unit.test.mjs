@@ -308,3 +308,11 @@ test('the recording as plots: x in program seconds, each channel its maximum and
   assert.deepEqual(data, [[0, 1, 2], [0.5, 2, null], [0, 1, null], [6, 6, 6], [5, 5, 5]]);
   assert.deepEqual(chartData(series, 'temperature_C', ['chamber']).labels, []);
 });
+
+test('a program edited and edited back is the built-in program again (canonical JSON)', async () => {
+  const { canonical } = await import('../../web/js/program_edit.mjs');
+  const a = { name: 'p', segments: [{ type: 'rate', axis: 'outer', rate_dps: 20, revolutions: 2 }] };
+  const b = { segments: [{ revolutions: 2, rate_dps: 20, type: 'rate', axis: 'outer' }], name: 'p' };
+  assert.equal(canonical(a), canonical(b));
+  assert.notEqual(canonical(a), canonical({ ...a, segments: [{ ...a.segments[0], rate_dps: 21 }] }));
+});

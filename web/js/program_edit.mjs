@@ -181,3 +181,9 @@ export function compress(list) {
     .map((p) => p.replace(/^campaign\.program: /, ''));
 }
 
+
+/** JSON with every object's keys in order: the same program however its edits ordered them. */
+export function canonical(value) {
+  return JSON.stringify(value, (key, v) => (v && typeof v === 'object' && !Array.isArray(v)
+    ? Object.fromEntries(Object.keys(v).sort().map((k) => [k, v[k]])) : v));
+}

@@ -8,7 +8,7 @@ import { get, post, ApiError } from '../api.mjs';
 import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog } from '../dialogs.mjs';
-import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress } from '../program_edit.mjs';
+import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical } from '../program_edit.mjs';
 import { SEED_TARGETS, predictionRows, summary } from '../plan.mjs';
 
 const DRAFT_KEY = 'imucal.builder.draft';
@@ -567,12 +567,14 @@ export function mount(root, ctx) {
     changed();
   }
 
+  // Edited means different from the built-in program: an edit undone by hand is no edit, and the
+  // campaign names the built-in program again.
   function modified() {
-    if (!draft.modified) {
-      draft.modified = true;
-      const info = templateInfo;
-      if (!info.querySelector('.modified')) info.append(h('strong', { class: 'modified' }, ' Edited: sent as an inline program.'));
-    }
+    const template = programs.find((x) => x.name === draft.template);
+    draft.modified = !template || canonical(draft.program) !== canonical(template.program);
+    const mark = templateInfo.querySelector('.modified');
+    if (draft.modified && !mark) templateInfo.append(h('strong', { class: 'modified' }, ' Edited: sent as an inline program.'));
+    if (!draft.modified) mark?.remove();
     changed();
   }
 
