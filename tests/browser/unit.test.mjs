@@ -316,3 +316,12 @@ test('a program edited and edited back is the built-in program again (canonical 
   assert.equal(canonical(a), canonical(b));
   assert.notEqual(canonical(a), canonical({ ...a, segments: [{ ...a.segments[0], rate_dps: 21 }] }));
 });
+
+test('positions are edited one per line and read back either way', async () => {
+  const { formatValue, parseField, SEGMENT_TYPES } = await import('../../web/js/program_edit.mjs');
+  const field = SEGMENT_TYPES.positions.find((x) => x.key === 'positions_deg');
+  const twelve = Array.from({ length: 12 }, (_, k) => [30 * k, 0, 0]);
+  const text = formatValue(field, twelve);
+  assert.equal(text.split('\n').length, 12, 'one line per position');
+  assert.deepEqual(parseField(field, text).value, twelve);
+});

@@ -453,8 +453,13 @@ export function mount(root, ctx) {
         control.addEventListener('change', () => { seg[f.key] = control.value; modified(); });
       } else {
         const text = formatValue(f, seg[f.key]);
-        control = h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
-          class: f.kind === 'vec3list' ? 'wide' : f.kind === 'number' ? 'short' : '', spellcheck: 'false' });
+        // A list of positions: one per line in a box that shows them all (twelve positions in
+        // one line of text were cut off).
+        control = f.kind === 'vec3list'
+          ? h('textarea', { id, 'aria-label': `segment ${i + 1} ${f.label}`, class: 'positions', spellcheck: 'false',
+            rows: String(Math.min(12, Math.max(2, (seg[f.key] || []).length))), value: text })
+          : h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
+            class: f.kind === 'number' ? 'short' : '', spellcheck: 'false' });
         control.addEventListener('input', () => {
           const r = parseField(f, control.value);
           let err = r.error || null;
