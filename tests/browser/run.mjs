@@ -439,6 +439,13 @@ try {
   await cert.close();
   log(`certificate ${certNumber} rendered, printed to one A4 page and saved as self-contained HTML`);
 
+  // ---- the idle live page: the bench's readings, none of the last run's figures (issue 18, item 5) ----
+  await page.goto(`${base}/#/live`);
+  await waitText(page, '#run-title', /Nothing runs/);
+  assert.equal((await page.textContent('#imu-frames')).trim(), '—', 'no frame count of the last run');
+  assert.equal((await page.textContent('#estimator-status')).trim(), '—', 'no estimator of the last run');
+  log('idle live page: the bench, none of the last run\'s figures');
+
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
   // Posted with the API (the builder was covered above), as fast as the machine goes, at a low
   // rate, with the navigation-grade truth of examples/ so that calibrating makes a difference.

@@ -240,12 +240,13 @@ export function mount(root, ctx) {
       ch.connected === false ? ['bad', 'disconnected'] : ['ok', 'connected'],
       ch.in_band === false ? ['bad', 'out of band'] : ['ok', 'in band'],
     ]);
-    const imu = m.imu || {};
+    // A run's counters belong to the run: the idle bench shows none of the last run's figures.
+    const imu = run ? (m.imu || {}) : { connected: m.imu?.connected };
     set('imu-rate', fixed(imu.frame_rate_hz, 1));
     set('imu-frames', String(imu.frames ?? '—'));
     set('imu-lost', String(imu.lost_frames ?? '—'));
     set('imu-bad', String(imu.bad_frames ?? '—'));
-    const rec = m.recorder || {};
+    const rec = run ? (m.recorder || {}) : {};
     set('rec-queue', `${rec.queue_frames ?? '—'} (peak ${rec.queue_high_water_frames ?? '—'})`);
     set('rec-committed', String(rec.committed_frames ?? '—'));
     flags('imu-flags', [
@@ -256,7 +257,7 @@ export function mount(root, ctx) {
       ...(store.droppedMessages > 0 ? [['warn', `${store.droppedMessages} live messages skipped (slow page)`]] : []),
     ]);
     const estBox = root.querySelector('#estimator-status');
-    const est = m.estimators || {};
+    const est = run ? (m.estimators || {}) : {};
     const sig = JSON.stringify(Object.entries(est).map(([k, e]) => [k, e.status, e.statics, e.rotations, e.message, e.max_velocity_error_mps, e.max_position_error_m, e.filter_status, e.updates, Math.round(e.program_time_s || 0)]));
     if (estBox.dataset.sig !== sig) {
       estBox.dataset.sig = sig;
