@@ -111,7 +111,18 @@ void DirectCalibrator::push(const ImuFrame& f) {
   const Vector3d wdt_p = A * table::Rx(-mid[1]) * Vector3d::UnitZ() * d[0] + A * Vector3d::UnitX() * d[1] +
                          Vector3d::UnitZ() * d[2];
   const Matrix3d C_p_n = table::C_p_n(mid, C_p0_n_);
-  const Vector3d wdt_o = meta_.mount.C_o_p.transpose() * (wdt_p + C_p_n.transpose() * w_ie_n_ * dt);
+  // The Earth rate along the path: resolved at the mid attitude, its part across the platform's
+  // rotation over the frame averages to sinc(phi/2) of that (exact for a rotation about a fixed
+  // axis). The plain midpoint rule left a systematic error of phi^2/24 of it: 0.0016" in a gyro
+  // misalignment at 20 Hz and 30 deg/s, beyond 4 sigma of an error-free IMU's fit at any rate.
+  Vector3d earth_p = C_p_n.transpose() * w_ie_n_ * dt;
+  const double phi = wdt_p.norm();
+  if (phi > 1e-12) {
+    const Vector3d axis = wdt_p / phi;
+    const Vector3d along = axis * axis.dot(earth_p);
+    earth_p = along + std::sin(0.5 * phi) / (0.5 * phi) * (earth_p - along);
+  }
+  const Vector3d wdt_o = meta_.mount.C_o_p.transpose() * (wdt_p + earth_p);
   for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
   iv.moved_axes_rad += d.cwiseAbs();
   if (iv.frames == 0 && iv.is_static) {

@@ -1,4 +1,6 @@
 #include "daemon/service/api.hpp"
+#include "daemon/service/run_series.hpp"
+#include "storage/run_db.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -403,6 +405,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     if (action == "recording") {
       if (auto r = only("GET")) return *r;
       return campaign_recording(*id, method == "HEAD");
+    }
+    if (action == "series") {
+      if (auto r = only("GET")) return *r;
+      return campaign_series(*id, query);
     }
     if (action == "allan" || action == "thermal" || action == "evaluation") {
       if (auto r = only("GET")) return *r;
@@ -841,6 +847,35 @@ HttpReply Api::campaign_events_csv(std::int64_t id) {
 void Api::broadcast(const json& message) {
   std::lock_guard lock(listener_mutex_);
   if (event_listener_) event_listener_(message);
+}
+
+HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std::string>& query) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (row->run_db.empty())
+    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  SeriesRange range;
+  // A query value that is not a number is named, not read as 0.
+  for (const auto& [key, target] : {std::pair<const char*, double*>{"from_s", &range.from_s}, {"to_s", &range.to_s}}) {
+    const auto it = query.find(key);
+    if (it == query.end()) continue;
+    char* end = nullptr;
+    *target = std::strtod(it->second.c_str(), &end);
+    if (it->second.empty() || *end != '\0') return error_reply(400, std::string(key) + " must be a number of seconds, not '" + it->second + "'");
+  }
+  if (const auto it = query.find("points"); it != query.end()) {
+    const auto v = parse_id(it->second);
+    if (!v || *v < 1 || *v > kMaxSeriesColumns)
+      return error_reply(400, "points must be a number from 1 to " + std::to_string(kMaxSeriesColumns));
+    range.columns = static_cast<int>(*v);
+  }
+  try {
+    // Read-only beside a writer (WAL): a running campaign's recording so far.
+    const auto run = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
+    return json_reply(200, run_series_json(run, range));
+  } catch (const std::invalid_argument& e) {
+    return error_reply(400, e.what());
+  }
 }
 
 void Api::set_event_listener(std::function<void(const json&)> listener) {

@@ -263,6 +263,9 @@ try {
   await page.fill(`#seg-${rateRow}-rate_dps`, '30');
   await page.fill(`#seg-${rateRow}-revolutions`, '2');
   await waitText(page, '#verdict', /^Valid/);
+  // Back to direct-short's own values: no longer "Edited", the campaign names the built-in program.
+  assert.equal(await page.$('#template-info .modified'), null, '"Edited" goes when the edit is undone');
+  assert.equal(JSON.parse(await page.textContent('#json-preview')).program, 'direct-short');
   // A simulated chamber fault: the run must suspend by itself and resume when it clears.
   await page.click('#add-fault');
   await page.fill('#fault-0-at_s', '100');
@@ -318,6 +321,19 @@ try {
   await shot(page, '04b-live-estimators');
   await page.evaluate(() => window.scrollTo(0, 0));
   log('live plots move (angles, rates, chamber, frame rate, estimator convergence)');
+
+  // "Whole run" after a reload: the run so far, from its recording (issue 18, item 2).
+  await page.click('#window-tabs button[data-window="Infinity"]');
+  await page.waitForSelector('#live-recording:not([hidden]) #recording-table_deg .uplot');
+  const framesBefore = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  await page.reload();
+  await page.waitForSelector('#live-recording:not([hidden]) #recording-table_deg .uplot', { timeout: 20000 });
+  const framesAfter = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  assert.ok(framesBefore > 0 && framesAfter >= framesBefore, `the whole run so far after a reload (${framesBefore} -> ${framesAfter} frames)`);
+  await shot(page, '04c-live-whole-run-after-reload');
+  await page.click('#window-tabs button[data-window="600"]');
+  await page.waitForSelector('#live-recording[hidden]', { state: 'attached' });
+  log('a reload during the run: "whole run" shows the run so far from its recording');
 
   // ---- pause and resume ----
   await page.click('.command-bar .cmd-pause');
@@ -377,6 +393,23 @@ try {
   assert.ok(coefRows >= 27, `the coefficient table lists every coefficient (${coefRows})`);
   assert.ok(await page.$('#coefficient-table td.truth'), 'a simulated run shows the truth beside the estimate');
   assert.ok(await page.$('#coefficient-table td.error'), 'and the error');
+  // The run from its recording (issue 18, item 2): table, rates, temperatures; drag to zoom.
+  await page.waitForSelector('#recording-table_deg .uplot');
+  await page.waitForSelector('#recording-temperature_C .uplot');
+  const recordedFrames = Number(await page.getAttribute('#recording-plots-status', 'data-frames'));
+  assert.equal(recordedFrames, (await apiCall('GET', `/api/campaigns/${id}`)).body.frames, 'the plots hold every recorded frame');
+  await page.$eval('#recording-plots', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  const over = await (await page.$('#recording-table_deg .u-over')).boundingBox();
+  await page.mouse.move(over.x + over.width * 0.3, over.y + over.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(over.x + over.width * 0.45, over.y + over.height / 2, { steps: 5 });
+  await page.mouse.up();
+  await waitText(page, '#recording-plots-status', /^Zoomed: /);
+  await page.waitForSelector('#recording-table_deg .uplot');
+  await shot(page, '07c-results-recording-zoomed');
+  await page.click('#recording-whole');
+  await waitText(page, '#recording-plots-status', /^Whole run: /);
+  log('results: table angles, IMU rates and temperatures from the recording; zoomed by dragging, read again');
   await page.waitForSelector('#results-convergence .conv-chart .uplot');
   await shot(page, '06-results');
   await page.$eval('#results-convergence', (el) => el.scrollIntoView());
@@ -400,6 +433,8 @@ try {
   log(`recording bundle downloaded (${bundle.suggestedFilename()}, ${tar.length} bytes)`);
   // direct-short has 10 s statics: enough for a short Allan curve; no thermal cycles, no tilts.
   await page.waitForSelector('#plot-allan .uplot');
+  // The model's noise terms beside the Allan figures, and why they differ (issue 18, item 4).
+  await waitText(page, '#allan-vs-model', /The model's noise terms: angle random walk .* quantisation dominates/);
   await waitText(page, '#plot-thermal-status', /Not available for this run: .*program 'thermal'/);
   await waitText(page, '#plot-evaluation-status', /Not available for this run: .*program 'evaluate'/);
   await page.$eval('#optional-plots', (el) => el.scrollIntoView());
@@ -502,6 +537,13 @@ try {
   await page.click('#confirm-ok');
   await page.waitForURL(/#\/live$/);
   const fullId = (await apiCall('GET', '/api/campaigns')).body.campaigns.find((c) => c.name === 'browser test: full').id;
+  // A second campaign's plots start empty: none of the first run's samples (issue 18, item 2).
+  {
+    await page.waitForFunction(() => window.imucal.store.runId !== null && window.imucal.store.angles.view(Infinity)[0].length > 0, null, { timeout: 60000 });
+    const started = Date.parse((await apiCall('GET', `/api/campaigns/${fullId}`)).body.started) / 1000;
+    const firstX = await page.evaluate(() => window.imucal.store.angles.view(Infinity)[0][0]);
+    assert.ok(firstX >= started - 1, `the angle plot starts with this campaign (${firstX} vs started ${started})`);
+  }
   // Stage 3 running: its convergence shown (the delays are stage-3 states), its innovations drawn.
   await page.waitForSelector('#innovations-card:not([hidden]) #innovations .conv-chart .uplot', { timeout: 180000 });
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart[data-coefficient^="gyro."] .uplot')?.dataset.points) >= 2

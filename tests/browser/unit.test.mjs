@@ -342,3 +342,29 @@ test('an alarm says whether it is active, and who acknowledged it when', () => {
   assert.equal(alarmSummary([alarm(1), alarm(2, { cleared: 'T1' })]), '2 alarms (1 active), 2 to acknowledge');
   assert.equal(alarmSummary([alarm(1, { acknowledged_by: 'a', acknowledged: 'T' })]), '1 alarm (1 active), all acknowledged');
 });
+
+test('the recording as plots: x in program seconds, each channel its maximum and minimum', async () => {
+  const { chartData } = await import('../../web/js/recording_plots.mjs');
+  const series = { t_s: [0, 1, 2], table_deg: { outer: { min: [0, 1, null], max: [0.5, 2, null] }, inner: { min: [5, 5, 5], max: [6, 6, 6] } } };
+  const { labels, data } = chartData(series, 'table_deg', ['outer', 'middle', 'inner']);
+  assert.deepEqual(labels, ['outer max', 'outer min', 'inner max', 'inner min'], 'channels the run lacks are left out');
+  assert.deepEqual(data, [[0, 1, 2], [0.5, 2, null], [0, 1, null], [6, 6, 6], [5, 5, 5]]);
+  assert.deepEqual(chartData(series, 'temperature_C', ['chamber']).labels, []);
+});
+
+test('a program edited and edited back is the built-in program again (canonical JSON)', async () => {
+  const { canonical } = await import('../../web/js/program_edit.mjs');
+  const a = { name: 'p', segments: [{ type: 'rate', axis: 'outer', rate_dps: 20, revolutions: 2 }] };
+  const b = { segments: [{ revolutions: 2, rate_dps: 20, type: 'rate', axis: 'outer' }], name: 'p' };
+  assert.equal(canonical(a), canonical(b));
+  assert.notEqual(canonical(a), canonical({ ...a, segments: [{ ...a.segments[0], rate_dps: 21 }] }));
+});
+
+test('positions are edited one per line and read back either way', async () => {
+  const { formatValue, parseField, SEGMENT_TYPES } = await import('../../web/js/program_edit.mjs');
+  const field = SEGMENT_TYPES.positions.find((x) => x.key === 'positions_deg');
+  const twelve = Array.from({ length: 12 }, (_, k) => [30 * k, 0, 0]);
+  const text = formatValue(field, twelve);
+  assert.equal(text.split('\n').length, 12, 'one line per position');
+  assert.deepEqual(parseField(field, text).value, twelve);
+});

@@ -112,3 +112,16 @@ TEST(Direct, BodyFrameZeroesTheAccelerometerReferenceAngles) {
   const Eigen::Matrix3d Dg_o = misalignment_matrix(m.gyro.misalignment_rad);
   EXPECT_LT((Dg_o * C_o_b.transpose() - misalignment_matrix(b.gyro.misalignment_rad)).cwiseAbs().maxCoeff(), 1e-7);
 }
+
+// The Earth rate along a rotating frame interval (issue 18, item 4): taken at the mid attitude it
+// is off by phi^2/24 of its part across the rotation, a systematic error that an error-free IMU
+// shows at any rate (0.00156" in gyro misalignment yx at 20 Hz before; 0.00104" with the
+// sinc(phi/2) average). What remains scales with the frame interval squared and is 1 % of the
+// seed's 0.1" at 20 Hz; its cause is not found yet (docs/calibration.md).
+TEST(Direct, AnErrorFreeImuLeavesOnlyADiscretisationFloor) {
+  const direct::Result r = calibrate_simulated("direct-short", ImuModel{}, 20, 1);
+  const double yx_arcsec = r.model.gyro.misalignment_rad.yx * units::kRadToArcsec;
+  std::printf("error-free IMU at 20 Hz: gyro misalignment yx %.3g arcsec (sigma %.3g)\n", yx_arcsec,
+              r.model.sigma->gyro.misalignment_rad.yx * units::kRadToArcsec);
+  EXPECT_LT(std::abs(yx_arcsec), 0.0012);
+}

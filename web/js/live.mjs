@@ -203,10 +203,11 @@ export class LiveStore extends EventTarget {
       const previous = this.runId;
       this.runId = id;
       this.runName = run ? run.name : null;
-      if (id !== null) {
-        this.estimators.clear();
-        this.loadProgress(id);
-      }
+      // One campaign's plots never carry another's: each run (and the idle bench after it)
+      // starts empty; the whole run comes back from its recording (views/live.mjs).
+      for (const s of [this.angles, this.rates, this.chamber, this.frameRate]) s.clear();
+      this.estimators.clear();
+      if (id !== null) this.loadProgress(id);
       this.dispatchEvent(new CustomEvent('run', { detail: { id, previous } }));
     }
     this.latest = m;

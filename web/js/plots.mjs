@@ -37,8 +37,9 @@ export function schedule(fn) {
  * @param {{title?: string, y?: string, x?: 'time'|string, height?: number,
  *          series: {label: string, color?: string, dash?: number[], width?: number, band?: boolean}[],
  *          bands?: [number, number, string][], yRange?: (u, min, max) => [number, number],
- *          log?: boolean, points?: boolean, markers?: () => number[]}} spec
+ *          log?: boolean, points?: boolean, markers?: () => number[], onZoom?: (x0, x1) => void}} spec
  *   markers: x positions drawn as dashed vertical lines (e.g. the restarts of stage 3's navigation).
+ *   onZoom: called with the x range a drag selected (charts whose x is not time zoom by dragging).
  */
 export function lineChart(el, spec) {
   const time = (spec.x ?? 'time') === 'time';
@@ -50,7 +51,7 @@ export function lineChart(el, spec) {
       stroke: s.band ? 'transparent' : (s.color || COLORS[i % COLORS.length]),
       width: s.band ? 0 : (s.width ?? 1.5),
       dash: s.dash,
-      spanGaps: false,
+      spanGaps: s.spanGaps ?? false,
       // uPlot shows the points by itself when they are sparse (an estimator's first few updates).
       points: spec.points === undefined ? { size: 5 } : { show: spec.points, size: 4 },
       value: s.value || ((u, v) => (v == null ? '—' : formatTick(v))),
@@ -76,7 +77,14 @@ export function lineChart(el, spec) {
     ],
     legend: { show: spec.legend ?? true, live: true },
     cursor: { drag: { x: !time, y: false } },
-    hooks: spec.markers ? { draw: [(u) => drawMarkers(u, spec.markers())] } : {},
+    hooks: {
+      ...(spec.markers ? { draw: [(u) => drawMarkers(u, spec.markers())] } : {}),
+      // A drag selected a range of x (the chart zooms to it): tell whoever can fetch its detail.
+      ...(spec.onZoom ? { setSelect: [(u) => {
+        if (u.select.width < 2) return;
+        spec.onZoom(u.posToVal(u.select.left, 'x'), u.posToVal(u.select.left + u.select.width, 'x'));
+      }] } : {}),
+    },
   };
   const empty = [[], ...spec.series.map(() => [])];
   const chart = new uPlot(opts, empty, el);

@@ -13,12 +13,12 @@ export const SEGMENT_TYPES = {
     { key: 'duration_s', kind: 'number', positive: true, label: 'duration s' },
   ],
   positions: [
-    { key: 'positions_deg', kind: 'vec3list', required: true, label: 'positions deg (o, m, i; …)' },
+    { key: 'positions_deg', kind: 'vec3list', required: true, label: 'positions deg (o, m, i; one per line)' },
     { key: 'dwell_s', kind: 'number', required: true, positive: true, label: 'dwell s' },
     { key: 'move_s', kind: 'number', positive: true, label: 'move s' },
   ],
   tilts: [
-    { key: 'positions_deg', kind: 'vec3list', required: true, label: 'positions deg (o, m, i; …)' },
+    { key: 'positions_deg', kind: 'vec3list', required: true, label: 'positions deg (o, m, i; one per line)' },
     { key: 'dwell_s', kind: 'number', required: true, positive: true, label: 'dwell s' },
     { key: 'move_s', kind: 'number', positive: true, label: 'move s' },
   ],
@@ -77,7 +77,7 @@ export function formatValue(field, value) {
   if (value === undefined || value === null) return '';
   switch (field.kind) {
     case 'vec3': case 'numlist': case 'axes': return Array.isArray(value) ? value.join(', ') : String(value);
-    case 'vec3list': return Array.isArray(value) ? value.map((p) => (Array.isArray(p) ? p.join(', ') : String(p))).join('; ') : '';
+    case 'vec3list': return Array.isArray(value) ? value.map((p) => (Array.isArray(p) ? p.join(', ') : String(p))).join('\n') : '';
     default: return String(value);
   }
 }
@@ -181,3 +181,9 @@ export function compress(list) {
     .map((p) => p.replace(/^campaign\.program: /, ''));
 }
 
+
+/** JSON with every object's keys in order: the same program however its edits ordered them. */
+export function canonical(value) {
+  return JSON.stringify(value, (key, v) => (v && typeof v === 'object' && !Array.isArray(v)
+    ? Object.fromEntries(Object.keys(v).sort().map((k) => [k, v[k]])) : v));
+}

@@ -8,7 +8,7 @@ import { get, post, ApiError } from '../api.mjs';
 import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog } from '../dialogs.mjs';
-import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress } from '../program_edit.mjs';
+import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical } from '../program_edit.mjs';
 import { SEED_TARGETS, predictionRows, summary } from '../plan.mjs';
 
 const DRAFT_KEY = 'imucal.builder.draft';
@@ -453,8 +453,13 @@ export function mount(root, ctx) {
         control.addEventListener('change', () => { seg[f.key] = control.value; modified(); });
       } else {
         const text = formatValue(f, seg[f.key]);
-        control = h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
-          class: f.kind === 'vec3list' ? 'wide' : f.kind === 'number' ? 'short' : '', spellcheck: 'false' });
+        // A list of positions: one per line in a box that shows them all (twelve positions in
+        // one line of text were cut off).
+        control = f.kind === 'vec3list'
+          ? h('textarea', { id, 'aria-label': `segment ${i + 1} ${f.label}`, class: 'positions', spellcheck: 'false',
+            rows: String(Math.min(12, Math.max(2, (seg[f.key] || []).length))), value: text })
+          : h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
+            class: f.kind === 'number' ? 'short' : '', spellcheck: 'false' });
         control.addEventListener('input', () => {
           const r = parseField(f, control.value);
           let err = r.error || null;
@@ -567,12 +572,14 @@ export function mount(root, ctx) {
     changed();
   }
 
+  // Edited means different from the built-in program: an edit undone by hand is no edit, and the
+  // campaign names the built-in program again.
   function modified() {
-    if (!draft.modified) {
-      draft.modified = true;
-      const info = templateInfo;
-      if (!info.querySelector('.modified')) info.append(h('strong', { class: 'modified' }, ' Edited: sent as an inline program.'));
-    }
+    const template = programs.find((x) => x.name === draft.template);
+    draft.modified = !template || canonical(draft.program) !== canonical(template.program);
+    const mark = templateInfo.querySelector('.modified');
+    if (draft.modified && !mark) templateInfo.append(h('strong', { class: 'modified' }, ' Edited: sent as an inline program.'));
+    if (!draft.modified) mark?.remove();
     changed();
   }
 

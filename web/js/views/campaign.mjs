@@ -13,10 +13,12 @@ import { contributionRows } from '../contributions.mjs';
 import { Series } from '../series.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
 import { alarmTable } from '../alarm_panel.mjs';
+import { recordingPlots } from '../recording_plots.mjs';
 
 export function mount(root, ctx) {
   const id = ctx.params.id;
   let detail = null;
+  let modelNoise = null;  // the run's model, for the Allan panel's comparison
   let stopped = false;
   let timer = null;
   let resultsFor = null;  // the state for which the results were loaded
@@ -122,6 +124,7 @@ export function mount(root, ctx) {
       ctx.status().catch(() => null),
     ]);
     if (stopped) return;
+    modelNoise = model && !model._error ? model : null;
     const truth = d.spec && typeof d.spec.truth === 'object' ? d.spec.truth : null;
     const simulated = (status?.devices || '').startsWith('sim') || truth !== null;
 
@@ -198,6 +201,13 @@ export function mount(root, ctx) {
         panel.update();
         cleanups.push(() => panel.destroy());
       }
+    }
+
+    // The run itself, from its recording: table, rates and temperatures, zoomable.
+    if (d.run_db) {
+      const box = h('div', { class: 'recording-plots', id: 'recording-plots' });
+      results.append(h('h3', {}, 'The run: table, IMU and temperatures from the recording'), box);
+      cleanups.push(recordingPlots(box, id));
     }
 
     // Plots whose data the API may provide (docs/web.md lists what it lacks today).
@@ -278,6 +288,15 @@ export function mount(root, ctx) {
       `Angle random walk ${fmt3(data.arw_deg_rth)} °/√h; velocity random walk ${fmt3(data.vrw_mps_rth)} m/s/√h (x, y, z)`,
       data.bias_instability_dph?.some((v) => v != null) ? `; bias instability ${fmt3(data.bias_instability_dph)} °/h` : '',
       `. ${(data.notes || []).join(' ')}`));
+    // The model's noise terms beside them, and why the two differ (docs/calibration.md).
+    const arw = modelNoise?.gyro?.noise?.arw_deg_rth, vrw = modelNoise?.accel?.noise?.vrw_mps_rth;
+    if (typeof arw === 'number' || typeof vrw === 'number') {
+      el.append(h('p', { class: 'muted', id: 'allan-vs-model' },
+        `The model's noise terms: angle random walk ${num(arw, 3)} °/√h, velocity random walk ${num(vrw, 3)} m/s/√h. `,
+        'They are the per-sample scatter of the statics (every noise at the sample rate, quantisation included: what the ',
+        'stage-3 filter needs per step); the Allan figures are the τ^-½ coefficient for τ ≤ 1 s. They agree when white noise ',
+        'dominates at the sample rate; where quantisation dominates (an error-free simulated IMU) the Allan figures are smaller.'));
+    }
   }
 
   function renderThermal(el, data) {

@@ -8,6 +8,7 @@ import { commandBar } from '../dialogs.mjs';
 import { convergencePanel } from '../convergence.mjs';
 import { unitOf } from '../coefficients.mjs';
 import { AXES } from '../live.mjs';
+import { recordingPlots } from '../recording_plots.mjs';
 
 const WINDOWS = [['60', '1 min'], ['600', '10 min'], ['3600', '1 h'], ['Infinity', 'whole run']];
 
@@ -58,12 +59,32 @@ export function mount(root, ctx) {
         windowS = Number(v);
         localStorage.setItem('imucal.live.window', v);
         for (const b of windowSel.children) b.setAttribute('aria-selected', String(b.dataset.window === v));
+        wholeRunMode();
         schedule(drawPlots);
       } }, label)));
   const plotGrid = h('div', { class: 'plot-grid' });
   const plotBox = (id) => h('div', { class: 'plot', id });
   const anglesEl = plotBox('plot-angles'), ratesEl = plotBox('plot-rates'), chamberEl = plotBox('plot-chamber'), rateEl = plotBox('plot-imu-rate');
   plotGrid.append(anglesEl, ratesEl, chamberEl, rateEl);
+  // "Whole run": the run's recording so far, read from imucald (it survives a reload, which the
+  // page's own buffers do not), over program time, read again every 10 s.
+  const recordingBox = h('div', { class: 'recording-plots', id: 'live-recording', hidden: true });
+  let recording = null, recordingRun = null;
+  function wholeRunMode() {
+    const whole = windowS === Infinity && store.runId !== null;
+    plotGrid.hidden = whole;
+    recordingBox.hidden = !whole;
+    if (whole && recordingRun === store.runId) return;
+    recording?.();
+    recording = null;
+    recordingRun = null;
+    recordingBox.replaceChildren();
+    if (whole) {
+      recording = recordingPlots(recordingBox, store.runId);
+      recordingRun = store.runId;
+    }
+  }
+  const recordingTimer = setInterval(() => recording?.reload(), 10000);
 
   const convEl = h('div', { id: 'convergence' });
   // Which estimator's convergence is shown: the operator's pick, else the one running now.
@@ -75,7 +96,7 @@ export function mount(root, ctx) {
     h('div', { class: 'conv-grid', id: 'innovations' }));
   const eventsBody = h('tbody', { id: 'events' });
   root.append(runBox, cards,
-    h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Table, chamber and IMU'), windowSel), plotGrid),
+    h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Table, chamber and IMU'), windowSel), plotGrid, recordingBox),
     h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Estimators converging (estimate ± σ over program time)'), convPick), convEl),
     innovationsCard,
     h('section', { class: 'card' }, h('h2', {}, 'Events, alarms and suspensions'),
@@ -281,12 +302,17 @@ export function mount(root, ctx) {
   store.addEventListener('telemetry', onTelemetry);
   store.addEventListener('event', onEvent);
   store.addEventListener('progress', onProgress);
+  store.addEventListener('run', wholeRunMode);
   onTelemetry();
+  wholeRunMode();
 
   return () => {
     store.removeEventListener('telemetry', onTelemetry);
     store.removeEventListener('event', onEvent);
     store.removeEventListener('progress', onProgress);
+    store.removeEventListener('run', wholeRunMode);
+    clearInterval(recordingTimer);
+    recording?.();
     angles.destroy();
     rates.destroy();
     chamber.destroy();
