@@ -6,9 +6,11 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 
 #include <spdlog/spdlog.h>
 
+#include "daemon/service/alarms.hpp"
 #include "daemon/service/analysis.hpp"
 #include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
@@ -356,6 +358,15 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     return compare_campaigns(query);
   }
   const auto parts = split_path(path);
+  if (path == "/api/alarms") {
+    if (auto r = only("GET")) return *r;
+    return list_alarms(query);
+  }
+  if (parts.size() >= 3 && parts[0] == "api" && parts[1] == "alarms") {
+    if (parts.size() != 4 || parts[3] != "ack") return error_reply(404, "no such endpoint: " + path + " (POST /api/alarms/{id}/ack)");
+    if (auto r = only("POST")) return *r;
+    return acknowledge_alarm(parts[2], *who);
+  }
   if (path == "/api/imus") {
     if (auto r = only("GET")) return *r;
     return json_reply(200, unit_list_json(db_.unit_campaigns(std::nullopt), limits_.current()));
@@ -402,6 +413,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
     if (action == "allan" || action == "thermal" || action == "evaluation") {
       if (auto r = only("GET")) return *r;
       return campaign_analysis(*id, action);
+    }
+    if (action == "events.csv") {
+      if (auto r = only("GET")) return *r;
+      return campaign_events_csv(*id);
     }
     if (action == "certificate") {
       if (auto r = only("GET")) return *r;
@@ -615,6 +630,9 @@ HttpReply Api::campaign_detail(std::int64_t id) {
                       {"program_time_s", e.program_time_s ? json(*e.program_time_s) : json(nullptr)},
                       {"reason", e.reason}});
   out["events"] = events;
+  json alarms = json::array();
+  for (const auto& a : db_.alarms(id, true)) alarms.push_back(alarm_json(a));
+  out["alarms"] = alarms;
   json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row->estimators_json);
   out["estimators"] = estimators.is_null() ? json::object() : estimators;
   const json results = parse_or_null(row->results_json);
@@ -780,6 +798,55 @@ HttpReply Api::campaign_recording(std::int64_t id, bool head) {
   r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + name + ".tar\"");
   (void)head;  // the server answers HEAD with the file's length and no body
   return r;
+}
+
+HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {
+  std::optional<std::int64_t> campaign;
+  if (const auto it = query.find("campaign"); it != query.end()) {
+    campaign = parse_id(it->second);
+    if (!campaign) return error_reply(400, "campaign must be a campaign id (/api/alarms?campaign=ID), not '" + it->second + "'");
+    if (!db_.campaign(*campaign)) return error_reply(404, "no campaign " + std::to_string(*campaign));
+  }
+  bool all = false;
+  if (const auto it = query.find("all"); it != query.end()) {
+    if (it->second != "0" && it->second != "1") return error_reply(400, "all must be 0 or 1, not '" + it->second + "'");
+    all = it->second == "1";
+  }
+  auto rows = db_.alarms(campaign, all);
+  json list = json::array();
+  for (auto it = rows.rbegin(); it != rows.rend(); ++it) list.push_back(alarm_json(*it));
+  return json_reply(200, {{"alarms", list}});
+}
+
+HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& who) {
+  const auto id = parse_id(id_text);
+  if (!id) return error_reply(404, "no alarm '" + id_text + "': an alarm id is a number (GET /api/alarms lists them)");
+  const auto [outcome, row] = db_.acknowledge_alarm(*id, who.user);
+  if (outcome == DaemonDb::Ack::NoSuchAlarm) return error_reply(404, "no alarm " + std::to_string(*id));
+  if (outcome == DaemonDb::Ack::AlreadyAcknowledged)
+    return error_reply(409,
+                       "alarm " + std::to_string(*id) + " was already acknowledged by " + row->acknowledged_by.value_or("?") +
+                           " at " + iso8601_utc(row->acknowledged_ms.value_or(0)),
+                       {{"alarm", alarm_json(*row)}});
+  spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row->campaign_id, row->id, row->severity,
+               row->message, who.user);
+  broadcast(alarm_message("acknowledged", *row));
+  return json_reply(200, alarm_json(*row));
+}
+
+HttpReply Api::campaign_events_csv(std::int64_t id) {
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  HttpReply r;
+  r.body = run_log_csv(db_.transitions(id), db_.events(id), db_.alarms(id, true, std::numeric_limits<std::int64_t>::max()));
+  r.content_type = "text/csv; charset=utf-8";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"campaign-" + std::to_string(id) + "-events.csv\"");
+  return r;
+}
+
+void Api::broadcast(const json& message) {
+  std::lock_guard lock(listener_mutex_);
+  if (event_listener_) event_listener_(message);
 }
 
 HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std::string>& query) {

@@ -81,6 +81,14 @@ class Api {
   // GET /api/campaigns/{id}/certificate: the campaign's certificate number, issued on the first
   // request (ended runs with a model only), then always the same.
   HttpReply campaign_certificate(std::int64_t id);
+  // GET /api/alarms: those still needing someone (or all with ?all=1), of every campaign (or of
+  // ?campaign=ID), newest first.
+  HttpReply list_alarms(const std::map<std::string, std::string>& query);
+  // POST /api/alarms/{id}/ack: who acknowledged it and when, once; broadcast.
+  HttpReply acknowledge_alarm(const std::string& id_text, const Principal& who);
+  // GET /api/campaigns/{id}/events.csv: the run's log with its alarms (alarms.hpp run_log_csv).
+  HttpReply campaign_events_csv(std::int64_t id);
+  void broadcast(const nlohmann::json& message);
   // PUT /api/limits: the whole limits file replaced by an operator.
   HttpReply replace_limits(const ApiRequest& request, const Principal& who);
 

@@ -86,6 +86,23 @@ CREATE TABLE IF NOT EXISTS certificate(
   issued_ms INTEGER NOT NULL,
   bench_json TEXT NOT NULL
 );
+-- Alarms (docs/api.md "Alarms"): raised, cleared (NULL while active), acknowledged by whom and
+-- when (NULL until then). Created where missing, as the certificate table, without a migration.
+CREATE TABLE IF NOT EXISTS alarm(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  severity TEXT NOT NULL,
+  source TEXT NOT NULL,
+  message TEXT NOT NULL,
+  segment INTEGER,
+  program_time_s REAL,
+  raised_ms INTEGER NOT NULL,
+  cleared_ms INTEGER,
+  cleared_reason TEXT,
+  acknowledged_by TEXT,
+  acknowledged_ms INTEGER
+);
+CREATE INDEX IF NOT EXISTS alarm_campaign ON alarm(campaign_id);
 )sql";
 
 // A prepared statement, finalized when it goes out of scope. The daemon database sees a few
@@ -571,6 +588,122 @@ std::int64_t DaemonDb::max_certificate_sequence() {
   std::lock_guard lock(mutex_);
   Stmt s(db_, path_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
   return s.step() ? s.i64(0) : 0;
+}
+
+
+namespace {
+
+constexpr const char* kAlarmColumns =
+    "a.id, a.campaign_id, COALESCE(c.name, ''), a.severity, a.source, a.message, a.segment, a.program_time_s, "
+    "a.raised_ms, a.cleared_ms, a.cleared_reason, a.acknowledged_by, a.acknowledged_ms "
+    "FROM alarm a LEFT JOIN campaign c ON c.id = a.campaign_id";
+
+AlarmRow read_alarm_row(const Stmt& s) {
+  AlarmRow r;
+  r.id = s.i64(0);
+  r.campaign_id = s.i64(1);
+  r.campaign_name = s.text(2);
+  r.severity = s.text(3);
+  r.source = s.text(4);
+  r.message = s.text(5);
+  r.segment = s.opt_i64(6);
+  r.program_time_s = s.opt_f64(7);
+  r.raised_ms = s.i64(8);
+  r.cleared_ms = s.opt_i64(9);
+  r.cleared_reason = s.opt_text(10);
+  r.acknowledged_by = s.opt_text(11);
+  r.acknowledged_ms = s.opt_i64(12);
+  return r;
+}
+
+std::optional<AlarmRow> select_alarm(sqlite3* db, const std::string& path, std::int64_t id) {
+  const std::string sql = std::string("SELECT ") + kAlarmColumns + " WHERE a.id = ?1";
+  Stmt s(db, path, sql.c_str());
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  return read_alarm_row(s);
+}
+
+}  // namespace
+
+AlarmRow DaemonDb::raise_alarm(std::int64_t campaign_id, const std::string& severity, const std::string& source,
+                               const std::string& message, std::optional<std::int64_t> segment,
+                               std::optional<double> program_time_s) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, path_,
+         "INSERT INTO alarm(campaign_id, severity, source, message, segment, program_time_s, raised_ms) "
+         "VALUES (?1,?2,?3,?4,?5,?6,?7)");
+  s.bind(1, campaign_id).bind(2, severity).bind(3, source).bind(4, message).bind(5, segment).bind(6, program_time_s);
+  s.bind(7, now_unix_ms());
+  s.run();
+  return *select_alarm(db_, path_, sqlite3_last_insert_rowid(db_));
+}
+
+std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
+                                             const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  Txn txn(db_);
+  std::vector<std::int64_t> ids;
+  {
+    Stmt s(db_, path_,
+           "SELECT id FROM alarm WHERE campaign_id = ?1 AND cleared_ms IS NULL AND (?2 IS NULL OR source = ?2) "
+           "ORDER BY id");
+    s.bind(1, campaign_id);
+    if (source) {
+      s.bind(2, *source);
+    } else {
+      s.bind_null(2);
+    }
+    while (s.step()) ids.push_back(s.i64(0));
+  }
+  const std::int64_t now = now_unix_ms();
+  std::vector<AlarmRow> cleared;
+  for (const std::int64_t id : ids) {
+    Stmt u(db_, path_, "UPDATE alarm SET cleared_ms = ?2, cleared_reason = ?3 WHERE id = ?1");
+    u.bind(1, id).bind(2, now).bind(3, reason);
+    u.run();
+    cleared.push_back(*select_alarm(db_, path_, id));
+  }
+  txn.commit();
+  return cleared;
+}
+
+std::pair<DaemonDb::Ack, std::optional<AlarmRow>> DaemonDb::acknowledge_alarm(std::int64_t id, const std::string& who) {
+  std::lock_guard lock(mutex_);
+  Txn txn(db_);
+  const auto before = select_alarm(db_, path_, id);
+  if (!before) return {Ack::NoSuchAlarm, std::nullopt};
+  if (before->acknowledged_ms) return {Ack::AlreadyAcknowledged, before};
+  Stmt u(db_, path_, "UPDATE alarm SET acknowledged_by = ?2, acknowledged_ms = ?3 WHERE id = ?1");
+  u.bind(1, id).bind(2, who).bind(3, now_unix_ms());
+  u.run();
+  auto after = select_alarm(db_, path_, id);
+  txn.commit();
+  return {Ack::Acknowledged, after};
+}
+
+std::optional<AlarmRow> DaemonDb::alarm(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  return select_alarm(db_, path_, id);
+}
+
+std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit) {
+  std::lock_guard lock(mutex_);
+  // The newest `limit`, handed back oldest first.
+  const std::string sql = std::string("SELECT * FROM (SELECT ") + kAlarmColumns +
+                          " WHERE (?1 IS NULL OR a.campaign_id = ?1)" +
+                          (all ? "" : " AND (a.cleared_ms IS NULL OR a.acknowledged_ms IS NULL)") +
+                          " ORDER BY a.id DESC LIMIT ?2) ORDER BY 1";
+  Stmt s(db_, path_, sql.c_str());
+  if (campaign) {
+    s.bind(1, *campaign);
+  } else {
+    s.bind_null(1);
+  }
+  s.bind(2, limit);
+  std::vector<AlarmRow> rows;
+  while (s.step()) rows.push_back(read_alarm_row(s));
+  return rows;
 }
 
 }  // namespace imucal::daemon

@@ -1,6 +1,6 @@
 // The daemon's own database (DATA_DIR/imucald.db, SQLite in WAL mode): campaigns with their run
-// state, the queue, every state transition, run events (suspensions, redos, alarms) and estimator
-// progress. Frames live elsewhere, one storage::RunDb per run. Thread-safe: one connection behind
+// state, the queue, every state transition, run events (suspensions, redos, alarms), the alarms an
+// operator acknowledges, and estimator progress. Frames live elsewhere, one storage::RunDb per run. Thread-safe: one connection behind
 // a mutex; every call is short.
 #pragma once
 
@@ -10,6 +10,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "daemon/service/run_state.hpp"
@@ -75,6 +76,24 @@ struct EventRow {
   std::optional<std::int64_t> segment;
   std::optional<double> program_time_s;
   std::string reason;
+};
+
+// An alarm (docs/api.md "Alarms"): raised with a run's serious condition, cleared when the condition
+// ends (cleared_ms null while it is active), acknowledged once by an operator (null until then).
+struct AlarmRow {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  std::string campaign_name;
+  std::string severity;  // alarms.hpp: "major" or "minor"
+  std::string source;    // what raised it: the event kind (suspended, alarm, error) or "interrupted"
+  std::string message;
+  std::optional<std::int64_t> segment;
+  std::optional<double> program_time_s;
+  std::int64_t raised_ms = 0;
+  std::optional<std::int64_t> cleared_ms;
+  std::optional<std::string> cleared_reason;
+  std::optional<std::string> acknowledged_by;
+  std::optional<std::int64_t> acknowledged_ms;
 };
 
 struct ProgressRow {
@@ -148,6 +167,22 @@ class DaemonDb {
   void insert_certificate(const CertificateRow& row);
   // The highest certificate sequence number this database has recorded (0: none).
   std::int64_t max_certificate_sequence();
+
+  // Alarms. raise_alarm returns the new row. clear_alarms ends the active alarms of a campaign
+  // (only those from `source` when given) and returns them as cleared.
+  AlarmRow raise_alarm(std::int64_t campaign_id, const std::string& severity, const std::string& source,
+                       const std::string& message, std::optional<std::int64_t> segment,
+                       std::optional<double> program_time_s);
+  std::vector<AlarmRow> clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
+                                     const std::string& reason);
+  enum class Ack { Acknowledged, NoSuchAlarm, AlreadyAcknowledged };
+  // Records who acknowledged the alarm and when, once: a second acknowledgement changes nothing
+  // (AlreadyAcknowledged, with the row as the first one left it).
+  std::pair<Ack, std::optional<AlarmRow>> acknowledge_alarm(std::int64_t id, const std::string& who);
+  std::optional<AlarmRow> alarm(std::int64_t id);
+  // Oldest first. `campaign`: that campaign's only. `all` false: only those that still need
+  // someone (active, or not acknowledged). At most `limit` (the newest ones).
+  std::vector<AlarmRow> alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit = 1000);
 
   std::optional<std::string> setting(const std::string& key);
   void set_setting(const std::string& key, const std::string& value);

@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/units.hpp"
+#include "daemon/service/alarms.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/estimator_worker.hpp"
 #include "daemon/service/sim_bench.hpp"
@@ -317,7 +318,29 @@ bool Sequencer::transition(std::int64_t id, RunState to, const std::string& reas
   spdlog::info("campaign {}: {} -> {} ({})", id, to_string(from), to_string(to), reason);
   emit({{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", to_string(from)},
         {"to", to_string(to)}, {"reason", reason}});
+  transition_alarms(id, from, to, reason);
   return true;
+}
+
+void Sequencer::transition_alarms(std::int64_t id, RunState from, RunState to, const std::string& reason) {
+  // An alarm that cannot be stored must not stop the run that raised it: it is in the log.
+  try {
+    for (const json& message : apply_transition_alarms(db_, id, from, to, reason)) emit(message);
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: alarms of {} -> {} not stored: {}", id, to_string(from), to_string(to), e.what());
+  }
+}
+
+void Sequencer::record_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                             std::optional<double> program_time_s, const std::string& reason) {
+  db_.add_event(id, kind, segment, program_time_s, reason);
+  const auto severity = alarm_severity_of_event(kind);
+  if (!severity) return;
+  try {
+    emit(alarm_message("raised", db_.raise_alarm(id, *severity, kind, reason, segment, program_time_s)));
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: alarm '{}' not stored: {}", id, reason, e.what());
+  }
 }
 
 namespace {
@@ -346,7 +369,7 @@ void sync_run_record(DaemonDb& db, RunContext& run) {
 }  // namespace
 
 void Sequencer::note_event(RunContext& run, const std::string& kind, const std::string& reason) {
-  db_.add_event(run.id, kind, static_cast<std::int64_t>(run.segment), run.program_time_s, reason);
+  record_event(run.id, kind, static_cast<std::int64_t>(run.segment), run.program_time_s, reason);
   if (kind == "alarm" || kind == "error") {
     spdlog::warn("campaign {}: {}: {}", run.id, kind, reason);
   } else {
@@ -362,6 +385,7 @@ Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, c
   const std::string why = std::string(to_string(command)) + " by " + who + (reason.empty() ? "" : ": " + reason);
   std::optional<json> event;
   CommandOutcome out;
+  RunState from = RunState::Created;
   {
     std::lock_guard lock(mutex_);
     if (shutdown_) return {503, "the daemon is shutting down", std::nullopt};
@@ -394,10 +418,12 @@ Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, c
     event = json{{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", to_string(state)},
                  {"to", to_string(*target)}, {"reason", why}};
     out.state = *target;
+    from = state;
   }
   cv_.notify_all();
   spdlog::info("campaign {}: {}", id, why);
   if (event) emit(*event);
+  if (out.state) transition_alarms(id, from, *out.state, why);
   return out;
 }
 
@@ -439,12 +465,14 @@ void Sequencer::runner() {
     spdlog::info("campaign {}: queued -> running ({})", id, reason);
     emit({{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", "queued"}, {"to", "running"},
           {"reason", reason}});
+    transition_alarms(id, RunState::Queued, RunState::Running, reason);
     try {
       run_campaign(id);
     } catch (const std::exception& e) {
       // run_campaign handles its own failures; this is the last line of defence.
       spdlog::critical("campaign {}: unexpected error: {}", id, e.what());
       db_.set_error(id, e.what());
+      record_event(id, "error", std::nullopt, std::nullopt, std::string("internal error: ") + e.what());
       transition(id, RunState::Failed, std::string("internal error: ") + e.what(), std::nullopt);
     }
     lock.lock();
@@ -466,7 +494,7 @@ void Sequencer::run_campaign(std::int64_t id) {
   run.id = id;
   auto fail_early = [&](const std::string& why) {
     db_.set_error(id, why);
-    db_.add_event(id, "error", std::nullopt, std::nullopt, why);
+    record_event(id, "error", std::nullopt, std::nullopt, why);
     transition(id, RunState::Failed, why, std::nullopt);
   };
   const auto row = db_.campaign(id);
@@ -919,6 +947,8 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     final_state = RunState::Failed;
     why = "recording failed: " + run.recorder->error().value_or("unknown error");
     db_.set_error(run.id, why);
+    // Its alarm; the run record is written again below (the recorder refuses nothing more now).
+    record_event(run.id, "error", static_cast<std::int64_t>(run.segment), run.program_time_s, why);
   }
   if (run.estimators) {
     if (results && is_final(final_state)) {

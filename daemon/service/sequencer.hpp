@@ -35,8 +35,8 @@ struct RunContext;
 
 class Sequencer {
  public:
-  // Events for the live view ({"type": "event", ...} without seq and t); called on the thread that
-  // made the event, never under the sequencer's lock.
+  // Events for the live view ({"type": "event", ...} and {"type": "alarm", ...}, without seq and
+  // t); called on the thread that made the event, never under the sequencer's lock.
   using EventListener = std::function<void(const nlohmann::json&)>;
 
   Sequencer(const DaemonConfig& config, DaemonDb& db);
@@ -85,6 +85,11 @@ class Sequencer {
   void run_campaign(std::int64_t id);
   bool transition(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected);
   void note_event(RunContext& run, const std::string& kind, const std::string& reason);
+  // Stores a run event; an event of a serious kind also raises its alarm (alarms.hpp), broadcast.
+  void record_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                    std::optional<double> program_time_s, const std::string& reason);
+  // Clears and raises the alarms a state change implies (alarms.hpp), broadcast.
+  void transition_alarms(std::int64_t id, RunState from, RunState to, const std::string& reason);
   std::optional<Outcome> pending_command();
   RunState active_state() const;
 

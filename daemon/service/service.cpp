@@ -10,6 +10,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/service/alarms.hpp"
 #include "daemon/service/http_server.hpp"
 
 namespace imucal::daemon {
@@ -77,8 +78,14 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   }
   db_ = std::make_unique<DaemonDb>((fs::path(config_.data_dir) / "imucald.db").string());
   for (const auto id : db_->recover_after_restart("found active at start-up: the daemon stopped without parking it "
-                                                  "(crash or power loss)"))
+                                                  "(crash or power loss)")) {
     spdlog::warn("campaign {} was active when the daemon stopped; it is now interrupted (resume to continue)", id);
+    // The alarms the change implies (an interruption raises one), as for the sequencer's changes;
+    // nobody is connected yet to be told, GET /api/alarms lists them.
+    const auto transitions = db_->transitions(id);
+    if (!transitions.empty() && transitions.back().from)
+      (void)apply_transition_alarms(*db_, id, *transitions.back().from, transitions.back().to, transitions.back().reason);
+  }
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   api_ = std::make_unique<Api>(config_, *db_, *sequencer_, *auth_);

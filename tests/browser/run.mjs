@@ -307,6 +307,14 @@ try {
   await waitText(page, '#run-state', /running/, 20000);
   await waitText(page, '#events', /resumed/);
   log('a simulated chamber offset suspended the run (banner, alert, event) and it resumed by itself');
+  // Its alarm (issue 18, item 1): cleared by the resume, and still listed until acknowledged.
+  const suspensionAlarm = '#alarm-list tr.alarm[data-source="suspended"]';
+  await page.waitForSelector(`${suspensionAlarm}[data-status="cleared"]`);
+  await waitText(page, suspensionAlarm, /major.*chamber out of band.*cleared .*not acknowledged/);
+  const alarmId = await page.getAttribute(suspensionAlarm, 'data-alarm-id');
+  await waitText(page, '#alarm-summary', /^1 alarm to acknowledge$/);
+  assert.ok(!/null|undefined/.test(await page.textContent('#alarm-panel')), 'the alarm list shows no placeholder words');
+  log(`the suspension raised alarm ${alarmId}; cleared when the run resumed, listed until acknowledged`);
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart .uplot')?.dataset.points) >= 2, null, { timeout: 20000 });
   await shot(page, '04-live');
   await page.$eval('#convergence', (el) => el.scrollIntoView());
@@ -352,6 +360,34 @@ try {
   // ---- results ----
   await page.goto(`${base}/#/campaigns/${id}`);
   await waitText(page, '#campaign-state', /done/, 60000);
+
+  // ---- the alarm outlives its run until the operator acknowledges it; the CSV log keeps it ----
+  const listed = `#alarm-list tr[data-alarm-id="${alarmId}"]`;
+  const recorded = `#campaign-alarms tr[data-alarm-id="${alarmId}"]`;
+  await page.waitForSelector(`${listed}[data-status="cleared"] button.ack:not([disabled])`);
+  await page.waitForSelector(`${recorded} button.ack`);
+  await shot(page, '06a-alarm-unacknowledged');
+  await page.click(`${listed} button.ack`);
+  await page.waitForSelector(listed, { state: 'detached' });
+  await waitText(page, recorded, /acknowledged by operator at \d{4}-\d\d-\d\d \d\d:\d\d:\d\d/);
+  assert.equal(await page.$(`${recorded} button.ack`), null, 'an acknowledged alarm has no Acknowledge button');
+  const [eventsDownload] = await Promise.all([page.waitForEvent('download'), page.click('#download-events')]);
+  assert.equal(eventsDownload.suggestedFilename(), `campaign-${id}-events.csv`);
+  const eventsFile = path.join(outDir, `campaign-${id}-events.csv`);
+  await eventsDownload.saveAs(eventsFile);
+  const eventsCsv = fs.readFileSync(eventsFile, 'utf8');
+  const csvLines = eventsCsv.split('\r\n');
+  assert.match(csvLines[0], /^time,record,kind,severity,segment,program_time_s,message,alarm_id,raised,cleared,cleared_reason,acknowledged_by,acknowledged$/);
+  const alarmLine = csvLines.find((l) => l.includes(',alarm,suspended,major,'));
+  assert.ok(alarmLine, `the CSV lists the alarm:\n${eventsCsv}`);
+  assert.ok(alarmLine.includes(`,${alarmId},`) && /,operator,\d{4}-\d\d-\d\dT[\d:.]+Z$/.test(alarmLine),
+    `the alarm's line says who acknowledged it and when: ${alarmLine}`);
+  assert.ok(csvLines.some((l) => l.includes(',transition,running -> suspended,')), 'and the transitions of the run');
+  await page.$eval('#record', (el) => el.scrollIntoView());
+  await shot(page, '06b-alarm-acknowledged');
+  await page.evaluate(() => window.scrollTo(0, 0));
+  log(`alarm ${alarmId} acknowledged by the operator (kept in the record) and in the events CSV`);
+
   await page.waitForSelector('#coefficient-table tbody tr[data-coefficient="gyro.bias_dph.x"]', { timeout: 20000 });
   const coefRows = await page.$$eval('#coefficient-table tbody tr[data-coefficient]', (rows) => rows.length);
   assert.ok(coefRows >= 27, `the coefficient table lists every coefficient (${coefRows})`);

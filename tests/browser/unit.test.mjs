@@ -6,6 +6,7 @@ import assert from 'node:assert/strict';
 import { Series, BoundedList } from '../../web/js/series.mjs';
 import { parseField, SEGMENT_TYPES, mapProblems, compress } from '../../web/js/program_edit.mjs';
 import { flatten, coefficientRows, unitOf, labelOf } from '../../web/js/coefficients.mjs';
+import { alarmStatus, needsAttention, applyAlarm, alarmStatusText, alarmSummary } from '../../web/js/alarms.mjs';
 
 test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
   const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
@@ -298,6 +299,48 @@ test('numbers and times for people: durations rounded once, time ticks with hour
   assert.equal(clockTick(t, 5), '14:03:25');
   assert.equal(clockTick(t, 300), '14:03');
   assert.equal(clockTick(t, 2 * 86400), '03-01 14:03');
+});
+
+// ---- alarms (issue 18, item 1) ----
+
+const alarm = (id, fields = {}) => ({ id, campaign: 1, campaign_name: 'c', severity: 'major', source: 'suspended',
+  message: 'chamber out of band', raised: '2026-01-01T10:00:00.000Z', cleared: null, cleared_reason: null,
+  acknowledged_by: null, acknowledged: null, ...fields });
+
+test('an alarm is listed while it is active or not acknowledged', () => {
+  assert.equal(alarmStatus(alarm(1)), 'active');
+  assert.equal(alarmStatus(alarm(1, { acknowledged_by: 'alice', acknowledged: '2026-01-01T10:01:00.000Z' })), 'active-acknowledged');
+  assert.equal(alarmStatus(alarm(1, { cleared: '2026-01-01T10:02:00.000Z' })), 'cleared');
+  const closed = alarm(1, { cleared: '2026-01-01T10:02:00.000Z', acknowledged_by: 'alice', acknowledged: '2026-01-01T10:03:00.000Z' });
+  assert.equal(alarmStatus(closed), 'closed');
+  assert.equal(needsAttention(closed), false);
+  assert.equal(needsAttention(alarm(1, { cleared: '2026-01-01T10:02:00.000Z' })), true, 'cleared but not acknowledged stays');
+});
+
+test('live alarm messages update the list: added, replaced, dropped once closed, newest first', () => {
+  let list = [];
+  list = applyAlarm(list, alarm(1));
+  list = applyAlarm(list, alarm(2, { severity: 'minor', source: 'alarm' }));
+  assert.deepEqual(list.map((a) => a.id), [2, 1]);
+  const before = list;
+  list = applyAlarm(list, alarm(1, { cleared: '2026-01-01T10:02:00.000Z' }));
+  assert.equal(before.find((a) => a.id === 1).cleared, null, 'the list given is not changed');
+  assert.deepEqual(list.map((a) => [a.id, alarmStatus(a)]), [[2, 'active'], [1, 'cleared']]);
+  list = applyAlarm(list, alarm(1, { cleared: '2026-01-01T10:02:00.000Z', acknowledged_by: 'alice', acknowledged: '2026-01-01T10:03:00.000Z' }));
+  assert.deepEqual(list.map((a) => a.id), [2]);
+  // A message about an alarm already closed (e.g. after a reload) adds nothing.
+  list = applyAlarm(list, alarm(0, { cleared: 'x', acknowledged: 'y', acknowledged_by: 'bob' }));
+  assert.deepEqual(list.map((a) => a.id), [2]);
+});
+
+test('an alarm says whether it is active, and who acknowledged it when', () => {
+  assert.equal(alarmStatusText(alarm(1)), 'active, not acknowledged');
+  assert.equal(alarmStatusText(alarm(1, { cleared: 'T1' })), 'cleared T1, not acknowledged');
+  assert.equal(alarmStatusText(alarm(1, { cleared: 'T1', acknowledged_by: 'alice', acknowledged: 'T2' }), (t) => `<${t}>`),
+    'cleared <T1>, acknowledged by alice at <T2>');
+  assert.equal(alarmSummary([alarm(1, { cleared: 'T1' })]), '1 alarm to acknowledge');
+  assert.equal(alarmSummary([alarm(1), alarm(2, { cleared: 'T1' })]), '2 alarms (1 active), 2 to acknowledge');
+  assert.equal(alarmSummary([alarm(1, { acknowledged_by: 'a', acknowledged: 'T' })]), '1 alarm (1 active), all acknowledged');
 });
 
 test('the recording as plots: x in program seconds, each channel its maximum and minimum', async () => {

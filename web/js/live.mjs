@@ -162,7 +162,8 @@ function push(map, name, t, values) {
 
 /**
  * What the page keeps of the telemetry: the latest message, bounded series for the plots and a
- * bounded event log. Listeners get 'telemetry', 'event' and 'run' (the active run changed).
+ * bounded event log. Listeners get 'telemetry', 'event', 'alarm' (raised, cleared or acknowledged:
+ * {change, alarm}) and 'run' (the active run changed).
  */
 export class LiveStore extends EventTarget {
   constructor() {
@@ -190,6 +191,7 @@ export class LiveStore extends EventTarget {
     if (msg.dropped > 0) this.droppedMessages += msg.dropped;
     if (msg.type === 'telemetry') this.ingestTelemetry(msg);
     else if (msg.type === 'event') this.ingestEvent(msg);
+    else if (msg.type === 'alarm') this.dispatchEvent(new CustomEvent('alarm', { detail: msg }));
   }
 
   ingestTelemetry(m) {

@@ -4,6 +4,8 @@
 import { get, ApiError } from './api.mjs';
 import { session, checkSession, signOut, onSessionChange } from './session.mjs';
 import { LiveClient, LiveStore } from './live.mjs';
+import { applyAlarm, alarmSummary } from './alarms.mjs';
+import { alarmTable } from './alarm_panel.mjs';
 import { h, clear, duration, stateBadge } from './format.mjs';
 import * as signinView from './views/signin.mjs';
 import * as campaignsView from './views/campaigns.mjs';
@@ -16,6 +18,7 @@ import * as unitsView from './views/units.mjs';
 const viewRoot = document.getElementById('view');
 const banner = document.getElementById('banner');
 const alerts = document.getElementById('alerts');
+const alarmPanel = document.getElementById('alarm-panel');
 
 const live = new LiveClient();
 const store = new LiveStore();
@@ -147,9 +150,10 @@ store.addEventListener('telemetry', (ev) => {
   }
 });
 
-// Alarms, suspensions and failures, wherever the user is: bottom right, clear of the controls.
-// A suspension's alert says when the run resumed and then goes away by itself; the others stay
-// until dismissed.
+// Alarms, suspensions and failures as they happen, wherever the user is: bottom right, clear of
+// the controls. A suspension's notice says when the run resumed and then goes away by itself; the
+// others stay until dismissed. These are notices only: the alarm list under the header keeps
+// every alarm until an operator has acknowledged it.
 const ALERT_KINDS = new Set(['suspended', 'alarm', 'error', 'interrupted']);
 store.addEventListener('event', (ev) => {
   const e = ev.detail;
@@ -173,11 +177,63 @@ store.addEventListener('event', (ev) => {
   while (alerts.children.length > 4) alerts.lastChild.remove();
 });
 
+// The alarms that need someone (docs/api.md "Alarms"), on every page until acknowledged: active
+// ones and cleared ones nobody has acknowledged yet (styled apart). Loaded at sign-in and whenever
+// the live connection (re)opens, then kept up to date by its alarm messages.
+let alarmList = [];
+let alarmError = '';
+async function loadAlarms() {
+  if (!session.user) return;
+  try {
+    alarmList = (await get('/api/alarms')).alarms || [];
+    alarmError = '';
+  } catch (e) {
+    alarmError = `Cannot load the alarms: ${e.message}`;
+  }
+  renderAlarms();
+}
+function renderAlarms() {
+  clear(alarmPanel);
+  alarmPanel.hidden = !session.user || (!alarmList.length && !alarmError);
+  if (alarmPanel.hidden) return;
+  const onAcknowledged = (a) => {
+    alarmList = applyAlarm(alarmList, a);
+    alarmError = '';
+    renderAlarms();
+  };
+  const onError = (a, e) => {
+    alarmError = `Alarm ${a.id}: ${e.message}`;
+    loadAlarms();
+  };
+  alarmPanel.dataset.active = String(alarmList.some((a) => !a.cleared));
+  // Element.append writes null as the text "null": only the parts there are.
+  alarmPanel.append(...[
+    h('div', { class: 'alarm-head' }, h('strong', { id: 'alarm-summary' }, alarmList.length ? alarmSummary(alarmList) : 'Alarms')),
+    alarmError ? h('div', { class: 'form-error', role: 'alert', id: 'alarm-error' }, alarmError) : null,
+    alarmList.length ? alarmTable(alarmList, { id: 'alarm-list', onAcknowledged, onError }) : null,
+  ].filter(Boolean));
+}
+store.addEventListener('alarm', (ev) => {
+  if (!ev.detail.alarm) return;
+  alarmList = applyAlarm(alarmList, ev.detail.alarm);
+  renderAlarms();
+});
+// Messages missed while the connection was down: the list is asked for again.
+live.addEventListener('status', (ev) => {
+  if (ev.detail.state === 'open') loadAlarms();
+});
+
 // ---- start --------------------------------------------------------------------------------------
 
 onSessionChange(() => {
   renderWho();
-  if (session.user) live.start();
+  if (session.user) {
+    live.start();
+    loadAlarms();
+  } else {
+    alarmList = [];
+    renderAlarms();
+  }
 });
 
 async function boot() {

@@ -12,6 +12,7 @@ import { convergencePanel } from '../convergence.mjs';
 import { contributionRows } from '../contributions.mjs';
 import { Series } from '../series.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
+import { alarmTable } from '../alarm_panel.mjs';
 import { recordingPlots } from '../recording_plots.mjs';
 
 export function mount(root, ctx) {
@@ -104,8 +105,12 @@ export function mount(root, ctx) {
   const onEvent = (ev) => {
     if (ev.detail.campaign === id) refresh();
   };
+  const onAlarm = (ev) => {
+    if (ev.detail.alarm?.campaign === id) refresh();
+  };
   ctx.store.addEventListener('telemetry', onTelemetry);
   ctx.store.addEventListener('event', onEvent);
+  ctx.store.addEventListener('alarm', onAlarm);
 
   // ---- results ----
 
@@ -438,8 +443,16 @@ export function mount(root, ctx) {
     const cp = d.checkpoint?.segment;
     // Re-rendered every poll while the campaign runs: keep what the user opened open.
     const open = new Set([...record.querySelectorAll('details[open]')].map((x) => x.id));
+    const alarms = d.alarms || [];
     clear(record).append(
-      h('h2', {}, 'Record'),
+      h('div', { class: 'record-head' }, h('h2', {}, 'Record'),
+        h('a', { class: 'button', id: 'download-events', href: `/api/campaigns/${id}/events.csv`, download: `campaign-${id}-events.csv`,
+          title: 'Transitions, events and alarms (raised, cleared, acknowledged by whom) as CSV' }, 'Download events (CSV)')),
+      h('h3', {}, 'Alarms'),
+      alarms.length
+        ? alarmTable([...alarms].reverse(), { id: 'campaign-alarms', campaignColumn: false, onAcknowledged: () => refresh(),
+          onError: (a, e) => { pageError.textContent = `Alarm ${a.id}: ${e.message}`; refresh(); } })
+        : h('p', { class: 'muted', id: 'no-alarms' }, 'No alarms.'),
       h('div', { class: 'two-col' },
         h('div', {}, h('h3', {}, 'Transitions'),
           h('table', { class: 'list compact', id: 'transitions' }, h('thead', {}, h('tr', {}, h('th', {}, 'time'), h('th', {}, 'from'), h('th', {}, 'to'), h('th', {}, 'reason'))),
@@ -465,6 +478,7 @@ export function mount(root, ctx) {
     clearInterval(timer);
     ctx.store.removeEventListener('telemetry', onTelemetry);
     ctx.store.removeEventListener('event', onEvent);
+    ctx.store.removeEventListener('alarm', onAlarm);
     for (const c of cleanups) c();
     document.title = 'imucal';
   };
