@@ -139,6 +139,26 @@ async function apiCall(method, p, body) {
   return { status: r.status, body: text ? JSON.parse(text) : null };
 }
 
+// Posts a campaign and starts it; its id.
+async function startCampaign(campaign) {
+  const created = await apiCall('POST', '/api/campaigns', campaign);
+  assert.equal(created.status, 201, JSON.stringify(created.body));
+  assert.equal((await apiCall('POST', `/api/campaigns/${created.body.id}/start`, {})).status, 200);
+  return created.body.id;
+}
+
+// Polls a campaign until `reached(campaign)`; fails at once in one of `badStates`, and after
+// `timeoutS`.
+async function waitCampaign(id, reached, what, { badStates = ['failed', 'aborted'], timeoutS = 300 } = {}) {
+  const deadline = Date.now() + timeoutS * 1000;
+  for (;;) {
+    const c = (await apiCall('GET', `/api/campaigns/${id}`)).body;
+    if (reached(c)) return c;
+    assert.ok(Date.now() < deadline && !badStates.includes(c.state), `${what}: campaign ${id} is ${c.state}`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
 // ---- the browser --------------------------------------------------------------------------------
 
 const browser = await chromium.launch({
@@ -598,16 +618,9 @@ try {
   log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');
 
   // ---- a second calibration of the unit, its part number's limits, verdicts, the comparison ----
-  const again = await apiCall('POST', '/api/campaigns', { name: 'browser test: FOG-BROWSER-1 again', program: 'direct-short', rate_hz: 20,
+  const againId = await startCampaign({ name: 'browser test: FOG-BROWSER-1 again', program: 'direct-short', rate_hz: 20,
     seed: 11, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
-  assert.equal(again.status, 201, JSON.stringify(again.body));
-  assert.equal((await apiCall('POST', `/api/campaigns/${again.body.id}/start`, {})).status, 200);
-  for (let i = 0; ; i++) {
-    const c = (await apiCall('GET', `/api/campaigns/${again.body.id}`)).body;
-    if (c.state === 'done') break;
-    assert.ok(i < 1200 && !['failed', 'aborted'].includes(c.state), `the second calibration ended ${c.state}`);
-    await new Promise((r) => setTimeout(r, 250));
-  }
+  await waitCampaign(againId, (c) => c.state === 'done', 'the second calibration');
   await page.click('#nav a[data-nav="units"]');
   await page.waitForSelector('#units-rows tr[data-serial="FOG-BROWSER-1"]');
   await page.waitForFunction(() => document.querySelector('#limits-text').value.includes('imucal-limits/1'));
@@ -631,23 +644,23 @@ try {
   await waitText(page, '#limits-message', /^Saved/);
   await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /FAIL/);
   await page.click('#units-rows tr[data-serial="FOG-BROWSER-1"] a');
-  await page.waitForSelector(`#unit-calibrations tr[data-id="${again.body.id}"]`);
-  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${again.body.id}"]`), /FAIL.*gyro\.delay_us\.x: not determined by this run/);
-  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${again.body.id}"]`), /significant|none significant/);
+  await page.waitForSelector(`#unit-calibrations tr[data-id="${againId}"]`);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /FAIL.*gyro\.delay_us\.x: not determined by this run/);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /significant|none significant/);
   await page.click('#compare-go');
   await page.waitForSelector('#compare-table tr[data-key="gyro.bias_dph.x"]');
   assert.match(await page.textContent('#compare-summary'), /significant difference/);
   await page.$eval('#unit-compare', (el) => { el.scrollIntoView(); window.scrollBy(0, -120); });
   await shot(page, '09d-unit-verdicts-and-comparison');
   log(`unit page: verdicts per calibration, change since the previous, ${await page.textContent('#compare-summary')}`);
-  await page.goto(`${base}/#/campaigns/${again.body.id}`);
+  await page.goto(`${base}/#/campaigns/${againId}`);
   await page.waitForSelector('#verdict-table tr[data-key="gyro.delay_us.z"].result-bad');
   assert.match(await page.textContent('#acceptance-verdict'), /FAIL part number PN-BROWSER/);
   await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '09e-results-verdict');
   log('results: the verdict per coefficient against PN-BROWSER\'s limits');
   // Its certificate: FAIL in the title block, the limits and the result per limited coefficient.
-  await page.goto(`${base}/certificate.html?id=${again.body.id}`);
+  await page.goto(`${base}/certificate.html?id=${againId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');
   assert.equal((await page.textContent('#certificate-verdict')).trim(), 'FAIL');
   assert.match(await page.textContent('#certificate-verdict-text'), /outside the acceptance limits of part number PN-BROWSER/);
@@ -659,24 +672,13 @@ try {
   log(`certificate ${againNumber}: FAIL against PN-BROWSER's limits, per coefficient`);
 
   // A run stopped early: its certificate says partial in the title block, with why and when.
-  const stoppedRun = await apiCall('POST', '/api/campaigns', { name: 'browser test: stopped early', program: 'direct-short', rate_hz: 20,
+  const stoppedId = await startCampaign({ name: 'browser test: stopped early', program: 'direct-short', rate_hz: 20,
     seed: 12, time_scale: 40, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-2', part_number: 'PN-BROWSER' } });
-  assert.equal(stoppedRun.status, 201, JSON.stringify(stoppedRun.body));
-  assert.equal((await apiCall('POST', `/api/campaigns/${stoppedRun.body.id}/start`, {})).status, 200);
-  for (let i = 0; ; i++) {
-    const c = (await apiCall('GET', `/api/campaigns/${stoppedRun.body.id}`)).body;
-    if (c.program_time_s > 0.8 * c.duration_s) break;
-    assert.ok(i < 2400 && !['done', 'failed', 'aborted'].includes(c.state), `the run to stop is ${c.state} at try ${i}`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
-  assert.equal((await apiCall('POST', `/api/campaigns/${stoppedRun.body.id}/stop`, {})).status, 200);
-  for (let i = 0; ; i++) {
-    const c = (await apiCall('GET', `/api/campaigns/${stoppedRun.body.id}`)).body;
-    if (c.state === 'done') break;
-    assert.ok(i < 1200 && !['failed', 'aborted'].includes(c.state), `the stopped run ended ${c.state}`);
-    await new Promise((r) => setTimeout(r, 250));
-  }
-  await page.goto(`${base}/certificate.html?id=${stoppedRun.body.id}`);
+  await waitCampaign(stoppedId, (c) => c.program_time_s > 0.8 * c.duration_s, 'the run to stop early',
+    { badStates: ['done', 'failed', 'aborted'] });
+  assert.equal((await apiCall('POST', `/api/campaigns/${stoppedId}/stop`, {})).status, 200);
+  await waitCampaign(stoppedId, (c) => c.state === 'done', 'the stopped run');
+  await page.goto(`${base}/certificate.html?id=${stoppedId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');
   assert.equal((await page.textContent('#certificate-partial')).trim(), 'PARTIAL');
   assert.match(await page.textContent('#certificate-partial-reason'), /^Partial run: stopped at \d+ % of the program \(stop by /);

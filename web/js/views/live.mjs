@@ -118,7 +118,11 @@ export function mount(root, ctx) {
     const running = withEstimates.filter((n) => store.estimators.get(n).latest?.status === 'running');
     return running.length ? running[running.length - 1] : withEstimates[withEstimates.length - 1] || null;
   }
+  // A draw scheduled for the next frame may come after the view was left (its elements gone).
+  let destroyed = false;
+
   function drawPick() {
+    if (destroyed) return;
     const names = [...store.estimators.entries()].filter(([, e]) => e.coefficients.size > 0).map(([n]) => n);
     const shown = shownEstimator();
     const sig = `${names.join('|')}/${shown}`;
@@ -140,6 +144,7 @@ export function mount(root, ctx) {
   // navigation's restarts as dashed lines.
   const innovationCharts = new Map();
   function drawInnovations() {
+    if (destroyed) return;
     const e = store.estimators.get('stage3');
     const names = e ? [...e.innovations.keys()] : [];
     innovationsCard.hidden = names.length === 0;
@@ -166,6 +171,7 @@ export function mount(root, ctx) {
   }
 
   function drawPlots() {
+    if (destroyed) return;
     angles.setData(store.angles.view(windowS));
     rates.setData(store.rates.view(windowS));
     chamber.setData(store.chamber.view(windowS));
@@ -179,13 +185,14 @@ export function mount(root, ctx) {
   const flags = (id, list) => {
     const el = root.querySelector(`#${id}`);
     const sig = list.map((f) => f.join(':')).join('|');
-    if (el.dataset.sig === sig) return;
+    if (!el || el.dataset.sig === sig) return;
     el.dataset.sig = sig;
     clear(el).append(...list.map(([cls, text]) => h('span', { class: `flag ${cls}` }, text)));
   };
 
   let lastSuspendReason = '';
   function drawNumbers() {
+    if (destroyed) return;
     const m = store.latest;
     const run = m?.run || null;
     current = run ? { id: run.id, name: run.name, state: run.state } : null;
@@ -308,6 +315,7 @@ export function mount(root, ctx) {
   wholeRunMode();
 
   return () => {
+    destroyed = true;
     store.removeEventListener('telemetry', onTelemetry);
     store.removeEventListener('event', onEvent);
     store.removeEventListener('progress', onProgress);
