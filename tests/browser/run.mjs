@@ -326,6 +326,9 @@ try {
   await shot(page, '04-live-suspended');
   await waitText(page, '#run-state', /running/, 20000);
   await waitText(page, '#events', /resumed/);
+  // Numbers with sensible digits (issue 18, item 3): "time scale 25x", "redoing ... from 95.4 s".
+  await waitText(page, '#events', /time scale 25x\)/);
+  await waitText(page, '#events', /redoing segment \d+ '[^']+' from \d+(\.\d{1,3})? s/);
   log('a simulated chamber offset suspended the run (banner, alert, event) and it resumed by itself');
   // Its alarm (issue 18, item 1): cleared by the resume, and still listed until acknowledged.
   // (A loaded machine may add its own, e.g. an IMU stall: this test's is the chamber's.)
