@@ -81,16 +81,6 @@ std::vector<json> apply_transition_alarms(DaemonDb& db, std::int64_t campaign_id
   return messages;
 }
 
-std::string csv_field(std::string_view text) {
-  if (text.find_first_of(",\"\r\n") == std::string_view::npos) return std::string(text);
-  std::string out = "\"";
-  for (const char c : text) {
-    if (c == '"') out += '"';
-    out += c;
-  }
-  return out + "\"";
-}
-
 std::string run_log_csv(const std::vector<TransitionRow>& transitions, const std::vector<EventRow>& events,
                         const std::vector<AlarmRow>& alarms) {
   // (time, order of the record kinds at the same instant, position) -> the row's fields.

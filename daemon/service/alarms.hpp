@@ -18,6 +18,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "daemon/service/csv.hpp"
 #include "daemon/service/daemon_db.hpp"
 #include "daemon/service/run_state.hpp"
 
@@ -52,8 +53,6 @@ nlohmann::json alarm_message(const std::string& change, const AlarmRow& alarm);
 // ISO 8601 UTC, null when not (yet) so.
 nlohmann::json alarm_json(const AlarmRow& alarm);
 
-// One field of RFC 4180 CSV: quoted when it holds a comma, a quote, CR or LF (quotes doubled).
-std::string csv_field(std::string_view text);
 
 // GET /api/campaigns/{id}/events.csv: the run's transitions, events and alarms in time order, one
 // row each, RFC 4180 (CRLF line ends, a header row). Columns: time, record (transition, event,

@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "daemon/service/acceptance.hpp"
+#include "daemon/service/csv.hpp"
 
 namespace imucal::daemon {
 
@@ -19,13 +20,6 @@ json model_or_null(const CampaignRow& row) {
   if (!row.model_json) return nullptr;
   json m = json::parse(*row.model_json, nullptr, false);
   return m.is_discarded() ? json(nullptr) : m;
-}
-
-std::string csv_field(const std::string& text) {
-  if (text.find_first_of(",\"\n\r") == std::string::npos) return text;
-  std::string out = "\"";
-  for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
-  return out + "\"";
 }
 
 std::string number_text(double v) {

@@ -100,6 +100,12 @@ TEST(Alarms, TheRunLogIsRfc4180Csv) {
   EXPECT_EQ(daemon::csv_field("say \"hold\""), "\"say \"\"hold\"\"\"");
   EXPECT_EQ(daemon::csv_field("two\r\nlines"), "\"two\r\nlines\"");
   EXPECT_EQ(daemon::csv_field(""), "");
+  // Text a spreadsheet would run as a formula is defused; numbers stay numbers.
+  EXPECT_EQ(daemon::csv_field("=HYPERLINK(\"x\")"), "\"'=HYPERLINK(\"\"x\"\")\"");
+  EXPECT_EQ(daemon::csv_field("@SUM(A1)"), "'@SUM(A1)");
+  EXPECT_EQ(daemon::csv_field("-1.5e-3"), "-1.5e-3");
+  EXPECT_EQ(daemon::csv_field("+3"), "+3");
+  EXPECT_EQ(daemon::csv_field("- table fault"), "'- table fault");
 
   std::vector<daemon::TransitionRow> transitions = {{1000, RunState::Queued, RunState::Running, "devices free: starting"},
                                                     {3000, RunState::Running, RunState::Suspended, "chamber out of band"}};
