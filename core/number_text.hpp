@@ -4,6 +4,8 @@
 #pragma once
 
 #include <cstdio>
+#include <cstdlib>
+#include <optional>
 #include <string>
 
 namespace imucal {
@@ -14,6 +16,16 @@ inline std::string number_text(double v, int significant = 6) {
   char text[40];
   std::snprintf(text, sizeof text, "%.*g", significant, v);
   return text;
+}
+
+// The whole of `text` read as a number ("-1.5e-3", "+3", "46.6"), or nothing ("soon", "3 s", "",
+// "-x"): what a query value, a command-line word or a CSV field is, told the same way everywhere.
+inline std::optional<double> parse_number_text(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0') return std::nullopt;
+  return v;
 }
 
 // A temperature for people: "31.43 °C" (four significant digits: a chamber's 0.01 C resolution).

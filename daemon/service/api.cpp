@@ -1,6 +1,4 @@
 #include "daemon/service/api.hpp"
-#include "daemon/service/run_series.hpp"
-#include "storage/run_db.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -15,11 +13,14 @@
 #include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/json_reader.hpp"
+#include "daemon/service/run_series.hpp"
 #include "daemon/service/unit_registry.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
+#include "core/number_text.hpp"
 #include "core/units.hpp"
+#include "storage/run_db.hpp"
 #include "plan/plan.hpp"
 
 #ifndef IMUCAL_VERSION
@@ -166,10 +167,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
   // Two threads: one long analysis (a 12 h thermal run) does not hold up every other.
   // The listener is called under its mutex, so that once set_event_listener({}) has returned no
   // job is still inside it (the HTTP server it points to may then go).
-  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) {
-    std::lock_guard lock(listener_mutex_);
-    if (event_listener_) event_listener_(e);
-  });
+  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); });
   // Without a configuration file the sequence can only live in the data directory.
   if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
@@ -859,9 +857,9 @@ HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std:
   for (const auto& [key, target] : {std::pair<const char*, double*>{"from_s", &range.from_s}, {"to_s", &range.to_s}}) {
     const auto it = query.find(key);
     if (it == query.end()) continue;
-    char* end = nullptr;
-    *target = std::strtod(it->second.c_str(), &end);
-    if (it->second.empty() || *end != '\0') return error_reply(400, std::string(key) + " must be a number of seconds, not '" + it->second + "'");
+    const auto seconds = parse_number_text(it->second);
+    if (!seconds) return error_reply(400, std::string(key) + " must be a number of seconds, not '" + it->second + "'");
+    *target = *seconds;
   }
   if (const auto it = query.find("points"); it != query.end()) {
     const auto v = parse_id(it->second);

@@ -1,5 +1,4 @@
 #include "daemon/service/campaign.hpp"
-#include "core/number_text.hpp"
 
 #include <algorithm>
 #include <array>
@@ -8,6 +7,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "daemon/service/daemon_db.hpp"
 #include "daemon/service/json_reader.hpp"

@@ -86,22 +86,10 @@ void replace_file(const std::string& path, const std::string& text) {
   }
 }
 
-std::int64_t days_from_civil(int y, int m, int d) {
-  // Howard Hinnant's days-from-civil: days since 1970-01-01 of a proleptic Gregorian date.
-  y -= m <= 2 ? 1 : 0;
-  const int era = (y >= 0 ? y : y - 399) / 400;
-  const int yoe = y - era * 400;
-  const int doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
-  const int doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-  return static_cast<std::int64_t>(era) * 146097 + doe - 719468;
-}
-
 json instrument_json(const std::optional<ReferenceInstrument>& i, std::int64_t ended_ms) {
   if (!i) return nullptr;
-  // calibration_due was checked to be YYYY-MM-DD when the configuration was read.
-  const std::int64_t due_day = days_from_civil(std::stoi(i->calibration_due.substr(0, 4)),
-                                               std::stoi(i->calibration_due.substr(5, 2)),
-                                               std::stoi(i->calibration_due.substr(8, 2)));
+  // calibration_due was checked to be a date when the configuration was read.
+  const std::int64_t due_day = date_day_number(i->calibration_due).value_or(0);
   const std::int64_t used_day = ended_ms >= 0 ? ended_ms / 86'400'000 : (ended_ms - 86'399'999) / 86'400'000;
   json out = {{"make", i->make},
               {"model", i->model},

@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <cstdlib>
 
 #include <CLI/CLI.hpp>
+
+#include "core/number_text.hpp"
 
 namespace imucal::daemon {
 
@@ -23,13 +24,6 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
     }
   }
   return row[b.size()];
-}
-
-// A value, not a flag: "-5", "-0.25", "-1e-3" (a negative number given to an option).
-bool is_number(const std::string& word) {
-  char* end = nullptr;
-  std::strtod(word.c_str(), &end);
-  return end != word.c_str() && *end == '\0';
 }
 
 std::vector<std::string> subcommand_names(const CLI::App& app) {
@@ -81,7 +75,7 @@ std::string unknown_word(const CLI::App& app, const std::vector<std::string>& ar
   const CLI::App* at = &app;
   for (const std::string& word : args) {
     if (word == "--") break;  // the rest are values
-    const bool flag = word.size() > 1 && word[0] == '-' && !is_number(word);
+    const bool flag = word.size() > 1 && word[0] == '-' && !parse_number_text(word);  // "-5": a value
     const auto subcommands = subcommand_names(*at);
     if (!flag) {
       if (subcommands.empty()) continue;  // a value or a positional argument of a leaf command

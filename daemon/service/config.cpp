@@ -126,18 +126,6 @@ void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems
   if (auto v = r.integer("max_files", 1, 1000)) c.log.max_files = static_cast<int>(*v);
 }
 
-// "YYYY-MM-DD" naming a day of the Gregorian calendar.
-bool is_date(const std::string& text) {
-  if (text.size() != 10 || text[4] != '-' || text[7] != '-') return false;
-  for (std::size_t i : {0, 1, 2, 3, 5, 6, 8, 9})
-    if (text[i] < '0' || text[i] > '9') return false;
-  const int year = std::stoi(text.substr(0, 4)), month = std::stoi(text.substr(5, 2)), day = std::stoi(text.substr(8, 2));
-  if (month < 1 || month > 12 || day < 1) return false;
-  const bool leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
-  constexpr int kDays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
-  return day <= kDays[month - 1] + (month == 2 && leap ? 1 : 0);
-}
-
 ReferenceInstrument read_instrument(const json& j, const std::string& where, std::vector<std::string>& problems) {
   ObjectReader r(j, where, problems);
   ReferenceInstrument out;
@@ -151,7 +139,7 @@ ReferenceInstrument read_instrument(const json& j, const std::string& where, std
       else *target = *v;
     }
   }
-  if (!out.calibration_due.empty() && !is_date(out.calibration_due)) {
+  if (!out.calibration_due.empty() && !date_day_number(out.calibration_due)) {
     problems.push_back(r.at("calibration_due") + " must be a date YYYY-MM-DD, not \"" + out.calibration_due + "\"");
     out.calibration_due.clear();
   }
@@ -322,6 +310,25 @@ DaemonConfig load_config_file(const std::string& path) {
   DaemonConfig c = parse_config(text.str(), path);
   c.config_dir = std::filesystem::absolute(path).parent_path().string();
   return c;
+}
+
+std::optional<std::int64_t> date_day_number(const std::string& text) {
+  if (text.size() != 10 || text[4] != '-' || text[7] != '-') return std::nullopt;
+  for (std::size_t i : {0, 1, 2, 3, 5, 6, 8, 9})
+    if (text[i] < '0' || text[i] > '9') return std::nullopt;
+  int y = std::stoi(text.substr(0, 4));
+  const int m = std::stoi(text.substr(5, 2)), d = std::stoi(text.substr(8, 2));
+  if (m < 1 || m > 12 || d < 1) return std::nullopt;
+  const bool leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
+  constexpr int kDays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+  if (d > kDays[m - 1] + (m == 2 && leap ? 1 : 0)) return std::nullopt;
+  // Howard Hinnant's days-from-civil (proleptic Gregorian calendar).
+  y -= m <= 2 ? 1 : 0;
+  const int era = (y >= 0 ? y : y - 399) / 400;
+  const int yoe = y - era * 400;
+  const int doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const int doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+  return static_cast<std::int64_t>(era) * 146097 + doe - 719468;
 }
 
 std::string certificate_prefix(const DaemonConfig& config) {

@@ -98,7 +98,7 @@ struct ReferenceEquipment {
 // sequence kept in a small file outside the data directory, so that a new data directory never
 // hands out a number again.
 struct CertificateConfig {
-  std::string prefix;         // empty: derived from the site's name (default_certificate_prefix)
+  std::string prefix;         // empty: derived from the site's name (certificate_prefix)
   std::string sequence_file;  // empty: kDefaultSequenceFile; relative: to the configuration file's directory
   static constexpr const char* kDefaultSequenceFile = "imucal-certificate-sequence.json";
 };
@@ -135,6 +135,10 @@ struct DaemonConfig {
 // Parses the configuration; throws ConfigError listing every problem. `source` names it in messages.
 DaemonConfig parse_config(const std::string& json_text, const std::string& source);
 DaemonConfig load_config_file(const std::string& path);
+
+// A date "YYYY-MM-DD" of the Gregorian calendar as its day number since 1970-01-01, or nothing
+// when it is not one (reference_equipment's calibration_due: checked here, compared by it).
+std::optional<std::int64_t> date_day_number(const std::string& text);
 
 // The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
 // every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most

@@ -124,6 +124,7 @@ class Stmt {
   }
   Stmt& bind(int i, std::optional<std::int64_t> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
   Stmt& bind(int i, std::optional<double> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
+  Stmt& bind(int i, const std::optional<std::string>& v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
   Stmt& bind_null(int i) { return check(sqlite3_bind_null(stmt_, i)); }
 
   bool step() {
@@ -590,7 +591,6 @@ std::int64_t DaemonDb::max_certificate_sequence() {
   return s.step() ? s.i64(0) : 0;
 }
 
-
 namespace {
 
 constexpr const char* kAlarmColumns =
@@ -648,12 +648,7 @@ std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std
     Stmt s(db_, path_,
            "SELECT id FROM alarm WHERE campaign_id = ?1 AND cleared_ms IS NULL AND (?2 IS NULL OR source = ?2) "
            "ORDER BY id");
-    s.bind(1, campaign_id);
-    if (source) {
-      s.bind(2, *source);
-    } else {
-      s.bind_null(2);
-    }
+    s.bind(1, campaign_id).bind(2, source);
     while (s.step()) ids.push_back(s.i64(0));
   }
   const std::int64_t now = now_unix_ms();
@@ -695,12 +690,7 @@ std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campai
                           (all ? "" : " AND (a.cleared_ms IS NULL OR a.acknowledged_ms IS NULL)") +
                           " ORDER BY a.id DESC LIMIT ?2) ORDER BY 1";
   Stmt s(db_, path_, sql.c_str());
-  if (campaign) {
-    s.bind(1, *campaign);
-  } else {
-    s.bind_null(1);
-  }
-  s.bind(2, limit);
+  s.bind(1, campaign).bind(2, limit);
   std::vector<AlarmRow> rows;
   while (s.step()) rows.push_back(read_alarm_row(s));
   return rows;

@@ -1,5 +1,4 @@
 #include "daemon/service/sequencer.hpp"
-#include "core/number_text.hpp"
 
 #include <sqlite3.h>
 
@@ -10,6 +9,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "daemon/service/alarms.hpp"
 #include "daemon/service/campaign.hpp"

@@ -1,11 +1,11 @@
 #include "daemon/service/sim_bench.hpp"
-#include "core/number_text.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <thread>
 
+#include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "drivers/sim/thermal_model.hpp"
 

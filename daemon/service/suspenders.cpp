@@ -1,8 +1,9 @@
 #include "daemon/service/suspenders.hpp"
-#include "core/number_text.hpp"
 
 #include <cmath>
 #include <cstdio>
+
+#include "core/number_text.hpp"
 
 namespace imucal::daemon {
 

@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 
+#include "core/number_text.hpp"
 #include "daemon/service/acceptance.hpp"
 #include "daemon/service/csv.hpp"
 
@@ -22,11 +23,8 @@ json model_or_null(const CampaignRow& row) {
   return m.is_discarded() ? json(nullptr) : m;
 }
 
-std::string number_text(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v);  // round-trips: the CSV agrees with the model exactly
-  return buf;
-}
+// 17 digits round-trip: the CSV agrees with the model exactly.
+std::string exact_text(double v) { return number_text(v, 17); }
 
 }  // namespace
 
@@ -179,8 +177,8 @@ std::string unit_history_csv(const std::vector<CampaignRow>& rows) {
     for (const auto& c : columns) {
       const auto v = l.values.find(c);
       const auto s = l.sigmas.find(c);
-      out += "," + (v != l.values.end() ? number_text(v->second) : std::string());
-      out += "," + (s != l.sigmas.end() ? number_text(s->second) : std::string());
+      out += "," + (v != l.values.end() ? exact_text(v->second) : std::string());
+      out += "," + (s != l.sigmas.end() ? exact_text(s->second) : std::string());
     }
     out += "\n";
   }

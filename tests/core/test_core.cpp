@@ -182,3 +182,10 @@ TEST(NumberText, ShortestFormWithoutNoiseDigits) {
   EXPECT_EQ(imucal::celsius_text(31.4321), "31.43 °C");
   EXPECT_EQ(imucal::celsius_text(-40.0), "-40 °C");
 }
+
+TEST(NumberText, TheWholeTextIsANumberOrNothing) {
+  EXPECT_EQ(imucal::parse_number_text("46.6"), 46.6);
+  EXPECT_EQ(imucal::parse_number_text("-1.5e-3"), -1.5e-3);
+  EXPECT_EQ(imucal::parse_number_text("+3"), 3.0);
+  for (const char* text : {"", "soon", "3 s", "-", "-x", "1,5"}) EXPECT_FALSE(imucal::parse_number_text(text)) << text;
+}

@@ -37,11 +37,11 @@ export function duration(s) {
   s = Math.abs(s);
   if (s < 9.95) return `${sign}${s.toFixed(1)} s`;
   // Rounded once, at the precision shown, so that 119.6 s is "2 min 00 s", never "1 min 60 s".
-  const whole_s = Math.round(s);
-  if (whole_s < 60) return `${sign}${whole_s} s`;
-  if (whole_s < 3600) return `${sign}${Math.floor(whole_s / 60)} min ${String(whole_s % 60).padStart(2, '0')} s`;
-  const whole_min = Math.round(s / 60);
-  return `${sign}${Math.floor(whole_min / 60)} h ${String(whole_min % 60).padStart(2, '0')} min`;
+  const wholeSeconds = Math.round(s);
+  if (wholeSeconds < 60) return `${sign}${wholeSeconds} s`;
+  if (wholeSeconds < 3600) return `${sign}${Math.floor(wholeSeconds / 60)} min ${String(wholeSeconds % 60).padStart(2, '0')} s`;
+  const wholeMinutes = Math.round(s / 60);
+  return `${sign}${Math.floor(wholeMinutes / 60)} h ${String(wholeMinutes % 60).padStart(2, '0')} min`;
 }
 
 /** ISO time as local "2025-03-01 21:04:05". */

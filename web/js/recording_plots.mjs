@@ -59,10 +59,10 @@ export function recordingPlots(box, campaignId) {
     }
     if (stopped) return;
     const frames = series.frames.reduce((a, b) => a + b, 0);
-    status.textContent = `${from_s === undefined ? 'Whole run' : 'Zoomed'}: ${duration(series.from_s)} – ${duration(series.to_s)}, ` +
+    status.textContent = `${zoomed ? 'Zoomed' : 'Whole run'}: ${duration(series.from_s)} – ${duration(series.to_s)}, ` +
       `${frames} frames in ${series.t_s.length} columns (each the minimum and maximum of its frames). Drag across a plot to zoom in.`;
     status.dataset.frames = String(frames);
-    whole.hidden = from_s === undefined;
+    whole.hidden = !zoomed;
     for (const c of charts) c.destroy();
     charts.length = 0;
     for (const spec of CHARTS) {
