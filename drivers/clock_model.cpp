@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 namespace imucal::drivers {
 
@@ -70,53 +72,117 @@ void ClockFit::add(std::int64_t device_ns, std::int64_t host_ns, std::int64_t ke
   }
 }
 
+namespace {
+
+// The line under every point whose value at x_mean is highest: the edge of the points' lower
+// convex hull above x_mean (it minimises the sum of the non-negative residuals). Points sorted by
+// x; false when no edge spans x_mean.
+bool lower_hull_line(const std::vector<std::pair<double, double>>& xz, double x_mean, double& a, double& c) {
+  std::vector<std::pair<double, double>> hull;
+  for (const auto& p : xz) {
+    while (hull.size() >= 2) {
+      const auto& o = hull[hull.size() - 2];
+      const auto& q = hull.back();
+      const double cross = (q.first - o.first) * (p.second - o.second) - (q.second - o.second) * (p.first - o.first);
+      if (cross > 0.0) break;  // o -> q -> p turns left: q stays on the lower hull
+      hull.pop_back();
+    }
+    hull.push_back(p);
+  }
+  for (std::size_t i = 0; i + 1 < hull.size(); ++i) {
+    const auto& p = hull[i];
+    const auto& q = hull[i + 1];
+    if (p.first <= x_mean && x_mean <= q.first && q.first > p.first) {
+      c = (q.second - p.second) / (q.first - p.first);
+      a = p.second - c * p.first;
+      return true;
+    }
+  }
+  return false;
+}
+
+// Least squares z = a + c x through the points `use` selects; false without a baseline.
+bool least_squares_line(const std::vector<std::pair<double, double>>& xz, const std::vector<bool>& use, double& a,
+                        double& c) {
+  double n = 0.0, mx = 0.0, mz = 0.0;
+  for (std::size_t i = 0; i < xz.size(); ++i) {
+    if (!use[i]) continue;
+    n += 1.0;
+    mx += xz[i].first;
+    mz += xz[i].second;
+  }
+  if (n < 2.0) return false;
+  mx /= n;
+  mz /= n;
+  double sxx = 0.0, sxz = 0.0;
+  for (std::size_t i = 0; i < xz.size(); ++i) {
+    if (!use[i]) continue;
+    sxx += (xz[i].first - mx) * (xz[i].first - mx);
+    sxz += (xz[i].first - mx) * (xz[i].second - mz);
+  }
+  if (!(sxx > 0.0)) return false;
+  c = sxz / sxx;
+  a = mz - c * mx;
+  return true;
+}
+
+}  // namespace
+
 void ClockFit::refit() noexcept {
   // Points: completed blocks plus the block in progress.
   const std::size_t n = blocks_.size() + (have_current_ ? 1 : 0);
   if (n == 0) return;
   auto point = [&](std::size_t i) -> const Point& { return i < blocks_.size() ? blocks_[i] : current_; };
-  double mx = 0.0, my = 0.0;
+  // Fitted in (x, z) = (device, host - device) relative to the reference, ns: z = a + c x with
+  // b = 1 + c. z stays within milliseconds where host itself runs to seconds, so the products
+  // of the hull and the sums of the least squares keep their precision.
+  std::vector<std::pair<double, double>> xz(n);
+  double mx = 0.0, mz = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    mx += static_cast<double>(point(i).device_ns - ref_device_ns_);
-    my += static_cast<double>(point(i).host_ns - ref_host_ns_);
+    const double x = static_cast<double>(point(i).device_ns - ref_device_ns_);
+    xz[i] = {x, static_cast<double>(point(i).host_ns - ref_host_ns_) - x};
+    mx += xz[i].first;
+    mz += xz[i].second;
   }
   mx /= static_cast<double>(n);
-  my /= static_cast<double>(n);
-  double sxx = 0.0, sxy = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double dx = static_cast<double>(point(i).device_ns - ref_device_ns_) - mx;
-    const double dy = static_cast<double>(point(i).host_ns - ref_host_ns_) - my;
-    sxx += dx * dx;
-    sxy += dx * dy;
-  }
-  // Drift needs a baseline: with less than one block span of device time keep the rate at 1.
-  double b = 1.0;
+  mz /= static_cast<double>(n);
+  // Drift needs a baseline: with less than two block spans of device time keep the rate at 1.
   const std::int64_t span_ns = point(n - 1).device_ns - point(0).device_ns;
-  if (n >= 3 && sxx > 0.0 && span_ns >= 2 * config_.block_span_ns) {
-    b = sxy / sxx;
-    // A drift beyond 1000 ppm is not a clock: keep the nominal rate rather than extrapolate.
-    if (!(std::fabs(b - 1.0) < 1e-3)) b = 1.0;
+  const bool fit_drift = n >= 3 && span_ns >= 2 * config_.block_span_ns;
+  double a = 0.0, c = 0.0;
+  bool fitted = false;
+  std::vector<bool> use(n, true);
+  if (fit_drift && config_.lower_envelope && lower_hull_line(xz, mx, a, c)) {
+    // The prompt points: those within prompt_tolerance_ns of the lowest tenth of the heights
+    // above the envelope. Blocks whose every observation came late (a sender or host loaded for a
+    // while) lie further up and are left out; the line through the rest uses many points, where
+    // the envelope's own edge rests on two, which may be rare early ones (a simulated IMU reached
+    // its floor once in a few seconds, 60 us under the usual, and the edge between two such
+    // points moved the drift by 13 ppm over 6 s).
+    std::vector<double> height(n);
+    for (std::size_t i = 0; i < n; ++i) height[i] = xz[i].second - (a + c * xz[i].first);
+    std::vector<double> sorted = height;
+    const auto q = sorted.begin() + static_cast<std::ptrdiff_t>(n / 10);
+    std::nth_element(sorted.begin(), q, sorted.end());
+    const double limit = *q + static_cast<double>(config_.prompt_tolerance_ns);
+    for (std::size_t i = 0; i < n; ++i) use[i] = height[i] <= limit;
   }
-  double a = my - b * mx;
-  double min_r = 0.0, sum_r2 = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double r = static_cast<double>(point(i).host_ns - ref_host_ns_) -
-                     (a + b * static_cast<double>(point(i).device_ns - ref_device_ns_));
-    min_r = i == 0 ? r : std::min(min_r, r);
-    sum_r2 += r * r;
+  if (fit_drift) fitted = least_squares_line(xz, use, a, c);
+  // A drift beyond 1000 ppm is not a clock: keep the nominal rate rather than extrapolate.
+  if (!fitted || !(std::fabs(c) < 1e-3)) {
+    c = 0.0;
+    a = mz;
   }
   if (config_.lower_envelope) {
     // Delays are never negative: rest the line on the lowest point.
-    a += min_r;
-    sum_r2 = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double r = static_cast<double>(point(i).host_ns - ref_host_ns_) -
-                       (a + b * static_cast<double>(point(i).device_ns - ref_device_ns_));
-      sum_r2 += r * r;
-    }
+    double lowest = xz[0].second - (a + c * xz[0].first);
+    for (const auto& [x, z] : xz) lowest = std::min(lowest, z - (a + c * x));
+    a += lowest;
   }
+  double sum_r2 = 0.0;
+  for (const auto& [x, z] : xz) sum_r2 += (z - a - c * x) * (z - a - c * x);
   a_ns_ = a;
-  b_ = b;
+  b_ = 1.0 + c;
   residual_rms_ns_ = std::sqrt(sum_r2 / static_cast<double>(n));
   have_model_ = true;
 }

@@ -3,8 +3,10 @@
 // jittery delay (SO_TIMESTAMP receive stamps of an IMU) or a symmetric error bounded by half a
 // round trip (a table's reply to a request). Jitter must not reach the data: observations are
 // grouped in blocks of device time, each block keeps its best point (smallest delay proxy), and
-// a line is fitted through the best points of a sliding window. For one-sided delays the line
-// is then lowered onto the lowest block point (a lower envelope). docs/drivers.md gives the error.
+// a least-squares line is fitted through the best points of a sliding window. For one-sided
+// delays only the prompt points count (those near the lower envelope: a whole block delayed by a
+// loaded host does not tilt the line), and the line is then lowered onto the lowest point.
+// docs/drivers.md gives the error.
 // Pure: no clock is read here.
 #pragma once
 
@@ -19,6 +21,9 @@ struct ClockFitConfig {
   std::int64_t block_span_ns = 100'000'000;  // device time per block
   std::size_t window_blocks = 128;           // blocks in the fit (window = span * blocks)
   bool lower_envelope = true;                // one-sided delays (receive stamps)
+  // With one-sided delays the drift comes from the block points within this of the lowest
+  // tenth's height above the envelope: the prompt ones.
+  std::int64_t prompt_tolerance_ns = 20'000;
   // An observation further than this from the model means the device or host clock jumped:
   // the fit restarts from that observation.
   std::int64_t reset_threshold_ns = 50'000'000;

@@ -10,6 +10,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -248,6 +249,11 @@ struct SimImu::Impl {
   }
 
   void run() {
+    // A real IMU sends on its hardware clock. A thread's sleep ends up to the timer slack (50 us
+    // by default) late, a different amount each time: the receive stamps then rarely showed the
+    // link's own delay, and the driver's clock model (which rests on the prompt frames) had few
+    // to rest on. 1 ns asks for the timer's own resolution.
+    (void)::prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     const std::size_t sample = cfg.link.sample_message();
     const link::Message& sm = cfg.link.messages[sample];
     const link::Field* gyro_x = sm.find(link::Role::gyro_x);
@@ -304,12 +310,9 @@ struct SimImu::Impl {
       const double temp = temperature_C.load();
       v.gyro_temp_C = temp;
       v.accel_temp_C = temp + 0.5;
-      const std::int64_t now = host_time_ns();
-      v.latency_ns = static_cast<double>(std::max<std::int64_t>(0, (now - sample_host_ns) / 1000) * 1000);
-      std::vector<std::uint8_t> bytes = link::encode(cfg.link, sample, v);
       {
         // What the frame says, as the description decodes it: the truth the driver must deliver.
-        const link::Decoded d = link::decode(cfg.link, bytes, sample);
+        const link::Decoded d = link::decode(cfg.link, link::encode(cfg.link, sample, v), sample);
         SampleTruth truth{seq, t_k, sample_host_ns, f.table_deg, {}, {}};
         link::to_increments(sm, d.values, dt_s, truth.dtheta_rad, truth.dv_mps);
         std::lock_guard lock(truth_mutex);
@@ -317,6 +320,12 @@ struct SimImu::Impl {
         truth_ring[i] = truth;
         truth_valid[i] = true;
       }
+      // The latency field is the age of the sample when the frame leaves, as a real IMU's: taken
+      // after the work above (measured before it, every frame carried tens of microseconds more
+      // delay than it declared, except when that work happened to be quick).
+      const std::int64_t now = host_time_ns();
+      v.latency_ns = static_cast<double>(std::max<std::int64_t>(0, (now - sample_host_ns) / 1000) * 1000);
+      std::vector<std::uint8_t> bytes = link::encode(cfg.link, sample, v);
       bool skip_it = now < pause_until_ns.load();
       if (!skip_it && drop.load() > 0) {
         --drop;

@@ -554,22 +554,25 @@ TEST(KvhSerial, AMissingDeviceFailsNamingIt) {
 }
 
 TEST(KvhUdp, StreamsOverLoopbackUdpWithTheImusTimeTag) {
-  // Format B carries a 32-bit microsecond time tag: the clock model runs on it.
+  // Format B carries a 32-bit microsecond time tag: the clock model runs on it. The IMU's clock
+  // runs 400 ppm fast, where one without a tag would show no drift at all (its samples are
+  // counted at the nominal period, and the simulated IMU sends on the host's clock). How well
+  // the drift is fitted is ClockModel.*'s question, with delays under the test's control: here a
+  // loaded host (the sanitizer suite beside a release suite) delays the simulated IMU's frames
+  // by tens of microseconds for seconds at a time, which over this test's 6 s moved a 40 ppm
+  // drift by 10-15 ppm even with the prompt frames alone.
   sim::SimImuConfig dc;
   dc.link = link::load_imu_link("kvh-1775-b");
   dc.link.transport = link::Transport::udp;
-  dc.clock_drift_ppm = 40.0;
+  dc.clock_drift_ppm = 400.0;
   Rig rig(dc);
   rig.up();
-  // 6 s: the drift is the slope of the receive stamps' lower envelope, and a loaded machine (the
-  // sanitizer suite beside a release suite) moves that envelope by tens of microseconds; over 3 s
-  // that was 23 ppm of apparent drift, over 6 s it is half as much.
   const ImuBatch b = rig.collect(6.0);
   ASSERT_GT(b.samples.size(), 3000u);
   for (std::size_t i = 1; i < b.samples.size(); ++i) ASSERT_EQ(b.samples[i].sequence, b.samples[i - 1].sequence + 1);
   EXPECT_EQ(rig.driver->counters().crc_failures, 0u);
   rig.expect_truth(b);
-  EXPECT_NEAR(rig.driver->clock_model().drift_ppm, -40.0, 10.0);
+  EXPECT_NEAR(rig.driver->clock_model().drift_ppm, -400.0, 20.0);
   rig.device->drop_next_samples(3);
   (void)rig.collect(0.3);
   EXPECT_EQ(rig.driver->counters().samples_lost, 3u);
