@@ -4,7 +4,8 @@
 //     Opens RUN for writing (recovering it if the last writer died), continues the deterministic
 //     frame sequence (frame k is expected_frame(k), see crash_frames.hpp) from the frames already
 //     in the run, and records paced at RATE_HZ with a storage::Recorder until it is killed.
-//     After every push it prints "accepted K" (frames accepted so far in the run) on stdout.
+//     After every push it prints "accepted K" (frames accepted so far in the run) on stdout, and
+//     after every commit "committed K S" (frames in the run after it, seconds the commit took).
 //   storage_crash_writer try-write RUN
 //     Tries to become RUN's writer; prints the error and exits 3 when another writer holds it,
 //     exits 0 when it could write.
@@ -44,7 +45,10 @@ int main(int argc, char** argv) {
     storage::RecorderOptions options;
     options.commit_interval_s = interval_s;
     options.wait_when_full = true;
-    storage::Recorder recorder(std::move(db), options);
+    storage::Recorder recorder(std::move(db), options, {}, [](const storage::RecorderStats& stats) {
+      std::printf("committed %lld %.6f\n", static_cast<long long>(stats.stored_frames), stats.last_commit_s);
+      std::fflush(stdout);
+    });
     std::printf("ready %lld\n", static_cast<long long>(k));
     std::fflush(stdout);
     // Batches every 5 ms of wall time, as a device reader would hand them over.
