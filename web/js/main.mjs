@@ -2,10 +2,10 @@
 // connection, the active run), and the one WebSocket the page keeps open. Views are modules with
 // mount(root, ctx) returning a cleanup function.
 import { get, ApiError } from './api.mjs';
-import { session, checkSession, signOut, onSessionChange } from './session.mjs';
+import { session, checkSession, signOut, onSessionChange, isOperator } from './session.mjs';
 import { LiveClient, LiveStore } from './live.mjs';
 import { applyAlarm, alarmSummary } from './alarms.mjs';
-import { alarmTable } from './alarm_panel.mjs';
+import { alarmTable, acknowledgeAlarm } from './alarm_panel.mjs';
 import { h, clear, duration, stateBadge } from './format.mjs';
 import * as signinView from './views/signin.mjs';
 import * as campaignsView from './views/campaigns.mjs';
@@ -206,9 +206,33 @@ function renderAlarms() {
     loadAlarms();
   };
   alarmPanel.dataset.active = String(alarmList.some((a) => !a.cleared));
+  // After a night of chamber excursions: one click for every alarm the operator has read. Each is
+  // acknowledged on its own (the daemon keeps who and when per alarm); a refusal (acknowledged
+  // meanwhile by someone else) is shown and the list reloaded.
+  const waiting = alarmList.filter((a) => !a.acknowledged);
+  let all = null;
+  if (waiting.length >= 2) {
+    const operator = isOperator();
+    all = h('button', { type: 'button', id: 'alarm-ack-all', disabled: !operator,
+      title: operator ? `Acknowledge the ${waiting.length} alarms listed (your name and the time are kept for each)` : 'operator role required (you are signed in as a viewer)' },
+    `Acknowledge all ${waiting.length}`);
+    all.addEventListener('click', async () => {
+      all.disabled = true;
+      for (const a of waiting) {
+        try {
+          alarmList = applyAlarm(alarmList, await acknowledgeAlarm(a));
+        } catch (e) {
+          onError(a, e);
+          return;
+        }
+      }
+      alarmError = '';
+      renderAlarms();
+    });
+  }
   // Element.append writes null as the text "null": only the parts there are.
   alarmPanel.append(...[
-    h('div', { class: 'alarm-head' }, h('strong', { id: 'alarm-summary' }, alarmList.length ? alarmSummary(alarmList) : 'Alarms')),
+    h('div', { class: 'alarm-head' }, h('strong', { id: 'alarm-summary' }, alarmList.length ? alarmSummary(alarmList) : 'Alarms'), all),
     alarmError ? h('div', { class: 'form-error', role: 'alert', id: 'alarm-error' }, alarmError) : null,
     alarmList.length ? alarmTable(alarmList, { id: 'alarm-list', onAcknowledged, onError }) : null,
   ].filter(Boolean));
