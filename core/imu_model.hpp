@@ -1,6 +1,7 @@
 // The sensor error model of CONVENTIONS.md (seed eq. 1): biases, scale factors (+/- for gyros),
 // the six misalignment angles per triad in the seed's sign convention, accelerometer proof-mass
-// lever arms, per-channel delays, noise; and its imucal-imu-model/1 JSON form.
+// lever arms, per-channel delays, noise, the optional nonlinear terms (gyro scale nonlinearity,
+// accelerometer K2/K3, gyro g-sensitivity); and its imucal-imu-model/1 JSON form.
 // Everything here is SI (rad, rad/s, m/s^2, m, s, dimensionless scale); JSON carries the units.
 #pragma once
 
@@ -9,6 +10,8 @@
 #include <string>
 
 #include <Eigen/Core>
+
+#include "core/units.hpp"
 
 namespace imucal {
 
@@ -50,6 +53,9 @@ struct AccelNoise {
   double accel_random_walk_mps2_rts = 0;  // Wiener-process bias drift, (m/s^2)/sqrt(s)
 };
 
+// The rate unit of the gyro scale nonlinearity: q = |w_j| / (100 deg/s) (CONVENTIONS.md).
+inline constexpr double kGyroNonlinearityRate_radps = 100.0 * units::kDegToRad;
+
 struct GyroErrors {
   Eigen::Vector3d bias_radps = Eigen::Vector3d::Zero();
   Eigen::Vector3d scale_pos = Eigen::Vector3d::Zero();  // dimensionless (ppm * 1e-6)
@@ -57,6 +63,12 @@ struct GyroErrors {
   Misalignment misalignment_rad;
   Eigen::Vector3d delay_s = Eigen::Vector3d::Zero();
   GyroNoise noise;
+  // Scale-factor nonlinearity: row j holds c1, c2, c3 of gyro j, dimensionless (ppm * 1e-6); its
+  // scale error gains c1 q + c2 q^2 + c3 q^3, q = |w_j| / kGyroNonlinearityRate_radps.
+  Eigen::Matrix3d scale_nonlinear = Eigen::Matrix3d::Zero();
+  // g-sensitivity: gyro j's bias gains row j . f_origin_o / g_std, in rad/s per g (rows gyro x y z,
+  // columns the specific force at the origin along o x y z).
+  Eigen::Matrix3d g_sensitivity_radps_per_g = Eigen::Matrix3d::Zero();
 };
 
 struct AccelErrors {
@@ -67,7 +79,25 @@ struct AccelErrors {
   Eigen::Vector3d lever_arm_z_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d delay_s = Eigen::Vector3d::Zero();
   AccelNoise noise;
+  // IEEE Std 1293's K2 and K3 as scale-error slopes: channel j's scale error gains
+  // k2_per_g[j] a + k3_per_g2[j] a^2 with a = f_j[j] / g_std (its own proof mass's specific force
+  // along its axis, in g). Its output then gains (k2 a^2 + k3 a^3) g_std, so K2 [ug/g^2] =
+  // k2_per_g * 1e6 and K3 [ug/g^3] = k3_per_g2 * 1e6 under either reading of the JSON's
+  // k2_ug_per_g2 / k3_ug_per_g3 (scale-error slope or output per g^2).
+  Eigen::Vector3d k2_per_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d k3_per_g2 = Eigen::Vector3d::Zero();
 };
+
+// True when the accelerometers have K2 or K3 (their inverse model then iterates).
+bool has_nonlinear_terms(const AccelErrors& a);
+
+// The scale errors s_j of seed eq. 1's S(i), each at its channel's own input (CONVENTIONS.md,
+// "Nonlinear terms"): the gyros' by the sign and size of w_io_o[j]; the accelerometers' by
+// f_own[j] = f_j[j], the specific force at proof mass j along axis j.
+Eigen::Vector3d gyro_scale_errors(const GyroErrors& g, const Eigen::Vector3d& w_io_o_radps);
+Eigen::Vector3d accel_scale_errors(const AccelErrors& a, const Eigen::Vector3d& f_own_mps2);
+// What g-sensitivity adds to the gyro outputs, rad/s, for the specific force at the origin.
+Eigen::Vector3d gyro_g_sensitivity_radps(const GyroErrors& g, const Eigen::Vector3d& f_origin_o_mps2);
 
 struct ImuErrorSet {
   GyroErrors gyro;
@@ -85,7 +115,9 @@ struct ImuModel {
   std::string extra_json;                            // keys other stages added (e.g. "status")
 };
 
-// Forward model of one triad sample: u = D S(i) i (+ bias added by the caller).
+// Forward model of one triad sample: u = D S(i) i (+ bias and g-sensitivity added by the caller),
+// S with the nonlinear terms at the input; the accelerometers' without proof-mass offsets
+// (f_j = f_o for every j; the simulator adds the size effect).
 Eigen::Vector3d apply_gyro_scale_misalignment(const GyroErrors& g, const Eigen::Vector3d& w_io_o);
 Eigen::Vector3d apply_accel_scale_misalignment(const AccelErrors& a, const Eigen::Vector3d& f_o);
 
@@ -101,18 +133,40 @@ Eigen::Matrix3d proof_mass_offsets_m(const ImuModel& model);
 // Rows j: f_j - f_origin for the rate w and its derivative dw, in the frame of the offsets.
 Eigen::Matrix3d size_effect_mps2(const Eigen::Matrix3d& offsets_m, const Eigen::Vector3d& w_radps,
                                  const Eigen::Vector3d& dw_radps2);
-// What the size effect adds to the accelerometer outputs before the bias: channel j is row j of
-// D S applied to its own term (row j of size_effect), so removing this from the raw output and
-// then inverting D S is exact, where seed eq. 7 (removing the terms after the inverse) leaves
-// misalignment and scale errors times the size effect.
-Eigen::Vector3d accel_size_effect_output(const AccelErrors& a, const Eigen::Matrix3d& size_effect_mps2);
 
 // Inverse model (seed eq. 2) applied to increments over dt_s: i = S^-1 D^-1 (u - u0 dt).
-// Gyro scale is chosen by the sign of the corrected increment on each axis.
+// Gyro scale is chosen by the sign of the corrected increment on each axis. With nonlinear terms S
+// depends on the input it is solving for: a short fixed-point iteration (imu_model.cpp says why
+// three steps reach double precision); without them the first pass is the answer, as before.
+//
+// Gyros: f_origin_o_mps2 is the specific force at the origin over the same interval (the
+// compensated accelerometer output), for the g-sensitivity. The three-argument form does not remove
+// the g-sensitivity: for a model without it, or for rates where its few 1e-8 rad/s do not matter.
+Eigen::Vector3d compensate_gyro_increment(const GyroErrors& g, const Eigen::Vector3d& dtheta_rad,
+                                          double dt_s, const Eigen::Vector3d& f_origin_o_mps2);
 Eigen::Vector3d compensate_gyro_increment(const GyroErrors& g, const Eigen::Vector3d& dtheta_rad,
                                           double dt_s);
+// Accelerometers: the specific-force increment at the origin. size_effect_mps2 (rows j:
+// f_j - f_origin over the interval, see size_effect_mps2()) is removed in sensor space: channel j's
+// raw output is row j of D S applied to f_origin + row j, so subtracting row j of D S times its
+// own term and then inverting D S is exact, where seed eq. 7 (removing the terms after the
+// inverse) leaves misalignment and scale errors times the size effect. The three-argument form is
+// for a model without proof-mass offsets.
+Eigen::Vector3d compensate_accel_increment(const AccelErrors& a, const Eigen::Vector3d& dv_mps, double dt_s,
+                                           const Eigen::Matrix3d& size_effect_mps2);
 Eigen::Vector3d compensate_accel_increment(const AccelErrors& a, const Eigen::Vector3d& dv_mps,
                                            double dt_s);
+
+// The one rule for a sample of both triads (every consumer reaches it through nav::Compensator):
+// the accelerometers first, then the gyros with the g-sensitivity of the specific force at the
+// origin the accelerometers gave. Inputs are each channel's raw increment on its input's interval.
+struct CompensatedIncrements {
+  Eigen::Vector3d dtheta_rad = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dv_mps = Eigen::Vector3d::Zero();  // at the origin
+};
+CompensatedIncrements compensate_imu_increments(const GyroErrors& g, const AccelErrors& a,
+                                                const Eigen::Vector3d& dtheta_rad, const Eigen::Vector3d& dv_mps,
+                                                double dt_s, const Eigen::Matrix3d& size_effect_mps2);
 
 // imucal-imu-model/1. Parsing throws std::runtime_error naming the offending key.
 ImuModel imu_model_from_json_text(const std::string& text, const std::string& source_name);

@@ -20,5 +20,8 @@ inline constexpr double kMmToM = 1e-3;
 inline constexpr double kDegRthToRadRts = kDegToRad / 60.0;
 inline constexpr double kMpsRthToMpsRts = 1.0 / 60.0;
 inline constexpr double kNsPerS = 1e9;
+// Standard gravity, the "g" of data sheets and of IEEE Std 1293 (CONVENTIONS.md g_std): the unit of
+// the accelerometer nonlinearity and of gyro g-sensitivity, whatever the site's gravity.
+inline constexpr double kStandardGravity_mps2 = 9.80665;
 
 }  // namespace imucal::units

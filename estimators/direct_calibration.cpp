@@ -491,6 +491,10 @@ ImuModel to_body_frame(const ImuModel& m) {
   gm.zy = D_gb(2, 0);
   gm.zx = -D_gb(2, 1);
   b.gyro.misalignment_rad = gm;
+  // The nonlinear terms stay with their channels (an arcsecond-size rotation moves the input they
+  // see by 1e-5 of itself). g-sensitivity acts on the specific force along o, f_o = C_b_o f_b: its
+  // columns turn into b.
+  b.gyro.g_sensitivity_radps_per_g = m.gyro.g_sensitivity_radps_per_g * C_b_o;
   if (m.sigma) {
     // The body axes are themselves estimated: add their variance to the shifted angles.
     const Misalignment& sa = m.sigma->accel.misalignment_rad;

@@ -69,8 +69,10 @@ void LeverArmFilter::process_middle() {
   // In sensor space, exactly (CONVENTIONS.md): channel j's output less its bias is row j of the
   // stage-1 D S applied to the force at its own proof mass, g + K rho_j. Inverting D S first would
   // mix the other channels' size effect into this one (1e-4 of it).
+  // S with the model's K2, K3 at gravity along each axis: the size effect changes a channel's
+  // nonlinear scale error by ppm of itself.
   const Matrix3d DS = misalignment_matrix(model_.accel.misalignment_rad) *
-                      (Vector3d::Ones() + model_.accel.scale).asDiagonal();
+                      (Vector3d::Ones() + accel_scale_errors(model_.accel, g_o)).asDiagonal();
   const Vector3d u = f2.dv_mps - model_.accel.bias_mps2 * dt;
   for (int j = 0; j < 3; ++j) {
     block_z_[j] += u[j] - DS.row(j).dot(g_o + model_.accel.delay_s[j] * g_rate_o) * dt;

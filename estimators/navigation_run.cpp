@@ -58,21 +58,24 @@ CompensatedSample Compensator::compensate(const std::deque<ImuFrame>& window) co
   CompensatedSample c;
   const auto k = static_cast<std::size_t>(lookback_);
   const double dt = static_cast<double>(window[k].t_ns - window[k - 1].t_ns) * 1e-9;
+  // The rates the size effect needs, without the gyros' g-sensitivity (it needs the specific force,
+  // which needs the size effect): at 0.01 deg/h/g that is 5e-8 rad/s, which moves the size effect
+  // of a 50 mm offset by 5e-9 m/s^2 at 1 rad/s.
   c.w_radps = rate_radps(window, 0, dt);
-  c.dtheta_rad = c.w_radps * dt;
   // The rate's derivative at mid-interval from the neighbours' compensated mean rates, a sample
   // interval apart (gaps never reach the window): second order in the interval, 3e-7 rad/s^2 at
   // 100 Hz on a 180 deg, 20 s oscillation.
   c.dw_radps2 = (rate_radps(window, 1, dt_nominal_s_) - rate_radps(window, -1, dt_nominal_s_)) / (2.0 * dt_nominal_s_);
-  Vector3d dv_raw = shifted(window, false, 0);
   const Eigen::Matrix3d offsets = proof_mass_offsets_m(model_);
-  if (!offsets.isZero()) {
-    // Exact removal in sensor space: each channel's own term through its own row of D S (the
-    // raw output is D S f_j row by row), then the inverse model. See docs/calibration.md.
-    c.size_effect_mps2 = size_effect_mps2(offsets, c.w_radps, c.dw_radps2);
-    dv_raw -= accel_size_effect_output(model_.accel, c.size_effect_mps2) * dt;
-  }
-  c.dv_mps = compensate_accel_increment(model_.accel, dv_raw, dt);
+  // Exact removal in sensor space: each channel's own term through its own row of D S (the raw
+  // output is D S f_j row by row), then the inverse model. See docs/calibration.md.
+  if (!offsets.isZero()) c.size_effect_mps2 = size_effect_mps2(offsets, c.w_radps, c.dw_radps2);
+  // The one rule of core/imu_model: accelerometers, then the gyros with their g-sensitivity.
+  const CompensatedIncrements inc = compensate_imu_increments(model_.gyro, model_.accel, shifted(window, true, 0),
+                                                              shifted(window, false, 0), dt, c.size_effect_mps2);
+  c.w_radps = inc.dtheta_rad / dt;
+  c.dtheta_rad = c.w_radps * dt;
+  c.dv_mps = inc.dv_mps;
   return c;
 }
 

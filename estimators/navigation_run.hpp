@@ -1,6 +1,7 @@
 // Free-inertial navigation of a recording against the reference the table implies (seed eq. 14):
-// frames in (streamed), model compensation (biases, scale factors, misalignments, lever arms,
-// delays), strapdown navigation, and the horizontal velocity and position errors of the IMU origin.
+// frames in (streamed), model compensation (biases, scale factors and their nonlinearity,
+// misalignments, lever arms, delays, g-sensitivity), strapdown navigation, and the horizontal
+// velocity and position errors of the IMU origin.
 #pragma once
 
 #include <cstdint>

@@ -159,11 +159,16 @@ void Simulator::sensor_outputs(double t, Vector3d& u_gyro, Vector3d& u_accel) co
 void Simulator::outputs(const TrueKinematics& k, const GyroErrors& gyro, const AccelErrors& accel,
                         const Eigen::Matrix3d& D_accel, Vector3d& u_gyro, Vector3d& u_accel) {
   u_gyro = apply_gyro_scale_misalignment(gyro, k.w_io_o);
+  // g-sensitivity: a bias that follows the specific force at the origin, so it is integrated (and
+  // delayed) with the rate part rather than added per sample with the constant bias.
+  if (!gyro.g_sensitivity_radps_per_g.isZero(0.0)) u_gyro += gyro_g_sensitivity_radps(gyro, k.f_origin_o);
   // Each accelerometer senses the specific force at its own proof mass (seed eq. 3).
-  const Eigen::Matrix3d DS = D_accel * (Vector3d::Ones() + accel.scale).asDiagonal();
   const Vector3d& w = k.w_io_o;
   const Vector3d f_y = k.f_origin_o + w.cross(w.cross(accel.lever_arm_y_m)) + k.dw_io_o.cross(accel.lever_arm_y_m);
   const Vector3d f_z = k.f_origin_o + w.cross(w.cross(accel.lever_arm_z_m)) + k.dw_io_o.cross(accel.lever_arm_z_m);
+  // S with each channel's K2, K3 at its own proof mass's force along its axis (CONVENTIONS.md).
+  const Vector3d s = accel_scale_errors(accel, Vector3d(k.f_origin_o[0], f_y[1], f_z[2]));
+  const Eigen::Matrix3d DS = D_accel * (Vector3d::Ones() + s).asDiagonal();
   u_accel[0] = DS.row(0).dot(k.f_origin_o);
   u_accel[1] = DS.row(1).dot(f_y);
   u_accel[2] = DS.row(2).dot(f_z);

@@ -1,6 +1,9 @@
 // Conventions in code: Earth, table kinematics, the sensor model and its JSON form.
 #include <cmath>
 #include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -168,6 +171,216 @@ TEST(ModelJson, ReadsTheIndependentSimulatorsTruth) {
   EXPECT_NEAR(m.gyro.bias_radps[0] * units::kRadpsToDph, 0.03721472649399559, 1e-15);
   EXPECT_NEAR(m.accel.misalignment_rad.zy * units::kRadToArcsec, 20.657489403031462, 1e-12);
   EXPECT_NEAR(m.gyro.noise.arw_rad_rts / units::kDegRthToRadRts, 0.0005, 1e-15);
+}
+
+// The nonlinear terms (CONVENTIONS.md, "Nonlinear terms") at the sizes of issue 19's acceptance:
+// gyro nonlinearity 5-20 ppm at 300 deg/s, K2 20-50 ug/g^2, K3 1-5 ug/g^3, g-sensitivity
+// 0.001-0.01 deg/h/g.
+namespace {
+GyroErrors gyro_with_every_term() {
+  GyroErrors g;
+  g.bias_radps << 0.02 * units::kDphToRadps, -0.03 * units::kDphToRadps, 0.01 * units::kDphToRadps;
+  g.scale_pos << 250e-6, -220e-6, 280e-6;
+  g.scale_neg << 240e-6, -210e-6, 295e-6;
+  g.misalignment_rad = {50 * units::kArcsecToRad, -45 * units::kArcsecToRad, 55 * units::kArcsecToRad,
+                        -60 * units::kArcsecToRad, 42 * units::kArcsecToRad, -48 * units::kArcsecToRad};
+  // At q = 3 (300 deg/s): x 3*3 + 0.5*9 + 0.1*27 = 16.2 ppm, y -7.5 ppm, z 19.2 ppm.
+  g.scale_nonlinear << 3e-6, 0.5e-6, 0.1e-6,
+                      -2.5e-6, 0.0, 0.0,
+                       1e-6, 1.2e-6, 0.2e-6;
+  g.g_sensitivity_radps_per_g << 0.004, -0.002, 0.008,
+                                 0.001, 0.006, -0.003,
+                                -0.005, 0.002, 0.009;
+  g.g_sensitivity_radps_per_g *= units::kDphToRadps;
+  return g;
+}
+
+AccelErrors accel_with_every_term() {
+  AccelErrors a;
+  a.bias_mps2 << 3e-4, -5e-4, 2e-4;
+  a.scale << 250e-6, -280e-6, 210e-6;
+  a.misalignment_rad = {-52 * units::kArcsecToRad, 44 * units::kArcsecToRad, 58 * units::kArcsecToRad,
+                        -41 * units::kArcsecToRad, 47 * units::kArcsecToRad, 53 * units::kArcsecToRad};
+  a.lever_arm_y_m << 0.01, 0.035, -0.02;
+  a.lever_arm_z_m << -0.03, 0.01, 0.04;
+  a.k2_per_g << 25e-6, -40e-6, 50e-6;  // ug/g^2 * 1e-6
+  a.k3_per_g2 << 2e-6, -1e-6, 5e-6;    // ug/g^3 * 1e-6
+  return a;
+}
+
+// The accelerometer forward model written out from CONVENTIONS.md, row by row: channel j is row j
+// of D S applied to the force at its own proof mass, S with each channel's s at its own f_j[j].
+Vector3d accel_forward(const AccelErrors& a, const Vector3d& f_origin, const Matrix3d& size_effect) {
+  Matrix3d f_at;  // rows j: f_j
+  for (int j = 0; j < 3; ++j) f_at.row(j) = f_origin.transpose() + size_effect.row(j);
+  const Vector3d s = accel_scale_errors(a, f_at.diagonal());
+  const Matrix3d DS = misalignment_matrix(a.misalignment_rad) * (Vector3d::Ones() + s).asDiagonal();
+  Vector3d u;
+  for (int j = 0; j < 3; ++j) u[j] = DS.row(j).dot(f_at.row(j));
+  return u + a.bias_mps2;
+}
+}  // namespace
+
+// Each term enters as the spec writes it: K2 of 1 ug/g^2 is 1 ug of output at 1 g (both readings
+// of "s_j + k2 a" with k2 in ug/g^2 agree), c_k scales q^k of the rate in units of 100 deg/s, and
+// g-sensitivity is a bias per g of specific force.
+TEST(SensorModel, NonlinearTermsFollowTheConventions) {
+  const double g = units::kStandardGravity_mps2;
+  AccelErrors a;
+  a.k2_per_g[2] = 40e-6;
+  a.k3_per_g2[2] = 3e-6;
+  for (const double a_g : {1.0, -1.0, 0.5, 2.0}) {
+    const Vector3d u = apply_accel_scale_misalignment(a, Vector3d(0, 0, a_g * g));
+    const double output_error_ug = (u[2] - a_g * g) / (1e-6 * g);
+    EXPECT_NEAR(output_error_ug, 40 * a_g * a_g + 3 * a_g * a_g * a_g, 1e-9) << a_g;
+  }
+  GyroErrors gy;
+  gy.scale_pos[0] = 10e-6;
+  gy.scale_neg[0] = -10e-6;
+  gy.scale_nonlinear.row(0) << 2e-6, 1e-6, 0.5e-6;
+  for (const double rate_dps : {300.0, -300.0, 100.0, -50.0}) {
+    const double w = rate_dps * units::kDegToRad, q = std::abs(rate_dps) / 100.0;
+    const double s = (w >= 0 ? 10e-6 : -10e-6) + 2e-6 * q + 1e-6 * q * q + 0.5e-6 * q * q * q;
+    EXPECT_NEAR(apply_gyro_scale_misalignment(gy, Vector3d(w, 0, 0))[0], (1 + s) * w, 1e-15) << rate_dps;
+  }
+  gy.g_sensitivity_radps_per_g << 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.005;
+  const Vector3d b = gyro_g_sensitivity_radps(gy, Vector3d(g, 0.0, -2 * g));
+  EXPECT_NEAR(b[0], 0.01, 1e-15);
+  EXPECT_NEAR(b[2], 0.01, 1e-15);
+}
+
+// Forward then inverse with every term at once, proof-mass offsets and delays' worth of rate
+// included: the fixed-point inverse returns the input to rounding, at full rate both ways and at
+// low rates. Without its nonlinear terms the same model is off by their size.
+TEST(SensorModel, CompensationInvertsTheNonlinearTerms) {
+  const GyroErrors g = gyro_with_every_term();
+  const AccelErrors a = accel_with_every_term();
+  Matrix3d offsets = Matrix3d::Zero();
+  offsets.col(1) = a.lever_arm_y_m;
+  offsets.col(2) = a.lever_arm_z_m;
+  const double dt = 1e-2, d = units::kDegToRad;
+  const std::vector<std::pair<Vector3d, Vector3d>> cases = {
+      {Vector3d(300 * d, -300 * d, 250 * d), Vector3d(0.3, -1.2, 9.7)},
+      {Vector3d(-300 * d, 120 * d, -2 * d), Vector3d(-9.78, 0.5, -0.4)},
+      {Vector3d(0.01 * d, -0.5 * d, 60 * d), Vector3d(5.0, -6.9, 5.1)},
+      {Vector3d(7.3e-5, -2e-5, 4e-5), Vector3d(0.0, 0.0, 9.81)}};
+  for (const auto& [w, f] : cases) {
+    const Vector3d dw(0.3, -0.2, 0.5);
+    const Matrix3d e = size_effect_mps2(offsets, w, dw);
+    const Vector3d dtheta = (apply_gyro_scale_misalignment(g, w) + g.bias_radps + gyro_g_sensitivity_radps(g, f)) * dt;
+    const Vector3d dv = accel_forward(a, f, e) * dt;
+    const CompensatedIncrements c = compensate_imu_increments(g, a, dtheta, dv, dt, e);
+    EXPECT_LT((c.dtheta_rad - w * dt).norm(), 1e-12 * (w * dt).norm()) << w.transpose();
+    EXPECT_LT((c.dv_mps - f * dt).norm(), 1e-12 * (f * dt).norm()) << f.transpose();
+    // The parts on their own: the accelerometers with their size effect, the gyros given f.
+    EXPECT_LT((compensate_accel_increment(a, dv, dt, e) - f * dt).norm(), 1e-12 * (f * dt).norm());
+    EXPECT_LT((compensate_gyro_increment(g, dtheta, dt, f) - w * dt).norm(), 1e-12 * (w * dt).norm());
+  }
+  // The terms matter at these sizes: left out, the full-rate case is off by ppm.
+  GyroErrors g_linear = g;
+  g_linear.scale_nonlinear.setZero();
+  g_linear.g_sensitivity_radps_per_g.setZero();
+  AccelErrors a_linear = a;
+  a_linear.k2_per_g.setZero();
+  a_linear.k3_per_g2.setZero();
+  const Vector3d w = cases[0].first, f = cases[0].second;
+  const Matrix3d e = size_effect_mps2(offsets, w, Vector3d::Zero());
+  const Vector3d dtheta = (apply_gyro_scale_misalignment(g, w) + g.bias_radps + gyro_g_sensitivity_radps(g, f)) * dt;
+  const Vector3d dv = accel_forward(a, f, e) * dt;
+  EXPECT_GT((compensate_gyro_increment(g_linear, dtheta, dt) - w * dt).norm(), 5e-6 * (w * dt).norm());
+  EXPECT_GT((compensate_accel_increment(a_linear, dv, dt, e) - f * dt).norm(), 2e-5 * (f * dt).norm());
+}
+
+TEST(ModelJson, RoundTripKeepsTheNonlinearTermsAndTheirSigmas) {
+  ImuModel m;
+  m.gyro = gyro_with_every_term();
+  m.accel = accel_with_every_term();
+  m.sigma = ImuErrorSet{};
+  m.sigma->gyro.scale_nonlinear.setConstant(0.3e-6);
+  m.sigma->gyro.g_sensitivity_radps_per_g.setConstant(0.0005 * units::kDphToRadps);
+  m.sigma->accel.k2_per_g.setConstant(2e-6);
+  m.sigma->accel.k3_per_g2.setConstant(0.5e-6);
+  const std::string text = imu_model_to_json_text(m);
+  const auto j = nlohmann::json::parse(text);
+  // The units of formats.md: ppm, deg/h per g, ug per g^2 and per g^3.
+  EXPECT_NEAR(j.at("gyro").at("scale_nonlinear_ppm").at("x")[0].get<double>(), 3.0, 1e-12);
+  EXPECT_NEAR(j.at("gyro").at("g_sensitivity_dph_per_g")[2][2].get<double>(), 0.009, 1e-15);
+  EXPECT_NEAR(j.at("accel").at("k2_ug_per_g2")[1].get<double>(), -40.0, 1e-12);
+  EXPECT_NEAR(j.at("accel").at("k3_ug_per_g3")[2].get<double>(), 5.0, 1e-12);
+  EXPECT_NEAR(j.at("sigma").at("accel").at("k3_ug_per_g3")[0].get<double>(), 0.5, 1e-12);
+  const ImuModel r = imu_model_from_json_text(text, "test");
+  EXPECT_TRUE(r.gyro.scale_nonlinear.isApprox(m.gyro.scale_nonlinear, 1e-14));
+  EXPECT_TRUE(r.gyro.g_sensitivity_radps_per_g.isApprox(m.gyro.g_sensitivity_radps_per_g, 1e-14));
+  EXPECT_TRUE(r.accel.k2_per_g.isApprox(m.accel.k2_per_g, 1e-14));
+  EXPECT_TRUE(r.accel.k3_per_g2.isApprox(m.accel.k3_per_g2, 1e-14));
+  ASSERT_TRUE(r.sigma.has_value());
+  EXPECT_TRUE(r.sigma->gyro.scale_nonlinear.isApprox(m.sigma->gyro.scale_nonlinear, 1e-14));
+  EXPECT_TRUE(r.sigma->gyro.g_sensitivity_radps_per_g.isApprox(m.sigma->gyro.g_sensitivity_radps_per_g, 1e-14));
+  EXPECT_TRUE(r.sigma->accel.k2_per_g.isApprox(m.sigma->accel.k2_per_g, 1e-14));
+  EXPECT_TRUE(r.sigma->accel.k3_per_g2.isApprox(m.sigma->accel.k3_per_g2, 1e-14));
+}
+
+TEST(ModelJson, NonlinearTermsReadAsTheSpecWritesThem) {
+  // One to three terms per axis, axes and keys left out read as zero; a one-term model writes one.
+  const ImuModel m = imu_model_from_json_text(R"({"format":"imucal-imu-model/1",
+    "gyro":{"scale_nonlinear_ppm":{"x":[4],"z":[1,-2]}},"accel":{"k3_ug_per_g3":[0,1,0]}})", "m");
+  EXPECT_NEAR(m.gyro.scale_nonlinear(0, 0), 4e-6, 1e-20);
+  EXPECT_NEAR(m.gyro.scale_nonlinear(2, 1), -2e-6, 1e-20);
+  EXPECT_EQ(m.gyro.scale_nonlinear(1, 0), 0.0);
+  EXPECT_TRUE(m.accel.k2_per_g.isZero(0.0));
+  EXPECT_TRUE(m.gyro.g_sensitivity_radps_per_g.isZero(0.0));
+  const auto j = nlohmann::json::parse(imu_model_to_json_text(m));
+  EXPECT_EQ(j.at("gyro").at("scale_nonlinear_ppm").at("y").size(), 2u);
+  EXPECT_FALSE(j.at("accel").contains("k2_ug_per_g2"));
+  const ImuModel one = imu_model_from_json_text(
+      R"({"format":"imucal-imu-model/1","gyro":{"scale_nonlinear_ppm":{"y":[7]}}})", "m");
+  EXPECT_EQ(nlohmann::json::parse(imu_model_to_json_text(one)).at("gyro").at("scale_nonlinear_ppm").at("x").size(), 1u);
+}
+
+// A model without the terms writes exactly the keys it wrote before they existed (their values go
+// through unchanged code), in the sigma section too.
+TEST(ModelJson, AModelWithoutTheTermsWritesNoneOfTheirKeys) {
+  ImuModel m = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  m.sigma = ImuErrorSet{};
+  m.sigma->gyro.bias_radps.setConstant(1e-9);
+  const auto j = nlohmann::json::parse(imu_model_to_json_text(m));
+  const auto keys = [](const nlohmann::json& o) {
+    std::vector<std::string> k;
+    for (const auto& [key, value] : o.items()) k.push_back(key);
+    return k;
+  };
+  using V = std::vector<std::string>;
+  const V gyro = {"bias_dph", "delay_us", "misalignment_arcsec", "scale_neg_ppm", "scale_pos_ppm"};
+  const V accel = {"bias_mps2", "delay_us", "lever_arm_mm", "misalignment_arcsec", "scale_ppm"};
+  EXPECT_EQ(keys(j.at("gyro")), V({"bias_dph", "delay_us", "misalignment_arcsec", "noise", "scale_neg_ppm", "scale_pos_ppm"}));
+  EXPECT_EQ(keys(j.at("accel")), V({"bias_mps2", "delay_us", "lever_arm_mm", "misalignment_arcsec", "noise", "scale_ppm"}));
+  EXPECT_EQ(keys(j.at("sigma").at("gyro")), gyro);
+  EXPECT_EQ(keys(j.at("sigma").at("accel")), accel);
+}
+
+TEST(ModelJson, MalformedNonlinearTermsAreNamed) {
+  const auto refused = [](const std::string& section, const std::string& expected) {
+    try {
+      imu_model_from_json_text(R"({"format":"imucal-imu-model/1",)" + section + "}", "m.json");
+      return std::string("accepted");
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      return what.find(expected) != std::string::npos ? std::string() : what;
+    }
+  };
+  EXPECT_EQ(refused(R"("accel":{"k2_ug_per_g":[1,2,3]})", "m.json.accel: unknown key 'k2_ug_per_g'"), "");
+  EXPECT_EQ(refused(R"("gyro":{"g_sensitivity_dps_per_g":[[0,0,0],[0,0,0],[0,0,0]]})",
+                    "m.json.gyro: unknown key 'g_sensitivity_dps_per_g'"), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"w":[1]}})", "m.json.gyro.scale_nonlinear_ppm: unknown key 'w'"), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"x":[1,2,3,4]}})", "m.json.gyro.scale_nonlinear_ppm.x"), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"x":[]}})", "m.json.gyro.scale_nonlinear_ppm.x"), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":[1,2,3]})", "m.json.gyro.scale_nonlinear_ppm"), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"y":[1,"a"]}})", "m.json.gyro.scale_nonlinear_ppm.y[1]"), "");
+  EXPECT_EQ(refused(R"("gyro":{"g_sensitivity_dph_per_g":[[0,0,0],[0,0],[0,0,0]]})",
+                    "m.json.gyro.g_sensitivity_dph_per_g[1]"), "");
+  EXPECT_EQ(refused(R"("gyro":{"g_sensitivity_dph_per_g":[0,0,0]})", "m.json.gyro.g_sensitivity_dph_per_g"), "");
+  EXPECT_EQ(refused(R"("accel":{"k3_ug_per_g3":[1,2]})", "m.json.accel.k3_ug_per_g3"), "");
+  EXPECT_EQ(refused(R"("sigma":{"accel":{"k2_ug_per_g3":[1,2,3]}})", "m.json.sigma.accel: unknown key 'k2_ug_per_g3'"), "");
 }
 
 // Numbers in messages for people (issue 18, item 3): no noise digits, units as people write them.

@@ -156,3 +156,68 @@ TEST(Simulator, ProofMassesSenseCentripetalForce) {
   const double w = 90 * units::kDegToRad;  // cruising at t = 6 s
   EXPECT_NEAR((b.dv_mps[1] - a.dv_mps[1]) / 0.01, -w * w * 0.05, 1e-4);
 }
+
+// The nonlinear terms (CONVENTIONS.md, "Nonlinear terms") in a static of a general pose: each
+// accelerometer gains (k2 a + k3 a^2) f_j with a = f_j / g_std, each gyro g-sensitivity G f / g_std;
+// against the same run of an ideal IMU, to the quantisation of the sums.
+TEST(Simulator, AccelerometerNonlinearityAndGSensitivityInAStatic) {
+  const auto p = program(R"({"name":"s","start_deg":[30,40,25],"segments":[{"type":"hold","duration_s":2}]})");
+  ImuModel truth;
+  truth.accel.k2_per_g << 25e-6, -40e-6, 50e-6;
+  truth.accel.k3_per_g2 << 2e-6, -1e-6, 5e-6;
+  truth.gyro.g_sensitivity_radps_per_g << 0.004, -0.002, 0.008, 0.001, 0.006, -0.003, -0.005, 0.002, 0.009;
+  truth.gyro.g_sensitivity_radps_per_g *= units::kDphToRadps;
+  sim::SimConfig cfg;
+  cfg.rate_hz = 100;
+  cfg.site.middle_axis_azimuth_deg = 20;
+  sim::Simulator ideal(p, ImuModel{}, cfg), s(p, truth, cfg);
+  Vector3d d_th = Vector3d::Zero(), d_v = Vector3d::Zero();
+  ImuFrame a, b;
+  while (ideal.next(a) && s.next(b)) {
+    d_th += b.dtheta_rad - a.dtheta_rad;
+    d_v += b.dv_mps - a.dv_mps;
+  }
+  const Eigen::Matrix3d C_o_n = table::C_p_n(Vector3d(30, 40, 25) * units::kDegToRad, table::C_p0_n(20 * units::kDegToRad));
+  const Vector3d f = C_o_n.transpose() * Vector3d(0, 0, earth::site_gravity_mps2(cfg.site));
+  ASSERT_GT(f.cwiseAbs().minCoeff(), 2.0);  // every axis sees gravity
+  for (int j = 0; j < 3; ++j) {
+    const double a_g = f[j] / units::kStandardGravity_mps2;
+    const double expected = (truth.accel.k2_per_g[j] * a_g + truth.accel.k3_per_g2[j] * a_g * a_g) * f[j] * 2.0;
+    EXPECT_NEAR(d_v[j], expected, 3 * sim::Simulator::kAccelLsbAt1kHz_mps * 10) << j;
+  }
+  const Vector3d expected_th = truth.gyro.g_sensitivity_radps_per_g * f / units::kStandardGravity_mps2 * 2.0;
+  EXPECT_LT((d_th - expected_th).cwiseAbs().maxCoeff(), 3 * sim::Simulator::kGyroLsbAt1kHz_rad * 10);
+  EXPECT_GT(expected_th.cwiseAbs().minCoeff(), 100 * sim::Simulator::kGyroLsbAt1kHz_rad * 10);
+}
+
+// The gyro scale nonlinearity at 300 deg/s, negative: the scale error is s_neg plus the
+// polynomial in |w| / (100 deg/s).
+TEST(Simulator, GyroNonlinearityAtFullRate) {
+  const auto p = program(R"({"name":"r","segments":[{"type":"hold","duration_s":1},
+    {"type":"rate","axis":"outer","rate_dps":-300,"revolutions":5,"accel_dps2":300},{"type":"hold","duration_s":1}]})");
+  ImuModel truth;
+  truth.gyro.scale_pos[2] = -300e-6;
+  truth.gyro.scale_neg[2] = 100e-6;
+  truth.gyro.scale_nonlinear.row(2) << 1e-6, 1.2e-6, 0.25e-6;
+  sim::SimConfig cfg;
+  cfg.rate_hz = 100;
+  cfg.site.latitude_deg = 0;  // no vertical Earth rate: gyro z sees the table alone
+  sim::Simulator ideal(p, ImuModel{}, cfg), s(p, truth, cfg);
+  const double step_deg = -300.0 / cfg.rate_hz;
+  double d_th = 0, angle = 0;
+  int n = 0;
+  ImuFrame a, b;
+  double prev_deg = 0;
+  int cruising_for = 0;
+  while (ideal.next(a) && s.next(b)) {
+    cruising_for = std::abs(a.table_deg[0] - prev_deg - step_deg) < 1e-9 ? cruising_for + 1 : 0;
+    prev_deg = a.table_deg[0];
+    if (cruising_for < 3) continue;  // well inside the constant rate
+    d_th += b.dtheta_rad[2] - a.dtheta_rad[2];
+    angle += a.dtheta_rad[2];
+    ++n;
+  }
+  ASSERT_GT(n, 300);
+  const double q = 3.0, s_expected = 100e-6 + 1e-6 * q + 1.2e-6 * q * q + 0.25e-6 * q * q * q;
+  EXPECT_NEAR(d_th, s_expected * angle, 3 * sim::Simulator::kGyroLsbAt1kHz_rad * 10);
+}
