@@ -56,12 +56,10 @@ std::vector<SegmentInfo> SegmentDetector::finish() {
 
 // ---------------------------------------------------------------------------------------------
 DirectCalibrator::DirectCalibrator(const RecordingMeta& meta, const Options& options)
-    : meta_(meta), options_(options) {
+    : meta_(meta), options_(options), reference_(meta) {
   for (const SegmentInfo& s : meta.segments)
     if (s.kind == "static" || s.kind == "tilt") statics_.push_back(s);
   std::sort(statics_.begin(), statics_.end(), [](const SegmentInfo& a, const SegmentInfo& b) { return a.t0_s < b.t0_s; });
-  C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * kDegToRad);
-  w_ie_n_ = earth::w_ie_n(meta.site.latitude_deg * kDegToRad);
   g_mps2_ = earth::site_gravity_mps2(meta.site);
   dt_nominal_s_ = 1.0 / meta.rate_hz;
   intervals_.reserve(statics_.size() * 2 + 1);
@@ -103,33 +101,11 @@ void DirectCalibrator::push(const ImuFrame& f) {
   Interval& iv = *current_;
   if (dt > options_.gap_factor * dt_nominal_s_ || dt <= 0) iv.gap = true;
 
-  // Reference rotation of o over the frame interval: platform rate from the encoder increments at
-  // the mid angles (exact for single-axis motion), plus the Earth rate along the path.
-  const Vector3d a0 = prev_.table_deg * kDegToRad, a1 = f.table_deg * kDegToRad;
-  const Vector3d mid = 0.5 * (a0 + a1), d = a1 - a0;
-  const Matrix3d A = table::Rz(-mid[2]);
-  const Vector3d wdt_p = A * table::Rx(-mid[1]) * Vector3d::UnitZ() * d[0] + A * Vector3d::UnitX() * d[1] +
-                         Vector3d::UnitZ() * d[2];
-  const Matrix3d C_p_n = table::C_p_n(mid, C_p0_n_);
-  // The Earth rate along the path: resolved at the mid attitude, its part across the platform's
-  // rotation over the frame averages to sinc(phi/2) of that (exact for a rotation about a fixed
-  // axis). The plain midpoint rule left a systematic error of phi^2/24 of it: 0.0016" in a gyro
-  // misalignment at 20 Hz and 30 deg/s, beyond 4 sigma of an error-free IMU's fit at any rate.
-  Vector3d earth_p = C_p_n.transpose() * w_ie_n_ * dt;
-  const double phi = wdt_p.norm();
-  if (phi > 1e-12) {
-    const Vector3d axis = wdt_p / phi;
-    const Vector3d along = axis * axis.dot(earth_p);
-    earth_p = along + std::sin(0.5 * phi) / (0.5 * phi) * (earth_p - along);
-  }
-  const Vector3d wdt_o = meta_.mount.C_o_p.transpose() * (wdt_p + earth_p);
+  const Vector3d wdt_o = reference_.increment_o_rad(prev_.table_deg, f.table_deg, dt);
   for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
-  iv.moved_axes_rad += d.cwiseAbs();
-  if (iv.frames == 0 && iv.is_static) {
-    // Specific force at rest: gravity reaction resolved in o.
-    const Matrix3d C_o_n = table::C_p_n(a1, C_p0_n_) * meta_.mount.C_o_p;
-    iv.f_o_mps2 = C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
-  }
+  iv.moved_axes_rad += (f.table_deg - prev_.table_deg).cwiseAbs() * kDegToRad;
+  // Specific force at rest: gravity reaction resolved in o.
+  if (iv.frames == 0 && iv.is_static) iv.f_o_mps2 = reference_.specific_force_at_rest_o_mps2(f.table_deg);
   iv.sum_dtheta += f.dtheta_rad;
   iv.sum_dv += f.dv_mps;
   iv.sumsq_dtheta += f.dtheta_rad.cwiseAbs2();

@@ -14,6 +14,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/recording.hpp"
+#include "estimators/table_reference.hpp"
 
 namespace imucal::direct {
 
@@ -124,8 +125,7 @@ class DirectCalibrator {
   Options options_;
   std::vector<SegmentInfo> statics_;
   std::size_t next_static_ = 0;
-  Eigen::Matrix3d C_p0_n_;
-  Eigen::Vector3d w_ie_n_;
+  table_reference::FrameReference reference_;
   double g_mps2_;
   double dt_nominal_s_;
   std::vector<Interval> intervals_;

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/units.hpp"
+#include "estimators/held_back.hpp"
 
 namespace imucal::thermal {
 
@@ -365,8 +366,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
 
   struct Candidate {
     DegreeScore score;
-    int params;
-    std::vector<double> e2;  // held-back squared residuals, per sample
+    held_back::Score held;  // held-back squared residuals, per sample
   };
   std::vector<Candidate> cands;
   const int folds = std::max(2, o.folds);
@@ -376,7 +376,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
       if (static_cast<double>(n) < o.min_samples_per_parameter * p) continue;
       const Solved full = solve(all, w, d, nT, nR);
       if (!full.ok) continue;
-      Candidate c{{nT, nR, 0.0, 0.0}, p, std::vector<double>(n, 0.0)};
+      Candidate c{{nT, nR, 0.0, 0.0}, {p, std::vector<double>(n, 0.0)}};
       double ss = 0;
       for (std::size_t i = 0; i < n; ++i) {
         const double r = samples[i].value - d.row(samples[i], nT, nR).dot(full.x);
@@ -403,43 +403,21 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
         }
         for (std::size_t i = static_cast<std::size_t>(f); i < n; i += static_cast<std::size_t>(folds)) {
           const double r = samples[i].value - d.row(samples[i], nT, nR).dot(part.x);
-          c.e2[i] = r * r;
+          c.held.e2[i] = r * r;
         }
       }
       if (!ok) continue;
-      c.score.cv_rms = std::sqrt(std::accumulate(c.e2.begin(), c.e2.end(), 0.0) / static_cast<double>(n));
+      c.score.cv_rms = std::sqrt(c.held.mean_e2());
       cands.push_back(std::move(c));
     }
   }
   if (cands.empty()) throw std::runtime_error("fit: no polynomial could be fitted to " + std::to_string(n) + " cycles");
 
-  const Candidate* best = &cands.front();
-  for (const Candidate& c : cands)
-    if (c.score.cv_rms < best->score.cv_rms) best = &c;
-  const double floor = std::max(o.min_improvement * best->score.cv_rms * best->score.cv_rms, o.resolution * o.resolution);
   // The simplest model that predicts held-back cycles as well as the best one, within the noise
   // of that comparison: a higher degree must earn its place.
-  const Candidate* chosen = best;
-  std::vector<const Candidate*> order;
-  for (const Candidate& c : cands) order.push_back(&c);
-  std::stable_sort(order.begin(), order.end(), [](const Candidate* a, const Candidate* b) {
-    return a->params != b->params ? a->params < b->params : a->score.cv_rms < b->score.cv_rms;
-  });
-  for (const Candidate* c : order) {
-    double mean = 0, sq = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double dlt = c->e2[i] - best->e2[i];
-      mean += dlt;
-      sq += dlt * dlt;
-    }
-    mean /= static_cast<double>(n);
-    const double var = std::max(0.0, sq / static_cast<double>(n) - mean * mean);
-    const double se = std::sqrt(var / static_cast<double>(n));
-    if (mean <= std::max(o.standard_errors * se, floor)) {
-      chosen = c;
-      break;
-    }
-  }
+  std::vector<held_back::Score> held;
+  for (const Candidate& c : cands) held.push_back(c.held);
+  const Candidate* chosen = &cands[held_back::choose(held, {o.standard_errors, o.min_improvement, o.resolution})];
 
   PolyFit out;
   out.T_degree = chosen->score.T_degree;
@@ -449,7 +427,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
   out.samples = static_cast<int>(n);
   for (const Candidate& c : cands) out.scores.push_back(c.score);
   const Solved full = solve(all, w, d, out.T_degree, out.rate_degree);
-  const int p = chosen->params;
+  const int p = chosen->held.params;
   out.constant = full.x[0];
   for (int k = 0; k < out.T_degree; ++k) out.poly.T.push_back(full.x[1 + k] / std::pow(d.T_scale, k + 1));
   for (int k = 0; k < out.rate_degree; ++k)

@@ -1,4 +1,5 @@
 // The built-in motion programs, generated as data (the same JSON a user could write).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -125,6 +126,33 @@ json evaluate_program() {
           {"segments", segs}};
 }
 
+// IEEE Std 952's scale-factor tests: each IMU axis vertical (the poses of `direct`), turned about
+// the outer axis at every rate of the ladder, positive then negative, whole revolutions rest to
+// rest (the cruise long against the ramps: about 30 deg/s worth of revolutions), with a static in
+// the same orientation before the first rate and after each. estimators/rate_steps.hpp reads it.
+json rate_steps_program(const std::string& name, const std::vector<double>& ladder_dps, double dwell_s) {
+  json segs = json::array();
+  const std::vector<std::pair<std::string, json>> axes = {{"z", pose(0, 0, 0)}, {"x", pose(0, 90, 90)}, {"y", pose(0, 90, 0)}};
+  char label[48];
+  for (const auto& [axis, p] : axes) {
+    segs.push_back(move("to-steps-" + axis, p));
+    segs.push_back(hold("rest-" + axis, dwell_s));
+    for (double r : ladder_dps) {
+      for (double sign : {1.0, -1.0}) {
+        std::snprintf(label, sizeof label, "%s%c%03.0f", axis.c_str(), sign > 0 ? '+' : '-', r);
+        segs.push_back({{"type", "rate"}, {"name", std::string("steps-") + label}, {"axis", "outer"},
+                        {"rate_dps", sign * r}, {"revolutions", std::max(1.0, std::round(r / 30.0))},
+                        {"accel_dps2", 100.0}});
+        segs.push_back(hold(std::string("rest-") + label, dwell_s));
+      }
+    }
+  }
+  return {{"name", name},
+          {"comment", "IEEE 952 scale-factor tests: each IMU axis up, turned at a ladder of rates both ways "
+                      "(whole revolutions, a static after each): scale factor per rate, asymmetry, nonlinearity"},
+          {"segments", segs}};
+}
+
 // Stage 2 (seed ch. 3): a table cycle that gives every coefficient of model (1) once (each axis
 // up and down; rotations of both signs about each axis between stops), repeated while the chamber
 // runs its profile. The cycle is a palindrome in time: six stops out, the sixth held twice as
@@ -171,7 +199,8 @@ json thermal_program(const std::string& name, int cycles, double dwell_s) {
 }  // namespace
 
 std::vector<std::string> builtin_program_names() {
-  return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short"};
+  return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short",
+          "rate-steps", "rate-steps-short"};
 }
 
 std::string builtin_program_json(const std::string& name) {
@@ -190,6 +219,8 @@ std::string builtin_program_json(const std::string& name) {
   // 83 cycles of 516 s and the closing stop: 11.9 h, the length of the thermal chamber profile.
   if (name == "thermal") return thermal_program("thermal", 83, 36.0).dump(1);
   if (name == "thermal-short") return thermal_program("thermal-short", 14, 36.0).dump(1);
+  if (name == "rate-steps") return rate_steps_program(name, {1, 2, 5, 10, 20, 50, 100, 150, 200, 250, 300}, 20.0).dump(1);
+  if (name == "rate-steps-short") return rate_steps_program(name, {5, 10, 20, 50, 100, 150, 200, 300}, 10.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

@@ -75,7 +75,8 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
 // discontinuity, each naming the segment, the axis and the limit. Empty when the program is safe.
 std::vector<std::string> validate_program(const Program& program, const TableLimits& limits);
 
-// Built-in programs: direct, lever-arm, navigation, noise, evaluate, short-direct.
+// Built-in programs: direct, direct-short, lever-arm, navigation, noise, evaluate, thermal,
+// thermal-short, rate-steps, rate-steps-short (docs/programs.md).
 std::vector<std::string> builtin_program_names();
 std::string builtin_program_json(const std::string& name);  // throws for an unknown name
 // A name of a built-in or a path to a JSON file.

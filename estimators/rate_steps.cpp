@@ -1,0 +1,406 @@
+#include "estimators/rate_steps.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+
+#include "core/units.hpp"
+#include "estimators/held_back.hpp"
+#include "estimators/table_reference.hpp"
+
+namespace imucal::rate_steps {
+
+using Eigen::MatrixXd;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+using units::kDegToRad;
+using units::kRadToDeg;
+
+namespace {
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+// One segment of the recording, accumulated: a static, or a rate segment (rest to rest).
+struct Segment {
+  std::string name;
+  bool is_static = false;
+  double t0_s = 0, t1_s = 0;
+  double T_s = 0;
+  long long frames = 0;
+  bool gap = false;
+  Vector3d sum_dtheta_rad = Vector3d::Zero();
+  Vector3d ref_pos_rad = Vector3d::Zero(), ref_neg_rad = Vector3d::Zero();  // reference, split by sign
+  // The nonlinear terms' regressors: integral of w_j (|w_j| / 100 deg/s)^k dt, k = 1..3.
+  std::array<Vector3d, 3> moment_rad{Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero()};
+  double peak_table_rate_dps = 0;               // the fastest table axis's largest rate (the cruise)
+  Vector3d f_o_mps2 = Vector3d::Zero();         // specific force at rest at its first frame
+  Vector3d ref_rad() const { return ref_pos_rad + ref_neg_rad; }
+};
+
+// Row of the design for gyro j: bias (times T), scale +, scale -, then c1 .. c_degree.
+VectorXd design_row(const Segment& s, int j, int degree) {
+  VectorXd r(3 + degree);
+  r[0] = s.T_s;
+  r[1] = s.ref_pos_rad[j];
+  r[2] = s.ref_neg_rad[j];
+  for (int k = 0; k < degree; ++k) r[3 + k] = s.moment_rad[static_cast<std::size_t>(k)][j];
+  return r;
+}
+
+struct Solved {
+  bool ok = false;
+  VectorXd x;
+  MatrixXd N_inv;  // (A'WA)^-1
+};
+
+Solved solve(const std::vector<const Segment*>& rows, const std::vector<double>& y, int j, int degree,
+             const std::vector<bool>* use = nullptr) {
+  const int p = 3 + degree;
+  MatrixXd N = MatrixXd::Zero(p, p);
+  VectorXd rhs = VectorXd::Zero(p);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (use && !(*use)[i]) continue;
+    const VectorXd a = design_row(*rows[i], j, degree);
+    const double w = 1.0 / rows[i]->T_s;  // white angle noise: variance grows with the time
+    N += w * a * a.transpose();
+    rhs += w * a * y[i];
+  }
+  // Scale the columns so that the rank test sees the geometry, not the units.
+  const VectorXd sc = N.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
+  const MatrixXd Ns = sc.asDiagonal() * N * sc.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<MatrixXd> eig(Ns);
+  Solved s;
+  if (eig.eigenvalues().minCoeff() < 1e-10 * eig.eigenvalues().maxCoeff()) return s;
+  const MatrixXd Ns_inv = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  s.N_inv = sc.asDiagonal() * Ns_inv * sc.asDiagonal();
+  s.x = s.N_inv * rhs;
+  s.ok = s.x.allFinite();
+  return s;
+}
+
+// The ladder's rates: steps whose cruise rates agree within 1 % are one rate (both directions, and
+// the few tenths of a percent a real table's encoder rate scatters).
+std::vector<int> group_rates(const std::vector<double>& rates_dps) {
+  std::vector<std::size_t> order(rates_dps.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return rates_dps[a] < rates_dps[b]; });
+  std::vector<int> group(rates_dps.size(), 0);
+  int g = -1;
+  double first = 0;
+  for (std::size_t i : order) {
+    if (g < 0 || rates_dps[i] > 1.01 * first) {
+      ++g;
+      first = rates_dps[i];
+    }
+    group[i] = g;
+  }
+  return group;
+}
+
+}  // namespace
+
+double Axis::scale_ppm_at(double rate_dps, double* sigma_ppm) const {
+  const auto p = covariance_ppm2.rows();
+  VectorXd g = VectorXd::Zero(p);
+  if (p >= 2) g[rate_dps >= 0 ? 0 : 1] = 1.0;
+  const double q = std::abs(rate_dps) / (kGyroNonlinearityRate_radps * kRadToDeg);
+  double value = rate_dps >= 0 ? scale_pos_ppm : scale_neg_ppm;
+  for (int k = 0; k < degree; ++k) {
+    const double qk = std::pow(q, k + 1);
+    value += nonlinear_ppm[static_cast<std::size_t>(k)] * qk;
+    if (2 + k < p) g[2 + k] = qk;
+  }
+  if (sigma_ppm) *sigma_ppm = p > 0 ? std::sqrt(std::max(0.0, g.dot(covariance_ppm2 * g))) : 0.0;
+  return value;
+}
+
+struct RateStepsEstimator::Impl {
+  RecordingMeta meta;
+  Options options;
+  table_reference::FrameReference reference;
+  std::vector<Segment> segments;  // statics and rate segments, by time
+  std::size_t cursor = 0;
+  double dt_nominal_s = 0;
+  bool have_prev = false;
+  ImuFrame prev;
+
+  Impl(const RecordingMeta& m, const Options& o) : meta(m), options(o), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
+    for (const SegmentInfo& s : m.segments) {
+      if (s.kind != "static" && s.kind != "rate") continue;
+      Segment seg;
+      seg.name = s.name;
+      seg.is_static = s.kind == "static";
+      seg.t0_s = s.t0_s;
+      seg.t1_s = s.t1_s;
+      segments.push_back(seg);
+    }
+    std::sort(segments.begin(), segments.end(), [](const Segment& a, const Segment& b) { return a.t0_s < b.t0_s; });
+  }
+
+  void push(const ImuFrame& f) {
+    if (!have_prev) {
+      prev = f;
+      have_prev = true;
+      return;
+    }
+    const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
+    const double dt = t - t_prev;
+    constexpr double eps = 1e-7;
+    while (cursor < segments.size() && t_prev >= segments[cursor].t1_s - eps) ++cursor;
+    // A rate segment takes every frame that overlaps it (its first and last frames straddle the
+    // rests around it, where the table does not move): the integral is then rest to rest. A static
+    // takes the frames wholly inside it.
+    for (std::size_t i = cursor; i < segments.size() && segments[i].t0_s < t - eps; ++i) {
+      Segment& s = segments[i];
+      if (t_prev >= s.t1_s - eps) continue;
+      if (!s.is_static || (t_prev >= s.t0_s - eps && t <= s.t1_s + eps)) {
+        accumulate(s, f, dt);
+        break;
+      }
+    }
+    prev = f;
+  }
+
+  void accumulate(Segment& s, const ImuFrame& f, double dt) {
+    if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
+    if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(prev.table_deg);
+    const Vector3d wdt = reference.increment_o_rad(prev.table_deg, f.table_deg, dt);
+    for (int k = 0; k < 3; ++k) {
+      (wdt[k] >= 0 ? s.ref_pos_rad[k] : s.ref_neg_rad[k]) += wdt[k];
+      const double w = dt > 0 ? wdt[k] / dt : 0.0;
+      const double q = std::abs(w) / kGyroNonlinearityRate_radps;
+      s.moment_rad[0][k] += wdt[k] * q;
+      s.moment_rad[1][k] += wdt[k] * q * q;
+      s.moment_rad[2][k] += wdt[k] * q * q * q;
+    }
+    if (dt > 0) s.peak_table_rate_dps = std::max(s.peak_table_rate_dps, (f.table_deg - prev.table_deg).cwiseAbs().maxCoeff() / dt);
+    s.sum_dtheta_rad += f.dtheta_rad;
+    s.T_s += dt;
+    ++s.frames;
+  }
+};
+
+RateStepsEstimator::RateStepsEstimator(const RecordingMeta& meta, const Options& options)
+    : impl_(std::make_unique<Impl>(meta, options)) {}
+RateStepsEstimator::~RateStepsEstimator() = default;
+void RateStepsEstimator::push(const ImuFrame& frame) { impl_->push(frame); }
+
+Result RateStepsEstimator::finish(const ImuModel& prior) const {
+  Result out;
+  out.model = prior;
+  out.model.frame = "instrument";
+  if (!out.model.sigma) out.model.sigma = ImuErrorSet{};
+  const Eigen::Matrix3d D = misalignment_matrix(prior.gyro.misalignment_rad);
+  char buf[256];
+
+  // Steps: rate segments about one gyro axis, whole and without gaps.
+  std::array<std::vector<const Segment*>, 3> steps_of;
+  std::vector<const Segment*> statics;
+  for (const Segment& s : impl_->segments) {
+    if (s.frames < 2) continue;
+    if (s.is_static) {
+      if (!s.gap) statics.push_back(&s);
+      continue;
+    }
+    const Vector3d ref = s.ref_rad();
+    int j = 0;
+    ref.cwiseAbs().maxCoeff(&j);
+    if (s.gap) {
+      out.notes.push_back("step '" + s.name + "' left out: a gap in the frames (never integrated across)");
+    } else if (std::abs(ref[j]) < impl_->options.min_rotation_deg * kDegToRad) {
+      std::snprintf(buf, sizeof buf, "step '%s' left out: it turned %.1f deg (a step needs %.0f)", s.name.c_str(),
+                    std::abs(ref[j]) * kRadToDeg, impl_->options.min_rotation_deg);
+      out.notes.push_back(buf);
+    } else if ((ref - ref[j] * Vector3d::Unit(j)).norm() > 0.01 * std::abs(ref[j])) {
+      out.notes.push_back("step '" + s.name + "' left out: not a rotation about one gyro axis");
+    } else {
+      steps_of[static_cast<std::size_t>(j)].push_back(&s);
+    }
+  }
+
+  bool any = false;
+  for (int j = 0; j < 3; ++j) {
+    Axis& ax = out.axes[static_cast<std::size_t>(j)];
+    ax.axis = j;
+    const auto& steps = steps_of[static_cast<std::size_t>(j)];
+    std::vector<double> cruise_dps;
+    for (const Segment* s : steps) cruise_dps.push_back(s->peak_table_rate_dps);
+    const std::vector<int> group = group_rates(cruise_dps);
+    const int n_rates = group.empty() ? 0 : *std::max_element(group.begin(), group.end()) + 1;
+    if (n_rates < 3) {
+      if (!steps.empty()) {
+        std::snprintf(buf, sizeof buf, "gyro %s: %zu rate(s) turned, the test needs 3 at least", kAxis[j], static_cast<std::size_t>(n_rates));
+        out.notes.push_back(buf);
+      }
+      continue;
+    }
+    // The statics in the orientation of this gyro's steps: its bias there (g-sensitivity included).
+    std::vector<const Segment*> rows;
+    for (const Segment* st : statics)
+      for (const Segment* s : steps)
+        if (st->f_o_mps2.normalized().dot(s->f_o_mps2.normalized()) > std::cos(1.0 * kDegToRad)) {
+          rows.push_back(st);
+          break;
+        }
+    if (rows.empty()) {
+      out.notes.push_back(std::string("gyro ") + kAxis[j] + ": no static in the orientation of its steps (its bias is unknown)");
+      continue;
+    }
+    const std::size_t n_statics = rows.size();
+    rows.insert(rows.end(), steps.begin(), steps.end());
+    // What the gyro measured beyond the reference and the prior's cross-axis terms.
+    std::vector<double> y;
+    for (const Segment* s : rows) {
+      const Vector3d ref = s->ref_rad();
+      y.push_back(s->sum_dtheta_rad[j] - D.row(j).dot(ref));
+    }
+
+    // Degree: every rate inside the ladder predicted (both directions) by the fit to the others.
+    // The ladder's ends are never held back: predicting beyond the rates a fit has seen is
+    // extrapolation, which every degree does badly and which would let one rate decide.
+    std::vector<int> rate_of_row(rows.size(), -1);
+    for (std::size_t i = n_statics; i < rows.size(); ++i) rate_of_row[i] = group[i - n_statics];
+    std::vector<held_back::Score> scores;
+    std::vector<int> degrees;
+    std::vector<double> held_rms;
+    for (int d = 0; d <= impl_->options.max_degree; ++d) {
+      if (n_rates < d + 2) break;
+      held_back::Score sc;
+      sc.params = 3 + d;
+      double ss_ppm = 0;
+      int held_steps = 0;
+      bool ok = true;
+      for (int rate = 1; rate + 1 < n_rates; ++rate) {
+        std::vector<bool> use(rows.size(), true);
+        for (std::size_t i = n_statics; i < rows.size(); ++i) use[i] = rate_of_row[i] != rate;
+        const Solved part = solve(rows, y, j, d, &use);
+        if (!part.ok) {
+          ok = false;
+          break;
+        }
+        // One sample per rate: its two directions share the nonlinear part of the error and are
+        // no two independent samples of it.
+        double e2 = 0;
+        for (std::size_t i = n_statics; i < rows.size(); ++i) {
+          if (use[i]) continue;
+          const double r = y[i] - design_row(*rows[i], j, d).dot(part.x);
+          e2 += r * r / rows[i]->T_s;
+          const double r_ppm = r / rows[i]->ref_rad()[j] * 1e6;
+          ss_ppm += r_ppm * r_ppm;
+          ++held_steps;
+        }
+        sc.e2.push_back(e2);
+      }
+      if (!ok) break;
+      held_rms.push_back(std::sqrt(ss_ppm / static_cast<double>(std::max(1, held_steps))));
+      scores.push_back(std::move(sc));
+      degrees.push_back(d);
+    }
+    if (scores.empty()) {
+      out.notes.push_back(std::string("gyro ") + kAxis[j] + ": the steps do not determine the scale factors");
+      continue;
+    }
+    const std::size_t chosen = held_back::choose(scores, held_back::Rule{});
+    for (std::size_t c = 0; c < scores.size(); ++c) ax.scores.push_back({degrees[c], held_rms[c]});
+    ax.degree = degrees[chosen];
+
+    const Solved fit = solve(rows, y, j, ax.degree);
+    if (!fit.ok) {
+      out.notes.push_back(std::string("gyro ") + kAxis[j] + ": the steps do not determine the scale factors");
+      continue;
+    }
+    const int p = 3 + ax.degree;
+    double wrss = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const double r = y[i] - design_row(*rows[i], j, ax.degree).dot(fit.x);
+      wrss += r * r / rows[i]->T_s;
+    }
+    const auto dof = static_cast<double>(rows.size()) - p;
+    // Residual variance per unit weight: the angle noise density the data show (rad^2/s).
+    const double s0sq = dof > 0 ? wrss / dof : 0.0;
+    const MatrixXd cov = fit.N_inv * s0sq;
+    ax.tested = true;
+    any = true;
+    ax.bias_dph = fit.x[0] * units::kRadpsToDph;
+    ax.bias_sigma_dph = std::sqrt(cov(0, 0)) * units::kRadpsToDph;
+    ax.scale_pos_ppm = fit.x[1] * 1e6;
+    ax.scale_neg_ppm = fit.x[2] * 1e6;
+    ax.scale_pos_sigma_ppm = std::sqrt(cov(1, 1)) * 1e6;
+    ax.scale_neg_sigma_ppm = std::sqrt(cov(2, 2)) * 1e6;
+    ax.asymmetry_ppm = ax.scale_pos_ppm - ax.scale_neg_ppm;
+    ax.asymmetry_sigma_ppm = std::sqrt(std::max(0.0, cov(1, 1) + cov(2, 2) - 2 * cov(1, 2))) * 1e6;
+    for (int k = 0; k < ax.degree; ++k) {
+      ax.nonlinear_ppm[static_cast<std::size_t>(k)] = fit.x[3 + k] * 1e6;
+      ax.nonlinear_sigma_ppm[static_cast<std::size_t>(k)] = std::sqrt(cov(3 + k, 3 + k)) * 1e6;
+    }
+    ax.covariance_ppm2 = cov.bottomRightCorner(p - 1, p - 1) * 1e12;
+
+    // Each step's own scale error, with the fitted bias removed.
+    double rss_ppm = 0;
+    for (std::size_t i = n_statics; i < rows.size(); ++i) {
+      const Segment& s = *rows[i];
+      const double ref = s.ref_rad()[j];
+      Step st;
+      st.segment = s.name;
+      st.rate_dps = std::copysign(s.peak_table_rate_dps, ref);
+      st.angle_deg = ref * kRadToDeg;
+      st.duration_s = s.T_s;
+      // The rotation's scale error is an average over its ramps and its cruise; the fitted model's
+      // own difference between the two moves it to the cruise rate, where IEEE 952 states it.
+      const double model_average_ppm = (design_row(s, j, ax.degree).dot(fit.x) - fit.x[0] * s.T_s) / ref * 1e6;
+      st.scale_ppm = (y[i] - fit.x[0] * s.T_s) / ref * 1e6 + ax.scale_ppm_at(st.rate_dps) - model_average_ppm;
+      st.sigma_ppm = std::sqrt(s0sq * s.T_s + s.T_s * s.T_s * cov(0, 0)) / std::abs(ref) * 1e6;
+      st.fit_residual_ppm = (y[i] - design_row(s, j, ax.degree).dot(fit.x)) / ref * 1e6;
+      rss_ppm += st.fit_residual_ppm * st.fit_residual_ppm;
+      ax.steps.push_back(st);
+    }
+    std::sort(ax.steps.begin(), ax.steps.end(), [](const Step& a, const Step& b) { return a.rate_dps < b.rate_dps; });
+    ax.residual_rms_ppm = std::sqrt(rss_ppm / static_cast<double>(ax.steps.size()));
+
+    // IEEE 952 nonlinearity: output (1 + s) * input against its least-squares line, over the steps.
+    MatrixXd A(static_cast<Eigen::Index>(ax.steps.size()), 2);
+    VectorXd o(A.rows());
+    for (Eigen::Index i = 0; i < A.rows(); ++i) {
+      const Step& st = ax.steps[static_cast<std::size_t>(i)];
+      A(i, 0) = st.rate_dps;
+      A(i, 1) = 1.0;
+      o[i] = (1.0 + st.scale_ppm * 1e-6) * st.rate_dps;
+      ax.full_scale_dps = std::max(ax.full_scale_dps, std::abs(st.rate_dps));
+    }
+    const VectorXd line = A.colPivHouseholderQr().solve(o);
+    const VectorXd dev = o - A * line;
+    Eigen::Index worst = 0;
+    dev.cwiseAbs().maxCoeff(&worst);
+    const Step& ws = ax.steps[static_cast<std::size_t>(worst)];
+    const double fs_out = std::abs(line[0]) * ax.full_scale_dps;
+    ax.nonlinearity_ppm_fs = std::abs(dev[worst]) / fs_out * 1e6;
+    ax.nonlinearity_sigma_ppm_fs = ws.sigma_ppm * std::abs(ws.rate_dps) / ax.full_scale_dps;
+    ax.nonlinearity_at_dps = ws.rate_dps;
+
+    // The model: this gyro's scale factors and nonlinear terms, with their sigmas.
+    out.model.gyro.scale_pos[j] = fit.x[1];
+    out.model.gyro.scale_neg[j] = fit.x[2];
+    out.model.sigma->gyro.scale_pos[j] = std::sqrt(cov(1, 1));
+    out.model.sigma->gyro.scale_neg[j] = std::sqrt(cov(2, 2));
+    for (int k = 0; k < 3; ++k) {
+      out.model.gyro.scale_nonlinear(j, k) = k < ax.degree ? fit.x[3 + k] : 0.0;
+      out.model.sigma->gyro.scale_nonlinear(j, k) = k < ax.degree ? std::sqrt(cov(3 + k, 3 + k)) : 0.0;
+    }
+    std::snprintf(buf, sizeof buf,
+                  "gyro %s: %zu steps at %zu rates up to %.0f deg/s, %zu statics; nonlinear degree %d; "
+                  "IEEE 952 nonlinearity %.2f ppm of full scale (at %+.0f deg/s)",
+                  kAxis[j], steps.size(), static_cast<std::size_t>(n_rates), ax.full_scale_dps, n_statics, ax.degree,
+                  ax.nonlinearity_ppm_fs, ax.nonlinearity_at_dps);
+    out.notes.push_back(buf);
+  }
+  if (!any)
+    throw std::runtime_error(
+        "rate-steps: no gyro was turned about its own axis at three rates or more with a static in the same "
+        "orientation (run the rate-steps or rate-steps-short program)");
+  return out;
+}
+
+}  // namespace imucal::rate_steps
