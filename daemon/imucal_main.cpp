@@ -257,6 +257,24 @@ void print_outcome(const pipeline::Outcome& o) {
     for (const char* g : thermal::groups())
       std::printf("  %-28s %14.6g %14.6g\n", g, report.at("before").value(g, 0.0), report.at("residual").value(g, 0.0));
   }
+  if (o.rate_steps) {
+    static const char* const kAxes[3] = {"x", "y", "z"};
+    for (const rate_steps::Axis& a : o.rate_steps->axes) {
+      if (!a.tested) continue;
+      std::printf("gyro %s: scale + %.3f +- %.3f ppm, - %.3f +- %.3f ppm, asymmetry %.3f +- %.3f ppm; IEEE 952 "
+                  "nonlinearity %.3f +- %.3f ppm of %.0f deg/s (at %+.0f deg/s); nonlinear degree %d",
+                  kAxes[a.axis], a.scale_pos_ppm, a.scale_pos_sigma_ppm, a.scale_neg_ppm, a.scale_neg_sigma_ppm,
+                  a.asymmetry_ppm, a.asymmetry_sigma_ppm, a.nonlinearity_ppm_fs, a.nonlinearity_sigma_ppm_fs,
+                  a.full_scale_dps, a.nonlinearity_at_dps, a.degree);
+      for (int k = 0; k < a.degree; ++k)
+        std::printf("%s c%d %.3f +- %.3f", k == 0 ? ":" : ",", k + 1, a.nonlinear_ppm[static_cast<std::size_t>(k)],
+                    a.nonlinear_sigma_ppm[static_cast<std::size_t>(k)]);
+      std::printf("\n  %10s %12s %9s %12s %10s\n", "rate deg/s", "scale ppm", "sigma", "model ppm", "resid ppm");
+      for (const rate_steps::Step& st : a.steps)
+        std::printf("  %+10.2f %12.3f %9.3f %12.3f %10.3f\n", st.rate_dps, st.scale_ppm, st.sigma_ppm,
+                    a.scale_ppm_at(st.rate_dps), st.fit_residual_ppm);
+    }
+  }
   if (o.navigation) {
     const navfilter::Result& r = *o.navigation;
     std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
@@ -305,10 +323,10 @@ int cmd_calibrate(const CalibrateArgs& a) {
     const std::string name = pipeline::names_of(o.stage).name;
     print_outcome(o);
     for (const auto& [key, text] : o.extras) db.set_extra(key, text);
-    if (o.thermal && !a.report.empty()) {
+    if ((o.thermal || o.rate_steps) && !a.report.empty()) {
       std::ofstream out(a.report);
       if (!out) throw std::runtime_error(a.report + ": cannot write");
-      out << nlohmann::json::parse(o.thermal->report_json).dump(1) << "\n";
+      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at("rate_steps")).dump(1) << "\n";
     }
     if (o.status == pipeline::Status::Done) {
       ran.push_back(name + " on " + o.source);
@@ -665,10 +683,12 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, lever-arm, thermal, noise, navigation or all")
+  cal->add_option("--stage", cal_args.stage, "direct, rate-steps, lever-arm, thermal, noise, navigation or all")
       ->capture_default_str()
-      ->check(CLI::IsMember({"direct", "lever-arm", "thermal", "noise", "navigation", "all"}));
-  cal->add_option("--report", cal_args.report, "stage thermal: write the report (residuals, degrees, plots) here");
+      ->check(CLI::IsMember({"direct", "rate-steps", "lever-arm", "thermal", "noise", "navigation", "all"}));
+  cal->add_option("--report", cal_args.report,
+                  "stage thermal or rate-steps: write the stage's report (thermal: residuals, degrees, plots; "
+                  "rate-steps: every figure per gyro and rate) here");
   cal->add_option("--statics-per-cycle", cal_args.statics_per_cycle,
                   "stage thermal: statics per table cycle, for a run whose statics are not named cycle-NNN/...");
   cal->add_option("--t-ref-C", cal_args.t_ref_C, "stage thermal: reference temperature (default: middle of the data)");

@@ -68,8 +68,9 @@ std::string span_text(double t0_s, double t1_s) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
-const std::array<StageName, 5>& stage_names() {
-  static const std::array<StageName, 5> names = {{{Stage::Direct, "direct", "direct", "direct"},
+const std::array<StageName, 6>& stage_names() {
+  static const std::array<StageName, 6> names = {{{Stage::Direct, "direct", "direct", "direct"},
+                                                  {Stage::RateSteps, "rate-steps", "rate-steps", "rate-steps"},
                                                   {Stage::LeverArm, "lever-arm", "lever-arm", "lever-arm"},
                                                   {Stage::Thermal, "thermal", "thermal", "thermal"},
                                                   {Stage::Navigation, "navigation", "stage3", "navigation"},
@@ -98,6 +99,7 @@ std::optional<Stage> stage_of_estimator(std::string_view estimator) {
 std::optional<Stage> purpose_of_program(std::string_view program) {
   if (program == "direct-short") return Stage::Direct;
   if (program == "thermal-short") return Stage::Thermal;
+  if (program == "rate-steps-short") return Stage::RateSteps;
   for (const StageName& n : stage_names())
     if (program == n.program) return n.stage;
   return std::nullopt;
@@ -139,6 +141,14 @@ std::optional<std::string> requirement_unmet(Stage stage, const std::vector<Segm
       if (statics >= 6 && rates >= 3) return std::nullopt;
       return "stage direct needs at least 6 static segments and 3 rate segments; there are " + std::to_string(statics) +
              " and " + std::to_string(rates) + " (program 'direct' gives them)";
+    }
+    case Stage::RateSteps: {
+      // Three rates both ways at least; the estimator itself says which gyro lacks what.
+      const int rates = count_kind(segments, "rate");
+      if (statics >= 1 && rates >= 6) return std::nullopt;
+      return "stage rate-steps needs rate segments at three rates or more, both ways, and statics between them; there "
+             "are " + std::to_string(rates) + " rate segments and " + std::to_string(statics) +
+             " statics (program 'rate-steps' or 'rate-steps-short' gives them)";
     }
     case Stage::LeverArm:
       if (count_kind(segments, "sine") > 0) return std::nullopt;
@@ -343,6 +353,12 @@ json estimates_json(const ImuModel& model) {
   vec("accel.bias_mps2", model.accel.bias_mps2, sigma.accel.bias_mps2, 1.0);
   vec("accel.scale_ppm", model.accel.scale, sigma.accel.scale, 1e6);
   mis("accel.misalignment_arcsec", model.accel.misalignment_rad, sigma.accel.misalignment_rad);
+  // The gyro scale nonlinearity where a stage estimated it (rate-steps): "gyro.scale_nonlinear_ppm.x.c2".
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k)
+      if (sigma.gyro.scale_nonlinear(j, k) > 0.0)
+        out[std::string("gyro.scale_nonlinear_ppm.") + axes[j] + ".c" + std::to_string(k + 1)] =
+            json::array({model.gyro.scale_nonlinear(j, k) * 1e6, sigma.gyro.scale_nonlinear(j, k) * 1e6});
   // Delays and proof masses only where the model carries their uncertainty (the lever-arm stage,
   // stage 3): elsewhere they are not estimated, and a row of zeros would say they were.
   auto estimated = [](const Eigen::Vector3d& sig) { return sig.cwiseAbs().maxCoeff() > 0.0; };
@@ -356,6 +372,36 @@ json estimates_json(const ImuModel& model) {
 }
 
 namespace {
+
+// The rate-steps test: the scale factors, their asymmetry and nonlinearity from the ladder; the
+// misalignments of the model before it remove the cross-axis Earth rate.
+class RateStepsRun final : public Pipeline::Run {
+ public:
+  RateStepsRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start)
+      : estimator_(with_segments(meta, f.segments)), start_(start) {}
+  void push(const ImuFrame& f) override { estimator_.push(f); }
+  void finish(const FrameSource&, const Feed&, Outcome& out) override {
+    rate_steps::Result r = estimator_.finish(start_);
+    out.notes.insert(out.notes.end(), r.notes.begin(), r.notes.end());
+    out.model = r.model;
+    out.rate_steps = std::move(r);
+  }
+  json progress() const override {
+    json p = {{"estimates", json::object()}, {"message", nullptr}};
+    try {
+      p["estimates"] = estimates_json(estimator_.finish(start_).model);
+    } catch (const std::exception& e) {
+      // Until a gyro has turned at three rates nothing is determined; say so.
+      p["undetermined"] = true;
+      p["message"] = e.what();
+    }
+    return p;
+  }
+
+ private:
+  rate_steps::RateStepsEstimator estimator_;
+  ImuModel start_;
+};
 
 class LeverArmRun final : public Pipeline::Run {
  public:
@@ -506,6 +552,48 @@ class NoiseRun final : public Pipeline::Run {
 
 }  // namespace
 
+namespace {
+
+// The rate-steps test's figures (docs/api.md, results): per gyro, every [value, sigma] it gives,
+// the degree scores and the steps (for the scale-against-rate plot).
+json rate_steps_json(const rate_steps::Result& r) {
+  static const char* const kAxes[3] = {"x", "y", "z"};
+  json axes = json::array();
+  for (const rate_steps::Axis& a : r.axes) {
+    if (!a.tested) continue;
+    json nonlinear = json::array();
+    for (int k = 0; k < a.degree; ++k)
+      nonlinear.push_back(json::array({a.nonlinear_ppm[static_cast<std::size_t>(k)], a.nonlinear_sigma_ppm[static_cast<std::size_t>(k)]}));
+    json scores = json::array();
+    for (const rate_steps::DegreeScore& d : a.scores)
+      scores.push_back({{"degree", d.degree}, {"held_back_rms_ppm", d.held_back_rms_ppm}});
+    json steps = json::array();
+    for (const rate_steps::Step& st : a.steps) {
+      double model_sigma = 0;
+      const double model = a.scale_ppm_at(st.rate_dps, &model_sigma);
+      steps.push_back({{"segment", st.segment}, {"rate_dps", st.rate_dps}, {"angle_deg", st.angle_deg},
+                       {"duration_s", st.duration_s}, {"scale_ppm", json::array({st.scale_ppm, st.sigma_ppm})},
+                       {"model_ppm", json::array({model, model_sigma})}, {"fit_residual_ppm", st.fit_residual_ppm}});
+    }
+    axes.push_back({{"axis", kAxes[a.axis]},
+                    {"bias_dph", json::array({a.bias_dph, a.bias_sigma_dph})},
+                    {"scale_pos_ppm", json::array({a.scale_pos_ppm, a.scale_pos_sigma_ppm})},
+                    {"scale_neg_ppm", json::array({a.scale_neg_ppm, a.scale_neg_sigma_ppm})},
+                    {"asymmetry_ppm", json::array({a.asymmetry_ppm, a.asymmetry_sigma_ppm})},
+                    {"degree", a.degree},
+                    {"scale_nonlinear_ppm", nonlinear},
+                    {"degree_scores", scores},
+                    {"full_scale_dps", a.full_scale_dps},
+                    {"nonlinearity_ppm_fs", json::array({a.nonlinearity_ppm_fs, a.nonlinearity_sigma_ppm_fs})},
+                    {"nonlinearity_at_dps", a.nonlinearity_at_dps},
+                    {"residual_rms_ppm", a.residual_rms_ppm},
+                    {"steps", steps}});
+  }
+  return {{"axes", axes}};
+}
+
+}  // namespace
+
 // ------------------------------------------------------------------------------------------------
 json Outcome::report() const {
   const StageName& n = names_of(stage);
@@ -518,6 +606,7 @@ json Outcome::report() const {
     j["accel_residual_rms_mps2"] = direct->accel_residual_rms_mps2;
     j["gyro_residual_rms_rad"] = direct->gyro_residual_rms_rad;
   }
+  if (rate_steps) j["rate_steps"] = rate_steps_json(*rate_steps);
   if (lever_arm) {
     j["updates"] = lever_arm->updates;
     json mm = json::array(), sg = json::array();
@@ -603,6 +692,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
       if (!run_) {
         switch (out.stage) {
           case Stage::Direct: run_ = std::make_unique<DirectRun>(meta_, f, model_); break;
+          case Stage::RateSteps: run_ = std::make_unique<RateStepsRun>(meta_, f, model_); break;
           case Stage::LeverArm: run_ = std::make_unique<LeverArmRun>(meta_, model_); break;
           case Stage::Thermal: run_ = std::make_unique<ThermalRun>(meta_, f, model_, settings_); break;
           case Stage::Navigation: run_ = std::make_unique<NavigationRun>(meta_, f, model_, settings_); break;

@@ -43,6 +43,8 @@ TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
   EXPECT_LT(by_name.at("full").at("duration_s").get<double>(), parts_s + 60.0);
   EXPECT_EQ(by_name.at("navigation").at("estimators"), json({"stage3"}));
   EXPECT_EQ(by_name.at("direct").at("estimators"), json({"direct"}));
+  EXPECT_EQ(by_name.at("rate-steps").at("estimators"), json({"rate-steps"}));
+  EXPECT_EQ(by_name.at("rate-steps-short").at("estimators"), json({"rate-steps"}));
 
   const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
                                                     "time_scale": 100})");

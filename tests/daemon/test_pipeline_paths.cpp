@@ -1,7 +1,7 @@
 // One calibration pipeline: `imucal calibrate --stage X` (the real binary) and the daemon's
 // estimator worker, tailing the same run file in the recorder's uneven commit steps, give the same
-// model to the last bit, for stage direct, lever-arm, navigation (stage 3) and thermal on a
-// thermal-short recording. The long recordings (the whole navigation program, the whole
+// model to the last bit, for stage direct, rate-steps, lever-arm, navigation (stage 3) and thermal
+// on a thermal-short recording. The long recordings (the whole navigation program, the whole
 // thermal-short run) are in the `slow` variant.
 #include <cstdio>
 #include <filesystem>
@@ -107,6 +107,25 @@ void expect_same_model(const Recording& rec, const std::string& stage, const std
 TEST(PipelinePaths, DirectGivesTheSameModelOnlineAndOffline) {
   const Recording rec = record("direct", "direct-short", 50, 0, noisy_truth());
   expect_same_model(rec, "direct", "direct");
+}
+
+TEST(PipelinePaths, RateStepsGivesTheSameModelOnlineAndOffline) {
+  ImuModel truth = noisy_truth();
+  truth.gyro.scale_nonlinear.row(0) = Eigen::RowVector3d(2.0, 1.0, 0.0) * 1e-6;  // 15 ppm at 300 deg/s
+  const Recording rec = record("rate-steps", "rate-steps-short", 50, 0, truth);
+  ImuModel stage1 = truth;  // the misalignments a stage-1 model gives; nothing of the scales
+  stage1.gyro.scale_pos.setZero();
+  stage1.gyro.scale_neg.setZero();
+  stage1.gyro.scale_nonlinear.setZero();
+  expect_same_model(rec, "rate-steps", "rate-steps", stage1);
+  // And the worker's model holds the gyro x nonlinearity within 3 sigma.
+  const ImuModel m = worker_model(rec, "rate-steps", stage1);
+  ASSERT_TRUE(m.sigma.has_value());
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_GT(m.sigma->gyro.scale_nonlinear(0, k), 0.0) << "c" << k + 1;
+    EXPECT_NEAR(m.gyro.scale_nonlinear(0, k), truth.gyro.scale_nonlinear(0, k), 3.0 * m.sigma->gyro.scale_nonlinear(0, k))
+        << "c" << k + 1;
+  }
 }
 
 TEST(PipelinePaths, LeverArmGivesTheSameModelOnlineAndOffline) {
