@@ -690,6 +690,22 @@ try {
   await shot(page, '08c-certificate-partial');
   log('certificate of a stopped run: PARTIAL in its title block, with why and when');
 
+  // ---- the rate-steps test: scale factor against rate, per gyro ----
+  const stepsId = await startCampaign({ name: 'browser test: rate steps', program: 'rate-steps-short', rate_hz: 20, seed: 13,
+    time_scale: 0, truth: { format: 'imucal-imu-model/1', gyro: { scale_pos_ppm: [20, -10, 5], scale_neg_ppm: [26, -12, 3],
+      scale_nonlinear_ppm: { y: [3, 1] }, noise: { arw_deg_rth: 0.0005 } } } });
+  const steps = await waitCampaign(stepsId, (c) => c.state === 'done', 'the rate-steps campaign');
+  assert.deepEqual(steps.spec.estimators, ['rate-steps']);
+  await page.goto(`${base}/#/campaigns/${stepsId}`);
+  await page.waitForSelector('#rate-steps-table tr[data-axis="y"]');
+  assert.equal(await page.$$eval('#rate-steps .plot .uplot', (els) => els.length), 3);
+  assert.match(await page.textContent('#rate-steps-table tr[data-axis="y"]'), /c1 .*c2 /);
+  assert.match(await page.textContent('#rate-steps-table tr[data-axis="x"]'), /none \(linear\)/);
+  await page.waitForSelector('#coefficient-table tr[data-coefficient="gyro.scale_nonlinear_ppm.y.c2"]');
+  await page.$eval('#rate-steps', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '17-results-rate-steps');
+  log('results of rate-steps-short: IEEE 952 figures per gyro, scale error against rate with the fitted nonlinearity');
+
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });
   assert.equal(queued.status, 201);

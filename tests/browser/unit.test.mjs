@@ -109,6 +109,11 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.equal(f.get('gyro.bias_dph.z'), 3);
   assert.equal(f.get('gyro.misalignment_arcsec.xy'), 5);
   assert.equal(f.get('accel.lever_arm_mm.y.z'), 3);
+  // The scale nonlinearity's one to three terms per gyro are c1, c2, c3, whatever their number.
+  const nl = flatten({ gyro: { scale_nonlinear_ppm: { x: [1, 2, 3], y: [4, 5] } } });
+  assert.deepEqual([...nl.entries()], [['gyro.scale_nonlinear_ppm.x.c1', 1], ['gyro.scale_nonlinear_ppm.x.c2', 2],
+    ['gyro.scale_nonlinear_ppm.x.c3', 3], ['gyro.scale_nonlinear_ppm.y.c1', 4], ['gyro.scale_nonlinear_ppm.y.c2', 5]]);
+  assert.equal(unitOf('gyro.scale_nonlinear_ppm.y.c2'), 'ppm');
   assert.equal(unitOf('gyro.bias_dph.x'), '°/h');
   assert.equal(unitOf('accel.bias_mps2.x'), 'm/s²');
   assert.equal(unitOf('gyro.noise.arw_deg_rth'), '°/√h');
@@ -187,6 +192,7 @@ test('certificate rows: names with units, k = 2 beside k = 1, "not determined" i
   assert.equal(coefficientName('accel.misalignment_arcsec.yz'), 'Accelerometer misalignment, sensor y about z');
   assert.equal(coefficientName('accel.lever_arm_mm.y.z'), 'Proof-mass offset of accelerometer y, z component');
   assert.equal(coefficientName('gyro.noise.bias_instability_dph'), 'Gyro bias instability');
+  assert.equal(coefficientName('gyro.scale_nonlinear_ppm.z.c2'), 'Gyro scale nonlinearity, z axis, c2 (of q^2, q = |ω| / 100 °/s)');
   // A direct run: delays and proof-mass offsets carried over (sigma 0), bias instability not
   // estimated (0, noise terms have no sigma), one misalignment whose sigma is null.
   const model = {

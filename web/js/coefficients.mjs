@@ -7,6 +7,7 @@ export const GROUPS = [
   { key: 'gyro.scale_pos_ppm', title: 'Gyro scale factor (+ rates)' },
   { key: 'gyro.scale_neg_ppm', title: 'Gyro scale factor (− rates)' },
   { key: 'gyro.misalignment_arcsec', title: 'Gyro misalignment' },
+  { key: 'gyro.scale_nonlinear_ppm', title: 'Gyro scale nonlinearity' },
   { key: 'accel.bias_mps2', title: 'Accelerometer bias' },
   { key: 'accel.scale_ppm', title: 'Accelerometer scale factor' },
   { key: 'accel.misalignment_arcsec', title: 'Accelerometer misalignment' },
@@ -58,6 +59,9 @@ export function flatten(model) {
   const out = new Map();
   const walk = (value, prefix) => {
     if (typeof value === 'number') out.set(prefix, value);
+    // A gyro's scale nonlinearity: one to three terms, c1 c2 c3 (formats.md).
+    else if (Array.isArray(value) && /\.scale_nonlinear_ppm\.[xyz]$/.test(prefix))
+      value.forEach((v, i) => { if (typeof v === 'number') out.set(`${prefix}.c${i + 1}`, v); });
     else if (Array.isArray(value) && value.length === 3 && value.every((v) => typeof v === 'number'))
       value.forEach((v, i) => out.set(`${prefix}.${AXES[i]}`, v));
     else if (value && typeof value === 'object' && !Array.isArray(value))
@@ -125,6 +129,8 @@ export function coefficientName(key) {
   if (group.key.endsWith('.misalignment_arcsec') && rest.length === 1 && rest[0].length === 2)
     return `${group.title}, sensor ${rest[0][0]} about ${rest[0][1]}`;
   if (rest.length === 1 && AXES.includes(rest[0])) return `${group.title}, ${rest[0]} axis`;
+  if (group.key === 'gyro.scale_nonlinear_ppm' && rest.length === 2 && AXES.includes(rest[0]))
+    return `${group.title}, ${rest[0]} axis, ${rest[1]} (of q^${rest[1].slice(1)}, q = |ω| / 100 °/s)`;
   return `${group.title}, ${rest.join('.')}`;
 }
 
