@@ -275,6 +275,27 @@ void print_outcome(const pipeline::Outcome& o) {
                     a.scale_ppm_at(st.rate_dps), st.fit_residual_ppm);
     }
   }
+  if (o.tumble) {
+    // Every coefficient the tumble gives, with its sigma, in the units of the model file.
+    const ImuModel& m = o.tumble->model;
+    const ImuErrorSet& s = *m.sigma;
+    static const char* const kAxes[3] = {"x", "y", "z"};
+    constexpr double ug = 1e6 / units::kStandardGravity_mps2;
+    std::printf("  %-6s %22s %18s %18s %18s %26s\n", "accel", "bias ug", "scale ppm", "K2 ug/g^2", "K3 ug/g^3", "residual rms ug");
+    for (int j = 0; j < 3; ++j)
+      std::printf("  %-6s %12.3f +- %6.3f %9.3f +- %5.3f %9.3f +- %5.3f %9.3f +- %5.3f %26.3f\n", kAxes[j], m.accel.bias_mps2[j] * ug,
+                  s.accel.bias_mps2[j] * ug, m.accel.scale[j] * 1e6, s.accel.scale[j] * 1e6, m.accel.k2_per_g[j] * 1e6,
+                  s.accel.k2_per_g[j] * 1e6, m.accel.k3_per_g2[j] * 1e6, s.accel.k3_per_g2[j] * 1e6,
+                  o.tumble->accel_residual_rms_mps2[j] * ug);
+    std::printf("  %-6s %22s   g-sensitivity deg/h/g along o x, y, z\n", "gyro", "bias deg/h");
+    for (int j = 0; j < 3; ++j) {
+      std::printf("  %-6s %12.5f +- %7.5f", kAxes[j], m.gyro.bias_radps[j] * units::kRadpsToDph, s.gyro.bias_radps[j] * units::kRadpsToDph);
+      for (int k = 0; k < 3; ++k)
+        std::printf(" %9.5f +- %7.5f", m.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph,
+                    s.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph);
+      std::printf("\n");
+    }
+  }
   if (o.navigation) {
     const navfilter::Result& r = *o.navigation;
     std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
@@ -683,9 +704,9 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, rate-steps, lever-arm, thermal, noise, navigation or all")
+  cal->add_option("--stage", cal_args.stage, "direct, rate-steps, tumble, lever-arm, thermal, noise, navigation or all")
       ->capture_default_str()
-      ->check(CLI::IsMember({"direct", "rate-steps", "lever-arm", "thermal", "noise", "navigation", "all"}));
+      ->check(CLI::IsMember({"direct", "rate-steps", "tumble", "lever-arm", "thermal", "noise", "navigation", "all"}));
   cal->add_option("--report", cal_args.report,
                   "stage thermal or rate-steps: write the stage's report (thermal: residuals, degrees, plots; "
                   "rate-steps: every figure per gyro and rate) here");

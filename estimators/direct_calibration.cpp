@@ -11,6 +11,7 @@
 #include "core/earth.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
+#include "estimators/least_squares.hpp"
 
 namespace imucal::direct {
 
@@ -119,39 +120,6 @@ void DirectCalibrator::push(const ImuFrame& f) {
 namespace {
 
 const char* kAxis[3] = {"x", "y", "z"};
-
-// Weighted least squares with the covariance scaled by the residual variance per unit weight.
-struct Fit {
-  Eigen::VectorXd x, sigma;
-  double rms_weighted = 0;
-};
-
-Fit solve_wls(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::VectorXd& w) {
-  const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
-  const Eigen::VectorXd rhs = A.transpose() * w.asDiagonal() * b;
-  // Scale columns so the conditioning check sees the geometry, not the units.
-  const Eigen::VectorXd scale = N.diagonal().cwiseSqrt().cwiseMax(1e-300);
-  const Eigen::MatrixXd Ns = scale.cwiseInverse().asDiagonal() * N * scale.cwiseInverse().asDiagonal();
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(Ns);
-  Fit f;
-  f.x = scale.cwiseInverse().asDiagonal() * ldlt.solve(scale.cwiseInverse().asDiagonal() * rhs);
-  const Eigen::VectorXd r = b - A * f.x;
-  const auto dof = static_cast<double>(A.rows() - A.cols());
-  const double s0sq = dof > 0 ? r.dot(w.asDiagonal() * r) / dof : 0.0;
-  f.rms_weighted = std::sqrt(s0sq);
-  const Eigen::MatrixXd Ninv = scale.cwiseInverse().asDiagonal() *
-                               ldlt.solve(Eigen::MatrixXd::Identity(N.rows(), N.cols())) *
-                               scale.cwiseInverse().asDiagonal();
-  f.sigma = (Ninv.diagonal() * s0sq).cwiseSqrt();
-  return f;
-}
-
-double min_scaled_eigenvalue(const Eigen::MatrixXd& A, const Eigen::VectorXd& w) {
-  const Eigen::MatrixXd N = A.transpose() * w.asDiagonal() * A;
-  const Eigen::VectorXd s = N.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
-  const Eigen::MatrixXd Ns = s.asDiagonal() * N * s.asDiagonal();
-  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Ns).eigenvalues().minCoeff();
-}
 
 // Off-diagonal misalignment entries of row j of D: (column k, sign, key) for the two k != j.
 struct OffDiag {
@@ -351,17 +319,17 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     acc_rms_sq = 0;
     for (int j = 0; j < 3; ++j) {
       const SensorDesign d = accel_design(j, sel, acc);
-      if (min_scaled_eigenvalue(d.A, d.w) < 1e-10)
+      if (least_squares::min_scaled_eigenvalue(d.A, d.w) < 1e-10)
         throw UndeterminedError(std::string("stage direct: accelerometer ") + kAxis[j] +
                                 ": bias, scale and angles are not separable with these positions (add positions with "
                                 "each of the other axes vertical)");
-      const Fit fit = solve_wls(d.A, d.b, d.w);
+      const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.accel, d.columns[c], j) = fit.sigma[i];
+        coefficient(sigma.accel, d.columns[c], j) = std::sqrt(fit.covariance(i, i));
       }
-      acc_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
+      acc_rms_sq += fit.s0sq / 3.0;
     }
     acc.bias_mps2 = next.bias_mps2;
     acc.scale = next.scale;
@@ -382,17 +350,17 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     gyro_rms_sq = 0;
     for (int j = 0; j < 3; ++j) {
       const SensorDesign d = gyro_design(j, sel, gy);
-      if (min_scaled_eigenvalue(d.A, d.w) < 1e-12)
+      if (least_squares::min_scaled_eigenvalue(d.A, d.w) < 1e-12)
         throw UndeterminedError(std::string("stage direct: gyro ") + kAxis[j] +
                                 ": bias, scale factors and angles are not separable (add statics and single-axis "
                                 "rotations of both signs about every axis)");
-      const Fit fit = solve_wls(d.A, d.b, d.w);
+      const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.gyro, d.columns[c], j) = fit.sigma[i];
+        coefficient(sigma.gyro, d.columns[c], j) = std::sqrt(fit.covariance(i, i));
       }
-      gyro_rms_sq += fit.rms_weighted * fit.rms_weighted / 3.0;
+      gyro_rms_sq += fit.s0sq / 3.0;
     }
     gy.bias_radps = next.bias_radps;
     gy.scale_pos = next.scale_pos;

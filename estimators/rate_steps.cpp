@@ -9,6 +9,7 @@
 
 #include "core/units.hpp"
 #include "estimators/held_back.hpp"
+#include "estimators/least_squares.hpp"
 #include "estimators/table_reference.hpp"
 
 namespace imucal::rate_steps {
@@ -52,32 +53,28 @@ VectorXd design_row(const Segment& s, int j, int degree) {
 
 struct Solved {
   bool ok = false;
-  VectorXd x;
-  MatrixXd N_inv;  // (A'WA)^-1
+  least_squares::Fit fit;
 };
 
+// The fit of gyro j's rows (those `use` keeps) at a degree; not ok when the rows do not determine it.
 Solved solve(const std::vector<const Segment*>& rows, const std::vector<double>& y, int j, int degree,
              const std::vector<bool>* use = nullptr) {
-  const int p = 3 + degree;
-  MatrixXd N = MatrixXd::Zero(p, p);
-  VectorXd rhs = VectorXd::Zero(p);
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    if (use && !(*use)[i]) continue;
-    const VectorXd a = design_row(*rows[i], j, degree);
-    const double w = 1.0 / rows[i]->T_s;  // white angle noise: variance grows with the time
-    N += w * a * a.transpose();
-    rhs += w * a * y[i];
+  std::vector<std::size_t> kept;
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (!use || (*use)[i]) kept.push_back(i);
+  const auto n = static_cast<Eigen::Index>(kept.size());
+  MatrixXd A(n, 3 + degree);
+  VectorXd b(n), w(n);
+  for (Eigen::Index r = 0; r < n; ++r) {
+    const std::size_t i = kept[static_cast<std::size_t>(r)];
+    A.row(r) = design_row(*rows[i], j, degree).transpose();
+    b[r] = y[i];
+    w[r] = 1.0 / rows[i]->T_s;  // white angle noise: the variance grows with the time
   }
-  // Scale the columns so that the rank test sees the geometry, not the units.
-  const VectorXd sc = N.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
-  const MatrixXd Ns = sc.asDiagonal() * N * sc.asDiagonal();
-  const Eigen::SelfAdjointEigenSolver<MatrixXd> eig(Ns);
   Solved s;
-  if (eig.eigenvalues().minCoeff() < 1e-10 * eig.eigenvalues().maxCoeff()) return s;
-  const MatrixXd Ns_inv = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
-  s.N_inv = sc.asDiagonal() * Ns_inv * sc.asDiagonal();
-  s.x = s.N_inv * rhs;
-  s.ok = s.x.allFinite();
+  if (n < A.cols() || least_squares::min_scaled_eigenvalue(A, w) < 1e-10) return s;
+  s.fit = least_squares::solve(A, b, w);
+  s.ok = s.fit.x.allFinite();
   return s;
 }
 
@@ -286,7 +283,7 @@ Result RateStepsEstimator::finish(const ImuModel& prior) const {
         double e2 = 0;
         for (std::size_t i = n_statics; i < rows.size(); ++i) {
           if (use[i]) continue;
-          const double r = y[i] - design_row(*rows[i], j, d).dot(part.x);
+          const double r = y[i] - design_row(*rows[i], j, d).dot(part.fit.x);
           e2 += r * r / rows[i]->T_s;
           const double r_ppm = r / rows[i]->ref_rad()[j] * 1e6;
           ss_ppm += r_ppm * r_ppm;
@@ -307,21 +304,16 @@ Result RateStepsEstimator::finish(const ImuModel& prior) const {
     for (std::size_t c = 0; c < scores.size(); ++c) ax.scores.push_back({degrees[c], held_rms[c]});
     ax.degree = degrees[chosen];
 
-    const Solved fit = solve(rows, y, j, ax.degree);
-    if (!fit.ok) {
+    const Solved solved = solve(rows, y, j, ax.degree);
+    if (!solved.ok) {
       out.notes.push_back(std::string("gyro ") + kAxis[j] + ": the steps do not determine the scale factors");
       continue;
     }
+    const least_squares::Fit& fit = solved.fit;
     const int p = 3 + ax.degree;
-    double wrss = 0;
-    for (std::size_t i = 0; i < rows.size(); ++i) {
-      const double r = y[i] - design_row(*rows[i], j, ax.degree).dot(fit.x);
-      wrss += r * r / rows[i]->T_s;
-    }
-    const auto dof = static_cast<double>(rows.size()) - p;
     // Residual variance per unit weight: the angle noise density the data show (rad^2/s).
-    const double s0sq = dof > 0 ? wrss / dof : 0.0;
-    const MatrixXd cov = fit.N_inv * s0sq;
+    const double s0sq = fit.s0sq;
+    const MatrixXd& cov = fit.covariance;
     ax.tested = true;
     any = true;
     ax.bias_dph = fit.x[0] * units::kRadpsToDph;

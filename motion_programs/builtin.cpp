@@ -153,6 +153,26 @@ json rate_steps_program(const std::string& name, const std::vector<double>& ladd
           {"segments", segs}};
 }
 
+// IEEE Std 1293's multipoint tumble: the platform turned about the horizontal middle axis through
+// a whole turn in equal steps, a static at each, twice: with the inner axis at 0 (y and z sweep the
+// vertical plane) and at 90 deg (x and y). Every accelerometer meets +1 g and -1 g and the angles
+// between; the specific force sweeps every direction of o, which the gyros' g-sensitivity needs.
+// estimators/tumble.hpp reads it.
+json tumble_program(const std::string& name, int steps, double dwell_s) {
+  json segs = json::array();
+  for (double inner : {0.0, 90.0}) {
+    const std::string plane = inner == 0.0 ? "yz" : "xy";
+    json positions = json::array();
+    for (int k = 0; k < steps; ++k) positions.push_back(pose(0, 360.0 * k / steps, inner));
+    segs.push_back({{"type", "positions"}, {"name", "tumble-" + plane}, {"positions_deg", positions}, {"dwell_s", dwell_s}});
+  }
+  return {{"name", name},
+          {"comment", "IEEE 1293 multipoint tumble: the middle axis through a whole turn in equal steps with a static at "
+                      "each, with the inner axis at 0 and at 90 deg: accelerometer bias, scale, K2, K3, misalignment; "
+                      "gyro g-sensitivity"},
+          {"segments", segs}};
+}
+
 // Stage 2 (seed ch. 3): a table cycle that gives every coefficient of model (1) once (each axis
 // up and down; rotations of both signs about each axis between stops), repeated while the chamber
 // runs its profile. The cycle is a palindrome in time: six stops out, the sixth held twice as
@@ -200,7 +220,7 @@ json thermal_program(const std::string& name, int cycles, double dwell_s) {
 
 std::vector<std::string> builtin_program_names() {
   return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short",
-          "rate-steps", "rate-steps-short"};
+          "rate-steps", "rate-steps-short", "tumble", "tumble-short"};
 }
 
 std::string builtin_program_json(const std::string& name) {
@@ -221,6 +241,8 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "thermal-short") return thermal_program("thermal-short", 14, 36.0).dump(1);
   if (name == "rate-steps") return rate_steps_program(name, {1, 2, 5, 10, 20, 50, 100, 150, 200, 250, 300}, 20.0).dump(1);
   if (name == "rate-steps-short") return rate_steps_program(name, {5, 10, 20, 50, 100, 150, 200, 300}, 10.0).dump(1);
+  if (name == "tumble") return tumble_program(name, 24, 36.0).dump(1);
+  if (name == "tumble-short") return tumble_program(name, 12, 20.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

@@ -68,9 +68,10 @@ std::string span_text(double t0_s, double t1_s) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
-const std::array<StageName, 6>& stage_names() {
-  static const std::array<StageName, 6> names = {{{Stage::Direct, "direct", "direct", "direct"},
+const std::array<StageName, 7>& stage_names() {
+  static const std::array<StageName, 7> names = {{{Stage::Direct, "direct", "direct", "direct"},
                                                   {Stage::RateSteps, "rate-steps", "rate-steps", "rate-steps"},
+                                                  {Stage::Tumble, "tumble", "tumble", "tumble"},
                                                   {Stage::LeverArm, "lever-arm", "lever-arm", "lever-arm"},
                                                   {Stage::Thermal, "thermal", "thermal", "thermal"},
                                                   {Stage::Navigation, "navigation", "stage3", "navigation"},
@@ -100,6 +101,7 @@ std::optional<Stage> purpose_of_program(std::string_view program) {
   if (program == "direct-short") return Stage::Direct;
   if (program == "thermal-short") return Stage::Thermal;
   if (program == "rate-steps-short") return Stage::RateSteps;
+  if (program == "tumble-short") return Stage::Tumble;
   for (const StageName& n : stage_names())
     if (program == n.program) return n.stage;
   return std::nullopt;
@@ -143,12 +145,21 @@ std::optional<std::string> requirement_unmet(Stage stage, const std::vector<Segm
              " and " + std::to_string(rates) + " (program 'direct' gives them)";
     }
     case Stage::RateSteps: {
-      // Three rates both ways at least; the estimator itself says which gyro lacks what.
+      // A ladder: more rate segments than stage 1's six, and statics between them; the estimator
+      // itself says which gyro lacks what.
       const int rates = count_kind(segments, "rate");
-      if (statics >= 1 && rates >= 6) return std::nullopt;
-      return "stage rate-steps needs rate segments at three rates or more, both ways, and statics between them; there "
-             "are " + std::to_string(rates) + " rate segments and " + std::to_string(statics) +
-             " statics (program 'rate-steps' or 'rate-steps-short' gives them)";
+      if (statics >= 1 && rates >= 12) return std::nullopt;
+      return "stage rate-steps needs a ladder of rate segments (three rates or more both ways, at least 12 segments) "
+             "and statics between them; there are " + std::to_string(rates) + " rate segments and " +
+             std::to_string(statics) + " statics (program 'rate-steps' or 'rate-steps-short' gives them)";
+    }
+    case Stage::Tumble: {
+      // Statics and the moves between them, nothing turning: a tumble.
+      const int turning = count_kind(segments, "rate") + count_kind(segments, "sine") + count_kind(segments, "coning");
+      if (statics >= 12 && turning == 0) return std::nullopt;
+      return "stage tumble needs at least 12 statics through whole turns in vertical planes and no rate or oscillation "
+             "segments; there are " + std::to_string(statics) + " statics and " + std::to_string(turning) +
+             " turning segments (program 'tumble' or 'tumble-short' gives them)";
     }
     case Stage::LeverArm:
       if (count_kind(segments, "sine") > 0) return std::nullopt;
@@ -359,6 +370,17 @@ json estimates_json(const ImuModel& model) {
       if (sigma.gyro.scale_nonlinear(j, k) > 0.0)
         out[std::string("gyro.scale_nonlinear_ppm.") + axes[j] + ".c" + std::to_string(k + 1)] =
             json::array({model.gyro.scale_nonlinear(j, k) * 1e6, sigma.gyro.scale_nonlinear(j, k) * 1e6});
+  // K2, K3 and the g-sensitivity where a stage estimated them (the tumble).
+  if (sigma.accel.k2_per_g.cwiseAbs().maxCoeff() > 0.0) {
+    vec("accel.k2_ug_per_g2", model.accel.k2_per_g, sigma.accel.k2_per_g, 1e6);
+    vec("accel.k3_ug_per_g3", model.accel.k3_per_g2, sigma.accel.k3_per_g2, 1e6);
+  }
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k)
+      if (sigma.gyro.g_sensitivity_radps_per_g(j, k) > 0.0)
+        out[std::string("gyro.g_sensitivity_dph_per_g.") + axes[j] + "." + axes[k]] =
+            json::array({model.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph,
+                         sigma.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph});
   // Delays and proof masses only where the model carries their uncertainty (the lever-arm stage,
   // stage 3): elsewhere they are not estimated, and a row of zeros would say they were.
   auto estimated = [](const Eigen::Vector3d& sig) { return sig.cwiseAbs().maxCoeff() > 0.0; };
@@ -400,6 +422,27 @@ class RateStepsRun final : public Pipeline::Run {
 
  private:
   rate_steps::RateStepsEstimator estimator_;
+  ImuModel start_;
+};
+
+// The tumble: the accelerometers' bias, scale, K2, K3 and angles and the gyros' bias and
+// g-sensitivity from statics in vertical planes; the gyro scale factors and angles of the model
+// before it remove the Earth rate.
+class TumbleRun final : public Pipeline::Run {
+ public:
+  TumbleRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start)
+      : estimator_(with_segments(meta, f.segments)), start_(start) {}
+  void push(const ImuFrame& f) override { estimator_.push(f); }
+  void finish(const FrameSource&, const Feed&, Outcome& out) override {
+    tumble::Result r = estimator_.finish(start_);
+    out.notes.insert(out.notes.end(), r.notes.begin(), r.notes.end());
+    out.model = r.model;
+    out.tumble = std::move(r);
+  }
+  json progress() const override { return {{"statics", estimator_.statics_seen()}}; }
+
+ private:
+  tumble::TumbleEstimator estimator_;
   ImuModel start_;
 };
 
@@ -592,6 +635,21 @@ json rate_steps_json(const rate_steps::Result& r) {
   return {{"axes", axes}};
 }
 
+// The tumble's figures: its residuals and every static's specific force, output and residuals
+// (for a plot of the residuals against the tumble angle).
+json tumble_json(const tumble::Result& r) {
+  constexpr double ug_per_mps2 = 1e6 / units::kStandardGravity_mps2;
+  auto vec = [](const Eigen::Vector3d& v, double scale) { return json::array({v[0] * scale, v[1] * scale, v[2] * scale}); };
+  json positions = json::array();
+  for (const tumble::Position& p : r.positions)
+    positions.push_back({{"segment", p.segment}, {"duration_s", p.duration_s}, {"f_o_mps2", vec(p.f_o_mps2, 1.0)},
+                         {"accel_residual_ug", vec(p.accel_residual_mps2, ug_per_mps2)},
+                         {"gyro_residual_dph", vec(p.gyro_residual_radps, units::kRadpsToDph)}});
+  return {{"accel_residual_rms_ug", vec(r.accel_residual_rms_mps2, ug_per_mps2)},
+          {"gyro_residual_rms_dph", vec(r.gyro_residual_rms_radps, units::kRadpsToDph)},
+          {"positions", positions}};
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
@@ -607,6 +665,7 @@ json Outcome::report() const {
     j["gyro_residual_rms_rad"] = direct->gyro_residual_rms_rad;
   }
   if (rate_steps) j["rate_steps"] = rate_steps_json(*rate_steps);
+  if (tumble) j["tumble"] = tumble_json(*tumble);
   if (lever_arm) {
     j["updates"] = lever_arm->updates;
     json mm = json::array(), sg = json::array();
@@ -693,6 +752,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
         switch (out.stage) {
           case Stage::Direct: run_ = std::make_unique<DirectRun>(meta_, f, model_); break;
           case Stage::RateSteps: run_ = std::make_unique<RateStepsRun>(meta_, f, model_); break;
+          case Stage::Tumble: run_ = std::make_unique<TumbleRun>(meta_, f, model_); break;
           case Stage::LeverArm: run_ = std::make_unique<LeverArmRun>(meta_, model_); break;
           case Stage::Thermal: run_ = std::make_unique<ThermalRun>(meta_, f, model_, settings_); break;
           case Stage::Navigation: run_ = std::make_unique<NavigationRun>(meta_, f, model_, settings_); break;

@@ -8,8 +8,8 @@
 // (imucald joins them so); each program is a part. A recording whose segment names do not all
 // carry such a prefix is one part, named by its program (RecordingMeta::program_json).
 // Which part feeds which stage: the parts of the built-in program made for that stage (direct and
-// direct-short: stage direct; rate-steps and rate-steps-short; lever-arm; thermal and
-// thermal-short; navigation; noise). A part of
+// direct-short: stage direct; rate-steps and rate-steps-short; tumble and tumble-short;
+// lever-arm; thermal and thermal-short; navigation; noise). A part of
 // an unknown program feeds every stage whose segment requirement it meets. A stage asked for by
 // name (`imucal calibrate --stage X`, a campaign's estimator) that no part feeds takes the whole
 // recording, as the estimator alone would; with `--stage all` it is skipped with the reason.
@@ -36,6 +36,7 @@
 #include "estimators/noise.hpp"
 #include "estimators/rate_steps.hpp"
 #include "estimators/thermal.hpp"
+#include "estimators/tumble.hpp"
 
 namespace imucal::storage {
 class RunDb;
@@ -43,7 +44,7 @@ class RunDb;
 
 namespace imucal::pipeline {
 
-enum class Stage { Direct, RateSteps, LeverArm, Thermal, Navigation, Noise };
+enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise };
 
 struct StageName {
   Stage stage;
@@ -52,7 +53,7 @@ struct StageName {
   const char* program;    // the built-in program made for it (docs/programs.md)
 };
 // In pipeline order: each stage starts from the model of the stages before it.
-const std::array<StageName, 6>& stage_names();
+const std::array<StageName, 7>& stage_names();
 const StageName& names_of(Stage stage);
 std::optional<Stage> stage_named(std::string_view name);
 std::optional<Stage> stage_of_estimator(std::string_view estimator);
@@ -158,6 +159,7 @@ struct Outcome {
   std::optional<ImuModel> model;  // Done (and a navigation pass that did not converge: its estimates)
   std::optional<direct::Result> direct;
   std::optional<rate_steps::Result> rate_steps;
+  std::optional<tumble::Result> tumble;
   std::optional<lever::Result> lever_arm;
   std::optional<thermal::Result> thermal;
   std::optional<navfilter::Result> navigation;

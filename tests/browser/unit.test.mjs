@@ -114,6 +114,9 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.deepEqual([...nl.entries()], [['gyro.scale_nonlinear_ppm.x.c1', 1], ['gyro.scale_nonlinear_ppm.x.c2', 2],
     ['gyro.scale_nonlinear_ppm.x.c3', 3], ['gyro.scale_nonlinear_ppm.y.c1', 4], ['gyro.scale_nonlinear_ppm.y.c2', 5]]);
   assert.equal(unitOf('gyro.scale_nonlinear_ppm.y.c2'), 'ppm');
+  const gs = flatten({ gyro: { g_sensitivity_dph_per_g: [[1, 2, 3], [4, 5, 6], [7, 8, 9]] } });
+  assert.equal(gs.get('gyro.g_sensitivity_dph_per_g.y.z'), 6);
+  assert.equal(unitOf('gyro.g_sensitivity_dph_per_g.y.z'), '°/h/g');
   assert.equal(unitOf('gyro.bias_dph.x'), '°/h');
   assert.equal(unitOf('accel.bias_mps2.x'), 'm/s²');
   assert.equal(unitOf('gyro.noise.arw_deg_rth'), '°/√h');
@@ -193,6 +196,8 @@ test('certificate rows: names with units, k = 2 beside k = 1, "not determined" i
   assert.equal(coefficientName('accel.lever_arm_mm.y.z'), 'Proof-mass offset of accelerometer y, z component');
   assert.equal(coefficientName('gyro.noise.bias_instability_dph'), 'Gyro bias instability');
   assert.equal(coefficientName('gyro.scale_nonlinear_ppm.z.c2'), 'Gyro scale nonlinearity, z axis, c2 (of q^2, q = |ω| / 100 °/s)');
+  assert.equal(coefficientName('gyro.g_sensitivity_dph_per_g.x.z'), 'Gyro g-sensitivity of gyro x to specific force along z');
+  assert.equal(coefficientName('accel.k2_ug_per_g2.y'), 'Accelerometer K2, y axis');
   // A direct run: delays and proof-mass offsets carried over (sigma 0), bias instability not
   // estimated (0, noise terms have no sigma), one misalignment whose sigma is null.
   const model = {

@@ -45,6 +45,8 @@ TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
   EXPECT_EQ(by_name.at("direct").at("estimators"), json({"direct"}));
   EXPECT_EQ(by_name.at("rate-steps").at("estimators"), json({"rate-steps"}));
   EXPECT_EQ(by_name.at("rate-steps-short").at("estimators"), json({"rate-steps"}));
+  EXPECT_EQ(by_name.at("tumble").at("estimators"), json({"tumble"}));
+  EXPECT_EQ(by_name.at("tumble-short").at("estimators"), json({"tumble"}));
 
   const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
                                                     "time_scale": 100})");

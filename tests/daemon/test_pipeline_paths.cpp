@@ -1,7 +1,7 @@
 // One calibration pipeline: `imucal calibrate --stage X` (the real binary) and the daemon's
 // estimator worker, tailing the same run file in the recorder's uneven commit steps, give the same
-// model to the last bit, for stage direct, rate-steps, lever-arm, navigation (stage 3) and thermal
-// on a thermal-short recording. The long recordings (the whole navigation program, the whole
+// model to the last bit, for stage direct, rate-steps, tumble, lever-arm, navigation (stage 3) and
+// thermal on a thermal-short recording. The long recordings (the whole navigation program, the whole
 // thermal-short run) are in the `slow` variant.
 #include <cstdio>
 #include <filesystem>
@@ -126,6 +126,19 @@ TEST(PipelinePaths, RateStepsGivesTheSameModelOnlineAndOffline) {
     EXPECT_NEAR(m.gyro.scale_nonlinear(0, k), truth.gyro.scale_nonlinear(0, k), 3.0 * m.sigma->gyro.scale_nonlinear(0, k))
         << "c" << k + 1;
   }
+}
+
+TEST(PipelinePaths, TumbleGivesTheSameModelOnlineAndOffline) {
+  ImuModel truth = noisy_truth();
+  truth.accel.k2_per_g = Eigen::Vector3d(30, -45, 22) * 1e-6;
+  const Recording rec = record("tumble", "tumble-short", 50, 0, truth);
+  ImuModel stage1 = truth;  // the gyro scale factors and angles a stage-1 model gives; no K2
+  stage1.accel.k2_per_g.setZero();
+  expect_same_model(rec, "tumble", "tumble", stage1);
+  const ImuModel m = worker_model(rec, "tumble", stage1);
+  ASSERT_TRUE(m.sigma.has_value());
+  for (int j = 0; j < 3; ++j)
+    EXPECT_NEAR(m.accel.k2_per_g[j], truth.accel.k2_per_g[j], 3.0 * m.sigma->accel.k2_per_g[j]) << "K2 of accelerometer " << j;
 }
 
 TEST(PipelinePaths, LeverArmGivesTheSameModelOnlineAndOffline) {

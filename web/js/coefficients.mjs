@@ -8,9 +8,12 @@ export const GROUPS = [
   { key: 'gyro.scale_neg_ppm', title: 'Gyro scale factor (− rates)' },
   { key: 'gyro.misalignment_arcsec', title: 'Gyro misalignment' },
   { key: 'gyro.scale_nonlinear_ppm', title: 'Gyro scale nonlinearity' },
+  { key: 'gyro.g_sensitivity_dph_per_g', title: 'Gyro g-sensitivity' },
   { key: 'accel.bias_mps2', title: 'Accelerometer bias' },
   { key: 'accel.scale_ppm', title: 'Accelerometer scale factor' },
   { key: 'accel.misalignment_arcsec', title: 'Accelerometer misalignment' },
+  { key: 'accel.k2_ug_per_g2', title: 'Accelerometer K2' },
+  { key: 'accel.k3_ug_per_g3', title: 'Accelerometer K3' },
   // The lever-arm stage and stage 3 estimate these too.
   { key: 'gyro.delay_us', title: 'Gyro delay' },
   { key: 'accel.delay_us', title: 'Accelerometer delay' },
@@ -31,6 +34,9 @@ export function unitOf(name) {
     if (p === 'vrw_mps_rth') return 'm/s/√h';
     if (p.endsWith('_dph_rth')) return '°/h/√h';
     if (p.endsWith('_mps2_rth')) return 'm/s²/√h';
+    if (p.endsWith('_dph_per_g')) return '°/h/g';
+    if (p.endsWith('_ug_per_g2')) return 'µg/g²';
+    if (p.endsWith('_ug_per_g3')) return 'µg/g³';
     const m = /_([A-Za-z0-9]+)$/.exec(p);
     if (m && UNITS[m[1]]) return UNITS[m[1]];
   }
@@ -62,6 +68,9 @@ export function flatten(model) {
     // A gyro's scale nonlinearity: one to three terms, c1 c2 c3 (formats.md).
     else if (Array.isArray(value) && /\.scale_nonlinear_ppm\.[xyz]$/.test(prefix))
       value.forEach((v, i) => { if (typeof v === 'number') out.set(`${prefix}.c${i + 1}`, v); });
+    // A 3x3 matrix (the g-sensitivity: rows gyro x y z, columns specific force along x y z).
+    else if (Array.isArray(value) && value.length === 3 && value.every((r) => Array.isArray(r) && r.length === 3))
+      value.forEach((r, i) => r.forEach((v, k) => { if (typeof v === 'number') out.set(`${prefix}.${AXES[i]}.${AXES[k]}`, v); }));
     else if (Array.isArray(value) && value.length === 3 && value.every((v) => typeof v === 'number'))
       value.forEach((v, i) => out.set(`${prefix}.${AXES[i]}`, v));
     else if (value && typeof value === 'object' && !Array.isArray(value))
@@ -129,6 +138,8 @@ export function coefficientName(key) {
   if (group.key.endsWith('.misalignment_arcsec') && rest.length === 1 && rest[0].length === 2)
     return `${group.title}, sensor ${rest[0][0]} about ${rest[0][1]}`;
   if (rest.length === 1 && AXES.includes(rest[0])) return `${group.title}, ${rest[0]} axis`;
+  if (group.key === 'gyro.g_sensitivity_dph_per_g' && rest.length === 2)
+    return `${group.title} of gyro ${rest[0]} to specific force along ${rest[1]}`;
   if (group.key === 'gyro.scale_nonlinear_ppm' && rest.length === 2 && AXES.includes(rest[0]))
     return `${group.title}, ${rest[0]} axis, ${rest[1]} (of q^${rest[1].slice(1)}, q = |ω| / 100 °/s)`;
   return `${group.title}, ${rest.join('.')}`;

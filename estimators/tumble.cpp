@@ -1,0 +1,221 @@
+#include "estimators/tumble.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "core/units.hpp"
+#include "estimators/least_squares.hpp"
+#include "estimators/table_reference.hpp"
+
+namespace imucal::tumble {
+
+using Eigen::MatrixXd;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+
+namespace {
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+struct Static {
+  std::string name;
+  double t0_s = 0, t1_s = 0;
+  double T_s = 0;
+  long long frames = 0;
+  bool gap = false;
+  Vector3d sum_dv_mps = Vector3d::Zero(), sum_dtheta_rad = Vector3d::Zero();
+  Vector3d earth_rad = Vector3d::Zero();  // the Earth's rotation of o over the static
+  Vector3d f_o_mps2 = Vector3d::Zero();
+};
+
+// The two misalignment angles that act on row j of D: each with its column of D - I per radian
+// (from misalignment_matrix, so the sign convention is the model's own).
+struct AngleColumn {
+  const MisalignmentKey* key;
+  Vector3d row_per_rad;  // d(D.row(j)) / d(angle)
+};
+std::vector<AngleColumn> angles_of_row(int j) {
+  std::vector<AngleColumn> out;
+  for (const MisalignmentKey& k : kMisalignmentKeys) {
+    Misalignment m;
+    m.*k.member = 1.0;
+    const Vector3d row = (misalignment_matrix(m) - Eigen::Matrix3d::Identity()).row(j).transpose();
+    if (row.cwiseAbs().maxCoeff() > 0.5) out.push_back({&k, row});
+  }
+  return out;
+}
+
+}  // namespace
+
+struct TumbleEstimator::Impl {
+  RecordingMeta meta;
+  table_reference::FrameReference reference;
+  std::vector<Static> statics;
+  std::size_t cursor = 0;
+  double dt_nominal_s;
+  bool have_prev = false;
+  ImuFrame prev;
+
+  explicit Impl(const RecordingMeta& m) : meta(m), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
+    for (const SegmentInfo& s : m.segments)
+      if (s.kind == "static" || s.kind == "tilt") statics.push_back({s.name, s.t0_s, s.t1_s});
+    std::sort(statics.begin(), statics.end(), [](const Static& a, const Static& b) { return a.t0_s < b.t0_s; });
+  }
+
+  void push(const ImuFrame& f) {
+    if (!have_prev) {
+      prev = f;
+      have_prev = true;
+      return;
+    }
+    const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
+    const double dt = t - t_prev;
+    constexpr double eps = 1e-7;
+    while (cursor < statics.size() && t_prev >= statics[cursor].t1_s - eps) ++cursor;
+    // The frames wholly inside a static: the table is at rest over each of them.
+    if (cursor < statics.size() && t_prev >= statics[cursor].t0_s - eps && t <= statics[cursor].t1_s + eps) {
+      Static& s = statics[cursor];
+      if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
+      if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(f.table_deg);
+      s.earth_rad += reference.increment_o_rad(prev.table_deg, f.table_deg, dt);
+      s.sum_dv_mps += f.dv_mps;
+      s.sum_dtheta_rad += f.dtheta_rad;
+      s.T_s += dt;
+      ++s.frames;
+    }
+    prev = f;
+  }
+};
+
+TumbleEstimator::TumbleEstimator(const RecordingMeta& meta) : impl_(std::make_unique<Impl>(meta)) {}
+TumbleEstimator::~TumbleEstimator() = default;
+void TumbleEstimator::push(const ImuFrame& frame) { impl_->push(frame); }
+int TumbleEstimator::statics_seen() const {
+  return static_cast<int>(std::count_if(impl_->statics.begin(), impl_->statics.end(), [](const Static& s) { return s.frames >= 2; }));
+}
+
+Result TumbleEstimator::finish(const ImuModel& prior) const {
+  Result out;
+  out.model = prior;
+  out.model.frame = "instrument";
+  if (!out.model.sigma) out.model.sigma = ImuErrorSet{};
+  ImuErrorSet& sigma = *out.model.sigma;
+  constexpr double g = units::kStandardGravity_mps2;
+  char buf[256];
+
+  std::vector<const Static*> rows;
+  int gaps = 0;
+  for (const Static& s : impl_->statics) {
+    if (s.frames < 2) continue;
+    if (s.gap) {
+      ++gaps;
+      continue;
+    }
+    rows.push_back(&s);
+  }
+  if (gaps) out.notes.push_back(std::to_string(gaps) + " static(s) left out: a gap in the frames");
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  // Each accelerometer: bias, scale, K2, K3, two angles. Each gyro: bias and a g-sensitivity row.
+  if (n < 12)
+    throw std::runtime_error("tumble: " + std::to_string(n) +
+                             " statics; the tumble needs 12 at least, at many angles of a whole turn in two vertical "
+                             "planes (run the tumble or tumble-short program)");
+  out.positions.resize(static_cast<std::size_t>(n));
+  VectorXd w(n);
+  for (Eigen::Index i = 0; i < n; ++i) w[i] = rows[static_cast<std::size_t>(i)]->T_s;  // a mean's variance falls as 1/T
+
+  for (int j = 0; j < 3; ++j) {
+    // Accelerometer j's mean output against the reference specific force.
+    const std::vector<AngleColumn> angles = angles_of_row(j);
+    MatrixXd A(n, 4 + static_cast<Eigen::Index>(angles.size()));
+    VectorXd b(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Static& s = *rows[static_cast<std::size_t>(i)];
+      const double fj = s.f_o_mps2[j];
+      A(i, 0) = 1.0;                  // bias
+      A(i, 1) = fj;                   // scale
+      A(i, 2) = fj * fj / g;          // K2: the scale error gains k2 a, a = f_j / g
+      A(i, 3) = fj * fj * fj / (g * g);  // K3: the scale error gains k3 a^2
+      for (std::size_t c = 0; c < angles.size(); ++c) A(i, 4 + static_cast<Eigen::Index>(c)) = angles[c].row_per_rad.dot(s.f_o_mps2);
+      b[i] = s.sum_dv_mps[j] / s.T_s - fj;
+    }
+    if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
+      std::snprintf(buf, sizeof buf,
+                    "tumble: the statics do not determine accelerometer %s's bias, scale, K2, K3 and angles (it must "
+                    "turn through a whole vertical circle: run the tumble or tumble-short program)",
+                    kAxis[j]);
+      throw std::runtime_error(buf);
+    }
+    const least_squares::Fit fit = least_squares::solve(A, b, w);
+    AccelErrors& a = out.model.accel;
+    a.bias_mps2[j] = fit.x[0];
+    a.scale[j] = fit.x[1];
+    a.k2_per_g[j] = fit.x[2];
+    a.k3_per_g2[j] = fit.x[3];
+    sigma.accel.bias_mps2[j] = std::sqrt(fit.covariance(0, 0));
+    sigma.accel.scale[j] = std::sqrt(fit.covariance(1, 1));
+    sigma.accel.k2_per_g[j] = std::sqrt(fit.covariance(2, 2));
+    sigma.accel.k3_per_g2[j] = std::sqrt(fit.covariance(3, 3));
+    for (std::size_t c = 0; c < angles.size(); ++c) {
+      const auto k = static_cast<Eigen::Index>(4 + c);
+      a.misalignment_rad.*(angles[c].key->member) = fit.x[k];
+      sigma.accel.misalignment_rad.*(angles[c].key->member) = std::sqrt(fit.covariance(k, k));
+    }
+    const VectorXd r = b - A * fit.x;
+    for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].accel_residual_mps2[j] = r[i];
+    out.accel_residual_rms_mps2[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
+  }
+
+  // Each gyro at rest: what it measured beyond the Earth rate (through the prior's scale factors
+  // and misalignments) against the specific force at its origin, in g.
+  GyroErrors earth_model = prior.gyro;
+  earth_model.bias_radps.setZero();
+  earth_model.g_sensitivity_radps_per_g.setZero();
+  for (int j = 0; j < 3; ++j) {
+    MatrixXd A(n, 4);
+    VectorXd b(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Static& s = *rows[static_cast<std::size_t>(i)];
+      A(i, 0) = 1.0;
+      A.block(i, 1, 1, 3) = s.f_o_mps2.transpose() / g;
+      const Vector3d earth_out = apply_gyro_scale_misalignment(earth_model, s.earth_rad / s.T_s);
+      b[i] = s.sum_dtheta_rad[j] / s.T_s - earth_out[j];
+    }
+    if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
+      std::snprintf(buf, sizeof buf,
+                    "tumble: the statics do not determine gyro %s's g-sensitivity (the specific force must point "
+                    "along every axis of the IMU: run the tumble or tumble-short program)",
+                    kAxis[j]);
+      throw std::runtime_error(buf);
+    }
+    const least_squares::Fit fit = least_squares::solve(A, b, w);
+    out.model.gyro.bias_radps[j] = fit.x[0];
+    sigma.gyro.bias_radps[j] = std::sqrt(fit.covariance(0, 0));
+    for (int k = 0; k < 3; ++k) {
+      out.model.gyro.g_sensitivity_radps_per_g(j, k) = fit.x[1 + k];
+      sigma.gyro.g_sensitivity_radps_per_g(j, k) = std::sqrt(fit.covariance(1 + k, 1 + k));
+    }
+    const VectorXd r = b - A * fit.x;
+    for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].gyro_residual_radps[j] = r[i];
+    out.gyro_residual_rms_radps[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
+  }
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Static& s = *rows[static_cast<std::size_t>(i)];
+    Position& p = out.positions[static_cast<std::size_t>(i)];
+    p.segment = s.name;
+    p.duration_s = s.T_s;
+    p.f_o_mps2 = s.f_o_mps2;
+    p.accel_mps2 = s.sum_dv_mps / s.T_s;
+  }
+  std::snprintf(buf, sizeof buf,
+                "tumble: %lld statics; accelerometer residual rms %.2f %.2f %.2f ug, gyro %.4f %.4f %.4f deg/h",
+                static_cast<long long>(n), out.accel_residual_rms_mps2[0] / g * 1e6, out.accel_residual_rms_mps2[1] / g * 1e6,
+                out.accel_residual_rms_mps2[2] / g * 1e6, out.gyro_residual_rms_radps[0] * units::kRadpsToDph,
+                out.gyro_residual_rms_radps[1] * units::kRadpsToDph, out.gyro_residual_rms_radps[2] * units::kRadpsToDph);
+  out.notes.push_back(buf);
+  return out;
+}
+
+}  // namespace imucal::tumble
