@@ -119,7 +119,7 @@ struct RateStepsEstimator::Impl {
   Options options;
   table_reference::FrameReference reference;
   std::vector<Segment> segments;  // statics and rate segments, by time
-  std::size_t cursor = 0;
+  table_reference::SegmentFrames frames{{}};
   double dt_nominal_s = 0;
   bool have_prev = false;
   ImuFrame prev;
@@ -135,6 +135,9 @@ struct RateStepsEstimator::Impl {
       segments.push_back(seg);
     }
     std::sort(segments.begin(), segments.end(), [](const Segment& a, const Segment& b) { return a.t0_s < b.t0_s; });
+    std::vector<table_reference::SegmentFrames::Span> spans;
+    for (const Segment& s : segments) spans.push_back({s.t0_s, s.t1_s, !s.is_static});
+    frames = table_reference::SegmentFrames(std::move(spans));
   }
 
   void push(const ImuFrame& f) {
@@ -145,19 +148,8 @@ struct RateStepsEstimator::Impl {
     }
     const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
     const double dt = t - t_prev;
-    constexpr double eps = 1e-7;
-    while (cursor < segments.size() && t_prev >= segments[cursor].t1_s - eps) ++cursor;
-    // A rate segment takes every frame that overlaps it (its first and last frames straddle the
-    // rests around it, where the table does not move): the integral is then rest to rest. A static
-    // takes the frames wholly inside it.
-    for (std::size_t i = cursor; i < segments.size() && segments[i].t0_s < t - eps; ++i) {
-      Segment& s = segments[i];
-      if (t_prev >= s.t1_s - eps) continue;
-      if (!s.is_static || (t_prev >= s.t0_s - eps && t <= s.t1_s + eps)) {
-        accumulate(s, f, dt);
-        break;
-      }
-    }
+    const int i = frames.assign(t_prev, t);
+    if (i >= 0) accumulate(segments[static_cast<std::size_t>(i)], f, dt);
     prev = f;
   }
 

@@ -46,4 +46,15 @@ Vector3d FrameReference::specific_force_at_rest_o_mps2(const Vector3d& angles_de
   return C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
 }
 
+int SegmentFrames::assign(double t_prev_s, double t_s) {
+  constexpr double eps = 1e-7;  // the segment times are rounded program times; frames are on ns
+  while (cursor_ < spans_.size() && t_prev_s >= spans_[cursor_].t1_s - eps) ++cursor_;
+  for (std::size_t i = cursor_; i < spans_.size() && spans_[i].t0_s < t_s - eps; ++i) {
+    const Span& s = spans_[i];
+    if (t_prev_s >= s.t1_s - eps) continue;
+    if (s.overlapping || (t_prev_s >= s.t0_s - eps && t_s <= s.t1_s + eps)) return static_cast<int>(i);
+  }
+  return -1;
+}
+
 }  // namespace imucal::table_reference

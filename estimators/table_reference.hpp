@@ -1,7 +1,11 @@
-// The table's reference rotation of the instrument frame over one frame interval: the one rule
-// every estimator that compares gyro increments with the table's angles uses (stage 1's rest-to-rest
-// rotations, the rate-steps test).
+// The table's reference over one frame interval: the rotation of the instrument frame and the
+// specific force at rest, the one rule every estimator that compares the IMU's increments with the
+// table's angles uses (stage 1, the rate-steps test, the tumble); and which segment a frame
+// belongs to.
 #pragma once
+
+#include <utility>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -24,6 +28,31 @@ class FrameReference {
   Eigen::Matrix3d C_p0_n_, C_o_p_;
   Eigen::Vector3d w_ie_n_;
   double g_mps2_;
+};
+
+}  // namespace imucal::table_reference
+
+namespace imucal::table_reference {
+
+// Which segment a frame belongs to, the one rule of the estimators that accumulate segments: a
+// static takes the frames wholly inside it (the table at rest over each); a motion segment that
+// starts and ends at rest takes every frame that overlaps it (its first and last frames straddle
+// the rests around it, where nothing moves), so that its integral is rest to rest.
+class SegmentFrames {
+ public:
+  struct Span {
+    double t0_s = 0, t1_s = 0;
+    bool overlapping = false;  // a rest-to-rest motion; false: a static
+  };
+  // Spans sorted by t0_s and not overlapping each other.
+  explicit SegmentFrames(std::vector<Span> spans) : spans_(std::move(spans)) {}
+  // The index of the span the frame interval (t_prev_s, t_s] belongs to, or -1. Frames come in
+  // time order.
+  int assign(double t_prev_s, double t_s);
+
+ private:
+  std::vector<Span> spans_;
+  std::size_t cursor_ = 0;
 };
 
 }  // namespace imucal::table_reference

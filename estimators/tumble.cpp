@@ -53,7 +53,7 @@ struct TumbleEstimator::Impl {
   RecordingMeta meta;
   table_reference::FrameReference reference;
   std::vector<Static> statics;
-  std::size_t cursor = 0;
+  table_reference::SegmentFrames frames{{}};
   double dt_nominal_s;
   bool have_prev = false;
   ImuFrame prev;
@@ -62,6 +62,9 @@ struct TumbleEstimator::Impl {
     for (const SegmentInfo& s : m.segments)
       if (s.kind == "static" || s.kind == "tilt") statics.push_back({s.name, s.t0_s, s.t1_s});
     std::sort(statics.begin(), statics.end(), [](const Static& a, const Static& b) { return a.t0_s < b.t0_s; });
+    std::vector<table_reference::SegmentFrames::Span> spans;
+    for (const Static& s : statics) spans.push_back({s.t0_s, s.t1_s, false});
+    frames = table_reference::SegmentFrames(std::move(spans));
   }
 
   void push(const ImuFrame& f) {
@@ -72,11 +75,9 @@ struct TumbleEstimator::Impl {
     }
     const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
     const double dt = t - t_prev;
-    constexpr double eps = 1e-7;
-    while (cursor < statics.size() && t_prev >= statics[cursor].t1_s - eps) ++cursor;
     // The frames wholly inside a static: the table is at rest over each of them.
-    if (cursor < statics.size() && t_prev >= statics[cursor].t0_s - eps && t <= statics[cursor].t1_s + eps) {
-      Static& s = statics[cursor];
+    if (const int i = frames.assign(t_prev, t); i >= 0) {
+      Static& s = statics[static_cast<std::size_t>(i)];
       if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
       if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(f.table_deg);
       s.earth_rad += reference.increment_o_rad(prev.table_deg, f.table_deg, dt);

@@ -11,8 +11,8 @@
 #include <Eigen/QR>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
 #include "estimators/rate_steps.hpp"
+#include "sim_run.hpp"
 
 namespace imucal::ratestepstest {
 
@@ -52,19 +52,11 @@ inline double ieee_nonlinearity_ppm(const std::vector<double>& rates_dps, const 
 
 inline rate_steps::Result run_rate_steps(const std::string& program, const ImuModel& truth, double rate_hz,
                                   std::uint64_t seed) {
-  const auto p = motion::load_program(program, motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = rate_hz;
-  cfg.seed = seed;
-  cfg.site.middle_axis_azimuth_deg = 15;
-  sim::Simulator s(p, truth, cfg);
-  rate_steps::RateStepsEstimator est(s.meta());
-  ImuFrame f;
-  while (s.next(f)) est.push(f);
   // The prior a stage-1 run would give: the gyro misalignments (to 0.3"), nothing of the scales.
   ImuModel prior;
   prior.gyro.misalignment_rad = truth.gyro.misalignment_rad;
-  return est.finish(prior);
+  return simrun::simulate_into<rate_steps::RateStepsEstimator>(program, truth, rate_hz, seed,
+                                                               [&](auto& est) { return est.finish(prior); });
 }
 
 // Every step's scale at its rate, the fitted model there, the scale factors, the asymmetry and the

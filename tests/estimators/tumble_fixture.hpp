@@ -8,8 +8,8 @@
 #include <string>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
 #include "estimators/tumble.hpp"
+#include "sim_run.hpp"
 
 namespace imucal::tumbletest {
 
@@ -26,21 +26,13 @@ inline ImuModel tumble_truth() {
 }
 
 inline tumble::Result run_tumble(const std::string& program, const ImuModel& truth, double rate_hz, std::uint64_t seed) {
-  const auto p = motion::load_program(program, motion::TableLimits{});
-  sim::SimConfig cfg;
-  cfg.rate_hz = rate_hz;
-  cfg.seed = seed;
-  cfg.site.middle_axis_azimuth_deg = 15;
-  sim::Simulator s(p, truth, cfg);
-  tumble::TumbleEstimator est(s.meta());
-  ImuFrame f;
-  while (s.next(f)) est.push(f);
   // The prior a stage-1 run gives: the gyro scale factors and angles (what removes the Earth rate).
   ImuModel prior;
   prior.gyro.scale_pos = truth.gyro.scale_pos;
   prior.gyro.scale_neg = truth.gyro.scale_neg;
   prior.gyro.misalignment_rad = truth.gyro.misalignment_rad;
-  return est.finish(prior);
+  return simrun::simulate_into<tumble::TumbleEstimator>(program, truth, rate_hz, seed,
+                                                        [&](auto& est) { return est.finish(prior); });
 }
 
 struct Check {
