@@ -84,6 +84,8 @@ void DirectCalibrator::push(const ImuFrame& f) {
   }
   const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev_.t_ns) * 1e-9;
   const double dt = t - t_prev;
+  // Every frame, so that each knows the table's acceleration from the one before.
+  const Vector3d wdt_o = reference_.next_increment_o_rad(prev_.table_deg, f.table_deg, dt);
   constexpr double eps = 1e-7;
   while (next_static_ < statics_.size() && t > statics_[next_static_].t1_s + eps) ++next_static_;
   const bool in_static = next_static_ < statics_.size() && t > statics_[next_static_].t0_s + eps;
@@ -102,7 +104,6 @@ void DirectCalibrator::push(const ImuFrame& f) {
   Interval& iv = *current_;
   if (dt > options_.gap_factor * dt_nominal_s_ || dt <= 0) iv.gap = true;
 
-  const Vector3d wdt_o = reference_.increment_o_rad(prev_.table_deg, f.table_deg, dt);
   for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
   iv.moved_axes_rad += (f.table_deg - prev_.table_deg).cwiseAbs() * kDegToRad;
   // Specific force at rest: gravity reaction resolved in o.

@@ -148,15 +148,16 @@ struct RateStepsEstimator::Impl {
     }
     const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
     const double dt = t - t_prev;
+    // Every frame, so that each knows the table's acceleration from the one before.
+    const Vector3d wdt = reference.next_increment_o_rad(prev.table_deg, f.table_deg, dt);
     const int i = frames.assign(t_prev, t);
-    if (i >= 0) accumulate(segments[static_cast<std::size_t>(i)], f, dt);
+    if (i >= 0) accumulate(segments[static_cast<std::size_t>(i)], f, dt, wdt);
     prev = f;
   }
 
-  void accumulate(Segment& s, const ImuFrame& f, double dt) {
+  void accumulate(Segment& s, const ImuFrame& f, double dt, const Vector3d& wdt) {
     if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
     if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(prev.table_deg);
-    const Vector3d wdt = reference.increment_o_rad(prev.table_deg, f.table_deg, dt);
     for (int k = 0; k < 3; ++k) {
       (wdt[k] >= 0 ? s.ref_pos_rad[k] : s.ref_neg_rad[k]) += wdt[k];
       const double w = dt > 0 ? wdt[k] / dt : 0.0;

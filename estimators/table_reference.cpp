@@ -20,9 +20,10 @@ FrameReference::FrameReference(const RecordingMeta& meta)
       w_ie_n_(earth::w_ie_n(meta.site.latitude_deg * kDegToRad)),
       g_mps2_(earth::site_gravity_mps2(meta.site)) {}
 
-Vector3d FrameReference::increment_o_rad(const Vector3d& angles0_deg, const Vector3d& angles1_deg, double dt_s) const {
+Vector3d FrameReference::increment_o_rad(const Vector3d& angles0_deg, const Vector3d& angles1_deg, double dt_s,
+                                         const Vector3d& accel_radps2) const {
   const Vector3d a0 = angles0_deg * kDegToRad, a1 = angles1_deg * kDegToRad;
-  const Vector3d mid = 0.5 * (a0 + a1), d = a1 - a0;
+  const Vector3d mid = 0.5 * (a0 + a1) - accel_radps2 * (dt_s * dt_s / 12.0), d = a1 - a0;
   const Matrix3d A = table::Rz(-mid[2]);
   const Vector3d wdt_p = A * table::Rx(-mid[1]) * Vector3d::UnitZ() * d[0] + A * Vector3d::UnitX() * d[1] +
                          Vector3d::UnitZ() * d[2];
@@ -39,6 +40,19 @@ Vector3d FrameReference::increment_o_rad(const Vector3d& angles0_deg, const Vect
     earth_p = along + std::sin(0.5 * phi) / (0.5 * phi) * (earth_p - along);
   }
   return C_o_p_.transpose() * (wdt_p + earth_p);
+}
+
+Vector3d FrameReference::next_increment_o_rad(const Vector3d& angles0_deg, const Vector3d& angles1_deg, double dt_s) {
+  const Vector3d rate_radps = dt_s > 0 ? Vector3d((angles1_deg - angles0_deg) * kDegToRad / dt_s) : Vector3d::Zero();
+  Vector3d accel_radps2 = Vector3d::Zero();
+  // A backward difference: the acceleration half a frame early, which leaves a third-order error.
+  if (have_last_ && angles0_deg == last_end_deg_ && dt_s > 0 && last_dt_s_ > 0)
+    accel_radps2 = (rate_radps - last_rate_radps_) / (0.5 * (dt_s + last_dt_s_));
+  last_rate_radps_ = rate_radps;
+  last_end_deg_ = angles1_deg;
+  last_dt_s_ = dt_s;
+  have_last_ = true;
+  return increment_o_rad(angles0_deg, angles1_deg, dt_s, accel_radps2);
 }
 
 Vector3d FrameReference::specific_force_at_rest_o_mps2(const Vector3d& angles_deg) const {
