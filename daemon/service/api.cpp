@@ -699,8 +699,11 @@ HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::
   if (const auto stage = query.find("stage"); stage != query.end()) {
     // One calibration stage's model, as the campaign kept it with its results.
     const json results = row->results_json ? json::parse(*row->results_json, nullptr, false) : json::object();
-    if (!pipeline::stage_of_estimator(stage->second))
-      return error_reply(400, "stage must be one of direct, lever-arm, stage3");
+    if (!pipeline::stage_of_estimator(stage->second)) {
+      std::string names;
+      for (const pipeline::StageName& n : pipeline::stage_names()) names += (names.empty() ? "" : ", ") + std::string(n.estimator);
+      return error_reply(400, "stage must be one of " + names);
+    }
     if (!results.is_object() || !results.contains(stage->second) || !results.at(stage->second).contains("model"))
       return error_reply(404, "campaign " + std::to_string(id) + " has no model of stage " + stage->second);
     text = results.at(stage->second).at("model").dump();
