@@ -706,6 +706,19 @@ try {
   await shot(page, '17-results-rate-steps');
   log('results of rate-steps-short: IEEE 952 figures per gyro, scale error against rate with the fitted nonlinearity');
 
+  // ---- the tumble: K2, K3 and g-sensitivity in the coefficient table, the residual plots ----
+  const tumbleId = await startCampaign({ name: 'browser test: tumble', program: 'tumble-short', rate_hz: 20, seed: 14,
+    time_scale: 0, truth: { format: 'imucal-imu-model/1', accel: { k2_ug_per_g2: [30, -40, 20] }, gyro: { noise: { arw_deg_rth: 0.0005 } } } });
+  const tumbled = await waitCampaign(tumbleId, (c) => c.state === 'done', 'the tumble campaign');
+  assert.deepEqual(tumbled.spec.estimators, ['tumble']);
+  await page.goto(`${base}/#/campaigns/${tumbleId}`);
+  await page.waitForSelector('#coefficient-table tr[data-coefficient="accel.k2_ug_per_g2.y"]');
+  await page.waitForSelector('#coefficient-table tr[data-coefficient="gyro.g_sensitivity_dph_per_g.x.z"]');
+  assert.equal(await page.$$eval('#tumble .plot .uplot', (els) => els.length), 2);
+  await page.$eval('#tumble', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '18-results-tumble');
+  log('results of tumble-short: K2, K3 and g-sensitivity with sigma, the residuals of every position');
+
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });
   assert.equal(queued.status, 201);

@@ -171,6 +171,8 @@ export function mount(root, ctx) {
     // The rate-steps test: scale factor against rate, per gyro (IEEE 952).
     const rateSteps = d.results?.['rate-steps']?.rate_steps;
     if (rateSteps?.axes?.length) results.append(rateStepsSection(rateSteps));
+    const tumble = d.results?.tumble?.tumble;
+    if (tumble?.positions?.length) results.append(tumbleSection(tumble));
 
     // What the estimators said
     const notes = h('div', { class: 'stage-results', id: 'stage-results' });
@@ -475,6 +477,26 @@ export function mount(root, ctx) {
         'and the nonlinear terms, with the degree chosen by how well it predicts each rate left out. The nonlinearity is the largest ',
         'deviation of the output from its least-squares line over both signs (so an asymmetry shows in it too).'),
       tableEl, row);
+  }
+
+  // The tumble's residuals (docs/api.md, results.tumble.tumble): what every static left after the
+  // fit, per accelerometer and per gyro, in the order of the positions (two whole turns).
+  function tumbleSection(t) {
+    const row = h('div', { class: 'plot-row' });
+    const index = t.positions.map((_, i) => i + 1);
+    for (const [key, title, unit, rms] of [['accel_residual_ug', 'Accelerometer residuals', 'µg', t.accel_residual_rms_ug],
+      ['gyro_residual_dph', 'Gyro residuals', '°/h', t.gyro_residual_rms_dph]]) {
+      const box = h('div', { class: 'plot', dataset: { kind: key } });
+      row.append(box);
+      const c = lineChart(box, { title: `${title} (rms ${rms.map((v) => num(v, 2)).join(', ')} ${unit})`, x: 'position', y: unit,
+        height: 200, points: true, series: ['x', 'y', 'z'].map((a, i) => ({ label: a, color: COLORS[i], width: 1 })) });
+      c.setData([index, ...[0, 1, 2].map((j) => t.positions.map((p) => p[key][j]))]);
+      cleanups.push(() => c.destroy());
+    }
+    return h('div', { id: 'tumble' }, h('h3', {}, 'Tumble: what every position left after the fit (IEEE 1293)'),
+      h('p', { class: 'muted' }, `${t.positions.length} statics: bias, scale, K2, K3 and angles per accelerometer, bias and `,
+        'g-sensitivity per gyro (in the coefficient table). Residuals that follow the position (a pattern, not noise) mean a term the model lacks.'),
+      row);
   }
 
   // ---- record: segments, transitions, events, spec ----
