@@ -115,7 +115,6 @@ double Axis::scale_ppm_at(double rate_dps, double* sigma_ppm) const {
 }
 
 struct RateStepsEstimator::Impl {
-  RecordingMeta meta;
   Options options;
   table_reference::FrameReference reference;
   std::vector<Segment> segments;  // statics and rate segments, by time
@@ -124,7 +123,7 @@ struct RateStepsEstimator::Impl {
   bool have_prev = false;
   ImuFrame prev;
 
-  Impl(const RecordingMeta& m, const Options& o) : meta(m), options(o), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
+  Impl(const RecordingMeta& m, const Options& o) : options(o), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
     for (const SegmentInfo& s : m.segments) {
       if (s.kind != "static" && s.kind != "rate") continue;
       Segment seg;
@@ -253,9 +252,8 @@ Result RateStepsEstimator::finish(const ImuModel& prior) const {
     // extrapolation, which every degree does badly and which would let one rate decide.
     std::vector<int> rate_of_row(rows.size(), -1);
     for (std::size_t i = n_statics; i < rows.size(); ++i) rate_of_row[i] = group[i - n_statics];
+    // scores[d] and ax.scores[d]: degree d, from 0 up to the first the rates cannot determine.
     std::vector<held_back::Score> scores;
-    std::vector<int> degrees;
-    std::vector<double> held_rms;
     for (int d = 0; d <= impl_->options.max_degree; ++d) {
       if (n_rates < d + 2) break;
       held_back::Score sc;
@@ -285,17 +283,14 @@ Result RateStepsEstimator::finish(const ImuModel& prior) const {
         sc.e2.push_back(e2);
       }
       if (!ok) break;
-      held_rms.push_back(std::sqrt(ss_ppm / static_cast<double>(std::max(1, held_steps))));
+      ax.scores.push_back({d, std::sqrt(ss_ppm / static_cast<double>(std::max(1, held_steps)))});
       scores.push_back(std::move(sc));
-      degrees.push_back(d);
     }
     if (scores.empty()) {
       out.notes.push_back(std::string("gyro ") + kAxis[j] + ": the steps do not determine the scale factors");
       continue;
     }
-    const std::size_t chosen = held_back::choose(scores, held_back::Rule{});
-    for (std::size_t c = 0; c < scores.size(); ++c) ax.scores.push_back({degrees[c], held_rms[c]});
-    ax.degree = degrees[chosen];
+    ax.degree = static_cast<int>(held_back::choose(scores, held_back::Rule{}));
 
     const Solved solved = solve(rows, y, j, ax.degree);
     if (!solved.ok) {

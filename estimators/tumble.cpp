@@ -50,7 +50,6 @@ std::vector<AngleColumn> angles_of_row(int j) {
 }  // namespace
 
 struct TumbleEstimator::Impl {
-  RecordingMeta meta;
   table_reference::FrameReference reference;
   std::vector<Static> statics;
   table_reference::SegmentFrames frames{{}};
@@ -58,7 +57,7 @@ struct TumbleEstimator::Impl {
   bool have_prev = false;
   ImuFrame prev;
 
-  explicit Impl(const RecordingMeta& m) : meta(m), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
+  explicit Impl(const RecordingMeta& m) : reference(m), dt_nominal_s(1.0 / m.rate_hz) {
     for (const SegmentInfo& s : m.segments)
       if (s.kind == "static" || s.kind == "tilt") statics.push_back({s.name, s.t0_s, s.t1_s});
     std::sort(statics.begin(), statics.end(), [](const Static& a, const Static& b) { return a.t0_s < b.t0_s; });
