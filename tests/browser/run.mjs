@@ -283,6 +283,15 @@ try {
   await page.fill(`#seg-${rateRow}-rate_dps`, '30');
   await page.fill(`#seg-${rateRow}-revolutions`, '2');
   await waitText(page, '#verdict', /^Valid/);
+  // A frame rate over the daemon's limit: the field named as the form names it, whole numbers
+  // (issue 18, item 3: was "campaign.rate_hz 5000.0 exceeds the limit of 4000.0 Hz").
+  await page.fill('#c-rate', '5000');
+  await waitText(page, '#verdict', /^Refused/);
+  await waitText(page, '#problems', /^rate \(Hz\): 5000 Hz exceeds the limit of \d+ Hz$/);
+  await waitText(page, '[data-field="rate_hz"] .server-field-problem', /^rate \(Hz\): 5000 Hz exceeds/);
+  assert.equal((await page.textContent('label[for="c-rate"]')).trim(), 'rate (Hz)', 'the field is labelled as the message names it');
+  await page.fill('#c-rate', '50');
+  await waitText(page, '#verdict', /^Valid/);
   // Back to direct-short's own values: no longer "Edited", the campaign names the built-in program.
   assert.equal(await page.$('#template-info .modified'), null, '"Edited" goes when the edit is undone');
   assert.equal(JSON.parse(await page.textContent('#json-preview')).program, 'direct-short');
@@ -316,6 +325,13 @@ try {
   const a1 = await plotState();
   assert.ok(a1.points > a0.points && a1.lastX > a0.lastX, `the angle plot moves (${JSON.stringify(a0)} -> ${JSON.stringify(a1)})`);
   await page.waitForFunction(() => Number(document.querySelector('#plot-chamber .uplot')?.dataset.points) > 5);
+  // Times and counts for people (issue 18, item 3): "checkpoint 1 min 00 s", never "1 min 60 s";
+  // "22 statics", not "22.00"; the time axis in clock time, not bare seconds.
+  await waitText(page, '#run-time', /^program .+ of .+ · checkpoint (\d+(\.\d)? s|\d+ min \d\d s|\d+ h \d\d min|—)$/);
+  assert.ok(!/\b60 s\b/.test(await page.textContent('#run-time')), 'no "60 s" in a duration');
+  await waitText(page, '#estimator-status [data-estimator="direct"]', /[^\d.]\d+ statics, \d+ rotations, at /);
+  const ticks = await page.getAttribute('#plot-angles .uplot', 'data-x-ticks');
+  assert.match(ticks, /^\d\d:\d\d(:\d\d)?( \d\d:\d\d(:\d\d)?)*$/, `the time axis shows clock times: ${ticks}`);
   const angleValues = await page.evaluate(() => window.imucal.store.angles.view(60));
   const moved = [1, 2, 3].some((c) => Math.max(...angleValues[c]) - Math.min(...angleValues[c]) > 1);
   assert.ok(moved, 'the table angles change during the run');
@@ -535,6 +551,31 @@ try {
   await page.$eval('#plot-thermal', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14-results-thermal');
   log('Schuler test (three variants) and thermal plots drawn from campaigns that ran evaluate and thermal-short');
+
+  // ---- a stage that cannot determine something says what, every line of it (issue 18, item 3) ----
+  // Six statics, all z up, and three rotations about the vertical: enough segments for stage 1's
+  // check at creation, not enough to separate its coefficients.
+  const oneAxis = { name: 'z up only', segments: [
+    { type: 'positions', name: 'pos', positions_deg: [[0, 0, 0], [90, 0, 0], [180, 0, 0], [270, 0, 0], [45, 0, 0], [135, 0, 0]], dwell_s: 5 },
+    { type: 'rate', name: 'r1', axis: 'outer', rate_dps: 30, revolutions: 1 },
+    { type: 'rate', name: 'r2', axis: 'outer', rate_dps: 30, revolutions: 1 },
+    { type: 'rate', name: 'r3', axis: 'outer', rate_dps: 30, revolutions: 1 }] };
+  const undetermined = await apiCall('POST', '/api/campaigns', { name: 'browser test: stage 1 cannot determine', program: oneAxis,
+    estimators: ['direct'], rate_hz: 20, time_scale: 0 });
+  assert.equal(undetermined.status, 201, JSON.stringify(undetermined.body));
+  assert.equal((await apiCall('POST', `/api/campaigns/${undetermined.body.id}/start`)).status, 200);
+  await page.goto(`${base}/#/campaigns/${undetermined.body.id}`);
+  await waitText(page, '#campaign-state', /done|failed/, 60000);
+  const stageMessage = '#stage-results [data-estimator="direct"] .estimator-message';
+  await page.waitForSelector(stageMessage, { timeout: 30000 });
+  const messageLines = (await page.innerText(stageMessage)).split('\n').map((l) => l.trim()).filter(Boolean);
+  assert.equal(messageLines[0], 'stage direct: the recording cannot determine:');
+  assert.ok(messageLines.length >= 3 && messageLines.slice(1).every((l) => l.startsWith('- ')) &&
+    messageLines.some((l) => /^- gyro x scale_pos_ppm .*add a single-axis rate run/.test(l)),
+  `every missing coefficient on its own line, with the motion that would determine it:\n${messageLines.join('\n')}`);
+  await page.$eval('#stage-results', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '14b-results-stage-cannot-determine');
+  log(`stage 1 on a z-up-only program: "${messageLines[0]}" and ${messageLines.length - 1} lines naming what is missing`);
 
   // ---- the whole method from the builder: the built-in campaign `full` ----
   // direct, lever-arm, navigation, evaluate; stage 1, the lever arms and stage 3 online. Stage 3's

@@ -98,6 +98,18 @@ test("the daemon's problems land beside their segment or field", () => {
   assert.deepEqual(c, ["segment 'rate-z+' axis outer: rate 400.000 deg/s exceeds the limit 300.000 deg/s (at t = 10.0, 12.7 s)"]);
 });
 
+test("the daemon's problems about a campaign field name it as the form does", async () => {
+  const { problemForPeople, campaignFieldLabel } = await import('../../web/js/program_edit.mjs');
+  assert.equal(problemForPeople('campaign.rate_hz: 5000 Hz exceeds the limit of 4000 Hz'), 'rate (Hz): 5000 Hz exceeds the limit of 4000 Hz');
+  assert.equal(problemForPeople("campaign.chamber.setpoint_C 100 °C is outside the chamber's limits -40 .. 85 °C"),
+    "set point °C: 100 °C is outside the chamber's limits -40 .. 85 °C");
+  assert.equal(problemForPeople('campaign.imu.serial must have 1 to 64 printable characters'), 'serial: must have 1 to 64 printable characters');
+  assert.equal(campaignFieldLabel('chamber.steps[1].ramp_C_per_min'), 'chamber step 2 ramp C per min');
+  assert.equal(campaignFieldLabel('sim_faults[0].at_s'), 'fault 1 at s');
+  const programProblem = "campaign.program: segment 'x' (t=1.0 s) axis outer: rate 400 deg/s exceeds the limit 300 deg/s";
+  assert.equal(problemForPeople(programProblem), programProblem, 'program problems are placed by segment, not renamed');
+});
+
 test('a model flattens to the names the live estimates use, with units', () => {
   const model = {
     format: 'imucal-imu-model/1', frame: 'instrument',

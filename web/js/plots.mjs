@@ -71,7 +71,11 @@ export function lineChart(el, spec) {
     axes: [
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: time ? undefined : spec.x,
         size: time ? 30 : 40,
-        values: time ? (u, vals, axis, space, incr) => vals.map((v) => clockTick(v, incr)) : (u, vals) => vals.map(formatTick) },
+        values: time ? (u, vals, axis, space, incr) => {
+          const labels = vals.map((v) => clockTick(v, incr));
+          u.root.dataset.xTicks = labels.join(' ');  // the drawn labels, readable where the canvas is not
+          return labels;
+        } : (u, vals) => vals.map(formatTick) },
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' }, label: spec.y, size: 62,
         values: (u, vals) => vals.map(formatTick) },
     ],

@@ -159,6 +159,41 @@ export function mapProblems(problems, segments) {
   return { bySegment, byField, general };
 }
 
+// The campaign fields as the builder's form names them, by their JSON path (docs/api.md): one
+// table for the labels and for the daemon's problems about them, so that "campaign.rate_hz: ..."
+// reads "rate (Hz): ..." (issue 18, item 3).
+export const CAMPAIGN_FIELD_LABELS = {
+  name: 'name',
+  estimators: 'estimators',
+  rate_hz: 'rate (Hz)',
+  time_scale: 'time scale',
+  seed: 'seed',
+  truth: 'truth (simulation)',
+  'imu.serial': 'serial',
+  'imu.part_number': 'part number',
+  'imu.firmware': 'firmware',
+  'imu.customer': 'customer',
+  'imu.notes': 'notes',
+  'chamber.setpoint_C': 'set point °C',
+  'chamber.tolerance_C': 'tolerance °C',
+  chamber: 'chamber',
+  sim_faults: 'simulated faults',
+};
+
+// The form's name of a campaign field path: "chamber.steps[1].at_s" -> "chamber step 2 at_s".
+export function campaignFieldLabel(path) {
+  if (CAMPAIGN_FIELD_LABELS[path]) return CAMPAIGN_FIELD_LABELS[path];
+  const m = /^(chamber\.steps|sim_faults)\[(\d+)\](?:\.(\w+))?$/.exec(path);
+  if (m) return `${m[1] === 'sim_faults' ? 'fault' : 'chamber step'} ${Number(m[2]) + 1}${m[3] ? ` ${m[3].replace(/_/g, ' ')}` : ''}`;
+  return path.replace(/_/g, ' ');
+}
+
+// A daemon problem about a campaign field, with the field named as the form names it.
+export function problemForPeople(problem) {
+  const m = /^campaign\.(?!program)([A-Za-z_][\w.[\]]*?):? (?=\S)/.exec(problem);
+  return m ? `${campaignFieldLabel(m[1])}: ${problem.slice(m[0].length)}` : problem;
+}
+
 export function sourceIndex(compiled, segments) {
   const bare = compiled.includes('/') ? compiled.slice(compiled.lastIndexOf('/') + 1) : compiled;
   let i = segments.findIndex((s) => s.name === bare);

@@ -8,7 +8,7 @@ import { get, post, ApiError } from '../api.mjs';
 import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog } from '../dialogs.mjs';
-import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical } from '../program_edit.mjs';
+import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical, campaignFieldLabel, problemForPeople } from '../program_edit.mjs';
 import { SEED_TARGETS, predictionRows, summary } from '../plan.mjs';
 
 const DRAFT_KEY = 'imucal.builder.draft';
@@ -211,11 +211,11 @@ export function mount(root, ctx) {
     notes.value = u.notes || '';
     notes.addEventListener('input', () => { u.notes = notes.value; changed(); });
     unitBox.append(
-      fieldRow('serial', serial, 'imu.serial', 'the unit\'s serial number; known serials are offered as you type'),
-      fieldRow('part number', text('c-imu-part', 'part_number'), 'imu.part_number'),
-      fieldRow('firmware', text('c-imu-firmware', 'firmware'), 'imu.firmware'),
-      fieldRow('customer', text('c-imu-customer', 'customer'), 'imu.customer'),
-      fieldRow('notes', notes, 'imu.notes'));
+      fieldRow(campaignFieldLabel('imu.serial'), serial, 'imu.serial', 'the unit\'s serial number; known serials are offered as you type'),
+      fieldRow(campaignFieldLabel('imu.part_number'), text('c-imu-part', 'part_number'), 'imu.part_number'),
+      fieldRow(campaignFieldLabel('imu.firmware'), text('c-imu-firmware', 'firmware'), 'imu.firmware'),
+      fieldRow(campaignFieldLabel('imu.customer'), text('c-imu-customer', 'customer'), 'imu.customer'),
+      fieldRow(campaignFieldLabel('imu.notes'), notes, 'imu.notes'));
     setError(serial, serialProblem(u));
   }
 
@@ -276,7 +276,7 @@ export function mount(root, ctx) {
         let err = r.error || (r.empty ? null : check?.(r.value));
         setCampaign(key, r.empty ? undefined : r.value, err, el);
       });
-      return fieldRow(key.replace(/_/g, ' ').replace(/ (hz|s)$/, ' $1'), el, key, hint);
+      return fieldRow(campaignFieldLabel(key), el, key, hint);
     };
     const maxRate = limits?.campaign?.max_rate_hz;
     const truthSel = h('select', { id: 'c-truth-kind', dataset: { path: 'truth' } },
@@ -295,7 +295,7 @@ export function mount(root, ctx) {
       truthSel, truthPath, h('div', { class: 'field-error', id: 'c-truth-path-error', role: 'alert' }));
 
     campaignBox.append(
-      fieldRow('name', name, 'name'),
+      fieldRow(campaignFieldLabel('name'), name, 'name'),
       h('div', { class: 'field', dataset: { field: 'estimators' } }, h('label', {}, 'estimators'), est,
         h('div', { class: 'field-error', id: 'c-estimators-error', role: 'alert' })),
       numberInput('c-rate', 'rate_hz', maxRate ? `IMU frames per second, ≤ ${maxRate}` : 'IMU frames per second',
@@ -345,8 +345,8 @@ export function mount(root, ctx) {
     });
     chamberBox.append(
       h('div', { class: 'grid-form' },
-        fieldRow('set point °C', sp, 'chamber.setpoint_C', lim ? `${lim.min_C} … ${lim.max_C} °C; empty: hold the safe set point ${lim.safe_setpoint_C} °C` : ''),
-        fieldRow('tolerance °C', tol, 'chamber.tolerance_C', 'a reading outside set point ± tolerance suspends the run')),
+        fieldRow(campaignFieldLabel('chamber.setpoint_C'), sp, 'chamber.setpoint_C', lim ? `${lim.min_C} … ${lim.max_C} °C; empty: hold the safe set point ${lim.safe_setpoint_C} °C` : ''),
+        fieldRow(campaignFieldLabel('chamber.tolerance_C'), tol, 'chamber.tolerance_C', 'a reading outside set point ± tolerance suspends the run')),
       ch.steps?.length ? h('table', { class: 'steps' },
         h('thead', {}, h('tr', {}, h('th', {}, '#'), h('th', {}, 'at program time s'), h('th', {}, 'set point °C'),
           h('th', {}, `ramp °C/min (0: step${lim ? `; ≤ ${lim.max_ramp_C_per_min}` : ''})`), h('th', {}, ''))),
@@ -764,9 +764,9 @@ export function mount(root, ctx) {
         const host = root.querySelector(`[data-field="${CSS.escape(path)}"]`) || root.querySelector(`[data-field="${CSS.escape(path.split(/[.[]/)[0])}"]`);
         if (!host) { mapped.general.push(...list); continue; }
         host.classList.add('has-problems');
-        host.append(h('div', { class: 'server-field-problem problem' }, list.join('; ')));
+        host.append(h('div', { class: 'server-field-problem problem' }, list.map(problemForPeople).join('; ')));
       }
-      for (const p of compress(v.problems)) problemsList.append(h('li', { class: 'problem' }, p));
+      for (const p of compress(v.problems)) problemsList.append(h('li', { class: 'problem' }, problemForPeople(p)));
     }
     renderTimes(v.segments);
     updateRoleUi();

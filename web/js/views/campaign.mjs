@@ -177,11 +177,13 @@ export function mount(root, ctx) {
     // What the estimators said
     const notes = h('div', { class: 'stage-results', id: 'stage-results' });
     for (const [name, r] of Object.entries(d.results || {})) {
-      const facts = Object.entries(r).filter(([k, v]) => typeof v === 'number' || typeof v === 'string');
+      const facts = Object.entries(r).filter(([k, v]) => k !== 'message' && (typeof v === 'number' || typeof v === 'string'));
       notes.append(h('div', { class: 'stage', dataset: { estimator: name } }, h('h3', {}, `${name}`),
         // Counts as integers ("22 statics"), quantities with their unit, names without it.
         h('dl', { class: 'meta compact' }, ...facts.flatMap(([k, v]) => [h('dt', {}, labelOf(k)),
           h('dd', {}, typeof v === 'number' ? (Number.isInteger(v) ? String(v) : `${num(v)} ${unitOf(k)}`.trim()) : v)])),
+        // The whole message, one line each: a stage that cannot determine something lists what.
+        typeof r.message === 'string' ? h('div', { class: 'estimator-message' }, r.message) : null,
         Array.isArray(r.notes) && r.notes.length ? h('ul', { class: 'notes' }, ...r.notes.map((n) => h('li', {}, n))) : null));
     }
     if (notes.childElementCount) results.append(h('h3', {}, 'Estimators'), notes);
