@@ -561,7 +561,9 @@ try {
     { type: 'rate', name: 'r2', axis: 'outer', rate_dps: 30, revolutions: 1 },
     { type: 'rate', name: 'r3', axis: 'outer', rate_dps: 30, revolutions: 1 }] };
   const undetermined = await apiCall('POST', '/api/campaigns', { name: 'browser test: stage 1 cannot determine', program: oneAxis,
-    estimators: ['direct'], rate_hz: 20, time_scale: 0 });
+    estimators: ['direct'], rate_hz: 20, time_scale: 0,
+    // Two chamber excursions: two alarms for "Acknowledge all" below.
+    sim_faults: [{ kind: 'chamber_offset', at_s: 8, duration_s: 5, offset_C: 6 }, { kind: 'chamber_offset', at_s: 45, duration_s: 5, offset_C: 6 }] });
   assert.equal(undetermined.status, 201, JSON.stringify(undetermined.body));
   assert.equal((await apiCall('POST', `/api/campaigns/${undetermined.body.id}/start`)).status, 200);
   await page.goto(`${base}/#/campaigns/${undetermined.body.id}`);
@@ -576,6 +578,19 @@ try {
   await page.$eval('#stage-results', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14b-results-stage-cannot-determine');
   log(`stage 1 on a z-up-only program: "${messageLines[0]}" and ${messageLines.length - 1} lines naming what is missing`);
+
+  // ---- "Acknowledge all": one click for every alarm listed, each kept with its name and time ----
+  const excursions = async () => (await apiCall('GET', `/api/alarms?campaign=${undetermined.body.id}&all=1`)).body.alarms;
+  assert.equal((await excursions()).filter((a) => a.source === 'suspended').length, 2, 'the two excursions raised two alarms');
+  await waitText(page, '#alarm-ack-all', /^Acknowledge all \d+$/);
+  await page.evaluate(() => window.scrollTo(0, 0));
+  await shot(page, '14c-alarms-acknowledge-all');
+  await page.click('#alarm-ack-all');
+  await page.waitForSelector('#alarm-panel', { state: 'hidden' });
+  assert.equal((await apiCall('GET', '/api/alarms')).body.alarms.length, 0, 'no alarm is left to acknowledge');
+  for (const a of await excursions())
+    assert.ok(a.acknowledged_by === 'operator' && a.acknowledged, `alarm ${a.id} keeps who acknowledged it and when`);
+  log('"Acknowledge all" acknowledged both excursions of the run, each with the operator\'s name and the time');
 
   // ---- the whole method from the builder: the built-in campaign `full` ----
   // direct, lever-arm, navigation, evaluate; stage 1, the lever arms and stage 3 online. Stage 3's
