@@ -12,6 +12,8 @@
 #include <Eigen/LU>
 #include <nlohmann/json.hpp>
 
+#include "core/model_json.hpp"
+#include "core/turn_on.hpp"
 #include "core/units.hpp"
 
 namespace imucal {
@@ -163,7 +165,7 @@ CompensatedIncrements compensate_imu_increments(const GyroErrors& g, const Accel
   return c;
 }
 
-namespace {
+namespace model_json {
 
 [[noreturn]] void fail(const std::string& where, const std::string& what) {
   throw std::runtime_error(where + ": " + what);
@@ -196,6 +198,14 @@ double scalar(const json& j, const char* key, const std::string& where, double s
   return num(j.at(key), where + "." + key) * scale;
 }
 
+json arr(const Eigen::Vector3d& v, double scale) { return {v[0] * scale, v[1] * scale, v[2] * scale}; }
+
+}  // namespace model_json
+
+namespace {
+
+using namespace model_json;
+
 Misalignment misalignment_from(const json& j, const std::string& where) {
   Misalignment m;
   if (!j.contains("misalignment_arcsec")) return m;
@@ -212,7 +222,6 @@ json misalignment_to(const Misalignment& m) {
   return j;
 }
 
-json arr(const Eigen::Vector3d& v, double scale) { return {v[0] * scale, v[1] * scale, v[2] * scale}; }
 
 // 3x3 as three rows of three numbers (g_sensitivity_dph_per_g).
 Eigen::Matrix3d mat3(const json& j, const char* key, const std::string& where, double scale) {
@@ -382,7 +391,7 @@ ImuModel imu_model_from_json_text(const std::string& text, const std::string& so
     fail(source, std::string("not valid JSON: ") + e.what());
   }
   check_keys(j, source, {"format", "frame", "gyro", "accel", "sigma", "thermal", "body_to_instrument_arcsec",
-                         "mount", "serial", "status", "stages", "comment"});
+                         "mount", "serial", "status", "stages", "comment", "turn_on"});
   if (!j.contains("format") || j.at("format") != "imucal-imu-model/1")
     fail(source, "\"format\" must be \"imucal-imu-model/1\"");
   ImuModel m;
@@ -409,8 +418,10 @@ ImuModel imu_model_from_json_text(const std::string& text, const std::string& so
   }
   if (j.contains("thermal")) m.thermal_json = j.at("thermal").dump();
   json extra = json::object();
-  for (const char* k : {"serial", "status", "stages", "comment"})
+  for (const char* k : {"serial", "status", "stages", "comment", "turn_on"})
     if (j.contains(k)) extra[k] = j.at(k);
+  // Checked here, kept as written: the turn-on terms are read where they are used (turn_on.hpp).
+  if (j.contains("turn_on")) turn_on_from_json(j.at("turn_on"), source + ".turn_on");
   if (!extra.empty()) m.extra_json = extra.dump();
   return m;
 }

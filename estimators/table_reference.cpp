@@ -72,3 +72,17 @@ int SegmentFrames::assign(double t_prev_s, double t_s) {
 }
 
 }  // namespace imucal::table_reference
+
+namespace imucal::table_reference {
+
+std::optional<FrameInterval> FrameIntervals::next(const ImuFrame& frame) {
+  std::optional<FrameInterval> out;
+  if (prev_) {
+    const double t_prev = static_cast<double>(prev_->t_ns) * 1e-9, t = static_cast<double>(frame.t_ns) * 1e-9;
+    out = FrameInterval{*prev_, t_prev, t, t - t_prev};
+  }
+  prev_ = frame;
+  return out;
+}
+
+}  // namespace imucal::table_reference

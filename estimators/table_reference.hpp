@@ -4,6 +4,7 @@
 // belongs to.
 #pragma once
 
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -67,6 +68,25 @@ class SegmentFrames {
  private:
   std::vector<Span> spans_;
   std::size_t cursor_ = 0;
+};
+
+}  // namespace imucal::table_reference
+
+namespace imucal::table_reference {
+
+// Consecutive frames as the intervals they close: a frame's increments cover (t_prev, t], where
+// t_prev is the frame before's time stamp; the first frame only opens the first interval.
+struct FrameInterval {
+  ImuFrame prev;
+  double t_prev_s = 0, t_s = 0, dt_s = 0;
+};
+class FrameIntervals {
+ public:
+  // The interval `frame` closes; nothing for the first frame.
+  std::optional<FrameInterval> next(const ImuFrame& frame);
+
+ private:
+  std::optional<ImuFrame> prev_;
 };
 
 }  // namespace imucal::table_reference

@@ -109,6 +109,15 @@ json noise_program() {
           {"segments", json::array({hold("static", 7500)})}};
 }
 
+// IEEE 952 warm-up: one static from the moment the IMU is switched on (start the campaign as it
+// is powered), z up, long enough for several time constants of its transient.
+json warm_up_program(const std::string& name, double duration_s) {
+  return {{"name", name},
+          {"comment", "Warm-up: a static from power-on (switch the IMU on as the run starts), z up: the bias transient, "
+                      "its time constant and the time to settle"},
+          {"segments", json::array({hold("warm-up", duration_s)})}};
+}
+
 json evaluate_program() {
   json segs = json::array();
   segs.push_back(hold("start", 120));
@@ -220,7 +229,7 @@ json thermal_program(const std::string& name, int cycles, double dwell_s) {
 
 std::vector<std::string> builtin_program_names() {
   return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short",
-          "rate-steps", "rate-steps-short", "tumble", "tumble-short"};
+          "rate-steps", "rate-steps-short", "tumble", "tumble-short", "warm-up", "warm-up-short"};
 }
 
 std::string builtin_program_json(const std::string& name) {
@@ -243,6 +252,8 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "rate-steps-short") return rate_steps_program(name, {5, 10, 20, 50, 100, 150, 200, 300}, 10.0).dump(1);
   if (name == "tumble") return tumble_program(name, 24, 36.0).dump(1);
   if (name == "tumble-short") return tumble_program(name, 12, 20.0).dump(1);
+  if (name == "warm-up") return warm_up_program(name, 7200.0).dump(1);
+  if (name == "warm-up-short") return warm_up_program(name, 1800.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

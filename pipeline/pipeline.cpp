@@ -68,14 +68,15 @@ std::string span_text(double t0_s, double t1_s) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
-const std::array<StageName, 7>& stage_names() {
-  static const std::array<StageName, 7> names = {{{Stage::Direct, "direct", "direct", "direct"},
+const std::array<StageName, 8>& stage_names() {
+  static const std::array<StageName, 8> names = {{{Stage::Direct, "direct", "direct", "direct"},
                                                   {Stage::RateSteps, "rate-steps", "rate-steps", "rate-steps"},
                                                   {Stage::Tumble, "tumble", "tumble", "tumble"},
                                                   {Stage::LeverArm, "lever-arm", "lever-arm", "lever-arm"},
                                                   {Stage::Thermal, "thermal", "thermal", "thermal"},
                                                   {Stage::Navigation, "navigation", "stage3", "navigation"},
-                                                  {Stage::Noise, "noise", "noise", "noise"}}};
+                                                  {Stage::Noise, "noise", "noise", "noise"},
+                                                  {Stage::WarmUp, "warm-up", "warm-up", "warm-up"}}};
   return names;
 }
 
@@ -102,6 +103,7 @@ std::optional<Stage> purpose_of_program(std::string_view program) {
   if (program == "thermal-short") return Stage::Thermal;
   if (program == "rate-steps-short") return Stage::RateSteps;
   if (program == "tumble-short") return Stage::Tumble;
+  if (program == "warm-up-short") return Stage::WarmUp;
   for (const StageName& n : stage_names())
     if (program == n.program) return n.stage;
   return std::nullopt;
@@ -182,6 +184,19 @@ std::optional<std::string> requirement_unmet(Stage stage, const std::vector<Segm
       std::snprintf(buf, sizeof buf,
                     "stage noise needs a static segment of at least %.0f s; there is none (program 'noise' holds still for 7500 s)",
                     o.min_static_s);
+      return std::string(buf);
+    }
+    case Stage::WarmUp: {
+      // One static from power-on (the run's start), long enough for the fit's bins.
+      const warm_up::Options o;
+      const double needed_s = 60.0 * o.bin_s;
+      for (const SegmentInfo& s : segments)
+        if (is_static(s) && s.t1_s - s.t0_s >= needed_s) return std::nullopt;
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "stage warm-up needs a static of at least %.0f s from power-on; there is none (program 'warm-up' "
+                    "holds still for 2 h, 'warm-up-short' for 30 min)",
+                    needed_s);
       return std::string(buf);
     }
   }
@@ -593,9 +608,57 @@ class NoiseRun final : public Pipeline::Run {
   ImuModel start_;
 };
 
+// The warm-up: each channel's transient from power-on in one static.
+class WarmUpRun final : public Pipeline::Run {
+ public:
+  WarmUpRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start)
+      : estimator_(with_segments(meta, f.segments)), start_(start) {}
+  void push(const ImuFrame& f) override { estimator_.push(f); }
+  void finish(const FrameSource&, const Feed&, Outcome& out) override {
+    warm_up::Result r = estimator_.finish(start_);
+    out.notes.insert(out.notes.end(), r.notes.begin(), r.notes.end());
+    out.model = r.model;
+    out.warm_up = std::move(r);
+  }
+  json progress() const override { return {{"bins", estimator_.bins_seen()}}; }
+
+ private:
+  warm_up::WarmUpEstimator estimator_;
+  ImuModel start_;
+};
+
 }  // namespace
 
 namespace {
+
+// The warm-up's figures per channel, in the units people read (deg/h, ug), and its bins for the
+// plot of each channel's output from power-on with the fitted transient.
+json warm_up_json(const warm_up::Result& r) {
+  constexpr double ug_per_mps2 = 1e6 / units::kStandardGravity_mps2;
+  static const char* const kAxes[3] = {"x", "y", "z"};
+  json channels = json::array();
+  json deviation = json::array();
+  for (std::size_t c = 0; c < 6; ++c) {
+    const warm_up::Channel& ch = r.channels[c];
+    const double k = ch.gyro ? units::kRadpsToDph : ug_per_mps2;
+    const char* unit = ch.gyro ? "dph" : "ug";
+    channels.push_back({{"sensor", ch.gyro ? "gyro" : "accel"},
+                        {"axis", kAxes[ch.axis]},
+                        {"unit", unit},
+                        {"detected", ch.detected},
+                        {"resolved", ch.resolved},
+                        {"amplitude", json::array({ch.amplitude * k, ch.amplitude_sigma * k})},
+                        {"time_constant_s", json::array({ch.time_constant_s, ch.time_constant_sigma_s})},
+                        {"settle_time_s", json::array({ch.settle_time_s, ch.settle_time_sigma_s})},
+                        {"band", ch.band * k},
+                        {"residual_rms", ch.residual_rms * k},
+                        {"chi2_gain", ch.chi2_gain}});
+    json d = json::array();
+    for (double v : r.deviation[c]) d.push_back(v * k);
+    deviation.push_back(d);
+  }
+  return {{"duration_s", r.duration_s}, {"channels", channels}, {"t_s", r.t_s}, {"deviation", deviation}};
+}
 
 // The rate-steps test's figures (docs/api.md, results): per gyro, every [value, sigma] it gives,
 // the degree scores and the steps (for the scale-against-rate plot).
@@ -666,6 +729,7 @@ json Outcome::report() const {
   }
   if (rate_steps) j["rate_steps"] = rate_steps_json(*rate_steps);
   if (tumble) j["tumble"] = tumble_json(*tumble);
+  if (warm_up) j["warm_up"] = warm_up_json(*warm_up);
   if (lever_arm) {
     j["updates"] = lever_arm->updates;
     json mm = json::array(), sg = json::array();
@@ -718,7 +782,7 @@ Pipeline::Pipeline(const RecordingMeta& meta, std::vector<Stage> stages, bool as
   for (const StageName& n : stage_names())
     if (std::find(stages.begin(), stages.end(), n.stage) != stages.end()) ordered.push_back(n.stage);
   if (model_.frame != "instrument" &&
-      std::any_of(ordered.begin(), ordered.end(), [](Stage s) { return s != Stage::Navigation && s != Stage::Noise; }))
+      std::any_of(ordered.begin(), ordered.end(), [](Stage s) { return s != Stage::Navigation && s != Stage::Noise && s != Stage::WarmUp; }))
     throw std::invalid_argument("the start model is in the " + model_.frame +
                                 " frame: give the instrument-frame model (the body-frame form is an output of stage "
                                 "navigation)");
@@ -757,6 +821,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
           case Stage::Thermal: run_ = std::make_unique<ThermalRun>(meta_, f, model_, settings_); break;
           case Stage::Navigation: run_ = std::make_unique<NavigationRun>(meta_, f, model_, settings_); break;
           case Stage::Noise: run_ = std::make_unique<NoiseRun>(meta_, f, model_); break;
+          case Stage::WarmUp: run_ = std::make_unique<WarmUpRun>(meta_, f, model_); break;
         }
         out.status = Status::Running;
         feeder_ = Feeder(f.t0_ns, f.t1_ns);

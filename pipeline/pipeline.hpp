@@ -9,7 +9,7 @@
 // carry such a prefix is one part, named by its program (RecordingMeta::program_json).
 // Which part feeds which stage: the parts of the built-in program made for that stage (direct and
 // direct-short: stage direct; rate-steps and rate-steps-short; tumble and tumble-short;
-// lever-arm; thermal and thermal-short; navigation; noise). A part of
+// lever-arm; thermal and thermal-short; navigation; noise; warm-up and warm-up-short). A part of
 // an unknown program feeds every stage whose segment requirement it meets. A stage asked for by
 // name (`imucal calibrate --stage X`, a campaign's estimator) that no part feeds takes the whole
 // recording, as the estimator alone would; with `--stage all` it is skipped with the reason.
@@ -37,6 +37,7 @@
 #include "estimators/rate_steps.hpp"
 #include "estimators/thermal.hpp"
 #include "estimators/tumble.hpp"
+#include "estimators/warm_up.hpp"
 
 namespace imucal::storage {
 class RunDb;
@@ -44,7 +45,7 @@ class RunDb;
 
 namespace imucal::pipeline {
 
-enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise };
+enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise, WarmUp };
 
 struct StageName {
   Stage stage;
@@ -53,7 +54,7 @@ struct StageName {
   const char* program;    // the built-in program made for it (docs/programs.md)
 };
 // In pipeline order: each stage starts from the model of the stages before it.
-const std::array<StageName, 7>& stage_names();
+const std::array<StageName, 8>& stage_names();
 const StageName& names_of(Stage stage);
 std::optional<Stage> stage_named(std::string_view name);
 std::optional<Stage> stage_of_estimator(std::string_view estimator);
@@ -164,6 +165,7 @@ struct Outcome {
   std::optional<thermal::Result> thermal;
   std::optional<navfilter::Result> navigation;
   std::optional<noise::Result> noise;
+  std::optional<warm_up::Result> warm_up;
   std::vector<std::pair<std::string, std::string>> extras;  // run extras: key, JSON text
   std::int64_t frames = 0;
   double program_time_s = 0;  // of the last frame fed
@@ -175,7 +177,7 @@ class Pipeline {
  public:
   // `stages`: in any order (run in pipeline order); `asked` as for feed(). `start`: the model the
   // first stage starts from (ideal by default); a body-frame start model is refused unless the only
-  // stages are navigation (stage 3 works in the body frame) and noise.
+  // stages are navigation (stage 3 works in the body frame), noise and warm-up.
   Pipeline(const RecordingMeta& meta, std::vector<Stage> stages, bool asked, ImuModel start = {},
            Settings settings = {});
   ~Pipeline();

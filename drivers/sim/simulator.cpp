@@ -117,6 +117,13 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
       }
     }
   }
+
+  if (const auto section = turn_on_of(truth)) {
+    turn_on_ = section->value;
+    NormalStream draws(mix_seed(config.seed, 200));  // a source of its own: the other streams are unchanged
+    for (int j = 0; j < 3; ++j) turn_on_offset_[j] = turn_on_->gyro_repeatability_radps[j] * draws.next();
+    for (int j = 0; j < 3; ++j) turn_on_offset_[3 + j] = turn_on_->accel_repeatability_mps2[j] * draws.next();
+  }
 }
 
 TrueKinematics Simulator::kinematics(double t_s) const {
@@ -241,6 +248,12 @@ bool Simulator::next(ImuFrame& out) {
   } else {
     dtheta += truth_.gyro.bias_radps * dt_s_;
     dv += truth_.accel.bias_mps2 * dt_s_;
+  }
+  if (turn_on_) {
+    // This power-on's offsets and the warm-up transient, mid-sample (time constants are minutes).
+    const double t_mid = 0.5 * (t0 + t1);
+    dtheta += (turn_on_offset_.head<3>() + turn_on_->gyro_transient_radps(t_mid)) * dt_s_;
+    dv += (turn_on_offset_.tail<3>() + turn_on_->accel_transient_mps2(t_mid)) * dt_s_;
   }
   for (std::size_t ch = 0; ch < 6; ++ch) {
     const auto i = static_cast<Eigen::Index>(ch);

@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -14,6 +15,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/recording.hpp"
+#include "core/turn_on.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::sim {
@@ -133,6 +135,11 @@ class Simulator {
 
   std::vector<TempSample> temps_;
   double next_temp_t_s_ = 0.0;
+
+  // The truth's turn-on terms (core/turn_on.hpp): the IMU is powered on at t = 0; that power-on's
+  // bias offsets, gyro x y z then accelerometer x y z, drawn from their own stream.
+  std::optional<TurnOnTerms> turn_on_;
+  Eigen::Matrix<double, 6, 1> turn_on_offset_ = Eigen::Matrix<double, 6, 1>::Zero();
 };
 
 }  // namespace imucal::sim
