@@ -296,6 +296,22 @@ void print_outcome(const pipeline::Outcome& o) {
       std::printf("\n");
     }
   }
+  if (o.warm_up) {
+    // Each channel's transient from power-on, in deg/h and ug.
+    std::printf("warm-up over %.0f s from power-on:\n  %-8s %24s %22s %22s %10s\n", o.warm_up->duration_s, "channel",
+                "amplitude", "time constant s", "settle time s", "band");
+    for (const warm_up::Channel& ch : o.warm_up->channels) {
+      const double k = ch.gyro ? units::kRadpsToDph : 1e6 / units::kStandardGravity_mps2;
+      const char* unit = ch.gyro ? "deg/h" : "ug";
+      std::printf("  %-6s %c %11.5f +- %7.5f %-5s", ch.gyro ? "gyro" : "accel", "xyz"[ch.axis], ch.amplitude * k,
+                  ch.amplitude_sigma * k, unit);
+      if (ch.detected)
+        std::printf(" %9.0f +- %7.0f %11.0f +- %7.0f %7.4g %s\n", ch.time_constant_s, ch.time_constant_sigma_s,
+                    ch.settle_time_s, ch.settle_time_sigma_s, ch.band * k, unit);
+      else
+        std::printf(" no transient above the noise\n");
+    }
+  }
   if (o.navigation) {
     const navfilter::Result& r = *o.navigation;
     std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
@@ -344,10 +360,10 @@ int cmd_calibrate(const CalibrateArgs& a) {
     const std::string name = pipeline::names_of(o.stage).name;
     print_outcome(o);
     for (const auto& [key, text] : o.extras) db.set_extra(key, text);
-    if ((o.thermal || o.rate_steps) && !a.report.empty()) {
+    if ((o.thermal || o.rate_steps || o.warm_up) && !a.report.empty()) {
       std::ofstream out(a.report);
       if (!out) throw std::runtime_error(a.report + ": cannot write");
-      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at("rate_steps")).dump(1) << "\n";
+      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at(o.rate_steps ? "rate_steps" : "warm_up")).dump(1) << "\n";
     }
     if (o.status == pipeline::Status::Done) {
       ran.push_back(name + " on " + o.source);
@@ -704,12 +720,18 @@ int main(int argc, char** argv) {
   CalibrateArgs cal_args;
   auto* cal = app.add_subcommand("calibrate", "Estimate the IMU model from a stored run");
   cal->add_option("--db", cal_args.db, "run database")->required()->check(CLI::ExistingFile);
-  cal->add_option("--stage", cal_args.stage, "direct, rate-steps, tumble, lever-arm, thermal, noise, navigation or all")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"direct", "rate-steps", "tumble", "lever-arm", "thermal", "noise", "navigation", "all"}));
+  // The stages as the pipeline names them, in its order: one list for the check and the help.
+  std::vector<std::string> stage_choices;
+  std::string stage_help;
+  for (const pipeline::StageName& n : pipeline::stage_names()) {
+    stage_choices.emplace_back(n.name);
+    stage_help += std::string(n.name) + ", ";
+  }
+  stage_choices.emplace_back("all");
+  cal->add_option("--stage", cal_args.stage, stage_help + "or all")->capture_default_str()->check(CLI::IsMember(stage_choices));
   cal->add_option("--report", cal_args.report,
-                  "stage thermal or rate-steps: write the stage's report (thermal: residuals, degrees, plots; "
-                  "rate-steps: every figure per gyro and rate) here");
+                  "stage thermal, rate-steps or warm-up: write the stage's report (thermal: residuals, degrees, plots; "
+                  "rate-steps: every figure per gyro and rate; warm-up: every channel's transient and the bins) here");
   cal->add_option("--statics-per-cycle", cal_args.statics_per_cycle,
                   "stage thermal: statics per table cycle, for a run whose statics are not named cycle-NNN/...");
   cal->add_option("--t-ref-C", cal_args.t_ref_C, "stage thermal: reference temperature (default: middle of the data)");

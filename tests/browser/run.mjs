@@ -775,6 +775,22 @@ try {
   await shot(page, '18-results-tumble');
   log('results of tumble-short: K2, K3 and g-sensitivity with sigma, the residuals of every position');
 
+  // ---- the warm-up: each channel's transient from power-on, its time constant and settle time ----
+  const warmId = await startCampaign({ name: 'browser test: warm-up', program: 'warm-up-short', rate_hz: 10, seed: 15, time_scale: 0,
+    truth: { format: 'imucal-imu-model/1', gyro: { noise: { arw_deg_rth: 0.0005 } }, accel: { noise: { vrw_mps_rth: 0.002 } },
+      turn_on: { gyro: { warm_up_dph: [0.05, -0.03, 0.06], warm_up_time_constant_s: [300, 400, 480] } } } });
+  const warmed = await waitCampaign(warmId, (c) => c.state === 'done', 'the warm-up campaign');
+  assert.deepEqual(warmed.spec.estimators, ['warm-up']);
+  await page.goto(`${base}/#/campaigns/${warmId}`);
+  await page.waitForSelector('#warm-up-table tr[data-channel="gyro.z"][data-detected="true"]');
+  await waitText(page, '#warm-up-table tr[data-channel="gyro.z"]', /\d+ min \d\d s ± \d/);
+  // The accelerometers of this truth do not warm up: said so, not a number.
+  await waitText(page, '#warm-up-table tr[data-channel="accel.x"]', /no transient above the noise/);
+  assert.equal(await page.$$eval('#warm-up .plot .uplot', (els) => els.length), 2);
+  await page.$eval('#warm-up', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '19-results-warm-up');
+  log('results of warm-up-short: the gyros\' transients with time constants and settle times, the accelerometers without one');
+
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });
   assert.equal(queued.status, 201);

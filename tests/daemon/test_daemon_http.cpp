@@ -47,6 +47,8 @@ TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
   EXPECT_EQ(by_name.at("rate-steps-short").at("estimators"), json({"rate-steps"}));
   EXPECT_EQ(by_name.at("tumble").at("estimators"), json({"tumble"}));
   EXPECT_EQ(by_name.at("tumble-short").at("estimators"), json({"tumble"}));
+  EXPECT_EQ(by_name.at("warm-up").at("estimators"), json({"warm-up"}));
+  EXPECT_EQ(by_name.at("warm-up-short").at("estimators"), json({"warm-up"}));
 
   const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
                                                     "time_scale": 100})");

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "../estimators/test_thermal_fixture.hpp"
+#include "core/turn_on.hpp"
 #include "daemon/service/estimator_worker.hpp"
 #include "drivers/sim/simulator.hpp"
 #include "motion_programs/program.hpp"
@@ -139,6 +140,21 @@ TEST(PipelinePaths, TumbleGivesTheSameModelOnlineAndOffline) {
   ASSERT_TRUE(m.sigma.has_value());
   for (int j = 0; j < 3; ++j)
     EXPECT_NEAR(m.accel.k2_per_g[j], truth.accel.k2_per_g[j], 3.0 * m.sigma->accel.k2_per_g[j]) << "K2 of accelerometer " << j;
+}
+
+TEST(PipelinePaths, WarmUpGivesTheSameModelOnlineAndOffline) {
+  ImuModel truth = noisy_truth();
+  TurnOnSection s;
+  s.value.gyro_warm_up_radps = Eigen::Vector3d(0.05, -0.03, 0.06) * units::kDphToRadps;
+  s.value.gyro_time_constant_s = Eigen::Vector3d(300, 400, 480);
+  set_turn_on(truth, s);
+  const Recording rec = record("warm-up", "warm-up-short", 20, 0, truth);
+  expect_same_model(rec, "warm-up", "warm-up", noisy_truth());
+  const auto found = turn_on_of(worker_model(rec, "warm-up", noisy_truth()));
+  ASSERT_TRUE(found.has_value() && found->sigma.has_value());
+  for (int j = 0; j < 3; ++j)
+    EXPECT_NEAR(found->value.gyro_time_constant_s[j], s.value.gyro_time_constant_s[j], 3.0 * found->sigma->gyro_time_constant_s[j])
+        << "the time constant of gyro " << j;
 }
 
 TEST(PipelinePaths, LeverArmGivesTheSameModelOnlineAndOffline) {
