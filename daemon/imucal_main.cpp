@@ -312,6 +312,16 @@ void print_outcome(const pipeline::Outcome& o) {
         std::printf(" no transient above the noise\n");
     }
   }
+  if (o.repeatability) {
+    const repeatability::Result& r = *o.repeatability;
+    std::printf("turn-on to turn-on repeatability over %zu power-ons:\n  %-8s %24s %12s %12s\n", r.turn_ons.size(),
+                "channel", "repeatability (1 sigma)", "spread", "noise");
+    for (const repeatability::Channel& ch : r.channels) {
+      const double k = ch.gyro ? units::kRadpsToDph : 1e6 / units::kStandardGravity_mps2;
+      std::printf("  %-6s %c %11.5f +- %7.5f %-5s %12.5f %12.5f\n", ch.gyro ? "gyro" : "accel", "xyz"[ch.axis],
+                  ch.repeatability * k, ch.repeatability_sigma * k, ch.gyro ? "deg/h" : "ug", ch.spread * k, ch.noise * k);
+    }
+  }
   if (o.navigation) {
     const navfilter::Result& r = *o.navigation;
     std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
@@ -360,10 +370,10 @@ int cmd_calibrate(const CalibrateArgs& a) {
     const std::string name = pipeline::names_of(o.stage).name;
     print_outcome(o);
     for (const auto& [key, text] : o.extras) db.set_extra(key, text);
-    if ((o.thermal || o.rate_steps || o.warm_up) && !a.report.empty()) {
+    if ((o.thermal || o.rate_steps || o.warm_up || o.repeatability) && !a.report.empty()) {
       std::ofstream out(a.report);
       if (!out) throw std::runtime_error(a.report + ": cannot write");
-      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at(o.rate_steps ? "rate_steps" : "warm_up")).dump(1) << "\n";
+      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at(o.rate_steps ? "rate_steps" : o.warm_up ? "warm_up" : "repeatability")).dump(1) << "\n";
     }
     if (o.status == pipeline::Status::Done) {
       ran.push_back(name + " on " + o.source);
@@ -730,8 +740,9 @@ int main(int argc, char** argv) {
   stage_choices.emplace_back("all");
   cal->add_option("--stage", cal_args.stage, stage_help + "or all")->capture_default_str()->check(CLI::IsMember(stage_choices));
   cal->add_option("--report", cal_args.report,
-                  "stage thermal, rate-steps or warm-up: write the stage's report (thermal: residuals, degrees, plots; "
-                  "rate-steps: every figure per gyro and rate; warm-up: every channel's transient and the bins) here");
+                  "stage thermal, rate-steps, warm-up or repeatability: write the stage's report (thermal: residuals, "
+                  "degrees, plots; rate-steps: every figure per gyro and rate; warm-up: every channel's transient and "
+                  "the bins; repeatability: every channel's figure and each power-on's mean) here");
   cal->add_option("--statics-per-cycle", cal_args.statics_per_cycle,
                   "stage thermal: statics per table cycle, for a run whose statics are not named cycle-NNN/...");
   cal->add_option("--t-ref-C", cal_args.t_ref_C, "stage thermal: reference temperature (default: middle of the data)");

@@ -118,6 +118,25 @@ json warm_up_program(const std::string& name, double duration_s) {
           {"segments", json::array({hold("warm-up", duration_s)})}};
 }
 
+// IEEE 952 turn-on to turn-on repeatability: `turn_ons` power-ons, z up, each followed by a rest
+// of settle_s (kind "settle": its warm-up, not measured) and a static of dwell_s; before each
+// power-on after the first a power-cycle segment (imucald prompts the operator to switch the IMU
+// off and on, and waits).
+json repeatability_program(const std::string& name, int turn_ons, double rest_s, double settle_s, double dwell_s) {
+  json segs = json::array();
+  char label[16];
+  for (int k = 1; k <= turn_ons; ++k) {
+    std::snprintf(label, sizeof label, "%02d", k);
+    if (k > 1) segs.push_back({{"type", "power-cycle"}, {"name", std::string("power-") + label}, {"duration_s", rest_s}});
+    segs.push_back({{"type", "hold"}, {"name", std::string("settle-") + label}, {"kind", "settle"}, {"duration_s", settle_s}});
+    segs.push_back(hold(std::string("on-") + label, dwell_s));
+  }
+  return {{"name", name},
+          {"comment", "Turn-on to turn-on repeatability: switch the IMU on as the run starts; imucald asks for each "
+                      "further power cycle and waits"},
+          {"segments", segs}};
+}
+
 json evaluate_program() {
   json segs = json::array();
   segs.push_back(hold("start", 120));
@@ -229,7 +248,8 @@ json thermal_program(const std::string& name, int cycles, double dwell_s) {
 
 std::vector<std::string> builtin_program_names() {
   return {"direct", "direct-short", "lever-arm", "navigation", "noise", "evaluate", "thermal", "thermal-short",
-          "rate-steps", "rate-steps-short", "tumble", "tumble-short", "warm-up", "warm-up-short"};
+          "rate-steps", "rate-steps-short", "tumble", "tumble-short", "warm-up", "warm-up-short",
+          "repeatability", "repeatability-short"};
 }
 
 std::string builtin_program_json(const std::string& name) {
@@ -254,6 +274,8 @@ std::string builtin_program_json(const std::string& name) {
   if (name == "tumble-short") return tumble_program(name, 12, 20.0).dump(1);
   if (name == "warm-up") return warm_up_program(name, 7200.0).dump(1);
   if (name == "warm-up-short") return warm_up_program(name, 1800.0).dump(1);
+  if (name == "repeatability") return repeatability_program(name, 8, 30.0, 300.0, 600.0).dump(1);
+  if (name == "repeatability-short") return repeatability_program(name, 6, 10.0, 30.0, 120.0).dump(1);
   throw std::invalid_argument("unknown built-in program '" + name + "'");
 }
 

@@ -385,6 +385,10 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
     const std::string where = "segment " + std::to_string(index) + " '" + name + "'";
     if (type == "hold") {
       b.hold(Builder::number(seg, "duration_s", where), name, seg.value("kind", std::string("static")), where);
+    } else if (type == "power-cycle") {
+      // The IMU is switched off and on before it (imucald prompts the operator and waits); the
+      // table rests for duration_s after the power-on.
+      b.hold(Builder::number(seg, "duration_s", where), name, "power-cycle", where);
     } else if (type == "move") {
       if (!seg.contains("to_deg")) Builder::fail(where, "missing \"to_deg\"");
       b.move(Builder::angles3(seg.at("to_deg"), where), Builder::number_or(seg, "duration_s", 0.0, where), name);
@@ -399,7 +403,7 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
     } else if (type == "coning") {
       b.coning(seg, name, where);
     } else {
-      Builder::fail(where, "unknown type \"" + type + "\" (hold, move, positions, tilts, rate, sine, coning)");
+      Builder::fail(where, "unknown type \"" + type + "\" (hold, move, positions, tilts, rate, sine, coning, power-cycle)");
     }
   }
   return b.program;

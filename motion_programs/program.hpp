@@ -76,8 +76,8 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
 std::vector<std::string> validate_program(const Program& program, const TableLimits& limits);
 
 // Built-in programs: direct, direct-short, lever-arm, navigation, noise, evaluate, thermal,
-// thermal-short, rate-steps, rate-steps-short, tumble, tumble-short, warm-up, warm-up-short
-// (docs/programs.md).
+// thermal-short, rate-steps, rate-steps-short, tumble, tumble-short, warm-up, warm-up-short,
+// repeatability, repeatability-short (docs/programs.md).
 std::vector<std::string> builtin_program_names();
 std::string builtin_program_json(const std::string& name);  // throws for an unknown name
 // A name of a built-in or a path to a JSON file.

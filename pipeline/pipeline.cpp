@@ -68,15 +68,16 @@ std::string span_text(double t0_s, double t1_s) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
-const std::array<StageName, 8>& stage_names() {
-  static const std::array<StageName, 8> names = {{{Stage::Direct, "direct", "direct", "direct"},
+const std::array<StageName, 9>& stage_names() {
+  static const std::array<StageName, 9> names = {{{Stage::Direct, "direct", "direct", "direct"},
                                                   {Stage::RateSteps, "rate-steps", "rate-steps", "rate-steps"},
                                                   {Stage::Tumble, "tumble", "tumble", "tumble"},
                                                   {Stage::LeverArm, "lever-arm", "lever-arm", "lever-arm"},
                                                   {Stage::Thermal, "thermal", "thermal", "thermal"},
                                                   {Stage::Navigation, "navigation", "stage3", "navigation"},
                                                   {Stage::Noise, "noise", "noise", "noise"},
-                                                  {Stage::WarmUp, "warm-up", "warm-up", "warm-up"}}};
+                                                  {Stage::WarmUp, "warm-up", "warm-up", "warm-up"},
+                                                  {Stage::Repeatability, "repeatability", "repeatability", "repeatability"}}};
   return names;
 }
 
@@ -104,6 +105,7 @@ std::optional<Stage> purpose_of_program(std::string_view program) {
   if (program == "rate-steps-short") return Stage::RateSteps;
   if (program == "tumble-short") return Stage::Tumble;
   if (program == "warm-up-short") return Stage::WarmUp;
+  if (program == "repeatability-short") return Stage::Repeatability;
   for (const StageName& n : stage_names())
     if (program == n.program) return n.stage;
   return std::nullopt;
@@ -198,6 +200,14 @@ std::optional<std::string> requirement_unmet(Stage stage, const std::vector<Segm
                     "holds still for 2 h, 'warm-up-short' for 30 min)",
                     needed_s);
       return std::string(buf);
+    }
+    case Stage::Repeatability: {
+      // Power-ons with a static after each: the run's start and two power cycles at least.
+      const int cycles = count_kind(segments, "power-cycle");
+      if (cycles >= 2 && statics >= 3) return std::nullopt;
+      return "stage repeatability needs statics after at least 3 power-ons (2 power-cycle segments or more); there are " +
+             std::to_string(cycles) + " power-cycle segments and " + std::to_string(statics) +
+             " statics (program 'repeatability' or 'repeatability-short' gives them)";
     }
   }
   return std::string("unknown stage");
@@ -627,9 +637,58 @@ class WarmUpRun final : public Pipeline::Run {
   ImuModel start_;
 };
 
+// Turn-on to turn-on repeatability: each power-on's static mean, their spread less the noise.
+class RepeatabilityRun final : public Pipeline::Run {
+ public:
+  RepeatabilityRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start)
+      : estimator_(with_segments(meta, f.segments)), start_(start) {}
+  void push(const ImuFrame& f) override { estimator_.push(f); }
+  void finish(const FrameSource&, const Feed&, Outcome& out) override {
+    repeatability::Result r = estimator_.finish(start_);
+    out.notes.insert(out.notes.end(), r.notes.begin(), r.notes.end());
+    out.model = r.model;
+    out.repeatability = std::move(r);
+  }
+  json progress() const override { return {{"turn_ons", estimator_.turn_ons_seen()}}; }
+
+ private:
+  repeatability::RepeatabilityEstimator estimator_;
+  ImuModel start_;
+};
+
 }  // namespace
 
 namespace {
+
+// The repeatability's figures per channel (deg/h, ug) and each power-on's static mean less the
+// mean over the power-ons, with its sigma (for a plot against the power-on).
+json repeatability_json(const repeatability::Result& r) {
+  constexpr double ug_per_mps2 = 1e6 / units::kStandardGravity_mps2;
+  static const char* const kAxes[3] = {"x", "y", "z"};
+  json channels = json::array();
+  repeatability::Vector6d mean = repeatability::Vector6d::Zero();
+  for (const repeatability::TurnOn& t : r.turn_ons) mean += t.mean / static_cast<double>(r.turn_ons.size());
+  for (const repeatability::Channel& ch : r.channels) {
+    const double k = ch.gyro ? units::kRadpsToDph : ug_per_mps2;
+    channels.push_back({{"sensor", ch.gyro ? "gyro" : "accel"}, {"axis", kAxes[ch.axis]}, {"unit", ch.gyro ? "dph" : "ug"},
+                        {"repeatability", json::array({ch.repeatability * k, ch.repeatability_sigma * k})},
+                        {"interval_68", json::array({ch.lo68 * k, ch.hi68 * k})},
+                        {"interval_997", json::array({ch.lo997 * k, ch.hi997 * k})},
+                        {"spread", ch.spread * k}, {"noise", ch.noise * k}});
+  }
+  json turn_ons = json::array();
+  for (const repeatability::TurnOn& t : r.turn_ons) {
+    json offset = json::array(), sigma = json::array();
+    for (int c = 0; c < 6; ++c) {
+      const double k = c < 3 ? units::kRadpsToDph : ug_per_mps2;
+      offset.push_back((t.mean[c] - mean[c]) * k);
+      sigma.push_back(t.mean_sigma[c] * k);
+    }
+    turn_ons.push_back({{"index", t.index}, {"segment", t.segment}, {"t0_s", t.t0_s}, {"duration_s", t.duration_s},
+                        {"offset", offset}, {"offset_sigma", sigma}});
+  }
+  return {{"channels", channels}, {"turn_ons", turn_ons}};
+}
 
 // The warm-up's figures per channel, in the units people read (deg/h, ug), and its bins for the
 // plot of each channel's output from power-on with the fitted transient.
@@ -730,6 +789,7 @@ json Outcome::report() const {
   if (rate_steps) j["rate_steps"] = rate_steps_json(*rate_steps);
   if (tumble) j["tumble"] = tumble_json(*tumble);
   if (warm_up) j["warm_up"] = warm_up_json(*warm_up);
+  if (repeatability) j["repeatability"] = repeatability_json(*repeatability);
   if (lever_arm) {
     j["updates"] = lever_arm->updates;
     json mm = json::array(), sg = json::array();
@@ -782,7 +842,8 @@ Pipeline::Pipeline(const RecordingMeta& meta, std::vector<Stage> stages, bool as
   for (const StageName& n : stage_names())
     if (std::find(stages.begin(), stages.end(), n.stage) != stages.end()) ordered.push_back(n.stage);
   if (model_.frame != "instrument" &&
-      std::any_of(ordered.begin(), ordered.end(), [](Stage s) { return s != Stage::Navigation && s != Stage::Noise && s != Stage::WarmUp; }))
+      std::any_of(ordered.begin(), ordered.end(), [](Stage s) { return s != Stage::Navigation && s != Stage::Noise && s != Stage::WarmUp &&
+                                                                 s != Stage::Repeatability; }))
     throw std::invalid_argument("the start model is in the " + model_.frame +
                                 " frame: give the instrument-frame model (the body-frame form is an output of stage "
                                 "navigation)");
@@ -822,6 +883,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
           case Stage::Navigation: run_ = std::make_unique<NavigationRun>(meta_, f, model_, settings_); break;
           case Stage::Noise: run_ = std::make_unique<NoiseRun>(meta_, f, model_); break;
           case Stage::WarmUp: run_ = std::make_unique<WarmUpRun>(meta_, f, model_); break;
+          case Stage::Repeatability: run_ = std::make_unique<RepeatabilityRun>(meta_, f, model_); break;
         }
         out.status = Status::Running;
         feeder_ = Feeder(f.t0_ns, f.t1_ns);

@@ -9,7 +9,8 @@
 // carry such a prefix is one part, named by its program (RecordingMeta::program_json).
 // Which part feeds which stage: the parts of the built-in program made for that stage (direct and
 // direct-short: stage direct; rate-steps and rate-steps-short; tumble and tumble-short;
-// lever-arm; thermal and thermal-short; navigation; noise; warm-up and warm-up-short). A part of
+// lever-arm; thermal and thermal-short; navigation; noise; warm-up and warm-up-short;
+// repeatability and repeatability-short). A part of
 // an unknown program feeds every stage whose segment requirement it meets. A stage asked for by
 // name (`imucal calibrate --stage X`, a campaign's estimator) that no part feeds takes the whole
 // recording, as the estimator alone would; with `--stage all` it is skipped with the reason.
@@ -35,6 +36,7 @@
 #include "estimators/nav_filter.hpp"
 #include "estimators/noise.hpp"
 #include "estimators/rate_steps.hpp"
+#include "estimators/repeatability.hpp"
 #include "estimators/thermal.hpp"
 #include "estimators/tumble.hpp"
 #include "estimators/warm_up.hpp"
@@ -45,7 +47,7 @@ class RunDb;
 
 namespace imucal::pipeline {
 
-enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise, WarmUp };
+enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise, WarmUp, Repeatability };
 
 struct StageName {
   Stage stage;
@@ -54,7 +56,7 @@ struct StageName {
   const char* program;    // the built-in program made for it (docs/programs.md)
 };
 // In pipeline order: each stage starts from the model of the stages before it.
-const std::array<StageName, 8>& stage_names();
+const std::array<StageName, 9>& stage_names();
 const StageName& names_of(Stage stage);
 std::optional<Stage> stage_named(std::string_view name);
 std::optional<Stage> stage_of_estimator(std::string_view estimator);
@@ -166,6 +168,7 @@ struct Outcome {
   std::optional<navfilter::Result> navigation;
   std::optional<noise::Result> noise;
   std::optional<warm_up::Result> warm_up;
+  std::optional<repeatability::Result> repeatability;
   std::vector<std::pair<std::string, std::string>> extras;  // run extras: key, JSON text
   std::int64_t frames = 0;
   double program_time_s = 0;  // of the last frame fed
@@ -177,7 +180,7 @@ class Pipeline {
  public:
   // `stages`: in any order (run in pipeline order); `asked` as for feed(). `start`: the model the
   // first stage starts from (ideal by default); a body-frame start model is refused unless the only
-  // stages are navigation (stage 3 works in the body frame), noise and warm-up.
+  // stages are navigation (stage 3 works in the body frame), noise, warm-up and repeatability.
   Pipeline(const RecordingMeta& meta, std::vector<Stage> stages, bool asked, ImuModel start = {},
            Settings settings = {});
   ~Pipeline();

@@ -21,9 +21,9 @@ using nlohmann::json;
 namespace {
 // The calibration stages imucald runs online, as the run file grows; thermal and noise are
 // analyses of the finished run (GET .../thermal, .../allan), on request.
-constexpr std::array<pipeline::Stage, 6> kOnlineStages = {pipeline::Stage::Direct,     pipeline::Stage::RateSteps,
-                                                          pipeline::Stage::Tumble,     pipeline::Stage::LeverArm,
-                                                          pipeline::Stage::Navigation, pipeline::Stage::WarmUp};
+constexpr std::array<pipeline::Stage, 7> kOnlineStages = {
+    pipeline::Stage::Direct,     pipeline::Stage::RateSteps, pipeline::Stage::Tumble,       pipeline::Stage::LeverArm,
+    pipeline::Stage::Navigation, pipeline::Stage::WarmUp,    pipeline::Stage::Repeatability};
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------

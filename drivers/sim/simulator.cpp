@@ -120,9 +120,17 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
 
   if (const auto section = turn_on_of(truth)) {
     turn_on_ = section->value;
+    power_on_s_.push_back(0.0);
+    for (const SegmentInfo& s : program.segments())
+      if (s.kind == "power-cycle") power_on_s_.push_back(s.t0_s);
+    std::sort(power_on_s_.begin(), power_on_s_.end());
     NormalStream draws(mix_seed(config.seed, 200));  // a source of its own: the other streams are unchanged
-    for (int j = 0; j < 3; ++j) turn_on_offset_[j] = turn_on_->gyro_repeatability_radps[j] * draws.next();
-    for (int j = 0; j < 3; ++j) turn_on_offset_[3 + j] = turn_on_->accel_repeatability_mps2[j] * draws.next();
+    for (std::size_t k = 0; k < power_on_s_.size(); ++k) {
+      Eigen::Matrix<double, 6, 1> offset;
+      for (int j = 0; j < 3; ++j) offset[j] = turn_on_->gyro_repeatability_radps[j] * draws.next();
+      for (int j = 0; j < 3; ++j) offset[3 + j] = turn_on_->accel_repeatability_mps2[j] * draws.next();
+      turn_on_offset_.push_back(offset);
+    }
   }
 }
 
@@ -250,10 +258,14 @@ bool Simulator::next(ImuFrame& out) {
     dv += truth_.accel.bias_mps2 * dt_s_;
   }
   if (turn_on_) {
-    // This power-on's offsets and the warm-up transient, mid-sample (time constants are minutes).
+    // The last power-on's offsets and its warm-up transient, mid-sample (time constants are minutes).
     const double t_mid = 0.5 * (t0 + t1);
-    dtheta += (turn_on_offset_.head<3>() + turn_on_->gyro_transient_radps(t_mid)) * dt_s_;
-    dv += (turn_on_offset_.tail<3>() + turn_on_->accel_transient_mps2(t_mid)) * dt_s_;
+    while (power_on_cursor_ + 1 < power_on_s_.size() && power_on_s_[power_on_cursor_ + 1] <= t_mid) ++power_on_cursor_;
+    while (power_on_cursor_ > 0 && power_on_s_[power_on_cursor_] > t_mid) --power_on_cursor_;
+    const double since_on = t_mid - power_on_s_[power_on_cursor_];
+    const Eigen::Matrix<double, 6, 1>& offset = turn_on_offset_[power_on_cursor_];
+    dtheta += (offset.head<3>() + turn_on_->gyro_transient_radps(since_on)) * dt_s_;
+    dv += (offset.tail<3>() + turn_on_->accel_transient_mps2(since_on)) * dt_s_;
   }
   for (std::size_t ch = 0; ch < 6; ++ch) {
     const auto i = static_cast<Eigen::Index>(ch);

@@ -136,10 +136,13 @@ class Simulator {
   std::vector<TempSample> temps_;
   double next_temp_t_s_ = 0.0;
 
-  // The truth's turn-on terms (core/turn_on.hpp): the IMU is powered on at t = 0; that power-on's
-  // bias offsets, gyro x y z then accelerometer x y z, drawn from their own stream.
+  // The truth's turn-on terms (core/turn_on.hpp): the IMU is powered on at t = 0 and at the start
+  // of each power-cycle segment of the program; each power-on's bias offsets, gyro x y z then
+  // accelerometer x y z, drawn from a stream of their own.
   std::optional<TurnOnTerms> turn_on_;
-  Eigen::Matrix<double, 6, 1> turn_on_offset_ = Eigen::Matrix<double, 6, 1>::Zero();
+  std::vector<double> power_on_s_;
+  std::vector<Eigen::Matrix<double, 6, 1>> turn_on_offset_;
+  std::size_t power_on_cursor_ = 0;
 };
 
 }  // namespace imucal::sim
