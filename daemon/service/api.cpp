@@ -424,6 +424,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
       if (auto r = only("POST")) return *r;
       return campaign_accept(*id, request, *who);
     }
+    if (action == "prompt") {
+      if (auto r = only("POST")) return *r;
+      return campaign_prompt(*id, request, *who);
+    }
     if (parse_command(action)) {
       if (auto r = only("POST")) return *r;
       return campaign_command(*id, action, request, *who);
@@ -631,6 +635,12 @@ HttpReply Api::campaign_detail(std::int64_t id) {
   json alarms = json::array();
   for (const auto& a : db_.alarms(id, true)) alarms.push_back(alarm_json(a));
   out["alarms"] = alarms;
+  // What the run asks the operator now (a power cycle), or null.
+  out["prompt"] = nullptr;
+  if (sequencer_.active_id() == id) {
+    const json t = sequencer_.telemetry();
+    if (t.contains("run") && t.at("run").is_object() && t.at("run").at("id") == id) out["prompt"] = t.at("run").value("prompt", json(nullptr));
+  }
   json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row->estimators_json);
   out["estimators"] = estimators.is_null() ? json::object() : estimators;
   const json results = parse_or_null(row->results_json);
@@ -761,6 +771,23 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
     return error_reply(outcome.http_status, outcome.error, extra);
   }
   return json_reply(200, {{"id", id}, {"state", to_string(*outcome.state)}});
+}
+
+// The operator's answer to what the run asks (a power cycle of the IMU): {"answer": "done"}.
+HttpReply Api::campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(body, "body", problems);
+    if (auto v = r.string("answer", true); v && *v != "done")
+      problems.push_back("body.answer must be \"done\" (the IMU was switched off and on again), not \"" + *v + "\"");
+  }
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  const auto outcome = sequencer_.answer_prompt(id, who.user);
+  if (outcome.http_status != 200) return error_reply(outcome.http_status, outcome.error);
+  return json_reply(200, {{"id", id}, {"answered", "done"}});
 }
 
 std::string Api::run_path(const CampaignRow& row) const {

@@ -71,6 +71,7 @@ class Api {
   // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
   HttpReply campaign_analysis(std::int64_t id, const std::string& what);
   std::string run_path(const CampaignRow& row) const;
+  HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
   nlohmann::json summary(const CampaignRow& row);

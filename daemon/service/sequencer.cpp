@@ -98,6 +98,8 @@ struct RunContext {
   double program_time_s = 0.0;
   std::optional<double> commanded_setpoint_C;
   std::optional<std::string> reported_serial;  // what the IMU said it is (check_unit)
+  // The power-cycle segment whose prompt the operator answered: a redo of it does not ask again.
+  std::optional<std::size_t> power_cycled_segment;
 
   Clock::time_point last_publish{}, last_db_update{}, window_wall{};
   double window_world_s = 0.0;
@@ -615,6 +617,10 @@ void Sequencer::run_campaign(std::int64_t id) {
         break;
       }
       db_.set_checkpoint(id, static_cast<std::int64_t>(run.segment), run.checkpoint_s());
+      if (run.segments[run.segment].kind == "power-cycle" && run.power_cycled_segment != run.segment) {
+        outcome = await_power_cycle(run);
+        if (outcome != Outcome::Completed) continue;
+      }
       outcome = run_segment(run);
       if (outcome == Outcome::Completed) ++run.segment;
     }
@@ -888,6 +894,57 @@ Sequencer::Outcome Sequencer::paused(RunContext& run) {
   return Outcome::Redo;
 }
 
+Sequencer::Outcome Sequencer::await_power_cycle(RunContext& run) {
+  // The table at rest with its interlock open: the operator may reach the IMU and its cable.
+  safe_hold(run);
+  if (run.recorder && !run.recorder->commit_and_wait()) run.recorder_failed = true;
+  const SegmentInfo& seg = run.segments[run.segment];
+  const std::string text = "Power-cycle the IMU: switch it off, wait at least 10 s, switch it on, then answer Done. "
+                           "Segment " + std::to_string(run.segment + 1) + " '" + seg.name + "' starts after the answer.";
+  {
+    std::lock_guard lock(mutex_);
+    prompt_ = Prompt{run.id, run.segment, text, iso8601_utc(now_unix_ms()), std::nullopt};
+  }
+  note_event(run, "prompt", text);
+  publish(run, true);
+  std::string who;
+  for (;;) {
+    {
+      std::unique_lock lock(mutex_);
+      cv_.wait_for(lock, std::chrono::milliseconds(100), [&] {
+        return shutdown_ || active_state_ != RunState::Running || (prompt_ && prompt_->answered_by);
+      });
+      if (prompt_ && prompt_->answered_by) {
+        who = *prompt_->answered_by;
+        prompt_.reset();
+        break;
+      }
+    }
+    if (auto c = pending_command()) {
+      std::lock_guard lock(mutex_);
+      prompt_.reset();  // asked again when the run comes back to this segment
+      return *c;
+    }
+    publish(run, false);
+  }
+  run.power_cycled_segment = run.segment;
+  note_event(run, "prompt-answered", "the IMU was power-cycled (answered by " + who + ")");
+  publish(run, true);
+  return wait_until_ready(run, false);
+}
+
+Sequencer::CommandOutcome Sequencer::answer_prompt(std::int64_t id, const std::string& who) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!prompt_ || prompt_->campaign != id || prompt_->answered_by)
+      return {409, "campaign " + std::to_string(id) + " is not waiting for an answer", std::nullopt};
+    prompt_->answered_by = who;
+  }
+  cv_.notify_all();
+  spdlog::info("campaign {}: prompt answered by {}", id, who);
+  return {};
+}
+
 // Safe hold (pause, suspension): rate zero, then the interlock open, as on every path out of
 // running; the next segment closes it again before the table moves.
 void Sequencer::safe_hold(RunContext& run) {
@@ -1035,6 +1092,12 @@ void Sequencer::publish(RunContext& run, bool force) {
       {"recorder",
        {{"queue_frames", rs.queued_frames}, {"queue_high_water_frames", rs.high_water_frames},
         {"committed_frames", rs.stored_frames}, {"dropped_frames", rs.dropped_frames}}}};
+  {
+    std::lock_guard lock(mutex_);
+    t["run"]["prompt"] = prompt_ && prompt_->campaign == run.id && !prompt_->answered_by
+                             ? json{{"text", prompt_->text}, {"since", prompt_->since}, {"segment", prompt_->segment}}
+                             : json(nullptr);
+  }
   {
     std::lock_guard lock(telemetry_mutex_);
     t["estimators"] = estimators_;

@@ -71,6 +71,10 @@ class Sequencer {
   // An operator command (thread-safe). `who` and `reason` go into the transition's reason.
   CommandOutcome command(std::int64_t id, Command command, const std::string& who, const std::string& reason);
 
+  // The operator's answer to the active run's prompt (a power-cycle segment waits for it): 200, or
+  // 409 when campaign `id` is not waiting for one.
+  CommandOutcome answer_prompt(std::int64_t id, const std::string& who);
+
   // The latest telemetry (the live message without type, seq and t).
   nlohmann::json telemetry() const;
   std::optional<std::int64_t> active_id() const;
@@ -100,6 +104,9 @@ class Sequencer {
   Outcome run_segment(RunContext& run);
   Outcome hold(RunContext& run, const std::string& reason);
   Outcome paused(RunContext& run);
+  // Before a power-cycle segment: the table safe, the operator asked to switch the IMU off and on;
+  // waits for the answer (or a command).
+  Outcome await_power_cycle(RunContext& run);
   Outcome wait_until_ready(RunContext& run, bool suspended);
   DeviceReadings readings(RunContext& run, double setpoint_C, double tolerance_C);
   void safe_hold(RunContext& run);
@@ -118,6 +125,14 @@ class Sequencer {
   RunState active_state_ = RunState::Created;
   bool shutdown_ = false;
   bool queue_enabled_ = true;
+  // What the active run asks the operator (telemetry "run.prompt"), until it is answered.
+  struct Prompt {
+    std::int64_t campaign = 0;
+    std::size_t segment = 0;
+    std::string text, since;
+    std::optional<std::string> answered_by;
+  };
+  std::optional<Prompt> prompt_;
   RecorderHooks recorder_hooks_;
   std::thread thread_;
 

@@ -791,6 +791,37 @@ try {
   await shot(page, '19-results-warm-up');
   log('results of warm-up-short: the gyros\' transients with time constants and settle times, the accelerometers without one');
 
+  // ---- repeatability: the run asks for each power cycle and waits; answered in the page, then through the API ----
+  const repeatId = await startCampaign({ name: 'browser test: repeatability', program: 'repeatability-short', rate_hz: 10, seed: 16,
+    time_scale: 0, truth: { format: 'imucal-imu-model/1', gyro: { noise: { arw_deg_rth: 0.0005 } }, accel: { noise: { vrw_mps_rth: 0.002 } },
+      turn_on: { gyro: { bias_repeatability_dph: [0.02, 0.01, 0.03] }, accel: { bias_repeatability_mps2: [1e-4, 2e-4, 1.5e-4] } } } });
+  await page.goto(`${base}/#/live`);
+  await page.waitForSelector('#prompt-box:not([hidden])', { timeout: 60000 });
+  await waitText(page, '#prompt-text', /^Power-cycle the IMU: switch it off, .* then answer Done\. Segment \d+ 'power-02' starts after the answer\./);
+  const firstAsked = await page.getAttribute('#prompt-box', 'data-segment');
+  const held = (await apiCall('GET', `/api/campaigns/${repeatId}`)).body;
+  assert.equal(held.prompt.segment, Number(firstAsked), 'the campaign says what it asks');
+  await shot(page, '20-live-power-cycle-prompt');
+  await page.click('#prompt-done');
+  await page.waitForFunction((s) => { const b = document.querySelector('#prompt-box'); return b.hidden || b.dataset.segment !== s; }, firstAsked);
+  let answeredSegment = Number(firstAsked);
+  for (let k = 3; k <= 6; ++k) {
+    const asked = await waitCampaign(repeatId, (c) => c.prompt && c.prompt.segment !== answeredSegment, `the prompt before power-on ${k}`);
+    const answer = await apiCall('POST', `/api/campaigns/${repeatId}/prompt`, { answer: 'done' });
+    assert.equal(answer.status, 200, JSON.stringify(answer.body));
+    answeredSegment = asked.prompt.segment;
+  }
+  const repeated = await waitCampaign(repeatId, (c) => c.state === 'done', 'the repeatability campaign');
+  assert.deepEqual(repeated.spec.estimators, ['repeatability']);
+  assert.equal(repeated.events.filter((e) => e.kind === 'prompt-answered').length, 5, 'five power cycles answered');
+  await page.goto(`${base}/#/campaigns/${repeatId}`);
+  await page.waitForSelector('#repeatability-table tr[data-channel="gyro.z"]');
+  await waitText(page, '#repeatability-table tr[data-channel="accel.y"]', /[\d.]+ ± [\d.]+ µg/);
+  assert.equal(await page.$$eval('#repeatability .plot .uplot', (els) => els.length), 2);
+  await page.$eval('#repeatability', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await shot(page, '21-results-repeatability');
+  log('repeatability-short: five power cycles asked and waited for (one answered in the page, four through the API); per-channel repeatability with its intervals');
+
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });
   assert.equal(queued.status, 201);

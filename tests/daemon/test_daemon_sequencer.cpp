@@ -90,6 +90,76 @@ TEST(Sequencer, PauseAndResumeRedoTheSegmentWithoutDuplicates) {
   expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
 }
 
+// The repeatability program's power cycles: before each the run holds the table safe, asks the
+// operator (telemetry run.prompt, an event) and waits; an answer through the API continues it; a
+// pause while it waits asks again after the resume; the run file holds every instant once.
+TEST(Sequencer, APowerCycleWaitsForTheOperatorsAnswer) {
+  LocalDaemon d("power-cycle");
+  json truth = noisy_truth();
+  truth["turn_on"] = {{"gyro", {{"bias_repeatability_dph", {0.02, 0.01, 0.03}}}},
+                      {"accel", {{"bias_repeatability_mps2", {1e-4, 2e-4, 1.5e-4}}}}};
+  const auto id = d.post_campaign({{"name", "repeatability"}, {"program", "repeatability-short"}, {"rate_hz", 10},
+                                   {"time_scale", 0}, {"truth", truth}});
+  EXPECT_EQ(d.campaign(id).at("spec").at("estimators"), json({"repeatability"}));
+  const std::string prompt_url = "/api/campaigns/" + std::to_string(id) + "/prompt";
+  EXPECT_EQ(d.call("POST", prompt_url, R"({"answer": "done"})").status, 409) << "nothing is asked before the start";
+  ASSERT_EQ(d.command(id, "start"), 200);
+  // The telemetry of a prompt for another segment than `answered` (the one answered last may
+  // still show until the run publishes again).
+  const auto wait_prompt = [&](std::optional<std::size_t> answered) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (std::chrono::steady_clock::now() < deadline) {
+      const json t = d.service->sequencer().telemetry();
+      if (t.contains("run") && t.at("run").is_object() && t.at("run").value("prompt", json(nullptr)).is_object() &&
+          t.at("run").at("prompt").at("segment").get<std::size_t>() != answered)
+        return t;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ADD_FAILURE() << "no prompt";
+    return json();
+  };
+  std::optional<std::size_t> answered;
+  for (int cycle = 2; cycle <= 6; ++cycle) {
+    const json t = wait_prompt(answered);
+    ASSERT_TRUE(t.is_object());
+    EXPECT_EQ(t.at("run").at("state"), "running");
+    EXPECT_NE(t.at("run").at("prompt").at("text").get<std::string>().find("Power-cycle the IMU"), std::string::npos);
+    EXPECT_EQ(t.at("table").at("rate_dps"), json::array({0.0, 0.0, 0.0}));
+    EXPECT_FALSE(t.at("table").at("interlock_closed").get<bool>()) << "the operator may reach the IMU";
+    const double held_s = d.campaign(id).at("program_time_s").get<double>();
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    EXPECT_DOUBLE_EQ(d.campaign(id).at("program_time_s").get<double>(), held_s) << "it waits";
+    if (cycle == 3) {
+      // Paused while it asks: after the resume it asks again.
+      ASSERT_EQ(d.command(id, "pause"), 200);
+      d.wait_state(id, "paused");
+      EXPECT_TRUE(d.service->sequencer().telemetry().at("run").at("prompt").is_null());
+      ASSERT_EQ(d.command(id, "resume"), 200);
+      ASSERT_TRUE(wait_prompt(std::nullopt).is_object());
+    }
+    const auto wrong = d.call("POST", prompt_url, R"({"answer": "later"})");
+    EXPECT_EQ(wrong.status, 400);
+    EXPECT_NE(wrong.body.find("body.answer must be"), std::string::npos) << wrong.body;
+    EXPECT_EQ(d.call("POST", prompt_url, R"({"answer": "done"})", kViewerToken).status, 403);
+    ASSERT_EQ(d.call("POST", prompt_url, R"({"answer": "done"})").status, 200);
+    answered = t.at("run").at("prompt").at("segment").get<std::size_t>();
+  }
+  const json c = d.wait_final(id);
+  ASSERT_EQ(c.at("state"), "done");
+  int asked = 0, answers = 0;
+  for (const auto& e : c.at("events")) {
+    asked += e.at("kind") == "prompt";
+    answers += e.at("kind") == "prompt-answered";
+  }
+  EXPECT_EQ(asked, 6) << "five power cycles, one asked twice (the pause)";
+  EXPECT_EQ(answers, 5);
+  EXPECT_TRUE(has_event(c, "prompt-answered", "answered by operator"));
+  const json& r = c.at("results").at("repeatability");
+  ASSERT_EQ(r.at("status"), "done") << r.dump();
+  EXPECT_EQ(r.at("repeatability").at("turn_ons").size(), 6u);
+  expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
+}
+
 TEST(Sequencer, SuspendsWhenTheChamberLeavesItsBandAndResumesByItself) {
   LocalDaemon d("chamber");
   json campaign = short_campaign("chamber", 0);

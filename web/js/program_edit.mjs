@@ -44,12 +44,17 @@ export const SEGMENT_TYPES = {
     { key: 'cycles', kind: 'number', required: true, positive: true, label: 'cycles' },
     { key: 'ramp_s', kind: 'number', nonnegative: true, label: 'ramp s' },
   ],
+  // The IMU is switched off and on before it (imucald asks the operator and waits).
+  'power-cycle': [
+    { key: 'duration_s', kind: 'number', required: true, positive: true, label: 'rest after power-on s' },
+  ],
 };
 export const NEW_SEGMENT = {
   hold: { duration_s: 10 }, move: { to_deg: [0, 0, 0] }, positions: { positions_deg: [[0, 0, 0]], dwell_s: 10 },
   tilts: { positions_deg: [[0, 10, 0]], dwell_s: 60 }, rate: { axis: 'outer', rate_dps: 20, revolutions: 2 },
   sine: { axis: 'outer', amplitude_deg: 20, period_s: 2, cycles: 10, ramp_s: 2 },
   coning: { axes: ['middle', 'inner'], amplitude_deg: 10, period_s: 10, cycles: 10 },
+  'power-cycle': { duration_s: 10 },
 };
 export const AXIS_NAMES = ['outer', 'middle', 'inner'];
 

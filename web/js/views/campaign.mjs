@@ -175,6 +175,8 @@ export function mount(root, ctx) {
     if (tumble?.positions?.length) results.append(tumbleSection(tumble));
     const warmUp = d.results?.['warm-up']?.warm_up;
     if (warmUp?.channels?.length) results.append(warmUpSection(warmUp));
+    const repeat = d.results?.repeatability?.repeatability;
+    if (repeat?.channels?.length) results.append(repeatabilitySection(repeat));
 
     // What the estimators said
     const notes = h('div', { class: 'stage-results', id: 'stage-results' });
@@ -191,9 +193,11 @@ export function mount(root, ctx) {
     if (notes.childElementCount) results.append(h('h3', {}, 'Estimators'), notes);
 
     // Convergence over the run
-    if (progress && Object.keys(progress).length) {
+    // Only stages whose progress carries estimates (the warm-up and repeatability report counts).
+    const converging = Object.keys(progress || {}).filter((n) => (progress[n] || []).some((p) => Object.keys(p.estimates || {}).length));
+    if (converging.length) {
       // Stage 3's convergence when it ran (the final refinement), else stage 1's, else the first.
-      const name = progress.stage3 ? 'stage3' : progress.direct ? 'direct' : Object.keys(progress)[0];
+      const name = converging.includes('stage3') ? 'stage3' : converging.includes('direct') ? 'direct' : converging[0];
       const restarts = (progress[name] || []).reduce((r, p) => (Array.isArray(p.restart_times_s) ? p.restart_times_s : r), []);
       const map = new Map();
       for (const p of progress[name] || []) {
@@ -537,6 +541,35 @@ export function mount(root, ctx) {
     return h('div', { id: 'warm-up' }, h('h3', {}, 'Warm-up: the bias transient from power-on (IEEE 952)'),
       h('p', { class: 'muted' }, `One static of ${duration(w.duration_s)} from power-on, averaged in bins and fitted with settled + amplitude · exp(−t / time constant) per channel. `,
         'Settled: the fitted transient stays inside the band from then on.'),
+      table, row);
+  }
+
+  // Turn-on to turn-on repeatability (IEEE 952): per channel the 1-sigma bias change from one
+  // power-on to the next with its intervals, and each power-on's bias against the mean.
+  function repeatabilitySection(r) {
+    const unitOfChannel = (c) => (c.unit === 'dph' ? '°/h' : 'µg');
+    const range = ([lo, hi]) => `${num(lo, 3)} … ${num(hi, 3)}`;
+    const table = h('table', { class: 'list compact', id: 'repeatability-table' },
+      h('thead', {}, h('tr', {}, h('th', {}, 'channel'), h('th', { class: 'num' }, 'repeatability (1σ)'), h('th', { class: 'num' }, '68 % interval'),
+        h('th', { class: 'num' }, '99.73 % interval'), h('th', { class: 'num' }, 'spread of the biases'), h('th', { class: 'num' }, 'noise in each'))),
+      h('tbody', {}, ...r.channels.map((c) => h('tr', { dataset: { channel: `${c.sensor}.${c.axis}` } },
+        h('td', {}, `${c.sensor === 'gyro' ? 'gyro' : 'accelerometer'} ${c.axis}`),
+        h('td', { class: 'num' }, `${num(c.repeatability[0], 3)} ± ${num(c.repeatability[1], 2)} ${unitOfChannel(c)}`),
+        h('td', { class: 'num' }, range(c.interval_68)), h('td', { class: 'num' }, range(c.interval_997)),
+        h('td', { class: 'num' }, num(c.spread, 3)), h('td', { class: 'num' }, num(c.noise, 2))))));
+    const row = h('div', { class: 'plot-row' });
+    const index = r.turn_ons.map((t) => t.index);
+    for (const [offset, title, unit] of [[0, 'Gyro bias at each power-on, less their mean', '°/h'], [3, 'Accelerometer bias at each power-on, less their mean', 'µg']]) {
+      const box = h('div', { class: 'plot', dataset: { kind: `repeatability-${offset ? 'accel' : 'gyro'}` } });
+      row.append(box);
+      const c = lineChart(box, { title, x: 'power-on', y: unit, height: 200, points: true,
+        series: ['x', 'y', 'z'].map((a, i) => ({ label: a, color: COLORS[i], width: 1 })) });
+      c.setData([index, ...[0, 1, 2].map((j) => r.turn_ons.map((t) => t.offset[offset + j]))]);
+      cleanups.push(() => c.destroy());
+    }
+    return h('div', { id: 'repeatability' }, h('h3', {}, 'Turn-on to turn-on bias repeatability (IEEE 952)'),
+      h('p', { class: 'muted' }, `${r.turn_ons.length} power-ons at one orientation, each a static after its settle time. `,
+        'The repeatability is the spread of their biases less the noise within each static; a standard deviation from a few power-ons is uncertain, hence the intervals (chi-square).'),
       table, row);
   }
 

@@ -2,6 +2,8 @@
 // readings, their plots, the estimators converging, and alarms and suspensions as they happen.
 // Everything comes from the page's one WebSocket through the LiveStore; this view only draws,
 // once per animation frame at most.
+import { post } from '../api.mjs';
+import { isOperator } from '../session.mjs';
 import { h, clear, duration, num, fixed, stateBadge, timeOfDay } from '../format.mjs';
 import { lineChart, schedule, AXIS_COLORS, COLORS } from '../plots.mjs';
 import { commandBar } from '../dialogs.mjs';
@@ -19,6 +21,24 @@ export function mount(root, ctx) {
 
   const runBox = h('section', { class: 'card run-card', id: 'run-card' });
   const suspendedBanner = h('div', { class: 'suspended-banner', id: 'suspended-banner', role: 'alert', hidden: true });
+  // What the run asks the operator (a power cycle of the IMU): it waits for the answer.
+  const promptText = h('p', { id: 'prompt-text' });
+  const promptError = h('div', { class: 'form-error', id: 'prompt-error', role: 'alert' });
+  const promptDone = h('button', { type: 'button', class: 'primary', id: 'prompt-done' }, 'Done: the IMU is on again');
+  const promptBox = h('div', { class: 'prompt-box', id: 'prompt-box', role: 'alert', hidden: true },
+    h('strong', {}, 'The run waits for you'), promptText, promptDone, promptError);
+  let promptRun = null;
+  promptDone.addEventListener('click', async () => {
+    if (promptRun === null) return;
+    promptDone.disabled = true;
+    promptError.textContent = '';
+    try {
+      await post(`/api/campaigns/${promptRun}/prompt`, { answer: 'done' });
+    } catch (e) {
+      promptError.textContent = `The answer was not taken: ${e.message}`;
+      promptDone.disabled = !isOperator();
+    }
+  });
   const runTitle = h('h1', { id: 'run-title' });
   const runState = h('span', { id: 'run-state' });
   const stepText = h('div', { class: 'kv', id: 'run-step' });
@@ -33,7 +53,7 @@ export function mount(root, ctx) {
   });
   runBox.append(
     h('div', { class: 'run-head' }, runTitle, runState, h('div', { class: 'spacer' }), commands),
-    suspendedBanner,
+    suspendedBanner, promptBox,
     h('div', { class: 'run-facts' }, stepText, timeText, leftText, speedText), progress);
 
   const cards = h('div', { class: 'cards' });
@@ -212,6 +232,16 @@ export function mount(root, ctx) {
       const pct = run.duration_s > 0 ? Math.min(100, (100 * run.program_time_s) / run.duration_s) : 0;
       progress.firstChild.style.width = `${pct}%`;
       progress.lastChild.textContent = `${pct.toFixed(1)} %`;
+      const asked = run.prompt || null;
+      if (asked && (promptBox.hidden || promptBox.dataset.segment !== String(asked.segment))) {
+        promptRun = run.id;
+        promptBox.dataset.segment = String(asked.segment);
+        promptText.textContent = `${asked.text} (asked at ${timeOfDay(asked.since)})`;
+        promptDone.disabled = !isOperator();
+        promptDone.title = isOperator() ? '' : 'operator role required (you are signed in as a viewer)';
+        promptError.textContent = '';
+      }
+      promptBox.hidden = !asked;
       const suspended = run.state === 'suspended';
       suspendedBanner.hidden = !suspended;
       if (suspended) suspendedBanner.textContent = `Suspended${lastSuspendReason ? `: ${lastSuspendReason}` : ''}. The run resumes by itself once the condition has cleared and settled; the interrupted segment is then redone.`;
@@ -226,6 +256,7 @@ export function mount(root, ctx) {
       progress.firstChild.style.width = '0%';
       progress.lastChild.textContent = '';
       suspendedBanner.hidden = true;
+      promptBox.hidden = true;
     }
     if (!m) return;
     const tb = m.table || {};
