@@ -49,6 +49,8 @@ TEST(Http, EndToEndPostStartPauseResumeFinishModel) {
   EXPECT_EQ(by_name.at("tumble-short").at("estimators"), json({"tumble"}));
   EXPECT_EQ(by_name.at("warm-up").at("estimators"), json({"warm-up"}));
   EXPECT_EQ(by_name.at("warm-up-short").at("estimators"), json({"warm-up"}));
+  EXPECT_EQ(by_name.at("repeatability").at("estimators"), json({"repeatability"}));
+  EXPECT_EQ(by_name.at("repeatability-short").at("estimators"), json({"repeatability"}));
 
   const auto posted = op.post("/api/campaigns", R"({"name": "e2e", "program": "direct-short", "rate_hz": 100,
                                                     "time_scale": 100})");
