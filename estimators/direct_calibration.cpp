@@ -107,7 +107,15 @@ void DirectCalibrator::push(const ImuFrame& f) {
   for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
   iv.moved_axes_rad += (f.table_deg - prev_.table_deg).cwiseAbs() * kDegToRad;
   // Specific force at rest: gravity reaction resolved in o.
-  if (iv.frames == 0 && iv.is_static) iv.f_o_mps2 = reference_.specific_force_at_rest_o_mps2(f.table_deg);
+  const Vector3d f_rest_o = reference_.specific_force_at_rest_o_mps2(f.table_deg);
+  if (iv.frames == 0 && iv.is_static) iv.f_o_mps2 = f_rest_o;
+  iv.f_dt_o += f_rest_o * dt;
+  if (dt > 0) {
+    for (int k = 0; k < 3; ++k) {
+      const double q = std::abs(wdt_o[k]) / dt / kGyroNonlinearityRate_radps;
+      iv.nonlinear_moments_rad.row(k) += Eigen::RowVector3d(q, q * q, q * q * q) * wdt_o[k];
+    }
+  }
   iv.sum_dtheta += f.dtheta_rad;
   iv.sum_dv += f.dv_mps;
   iv.sumsq_dtheta += f.dtheta_rad.cwiseAbs2();
@@ -202,7 +210,10 @@ SensorDesign accel_design(int j, const Selection& sel, const AccelErrors& at) {
       const OffDiag& od = kOffDiag[j][c];
       d.A(i, 2 + c) = od.sign * (1.0 + at.scale[od.k]) * f[od.k];
     }
-    d.b(i) = s.sum_dv[j] / s.T_s - f[j];  // mean specific-force residual of the static
+    // Mean specific-force residual of the static, less what K2 and K3 (known) add at f_j.
+    const double a_g = f[j] / units::kStandardGravity_mps2;
+    const double nonlinear = (at.k2_per_g[j] + at.k3_per_g2[j] * a_g) * a_g * f[j];
+    d.b(i) = s.sum_dv[j] / s.T_s - f[j] - nonlinear;
     d.w(i) = s.T_s;                       // white noise: variance of the mean falls as 1/T
   }
   return d;
@@ -230,7 +241,10 @@ SensorDesign gyro_design(int j, const Selection& sel, const GyroErrors& at) {
     d.A(i, 1) = e.ref_pos_rad[j];
     d.A(i, 2) = e.ref_neg_rad[j];
     for (int c = 0; c < 2; ++c) d.A(i, 3 + c) = kOffDiag[j][c].sign * scaled(kOffDiag[j][c].k);
-    d.b(i) = e.sum_dtheta[j] - (e.ref_pos_rad[j] + e.ref_neg_rad[j]);  // summed-angle residual
+    // Summed-angle residual, less what the known g-sensitivity and scale nonlinearity add.
+    const double g_sensitivity = at.g_sensitivity_radps_per_g.row(j).dot(e.f_dt_o) / units::kStandardGravity_mps2;
+    const double nonlinear = at.scale_nonlinear.row(j).dot(e.nonlinear_moments_rad.row(j));
+    d.b(i) = e.sum_dtheta[j] - (e.ref_pos_rad[j] + e.ref_neg_rad[j]) - g_sensitivity - nonlinear;
     d.w(i) = 1.0 / e.T_s;  // angle random walk: variance of the summed angle grows as T
   }
   return d;
@@ -388,6 +402,18 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
 
   res.model.sigma = sigma;
   res.model.frame = "instrument";
+  // The terms stage 1 takes from the start model (a rate-steps or tumble model), not estimating
+  // them: said, so that nobody reads their sigma as this run's.
+  std::vector<std::string> fixed;
+  if (!gy.scale_nonlinear.isZero(0.0)) fixed.emplace_back("gyro scale_nonlinear_ppm");
+  if (!gy.g_sensitivity_radps_per_g.isZero(0.0)) fixed.emplace_back("gyro g_sensitivity_dph_per_g");
+  if (!acc.k2_per_g.isZero(0.0)) fixed.emplace_back("accel k2_ug_per_g2");
+  if (!acc.k3_per_g2.isZero(0.0)) fixed.emplace_back("accel k3_ug_per_g3");
+  if (!fixed.empty()) {
+    std::string text = "stage direct: taken from the start model and removed from the measurements (not estimated here): ";
+    for (std::size_t i = 0; i < fixed.size(); ++i) text += (i ? ", " : "") + fixed[i];
+    res.notes.push_back(text);
+  }
   char buf[200];
   std::snprintf(buf, sizeof buf, "stage direct: %d statics (%.0f s), %d rotations used", res.statics, res.static_time_s,
                 res.rotations);

@@ -55,6 +55,12 @@ struct Interval {
   Eigen::Vector3d ref_neg_rad = Eigen::Vector3d::Zero();  // integral of the negative parts
   Eigen::Vector3d f_o_mps2 = Eigen::Vector3d::Zero();     // statics: specific force in o
   Eigen::Vector3d moved_axes_rad = Eigen::Vector3d::Zero();  // |total angle change| per table axis
+  // For the nonlinear terms a start model fixes (CONVENTIONS.md, "Nonlinear terms"): the integral
+  // of the specific force at rest in o (the gyros' g-sensitivity), and per axis k the sums of
+  // q_k^m times the reference increment, q_k = |w_k| / kGyroNonlinearityRate_radps, m = 1, 2, 3
+  // (the gyro scale nonlinearity's angle is row k of scale_nonlinear times row k of these).
+  Eigen::Vector3d f_dt_o = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d nonlinear_moments_rad = Eigen::Matrix3d::Zero();
   bool gap = false;
 };
 
@@ -76,7 +82,8 @@ struct Column {
 };
 
 // Stage 1's weighted least squares of one sensor (gyro or accelerometer `axis`), linearised at
-// the given errors: rows are intervals (accelerometers: the statics; gyros: the statics, then the
+// the given errors (their nonlinear terms, which stage 1 does not estimate, taken as known and
+// removed from the measurements): rows are intervals (accelerometers: the statics; gyros: the statics, then the
 // rotations), b the measured residual of each row, w its weight. Solving it at the errors it
 // returns is what DirectCalibrator::finish iterates to.
 struct SensorDesign {
