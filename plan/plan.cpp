@@ -140,7 +140,16 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
                                 "' feeds no calibration stage (direct, lever-arm or navigation): nothing to predict");
   // Without stage 1 the later stages start from the unit's model (what stage 1 would have given).
   const bool with_direct = std::find(stages.begin(), stages.end(), pipeline::Stage::Direct) != stages.end();
-  const ImuModel start = with_direct ? ImuModel{} : imu;
+  // Stage 1 from the unit's nonlinear terms, as a campaign gives it a tumble's and a rate-steps
+  // test's model (stage 1 cannot determine them; without them they would read as its constants).
+  ImuModel start = imu;
+  if (with_direct) {
+    start = ImuModel{};
+    start.gyro.scale_nonlinear = imu.gyro.scale_nonlinear;
+    start.gyro.g_sensitivity_radps_per_g = imu.gyro.g_sensitivity_radps_per_g;
+    start.accel.k2_per_g = imu.accel.k2_per_g;
+    start.accel.k3_per_g2 = imu.accel.k3_per_g2;
+  }
 
   Prediction p;
   p.program = program.name;
@@ -227,6 +236,34 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     }
     p.stages.push_back(std::move(sp));
   }
+  // The nonlinear terms (CONVENTIONS.md, "Nonlinear terms"): the stages predicted here do not
+  // estimate them; stage 1 and stage 3 take them from the model. Named, with the program that
+  // determines each, unless this program runs it too.
+  const std::vector<pipeline::Stage> all = pipeline::stages_for_parts(meta);
+  const auto runs = [&](pipeline::Stage s) { return std::find(all.begin(), all.end(), s) != all.end(); };
+  struct Term {
+    const char* coefficient;
+    bool in_model;
+    pipeline::Stage by;
+    const char* fix;
+  };
+  const Term terms[] = {
+      {"gyro.scale_nonlinear_ppm", !imu.gyro.scale_nonlinear.isZero(0.0), pipeline::Stage::RateSteps,
+       "run 'rate-steps' (or 'rate-steps-short') and give its model to the calibration"},
+      {"gyro.g_sensitivity_dph_per_g", !imu.gyro.g_sensitivity_radps_per_g.isZero(0.0), pipeline::Stage::Tumble,
+       "run 'tumble' (or 'tumble-short') and give its model to the calibration"},
+      {"accel.k2_ug_per_g2", !imu.accel.k2_per_g.isZero(0.0), pipeline::Stage::Tumble,
+       "run 'tumble' (or 'tumble-short') and give its model to the calibration"},
+      {"accel.k3_ug_per_g3", !imu.accel.k3_per_g2.isZero(0.0), pipeline::Stage::Tumble,
+       "run 'tumble' (or 'tumble-short') and give its model to the calibration"}};
+  for (const Term& t : terms) {
+    if (runs(t.by)) continue;
+    p.from_model.push_back({stage_key(stages.front()), t.coefficient,
+                      t.in_model ? "not determined by this program: stage 1 and stage 3 take it from the model given"
+                                 : "not determined by this program and not in the model given: taken as zero (an IMU "
+                                   "with it shows it in stage 1's constants)",
+                      t.fix});
+  }
   report(1.0);
   return p;
 }
@@ -245,10 +282,13 @@ json Prediction::to_json() const {
     if (!s.history.is_null()) e["history"] = s.history;
     st[s.stage] = e;
   }
-  json w = json::array();
-  for (const Weak& x : weak) w.push_back({{"stage", x.stage}, {"coefficient", x.coefficient}, {"why", x.why}, {"fix", x.fix}});
+  const auto list = [](const std::vector<Weak>& v) {
+    json w = json::array();
+    for (const Weak& x : v) w.push_back({{"stage", x.stage}, {"coefficient", x.coefficient}, {"why", x.why}, {"fix", x.fix}});
+    return w;
+  };
   return {{"format", "imucal-plan/1"}, {"program", program}, {"duration_s", duration_s}, {"rate_hz", rate_hz},
-          {"stages", st}, {"weak", w}};
+          {"stages", st}, {"weak", list(weak)}, {"from_model", list(from_model)}};
 }
 
 }  // namespace imucal::plan

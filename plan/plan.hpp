@@ -58,6 +58,9 @@ struct Prediction {
   double rate_hz = 0.0;
   std::vector<StagePrediction> stages;
   std::vector<Weak> weak;
+  // The nonlinear terms no stage of the program determines (stage 1 and stage 3 take them from
+  // the model), each with the program that would: why says whether the model given has it.
+  std::vector<Weak> from_model;
   nlohmann::json to_json() const;
 };
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -105,4 +106,27 @@ TEST(Plan, AProgramWithoutANegativeRotationIsNamedWithTheFix) {
   EXPECT_EQ(it->why, "no negative rotation about the z axis") << said;
   EXPECT_EQ(it->fix, "add a single-axis rate run with negative rate about it") << said;
   EXPECT_EQ(p.weak.front().stage, "direct");
+}
+
+// Issue 19, item 3: the nonlinear terms no stage of the program determines are named, with the
+// program that would determine each and whether the model given has it.
+TEST(Plan, TheNonlinearTermsTheProgramDoesNotDetermineAreNamed) {
+  ImuModel imu = nav_grade();
+  imu.accel.k2_per_g = Eigen::Vector3d(30, -45, 22) * 1e-6;
+  const plan::Prediction p = plan::predict(motion::load_program("direct-short", motion::TableLimits{}), imu);
+  std::map<std::string, plan::Weak> named;
+  for (const plan::Weak& w : p.from_model) named[w.coefficient] = w;
+  ASSERT_EQ(named.size(), 4u);
+  EXPECT_NE(named.at("gyro.scale_nonlinear_ppm").fix.find("'rate-steps'"), std::string::npos);
+  EXPECT_NE(named.at("gyro.g_sensitivity_dph_per_g").fix.find("'tumble'"), std::string::npos);
+  EXPECT_EQ(named.at("accel.k2_ug_per_g2").why, "not determined by this program: stage 1 and stage 3 take it from the model given");
+  EXPECT_NE(named.at("accel.k3_ug_per_g3").why.find("taken as zero"), std::string::npos);
+  const nlohmann::json j = p.to_json();
+  EXPECT_EQ(j.at("from_model").size(), 4u);
+  // Stage 1 started from the unit's K2 (as a campaign gives it a tumble's model): its predicted
+  // accelerometer bias sigma is that of an IMU without K2, not inflated by it.
+  const plan::Prediction plain = plan::predict(motion::load_program("direct-short", motion::TableLimits{}), nav_grade());
+  const double with_k2 = p.stages.front().model->sigma->accel.bias_mps2.maxCoeff();
+  const double without = plain.stages.front().model->sigma->accel.bias_mps2.maxCoeff();
+  EXPECT_LT(with_k2, 1.5 * without) << with_k2 << " against " << without;
 }

@@ -729,6 +729,9 @@ export function mount(root, ctx) {
     clear(planWeak);
     for (const w of p.weak || [])
       planWeak.append(h('li', { class: 'problem' }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
+    // The nonlinear terms the program does not determine: taken from the model, said as such.
+    for (const w of p.from_model || [])
+      planWeak.append(h('li', { class: 'from-model', dataset: { coefficient: w.coefficient } }, `${w.coefficient}: ${w.why}; to determine it, ${w.fix}`));
   }
 
   function renderVerdict() {
