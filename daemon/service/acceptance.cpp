@@ -28,12 +28,18 @@ void flatten(const json& value, const std::string& prefix, std::vector<std::pair
 
 bool is_noise(const std::string& key) { return key.find(".noise.") != std::string::npos; }
 
-// Every flat name a model can carry: the names of the writer's own output for a default model, so
-// a limit on a coefficient that does not exist (a typo) is refused, not silently never applied.
+// Every flat name a model can carry: the names of the writer's own output for a model with every
+// optional term (the nonlinear ones are written only when not zero), so a limit on a coefficient
+// that does not exist (a typo) is refused, not silently never applied.
 const std::set<std::string>& known_keys() {
   static const std::set<std::string> keys = [] {
+    ImuModel every;
+    every.gyro.scale_nonlinear.setConstant(1.0);
+    every.gyro.g_sensitivity_radps_per_g.setConstant(1.0);
+    every.accel.k2_per_g.setConstant(1.0);
+    every.accel.k3_per_g2.setConstant(1.0);
     std::set<std::string> k;
-    for (const auto& [name, v] : flat_coefficients(json::parse(imu_model_to_json_text(ImuModel{})))) k.insert(name);
+    for (const auto& [name, v] : flat_coefficients(json::parse(imu_model_to_json_text(every)))) k.insert(name);
     return k;
   }();
   return keys;

@@ -20,6 +20,7 @@
 #include "motion_programs/program.hpp"
 #include "core/number_text.hpp"
 #include "core/units.hpp"
+#include "daemon/service/test_report.hpp"
 #include "storage/run_db.hpp"
 #include "plan/plan.hpp"
 
@@ -420,6 +421,10 @@ HttpReply Api::route(const ApiRequest& request, const std::string& path, const s
       if (auto r = only("GET")) return *r;
       return campaign_certificate(*id);
     }
+    if (action == "report") {
+      if (auto r = only("GET")) return *r;
+      return campaign_report(*id);
+    }
     if (action == "accept") {
       if (auto r = only("POST")) return *r;
       return campaign_accept(*id, request, *who);
@@ -662,6 +667,26 @@ HttpReply Api::campaign_detail(std::int64_t id) {
   }
   out["imu_serial"] = serial;
   return json_reply(200, out);
+}
+
+// The run's test report (test_report.hpp): its figures from the results, the temperatures from
+// its recording, the gravity as the certificate states it.
+HttpReply Api::campaign_report(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  const HttpReply d = campaign_detail(id);
+  if (d.status != 200) return d;
+  TemperatureSummary temperatures;
+  if (!row->run_db.empty() && std::filesystem::exists(run_path(*row))) {
+    try {
+      const storage::RunDb db = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
+      temperatures = summarize_temperatures(db.temps());
+    } catch (const std::exception& e) {
+      spdlog::warn("campaign {}: the report goes without temperatures: {}", id, e.what());
+    }
+  }
+  return json_reply(200, test_report_json(json::parse(d.body), certificate_bench_json(config_, row->ended_ms.value_or(0)),
+                                          temperatures));
 }
 
 HttpReply Api::campaign_certificate(std::int64_t id) {

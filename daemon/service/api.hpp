@@ -72,6 +72,7 @@ class Api {
   HttpReply campaign_analysis(std::int64_t id, const std::string& what);
   std::string run_path(const CampaignRow& row) const;
   HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);
+  HttpReply campaign_report(std::int64_t id);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
   nlohmann::json summary(const CampaignRow& row);

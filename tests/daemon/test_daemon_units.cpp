@@ -323,3 +323,54 @@ TEST(Units, CampaignRunFilesNameTheirUnit) {
   EXPECT_EQ(rows[0].imu_part_number, "PN-100");
   EXPECT_EQ(rows[0].complete, true);
 }
+
+// Issue 19, item 4: the run's test report (GET /api/campaigns/{id}/report): per test its figures
+// with their uncertainty and conditions, the run's conditions, and the verdict against the part
+// number's limits on the figures that have them.
+TEST(Units, TheTestReportStatesFiguresConditionsAndTheVerdict) {
+  LocalDaemon d("report");
+  const json limits = {{"format", "imucal-limits/1"},
+                       {"part_numbers", {{"PN-REPORT", {{"accel.k2_ug_per_g2", {{"max_abs", 100}, {"max_sigma", 5}}}}}}}};
+  ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+  json truth = noisy_truth();
+  truth["accel"]["k2_ug_per_g2"] = {30, -45, 22};
+  truth["turn_on"] = {{"gyro", {{"warm_up_dph", {0.05, -0.03, 0.06}}, {"warm_up_time_constant_s", {300, 400, 480}}}}};
+  const auto id = d.post_campaign({{"name", "report"}, {"program", {"warm-up-short", "tumble-short"}}, {"rate_hz", 10},
+                                   {"time_scale", 0}, {"truth", truth},
+                                   {"imu", {{"serial", "FOG-REPORT"}, {"part_number", "PN-REPORT"}}}});
+  EXPECT_EQ(d.campaign(id).at("spec").at("estimators"), json({"tumble", "warm-up"}));  // pipeline order
+  ASSERT_EQ(d.command(id, "start"), 200);
+  ASSERT_EQ(d.wait_final(id, 300).at("state"), "done");
+  const auto r = d.call("GET", "/api/campaigns/" + std::to_string(id) + "/report");
+  ASSERT_EQ(r.status, 200) << r.body;
+  const json report = json::parse(r.body);
+  EXPECT_EQ(report.at("format"), "imucal-test-report/1");
+  EXPECT_EQ(report.at("unit").at("serial"), "FOG-REPORT");
+  const json& c = report.at("conditions");
+  EXPECT_EQ(c.at("rate_hz"), 10);
+  EXPECT_NEAR(c.at("gravity").at("value_mps2").get<double>(), 9.8, 0.05);
+  EXPECT_TRUE(c.at("simulated").get<bool>());
+  EXPECT_NEAR(c.at("temperatures").at("chamber_C").at("mean").get<double>(), 25.0, 3.0);
+  std::map<std::string, json> tests;
+  for (const json& t : report.at("tests")) tests[t.at("test").get<std::string>()] = t;
+  ASSERT_TRUE(tests.count("tumble") && tests.count("warm-up")) << report.dump(1).substr(0, 2000);
+  EXPECT_EQ(tests.at("tumble").at("conditions").at("positions"), 24);
+  EXPECT_NE(tests.at("tumble").at("standard").get<std::string>().find("1293"), std::string::npos);
+  bool judged = false;
+  for (const json& f : tests.at("tumble").at("figures")) {
+    EXPECT_GT(f.at("u").get<double>(), 0.0) << f.dump();
+    if (f.at("key") == "accel.k2_ug_per_g2.y") {
+      judged = true;
+      EXPECT_NEAR(f.at("value").get<double>(), -45.0, 3.0 * f.at("u").get<double>()) << f.dump();
+      EXPECT_TRUE(f.at("pass").get<bool>()) << f.dump();
+      EXPECT_EQ(f.at("limit_value"), 100);
+    }
+  }
+  EXPECT_TRUE(judged) << "the K2 figure carries its verdict";
+  EXPECT_TRUE(report.at("verdict").at("pass").get<bool>());
+  int transients = 0;
+  for (const json& f : tests.at("warm-up").at("figures"))
+    transients += f.at("key").get<std::string>().find(".time_constant_s") != std::string::npos;
+  EXPECT_EQ(transients, 3) << "the three gyros warm up; the accelerometers do not";
+  EXPECT_EQ(d.call("GET", "/api/campaigns/999/report").status, 404);
+}
