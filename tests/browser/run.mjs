@@ -822,6 +822,31 @@ try {
   await shot(page, '21-results-repeatability');
   log('repeatability-short: five power cycles asked and waited for (one answered in the page, four through the API); per-channel repeatability with its intervals');
 
+  // ---- the test reports (IEEE 952 / 1293): a printable page per run, its JSON behind it ----
+  const [reportPage] = await Promise.all([page.context().waitForEvent('page'), page.click('#test-report')]);
+  await reportPage.waitForSelector('#report[data-ready="true"]');
+  const reportText = await reportPage.textContent('#report');
+  for (const expected of ['Test report', 'Turn-on to turn-on bias repeatability', 'IEEE Std 952', 'power ons: 6', 'Gravity',
+    'normal gravity formula', 'Temperatures', 'chamber', 'no acceptance limits', 'accelerometer y turn-on to turn-on bias repeatability (1 sigma)', '68 %:'])
+    assert.ok(reportText.includes(expected), `the repeatability report shows ${expected}`);
+  await reportPage.setViewportSize({ width: 1366, height: 900 });
+  await shot(reportPage, '22-test-report-repeatability');
+  const reportPdf = path.join(outDir, `test-report-campaign-${repeatId}.pdf`);
+  await reportPage.pdf({ path: reportPdf, format: 'A4', printBackground: true, preferCSSPageSize: true });
+  assert.ok(fs.statSync(reportPdf).size > 10000, 'the report prints');
+  for (const [cid, test, expected] of [[stepsId, 'rate-steps', ['scale factor nonlinearity (largest deviation from the line)', 'ppm of full scale', 'rates dps: 5, 10, 20, 50, 100, 150, 200, 300']],
+    [tumbleId, 'tumble', ['IEEE Std 1293', 'positions: 24', 'K2']], [warmId, 'warm-up', ['gyro z time constant', 'accelerometer x warm-up transient', 'no transient above the noise']]]) {
+    await reportPage.goto(`${base}/report.html?id=${cid}`);
+    await reportPage.waitForSelector(`#report[data-ready="true"] table[data-test="${test}"]`);
+    const text = await reportPage.textContent('#report');
+    for (const e of expected) assert.ok(text.includes(e), `the ${test} report shows ${e}`);
+    await shot(reportPage, `22-test-report-${test}`);
+  }
+  const reportJson = await apiCall('GET', `/api/campaigns/${tumbleId}/report`);
+  assert.equal(reportJson.body.format, 'imucal-test-report/1');
+  await reportPage.close();
+  log('test reports of the rate-steps, tumble, warm-up and repeatability runs: figures with u, conditions, printed to A4');
+
   // ---- a viewer sees everything and changes nothing ----
   const queued = await apiCall('POST', '/api/campaigns', { name: 'waiting for an operator', program: 'direct-short' });
   assert.equal(queued.status, 201);

@@ -139,6 +139,8 @@ export function mount(root, ctx) {
       downloads.append(h('span', { class: 'muted', id: 'no-model' }, d.state === 'done' ? 'This campaign produced no model (see the estimator notes below).' : `No model: the campaign ended ${d.state}.`));
     }
     const bundle = h('a', { class: 'button', id: 'download-recording', 'aria-disabled': 'true' }, 'Recording bundle (tar)');
+    if (Object.keys(d.results || {}).length)
+      downloads.append(h('a', { class: 'button', id: 'test-report', href: `report.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Test report (print)'));
     downloads.append(bundle, h('button', { type: 'button', class: 'link', id: 'download-record', onclick: () => saveJson(`campaign-${id}.json`, detail) }, 'Campaign record (JSON)'));
     results.append(downloads);
     enableRecording(bundle);
