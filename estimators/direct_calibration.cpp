@@ -12,6 +12,7 @@
 #include "core/table.hpp"
 #include "core/units.hpp"
 #include "estimators/least_squares.hpp"
+#include "estimators/rate_moments.hpp"
 
 namespace imucal::direct {
 
@@ -110,12 +111,7 @@ void DirectCalibrator::push(const ImuFrame& f) {
   const Vector3d f_rest_o = reference_.specific_force_at_rest_o_mps2(f.table_deg);
   if (iv.frames == 0 && iv.is_static) iv.f_o_mps2 = f_rest_o;
   iv.f_dt_o += f_rest_o * dt;
-  if (dt > 0) {
-    for (int k = 0; k < 3; ++k) {
-      const double q = std::abs(wdt_o[k]) / dt / kGyroNonlinearityRate_radps;
-      iv.nonlinear_moments_rad.row(k) += Eigen::RowVector3d(q, q * q, q * q * q) * wdt_o[k];
-    }
-  }
+  iv.nonlinear_moments_rad += rate_moments::of(wdt_o, dt);
   iv.sum_dtheta += f.dtheta_rad;
   iv.sum_dv += f.dv_mps;
   iv.sumsq_dtheta += f.dtheta_rad.cwiseAbs2();

@@ -10,6 +10,7 @@
 #include "core/units.hpp"
 #include "estimators/held_back.hpp"
 #include "estimators/least_squares.hpp"
+#include "estimators/rate_moments.hpp"
 #include "estimators/table_reference.hpp"
 
 namespace imucal::rate_steps {
@@ -120,8 +121,7 @@ struct RateStepsEstimator::Impl {
   std::vector<Segment> segments;  // statics and rate segments, by time
   table_reference::SegmentFrames frames{{}};
   double dt_nominal_s = 0;
-  bool have_prev = false;
-  ImuFrame prev;
+  table_reference::FrameIntervals intervals;
 
   Impl(const RecordingMeta& m, const Options& o) : options(o), reference(m), dt_nominal_s(1.0 / m.rate_hz) {
     for (const SegmentInfo& s : m.segments) {
@@ -140,31 +140,20 @@ struct RateStepsEstimator::Impl {
   }
 
   void push(const ImuFrame& f) {
-    if (!have_prev) {
-      prev = f;
-      have_prev = true;
-      return;
-    }
-    const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
-    const double dt = t - t_prev;
+    const auto iv = intervals.next(f);
+    if (!iv) return;
     // Every frame, so that each knows the table's acceleration from the one before.
-    const Vector3d wdt = reference.next_increment_o_rad(prev.table_deg, f.table_deg, dt);
-    const int i = frames.assign(t_prev, t);
-    if (i >= 0) accumulate(segments[static_cast<std::size_t>(i)], f, dt, wdt);
-    prev = f;
+    const Vector3d wdt = reference.next_increment_o_rad(iv->prev.table_deg, f.table_deg, iv->dt_s);
+    const int i = frames.assign(iv->t_prev_s, iv->t_s);
+    if (i >= 0) accumulate(segments[static_cast<std::size_t>(i)], iv->prev, f, iv->dt_s, wdt);
   }
 
-  void accumulate(Segment& s, const ImuFrame& f, double dt, const Vector3d& wdt) {
+  void accumulate(Segment& s, const ImuFrame& prev, const ImuFrame& f, double dt, const Vector3d& wdt) {
     if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
     if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(prev.table_deg);
-    for (int k = 0; k < 3; ++k) {
-      (wdt[k] >= 0 ? s.ref_pos_rad[k] : s.ref_neg_rad[k]) += wdt[k];
-      const double w = dt > 0 ? wdt[k] / dt : 0.0;
-      const double q = std::abs(w) / kGyroNonlinearityRate_radps;
-      s.moment_rad[0][k] += wdt[k] * q;
-      s.moment_rad[1][k] += wdt[k] * q * q;
-      s.moment_rad[2][k] += wdt[k] * q * q * q;
-    }
+    for (int k = 0; k < 3; ++k) (wdt[k] >= 0 ? s.ref_pos_rad[k] : s.ref_neg_rad[k]) += wdt[k];
+    const Eigen::Matrix3d moments = rate_moments::of(wdt, dt);
+    for (std::size_t m = 0; m < 3; ++m) s.moment_rad[m] += moments.col(static_cast<Eigen::Index>(m));
     if (dt > 0) s.peak_table_rate_dps = std::max(s.peak_table_rate_dps, (f.table_deg - prev.table_deg).cwiseAbs().maxCoeff() / dt);
     s.sum_dtheta_rad += f.dtheta_rad;
     s.T_s += dt;

@@ -54,8 +54,7 @@ struct TumbleEstimator::Impl {
   std::vector<Static> statics;
   table_reference::SegmentFrames frames{{}};
   double dt_nominal_s;
-  bool have_prev = false;
-  ImuFrame prev;
+  table_reference::FrameIntervals intervals;
 
   explicit Impl(const RecordingMeta& m) : reference(m), dt_nominal_s(1.0 / m.rate_hz) {
     for (const SegmentInfo& s : m.segments)
@@ -67,15 +66,12 @@ struct TumbleEstimator::Impl {
   }
 
   void push(const ImuFrame& f) {
-    if (!have_prev) {
-      prev = f;
-      have_prev = true;
-      return;
-    }
-    const double t = static_cast<double>(f.t_ns) * 1e-9, t_prev = static_cast<double>(prev.t_ns) * 1e-9;
-    const double dt = t - t_prev;
+    const auto iv = intervals.next(f);
+    if (!iv) return;
+    const double dt = iv->dt_s;
+    const ImuFrame& prev = iv->prev;
     // The frames wholly inside a static: the table is at rest over each of them.
-    if (const int i = frames.assign(t_prev, t); i >= 0) {
+    if (const int i = frames.assign(iv->t_prev_s, iv->t_s); i >= 0) {
       Static& s = statics[static_cast<std::size_t>(i)];
       if (dt > 1.5 * dt_nominal_s || dt <= 0) s.gap = true;
       if (s.frames == 0) s.f_o_mps2 = reference.specific_force_at_rest_o_mps2(f.table_deg);
@@ -85,7 +81,6 @@ struct TumbleEstimator::Impl {
       s.T_s += dt;
       ++s.frames;
     }
-    prev = f;
   }
 };
 
