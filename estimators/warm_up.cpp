@@ -72,11 +72,14 @@ Channel fit_channel(const std::vector<double>& t, const std::vector<double>& y, 
   constexpr int kGrid = 80;
   std::vector<double> grid(kGrid);
   int best = 0;
-  std::vector<double> rss(kGrid);
+  double best_rss = std::numeric_limits<double>::infinity();
   for (int i = 0; i < kGrid; ++i) {
     grid[static_cast<std::size_t>(i)] = tau_lo * std::pow(tau_hi / tau_lo, static_cast<double>(i) / (kGrid - 1));
-    rss[static_cast<std::size_t>(i)] = fit_at(t, y, grid[static_cast<std::size_t>(i)]).rss;
-    if (rss[static_cast<std::size_t>(i)] < rss[static_cast<std::size_t>(best)]) best = i;
+    const double rss = fit_at(t, y, grid[static_cast<std::size_t>(i)]).rss;
+    if (rss < best_rss) {
+      best_rss = rss;
+      best = i;
+    }
   }
   double lo = std::log(grid[static_cast<std::size_t>(std::max(0, best - 1))]);
   double hi = std::log(grid[static_cast<std::size_t>(std::min(kGrid - 1, best + 1))]);

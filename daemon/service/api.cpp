@@ -603,12 +603,17 @@ HttpReply Api::compare_campaigns(const std::map<std::string, std::string>& query
 HttpReply Api::campaign_detail(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  json out = summary(*row);
-  out["verdict"] = run_verdict(*row, limits_.current());
-  json spec = parse_or_null(row->spec_json);
+  return json_reply(200, detail_json(*row));
+}
+
+json Api::detail_json(const CampaignRow& row) {
+  const std::int64_t id = row.id;
+  json out = summary(row);
+  out["verdict"] = run_verdict(row, limits_.current());
+  json spec = parse_or_null(row.spec_json);
   out["spec"] = spec;
   json segments = json::array();
-  const CampaignCheck check = check_campaign_text(row->spec_json, config_);
+  const CampaignCheck check = check_campaign_text(row.spec_json, config_);
   for (std::size_t i = 0; i < check.segments.size(); ++i) {
     const auto& s = check.segments[i];
     const bool redoable = !check.spec || !check.spec->chamber.ramps_within(s.t0_s, s.t1_s);
@@ -616,12 +621,12 @@ HttpReply Api::campaign_detail(std::int64_t id) {
                         {"redoable", redoable}});
   }
   out["segments"] = segments;
-  out["checkpoint"] = row->checkpoint_segment
-                          ? json{{"segment", *row->checkpoint_segment}, {"t_s", row->checkpoint_s.value_or(0.0)}}
+  out["checkpoint"] = row.checkpoint_segment
+                          ? json{{"segment", *row.checkpoint_segment}, {"t_s", row.checkpoint_s.value_or(0.0)}}
                           : json(nullptr);
-  out["frames"] = row->frames;
-  out["lost_frames"] = row->lost_frames;
-  out["bad_frames"] = row->bad_frames;
+  out["frames"] = row.frames;
+  out["lost_frames"] = row.lost_frames;
+  out["bad_frames"] = row.bad_frames;
   json transitions = json::array();
   for (const auto& t : db_.transitions(id))
     transitions.push_back({{"t", iso8601_utc(t.t_ms)},
@@ -641,32 +646,28 @@ HttpReply Api::campaign_detail(std::int64_t id) {
   for (const auto& a : db_.alarms(id, true)) alarms.push_back(alarm_json(a));
   out["alarms"] = alarms;
   // What the run asks the operator now (a power cycle), or null.
-  out["prompt"] = nullptr;
-  if (sequencer_.active_id() == id) {
-    const json t = sequencer_.telemetry();
-    if (t.contains("run") && t.at("run").is_object() && t.at("run").at("id") == id) out["prompt"] = t.at("run").value("prompt", json(nullptr));
-  }
-  json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row->estimators_json);
+  out["prompt"] = sequencer_.prompt_of(id);
+  json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row.estimators_json);
   out["estimators"] = estimators.is_null() ? json::object() : estimators;
-  const json results = parse_or_null(row->results_json);
+  const json results = parse_or_null(row.results_json);
   out["results"] = results.is_null() ? json::object() : results;
-  out["run_db"] = row->run_db.empty() ? json(nullptr) : json(row->run_db);
+  out["run_db"] = row.run_db.empty() ? json(nullptr) : json(row.run_db);
   // The serial the run file records (the IMU's own report; the simulator's for simulated runs).
   json serial = nullptr;
-  if (!row->run_db.empty()) {
+  if (!row.run_db.empty()) {
     std::lock_guard lock(serial_mutex_);
     auto it = serial_cache_.find(id);
     if (it == serial_cache_.end()) {
       try {
-        it = serial_cache_.emplace(id, imu_serial_of_run(run_path(*row))).first;
+        it = serial_cache_.emplace(id, imu_serial_of_run(run_path(row))).first;
       } catch (const std::exception& e) {
-        spdlog::warn("campaign {}: cannot read the IMU serial from {}: {}", id, row->run_db, e.what());
+        spdlog::warn("campaign {}: cannot read the IMU serial from {}: {}", id, row.run_db, e.what());
       }
     }
     if (it != serial_cache_.end()) serial = it->second;
   }
   out["imu_serial"] = serial;
-  return json_reply(200, out);
+  return out;
 }
 
 // The run's test report (test_report.hpp): its figures from the results, the temperatures from
@@ -674,8 +675,6 @@ HttpReply Api::campaign_detail(std::int64_t id) {
 HttpReply Api::campaign_report(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  const HttpReply d = campaign_detail(id);
-  if (d.status != 200) return d;
   TemperatureSummary temperatures;
   if (!row->run_db.empty() && std::filesystem::exists(run_path(*row))) {
     try {
@@ -685,7 +684,7 @@ HttpReply Api::campaign_report(std::int64_t id) {
       spdlog::warn("campaign {}: the report goes without temperatures: {}", id, e.what());
     }
   }
-  return json_reply(200, test_report_json(json::parse(d.body), certificate_bench_json(config_, row->ended_ms.value_or(0)),
+  return json_reply(200, test_report_json(detail_json(*row), certificate_bench_json(config_, row->ended_ms.value_or(0)),
                                           temperatures));
 }
 

@@ -63,6 +63,8 @@ class Api {
   // An analysis job's answer when ready, else 202 with its progress.
   static HttpReply job_reply(const AnalysisJobs::Answer& answer);
   HttpReply campaign_detail(std::int64_t id);
+  // GET /api/campaigns/{id}'s body, which the test report is also made from.
+  nlohmann::json detail_json(const CampaignRow& row);
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_progress(std::int64_t id);
   // The recording bundle as a tar file, built once per run under DATA_DIR/exports/.

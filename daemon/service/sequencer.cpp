@@ -933,6 +933,12 @@ Sequencer::Outcome Sequencer::await_power_cycle(RunContext& run) {
   return wait_until_ready(run, false);
 }
 
+json Sequencer::prompt_of(std::int64_t id) const {
+  std::lock_guard lock(mutex_);
+  if (!prompt_ || prompt_->campaign != id || prompt_->answered_by) return nullptr;
+  return {{"text", prompt_->text}, {"since", prompt_->since}, {"segment", prompt_->segment}};
+}
+
 Sequencer::CommandOutcome Sequencer::answer_prompt(std::int64_t id, const std::string& who) {
   {
     std::lock_guard lock(mutex_);
@@ -1092,12 +1098,7 @@ void Sequencer::publish(RunContext& run, bool force) {
       {"recorder",
        {{"queue_frames", rs.queued_frames}, {"queue_high_water_frames", rs.high_water_frames},
         {"committed_frames", rs.stored_frames}, {"dropped_frames", rs.dropped_frames}}}};
-  {
-    std::lock_guard lock(mutex_);
-    t["run"]["prompt"] = prompt_ && prompt_->campaign == run.id && !prompt_->answered_by
-                             ? json{{"text", prompt_->text}, {"since", prompt_->since}, {"segment", prompt_->segment}}
-                             : json(nullptr);
-  }
+  t["run"]["prompt"] = prompt_of(run.id);
   {
     std::lock_guard lock(telemetry_mutex_);
     t["estimators"] = estimators_;

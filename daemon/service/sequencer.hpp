@@ -74,6 +74,9 @@ class Sequencer {
   // The operator's answer to the active run's prompt (a power-cycle segment waits for it): 200, or
   // 409 when campaign `id` is not waiting for one.
   CommandOutcome answer_prompt(std::int64_t id, const std::string& who);
+  // What campaign `id` asks now ({"text", "since", "segment"}), or null: the telemetry's run.prompt
+  // and the campaign's prompt.
+  nlohmann::json prompt_of(std::int64_t id) const;
 
   // The latest telemetry (the live message without type, seq and t).
   nlohmann::json telemetry() const;
