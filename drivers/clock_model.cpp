@@ -14,6 +14,7 @@ void ClockFit::clear() noexcept {
   a_ns_ = 0.0;
   b_ = 1.0;
   residual_rms_ns_ = 0.0;
+  late_ = false;
 }
 
 double ClockFit::model_at(std::int64_t device_ns) const noexcept {
@@ -31,19 +32,32 @@ ClockModelState ClockFit::state() const noexcept {
   s.drift_ppm = (b_ - 1.0) * 1e6;
   s.residual_rms_ns = residual_rms_ns_;
   s.points = blocks_.size() + (have_current_ ? 1 : 0);
+  s.resets = resets_;
   return s;
 }
 
+bool ClockFit::jumped(std::int64_t device_ns, std::int64_t host_ns, std::int64_t key) noexcept {
+  // A device time running backwards: the device restarted its clock.
+  if (have_current_ && device_ns < current_.device_ns) return true;
+  const double r = static_cast<double>(host_ns - ref_host_ns_) - model_at(device_ns);
+  const auto threshold = static_cast<double>(config_.reset_threshold_ns);
+  if (!config_.lower_envelope) return std::fabs(r) > threshold + 0.5 * static_cast<double>(key);
+  if (r < -threshold) return true;  // earlier than the model: no delay does that
+  if (r <= threshold) {
+    late_ = false;
+    return false;
+  }
+  if (!late_) {
+    late_ = true;
+    late_since_device_ns_ = device_ns;
+  }
+  return device_ns - late_since_device_ns_ >= config_.late_confirm_ns;
+}
+
 void ClockFit::add(std::int64_t device_ns, std::int64_t host_ns, std::int64_t key) {
-  if (have_model_) {
-    const double r = static_cast<double>(host_ns - ref_host_ns_) - model_at(device_ns);
-    // A jump of either clock (device reboot, host clock step) or a device time running backwards
-    // makes the old points meaningless.
-    const bool backwards = have_current_ && device_ns < current_.device_ns;
-    if (std::fabs(r) > static_cast<double>(config_.reset_threshold_ns) || backwards) {
-      clear();
-      ++resets_;
-    }
+  if (have_model_ && jumped(device_ns, host_ns, key)) {
+    clear();
+    ++resets_;
   }
   if (!have_model_) {
     ref_device_ns_ = device_ns;
@@ -101,24 +115,25 @@ bool lower_hull_line(const std::vector<std::pair<double, double>>& xz, double x_
   return false;
 }
 
-// Least squares z = a + c x through the points `use` selects; false without a baseline.
-bool least_squares_line(const std::vector<std::pair<double, double>>& xz, const std::vector<bool>& use, double& a,
+// Weighted least squares z = a + c x (weight 0 leaves a point out); false without a baseline.
+bool least_squares_line(const std::vector<std::pair<double, double>>& xz, const std::vector<double>& weight, double& a,
                         double& c) {
   double n = 0.0, mx = 0.0, mz = 0.0;
+  int used = 0;
   for (std::size_t i = 0; i < xz.size(); ++i) {
-    if (!use[i]) continue;
-    n += 1.0;
-    mx += xz[i].first;
-    mz += xz[i].second;
+    if (!(weight[i] > 0.0)) continue;
+    ++used;
+    n += weight[i];
+    mx += weight[i] * xz[i].first;
+    mz += weight[i] * xz[i].second;
   }
-  if (n < 2.0) return false;
+  if (used < 2) return false;
   mx /= n;
   mz /= n;
   double sxx = 0.0, sxz = 0.0;
   for (std::size_t i = 0; i < xz.size(); ++i) {
-    if (!use[i]) continue;
-    sxx += (xz[i].first - mx) * (xz[i].first - mx);
-    sxz += (xz[i].first - mx) * (xz[i].second - mz);
+    sxx += weight[i] * (xz[i].first - mx) * (xz[i].first - mx);
+    sxz += weight[i] * (xz[i].first - mx) * (xz[i].second - mz);
   }
   if (!(sxx > 0.0)) return false;
   c = sxz / sxx;
@@ -136,22 +151,31 @@ void ClockFit::refit() noexcept {
   // Fitted in (x, z) = (device, host - device) relative to the reference, ns: z = a + c x with
   // b = 1 + c. z stays within milliseconds where host itself runs to seconds, so the products
   // of the hull and the sums of the least squares keep their precision.
+  // Round trips bound each point's error by half of theirs: weighted by the inverse square (a
+  // block whose only read so far was held up by a loaded host barely moves the line). Receive
+  // stamps: every point alike, the late ones left out below.
+  std::vector<double> weight(n, 1.0);
+  if (!config_.lower_envelope)
+    for (std::size_t i = 0; i < n; ++i) {
+      const double half_ns = std::max(0.5 * static_cast<double>(point(i).key), static_cast<double>(config_.round_trip_floor_ns));
+      weight[i] = 1.0 / (half_ns * half_ns);
+    }
   std::vector<std::pair<double, double>> xz(n);
-  double mx = 0.0, mz = 0.0;
+  double mx = 0.0, mz = 0.0, sum_w = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     const double x = static_cast<double>(point(i).device_ns - ref_device_ns_);
     xz[i] = {x, static_cast<double>(point(i).host_ns - ref_host_ns_) - x};
     mx += xz[i].first;
-    mz += xz[i].second;
+    mz += weight[i] * xz[i].second;
+    sum_w += weight[i];
   }
   mx /= static_cast<double>(n);
-  mz /= static_cast<double>(n);
+  mz /= sum_w;  // weighted: the offset when there is no baseline for a drift
   // Drift needs a baseline: with less than two block spans of device time keep the rate at 1.
   const std::int64_t span_ns = point(n - 1).device_ns - point(0).device_ns;
   const bool fit_drift = n >= 3 && span_ns >= 2 * config_.block_span_ns;
   double a = 0.0, c = 0.0;
   bool fitted = false;
-  std::vector<bool> use(n, true);
   if (fit_drift && config_.lower_envelope && lower_hull_line(xz, mx, a, c)) {
     // The prompt points: those within prompt_tolerance_ns of the lowest tenth of the heights
     // above the envelope. Blocks whose every observation came late (a sender or host loaded for a
@@ -165,9 +189,9 @@ void ClockFit::refit() noexcept {
     const auto q = sorted.begin() + static_cast<std::ptrdiff_t>(n / 10);
     std::nth_element(sorted.begin(), q, sorted.end());
     const double limit = *q + static_cast<double>(config_.prompt_tolerance_ns);
-    for (std::size_t i = 0; i < n; ++i) use[i] = height[i] <= limit;
+    for (std::size_t i = 0; i < n; ++i) weight[i] = height[i] <= limit ? 1.0 : 0.0;
   }
-  if (fit_drift) fitted = least_squares_line(xz, use, a, c);
+  if (fit_drift) fitted = least_squares_line(xz, weight, a, c);
   // A drift beyond 1000 ppm is not a clock: keep the nominal rate rather than extrapolate.
   if (!fitted || !(std::fabs(c) < 1e-3)) {
     c = 0.0;

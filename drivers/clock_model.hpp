@@ -24,9 +24,17 @@ struct ClockFitConfig {
   // With one-sided delays the drift comes from the block points within this of the lowest
   // tenth's height above the envelope: the prompt ones.
   std::int64_t prompt_tolerance_ns = 20'000;
-  // An observation further than this from the model means the device or host clock jumped:
-  // the fit restarts from that observation.
+  // An observation further than this from the model, beyond what its delay can explain, means
+  // the device or host clock jumped: the fit restarts from that observation. What a delay
+  // explains: with one-sided delays any lateness (a sender descheduled for half a second sends
+  // its backlog late, and that must not restart the fit onto a late point), unless every
+  // observation stays that late for late_confirm_ns of device time; with round trips, half the
+  // observation's round trip.
   std::int64_t reset_threshold_ns = 50'000'000;
+  std::int64_t late_confirm_ns = 2'000'000'000;
+  // Round trips: a point's weight is 1 / (half its round trip)^2, the half taken at least this
+  // (the host's own stamping error).
+  std::int64_t round_trip_floor_ns = 20'000;
 };
 
 class ClockFit {
@@ -34,7 +42,8 @@ class ClockFit {
   explicit ClockFit(ClockFitConfig config = {}) : config_(config) {}
 
   // `key` ranks observations inside a block, smaller is better: host - device for receive
-  // stamps (the delay plus a constant), the round-trip time for request/reply pairs.
+  // stamps (the delay plus a constant), the round-trip time for request/reply pairs (and then
+  // bounds the observation's error: half of it).
   void add(std::int64_t device_ns, std::int64_t host_ns, std::int64_t key);
   bool valid() const noexcept { return have_model_; }
   std::int64_t map(std::int64_t device_ns) const noexcept;
@@ -47,6 +56,7 @@ class ClockFit {
     std::int64_t device_ns, host_ns, key;
   };
   void refit() noexcept;
+  bool jumped(std::int64_t device_ns, std::int64_t host_ns, std::int64_t key) noexcept;
   double model_at(std::int64_t device_ns) const noexcept;  // host - ref_host, ns
 
   ClockFitConfig config_;
@@ -59,6 +69,8 @@ class ClockFit {
   double a_ns_ = 0.0, b_ = 1.0;  // host - ref_host = a + b (device - ref_device)
   double residual_rms_ns_ = 0.0;
   std::uint64_t resets_ = 0;
+  bool late_ = false;  // one-sided: every observation since late_since_device_ns_ came late
+  std::int64_t late_since_device_ns_ = 0;
 };
 
 }  // namespace imucal::drivers

@@ -295,6 +295,7 @@ struct ClockModelState {
   double drift_ppm = 0.0;
   double residual_rms_ns = 0.0;  // scatter of receive times about the fitted lower envelope
   std::size_t points = 0;
+  std::uint64_t resets = 0;  // restarts of the fit on a clock jump since the device was made
 };
 
 struct ImuBatch {

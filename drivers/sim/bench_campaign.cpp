@@ -72,6 +72,7 @@ std::string CampaignReport::to_text() const {
                 "chamber reads            %llu (errors %llu)\n"
                 "table-to-IMU alignment   rms %.1f us, 99th percentile %.1f us, max %.1f us over %llu samples\n"
                 "IMU sample time vs truth rms %.1f us, max %.1f us\n"
+                "clock model restarts     table %llu, IMU %llu\n"
                 "driver CPU (one core)    IMU %.2f %%, table %.2f %%, chamber %.3f %%\n"
                 "process CPU (one core)   %.1f %% (simulated devices and physics included)\n"
                 "physics restarts         %llu (table motion changes)\n",
@@ -82,7 +83,8 @@ std::string CampaignReport::to_text() const {
                 static_cast<unsigned long long>(table_reads), static_cast<unsigned long long>(table_errors),
                 static_cast<unsigned long long>(chamber_reads), static_cast<unsigned long long>(chamber_errors),
                 alignment_rms_us, alignment_p99_us, alignment_max_us, static_cast<unsigned long long>(alignment_points), imu_time_rms_us,
-                imu_time_max_us, imu_cpu_percent, table_cpu_percent, chamber_cpu_percent, process_cpu_percent,
+                imu_time_max_us, static_cast<unsigned long long>(table_clock_resets),
+                static_cast<unsigned long long>(imu_clock_resets), imu_cpu_percent, table_cpu_percent, chamber_cpu_percent, process_cpu_percent,
                 static_cast<unsigned long long>(physics_restarts));
   std::string out = buf;
   for (const auto& [what, n] : errors) out += "  error " + what + ": " + std::to_string(n) + "\n";
@@ -276,6 +278,8 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   rep.imu_stalls = c.stalls;
   rep.imu_not_sent = imu.samples_not_sent();
   rep.physics_restarts = imu.physics_restarts();
+  rep.table_clock_resets = table_driver.clock_model().resets;
+  rep.imu_clock_resets = imu_driver.clock_model().resets;
   rep.imu_cpu_percent = 100.0 * imu_cpu / wall;
   rep.table_cpu_percent = 100.0 * table_cpu / wall;
   rep.chamber_cpu_percent = 100.0 * chamber_cpu / wall;

@@ -28,6 +28,7 @@ struct CampaignReport {
   std::uint64_t imu_not_sent = 0;        // the simulated IMU could not send (full link)
   std::uint64_t table_reads = 0, table_errors = 0, chamber_reads = 0, chamber_errors = 0;
   std::uint64_t alignment_points = 0;
+  std::uint64_t table_clock_resets = 0, imu_clock_resets = 0;  // clock models restarted on a jump
   double alignment_rms_us = 0.0, alignment_p99_us = 0.0, alignment_max_us = 0.0;  // table angle vs IMU sample, as time
   double imu_time_rms_us = 0.0, imu_time_max_us = 0.0;    // IMU sample time vs truth
   double imu_cpu_percent = 0.0, table_cpu_percent = 0.0, chamber_cpu_percent = 0.0;  // of one core
