@@ -24,32 +24,10 @@ ModbusChamberConfig modbus_chamber_config_from_json(const std::string& json_text
   }
   ModbusChamberConfig c;
   try {
-    const std::string transport = j.value("transport", std::string("tcp"));
-    if (transport == "tcp") c.transport = ModbusChamberConfig::Transport::tcp;
-    else if (transport == "rtu") c.transport = ModbusChamberConfig::Transport::rtu;
-    else throw std::invalid_argument("chamber config: 'transport' must be \"tcp\" or \"rtu\"");
-    c.host = j.value("host", c.host);
-    c.port = j.value("port", c.port);
-    if (c.port < 1 || c.port > 65535) throw std::invalid_argument("chamber config: 'port' must be 1..65535");
-    c.serial_device = j.value("serial_device", c.serial_device);
-    c.baud = j.value("baud", c.baud);
-    const std::string parity = j.value("parity", std::string("N"));
-    if (parity != "N" && parity != "E" && parity != "O")
-      throw std::invalid_argument("chamber config: 'parity' must be \"N\", \"E\" or \"O\"");
-    c.parity = parity[0];
-    c.data_bits = j.value("data_bits", c.data_bits);
-    c.stop_bits = j.value("stop_bits", c.stop_bits);
+    read_modbus_link(j, "chamber", c);
     if (!j.contains("map")) throw std::invalid_argument("chamber config: 'map' is required");
     if (j["map"].is_string()) c.map = load_register_map(j["map"].get<std::string>());
     else c.map = register_map_from_json(j["map"].dump());
-    auto ms = [&](const char* key, std::chrono::milliseconds def) {
-      const int v = j.value(key, static_cast<int>(def.count()));
-      if (v <= 0) throw std::invalid_argument(std::string("chamber config: '") + key + "' must be positive");
-      return std::chrono::milliseconds(v);
-    };
-    c.response_timeout = ms("response_timeout_ms", c.response_timeout);
-    c.backoff_initial = ms("backoff_initial_ms", c.backoff_initial);
-    c.backoff_max = ms("backoff_max_ms", c.backoff_max);
     if (j.contains("safe_setpoint_C")) {
       if (j["safe_setpoint_C"].is_null()) c.safe_setpoint_C.reset();
       else c.safe_setpoint_C = j["safe_setpoint_C"].get<double>();
@@ -71,13 +49,9 @@ ModbusChamberConfig modbus_chamber_config_from_json(const std::string& json_text
 struct ModbusChamber::Impl {
   ModbusChamberConfig cfg;
   mutable std::mutex mutex;
-  modbus_t* ctx = nullptr;
+  ModbusLink link;
+  modbus_t* ctx = nullptr;  // link's context while open (link.open())
   DeviceState state = DeviceState::disconnected;  // the lifecycle state reached
-  Clock::time_point next_attempt{};
-  std::chrono::milliseconds backoff{0};
-  std::string last_link_error;
-  std::uint64_t reconnects = 0;
-  bool ever_connected = false;
 
   // Driver-side ramp (maps without a ramp register).
   struct Ramp {
@@ -88,92 +62,31 @@ struct ModbusChamber::Impl {
   std::optional<Ramp> ramp;
   std::optional<double> device_ramp_target_C;  // ramp run by the controller
 
-  explicit Impl(ModbusChamberConfig c) : cfg(std::move(c)), backoff(cfg.backoff_initial) {}
-  ~Impl() { close_link(); }
+  explicit Impl(ModbusChamberConfig c)
+      : cfg(std::move(c)), link(cfg, cfg.map.slave_id, "chamber " + cfg.address() + " (" + cfg.map.name + ")") {}
 
-  std::string address() const {
-    if (cfg.transport == ModbusChamberConfig::Transport::tcp)
-      return "modbus-tcp://" + cfg.host + ":" + std::to_string(cfg.port);
-    return "modbus-rtu://" + cfg.serial_device + "@" + std::to_string(cfg.baud);
-  }
-  std::string who() const { return "chamber " + address() + " (" + cfg.map.name + ")"; }
+  const std::string& who() const { return link.who(); }
 
   void close_link() noexcept {
-    if (ctx) {
-      modbus_close(ctx);
-      modbus_free(ctx);
-      ctx = nullptr;
-    }
+    link.close();
+    ctx = nullptr;
   }
 
   // Opens the link if it is down. `force` ignores the backoff (explicit connect()).
   Result<void> ensure_link(bool force) {
-    if (ctx) return success();
-    const auto now = Clock::now();
-    if (!force && now < next_attempt) {
-      const auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(next_attempt - now);
-      return {DriverErrc::not_connected, who() + ": link down (" + last_link_error + "), next attempt in " +
-                                             std::to_string(wait.count()) + " ms"};
+    auto c = link.open(force);
+    if (!c) {
+      ctx = nullptr;
+      return c.error();
     }
-    modbus_t* c = nullptr;
-    if (cfg.transport == ModbusChamberConfig::Transport::tcp)
-      c = modbus_new_tcp(cfg.host.c_str(), cfg.port);
-    else
-      c = modbus_new_rtu(cfg.serial_device.c_str(), cfg.baud, cfg.parity, cfg.data_bits, cfg.stop_bits);
-    if (!c) return {DriverErrc::connect_failed, who() + ": cannot create the Modbus context: " + modbus_strerror(errno)};
-    const auto to_us = std::chrono::duration_cast<std::chrono::microseconds>(cfg.response_timeout).count();
-    modbus_set_response_timeout(c, static_cast<std::uint32_t>(to_us / 1000000), static_cast<std::uint32_t>(to_us % 1000000));
-    // Between bytes of one reply: a real controller streams a reply without pauses.
-    modbus_set_byte_timeout(c, 0, static_cast<std::uint32_t>(std::min<long long>(to_us, 500000)));
-    modbus_set_slave(c, cfg.map.slave_id);
-    // libmodbus uses the response timeout for the TCP connect as well, so this is bounded.
-    if (modbus_connect(c) == -1) {
-      const std::string why = modbus_strerror(errno);
-      modbus_free(c);
-      last_link_error = "connect failed: " + why;
-      next_attempt = now + backoff;
-      backoff = std::min(backoff * 2, cfg.backoff_max);
-      return {DriverErrc::connect_failed, who() + ": " + last_link_error};
-    }
-    ctx = c;
-    backoff = cfg.backoff_initial;
-    if (ever_connected) ++reconnects;
-    ever_connected = true;
+    ctx = *c;
     return success();
   }
 
-  // Turns the errno of a failed libmodbus call into a typed error; closes the link unless the
-  // device itself answered with an exception (the link is fine then).
   DriverError fail(const std::string& what) {
-    const int e = errno;
-    const std::string text = who() + ": " + what + ": " + modbus_strerror(e);
-    DriverErrc code = DriverErrc::io_error;
-    bool link_ok = false;
-    switch (e) {
-      case EMBXILFUN: case EMBXILADD: case EMBXILVAL: case EMBXSFAIL: case EMBXACK:
-      case EMBXSBUSY: case EMBXNACK: case EMBXMEMPAR: case EMBXGPATH: case EMBXGTAR:
-        code = DriverErrc::device_rejected;
-        link_ok = true;
-        break;
-      case ETIMEDOUT: code = DriverErrc::timeout; break;
-      case EMBBADCRC: code = DriverErrc::crc_error; break;
-      case EMBBADDATA: case EMBBADEXC: case EMBUNKEXC: case EMBMDATA: case EMBBADSLAVE:
-        code = DriverErrc::protocol_error;
-        break;
-      case ECONNRESET: case EPIPE: case ECONNREFUSED: case ENOTCONN: case EBADF: case ECONNABORTED:
-        code = DriverErrc::connection_lost;
-        break;
-      default: break;
-    }
-    if (!link_ok) {
-      // After a timeout or a garbled reply the stream position is unknown and a late reply could
-      // be taken for the answer to the next request: start over on a fresh connection. The
-      // first reconnection is tried at once, later ones back off.
-      close_link();
-      last_link_error = what + ": " + modbus_strerror(e);
-      next_attempt = Clock::now();
-    }
-    return {code, text};
+    DriverError e = link.fail(what);
+    if (!link.is_open()) ctx = nullptr;
+    return e;
   }
 
   // "what (register 2782..2783)": an exception reply names the register the controller refused,
@@ -282,7 +195,7 @@ std::string ModbusChamber::describe() const { return impl_->who(); }
 
 std::uint64_t ModbusChamber::reconnects() const {
   std::lock_guard lock(impl_->mutex);
-  return impl_->reconnects;
+  return impl_->link.reconnects();
 }
 
 DeviceState ModbusChamber::state() const {

@@ -11,23 +11,14 @@
 #include <string>
 
 #include "drivers/interfaces.hpp"
+#include "drivers/modbus_link.hpp"
 #include "drivers/register_map.hpp"
 
 namespace imucal::drivers {
 
-struct ModbusChamberConfig {
-  enum class Transport { tcp, rtu } transport = Transport::tcp;
-  std::string host = "127.0.0.1";  // tcp
-  int port = 502;
-  std::string serial_device = "/dev/ttyUSB0";  // rtu
-  int baud = 9600;
-  char parity = 'N';
-  int data_bits = 8;
-  int stop_bits = 1;
+// The link (drivers/modbus_link.hpp) and what the chamber adds to it.
+struct ModbusChamberConfig : ModbusLinkConfig {
   RegisterMap map;
-  std::chrono::milliseconds response_timeout{500};
-  std::chrono::milliseconds backoff_initial{250};
-  std::chrono::milliseconds backoff_max{8000};
   // safe_stop(): go to this set point with control on; empty: switch control off (needs a
   // control-mode register).
   std::optional<double> safe_setpoint_C = 25.0;

@@ -45,11 +45,37 @@ struct SimChamber::Impl {
   int corrupt = 0;
   bool silent = false;
   double reading_offset_C = 0.0;  // a sensor fault: added to the process value served
+  std::vector<bool> coils;        // the digital outputs as written
+  std::vector<CoilChange> coil_changes;
+  Clock::time_point started = Clock::now();
 
   explicit Impl(SimChamberConfig c)
       : cfg(std::move(c)), pv_C(cfg.initial_C), sp_C(cfg.initial_C), wsp_C(cfg.initial_C), unit(cfg.unit) {
     if (!cfg.map.units) unit = cfg.map.fixed_unit;
     alarm_raw.resize(cfg.map.alarms.size());
+    coils.assign(static_cast<std::size_t>(std::max(cfg.digital_outputs, 0)), false);
+  }
+
+  // Coil writes (function 5 or 15) taken into the outputs before the reply, as registers are.
+  void absorb_coil_writes(const std::uint8_t* query, int h, int rc) {
+    const std::uint8_t function = query[h];
+    if (function != 0x05 && function != 0x0F) return;
+    const int first = (query[h + 1] << 8) | query[h + 2];
+    std::vector<bool> values;
+    if (function == 0x05) {
+      values.push_back(query[h + 3] == 0xFF);
+    } else {
+      const int count = (query[h + 3] << 8) | query[h + 4];
+      for (int i = 0; i < count && h + 6 + i / 8 < rc; ++i) values.push_back(((query[h + 6 + i / 8] >> (i % 8)) & 1) != 0);
+    }
+    std::lock_guard lock(mutex);
+    const double t_s = std::chrono::duration<double>(Clock::now() - started).count();
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      const auto k = static_cast<std::size_t>(first) + i;
+      if (k >= coils.size() || coils[k] == values[i]) continue;
+      coils[k] = values[i];
+      coil_changes.push_back({t_s, static_cast<int>(k), values[i]});
+    }
   }
 
   // First-order air temperature towards the working set point; the working set point follows
@@ -177,6 +203,7 @@ struct SimChamber::Impl {
         absorb_writes(first, count);
       }
     }
+    absorb_coil_writes(query, h, rc);
     if (modbus_reply(ctx, query, rc, mapping) == -1) close_client(fd);
   }
 
@@ -218,7 +245,7 @@ SimChamber::SimChamber(SimChamberConfig config) : impl_(std::make_unique<Impl>(s
   Impl& m = *impl_;
   m.ctx = modbus_new_tcp("127.0.0.1", m.cfg.port);
   if (!m.ctx) throw std::runtime_error(std::string("simulated chamber: modbus_new_tcp: ") + modbus_strerror(errno));
-  m.mapping = modbus_mapping_new(0, 0, m.cfg.map.address_end(), 0);
+  m.mapping = modbus_mapping_new(std::max(m.cfg.digital_outputs, 0), 0, m.cfg.map.address_end(), 0);
   if (!m.mapping) {
     modbus_free(m.ctx);
     throw std::runtime_error(std::string("simulated chamber: register bank: ") + modbus_strerror(errno));
@@ -270,6 +297,16 @@ bool SimChamber::control_on() const {
   return impl_->control_on;
 }
 std::uint64_t SimChamber::requests() const { return impl_->requests; }
+
+bool SimChamber::coil(int address) const {
+  std::lock_guard lock(impl_->mutex);
+  return address >= 0 && static_cast<std::size_t>(address) < impl_->coils.size() && impl_->coils[static_cast<std::size_t>(address)];
+}
+
+std::vector<CoilChange> SimChamber::coil_changes() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->coil_changes;
+}
 
 void SimChamber::set_unit(TemperatureUnit unit) {
   std::lock_guard lock(impl_->mutex);

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "drivers/interfaces.hpp"
 #include "drivers/register_map.hpp"
@@ -20,6 +21,16 @@ struct SimChamberConfig {
   double time_constant_s = 60.0;    // first-order lag of the air to the working set point
   TemperatureUnit unit = TemperatureUnit::celsius;  // for maps with a units register
   int port = 0;                     // 0: any free port (see port())
+  // Digital outputs served as coils 0.. (a controller's relay outputs; one may switch the IMU's
+  // supply, drivers/power_relay.hpp). They start clear.
+  int digital_outputs = 8;
+};
+
+// A write that changed a digital output, in seconds since the server started.
+struct CoilChange {
+  double t_s;
+  int coil;
+  bool set;
 };
 
 class SimChamber {
@@ -38,6 +49,8 @@ class SimChamber {
   double working_setpoint_C() const;
   bool control_on() const;
   std::uint64_t requests() const;  // requests answered or dropped
+  bool coil(int address) const;
+  std::vector<CoilChange> coil_changes() const;
 
   // What the front panel would change.
   void set_unit(TemperatureUnit unit);

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "drivers/modbus_chamber.hpp"
+#include "drivers/power_relay.hpp"
 #include "drivers/sim/sim_chamber.hpp"
 #include "test_helpers.hpp"
 
@@ -310,6 +311,103 @@ TEST(ModbusChamber, RefusesSetPointsOutsideTheConfiguredRange) {
 // Fuzz at the wire: a server that answers every request with random bytes (the request's own
 // transaction id half of the time, so that libmodbus reads on into the random PDU). The driver
 // must return an error every time, within its timeout, and never a value.
+// ------------------------------------------------------------------------------------------------
+// The IMU's power relay: a coil of the chamber controller's digital outputs (or a relay module).
+
+namespace {
+
+PowerRelayConfig relay_config(const sim::SimChamber& s, int coil) {
+  PowerRelayConfig c;
+  c.port = s.port();
+  c.coil = coil;
+  c.response_timeout = 400ms;
+  c.backoff_initial = 50ms;
+  c.backoff_max = 400ms;
+  return c;
+}
+
+}  // namespace
+
+TEST(PowerRelay, SwitchesTheCoilAndReadsItBack) {
+  sim::SimChamber sim(sim_config("watlow-f4t"));
+  PowerRelay relay(relay_config(sim, 3));
+  ASSERT_TRUE(relay.set_power(true)) << relay.describe();
+  EXPECT_TRUE(sim.coil(3));
+  EXPECT_TRUE(*relay.powered());
+  ASSERT_TRUE(relay.set_power(false));
+  EXPECT_FALSE(sim.coil(3));
+  EXPECT_FALSE(*relay.powered());
+  ASSERT_TRUE(relay.set_power(true));
+  const auto changes = sim.coil_changes();
+  ASSERT_EQ(changes.size(), 3u);
+  EXPECT_TRUE(changes[0].set);
+  EXPECT_FALSE(changes[1].set);
+  EXPECT_TRUE(changes[2].set);
+  for (const auto& c : changes) EXPECT_EQ(c.coil, 3);
+  EXPECT_EQ(relay.describe(), "power relay modbus-tcp://127.0.0.1:" + std::to_string(sim.port()) + " unit 1 coil 3");
+}
+
+TEST(PowerRelay, ANormallyClosedContactPowersTheImuWhileTheCoilIsClear) {
+  sim::SimChamber sim(sim_config("watlow-f4t"));
+  PowerRelayConfig c = relay_config(sim, 0);
+  c.on_when_set = false;
+  PowerRelay relay(c);
+  EXPECT_TRUE(*relay.powered()) << "the coil starts clear";
+  ASSERT_TRUE(relay.set_power(false));
+  EXPECT_TRUE(sim.coil(0));
+  ASSERT_TRUE(relay.set_power(true));
+  EXPECT_FALSE(sim.coil(0));
+}
+
+TEST(PowerRelay, ACoilTheDeviceDoesNotHaveIsNamedInTheError) {
+  sim::SimChamber sim(sim_config("watlow-f4t"));  // 8 digital outputs: coils 0..7
+  PowerRelay relay(relay_config(sim, 12));
+  const auto r = relay.set_power(false);
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.code(), DriverErrc::device_rejected);
+  EXPECT_NE(r.error().message.find("coil 12"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("switching the IMU off"), std::string::npos) << r.error().message;
+}
+
+TEST(PowerRelay, AnUnreachableRelayFailsWithinTheTimeoutNamingIt) {
+  int port = 0;
+  ::close(bind_loopback(port, false));  // a port nobody listens on
+  PowerRelayConfig c;
+  c.port = port;
+  c.response_timeout = 300ms;
+  PowerRelay relay(c);
+  Stopwatch sw;
+  const auto r = relay.set_power(true);
+  ASSERT_FALSE(r);
+  EXPECT_LT(sw.seconds(), 2.0);
+  EXPECT_EQ(r.code(), DriverErrc::connect_failed);
+  EXPECT_NE(r.error().message.find("power relay modbus-tcp://127.0.0.1:" + std::to_string(port)), std::string::npos)
+      << r.error().message;
+}
+
+TEST(PowerRelay, ConfigurationFromJson) {
+  const auto c = power_relay_config_from_json(
+      R"({"host": "10.0.0.7", "port": 1502, "unit_id": 4, "coil": 2, "on_when_set": false, "off_s": 15})");
+  EXPECT_EQ(c.host, "10.0.0.7");
+  EXPECT_EQ(c.port, 1502);
+  EXPECT_EQ(c.unit_id, 4);
+  EXPECT_EQ(c.coil, 2);
+  EXPECT_FALSE(c.on_when_set);
+  EXPECT_DOUBLE_EQ(c.off_s, 15.0);
+  auto message = [](const char* text) {
+    try {
+      (void)power_relay_config_from_json(text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(message(R"({"coil": -1})"), "power relay config: 'coil' must be 0..65535");
+  EXPECT_EQ(message(R"({"unit_id": 0})"), "power relay config: 'unit_id' must be 1..247");
+  EXPECT_EQ(message(R"({"off_s": 0.2})"), "power relay config: 'off_s' must be 1..600 seconds");
+  EXPECT_EQ(message(R"({"transport": "udp"})"), "power relay config: 'transport' must be \"tcp\" or \"rtu\"");
+}
+
 TEST(ModbusChamberFuzz, RandomRepliesNeverYieldAValue) {
   int port = 0;
   const int ls = bind_loopback(port);
