@@ -330,9 +330,11 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
       }
     } else if (*kind == "table_fault") {
       fault.kind = SimFault::Kind::TableFault;
+    } else if (*kind == "relay_stuck") {
+      fault.kind = SimFault::Kind::RelayStuck;
     } else {
       problems.push_back(where + ".kind \"" + *kind +
-                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, disconnect, table_fault");
+                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, disconnect, table_fault, relay_stuck");
     }
     faults.push_back(fault);
   }
@@ -545,6 +547,10 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
     }
     if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+    for (std::size_t i = 0; i < spec.faults.size(); ++i)
+      if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
     if (imu != nullptr) check_imu(*imu, spec.imu, problems);
     if (config.device_addresses) {
       if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {

@@ -38,7 +38,7 @@ struct ChamberProfile {
 };
 
 struct SimFault {
-  enum class Kind { ChamberOffset, ImuDropout, ImuCorrupt, Disconnect, TableFault } kind = Kind::ChamberOffset;
+  enum class Kind { ChamberOffset, ImuDropout, ImuCorrupt, Disconnect, TableFault, RelayStuck } kind = Kind::ChamberOffset;
   std::string device;       // Disconnect: table, chamber or imu
   double at_s = 0.0;        // program time of the first pass
   double duration_s = 0.0;  // simulated (device) seconds

@@ -20,7 +20,8 @@ namespace dr = imucal::drivers;
 
 namespace {
 
-// The keys of imucal-table/1 and imucal-chamber/1 (drivers/acl_table.hpp, modbus_chamber.hpp).
+// The keys of imucal-table/1, imucal-chamber/1 and imucal-power-relay/1 (drivers/acl_table.hpp,
+// modbus_chamber.hpp, power_relay.hpp).
 // The drivers' parsers ignore keys they do not know; the daemon's configuration refuses them, so
 // that a typo (`"watchdog"`) never becomes a silent default.
 constexpr std::array<const char*, 11> kTableKeys = {
@@ -30,6 +31,9 @@ constexpr std::array<const char*, 15> kChamberKeys = {
     "format",    "transport", "host", "port", "serial_device",       "baud",           "parity",          "data_bits",
     "stop_bits", "map",       "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms", "safe_setpoint_C",
     "setpoint_range_C"};
+constexpr std::array<const char*, 16> kPowerRelayKeys = {
+    "format",    "transport", "host",    "port", "serial_device",       "baud",           "parity",         "data_bits",
+    "stop_bits", "unit_id",   "coil",    "on_when_set", "off_s", "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms"};
 
 // A driver's message starts with its own context ("table config: "); the key path replaces it.
 // nlohmann's "[json.exception.type_error.302] " tag says nothing to an operator either.
@@ -103,6 +107,22 @@ std::optional<dr::ModbusChamberConfig> read_chamber(const json& j, const std::st
   return read_driver_object<dr::ModbusChamberConfig>(j, where, kChamberKeys, "imucal-chamber/1", "chamber config: ",
                                                      required, json{{"map", "watlow-f4t"}},
                                                      dr::modbus_chamber_config_from_json, problems);
+}
+
+std::optional<dr::PowerRelayConfig> read_power_relay(const json& j, const std::string& where,
+                                                     std::vector<std::string>& problems) {
+  // No default address or coil: a relay switched by guess could cut the wrong supply.
+  std::vector<std::string> required = {"coil"};
+  const bool rtu = j.is_object() && j.contains("transport") && j["transport"] == "rtu";
+  if (rtu) {
+    required.push_back("serial_device");
+  } else {
+    required.push_back("host");
+    required.push_back("port");
+  }
+  return read_driver_object<dr::PowerRelayConfig>(j, where, kPowerRelayKeys, "imucal-power-relay/1",
+                                                  "power relay config: ", required, json::object(),
+                                                  dr::power_relay_config_from_json, problems);
 }
 
 // The keys of `devices.imu` that say where the link is, by transport.
@@ -271,6 +291,7 @@ DeviceAddresses read_device_addresses(const json& devices, const std::string& wh
     if (auto c = read_chamber(*v, r.at("chamber"), problems)) d.chamber = std::move(*c);
   }
   if (const json* v = r.get("imu", true)) d.imu = read_imu(*v, r.at("imu"), problems);
+  if (const json* v = r.get("power_relay")) d.power_relay = read_power_relay(*v, r.at("power_relay"), problems);
   return d;
 }
 

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,7 @@
 #include "drivers/can_protocol.hpp"
 #include "drivers/imu_link.hpp"
 #include "drivers/modbus_chamber.hpp"
+#include "drivers/power_relay.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
@@ -46,6 +48,8 @@ struct DeviceAddresses {
   drivers::AclTableConfig table;
   drivers::ModbusChamberConfig chamber;
   ImuDeviceConfig imu;
+  // The relay that switches the IMU's supply (imucal-power-relay/1); none: the operator does.
+  std::optional<drivers::PowerRelayConfig> power_relay;
 };
 
 // One axis's program limits as the table controller takes them (its configure() and the

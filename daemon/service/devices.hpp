@@ -93,12 +93,24 @@ class Imu {
   }
 };
 
+// The IMU's supply, when the bench has a relay for it (drivers/power_relay.hpp): power-cycle
+// segments then switch it themselves instead of asking the operator.
+class PowerSwitch {
+ public:
+  virtual ~PowerSwitch() = default;
+  virtual DeviceResult set_power(bool on) = 0;
+  virtual double off_s() const = 0;  // how long a power cycle leaves the IMU unpowered
+  virtual std::string describe() const = 0;
+};
+
 class Bench {
  public:
   virtual ~Bench() = default;
   virtual Table& table() = 0;
   virtual Chamber& chamber() = 0;
   virtual Imu& imu() = 0;
+  // The IMU's power relay; nullptr when the operator switches the IMU.
+  virtual PowerSwitch* power_switch() { return nullptr; }
   // The devices' clock in seconds (simulated time for simulated devices): timeouts and settle
   // times are measured on it, so that accelerated runs behave as real ones.
   virtual double now_s() const = 0;

@@ -899,8 +899,14 @@ Sequencer::Outcome Sequencer::await_power_cycle(RunContext& run) {
   safe_hold(run);
   if (run.recorder && !run.recorder->commit_and_wait()) run.recorder_failed = true;
   const SegmentInfo& seg = run.segments[run.segment];
-  const std::string text = "Power-cycle the IMU: switch it off, wait at least 10 s, switch it on, then answer Done. "
-                           "Segment " + std::to_string(run.segment + 1) + " '" + seg.name + "' starts after the answer.";
+  std::string text = "Power-cycle the IMU: switch it off, wait at least 10 s, switch it on, then answer Done. "
+                     "Segment " + std::to_string(run.segment + 1) + " '" + seg.name + "' starts after the answer.";
+  if (PowerSwitch* power = run.bench->power_switch()) {
+    std::string failure;
+    if (const auto switched = switch_power(run, *power, failure)) return *switched;
+    note_event(run, "alarm", failure + "; asking the operator instead");
+    text += " (The power relay failed: " + failure + ".)";
+  }
   {
     std::lock_guard lock(mutex_);
     prompt_ = Prompt{run.id, run.segment, text, iso8601_utc(now_unix_ms()), std::nullopt};
@@ -929,6 +935,37 @@ Sequencer::Outcome Sequencer::await_power_cycle(RunContext& run) {
   }
   run.power_cycled_segment = run.segment;
   note_event(run, "prompt-answered", "the IMU was power-cycled (answered by " + who + ")");
+  publish(run, true);
+  return wait_until_ready(run, false);
+}
+
+// The IMU power-cycled through the bench's relay: off, off_s on the bench's clock, on. A command
+// meanwhile (pause, stop) still has the IMU switched on again first: every way out of a run
+// leaves it powered. nullopt, with `failure`, when a switch failed.
+std::optional<Sequencer::Outcome> Sequencer::switch_power(RunContext& run, PowerSwitch& power, std::string& failure) {
+  if (auto r = power.set_power(false); !r.ok) {
+    failure = r.message;
+    return std::nullopt;
+  }
+  const double off_since_s = run.bench->now_s();
+  note_event(run, "power-off",
+             "the IMU switched off through " + power.describe() + "; on again in " + number_text(power.off_s()) + " s");
+  publish(run, true);
+  std::optional<Outcome> command;
+  for (;;) {
+    const double left_s = off_since_s + power.off_s() - run.bench->now_s();
+    if (left_s <= 0.0 || (command = pending_command())) break;
+    run.bench->wait(std::min(0.1, left_s));
+    publish(run, false);
+  }
+  if (auto r = power.set_power(true); !r.ok) {
+    failure = "switching the IMU on again: " + r.message;
+    return std::nullopt;
+  }
+  note_event(run, "power-on",
+             "the IMU switched on again after " + number_text(run.bench->now_s() - off_since_s) + " s unpowered");
+  if (command) return *command;  // asked again (switched) when the run comes back to this segment
+  run.power_cycled_segment = run.segment;
   publish(run, true);
   return wait_until_ready(run, false);
 }
@@ -974,6 +1011,9 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
   } catch (const std::exception& e) {
     spdlog::error("campaign {}: safe exit: {}", run.id, e.what());
   }
+  // The parked table in the telemetry before the run is seen final: a client that reads both
+  // after the final state must not see the bench as it was before the safe exit.
+  publish(run, true);
   RunState final_state = RunState::Failed;
   std::string why = reason;
   bool results = false;

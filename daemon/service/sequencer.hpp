@@ -32,6 +32,7 @@
 namespace imucal::daemon {
 
 struct RunContext;
+class PowerSwitch;
 
 class Sequencer {
  public:
@@ -110,6 +111,7 @@ class Sequencer {
   // Before a power-cycle segment: the table safe, the operator asked to switch the IMU off and on;
   // waits for the answer (or a command).
   Outcome await_power_cycle(RunContext& run);
+  std::optional<Outcome> switch_power(RunContext& run, PowerSwitch& power, std::string& failure);
   Outcome wait_until_ready(RunContext& run, bool suspended);
   DeviceReadings readings(RunContext& run, double setpoint_C, double tolerance_C);
   void safe_hold(RunContext& run);

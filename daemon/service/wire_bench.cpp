@@ -15,6 +15,7 @@
 #include "drivers/acl_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
+#include "drivers/power_relay.hpp"
 #include "drivers/register_map.hpp"
 #include "drivers/sim/sim_devices.hpp"
 
@@ -79,6 +80,7 @@ struct WireBench::Devices {
   std::unique_ptr<dr::AclTable> table;
   std::unique_ptr<dr::ModbusChamber> chamber;
   std::unique_ptr<dr::LinkImu> imu;
+  std::unique_ptr<dr::PowerRelay> relay;  // when configured
   // How far the bring-up got: what a failed start must park.
   bool table_connected = false;
   bool chamber_active = false;
@@ -158,6 +160,20 @@ class WireBench::ChamberFacade final : public Chamber {
 
  private:
   WireBench& b_;
+};
+
+class WireBench::PowerFacade final : public PowerSwitch {
+ public:
+  explicit PowerFacade(dr::PowerRelay& relay) : relay_(relay) {}
+  DeviceResult set_power(bool on) override {
+    if (auto r = relay_.set_power(on); !r) return DeviceResult::failure(r.error().message);
+    return DeviceResult::success();
+  }
+  double off_s() const override { return relay_.config().off_s; }
+  std::string describe() const override { return relay_.describe(); }
+
+ private:
+  dr::PowerRelay& relay_;
 };
 
 class WireBench::ImuFacade final : public Imu {
@@ -255,6 +271,13 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   dr::link::resolve_per_unit_lsb(addresses_.imu.link, sim_->gyro_lsb_rad(), sim_->accel_lsb_mps());
   addresses_.imu.rate_hz = settings.rate_hz;
   addresses_.imu.serial = sim.imu_serial;
+  // The simulated chamber's digital output 0 is the IMU's supply (normally open, powered).
+  dr::PowerRelayConfig relay;
+  relay.host = "127.0.0.1";
+  relay.port = sim_->chamber_port();
+  relay.coil = drsim::SimDevices::kImuPowerCoil;
+  relay.off_s = 2.0;  // the simulated IMU has no supply to drain: short rehearsals
+  addresses_.power_relay = relay;
   truth_json_ = imu_model_to_json_text(simulated.truth);
   for (const SimFault& f : simulated.faults) faults_.push_back({f});
   imu_link_ = "a socket pair";
@@ -332,6 +355,19 @@ void WireBench::start(int imu_fd) {
     next_chamber_read_ns_ = dr::host_time_ns() + kChamberReadPeriod_ns;
     require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
     require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
+    if (addresses_.power_relay) {
+      dev_->relay = std::make_unique<dr::PowerRelay>(*addresses_.power_relay);
+      // A program that cycles the IMU's power needs the relay hours later: checked now, and the
+      // IMU that has just answered must be powered by it (else the coil or its sense is wrong).
+      const auto segments = program_.segments();
+      if (std::any_of(segments.begin(), segments.end(), [](const SegmentInfo& g) { return g.kind == "power-cycle"; })) {
+        auto powered = dev_->relay->powered();
+        require(powered, "power relay");
+        if (!*powered)
+          throw std::runtime_error(dev_->relay->describe() + " says the IMU is unpowered, but the IMU answers: "
+                                   "check the coil and on_when_set (config.devices.power_relay)");
+      }
+    }
   } catch (const std::exception& e) {
     std::string message = e.what();
     park_after_failed_start(message);
@@ -341,6 +377,7 @@ void WireBench::start(int imu_fd) {
   table_ = std::make_unique<TableFacade>(*this);
   chamber_ = std::make_unique<ChamberFacade>(*this);
   imu_ = std::make_unique<ImuFacade>(*this);
+  if (dev_->relay) power_ = std::make_unique<PowerFacade>(*dev_->relay);
   service(0);
 }
 
@@ -372,6 +409,7 @@ WireBench::~WireBench() {
 Table& WireBench::table() { return *table_; }
 Chamber& WireBench::chamber() { return *chamber_; }
 Imu& WireBench::imu() { return *imu_; }
+PowerSwitch* WireBench::power_switch() { return power_.get(); }
 double WireBench::now_s() const { return static_cast<double>(dr::host_time_ns() - epoch_ns_) / units::kNsPerS; }
 
 void WireBench::wait(double seconds) {
@@ -479,6 +517,9 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
       case SimFault::Kind::TableFault:
         sim_->table().trip_interlock();  // the panel's emergency stop: the axes brake, demands are refused
         break;
+      case SimFault::Kind::RelayStuck:
+        sim_->chamber().set_outputs_forced(true);  // the IMU's supply forced on by hand
+        break;
     }
   }
 }
@@ -489,6 +530,7 @@ void WireBench::expire_faults() {
     if (!f.fired || f.over || now_ns < f.until_ns) continue;
     f.over = true;
     if (f.fault.kind == SimFault::Kind::ChamberOffset) sim_->chamber().set_reading_offset(0.0);
+    if (f.fault.kind == SimFault::Kind::RelayStuck) sim_->chamber().set_outputs_forced(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "table") sim_->table().set_silent(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "chamber") sim_->chamber().set_silent(false);
   }

@@ -23,6 +23,8 @@
 //   angles and rates) at the sample's host time.
 // - Chamber: set points written through Modbus; readings refreshed a few times a second, the
 //   first one before the bench is handed over.
+// - Power: the IMU's supply relay (a Modbus coil) when configured; sim-wire uses the simulated
+//   chamber's digital output 0.
 //
 // Like every Bench it is called from the sequencer's thread only.
 #pragma once
@@ -87,6 +89,7 @@ class WireBench final : public Bench {
   Table& table() override;
   Chamber& chamber() override;
   Imu& imu() override;
+  PowerSwitch* power_switch() override;  // when devices.power_relay names one (sim-wire: always)
   double now_s() const override;  // host time base, from the bench's start
   void wait(double seconds) override;
   bool paced_by_consumer() const override { return false; }  // real time: a device never waits
@@ -101,6 +104,7 @@ class WireBench final : public Bench {
   class TableFacade;
   class ChamberFacade;
   class ImuFacade;
+  class PowerFacade;
 
   struct TableRead {
     std::int64_t t_ns = 0;  // host time base
@@ -161,6 +165,7 @@ class WireBench final : public Bench {
   std::unique_ptr<TableFacade> table_;
   std::unique_ptr<ChamberFacade> chamber_;
   std::unique_ptr<ImuFacade> imu_;
+  std::unique_ptr<PowerFacade> power_;
 
   // Device state as last read (the sequencer polls state() often; the wire is read in service()).
   TableState table_state_;

@@ -46,6 +46,7 @@ struct SimChamber::Impl {
   bool silent = false;
   double reading_offset_C = 0.0;  // a sensor fault: added to the process value served
   std::vector<bool> coils;        // the digital outputs as written
+  bool outputs_forced = false;
   std::vector<CoilChange> coil_changes;
   Clock::time_point started = Clock::now();
 
@@ -69,6 +70,7 @@ struct SimChamber::Impl {
       for (int i = 0; i < count && h + 6 + i / 8 < rc; ++i) values.push_back(((query[h + 6 + i / 8] >> (i % 8)) & 1) != 0);
     }
     std::lock_guard lock(mutex);
+    if (outputs_forced) return;
     const double t_s = std::chrono::duration<double>(Clock::now() - started).count();
     for (std::size_t i = 0; i < values.size(); ++i) {
       const auto k = static_cast<std::size_t>(first) + i;
@@ -178,6 +180,7 @@ struct SimChamber::Impl {
       if (drop_pending) return;
       update(Clock::now());
       write_registers();
+      for (std::size_t i = 0; i < coils.size(); ++i) mapping->tab_bits[i] = coils[i] ? 1 : 0;
     }
     const int h = modbus_get_header_length(ctx);
     const std::uint8_t function = query[h];
@@ -297,6 +300,18 @@ bool SimChamber::control_on() const {
   return impl_->control_on;
 }
 std::uint64_t SimChamber::requests() const { return impl_->requests; }
+
+void SimChamber::set_coil(int address, bool set) {
+  std::lock_guard lock(impl_->mutex);
+  if (address >= 0 && static_cast<std::size_t>(address) < impl_->coils.size()) {
+    impl_->coils[static_cast<std::size_t>(address)] = set;  // served from the next request on
+  }
+}
+
+void SimChamber::set_outputs_forced(bool forced) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->outputs_forced = forced;
+}
 
 bool SimChamber::coil(int address) const {
   std::lock_guard lock(impl_->mutex);

@@ -54,6 +54,9 @@ class SimChamber {
 
   // What the front panel would change.
   void set_unit(TemperatureUnit unit);
+  void set_coil(int address, bool set);  // not recorded as a change
+  // The outputs forced by hand on the front panel: coil writes are acknowledged but not taken.
+  void set_outputs_forced(bool forced);
   // Sets alarms[index] of the map to `raw` (an active value); clear_alarms() restores normal.
   void set_alarm(std::size_t index, std::uint16_t raw);
   void clear_alarms();

@@ -89,6 +89,7 @@ struct SimDevices::Impl {
       : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {
     cfg.imu.link = link::load_imu_link(cfg.imu_link);
     if (cfg.imu.serial.empty()) cfg.imu.serial = cfg.imu_serial;  // what it reports, if its link can
+    chamber.set_coil(kImuPowerCoil, true);
   }
 
   void attach(int fd) {
@@ -194,7 +195,8 @@ std::string SimDevices::devices_config_json() const {
   const json devices = {
       {"table", {{"host", "127.0.0.1"}, {"port", table_port()}}},
       {"chamber", {{"transport", "tcp"}, {"host", "127.0.0.1"}, {"port", chamber_port()}, {"map", c.chamber_map}}},
-      {"imu", imu}};
+      {"imu", imu},
+      {"power_relay", {{"host", "127.0.0.1"}, {"port", chamber_port()}, {"coil", kImuPowerCoil}}}};
   return devices.dump(2);
 }
 

@@ -35,6 +35,11 @@ struct SimDevicesConfig {
 
 class SimDevices {
  public:
+  // The chamber controller's digital output wired to the IMU's supply (normally open, set at the
+  // start: the IMU is powered). The simulated IMU does not model its supply: switching it off
+  // does not stop its stream; the power-on's new turn-on bias is the in-process simulator's.
+  static constexpr int kImuPowerCoil = 0;
+
   // Starts the table and chamber servers and the IMU listener. Throws std::runtime_error naming
   // the device and the address that could not be opened (a port in use, a path that exists and
   // is not a socket).

@@ -181,7 +181,9 @@ TEST(Config, ADevicesObjectNamesRealDevices) {
               "limits": [{"axis": "outer", "mode": "rate", "min_deg": -1e6, "max_deg": 1e6, "rate_dps": 100, "accel_dps2": 50}]},
     "chamber": {"transport": "tcp", "host": "10.0.0.6", "port": 1502, "map": "csz-ezt570i", "safe_setpoint_C": 22},
     "imu": {"socket": "/run/imucal/imu.sock", "framing": "fd", "rate_hz": 400, "gyro_lsb_rad": 2.5e-9,
-            "accel_lsb_mps": 2.5e-8, "serial": "FOG-0042", "transport_delay_ns": 1500, "stall_timeout_ms": 300}}})",
+            "accel_lsb_mps": 2.5e-8, "serial": "FOG-0042", "transport_delay_ns": 1500, "stall_timeout_ms": 300},
+    "power_relay": {"format": "imucal-power-relay/1", "host": "10.0.0.9", "port": 502, "unit_id": 3, "coil": 5,
+                    "on_when_set": false, "off_s": 20}}})",
                                       "test");
   EXPECT_EQ(c.devices, "real");
   ASSERT_TRUE(c.device_addresses);
@@ -203,12 +205,19 @@ TEST(Config, ADevicesObjectNamesRealDevices) {
   EXPECT_EQ(d.imu.serial, "FOG-0042");
   EXPECT_EQ(d.imu.transport_delay_ns, 1500);
   EXPECT_EQ(d.imu.stall_timeout_ms, 300);
+  ASSERT_TRUE(d.power_relay);
+  EXPECT_EQ(d.power_relay->host, "10.0.0.9");
+  EXPECT_EQ(d.power_relay->unit_id, 3);
+  EXPECT_EQ(d.power_relay->coil, 5);
+  EXPECT_FALSE(d.power_relay->on_when_set);
+  EXPECT_DOUBLE_EQ(d.power_relay->off_s, 20.0);
 
   const DaemonConfig can = parse_config(R"({"devices": {"table": {"host": "t", "port": 5000},
     "chamber": {"transport": "rtu", "serial_device": "/dev/ttyS1", "map": "watlow-f4t"},
     "imu": {"interface": "can0", "framing": "classic", "rate_hz": 200, "gyro_lsb_rad": 1e-8, "accel_lsb_mps": 1e-7,
             "serial": "X1"}}})", "test");
   ASSERT_TRUE(can.device_addresses);
+  EXPECT_FALSE(can.device_addresses->power_relay) << "none: the operator switches the IMU";
   EXPECT_EQ(can.device_addresses->imu.interface, "can0");
   EXPECT_EQ(can.device_addresses->chamber.transport, drivers::ModbusChamberConfig::Transport::rtu);
   EXPECT_EQ(can.device_addresses->imu.framing, drivers::can::Framing::classic);
@@ -222,6 +231,7 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
       "chamber": {"port": 1502, "map": "no-such-map", "parity": "X"},
       "imu": {"interface": "can0", "socket": "/tmp/imu.sock", "framing": "flexray", "gyro_lsb_rad": 0,
               "accel_lsb_mps": 1e-7, "serial": "", "rate": 100},
+      "power_relay": {"host": "r", "port": 502, "off_s": 3600, "coils": 2},
       "spare": {}}})",
                  "bench.json");
     FAIL() << "accepted a bad devices object";
@@ -244,6 +254,9 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
            "config.devices.imu.gyro_lsb_rad must be positive",
            "config.devices.imu.serial must not be empty",
            "config.devices.imu: unknown key \"rate\"",
+           "config.devices.power_relay.coil is required",
+           "config.devices.power_relay.off_s: 'off_s' must be 1..600 seconds",
+           "config.devices.power_relay: unknown key \"coils\"",
        })
     EXPECT_NE(m.find(part), std::string::npos) << "missing: " << part << "\nin:\n" << m;
   // The port is reported once, with its path; the driver's own prefix is gone.

@@ -117,3 +117,73 @@ TEST(SimWire, AChamberOutOfBandOverTheWireSuspendsAndTheRunResumes) {
   for (std::size_t i = 1; i < frames.size(); ++i) off_grid += frames[i].t_ns - frames[i - 1].t_ns != 10'000'000;
   EXPECT_EQ(off_grid, 0u);
 }
+
+namespace {
+
+// A rest, a power cycle with the rest after it, and a short hold: the relay's whole path.
+json power_cycle_campaign(const std::string& name) {
+  const json program = json::parse(R"({"name": "power-short", "segments": [
+    {"type": "hold", "name": "before", "duration_s": 2},
+    {"type": "power-cycle", "name": "power-on-2", "duration_s": 2},
+    {"type": "hold", "name": "after", "duration_s": 1}]})");
+  return {{"name", name}, {"program", program}, {"rate_hz", 100}, {"seed", 4},
+          {"truth", noisy_truth()}, {"estimators", json::array()}};
+}
+
+int count_events(const json& c, const std::string& kind) {
+  int n = 0;
+  for (const auto& e : c.at("events")) n += e.at("kind") == kind;
+  return n;
+}
+
+}  // namespace
+
+// The bench's power relay (sim-wire: the simulated chamber's digital output 0) switches the IMU:
+// nobody is asked, the IMU is off for the relay's off time, and the run goes on by itself.
+TEST(SimWire, APowerCycleSwitchesTheRelayWithoutAskingAnyone) {
+  LocalDaemon d("wire-relay", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
+  const auto id = d.post_campaign(power_cycle_campaign("relay"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 120.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_EQ(count_events(c, "prompt"), 0) << c.at("events").dump();
+  ASSERT_EQ(count_events(c, "power-off"), 1) << c.at("events").dump();
+  ASSERT_EQ(count_events(c, "power-on"), 1);
+  EXPECT_TRUE(has_event(c, "power-off", "through power relay modbus-tcp://127.0.0.1:")) << c.at("events").dump();
+  EXPECT_TRUE(has_event(c, "power-off", "coil 0; on again in 2 s")) << c.at("events").dump();
+  double off_s = 0.0;
+  for (const auto& e : c.at("events"))
+    if (e.at("kind") == "power-on") std::sscanf(e.at("reason").get<std::string>().c_str(), "the IMU switched on again after %lf", &off_s);
+  EXPECT_GE(off_s, 2.0);
+  EXPECT_LT(off_s, 10.0) << "a loaded machine may be late, not this late";
+}
+
+// A relay whose output does not follow (forced by hand on the controller's panel) is an alarm
+// naming the coil; the operator is asked instead, and the run goes on after the answer.
+TEST(SimWire, ARelayThatDoesNotSwitchAsksTheOperatorInstead) {
+  LocalDaemon d("wire-relay-stuck", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
+  json campaign = power_cycle_campaign("stuck");
+  campaign["sim_faults"] = {{{"kind", "relay_stuck"}, {"at_s", 0.5}, {"duration_s", 600}}};
+  const auto id = d.post_campaign(campaign);
+  ASSERT_EQ(d.command(id, "start"), 200);
+  d.wait_for(id, [](const json& x) { return x.contains("prompt") && x.at("prompt").is_object(); }, 60.0);
+  const json asked = d.campaign(id);
+  EXPECT_NE(asked.at("prompt").at("text").get<std::string>().find("The power relay failed"), std::string::npos)
+      << asked.at("prompt").dump();
+  ASSERT_EQ(d.call("POST", "/api/campaigns/" + std::to_string(id) + "/prompt", R"({"answer": "done"})").status, 200);
+  const json c = d.wait_final(id, 120.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "alarm", "coil 0: the coil reads set after it was written clear")) << c.at("events").dump();
+  EXPECT_TRUE(has_event(c, "alarm", "asking the operator instead"));
+  EXPECT_EQ(count_events(c, "power-on"), 0);
+  EXPECT_EQ(count_events(c, "prompt-answered"), 1);
+}
+
+TEST(SimWire, AStuckRelayNeedsTheSimWireDevices) {
+  LocalDaemon d("relay-fault-sim");
+  json campaign = power_cycle_campaign("stuck");
+  campaign["sim_faults"] = {{{"kind", "relay_stuck"}, {"at_s", 0.5}}};
+  const auto r = d.call("POST", "/api/campaigns", campaign.dump());
+  EXPECT_EQ(r.status, 422);
+  EXPECT_NE(r.body.find("campaign.sim_faults[0]: relay_stuck needs the sim-wire devices"), std::string::npos) << r.body;
+}
