@@ -95,6 +95,21 @@ std::string socket_path_for(const std::string& tag) {
   return "/tmp/imucal-test-" + std::to_string(::getpid()) + "-" + tag + ".sock";
 }
 
+// A loopback port nothing listens on: bound, then released (0 when no port could be bound).
+int closed_loopback_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  int port = 0;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) {
+    socklen_t len = sizeof addr;
+    if (::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) == 0) port = ntohs(addr.sin_port);
+  }
+  ::close(fd);
+  return port;
+}
+
 drivers::TableStatus table_truth(drivers::sim::SimDevices& sim) {
   return sim.world().with_servo([](drivers::sim::TableServo& s, double t) { return s.status(t); });
 }
@@ -260,19 +275,8 @@ TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) 
     ASSERT_TRUE(table.set_mode(0, drivers::TableMode::rate));
     ASSERT_TRUE(table.demand_rate(0, 10.0));
   }
-  // A port nothing listens on: bound, then released.
-  int closed_port = 0;
-  {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
-    socklen_t len = sizeof addr;
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-    closed_port = ntohs(addr.sin_port);
-    ::close(fd);
-  }
+  const int closed_port = closed_loopback_port();
+  ASSERT_GT(closed_port, 0);
   json devices = json::parse(sim.devices_config_json());
   devices["chamber"]["port"] = closed_port;
   devices["chamber"]["response_timeout_ms"] = 300;
@@ -294,6 +298,48 @@ TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) 
     EXPECT_EQ(axis.mode, drivers::TableMode::off);
     EXPECT_FALSE(axis.moving);
   }
+}
+
+// A program that cycles the IMU's power needs the relay hours later: at the start, a relay that
+// says the IMU is unpowered while the IMU answers (the coil's sense configured wrong) fails the
+// run before anything moves, naming the relay and the key to check; a relay that is not there
+// fails it naming its address.
+TEST(ConfiguredDevices, APowerRelayThatCannotServeTheProgramFailsTheStart) {
+  const std::string dir = scratch_dir("devices-relay");
+  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  json campaign = short_campaign("relay");
+  campaign["program"]["segments"] = json::parse(R"([{"type": "hold", "name": "a", "duration_s": 1},
+    {"type": "power-cycle", "name": "power-on-2", "duration_s": 1}])");
+  const auto run = [&](const json& relay, const std::string& tag) {
+    json devices = json::parse(sim.devices_config_json());
+    devices["power_relay"] = relay;
+    write_file(dir + "/" + tag + ".json", json{{"devices", devices}});
+    LocalDaemon d("devices-" + tag, false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/" + tag + ".json", c); });
+    const auto id = d.post_campaign(campaign);
+    EXPECT_EQ(d.command(id, "start"), 200);
+    return d.wait_final(id, 60.0);
+  };
+  json relay = json::parse(sim.devices_config_json()).at("power_relay");
+  relay["on_when_set"] = false;  // the simulated supply's contact is normally open
+  const json wrong = run(relay, "relay-sense");
+  EXPECT_EQ(wrong.at("state"), "failed");
+  std::string error = wrong.at("error").get<std::string>();
+  EXPECT_NE(error.find("coil 0 says the IMU is unpowered, but the IMU answers: check the coil and on_when_set"),
+            std::string::npos) << error;
+  EXPECT_NE(error.find("the table was parked"), std::string::npos) << error;
+  EXPECT_EQ(wrong.at("frames"), 0);
+
+  const int closed_port = closed_loopback_port();
+  ASSERT_GT(closed_port, 0);
+  relay = json::parse(sim.devices_config_json()).at("power_relay");
+  relay["port"] = closed_port;
+  relay["response_timeout_ms"] = 300;
+  const json missing = run(relay, "relay-missing");
+  EXPECT_EQ(missing.at("state"), "failed");
+  error = missing.at("error").get<std::string>();
+  EXPECT_NE(error.find("power relay modbus-tcp://127.0.0.1:" + std::to_string(closed_port)), std::string::npos) << error;
+  EXPECT_EQ(missing.at("frames"), 0);
+  EXPECT_TRUE(sim.chamber().coil_changes().empty()) << "nothing was switched";
 }
 
 // A KVH-style serial IMU (the built-in kvh-1750 description: float32 delta angles, accelerations in
