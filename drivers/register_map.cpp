@@ -9,6 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "drivers/chamber_maps_builtin.hpp"  // generated from drivers/chamber_maps/*.json
+
 namespace imucal::drivers {
 
 using nlohmann::json;
@@ -31,37 +33,6 @@ int RegisterMap::address_end() const noexcept {
 
 namespace {
 
-// The built-in maps. Register addresses are Modbus PDU addresses (0-based, as libmodbus takes
-// them). The F4T loop-1 addresses are those of its manual's parameter tables; its alarm-state
-// address and enumeration, and every address of the EZT-570i-style map, are illustrative and
-// must be checked against the controller at hand (docs/drivers.md).
-constexpr const char* kWatlowF4t = R"({
-  "format": "imucal-chamber-map/1",
-  "name": "watlow-f4t",
-  "slave_id": 1,
-  "value": {"type": "float32", "word_order": "CDAB"},
-  "process_value": 2820,
-  "setpoint": 2782,
-  "working_setpoint": 2810,
-  "control_mode": {"address": 2730, "auto": 10, "off": 62},
-  "units": {"address": 1328, "C": 15, "F": 30},
-  "alarms": [{"name": "alarm 1", "address": 1356, "normal": [61, 88, 12]}]
-})";
-
-constexpr const char* kCszEzt570i = R"({
-  "format": "imucal-chamber-map/1",
-  "name": "csz-ezt570i",
-  "slave_id": 1,
-  "value": {"type": "int16", "scale": 10},
-  "process_value": 35,
-  "setpoint": 60,
-  "working_setpoint": 61,
-  "ramp_rate_per_min": 62,
-  "control_mode": {"address": 59, "auto": 1, "off": 0},
-  "fixed_unit": "C",
-  "alarms": [{"name": "alarm word", "address": 33, "mask": 65535}]
-})";
-
 int get_address(const json& j, const char* key) {
   const json& v = j.at(key);
   if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 65535)
@@ -82,6 +53,50 @@ TemperatureUnit parse_unit(const std::string& s) {
   if (s == "C") return TemperatureUnit::celsius;
   if (s == "F") return TemperatureUnit::fahrenheit;
   throw std::invalid_argument("register map: 'fixed_unit' must be \"C\" or \"F\"");
+}
+
+// The keys of `j` that carry addresses or encodings, in the order the map format lists them.
+std::vector<std::string> used_keys(const json& j) {
+  std::vector<std::string> keys;
+  for (const char* k : {"value", "process_value", "setpoint", "working_setpoint", "ramp_rate_per_min", "control_mode",
+                        "units", "fixed_unit", "alarms"})
+    if (j.contains(k) && !j[k].is_null() && !(j[k].is_array() && j[k].empty())) keys.emplace_back(k);
+  return keys;
+}
+
+// `source`: {"manual", "document", "registers": {key: {"checked", "where"}}, "note"}. Every key
+// the map uses is listed; one the source does not name is "not checked".
+MapSource read_source(const json& j, const RegisterMap& m) {
+  MapSource s;
+  const json* src = j.contains("source") ? &j["source"] : nullptr;
+  if (src && !src->is_object()) throw std::invalid_argument("register map: 'source' must be an object");
+  if (src) {
+    s.manual = src->value("manual", std::string());
+    s.document = src->value("document", std::string());
+    s.note = src->value("note", std::string());
+  }
+  const json* regs = src && src->contains("registers") ? &(*src)["registers"] : nullptr;
+  if (regs && !regs->is_object()) throw std::invalid_argument("register map: 'source.registers' must be an object");
+  const std::vector<std::string> keys = used_keys(j);
+  if (regs)
+    for (const auto& [key, entry] : regs->items())
+      if (std::find(keys.begin(), keys.end(), key) == keys.end())
+        throw std::invalid_argument("register map '" + m.name + "': 'source.registers." + key + "' is not a key the map uses");
+  for (const std::string& key : keys) {
+    RegisterSource r;
+    r.key = key;
+    if (regs && regs->contains(key)) {
+      const json& e = (*regs)[key];
+      r.checked = e.value("checked", false);
+      r.where = e.value("where", std::string());
+    } else {
+      r.where = "not named in the map's source";
+    }
+    if (r.checked && s.manual.empty())
+      throw std::invalid_argument("register map '" + m.name + "': 'source.registers." + key + "' is checked but the source names no manual");
+    s.registers.push_back(std::move(r));
+  }
+  return s;
 }
 
 }  // namespace
@@ -157,6 +172,7 @@ RegisterMap register_map_from_json(const std::string& json_text) {
       m.plausible_min_C = r[0];
       m.plausible_max_C = r[1];
     }
+    m.source = read_source(j, m);
     return m;
   } catch (const json::exception& e) {
     throw std::invalid_argument(std::string("register map '") + j.value("name", std::string("?")) +
@@ -164,13 +180,39 @@ RegisterMap register_map_from_json(const std::string& json_text) {
   }
 }
 
-std::vector<std::string> builtin_register_map_names() { return {"watlow-f4t", "csz-ezt570i"}; }
+std::vector<std::string> builtin_register_map_names() {
+  std::vector<std::string> names;
+  for (const auto& b : chamber_map_builtin::kChamberMaps) names.emplace_back(b.name);
+  return names;
+}
 
 std::string builtin_register_map_json(const std::string& name) {
-  if (name == "watlow-f4t") return kWatlowF4t;
-  if (name == "csz-ezt570i") return kCszEzt570i;
-  throw std::invalid_argument("unknown built-in register map '" + name +
-                              "' (built-in: watlow-f4t, csz-ezt570i)");
+  for (const auto& b : chamber_map_builtin::kChamberMaps)
+    if (name == b.name) return b.json;
+  std::string known;
+  for (const auto& n : builtin_register_map_names()) known += (known.empty() ? "" : ", ") + n;
+  throw std::invalid_argument("unknown built-in register map '" + name + "' (built-in: " + known + ")");
+}
+
+bool MapSource::fully_checked() const noexcept {
+  return !registers.empty() && std::all_of(registers.begin(), registers.end(), [](const RegisterSource& r) { return r.checked; });
+}
+
+std::vector<std::string> MapSource::unchecked_keys() const {
+  std::vector<std::string> keys;
+  for (const RegisterSource& r : registers)
+    if (!r.checked) keys.push_back(r.key);
+  return keys;
+}
+
+std::string MapSource::summary() const {
+  const std::vector<std::string> unchecked = unchecked_keys();
+  if (unchecked.size() == registers.size()) return "not checked against a maker's manual";
+  std::string s = (unchecked.empty() ? "checked against " : "partly checked against ") + manual;
+  if (unchecked.empty()) return s;
+  s += "; not checked: ";
+  for (std::size_t i = 0; i < unchecked.size(); ++i) s += (i ? ", " : "") + unchecked[i];
+  return s;
 }
 
 RegisterMap load_register_map(const std::string& name_or_path) {

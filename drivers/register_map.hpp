@@ -1,14 +1,15 @@
 // The Modbus register map of a chamber controller, as configuration: which holding registers hold
 // the process value, the set point, the ramping (working) set point, a ramp rate, the control
 // mode, the temperature unit and the alarms, and how a temperature is encoded in them. JSON form
-// "imucal-chamber-map/1" (docs/drivers.md); built-in maps for a Watlow F4T and a CSZ
-// EZT-570i-style controller. The same map drives the Modbus driver and the simulated chamber.
+// "imucal-chamber-map/1" (docs/drivers.md); the built-in maps are the files of
+// drivers/chamber_maps/, each saying which manual it was checked against (`source`). The same map drives the Modbus driver and the simulated chamber.
 #pragma once
 
 #include <cstdint>
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "drivers/interfaces.hpp"
@@ -44,8 +45,30 @@ struct UnitsRegister {
   std::uint16_t fahrenheit_value = 0;
 };
 
+// Where a map's addresses come from: the maker's manual each was checked against, with the page,
+// or that it was not (then it must be checked on the controller at hand).
+struct RegisterSource {
+  std::string key;  // the map's key: value, process_value, setpoint, ..., alarms
+  bool checked = false;
+  std::string where;  // the manual's page and what it says, or why it is not checked
+};
+
+struct MapSource {
+  std::string manual;    // title
+  std::string document;  // number, revision, date
+  std::vector<RegisterSource> registers;  // every key the map uses (absent from the file: not checked)
+  std::string note;
+
+  bool fully_checked() const noexcept;
+  std::vector<std::string> unchecked_keys() const;
+  // "checked against <manual> (<document>)", "partly checked against <manual> (<document>); not
+  // checked: control_mode, alarms", or "not checked against a maker's manual".
+  std::string summary() const;
+};
+
 struct RegisterMap {
   std::string name;
+  MapSource source;
   int slave_id = 1;
   ValueEncoding encoding = ValueEncoding::float32;
   words::WordOrder word_order = words::WordOrder::high_word_first;

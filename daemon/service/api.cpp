@@ -12,6 +12,7 @@
 #include "daemon/service/analysis.hpp"
 #include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
+#include "daemon/service/device_config.hpp"
 #include "daemon/service/json_reader.hpp"
 #include "daemon/service/run_series.hpp"
 #include "daemon/service/unit_registry.hpp"
@@ -234,8 +235,22 @@ json Api::status() {
   if (const auto id = sequencer_.active_id()) {
     if (const auto row = db_.campaign(*id)) active = {{"id", row->id}, {"name", row->name}, {"state", to_string(row->state)}};
   }
+  // The chamber controller's register map and whether a maker's manual vouches for it: an
+  // address nobody checked is worth a look before a chamber is trusted overnight.
+  json chamber_map = nullptr;
+  std::optional<drivers::RegisterMap> map;
+  if (config_.device_addresses) map = config_.device_addresses->chamber.map;
+  else if (config_.devices == "sim-wire") map = drivers::load_register_map(kSimWireChamberMap);
+  if (map) {
+    const auto unchecked = map->source.unchecked_keys();
+    chamber_map = {{"name", map->name},
+                   {"checked", unchecked.empty() ? "yes" : unchecked.size() == map->source.registers.size() ? "no" : "partly"},
+                   {"summary", map->source.summary()},
+                   {"unchecked", unchecked}};
+  }
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
+          {"chamber_map", chamber_map},
           {"started", iso8601_utc(started_ms_)},
           {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
           {"devices", config_.devices},

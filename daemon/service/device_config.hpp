@@ -44,6 +44,9 @@ struct ImuDeviceConfig {
   std::string describe() const;
 };
 
+// The register map of the simulated chamber controller that `sim-wire` reaches.
+inline constexpr const char* kSimWireChamberMap = "watlow-f4t";
+
 struct DeviceAddresses {
   drivers::AclTableConfig table;
   drivers::ModbusChamberConfig chamber;

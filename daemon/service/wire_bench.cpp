@@ -26,7 +26,6 @@ namespace drsim = imucal::drivers::sim;
 
 namespace {
 
-constexpr const char* kChamberMap = "watlow-f4t";
 constexpr std::int64_t kChamberReadPeriod_ns = 250'000'000;
 constexpr std::int64_t kReadHistory_ns = 10'000'000'000;  // table reads kept for interpolation
 // Rate tracking of sine pieces: the program's rate a little ahead (the controller ramps towards a
@@ -246,7 +245,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   drsim::SimDevicesConfig sim;
   for (std::size_t a = 0; a < 3; ++a)
     for (auto& mode : sim.servo.limits[a]) mode = table_limit_setting(settings.limits.axis[a]);
-  sim.chamber_map = kChamberMap;
+  sim.chamber_map = kSimWireChamberMap;
   sim.chamber_start_C = simulated.chamber_start_C;
   sim.chamber_tau_s = simulated.chamber_tau_s;
   sim.imu.framing = dr::can::Framing::fd;
@@ -263,7 +262,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   addresses_.table.port = sim_->table_port();
   addresses_.chamber.host = "127.0.0.1";
   addresses_.chamber.port = sim_->chamber_port();
-  addresses_.chamber.map = dr::load_register_map(kChamberMap);
+  addresses_.chamber.map = dr::load_register_map(kSimWireChamberMap);
   addresses_.chamber.safe_setpoint_C = simulated.chamber_safe_setpoint_C;
   addresses_.imu.framing = dr::can::Framing::fd;
   addresses_.imu.link_name = sim.imu_link;

@@ -142,6 +142,12 @@ int count_events(const json& c, const std::string& kind) {
 // nobody is asked, the IMU is off for the relay's off time, and the run goes on by itself.
 TEST(SimWire, APowerCycleSwitchesTheRelayWithoutAskingAnyone) {
   LocalDaemon d("wire-relay", false, [](daemon::DaemonConfig& c) { c.devices = "sim-wire"; });
+  // The chamber's register map as the device card shows it: what a manual vouches for.
+  const json map = d.get("/api/status").at("chamber_map");
+  EXPECT_EQ(map.at("name"), "watlow-f4t");
+  EXPECT_EQ(map.at("checked"), "partly");
+  EXPECT_EQ(map.at("unchecked"), json({"control_mode", "alarms"}));
+  EXPECT_NE(map.at("summary").get<std::string>().find("partly checked against Watlow F4T"), std::string::npos);
   const auto id = d.post_campaign(power_cycle_campaign("relay"));
   ASSERT_EQ(d.command(id, "start"), 200);
   const json c = d.wait_final(id, 120.0);
@@ -181,6 +187,7 @@ TEST(SimWire, ARelayThatDoesNotSwitchAsksTheOperatorInstead) {
 
 TEST(SimWire, AStuckRelayNeedsTheSimWireDevices) {
   LocalDaemon d("relay-fault-sim");
+  EXPECT_TRUE(d.get("/api/status").at("chamber_map").is_null()) << "the in-process simulation has no register map";
   json campaign = power_cycle_campaign("stuck");
   campaign["sim_faults"] = {{{"kind", "relay_stuck"}, {"at_s", 0.5}}};
   const auto r = d.call("POST", "/api/campaigns", campaign.dump());

@@ -99,9 +99,20 @@ TEST(ModbusChamber, FahrenheitControllerIsReadAndWrittenInCelsius) {
   EXPECT_NEAR(r->setpoint_C, -20.0, 1e-3);
 }
 
-TEST(ModbusChamber, Ezt570iStyleInt16MapWithControllerRamp) {
-  sim::SimChamber sim(sim_config("csz-ezt570i", 0.5));
-  ModbusChamber d(driver_config(sim, "csz-ezt570i"));
+// A controller that runs its own ramps (a ramp-rate register and a working set point), with
+// int16 values in tenths: a map of the test's own (neither built-in controller has both).
+constexpr const char* kRampingInt16Map = R"({"format": "imucal-chamber-map/1", "name": "ramping-int16",
+  "value": {"type": "int16", "scale": 10}, "process_value": 35, "setpoint": 60, "working_setpoint": 61,
+  "ramp_rate_per_min": 62, "control_mode": {"address": 59, "auto": 1, "off": 0}, "fixed_unit": "C",
+  "alarms": [{"name": "alarm word", "address": 33, "mask": 65535}]})";
+
+TEST(ModbusChamber, Int16MapWithControllerRamp) {
+  sim::SimChamberConfig sc = sim_config("csz-ezt570i", 0.5);
+  sc.map = register_map_from_json(kRampingInt16Map);
+  sim::SimChamber sim(sc);
+  ModbusChamberConfig dc = driver_config(sim, "csz-ezt570i");
+  dc.map = sc.map;
+  ModbusChamber d(dc);
   bring_up(d);
   ASSERT_TRUE(d.set_setpoint(22.0));
   Stopwatch sw;
@@ -283,17 +294,44 @@ TEST(ModbusChamber, RtuOnAMissingSerialDeviceFailsNamingIt) {
   EXPECT_NE(r.error().message.find("/dev/ttyIMUCAL-missing"), std::string::npos) << r.error().message;
 }
 
+TEST(RegisterMap, BuiltInMapsNameTheManualPageOfEveryRegisterOrSayTheyAreNotChecked) {
+  const RegisterMap f4t = load_register_map("watlow-f4t");
+  EXPECT_EQ(f4t.source.summary(),
+            "partly checked against Watlow F4T Controller Setup and Operations User's Guide, with the TestEquity F4T "
+            "chamber manual (chapter 4, Communications); not checked: control_mode, alarms");
+  for (const RegisterSource& r : f4t.source.registers) EXPECT_FALSE(r.where.empty()) << r.key;
+  const RegisterMap ezt = load_register_map("csz-ezt570i");
+  EXPECT_EQ(ezt.source.unchecked_keys(), std::vector<std::string>{"fixed_unit"});
+  // A lab's own map without a source, and a source that names a key the map does not use.
+  EXPECT_EQ(register_map_from_json(kRampingInt16Map).source.summary(), "not checked against a maker's manual");
+  try {
+    (void)register_map_from_json(R"({"format": "imucal-chamber-map/1", "name": "x", "value": {"type": "int16", "scale": 10},
+      "process_value": 1, "setpoint": 2, "source": {"manual": "M", "registers": {"ramp_rate_per_min": {"checked": true}}}})");
+    FAIL() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "register map 'x': 'source.registers.ramp_rate_per_min' is not a key the map uses");
+  }
+}
+
 TEST(ModbusChamber, ConfigurationFromJson) {
   const auto c = modbus_chamber_config_from_json(
       R"({"transport":"rtu","serial_device":"/dev/ttyS1","baud":19200,"parity":"E","map":"csz-ezt570i",
-          "response_timeout_ms":250,"safe_setpoint_C":null,"setpoint_range_C":[-40,120]})");
+          "response_timeout_ms":250,"safe_setpoint_C":18,"setpoint_range_C":[-40,120]})");
   EXPECT_EQ(c.transport, ModbusChamberConfig::Transport::rtu);
   EXPECT_EQ(c.baud, 19200);
   EXPECT_EQ(c.parity, 'E');
   EXPECT_EQ(c.map.name, "csz-ezt570i");
   EXPECT_EQ(c.response_timeout, 250ms);
-  EXPECT_FALSE(c.safe_setpoint_C);
+  EXPECT_DOUBLE_EQ(c.safe_setpoint_C.value_or(0), 18.0);
   EXPECT_DOUBLE_EQ(c.setpoint_max_C, 120.0);
+  // Control off as the safe stop needs a control-mode register, which the F4T's map has.
+  EXPECT_FALSE(modbus_chamber_config_from_json(R"({"map":"watlow-f4t","safe_setpoint_C":null})").safe_setpoint_C);
+  try {
+    (void)modbus_chamber_config_from_json(R"({"map":"csz-ezt570i","safe_setpoint_C":null})");
+    ADD_FAILURE() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "chamber config: 'safe_setpoint_C' is null but the map has no control_mode register to switch off");
+  }
   EXPECT_THROW(modbus_chamber_config_from_json(R"({"transport":"udp","map":"watlow-f4t"})"), std::invalid_argument);
   EXPECT_THROW(modbus_chamber_config_from_json(R"({"port":70000,"map":"watlow-f4t"})"), std::invalid_argument);
 }

@@ -68,7 +68,7 @@ TEST(RegisterMap, BuiltInWatlowF4t) {
   const RegisterMap m = load_register_map("watlow-f4t");
   EXPECT_EQ(m.encoding, ValueEncoding::float32);
   EXPECT_EQ(m.word_order, words::WordOrder::low_word_first);
-  EXPECT_EQ(m.process_value, 2820);
+  EXPECT_EQ(m.process_value, 27586);  // Universal Input 1's analog input value, as the manuals give it
   EXPECT_EQ(m.setpoint, 2782);
   EXPECT_EQ(m.working_setpoint, 2810);
   ASSERT_TRUE(m.control_mode);
@@ -79,14 +79,22 @@ TEST(RegisterMap, BuiltInWatlowF4t) {
   ASSERT_EQ(m.alarms.size(), 1u);
   EXPECT_FALSE(m.alarms[0].active(61));
   EXPECT_TRUE(m.alarms[0].active(7));
-  EXPECT_EQ(m.address_end(), 2822);
+  EXPECT_EQ(m.address_end(), 27588);
 }
 
-TEST(RegisterMap, BuiltInEzt570iStyleAndEncoding) {
+TEST(RegisterMap, BuiltInEzt570iAndEncoding) {
   const RegisterMap m = load_register_map("csz-ezt570i");
   EXPECT_EQ(m.encoding, ValueEncoding::scaled_i16);
   EXPECT_DOUBLE_EQ(m.scale, 10.0);
-  EXPECT_TRUE(m.ramp_rate_per_min);
+  EXPECT_EQ(m.process_value, 61);
+  EXPECT_EQ(m.setpoint, 60);
+  EXPECT_FALSE(m.ramp_rate_per_min) << "none outside profiles: the driver ramps";
+  EXPECT_FALSE(m.working_setpoint);
+  EXPECT_FALSE(m.control_mode) << "run/stop is a bit of an event word, not in the map";
+  ASSERT_EQ(m.alarms.size(), 4u);
+  EXPECT_EQ(m.alarms[2].address, 57);
+  EXPECT_FALSE(m.alarms[2].active(0x8000)) << "bit 15 is not defined";
+  EXPECT_TRUE(m.alarms[2].active(1u << 9)) << "door open";
   const auto regs = encode_value(m, -12.34);
   ASSERT_TRUE(regs);
   ASSERT_EQ(regs->size(), 1u);

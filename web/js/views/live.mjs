@@ -66,12 +66,25 @@ export function mount(root, ctx) {
       h('div', { class: 'flags', id: 'table-flags' })),
     h('section', { class: 'card small', id: 'chamber-card' }, h('h2', {}, 'Chamber'),
       kv('temperature', 'chamber-temp', '°C'), kv('set point', 'chamber-sp', '°C'), kv('tolerance', 'chamber-tol', '± °C'),
-      h('div', { class: 'flags', id: 'chamber-flags' })),
+      h('div', { class: 'flags', id: 'chamber-flags' }),
+      h('p', { class: 'map-note', id: 'chamber-map', hidden: true })),
     h('section', { class: 'card small', id: 'imu-card' }, h('h2', {}, 'IMU and recorder'),
       kv('frame rate', 'imu-rate', 'Hz'), kv('frames', 'imu-frames'), kv('lost', 'imu-lost'), kv('bad', 'imu-bad'),
       kv('recorder queue', 'rec-queue', 'frames'), kv('committed', 'rec-committed', 'frames'),
       h('div', { class: 'flags', id: 'imu-flags' })),
     h('section', { class: 'card small', id: 'estimators-card' }, h('h2', {}, 'Estimators'), h('div', { id: 'estimator-status' })));
+
+  // The chamber controller's register map, and whether the maker's manual vouches for it
+  // (GET /api/status chamber_map; none on the in-process simulation).
+  ctx.status().then((s) => {
+    const cm = s?.chamber_map;
+    const el = cards.querySelector('#chamber-map');
+    if (!cm || !el) return;
+    el.textContent = `Register map ${cm.name}: ${cm.summary}.`;
+    el.dataset.checked = cm.checked;
+    if (cm.checked !== 'yes') el.classList.add('warn-text');
+    el.hidden = false;
+  }).catch(() => {});
 
   const windowSel = h('div', { class: 'tabs small', role: 'tablist', id: 'window-tabs' },
     ...WINDOWS.map(([v, label]) => h('button', { type: 'button', role: 'tab', dataset: { window: v }, 'aria-selected': String(Number(v) === windowS),
