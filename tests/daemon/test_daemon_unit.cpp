@@ -523,6 +523,8 @@ TEST(Config, TheCommentedExampleParses) {
   ASSERT_TRUE(real.device_addresses);
   EXPECT_EQ(real.device_addresses->imu.interface, "can0");
   EXPECT_EQ(real.device_addresses->table.port, 5000);
+  ASSERT_TRUE(real.device_addresses->power_relay);
+  EXPECT_EQ(real.device_addresses->power_relay->host, "192.168.10.21");
 }
 
 // The suspenders as objects: each trips on its condition, the chamber only after its persistence,
