@@ -27,13 +27,31 @@ namespace {
 constexpr std::array<const char*, 11> kTableKeys = {
     "format",         "host",           "port",       "response_timeout_ms",  "connect_timeout_ms", "backoff_initial_ms",
     "backoff_max_ms", "reply_checksum", "watchdog_s", "safe_stop_timeout_ms", "limits"};
-constexpr std::array<const char*, 15> kChamberKeys = {
-    "format",    "transport", "host", "port", "serial_device",       "baud",           "parity",          "data_bits",
-    "stop_bits", "map",       "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms", "safe_setpoint_C",
-    "setpoint_range_C"};
-constexpr std::array<const char*, 16> kPowerRelayKeys = {
-    "format",    "transport", "host",    "port", "serial_device",       "baud",           "parity",         "data_bits",
-    "stop_bits", "unit_id",   "coil",    "on_when_set", "off_s", "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms"};
+// The Modbus link keys (drivers/modbus_link.hpp), which the chamber and the power relay share,
+// and each device's own.
+constexpr std::array<const char*, 11> kModbusLinkKeys = {
+    "transport", "host",      "port",      "serial_device",      "baud",          "parity",
+    "data_bits", "stop_bits", "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms"};
+
+std::vector<const char*> modbus_device_keys(std::initializer_list<const char*> own) {
+  std::vector<const char*> keys = {"format"};
+  keys.insert(keys.end(), kModbusLinkKeys.begin(), kModbusLinkKeys.end());
+  keys.insert(keys.end(), own);
+  return keys;
+}
+
+// What a Modbus device object must give besides `own`: where its link is (the serial device over
+// RTU, host and port over TCP); no address is worth guessing.
+std::vector<std::string> modbus_required(const json& j, std::vector<std::string> own) {
+  const bool rtu = j.is_object() && j.contains("transport") && j["transport"] == "rtu";
+  if (rtu) {
+    own.push_back("serial_device");
+  } else {
+    own.push_back("host");
+    own.push_back("port");
+  }
+  return own;
+}
 
 // A driver's message starts with its own context ("table config: "); the key path replaces it.
 // nlohmann's "[json.exception.type_error.302] " tag says nothing to an operator either.
@@ -95,33 +113,19 @@ std::optional<dr::AclTableConfig> read_table(const json& j, const std::string& w
 
 std::optional<dr::ModbusChamberConfig> read_chamber(const json& j, const std::string& where,
                                                     std::vector<std::string>& problems) {
-  std::vector<std::string> required = {"map"};
-  const bool rtu = j.is_object() && j.contains("transport") && j["transport"] == "rtu";
-  if (rtu) {
-    required.push_back("serial_device");
-  } else {
-    required.push_back("host");
-    required.push_back("port");
-  }
+  static const std::vector<const char*> keys = modbus_device_keys({"map", "safe_setpoint_C", "setpoint_range_C"});
   // The parser requires a map: a key other than "map" is checked on a built-in one.
-  return read_driver_object<dr::ModbusChamberConfig>(j, where, kChamberKeys, "imucal-chamber/1", "chamber config: ",
-                                                     required, json{{"map", "watlow-f4t"}},
+  return read_driver_object<dr::ModbusChamberConfig>(j, where, keys, "imucal-chamber/1", "chamber config: ",
+                                                     modbus_required(j, {"map"}), json{{"map", "watlow-f4t"}},
                                                      dr::modbus_chamber_config_from_json, problems);
 }
 
 std::optional<dr::PowerRelayConfig> read_power_relay(const json& j, const std::string& where,
                                                      std::vector<std::string>& problems) {
-  // No default address or coil: a relay switched by guess could cut the wrong supply.
-  std::vector<std::string> required = {"coil"};
-  const bool rtu = j.is_object() && j.contains("transport") && j["transport"] == "rtu";
-  if (rtu) {
-    required.push_back("serial_device");
-  } else {
-    required.push_back("host");
-    required.push_back("port");
-  }
-  return read_driver_object<dr::PowerRelayConfig>(j, where, kPowerRelayKeys, "imucal-power-relay/1",
-                                                  "power relay config: ", required, json::object(),
+  static const std::vector<const char*> keys = modbus_device_keys({"unit_id", "coil", "on_when_set", "off_s"});
+  // No default coil: a relay switched by guess could cut the wrong supply.
+  return read_driver_object<dr::PowerRelayConfig>(j, where, keys, "imucal-power-relay/1", "power relay config: ",
+                                                  modbus_required(j, {"coil"}), json::object(),
                                                   dr::power_relay_config_from_json, problems);
 }
 
