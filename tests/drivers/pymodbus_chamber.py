@@ -17,6 +17,7 @@ Controls, one command a line on stdin, each answered by one JSON line on stdout:
   set NAME VALUE      encode VALUE (device unit) with pymodbus's BinaryPayloadBuilder and store it
   raw ADDRESS COUNT   raw holding registers
   poke ADDRESS VALUE  store one raw 16-bit register (alarms, units, control mode)
+  coil ADDRESS        one of the 8 coils (digital outputs; a power relay writes them)
   fcs                 the function codes of the requests served since the last `fcs`
   exception ADDRESS CODE  answer every request touching ADDRESS with Modbus exception CODE
   clear-exceptions
@@ -218,6 +219,8 @@ def run_command(controls, words):
     if cmd == "poke":
         controls.set_holding(int(args[0]), [int(args[1]) & 0xFFFF])
         return {"ok": True}
+    if cmd == "coil":
+        return {"value": bool(controls.store.getValues(1, int(args[0]), 1)[0])}
     if cmd == "fcs":
         seen, controls.function_codes = controls.function_codes, []
         return {"function_codes": seen}
@@ -322,7 +325,7 @@ async def main():
     store = ModbusSlaveContext(
         hr=ModbusSequentialDataBlock(0, initial_registers(chamber_map, args.initial)),
         ir=NoRegisters(),
-        co=NoRegisters(),
+        co=ModbusSequentialDataBlock(0, [False] * 8),  # digital outputs, as a power relay's coil
         di=NoRegisters(),
         zero_mode=True,  # addresses as on the wire (0-based), as imucal's maps give them
     )

@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "drivers/modbus_chamber.hpp"
+#include "drivers/power_relay.hpp"
 #include "test_helpers.hpp"
 
 extern char** environ;
@@ -327,6 +328,36 @@ class Pymodbus : public ::testing::Test {
  protected:
   void SetUp() override { ASSERT_TRUE(python_with_pymodbus()) << kInstallHint; }
 };
+
+// The IMU's power relay against the same independent server: a coil written with function 5 and
+// read back with function 1, in the relay's sense; a coil the server does not have is refused by
+// the server and the error names it.
+TEST_F(Pymodbus, PowerRelayWritesACoilWithFunctionFiveAndReadsItBackWithOne) {
+  PymodbusChamber server(builtin_register_map_json("watlow-f4t"), PymodbusChamber::Transport::tcp);
+  PowerRelayConfig c;
+  c.port = server.tcp_port();
+  c.coil = 3;
+  c.response_timeout = 1000ms;
+  PowerRelay relay(c);
+  ASSERT_TRUE(relay.set_power(true)) << relay.describe();
+  EXPECT_TRUE(server.command("coil 3").at("value").get<bool>());
+  EXPECT_EQ(server.function_codes(), (std::vector<int>{5, 1}));
+  ASSERT_TRUE(relay.set_power(false));
+  EXPECT_FALSE(server.command("coil 3").at("value").get<bool>());
+  EXPECT_FALSE(server.command("coil 2").at("value").get<bool>()) << "its neighbour untouched";
+  const auto powered = relay.powered();
+  ASSERT_TRUE(powered);
+  EXPECT_FALSE(*powered);
+  EXPECT_EQ(server.function_codes(), (std::vector<int>{5, 1, 1}));
+
+  c.coil = 9;  // the server has coils 0..7
+  PowerRelay missing(c);
+  const auto r = missing.set_power(false);
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.code(), DriverErrc::device_rejected);
+  EXPECT_NE(r.error().message.find("coil 9: switching the IMU off: Illegal data address"), std::string::npos)
+      << r.error().message;
+}
 
 TEST_F(Pymodbus, ReadingFollowsTheSetPoint) {
   const std::string map = builtin_register_map_json("watlow-f4t");
