@@ -144,8 +144,13 @@ bool least_squares_line(const std::vector<std::pair<double, double>>& xz, const 
 }  // namespace
 
 void ClockFit::refit() noexcept {
-  // Points: completed blocks plus the block in progress.
-  const std::size_t n = blocks_.size() + (have_current_ ? 1 : 0);
+  // Points: the completed blocks, each its best observation; while fewer than two are complete,
+  // the block in progress too (its best so far). Once two are, the block in progress is left out:
+  // its point is whatever came first in it, and at the end of the window it has the most
+  // leverage on the line (one slow table read at a block's start moved the model by 500 us for
+  // the whole block).
+  const bool with_current = have_current_ && blocks_.size() < 2;
+  const std::size_t n = blocks_.size() + (with_current ? 1 : 0);
   if (n == 0) return;
   auto point = [&](std::size_t i) -> const Point& { return i < blocks_.size() ? blocks_[i] : current_; };
   // Fitted in (x, z) = (device, host - device) relative to the reference, ns: z = a + c x with
@@ -190,6 +195,18 @@ void ClockFit::refit() noexcept {
     std::nth_element(sorted.begin(), q, sorted.end());
     const double limit = *q + static_cast<double>(config_.prompt_tolerance_ns);
     for (std::size_t i = 0; i < n; ++i) weight[i] = height[i] <= limit ? 1.0 : 0.0;
+  }
+  if (fit_drift && !config_.lower_envelope) {
+    // The prompt round trips: within twice prompt_tolerance_ns of the lowest tenth's. A block
+    // whose every read was held up by the host (a loaded machine) is left out, as a late block of
+    // receive stamps is above: its weight alone still let it tilt the line by 100 us.
+    std::vector<std::int64_t> keys(n);
+    for (std::size_t i = 0; i < n; ++i) keys[i] = point(i).key;
+    const auto q = keys.begin() + static_cast<std::ptrdiff_t>(n / 10);
+    std::nth_element(keys.begin(), q, keys.end());
+    const std::int64_t limit = *q + 2 * config_.prompt_tolerance_ns;
+    for (std::size_t i = 0; i < n; ++i)
+      if (point(i).key > limit) weight[i] = 0.0;
   }
   if (fit_drift) fitted = least_squares_line(xz, weight, a, c);
   // A drift beyond 1000 ppm is not a clock: keep the nominal rate rather than extrapolate.

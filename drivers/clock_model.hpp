@@ -22,7 +22,8 @@ struct ClockFitConfig {
   std::size_t window_blocks = 128;           // blocks in the fit (window = span * blocks)
   bool lower_envelope = true;                // one-sided delays (receive stamps)
   // With one-sided delays the drift comes from the block points within this of the lowest
-  // tenth's height above the envelope: the prompt ones.
+  // tenth's height above the envelope: the prompt ones; with round trips, from those whose round
+  // trip is within twice this of the lowest tenth's.
   std::int64_t prompt_tolerance_ns = 20'000;
   // An observation further than this from the model, beyond what its delay can explain, means
   // the device or host clock jumped: the fit restarts from that observation. What a delay
