@@ -342,6 +342,36 @@ TEST(ConfiguredDevices, APowerRelayThatCannotServeTheProgramFailsTheStart) {
   EXPECT_TRUE(sim.chamber().coil_changes().empty()) << "nothing was switched";
 }
 
+// A pause while the relay holds the IMU off switches it on first (every way out of a run leaves
+// the IMU powered); the resumed run power-cycles it again, for the whole off time.
+TEST(ConfiguredDevices, APauseWhileTheRelayHoldsTheImuOffSwitchesItOnFirst) {
+  const std::string dir = scratch_dir("devices-relay-pause-config");
+  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  json devices = json::parse(sim.devices_config_json());
+  devices["power_relay"]["off_s"] = 5;  // room for the pause on a loaded machine
+  write_file(dir + "/imucald.json", json{{"devices", devices}});
+  LocalDaemon d("devices-relay-pause", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  json campaign = short_campaign("relay-pause");
+  campaign["program"]["segments"] = json::parse(R"([{"type": "hold", "name": "a", "duration_s": 1},
+    {"type": "power-cycle", "name": "power-on-2", "duration_s": 1}, {"type": "hold", "name": "b", "duration_s": 0.5}])");
+  const auto id = d.post_campaign(campaign);
+  ASSERT_EQ(d.command(id, "start"), 200);
+  d.wait_for(id, [](const json& c) { return has_event(c, "power-off"); }, 60.0);
+  ASSERT_EQ(d.command(id, "pause"), 200);
+  const json paused = d.wait_state(id, "paused", 30.0);
+  EXPECT_TRUE(has_event(paused, "power-on")) << paused.at("events").dump();
+  EXPECT_TRUE(sim.chamber().coil(drivers::sim::SimDevices::kImuPowerCoil)) << "the IMU is on while the run is paused";
+  ASSERT_EQ(d.command(id, "resume"), 200);
+  const json c = d.wait_final(id, 60.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  const auto changes = sim.chamber().coil_changes();
+  ASSERT_EQ(changes.size(), 4u) << "off, on (the pause), off, on";
+  for (std::size_t i = 0; i < changes.size(); ++i) EXPECT_EQ(changes[i].set, i % 2 == 1) << i;
+  EXPECT_LT(changes[1].t_s - changes[0].t_s, 5.0) << "the pause cut the first off time short";
+  EXPECT_GE(changes[3].t_s - changes[2].t_s, 5.0) << "the second power cycle is whole";
+  EXPECT_TRUE(sim.chamber().coil(drivers::sim::SimDevices::kImuPowerCoil));
+}
+
 // A KVH-style serial IMU (the built-in kvh-1750 description: float32 delta angles, accelerations in
 // g, a 7-bit counter, CRC-32/MPEG-2) on a pseudo-terminal, reached by the daemon through the
 // serial device path in its configuration. A campaign records every frame of its grid once; a
