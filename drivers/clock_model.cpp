@@ -115,6 +115,14 @@ bool lower_hull_line(const std::vector<std::pair<double, double>>& xz, double x_
   return false;
 }
 
+// The value a tenth of the way up `v` (the lower edge of what the prompt points reach).
+template <class T>
+T lowest_tenth(std::vector<T> v) {
+  const auto q = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 10);
+  std::nth_element(v.begin(), q, v.end());
+  return *q;
+}
+
 // Weighted least squares z = a + c x (weight 0 leaves a point out); false without a baseline.
 bool least_squares_line(const std::vector<std::pair<double, double>>& xz, const std::vector<double>& weight, double& a,
                         double& c) {
@@ -190,10 +198,7 @@ void ClockFit::refit() noexcept {
     // points moved the drift by 13 ppm over 6 s).
     std::vector<double> height(n);
     for (std::size_t i = 0; i < n; ++i) height[i] = xz[i].second - (a + c * xz[i].first);
-    std::vector<double> sorted = height;
-    const auto q = sorted.begin() + static_cast<std::ptrdiff_t>(n / 10);
-    std::nth_element(sorted.begin(), q, sorted.end());
-    const double limit = *q + static_cast<double>(config_.prompt_tolerance_ns);
+    const double limit = lowest_tenth(height) + static_cast<double>(config_.prompt_tolerance_ns);
     for (std::size_t i = 0; i < n; ++i) weight[i] = height[i] <= limit ? 1.0 : 0.0;
   }
   if (fit_drift && !config_.lower_envelope) {
@@ -202,9 +207,7 @@ void ClockFit::refit() noexcept {
     // receive stamps is above: its weight alone still let it tilt the line by 100 us.
     std::vector<std::int64_t> keys(n);
     for (std::size_t i = 0; i < n; ++i) keys[i] = point(i).key;
-    const auto q = keys.begin() + static_cast<std::ptrdiff_t>(n / 10);
-    std::nth_element(keys.begin(), q, keys.end());
-    const std::int64_t limit = *q + 2 * config_.prompt_tolerance_ns;
+    const std::int64_t limit = lowest_tenth(std::move(keys)) + 2 * config_.prompt_tolerance_ns;
     for (std::size_t i = 0; i < n; ++i)
       if (point(i).key > limit) weight[i] = 0.0;
   }

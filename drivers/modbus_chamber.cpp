@@ -49,8 +49,7 @@ ModbusChamberConfig modbus_chamber_config_from_json(const std::string& json_text
 struct ModbusChamber::Impl {
   ModbusChamberConfig cfg;
   mutable std::mutex mutex;
-  ModbusLink link;
-  modbus_t* ctx = nullptr;  // link's context while open (link.open())
+  ModbusLink link;  // open while the controller is reachable
   DeviceState state = DeviceState::disconnected;  // the lifecycle state reached
 
   // Driver-side ramp (maps without a ramp register).
@@ -67,28 +66,6 @@ struct ModbusChamber::Impl {
 
   const std::string& who() const { return link.who(); }
 
-  void close_link() noexcept {
-    link.close();
-    ctx = nullptr;
-  }
-
-  // Opens the link if it is down. `force` ignores the backoff (explicit connect()).
-  Result<void> ensure_link(bool force) {
-    auto c = link.open(force);
-    if (!c) {
-      ctx = nullptr;
-      return c.error();
-    }
-    ctx = *c;
-    return success();
-  }
-
-  DriverError fail(const std::string& what) {
-    DriverError e = link.fail(what);
-    if (!link.is_open()) ctx = nullptr;
-    return e;
-  }
-
   // "what (register 2782..2783)": an exception reply names the register the controller refused,
   // so a wrong map entry is found from the message alone.
   static std::string at_register(const std::string& what, int address, int count) {
@@ -98,29 +75,31 @@ struct ModbusChamber::Impl {
   }
 
   Result<std::vector<std::uint16_t>> read_regs(int address, int count, const std::string& what) {
-    if (auto r = ensure_link(false); !r) return r.error();
+    auto ctx = link.open(false);
+    if (!ctx) return ctx.error();
     std::vector<std::uint16_t> regs(static_cast<std::size_t>(count));
     errno = 0;
-    const int n = modbus_read_registers(ctx, address, count, regs.data());
+    const int n = modbus_read_registers(*ctx, address, count, regs.data());
     if (n != count) {
       if (n >= 0) {
         errno = EMBBADDATA;
       }
-      return fail(at_register(what, address, count));
+      return link.fail(at_register(what, address, count));
     }
     return regs;
   }
 
   Result<void> write_regs(int address, const std::vector<std::uint16_t>& regs, const std::string& what) {
-    if (auto r = ensure_link(false); !r) return r.error();
+    auto ctx = link.open(false);
+    if (!ctx) return ctx.error();
     errno = 0;
-    const int n = regs.size() == 1 ? modbus_write_register(ctx, address, regs[0])
-                                   : modbus_write_registers(ctx, address, static_cast<int>(regs.size()), regs.data());
+    const int n = regs.size() == 1 ? modbus_write_register(*ctx, address, regs[0])
+                                   : modbus_write_registers(*ctx, address, static_cast<int>(regs.size()), regs.data());
     if (n != (regs.size() == 1 ? 1 : static_cast<int>(regs.size()))) {
       if (n >= 0) {
         errno = EMBBADDATA;
       }
-      return fail(at_register(what, address, static_cast<int>(regs.size())));
+      return link.fail(at_register(what, address, static_cast<int>(regs.size())));
     }
     return success();
   }
@@ -200,13 +179,13 @@ std::uint64_t ModbusChamber::reconnects() const {
 
 DeviceState ModbusChamber::state() const {
   std::lock_guard lock(impl_->mutex);
-  if (impl_->state != DeviceState::disconnected && !impl_->ctx) return DeviceState::faulted;
+  if (impl_->state != DeviceState::disconnected && !impl_->link.is_open()) return DeviceState::faulted;
   return impl_->state;
 }
 
 Result<void> ModbusChamber::connect() {
   std::lock_guard lock(impl_->mutex);
-  if (auto r = impl_->ensure_link(true); !r) return r;
+  if (auto r = impl_->link.open(true); !r) return r.error();
   // A request proves the controller answers (a TCP connect alone may reach a gateway only).
   auto unit = impl_->read_unit();
   if (!unit) return unit.error();
@@ -264,7 +243,7 @@ Result<void> ModbusChamber::safe_stop() {
 
 void ModbusChamber::disconnect() noexcept {
   std::lock_guard lock(impl_->mutex);
-  impl_->close_link();
+  impl_->link.close();
   impl_->ramp.reset();
   impl_->state = DeviceState::disconnected;
 }

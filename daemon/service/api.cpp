@@ -154,6 +154,25 @@ bool split_target(const std::string& target, std::string& path, std::map<std::st
   return true;
 }
 
+namespace {
+
+// The chamber controller's register map and whether a maker's manual vouches for it (null on the
+// in-process simulation): an address nobody checked is worth a look before a chamber is trusted
+// overnight.
+json chamber_map_json(const DaemonConfig& config) {
+  std::optional<drivers::RegisterMap> map;
+  if (config.device_addresses) map = config.device_addresses->chamber.map;
+  else if (config.devices == "sim-wire") map = drivers::load_register_map(kSimWireChamberMap);
+  if (!map) return nullptr;
+  const auto unchecked = map->source.unchecked_keys();
+  return {{"name", map->name},
+          {"checked", unchecked.empty() ? "yes" : unchecked.size() == map->source.registers.size() ? "no" : "partly"},
+          {"summary", map->source.summary()},
+          {"unchecked", unchecked}};
+}
+
+}  // namespace
+
 Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth)
     : config_(config),
       db_(db),
@@ -170,6 +189,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
   // The listener is called under its mutex, so that once set_event_listener({}) has returned no
   // job is still inside it (the HTTP server it points to may then go).
   jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); });
+  chamber_map_ = chamber_map_json(config);
   // Without a configuration file the sequence can only live in the data directory.
   if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
@@ -235,22 +255,9 @@ json Api::status() {
   if (const auto id = sequencer_.active_id()) {
     if (const auto row = db_.campaign(*id)) active = {{"id", row->id}, {"name", row->name}, {"state", to_string(row->state)}};
   }
-  // The chamber controller's register map and whether a maker's manual vouches for it: an
-  // address nobody checked is worth a look before a chamber is trusted overnight.
-  json chamber_map = nullptr;
-  std::optional<drivers::RegisterMap> map;
-  if (config_.device_addresses) map = config_.device_addresses->chamber.map;
-  else if (config_.devices == "sim-wire") map = drivers::load_register_map(kSimWireChamberMap);
-  if (map) {
-    const auto unchecked = map->source.unchecked_keys();
-    chamber_map = {{"name", map->name},
-                   {"checked", unchecked.empty() ? "yes" : unchecked.size() == map->source.registers.size() ? "no" : "partly"},
-                   {"summary", map->source.summary()},
-                   {"unchecked", unchecked}};
-  }
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
-          {"chamber_map", chamber_map},
+          {"chamber_map", chamber_map_},
           {"started", iso8601_utc(started_ms_)},
           {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
           {"devices", config_.devices},
