@@ -486,6 +486,7 @@ int cmd_compare(const std::string& model_path, const std::string& truth_path, co
 struct SimDevicesArgs {
   int table_port = 0, chamber_port = 0;
   std::string imu_socket, imu_link = "imucal-can", truth = "ideal", serial, config_file, framing = "fd";
+  std::string table_dialect = "imucal-acl";
   double rate_hz = 1000.0;
   std::uint64_t seed = 1;
 };
@@ -504,6 +505,7 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
   for (std::size_t axis = 0; axis < 3; ++axis)
     c.servo.limits[axis].fill(daemon::table_limit_setting(config.table_limits.axis[axis]));
   c.table_port = a.table_port;
+  c.table_dialect = a.table_dialect;
   c.chamber_port = a.chamber_port;
   c.chamber_start_C = config.chamber.safe_setpoint_C;
   c.chamber_tau_s = config.sim.chamber_tau_s;
@@ -529,9 +531,9 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
   std::printf("{\"devices\": %s}\n", devices.devices_config_json().c_str());
   std::fflush(stdout);
   std::fprintf(stderr,
-               "imucal sim-devices: table controller on 127.0.0.1:%d, chamber controller (Modbus TCP, map %s) on "
-               "127.0.0.1:%d, IMU (%s) at %g Hz on %s; SIGINT or SIGTERM stops\n",
-               devices.table_port(), c.chamber_map.c_str(), devices.chamber_port(), a.imu_link.c_str(), a.rate_hz,
+               "imucal sim-devices: table controller (dialect %s) on 127.0.0.1:%d, chamber controller (Modbus TCP, "
+               "map %s) on 127.0.0.1:%d, IMU (%s) at %g Hz on %s; SIGINT or SIGTERM stops\n",
+               a.table_dialect.c_str(), devices.table_port(), c.chamber_map.c_str(), devices.chamber_port(), a.imu_link.c_str(), a.rate_hz,
                imu_where.c_str());
   int signal_number = 0;
   sigwait(&signals, &signal_number);
@@ -804,6 +806,9 @@ int main(int argc, char** argv) {
   simdev->add_option("--table-port", simdev_args.table_port, "TCP port of the table controller on 127.0.0.1 (0: any free)")
       ->capture_default_str()
       ->check(CLI::Range(0, 65535));
+  simdev->add_option("--table-dialect", simdev_args.table_dialect,
+                     "the table controller's language (imucal-acl or an imucal-table-dialect/1 file)")
+      ->capture_default_str();
   simdev->add_option("--chamber-port", simdev_args.chamber_port,
                      "Modbus TCP port of the chamber controller on 127.0.0.1 (0: any free)")
       ->capture_default_str()

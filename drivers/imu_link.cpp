@@ -3,10 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 #include <utility>
 
@@ -617,35 +615,12 @@ ImuLink imu_link_from_json(const std::string& json_text) {
   return link;
 }
 
-std::vector<std::string> builtin_imu_link_names() {
-  std::vector<std::string> names;
-  for (const auto& b : builtin::kImuLinks) names.emplace_back(b.name);
-  return names;
-}
+std::vector<std::string> builtin_imu_link_names() { return embedded_names(builtin::kImuLinks); }
 
-namespace {
-std::string known_names() {
-  std::string known;
-  for (const auto& n : builtin_imu_link_names()) known += (known.empty() ? "" : ", ") + n;
-  return known;
-}
-}  // namespace
-
-std::string builtin_imu_link_json(const std::string& name) {
-  for (const auto& b : builtin::kImuLinks)
-    if (name == b.name) return b.json;
-  throw std::invalid_argument("unknown built-in IMU link '" + name + "' (built in: " + known_names() + ")");
-}
+std::string builtin_imu_link_json(const std::string& name) { return embedded_text(builtin::kImuLinks, name, "IMU link"); }
 
 ImuLink load_imu_link(const std::string& name_or_path) {
-  for (const auto& b : builtin::kImuLinks)
-    if (name_or_path == b.name) return imu_link_from_json(b.json);
-  std::ifstream in(name_or_path);
-  if (!in)
-    throw std::invalid_argument("IMU link '" + name_or_path + "': no such built-in description (" + known_names() + ") or file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return imu_link_from_json(ss.str());
+  return imu_link_from_json(embedded_or_file_text(builtin::kImuLinks, name_or_path, "IMU link"));
 }
 
 void resolve_per_unit_lsb(ImuLink& link, std::optional<double> gyro_lsb_rad, std::optional<double> accel_lsb_mps) {

@@ -2,9 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
@@ -180,18 +178,10 @@ RegisterMap register_map_from_json(const std::string& json_text) {
   }
 }
 
-std::vector<std::string> builtin_register_map_names() {
-  std::vector<std::string> names;
-  for (const auto& b : chamber_map_builtin::kChamberMaps) names.emplace_back(b.name);
-  return names;
-}
+std::vector<std::string> builtin_register_map_names() { return embedded_names(builtin::kChamberMaps); }
 
 std::string builtin_register_map_json(const std::string& name) {
-  for (const auto& b : chamber_map_builtin::kChamberMaps)
-    if (name == b.name) return b.json;
-  std::string known;
-  for (const auto& n : builtin_register_map_names()) known += (known.empty() ? "" : ", ") + n;
-  throw std::invalid_argument("unknown built-in register map '" + name + "' (built-in: " + known + ")");
+  return embedded_text(builtin::kChamberMaps, name, "register map");
 }
 
 bool MapSource::fully_checked() const noexcept {
@@ -216,13 +206,7 @@ std::string MapSource::summary() const {
 }
 
 RegisterMap load_register_map(const std::string& name_or_path) {
-  for (const std::string& n : builtin_register_map_names())
-    if (n == name_or_path) return register_map_from_json(builtin_register_map_json(n));
-  std::ifstream in(name_or_path);
-  if (!in) throw std::invalid_argument("register map '" + name_or_path + "': no such built-in map or file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return register_map_from_json(ss.str());
+  return register_map_from_json(embedded_or_file_text(builtin::kChamberMaps, name_or_path, "register map"));
 }
 
 std::optional<std::vector<std::uint16_t>> encode_value(const RegisterMap& map, double value) {

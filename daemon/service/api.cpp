@@ -13,7 +13,7 @@
 #include "pipeline/pipeline.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/device_config.hpp"
-#include "daemon/service/json_reader.hpp"
+#include "core/json_reader.hpp"
 #include "daemon/service/run_series.hpp"
 #include "daemon/service/unit_registry.hpp"
 #include "estimators/direct_calibration.hpp"

@@ -10,7 +10,7 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "daemon/service/daemon_db.hpp"
-#include "daemon/service/json_reader.hpp"
+#include "core/json_reader.hpp"
 #include "motion_programs/chamber.hpp"
 #include "pipeline/pipeline.hpp"
 

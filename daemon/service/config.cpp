@@ -12,7 +12,7 @@
 
 #include "daemon/service/password_hash.hpp"
 
-#include "daemon/service/json_reader.hpp"
+#include "core/json_reader.hpp"
 
 namespace imucal::daemon {
 

@@ -11,7 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/service/json_reader.hpp"
+#include "core/json_reader.hpp"
 
 namespace imucal::daemon {
 
@@ -20,12 +20,12 @@ namespace dr = imucal::drivers;
 
 namespace {
 
-// The keys of imucal-table/1, imucal-chamber/1 and imucal-power-relay/1 (drivers/acl_table.hpp,
+// The keys of imucal-table/1, imucal-chamber/1 and imucal-power-relay/1 (drivers/tcp_table.hpp,
 // modbus_chamber.hpp, power_relay.hpp).
 // The drivers' parsers ignore keys they do not know; the daemon's configuration refuses them, so
 // that a typo (`"watchdog"`) never becomes a silent default.
-constexpr std::array<const char*, 11> kTableKeys = {
-    "format",         "host",           "port",       "response_timeout_ms",  "connect_timeout_ms", "backoff_initial_ms",
+constexpr std::array<const char*, 12> kTableKeys = {
+    "format",         "host",           "port",       "dialect", "response_timeout_ms",  "connect_timeout_ms", "backoff_initial_ms",
     "backoff_max_ms", "reply_checksum", "watchdog_s", "safe_stop_timeout_ms", "limits"};
 // The Modbus link keys (drivers/modbus_link.hpp), which the chamber and the power relay share,
 // and each device's own.
@@ -104,10 +104,10 @@ std::optional<Config> read_driver_object(const json& j, const std::string& where
   }
 }
 
-std::optional<dr::AclTableConfig> read_table(const json& j, const std::string& where, std::vector<std::string>& problems) {
+std::optional<dr::TcpTableConfig> read_table(const json& j, const std::string& where, std::vector<std::string>& problems) {
   // A real controller has no default address worth guessing.
-  return read_driver_object<dr::AclTableConfig>(j, where, kTableKeys, "imucal-table/1", "table config: ",
-                                                {"host", "port"}, json::object(), dr::acl_table_config_from_json,
+  return read_driver_object<dr::TcpTableConfig>(j, where, kTableKeys, "imucal-table/1", "table config: ",
+                                                {"host", "port"}, json::object(), dr::tcp_table_config_from_json,
                                                 problems);
 }
 

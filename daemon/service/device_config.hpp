@@ -13,7 +13,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/can_protocol.hpp"
 #include "drivers/imu_link.hpp"
 #include "drivers/modbus_chamber.hpp"
@@ -48,7 +48,7 @@ struct ImuDeviceConfig {
 inline constexpr const char* kSimWireChamberMap = "watlow-f4t";
 
 struct DeviceAddresses {
-  drivers::AclTableConfig table;
+  drivers::TcpTableConfig table;
   drivers::ModbusChamberConfig chamber;
   ImuDeviceConfig imu;
   // The relay that switches the IMU's supply (imucal-power-relay/1); none: the operator does.

@@ -12,7 +12,7 @@
 #include <stdexcept>
 
 #include "core/units.hpp"
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/power_relay.hpp"
@@ -76,7 +76,7 @@ dr::Result<std::unique_ptr<dr::ImuTransport>> imu_transport(const ImuDeviceConfi
 }  // namespace
 
 struct WireBench::Devices {
-  std::unique_ptr<dr::AclTable> table;
+  std::unique_ptr<dr::TcpTable> table;
   std::unique_ptr<dr::ModbusChamber> chamber;
   std::unique_ptr<dr::LinkImu> imu;
   std::unique_ptr<dr::PowerRelay> relay;  // when configured
@@ -334,7 +334,7 @@ void WireBench::start(int imu_fd) {
       throw std::runtime_error("IMU on " + imu_link_ + ": " + transport.error().message +
                                "; nothing was moved (the table and the chamber were not contacted)");
   }
-  dev_->table = std::make_unique<dr::AclTable>(addresses_.table);
+  dev_->table = std::make_unique<dr::TcpTable>(addresses_.table);
   dev_->chamber = std::make_unique<dr::ModbusChamber>(addresses_.chamber);
 
   try {

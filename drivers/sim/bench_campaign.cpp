@@ -12,7 +12,7 @@
 
 #include <sys/socket.h>
 
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/sim/sim_chamber.hpp"
@@ -116,10 +116,10 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   imu_cfg.clock_offset_ns = 42'000'000'000;
   SimImu imu(world, sv[1], imu_cfg);
 
-  AclTableConfig tc;
+  TcpTableConfig tc;
   tc.port = table.port();
   tc.watchdog_s = 1.0;
-  AclTable table_driver(tc);
+  TcpTable table_driver(tc);
   ModbusChamberConfig cc;
   cc.port = chamber.port();
   cc.map = chamber_cfg.map;

@@ -38,6 +38,7 @@ SimChamberConfig chamber_config(const SimDevicesConfig& c) {
 SimTableConfig table_config(const SimDevicesConfig& c) {
   SimTableConfig s;
   s.port = c.table_port;
+  s.dialect = dialect::load_dialect(c.table_dialect);
   return s;
 }
 
@@ -193,7 +194,7 @@ std::string SimDevices::devices_config_json() const {
   if (c.imu.link.gyro_lsb_per_unit()) imu["gyro_lsb_rad"] = gyro_lsb_rad();
   if (c.imu.link.accel_lsb_per_unit()) imu["accel_lsb_mps"] = accel_lsb_mps();
   const json devices = {
-      {"table", {{"host", "127.0.0.1"}, {"port", table_port()}}},
+      {"table", {{"host", "127.0.0.1"}, {"port", table_port()}, {"dialect", c.table_dialect}}},
       {"chamber", {{"transport", "tcp"}, {"host", "127.0.0.1"}, {"port", chamber_port()}, {"map", c.chamber_map}}},
       {"imu", imu},
       {"power_relay", {{"host", "127.0.0.1"}, {"port", chamber_port()}, {"coil", kImuPowerCoil}}}};

@@ -1,6 +1,6 @@
 // The three simulated devices of a bench together, as `imucal sim-devices` runs them standalone and
-// `imucald --devices sim-wire` runs them in-process: the table controller (ACL over TCP) and the
-// chamber controller (Modbus TCP) on 127.0.0.1 ports, and the IMU speaking its link description:
+// `imucald --devices sim-wire` runs them in-process: the table controller (its dialect over TCP)
+// and the chamber controller (Modbus TCP) on 127.0.0.1 ports, and the IMU speaking its link description:
 // on CAN, either a Unix SOCK_SEQPACKET socket listening on a path (each connection gets a new
 // simulated IMU, the old one is dropped: the daemon opens the link once per run) or a link end
 // handed over with attach_imu() (a socket pair); on a serial line, a pseudo-terminal whose slave
@@ -23,6 +23,7 @@ namespace imucal::drivers::sim {
 struct SimDevicesConfig {
   ServoConfig servo;                  // the table's limits per axis and mode
   int table_port = 0;                 // 0: any free port (see table_port())
+  std::string table_dialect = "imucal-acl";  // the controller's language: built-in name or file
   int chamber_port = 0;
   std::string chamber_map = "watlow-f4t";  // a built-in register map or a map file
   double chamber_start_C = 25.0;      // initial air temperature, also the ambient

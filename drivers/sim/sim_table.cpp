@@ -15,7 +15,6 @@
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/write.hpp>
 
-#include "drivers/acl_protocol.hpp"
 
 namespace imucal::drivers::sim {
 
@@ -50,18 +49,18 @@ struct SimTable::Impl {
 
     void read() {
       auto self = shared_from_this();
-      asio::async_read_until(socket, asio::dynamic_buffer(rx, acl::kMaxLineBytes + 2), '\n',
+      asio::async_read_until(socket, asio::dynamic_buffer(rx, dialect::kMaxLineBytes + 2), '\n',
                              [self](const error_code& ec, std::size_t n) { self->on_line(ec, n); });
     }
 
     void on_line(const error_code& ec, std::size_t n) {
       if (ec == asio::error::not_found) {
         // A line longer than any command: answer and hang up, as the framing is lost.
-        acl::Reply too_long;
-        too_long.kind = acl::Reply::Kind::error;
-        too_long.error_code = acl::kErrSyntax;
+        dialect::Reply too_long;
+        too_long.kind = dialect::Reply::Kind::error;
+        too_long.refusal = dialect::Refusal::syntax;
         too_long.text = "line too long";
-        tx = acl::frame_line(acl::format_reply(too_long), checksum);
+        tx = dialect::frame_line(impl.cfg.dialect, dialect::format_reply(impl.cfg.dialect, too_long), checksum);
         auto self = shared_from_this();
         asio::async_write(socket, asio::buffer(tx), [self](const error_code&, std::size_t) {
           error_code ignored;
@@ -91,7 +90,7 @@ struct SimTable::Impl {
         read();
         return;
       }
-      tx = acl::frame_line(body, checksum);
+      tx = dialect::frame_line(impl.cfg.dialect, body, checksum);
       if (corrupt_this && tx.size() > 1) {
         // Flip bits in one byte of the body, mid-line, keeping it printable ASCII so that only
         // the content (not the framing) is damaged.
@@ -141,73 +140,71 @@ struct SimTable::Impl {
 
   // Executes one command line on the world; returns the reply body.
   std::string execute(Session& session, const std::string& line) {
-    const auto parsed = acl::parse_command(line);
-    acl::Reply reply;
-    if (const auto* e = std::get_if<acl::ParseError>(&parsed)) {
-      reply.kind = acl::Reply::Kind::error;
-      reply.error_code = e->code;
+    const dialect::Dialect& d = cfg.dialect;
+    const auto parsed = dialect::parse_command(d, line);
+    dialect::Reply reply;
+    if (const auto* e = std::get_if<dialect::ParseError>(&parsed)) {
+      reply.kind = dialect::Reply::Kind::error;
+      reply.refusal = e->refusal;
       reply.text = e->text;
-      return acl::format_reply(reply);
+      return dialect::format_reply(d, reply);
     }
-    const acl::Command& c = std::get<acl::Command>(parsed);
-    const int axis = c.axis - 1;
-    ServoResult r;
+    const dialect::Command& c = std::get<dialect::Command>(parsed);
     switch (c.op) {
-      case acl::Op::identify:
-        reply.kind = acl::Reply::Kind::identity;
+      case dialect::Op::identify:
+        reply.kind = dialect::Reply::Kind::identity;
         reply.text = cfg.identity;
-        return acl::format_reply(reply);
-      case acl::Op::checksum:
+        return dialect::format_reply(d, reply);
+      case dialect::Op::checksum:
         session.checksum = c.flag;
-        return acl::format_reply(reply);
-      case acl::Op::read_positions:
+        return dialect::format_reply(d, reply);
+      case dialect::Op::read_positions:
         world.with_servo([&](TableServo& s, double t) {
           const auto smp = s.sample(t);
-          reply.kind = acl::Reply::Kind::positions;
+          reply.kind = dialect::Reply::Kind::positions;
           reply.time_us = device_time_us(t);
           for (std::size_t k = 0; k < 3; ++k) {
             reply.angle_deg[k] = smp[k].angle_deg;
             reply.rate_dps[k] = smp[k].rate_dps;
           }
         });
-        return acl::format_reply(reply);
-      case acl::Op::read_status:
+        return dialect::format_reply(d, reply);
+      case dialect::Op::read_status:
         world.with_servo([&](TableServo& s, double t) {
           const TableStatus st = s.status(t);
-          reply.kind = acl::Reply::Kind::status;
+          reply.kind = dialect::Reply::Kind::status;
           reply.time_us = device_time_us(t);
           reply.interlock = st.interlock;
           for (std::size_t k = 0; k < 3; ++k) {
             reply.modes[k] = st.axes[k].mode;
-            reply.flags[k] = (st.axes[k].at_limit ? acl::flag::kAtLimit : 0u) | (st.axes[k].fault ? acl::flag::kFault : 0u) |
-                             (st.axes[k].watchdog_expired ? acl::flag::kWatchdog : 0u) | (st.axes[k].moving ? acl::flag::kMoving : 0u);
+            reply.flags[k] = {st.axes[k].at_limit, st.axes[k].fault, st.axes[k].watchdog_expired, st.axes[k].moving};
           }
         });
-        return acl::format_reply(reply);
+        return dialect::format_reply(d, reply);
       default: break;
     }
-    r = world.with_servo([&](TableServo& s, double t) -> ServoResult {
+    const ServoResult r = world.with_servo([&](TableServo& s, double t) -> ServoResult {
       switch (c.op) {
-        case acl::Op::interlock_close: return s.interlock_close(t);
-        case acl::Op::interlock_open: return s.interlock_open(t);
-        case acl::Op::interlock_reset: return s.interlock_reset(t);
-        case acl::Op::mode: return s.set_mode(t, axis, c.mode);
-        case acl::Op::demand_position: return s.demand_position(t, axis, c.args[0]);
-        case acl::Op::demand_rate: return s.demand_rate(t, axis, c.args[0]);
-        case acl::Op::demand_oscillation: return s.demand_oscillation(t, axis, {c.args[0], c.args[1], c.args[2]});
-        case acl::Op::limit_position: return s.set_limit_position(t, axis, c.mode, c.args[0], c.args[1]);
-        case acl::Op::limit_rate: return s.set_limit_rate(t, axis, c.mode, c.args[0]);
-        case acl::Op::limit_accel: return s.set_limit_accel(t, axis, c.mode, c.args[0]);
-        case acl::Op::watchdog: return s.set_watchdog(t, c.args[0]);
-        default: return {acl::kErrSyntax, "unsupported"};
+        case dialect::Op::interlock_close: return s.interlock_close(t);
+        case dialect::Op::interlock_open: return s.interlock_open(t);
+        case dialect::Op::interlock_reset: return s.interlock_reset(t);
+        case dialect::Op::mode: return s.set_mode(t, c.axis, c.mode);
+        case dialect::Op::demand_position: return s.demand_position(t, c.axis, c.args[0]);
+        case dialect::Op::demand_rate: return s.demand_rate(t, c.axis, c.args[0]);
+        case dialect::Op::demand_oscillation: return s.demand_oscillation(t, c.axis, {c.args[0], c.args[1], c.args[2]});
+        case dialect::Op::limit_position: return s.set_limit_position(t, c.axis, c.mode, c.args[0], c.args[1]);
+        case dialect::Op::limit_rate: return s.set_limit_rate(t, c.axis, c.mode, c.args[0]);
+        case dialect::Op::limit_accel: return s.set_limit_accel(t, c.axis, c.mode, c.args[0]);
+        case dialect::Op::watchdog: return s.set_watchdog(t, c.args[0]);
+        default: return {dialect::Refusal::syntax, "unsupported"};
       }
     });
     if (!r.ok()) {
-      reply.kind = acl::Reply::Kind::error;
-      reply.error_code = r.code;
+      reply.kind = dialect::Reply::Kind::error;
+      reply.refusal = r.refusal;
       reply.text = r.text;
     }
-    return acl::format_reply(reply);
+    return dialect::format_reply(d, reply);
   }
 
   void close_all() {

@@ -1,5 +1,6 @@
 // A simulated three-axis table controller: an Asio TCP server on 127.0.0.1 (its own thread)
-// speaking the ACL-style command language of drivers/acl_protocol.hpp, executing the commands on
+// speaking any table dialect (drivers/table_dialect.hpp; imucal's ACL-style language by default:
+// the driver's tests run against the dialect the driver is given), executing the commands on
 // the world's TableServo, with its own clock (offset and drift) for the time tags of its
 // replies, and fault injection (dropped connections, late, corrupted or missing replies, an
 // emergency stop from the panel).
@@ -11,6 +12,7 @@
 #include <string>
 
 #include "drivers/sim/sim_world.hpp"
+#include "drivers/table_dialect.hpp"
 
 namespace imucal::drivers::sim {
 
@@ -19,6 +21,7 @@ struct SimTableConfig {
   double clock_drift_ppm = 0.0;   // the controller's clock against the world clock
   std::int64_t clock_offset_us = 0;
   std::string identity = "IMUCAL,SIM-TABLE,0,1.0";
+  dialect::Dialect dialect = dialect::imucal_acl();
 };
 
 class SimTable {

@@ -4,7 +4,6 @@
 #include <cmath>
 
 #include "core/units.hpp"
-#include "drivers/acl_protocol.hpp"
 
 namespace imucal::drivers::sim {
 
@@ -228,18 +227,18 @@ void TableServo::advance(double t_s) {
 }
 
 ServoResult TableServo::bad_axis(int axis) const {
-  if (axis < 0 || axis > 2) return {acl::kErrArgument, "axis must be 1, 2 or 3"};
+  if (axis < 0 || axis > 2) return {dialect::Refusal::argument, "axis must be 1, 2 or 3"};
   return {};
 }
 
 ServoResult TableServo::check_motion_allowed(int axis, TableMode needed) const {
   if (auto r = bad_axis(axis); !r.ok()) return r;
   const Axis& a = axes_[static_cast<std::size_t>(axis)];
-  if (interlock_ != InterlockState::closed) return {acl::kErrInterlock, "interlock open"};
-  if (a.at_limit) return {acl::kErrAxisFault, "axis " + std::to_string(axis + 1) + " hit a position limit: reset required"};
-  if (a.watchdog) return {acl::kErrWatchdog, "axis " + std::to_string(axis + 1) + " dropped to off by the watchdog: set its mode"};
+  if (interlock_ != InterlockState::closed) return {dialect::Refusal::interlock_open, "interlock open"};
+  if (a.at_limit) return {dialect::Refusal::axis_fault, "axis " + std::to_string(axis + 1) + " hit a position limit: reset required"};
+  if (a.watchdog) return {dialect::Refusal::watchdog_expired, "axis " + std::to_string(axis + 1) + " dropped to off by the watchdog: set its mode"};
   if (a.mode != needed)
-    return {acl::kErrMode, "axis " + std::to_string(axis + 1) + " is in " + to_string(a.mode) + " mode, not " + to_string(needed)};
+    return {dialect::Refusal::wrong_mode, "axis " + std::to_string(axis + 1) + " is in " + to_string(a.mode) + " mode, not " + to_string(needed)};
   return {};
 }
 
@@ -272,8 +271,8 @@ ServoResult TableServo::set_mode(double t_s, int axis, TableMode mode) {
   if (auto r = bad_axis(axis); !r.ok()) return r;
   Axis& a = axes_[static_cast<std::size_t>(axis)];
   if (mode != TableMode::off) {
-    if (interlock_ != InterlockState::closed) return {acl::kErrInterlock, "interlock open"};
-    if (a.at_limit) return {acl::kErrAxisFault, "axis " + std::to_string(axis + 1) + " hit a position limit: reset required"};
+    if (interlock_ != InterlockState::closed) return {dialect::Refusal::interlock_open, "interlock open"};
+    if (a.at_limit) return {dialect::Refusal::axis_fault, "axis " + std::to_string(axis + 1) + " hit a position limit: reset required"};
   }
   a.watchdog = false;
   a.last_feed_s = now_;
@@ -291,7 +290,7 @@ ServoResult TableServo::demand_position(double t_s, int axis, double angle_deg) 
   if (auto r = check_motion_allowed(axis, TableMode::position); !r.ok()) return r;
   const AxisLimitSetting& L = limits(axis, TableMode::position);
   if (!std::isfinite(angle_deg) || angle_deg < L.min_deg || angle_deg > L.max_deg)
-    return {acl::kErrLimit, "position outside [" + std::to_string(L.min_deg) + ", " + std::to_string(L.max_deg) + "] deg"};
+    return {dialect::Refusal::limit_exceeded, "position outside [" + std::to_string(L.min_deg) + ", " + std::to_string(L.max_deg) + "] deg"};
   Axis& a = axes_[static_cast<std::size_t>(axis)];
   a.last_feed_s = now_;
   const double v = L.rate_dps * kDegToRad, acc = L.accel_dps2 * kDegToRad;
@@ -331,7 +330,7 @@ ServoResult TableServo::demand_rate(double t_s, int axis, double rate_dps) {
   if (auto r = check_motion_allowed(axis, TableMode::rate); !r.ok()) return r;
   const AxisLimitSetting& L = limits(axis, TableMode::rate);
   if (!std::isfinite(rate_dps) || std::fabs(rate_dps) > L.rate_dps)
-    return {acl::kErrLimit, "rate beyond the rate-mode limit of " + std::to_string(L.rate_dps) + " deg/s"};
+    return {dialect::Refusal::limit_exceeded, "rate beyond the rate-mode limit of " + std::to_string(L.rate_dps) + " deg/s"};
   Axis& a = axes_[static_cast<std::size_t>(axis)];
   a.last_feed_s = now_;
   double angle, rate, accel;
@@ -365,12 +364,12 @@ ServoResult TableServo::demand_oscillation(double t_s, int axis, const Oscillati
   Axis& a = axes_[static_cast<std::size_t>(axis)];
   const double A = d.amplitude_deg * kDegToRad, w = 2.0 * kPi * d.frequency_hz, phi = d.phase_deg * kDegToRad;
   if (!std::isfinite(A) || !std::isfinite(w) || !std::isfinite(phi) || A < 0.0 || (A > 0.0 && !(w > 0.0)))
-    return {acl::kErrArgument, "amplitude must be >= 0 and frequency > 0"};
+    return {dialect::Refusal::argument, "amplitude must be >= 0 and frequency > 0"};
   const double c = a.centre_rad;
   if ((c - A) * kRadToDeg < L.min_deg || (c + A) * kRadToDeg > L.max_deg)
-    return {acl::kErrLimit, "oscillation leaves the position range"};
-  if (A * w * kRadToDeg > L.rate_dps) return {acl::kErrLimit, "oscillation rate amplitude beyond the rate limit"};
-  if (A * w * w * kRadToDeg > L.accel_dps2) return {acl::kErrLimit, "oscillation acceleration beyond the limit"};
+    return {dialect::Refusal::limit_exceeded, "oscillation leaves the position range"};
+  if (A * w * kRadToDeg > L.rate_dps) return {dialect::Refusal::limit_exceeded, "oscillation rate amplitude beyond the rate limit"};
+  if (A * w * w * kRadToDeg > L.accel_dps2) return {dialect::Refusal::limit_exceeded, "oscillation acceleration beyond the limit"};
   a.last_feed_s = now_;
   // The oscillation in force demanded again (track-mode keep-alive): nothing changes.
   const Seg& last = a.segs.back();
@@ -444,7 +443,7 @@ ServoResult TableServo::set_limit_position(double t_s, int axis, TableMode mode,
   advance(t_s);
   if (auto r = bad_axis(axis); !r.ok()) return r;
   if (!(min_deg < max_deg) || !std::isfinite(min_deg) || !std::isfinite(max_deg))
-    return {acl::kErrArgument, "position limits need min < max"};
+    return {dialect::Refusal::argument, "position limits need min < max"};
   lim(axis, mode).min_deg = min_deg;
   lim(axis, mode).max_deg = max_deg;
   update_limit_event(axis, now_);
@@ -454,7 +453,7 @@ ServoResult TableServo::set_limit_position(double t_s, int axis, TableMode mode,
 ServoResult TableServo::set_limit_rate(double t_s, int axis, TableMode mode, double rate_dps) {
   advance(t_s);
   if (auto r = bad_axis(axis); !r.ok()) return r;
-  if (!(rate_dps > 0.0) || !std::isfinite(rate_dps)) return {acl::kErrArgument, "rate limit must be positive"};
+  if (!(rate_dps > 0.0) || !std::isfinite(rate_dps)) return {dialect::Refusal::argument, "rate limit must be positive"};
   lim(axis, mode).rate_dps = rate_dps;
   return {};
 }
@@ -462,14 +461,14 @@ ServoResult TableServo::set_limit_rate(double t_s, int axis, TableMode mode, dou
 ServoResult TableServo::set_limit_accel(double t_s, int axis, TableMode mode, double accel_dps2) {
   advance(t_s);
   if (auto r = bad_axis(axis); !r.ok()) return r;
-  if (!(accel_dps2 > 0.0) || !std::isfinite(accel_dps2)) return {acl::kErrArgument, "acceleration limit must be positive"};
+  if (!(accel_dps2 > 0.0) || !std::isfinite(accel_dps2)) return {dialect::Refusal::argument, "acceleration limit must be positive"};
   lim(axis, mode).accel_dps2 = accel_dps2;
   return {};
 }
 
 ServoResult TableServo::set_watchdog(double t_s, double period_s) {
   advance(t_s);
-  if (!(period_s >= 0.0) || !std::isfinite(period_s)) return {acl::kErrArgument, "watchdog period must be >= 0"};
+  if (!(period_s >= 0.0) || !std::isfinite(period_s)) return {dialect::Refusal::argument, "watchdog period must be >= 0"};
   watchdog_period_s_ = period_s;
   for (Axis& a : axes_) a.last_feed_s = now_;
   return {};

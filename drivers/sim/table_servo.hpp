@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "drivers/interfaces.hpp"
+#include "drivers/table_dialect.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::drivers::sim {
@@ -31,9 +32,9 @@ struct ServoConfig {
 };
 
 struct ServoResult {
-  int code = 0;  // 0 or an acl::ErrorCode
+  dialect::Refusal refusal = dialect::Refusal::none;
   std::string text;
-  bool ok() const noexcept { return code == 0; }
+  bool ok() const noexcept { return refusal == dialect::Refusal::none; }
 };
 
 struct AxisSample {

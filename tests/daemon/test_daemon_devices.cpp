@@ -14,7 +14,7 @@
 
 #include <gtest/gtest.h>
 
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/register_map.hpp"
 #include "drivers/sim/sim_devices.hpp"
 #include "service_fixture.hpp"
@@ -267,9 +267,9 @@ TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) 
   drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
   // Someone left the table spinning: a failed start must not leave it so once it took it over.
   {
-    drivers::AclTableConfig tc;
+    drivers::TcpTableConfig tc;
     tc.port = sim.table_port();
-    drivers::AclTable table(tc);
+    drivers::TcpTable table(tc);
     ASSERT_TRUE(table.connect());
     ASSERT_TRUE(table.interlock_close());
     ASSERT_TRUE(table.set_mode(0, drivers::TableMode::rate));

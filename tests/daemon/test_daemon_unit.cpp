@@ -246,7 +246,7 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
            "config.devices.table: unknown key \"watchdog\"",
            "config.devices.table.reply_checksum:",
            "config.devices.chamber.host is required",
-           "config.devices.chamber.map: register map 'no-such-map': no such built-in map or file",
+           "config.devices.chamber.map: register map 'no-such-map': no such built-in one (watlow-f4t, csz-ezt570i) or file",
            "config.devices.chamber.parity:",
            "config.devices.imu: give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both",
            "config.devices.imu.framing must be \"fd\" or \"classic\"",

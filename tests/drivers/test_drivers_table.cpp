@@ -14,8 +14,8 @@
 #include <unistd.h>
 
 #include "core/units.hpp"
-#include "drivers/acl_protocol.hpp"
-#include "drivers/acl_table.hpp"
+#include "drivers/table_dialect.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/sim/sim_table.hpp"
 #include "drivers/sim/table_servo.hpp"
 #include "test_helpers.hpp"
@@ -68,7 +68,7 @@ TEST(TableServo, PositionMoveIsARestToRestTrapezoid) {
   EXPECT_NEAR(s.sample(ta)[1].rate_dps, 400.0 * ta, 1e-9);
   EXPECT_NEAR(s.sample(2 * ta + 0.01)[1].angle_deg, 90.0, 1e-12);
   EXPECT_EQ(s.sample(2 * ta + 0.01)[1].rate_dps, 0.0);
-  EXPECT_EQ(s.demand_position(5.0, kMiddle, 1e10).code, 201);
+  EXPECT_EQ(s.demand_position(5.0, kMiddle, 1e10).refusal, dialect::Refusal::limit_exceeded);
 }
 
 TEST(TableServo, RateModeRunsIntoItsPositionLimitAndLatches) {
@@ -85,7 +85,7 @@ TEST(TableServo, RateModeRunsIntoItsPositionLimitAndLatches) {
   EXPECT_GT(a, 10.0);  // braked beyond the limit (limit switch before the hard stop)
   EXPECT_LT(a, 10.0 + 20.0 * 20.0 / (2 * 400.0) + 1e-9);
   EXPECT_EQ(s.sample(2.0)[2].rate_dps, 0.0);
-  EXPECT_EQ(s.set_mode(2.0, kInner, TableMode::rate).code, 202);
+  EXPECT_EQ(s.set_mode(2.0, kInner, TableMode::rate).refusal, dialect::Refusal::axis_fault);
   ASSERT_TRUE(s.interlock_reset(2.0).ok());
   ASSERT_TRUE(s.set_mode(2.0, kInner, TableMode::position).ok());
   ASSERT_TRUE(s.set_limit_position(2.0, kInner, TableMode::position, -10.0, 10.0).ok());
@@ -112,20 +112,20 @@ TEST(TableServo, OscillationStartsAndStopsAtTurningPointsInPhaseWithWorldTime) {
   const auto end = s.sample(6.0)[0];
   EXPECT_NEAR(std::fabs(end.angle_deg), 2.0, 1e-9);
   EXPECT_EQ(end.rate_dps, 0.0);
-  EXPECT_EQ(s.demand_oscillation(6.0, kOuter, {1.0, 1.0, 0.0}).code, 204);
+  EXPECT_EQ(s.demand_oscillation(6.0, kOuter, {1.0, 1.0, 0.0}).refusal, dialect::Refusal::wrong_mode);
 }
 
 TEST(TableServo, OscillationBeyondTheLimitsIsRefused) {
   sim::TableServo s(servo_config());
   s.interlock_close(0.0);
   s.set_mode(0.0, kOuter, TableMode::synthesis);
-  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {10.0, 10.0, 0.0}).code, 201);  // rate 628 deg/s
-  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {1.0, -1.0, 0.0}).code, 101);
+  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {10.0, 10.0, 0.0}).refusal, dialect::Refusal::limit_exceeded);  // rate 628 deg/s
+  EXPECT_EQ(s.demand_oscillation(0.0, kOuter, {1.0, -1.0, 0.0}).refusal, dialect::Refusal::argument);
 }
 
 TEST(TableServo, InterlockAndWatchdog) {
   sim::TableServo s(servo_config());
-  EXPECT_EQ(s.set_mode(0.0, kOuter, TableMode::rate).code, 200);
+  EXPECT_EQ(s.set_mode(0.0, kOuter, TableMode::rate).refusal, dialect::Refusal::interlock_open);
   s.interlock_close(0.0);
   ASSERT_TRUE(s.set_watchdog(0.0, 0.5).ok());
   s.set_mode(0.0, kOuter, TableMode::rate);
@@ -136,7 +136,7 @@ TEST(TableServo, InterlockAndWatchdog) {
   s.advance(1.0);
   EXPECT_EQ(s.status(1.0).axes[0].mode, TableMode::off);
   EXPECT_TRUE(s.status(1.0).axes[0].watchdog_expired);
-  EXPECT_EQ(s.demand_rate(1.0, kOuter, 10.0).code, 203);
+  EXPECT_EQ(s.demand_rate(1.0, kOuter, 10.0).refusal, dialect::Refusal::watchdog_expired);
   // Interlock open brakes everything.
   s.set_mode(1.0, kMiddle, TableMode::rate);
   s.set_watchdog(1.0, 0.0);
@@ -144,7 +144,7 @@ TEST(TableServo, InterlockAndWatchdog) {
   s.interlock_open(2.0);
   EXPECT_EQ(s.status(2.0).interlock, InterlockState::open);
   EXPECT_EQ(s.sample(3.0)[1].rate_dps, 0.0);
-  EXPECT_EQ(s.demand_rate(3.0, kMiddle, 1.0).code, 200);
+  EXPECT_EQ(s.demand_rate(3.0, kMiddle, 1.0).refusal, dialect::Refusal::interlock_open);
 }
 
 TEST(TableServo, ProgramFromMatchesTheServoMotion) {
@@ -181,11 +181,11 @@ namespace {
 struct Rig {
   sim::SimWorld world{servo_config()};
   sim::SimTable table;
-  AclTable driver;
-  explicit Rig(sim::SimTableConfig tc = {}, std::function<void(AclTableConfig&)> tweak = {})
+  TcpTable driver;
+  explicit Rig(sim::SimTableConfig tc = {}, std::function<void(TcpTableConfig&)> tweak = {})
       : table(world, tc), driver(make_config(table, tweak)) {}
-  static AclTableConfig make_config(const sim::SimTable& t, const std::function<void(AclTableConfig&)>& tweak) {
-    AclTableConfig c;
+  static TcpTableConfig make_config(const sim::SimTable& t, const std::function<void(TcpTableConfig&)>& tweak) {
+    TcpTableConfig c;
     c.port = t.port();
     c.response_timeout = 500ms;
     c.backoff_initial = 50ms;
@@ -203,8 +203,8 @@ struct Rig {
 
 }  // namespace
 
-TEST(AclTable, LifecycleConfiguresLimitsAndClosesTheInterlock) {
-  Rig rig({}, [](AclTableConfig& c) { c.limits[1][static_cast<int>(TableMode::position)] = AxisLimitSetting{-95.0, 95.0, 50.0, 100.0}; });
+TEST(TcpTable, LifecycleConfiguresLimitsAndClosesTheInterlock) {
+  Rig rig({}, [](TcpTableConfig& c) { c.limits[1][static_cast<int>(TableMode::position)] = AxisLimitSetting{-95.0, 95.0, 50.0, 100.0}; });
   rig.up();
   EXPECT_EQ(rig.driver.state(), DeviceState::active);
   const auto st = rig.driver.read_status();
@@ -220,7 +220,7 @@ TEST(AclTable, LifecycleConfiguresLimitsAndClosesTheInterlock) {
   EXPECT_EQ(rig.driver.read_positions().code(), DriverErrc::invalid_state);
 }
 
-TEST(AclTable, RateModeAndTimeCoherentPositionReads) {
+TEST(TcpTable, RateModeAndTimeCoherentPositionReads) {
   sim::SimTableConfig tc;
   tc.clock_drift_ppm = 80.0;
   tc.clock_offset_us = 123'456'789'000;
@@ -254,7 +254,7 @@ TEST(AclTable, RateModeAndTimeCoherentPositionReads) {
   EXPECT_TRUE(cm.valid);
 }
 
-TEST(AclTable, PositionAndOscillationDemandsMoveTheTable) {
+TEST(TcpTable, PositionAndOscillationDemandsMoveTheTable) {
   Rig rig;
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kMiddle, TableMode::position));
@@ -280,7 +280,7 @@ TEST(AclTable, PositionAndOscillationDemandsMoveTheTable) {
   EXPECT_GE(lo, -1.5 - 1e-9);
 }
 
-TEST(AclTable, InterlockOpenRefusesMotion) {
+TEST(TcpTable, InterlockOpenRefusesMotion) {
   Rig rig;
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
@@ -301,7 +301,7 @@ TEST(AclTable, InterlockOpenRefusesMotion) {
   EXPECT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
 }
 
-TEST(AclTable, AxisLimitHitIsATypedFaultUntilReset) {
+TEST(TcpTable, AxisLimitHitIsATypedFaultUntilReset) {
   Rig rig;
   rig.up();
   ASSERT_TRUE(rig.driver.set_limits(kInner, TableMode::rate, {-5.0, 5.0, 100.0, 400.0}));
@@ -323,8 +323,8 @@ TEST(AclTable, AxisLimitHitIsATypedFaultUntilReset) {
   EXPECT_EQ(rig.driver.demand_rate(kInner, 1.0).code(), DriverErrc::invalid_state);  // wrong mode
 }
 
-TEST(AclTable, WatchdogDropsAnUnfedAxisAndFeedingKeepsItAlive) {
-  Rig rig({}, [](AclTableConfig& c) { c.watchdog_s = 1.0; });
+TEST(TcpTable, WatchdogDropsAnUnfedAxisAndFeedingKeepsItAlive) {
+  Rig rig({}, [](TcpTableConfig& c) { c.watchdog_s = 1.0; });
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
   ASSERT_TRUE(rig.driver.demand_rate(kOuter, 5.0));
@@ -345,7 +345,7 @@ TEST(AclTable, WatchdogDropsAnUnfedAxisAndFeedingKeepsItAlive) {
   EXPECT_TRUE(rig.driver.demand_rate(kOuter, 5.0));
 }
 
-TEST(AclTable, BadCommandsGetErrorRepliesAndBadArgumentsNeverLeave) {
+TEST(TcpTable, BadCommandsGetErrorRepliesAndBadArgumentsNeverLeave) {
   Rig rig;
   rig.up();
   EXPECT_EQ(rig.driver.demand_rate(3, 1.0).code(), DriverErrc::invalid_argument);
@@ -372,7 +372,7 @@ TEST(AclTable, BadCommandsGetErrorRepliesAndBadArgumentsNeverLeave) {
   ::close(s);
 }
 
-TEST(AclTable, DroppedConnectionIsReportedThenReconnected) {
+TEST(TcpTable, DroppedConnectionIsReportedThenReconnected) {
   Rig rig;
   rig.up();
   rig.table.drop_connections();
@@ -390,8 +390,8 @@ TEST(AclTable, DroppedConnectionIsReportedThenReconnected) {
   EXPECT_EQ(rig.driver.read_positions().code(), DriverErrc::crc_error);
 }
 
-TEST(AclTable, LateReplyIsATimeoutAndNeverAStaleValue) {
-  Rig rig({}, [](AclTableConfig& c) { c.response_timeout = 300ms; });
+TEST(TcpTable, LateReplyIsATimeoutAndNeverAStaleValue) {
+  Rig rig({}, [](TcpTableConfig& c) { c.response_timeout = 300ms; });
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
   ASSERT_TRUE(rig.driver.demand_rate(kOuter, 20.0));
@@ -408,7 +408,7 @@ TEST(AclTable, LateReplyIsATimeoutAndNeverAStaleValue) {
   EXPECT_GT(p->t_ns, after_timeout - 1'000'000);
 }
 
-TEST(AclTable, CorruptedReplyIsCaughtByTheChecksum) {
+TEST(TcpTable, CorruptedReplyIsCaughtByTheChecksum) {
   Rig rig;
   rig.up();
   for (int i = 0; i < 5; ++i) {
@@ -419,8 +419,8 @@ TEST(AclTable, CorruptedReplyIsCaughtByTheChecksum) {
   }
 }
 
-TEST(AclTable, SilentTableTimesOut) {
-  Rig rig({}, [](AclTableConfig& c) { c.response_timeout = 300ms; });
+TEST(TcpTable, SilentTableTimesOut) {
+  Rig rig({}, [](TcpTableConfig& c) { c.response_timeout = 300ms; });
   rig.up();
   rig.table.set_silent(true);
   Stopwatch sw;
@@ -430,7 +430,7 @@ TEST(AclTable, SilentTableTimesOut) {
   ASSERT_TRUE(eventually([&] { return rig.driver.read_status().ok(); }));
 }
 
-TEST(AclTable, SafeStopBringsEveryAxisToRestThenOpensTheInterlock) {
+TEST(TcpTable, SafeStopBringsEveryAxisToRestThenOpensTheInterlock) {
   Rig rig;
   rig.up();
   ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
@@ -445,10 +445,10 @@ TEST(AclTable, SafeStopBringsEveryAxisToRestThenOpensTheInterlock) {
   EXPECT_EQ(rig.driver.read_status()->interlock, InterlockState::open);
 }
 
-TEST(AclTable, UnreachableTableFailsWithinTheConnectTimeout) {
-  AclTableConfig c;
+TEST(TcpTable, UnreachableTableFailsWithinTheConnectTimeout) {
+  TcpTableConfig c;
   c.port = 1;  // nothing listens on port 1 of the loopback
-  AclTable d(c);
+  TcpTable d(c);
   Stopwatch sw;
   const auto r = d.connect();
   EXPECT_EQ(r.code(), DriverErrc::connect_failed);
@@ -456,8 +456,8 @@ TEST(AclTable, UnreachableTableFailsWithinTheConnectTimeout) {
   EXPECT_LT(sw.seconds(), 2.0);
 }
 
-TEST(AclTable, ConfigurationFromJson) {
-  const auto c = acl_table_config_from_json(
+TEST(TcpTable, ConfigurationFromJson) {
+  const auto c = tcp_table_config_from_json(
       R"({"host":"10.0.0.5","port":5001,"watchdog_s":0.5,"reply_checksum":false,
           "limits":[{"axis":"middle","mode":"rate","min_deg":-90,"max_deg":90,"rate_dps":50,"accel_dps2":20}]})");
   EXPECT_EQ(c.host, "10.0.0.5");
@@ -465,13 +465,13 @@ TEST(AclTable, ConfigurationFromJson) {
   EXPECT_FALSE(c.reply_checksum);
   ASSERT_TRUE(c.limits[1][2]);
   EXPECT_DOUBLE_EQ(c.limits[1][2]->max_deg, 90.0);
-  EXPECT_THROW(acl_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
+  EXPECT_THROW(tcp_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
 }
 
 // Fuzz at the wire: a table that answers the connection handshake properly and every position
 // request with a damaged reply (one byte changed, a truncated line, random printable garbage or
 // random bytes). With reply checksums on, the driver must never return a position.
-TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
+TEST(TcpTableFuzz, DamagedRepliesNeverYieldAPosition) {
   int port = 0;
   const int ls = bind_loopback(port);
   std::atomic<bool> stop{false};
@@ -503,10 +503,10 @@ TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
           const std::string line = pending[idx].substr(0, nl);
           pending[idx].erase(0, nl + 1);
           std::string reply;
-          if (line == "*IDN?") reply = acl::frame_line("IDN FUZZ", false);
-          else if (line.rfind(":SYST:CHEC", 0) == 0) reply = acl::frame_line("OK", true);
+          if (line == "*IDN?") reply = dialect::frame_line(dialect::imucal_acl(), "IDN FUZZ", false);
+          else if (line.rfind(":SYST:CHEC", 0) == 0) reply = dialect::frame_line(dialect::imucal_acl(), "OK", true);
           else {
-            std::string good = acl::frame_line("POS 123456,1.5,2.5,3.5,0,0,0", true);
+            std::string good = dialect::frame_line(dialect::imucal_acl(), "POS 123456,1.5,2.5,3.5,0,0,0", true);
             switch (rng() % 4) {
               case 0: {  // one byte changed, the terminator kept
                 const std::size_t at = rng() % (good.size() - 1);
@@ -545,12 +545,12 @@ TEST(AclTableFuzz, DamagedRepliesNeverYieldAPosition) {
     }
     for (int c : clients) ::close(c);
   });
-  AclTableConfig c;
+  TcpTableConfig c;
   c.port = port;
   c.response_timeout = 100ms;
   c.backoff_initial = 1ms;
   c.backoff_max = 1ms;
-  AclTable d(c);
+  TcpTable d(c);
   ASSERT_TRUE(d.connect());
   int values = 0;
   Stopwatch total;

@@ -11,7 +11,7 @@
 
 #include "core/earth.hpp"
 #include "core/units.hpp"
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/sim/bench_campaign.hpp"
 #include "drivers/sim/sim_imu.hpp"
@@ -34,9 +34,9 @@ TEST(TimeBase, ImuSensesTheTableMotionItsDriverReports) {
   sim::SimImuConfig ic;
   ic.rate_hz = 500.0;
   sim::SimImu imu(world, sv[1], ic);
-  AclTableConfig tc;
+  TcpTableConfig tc;
   tc.port = table.port();
-  AclTable td(tc);
+  TcpTable td(tc);
   const LinkImuConfig cc = imu.driver_config();
   LinkImu id(socketcan_transport(sv[0], cc.link, ic.framing, "a socket pair"), cc);
   for (Device* d : std::initializer_list<Device*>{&td, &id}) {

@@ -1,6 +1,6 @@
-// Table driver: the ACL-style command language (acl_protocol.hpp) over TCP with Boost.Asio. Each
-// call sends one command and waits for its one reply within the response timeout, running the
-// driver's private io_context in the calling thread; no exception leaves a handler or a call.
+// Table driver: a controller's command language described as data (table_dialect.hpp; imucal's
+// ACL-style language by default) over TCP with Boost.Asio. Each call sends one command and waits
+// for its one reply within the response timeout, running the driver's private io_context in the calling thread; no exception leaves a handler or a call.
 // A timeout, a lost connection or a garbled reply closes the connection (a late reply can then
 // never be taken for the answer to a later command); the next call reconnects, at once the first
 // time and with exponential backoff after failures. Position reads are stamped on the host time
@@ -16,18 +16,22 @@
 
 #include "drivers/clock_model.hpp"
 #include "drivers/interfaces.hpp"
+#include "drivers/table_dialect.hpp"
 
 namespace imucal::drivers {
 
-struct AclTableConfig {
+struct TcpTableConfig {
   std::string host = "127.0.0.1";
   int port = 5000;
+  // The controller's language: a built-in dialect or a dialect file, as configured, and parsed.
+  std::string dialect_name = "imucal-acl";
+  dialect::Dialect dialect = dialect::imucal_acl();
   std::chrono::milliseconds response_timeout{500};
   std::chrono::milliseconds connect_timeout{1000};
   std::chrono::milliseconds backoff_initial{250};
   std::chrono::milliseconds backoff_max{8000};
-  // Ask the table for "*HH" reply checksums (":SYST:CHEC ON" after each connect). An imucal
-  // extension of the ACL style: turn off for a controller that does not know the command.
+  // Ask the table for reply checksums (the dialect's reply_checksum "on" command after each
+  // connect); ignored for a dialect without them. From JSON: by default when the dialect has them.
   bool reply_checksum = true;
   // configure() sends these limits ([axis][mode], mode indexed by TableMode) and arms the
   // watchdog with this period (0: leave it off).
@@ -38,18 +42,19 @@ struct AclTableConfig {
   ClockFitConfig clock{500'000'000, 64, false, 50'000'000};
 };
 
-// "imucal-table/1" JSON: {"host", "port", "response_timeout_ms", "connect_timeout_ms",
+// "imucal-table/1" JSON: {"host", "port", "dialect" (a built-in name or a dialect file),
+// "response_timeout_ms", "connect_timeout_ms",
 // "backoff_initial_ms", "backoff_max_ms", "reply_checksum", "watchdog_s", "safe_stop_timeout_ms",
 // "limits": [{"axis": "outer"|"middle"|"inner", "mode": "position"|"rate"|"synthesis"|"off",
 // "min_deg", "max_deg", "rate_dps", "accel_dps2"}, ...]}. Throws std::invalid_argument.
-AclTableConfig acl_table_config_from_json(const std::string& json_text);
+TcpTableConfig tcp_table_config_from_json(const std::string& json_text);
 
-class AclTable final : public Table {
+class TcpTable final : public Table {
  public:
-  explicit AclTable(AclTableConfig config);
-  ~AclTable() override;
-  AclTable(const AclTable&) = delete;
-  AclTable& operator=(const AclTable&) = delete;
+  explicit TcpTable(TcpTableConfig config);
+  ~TcpTable() override;
+  TcpTable(const TcpTable&) = delete;
+  TcpTable& operator=(const TcpTable&) = delete;
 
   Result<void> connect() override;
   Result<void> configure() override;

@@ -1,9 +1,9 @@
-#include "daemon/service/json_reader.hpp"
+#include "core/json_reader.hpp"
 
 #include <cmath>
 #include <limits>
 
-namespace imucal::daemon {
+namespace imucal {
 
 using nlohmann::json;
 
@@ -117,4 +117,4 @@ void ObjectReader::finish() {
   }
 }
 
-}  // namespace imucal::daemon
+}  // namespace imucal

@@ -1,7 +1,7 @@
 // Strict reading of JSON objects written by people (the daemon configuration, campaigns, API
-// bodies): every problem is collected with its location instead of stopping at the first, an
-// unknown key is a problem (a typo must not become a silent default), and keys starting with '_'
-// are comments (JSON has none) and ignored.
+// bodies, device descriptions): every problem is collected with its location instead of stopping
+// at the first, an unknown key is a problem (a typo must not become a silent default), and keys
+// starting with '_' are comments (JSON has none) and ignored.
 #pragma once
 
 #include <cstdint>
@@ -12,7 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
-namespace imucal::daemon {
+namespace imucal {
 
 class ObjectReader {
  public:
@@ -55,4 +55,4 @@ class ObjectReader {
 // "JSON type" in words for messages ("a string", "an array").
 std::string json_type_name(const nlohmann::json& value);
 
-}  // namespace imucal::daemon
+}  // namespace imucal

@@ -1,4 +1,4 @@
-#include "drivers/acl_table.hpp"
+#include "drivers/tcp_table.hpp"
 
 #include <cmath>
 #include <mutex>
@@ -11,7 +11,6 @@
 #include <boost/asio/write.hpp>
 #include <nlohmann/json.hpp>
 
-#include "drivers/acl_protocol.hpp"
 
 namespace imucal::drivers {
 
@@ -20,7 +19,7 @@ using asio::ip::tcp;
 using boost::system::error_code;
 using Clock = std::chrono::steady_clock;
 
-AclTableConfig acl_table_config_from_json(const std::string& json_text) {
+TcpTableConfig tcp_table_config_from_json(const std::string& json_text) {
   using nlohmann::json;
   json j;
   try {
@@ -28,7 +27,7 @@ AclTableConfig acl_table_config_from_json(const std::string& json_text) {
   } catch (const json::exception& e) {
     throw std::invalid_argument(std::string("table config: not valid JSON: ") + e.what());
   }
-  AclTableConfig c;
+  TcpTableConfig c;
   try {
     c.host = j.value("host", c.host);
     c.port = j.value("port", c.port);
@@ -43,7 +42,14 @@ AclTableConfig acl_table_config_from_json(const std::string& json_text) {
     c.backoff_initial = ms("backoff_initial_ms", c.backoff_initial);
     c.backoff_max = ms("backoff_max_ms", c.backoff_max);
     c.safe_stop_timeout = ms("safe_stop_timeout_ms", c.safe_stop_timeout);
-    c.reply_checksum = j.value("reply_checksum", c.reply_checksum);
+    if (j.contains("dialect")) {
+      if (!j["dialect"].is_string()) throw std::invalid_argument("table config: 'dialect' must be a built-in name or a file");
+      c.dialect_name = j["dialect"].get<std::string>();
+      c.dialect = dialect::load_dialect(c.dialect_name);
+    }
+    c.reply_checksum = j.value("reply_checksum", c.dialect.has_reply_checksum);
+    if (c.reply_checksum && !c.dialect.has_reply_checksum)
+      throw std::invalid_argument("table config: 'reply_checksum' is true but dialect '" + c.dialect.name + "' has no reply checksum");
     c.watchdog_s = j.value("watchdog_s", c.watchdog_s);
     if (!(c.watchdog_s >= 0.0)) throw std::invalid_argument("table config: 'watchdog_s' must be >= 0");
     if (j.contains("limits")) {
@@ -70,8 +76,8 @@ AclTableConfig acl_table_config_from_json(const std::string& json_text) {
   return c;
 }
 
-struct AclTable::Impl {
-  AclTableConfig cfg;
+struct TcpTable::Impl {
+  TcpTableConfig cfg;
   mutable std::mutex mutex;
   asio::io_context io;
   tcp::socket socket{io};
@@ -85,9 +91,10 @@ struct AclTable::Impl {
   bool ever_connected = false;
   ClockFit clock;
 
-  explicit Impl(AclTableConfig c) : cfg(std::move(c)), backoff(cfg.backoff_initial), clock(cfg.clock) {}
+  explicit Impl(TcpTableConfig c) : cfg(std::move(c)), backoff(cfg.backoff_initial), clock(cfg.clock) {}
 
-  std::string who() const { return "table acl://" + cfg.host + ":" + std::to_string(cfg.port); }
+  std::string who() const { return "table " + cfg.dialect.name + "://" + cfg.host + ":" + std::to_string(cfg.port); }
+  const dialect::Dialect& lang() const { return cfg.dialect; }
 
   void close_link(const std::string& why) {
     if (socket.is_open()) {
@@ -153,25 +160,31 @@ struct AclTable::Impl {
     if (ever_connected) ++reconnects;
     ever_connected = true;
     // Per-session settings of the controller, restored on every (re)connection.
-    auto idn = transact_raw("*IDN?", nullptr, nullptr);
+    dialect::Command identify;
+    identify.op = dialect::Op::identify;
+    auto idn = transact_raw(identify, nullptr, nullptr);
     if (!idn) return fail("no identification: " + idn.error().message);
-    if (idn->kind != acl::Reply::Kind::identity) return fail("unexpected reply to *IDN?");
-    if (cfg.reply_checksum) {
+    if (idn->kind != dialect::Reply::Kind::identity) return fail("identification refused: " + idn->code + " " + idn->text);
+    if (cfg.reply_checksum && lang().has_reply_checksum) {
       checksum_on = true;  // the reply to this command already carries the checksum
-      auto r = transact_raw(":SYST:CHEC ON", nullptr, nullptr);
+      dialect::Command on;
+      on.op = dialect::Op::checksum;
+      on.flag = true;
+      auto r = transact_raw(on, nullptr, nullptr);
       if (!r) return fail("cannot enable reply checksums: " + r.error().message);
-      if (r->kind != acl::Reply::Kind::ok) return fail("table refused reply checksums: " + r->text);
+      if (r->kind != dialect::Reply::Kind::ok) return fail("table refused reply checksums: " + r->code + " " + r->text);
     }
     return success();
   }
 
   // One line out, one line back, on an open link.
-  Result<acl::Reply> transact_raw(const std::string& body, std::int64_t* t_send, std::int64_t* t_recv) {
+  Result<dialect::Reply> transact_raw(const dialect::Command& c, std::int64_t* t_send, std::int64_t* t_recv) {
+    const std::string body = dialect::format_command(lang(), c);
     if (!rx.empty()) {
       close_link("unsolicited data from the table");
       return {DriverErrc::protocol_error, who() + ": unsolicited data before '" + body + "'"};
     }
-    std::string out = body + "\n";
+    std::string out = body + lang().line_end;
     bool wrote = false, read = false;
     error_code wec, rec;
     std::size_t n = 0;
@@ -180,7 +193,7 @@ struct AclTable::Impl {
       wec = e;
       wrote = true;
     });
-    asio::async_read_until(socket, asio::dynamic_buffer(rx, acl::kMaxLineBytes + 2), '\n',
+    asio::async_read_until(socket, asio::dynamic_buffer(rx, dialect::kMaxLineBytes + 2), '\n',
                            [&](const error_code& e, std::size_t len) {
                              recv_ns = host_time_ns();
                              rec = e;
@@ -197,14 +210,14 @@ struct AclTable::Impl {
       const error_code& e = rec ? rec : wec;
       const bool too_long = e == asio::error::not_found;
       close_link(e.message());
-      if (too_long) return {DriverErrc::protocol_error, who() + ": reply longer than " + std::to_string(acl::kMaxLineBytes) + " bytes"};
+      if (too_long) return {DriverErrc::protocol_error, who() + ": reply longer than " + std::to_string(dialect::kMaxLineBytes) + " bytes"};
       return {DriverErrc::connection_lost, who() + ": connection lost during '" + body + "': " + e.message()};
     }
     std::string line = rx.substr(0, n - 1);
     rx.erase(0, n);
     if (t_send) *t_send = send_ns;
     if (t_recv) *t_recv = recv_ns;
-    auto reply = acl::parse_reply(line, checksum_on);
+    auto reply = dialect::parse_reply(lang(), line, dialect::reply_kind_of(c.op), checksum_on);
     if (!reply) {
       // Resynchronise on a fresh connection rather than guess where the next reply starts.
       close_link("garbled reply");
@@ -213,35 +226,32 @@ struct AclTable::Impl {
     return reply;
   }
 
-  Result<acl::Reply> transact(const acl::Command& c, std::int64_t* t_send = nullptr, std::int64_t* t_recv = nullptr) {
+  Result<dialect::Reply> transact(const dialect::Command& c, std::int64_t* t_send = nullptr, std::int64_t* t_recv = nullptr) {
     if (state == DeviceState::disconnected) return {DriverErrc::invalid_state, who() + ": not connected"};
     if (auto r = open_link(false); !r) return r.error();
-    return transact_raw(acl::format_command(c), t_send, t_recv);
+    return transact_raw(c, t_send, t_recv);
   }
 
-  // A command answered by OK; an ERR reply becomes its typed error.
-  Result<void> command(const acl::Command& c) {
+  // A command answered by the dialect's "ok"; an error reply becomes its typed error (a reply of
+  // another kind is a garbled reply: parse_reply refuses it and the link restarts).
+  Result<void> command(const dialect::Command& c) {
     auto r = transact(c);
     if (!r) return r.error();
-    if (r->kind == acl::Reply::Kind::ok) return success();
-    if (r->kind != acl::Reply::Kind::error) {
-      close_link("unexpected reply");
-      return {DriverErrc::protocol_error, who() + ": unexpected reply to '" + acl::format_command(c) + "'"};
-    }
+    if (r->kind == dialect::Reply::Kind::ok) return success();
     return error_of(*r, c);
   }
 
-  DriverError error_of(const acl::Reply& r, const acl::Command& c) const {
+  DriverError error_of(const dialect::Reply& r, const dialect::Command& c) const {
     DriverErrc code = DriverErrc::device_rejected;
-    switch (r.error_code) {
-      case acl::kErrInterlock: code = DriverErrc::interlock_open; break;
-      case acl::kErrLimit: code = DriverErrc::limit_exceeded; break;
-      case acl::kErrAxisFault: code = DriverErrc::axis_fault; break;
-      case acl::kErrWatchdog: code = DriverErrc::watchdog_expired; break;
-      case acl::kErrMode: code = DriverErrc::invalid_state; break;
+    switch (r.refusal) {
+      case dialect::Refusal::interlock_open: code = DriverErrc::interlock_open; break;
+      case dialect::Refusal::limit_exceeded: code = DriverErrc::limit_exceeded; break;
+      case dialect::Refusal::axis_fault: code = DriverErrc::axis_fault; break;
+      case dialect::Refusal::watchdog_expired: code = DriverErrc::watchdog_expired; break;
+      case dialect::Refusal::wrong_mode: code = DriverErrc::invalid_state; break;
       default: break;
     }
-    return {code, who() + ": '" + acl::format_command(c) + "' refused: " + std::to_string(r.error_code) + " " + r.text};
+    return {code, who() + ": '" + dialect::format_command(lang(), c) + "' refused: " + r.code + " " + r.text};
   }
 
   Result<void> check_axis(int axis) const {
@@ -251,61 +261,57 @@ struct AclTable::Impl {
   }
 
   Result<TableStatus> status() {
-    acl::Command c;
-    c.op = acl::Op::read_status;
+    dialect::Command c;
+    c.op = dialect::Op::read_status;
     auto r = transact(c);
     if (!r) return r.error();
-    if (r->kind == acl::Reply::Kind::error) return error_of(*r, c);
-    if (r->kind != acl::Reply::Kind::status) {
-      close_link("unexpected reply");
-      return {DriverErrc::protocol_error, who() + ": unexpected reply to a status request"};
-    }
+    if (r->kind == dialect::Reply::Kind::error) return error_of(*r, c);
     TableStatus st;
     st.t_ns = host_time_ns();
     st.interlock = r->interlock;
     for (std::size_t k = 0; k < 3; ++k) {
       st.axes[k].mode = r->modes[k];
-      st.axes[k].at_limit = r->flags[k] & acl::flag::kAtLimit;
-      st.axes[k].fault = r->flags[k] & acl::flag::kFault;
-      st.axes[k].watchdog_expired = r->flags[k] & acl::flag::kWatchdog;
-      st.axes[k].moving = r->flags[k] & acl::flag::kMoving;
+      st.axes[k].at_limit = r->flags[k].at_limit;
+      st.axes[k].fault = r->flags[k].fault;
+      st.axes[k].watchdog_expired = r->flags[k].watchdog_expired;
+      st.axes[k].moving = r->flags[k].moving;
     }
     return st;
   }
 };
 
-AclTable::AclTable(AclTableConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {}
-AclTable::~AclTable() {
+TcpTable::TcpTable(TcpTableConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {}
+TcpTable::~TcpTable() {
   std::lock_guard lock(impl_->mutex);
   impl_->close_link("driver destroyed");
 }
 
-std::string AclTable::describe() const { return impl_->who(); }
+std::string TcpTable::describe() const { return impl_->who(); }
 
-DeviceState AclTable::state() const {
+DeviceState TcpTable::state() const {
   std::lock_guard lock(impl_->mutex);
   if (impl_->state != DeviceState::disconnected && !impl_->socket.is_open()) return DeviceState::faulted;
   return impl_->state;
 }
 
-std::uint64_t AclTable::reconnects() const {
+std::uint64_t TcpTable::reconnects() const {
   std::lock_guard lock(impl_->mutex);
   return impl_->reconnects;
 }
 
-ClockModelState AclTable::clock_model() const {
+ClockModelState TcpTable::clock_model() const {
   std::lock_guard lock(impl_->mutex);
   return impl_->clock.state();
 }
 
-Result<void> AclTable::connect() {
+Result<void> TcpTable::connect() {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->open_link(true); !r) return r;
   if (impl_->state == DeviceState::disconnected) impl_->state = DeviceState::connected;
   return success();
 }
 
-Result<void> AclTable::configure() {
+Result<void> TcpTable::configure() {
   std::lock_guard lock(impl_->mutex);
   Impl& m = *impl_;
   if (m.state == DeviceState::disconnected) return {DriverErrc::invalid_state, m.who() + ": configure before connect"};
@@ -313,22 +319,22 @@ Result<void> AclTable::configure() {
     for (int mode = 0; mode < 4; ++mode) {
       const auto& l = m.cfg.limits[static_cast<std::size_t>(a)][static_cast<std::size_t>(mode)];
       if (!l) continue;
-      acl::Command c;
-      c.axis = a + 1;
+      dialect::Command c;
+      c.axis = a;
       c.mode = static_cast<TableMode>(mode);
-      c.op = acl::Op::limit_position;
+      c.op = dialect::Op::limit_position;
       c.args = {l->min_deg, l->max_deg, 0.0};
       if (auto r = m.command(c); !r) return r;
-      c.op = acl::Op::limit_rate;
+      c.op = dialect::Op::limit_rate;
       c.args = {l->rate_dps, 0.0, 0.0};
       if (auto r = m.command(c); !r) return r;
-      c.op = acl::Op::limit_accel;
+      c.op = dialect::Op::limit_accel;
       c.args = {l->accel_dps2, 0.0, 0.0};
       if (auto r = m.command(c); !r) return r;
     }
   if (m.cfg.watchdog_s > 0.0) {
-    acl::Command c;
-    c.op = acl::Op::watchdog;
+    dialect::Command c;
+    c.op = dialect::Op::watchdog;
     c.args[0] = m.cfg.watchdog_s;
     if (auto r = m.command(c); !r) return r;
   }
@@ -338,19 +344,19 @@ Result<void> AclTable::configure() {
   return success();
 }
 
-Result<void> AclTable::activate() {
+Result<void> TcpTable::activate() {
   std::lock_guard lock(impl_->mutex);
   Impl& m = *impl_;
   if (m.state != DeviceState::configured && m.state != DeviceState::active)
     return {DriverErrc::invalid_state, m.who() + ": activate before configure"};
-  acl::Command c;
-  c.op = acl::Op::interlock_close;
+  dialect::Command c;
+  c.op = dialect::Op::interlock_close;
   if (auto r = m.command(c); !r) return r;
   m.state = DeviceState::active;
   return success();
 }
 
-Result<void> AclTable::safe_stop() {
+Result<void> TcpTable::safe_stop() {
   std::lock_guard lock(impl_->mutex);
   Impl& m = *impl_;
   if (m.state == DeviceState::disconnected) return success();
@@ -358,9 +364,9 @@ Result<void> AclTable::safe_stop() {
   // step is attempted even if an earlier one failed; the first error is reported.
   Result<void> first = success();
   for (int a = 0; a < 3; ++a) {
-    acl::Command c;
-    c.op = acl::Op::mode;
-    c.axis = a + 1;
+    dialect::Command c;
+    c.op = dialect::Op::mode;
+    c.axis = a;
     c.mode = TableMode::off;
     if (auto r = m.command(c); !r && first) first = r;
   }
@@ -382,128 +388,124 @@ Result<void> AclTable::safe_stop() {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  acl::Command open;
-  open.op = acl::Op::interlock_open;
+  dialect::Command open;
+  open.op = dialect::Op::interlock_open;
   if (auto r = m.command(open); !r && first) first = r;
   if (first) m.state = DeviceState::configured;
   return first;
 }
 
-void AclTable::disconnect() noexcept {
+void TcpTable::disconnect() noexcept {
   std::lock_guard lock(impl_->mutex);
   impl_->close_link("disconnected");
   impl_->state = DeviceState::disconnected;
 }
 
-Result<void> AclTable::interlock_close() {
+Result<void> TcpTable::interlock_close() {
   std::lock_guard lock(impl_->mutex);
-  acl::Command c;
-  c.op = acl::Op::interlock_close;
+  dialect::Command c;
+  c.op = dialect::Op::interlock_close;
   return impl_->command(c);
 }
 
-Result<void> AclTable::interlock_open() {
+Result<void> TcpTable::interlock_open() {
   std::lock_guard lock(impl_->mutex);
-  acl::Command c;
-  c.op = acl::Op::interlock_open;
+  dialect::Command c;
+  c.op = dialect::Op::interlock_open;
   return impl_->command(c);
 }
 
-Result<void> AclTable::interlock_reset() {
+Result<void> TcpTable::interlock_reset() {
   std::lock_guard lock(impl_->mutex);
-  acl::Command c;
-  c.op = acl::Op::interlock_reset;
+  dialect::Command c;
+  c.op = dialect::Op::interlock_reset;
   return impl_->command(c);
 }
 
-Result<void> AclTable::set_mode(int axis, TableMode mode) {
+Result<void> TcpTable::set_mode(int axis, TableMode mode) {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->check_axis(axis); !r) return r;
-  acl::Command c;
-  c.op = acl::Op::mode;
-  c.axis = axis + 1;
+  dialect::Command c;
+  c.op = dialect::Op::mode;
+  c.axis = axis;
   c.mode = mode;
   return impl_->command(c);
 }
 
-Result<void> AclTable::demand_position(int axis, double angle_deg) {
+Result<void> TcpTable::demand_position(int axis, double angle_deg) {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->check_axis(axis); !r) return r;
   if (!std::isfinite(angle_deg)) return {DriverErrc::invalid_argument, impl_->who() + ": position demand is not a number"};
-  acl::Command c;
-  c.op = acl::Op::demand_position;
-  c.axis = axis + 1;
+  dialect::Command c;
+  c.op = dialect::Op::demand_position;
+  c.axis = axis;
   c.args[0] = angle_deg;
   return impl_->command(c);
 }
 
-Result<void> AclTable::demand_rate(int axis, double rate_dps) {
+Result<void> TcpTable::demand_rate(int axis, double rate_dps) {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->check_axis(axis); !r) return r;
   if (!std::isfinite(rate_dps)) return {DriverErrc::invalid_argument, impl_->who() + ": rate demand is not a number"};
-  acl::Command c;
-  c.op = acl::Op::demand_rate;
-  c.axis = axis + 1;
+  dialect::Command c;
+  c.op = dialect::Op::demand_rate;
+  c.axis = axis;
   c.args[0] = rate_dps;
   return impl_->command(c);
 }
 
-Result<void> AclTable::demand_oscillation(int axis, const OscillationDemand& d) {
+Result<void> TcpTable::demand_oscillation(int axis, const OscillationDemand& d) {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->check_axis(axis); !r) return r;
   if (!std::isfinite(d.amplitude_deg) || !std::isfinite(d.frequency_hz) || !std::isfinite(d.phase_deg) ||
       d.amplitude_deg < 0.0 || d.frequency_hz < 0.0)
     return {DriverErrc::invalid_argument, impl_->who() + ": oscillation needs amplitude >= 0, frequency >= 0, finite phase"};
-  acl::Command c;
-  c.op = acl::Op::demand_oscillation;
-  c.axis = axis + 1;
+  dialect::Command c;
+  c.op = dialect::Op::demand_oscillation;
+  c.axis = axis;
   c.args = {d.amplitude_deg, d.frequency_hz, d.phase_deg};
   return impl_->command(c);
 }
 
-Result<void> AclTable::set_limits(int axis, TableMode mode, const AxisLimitSetting& l) {
+Result<void> TcpTable::set_limits(int axis, TableMode mode, const AxisLimitSetting& l) {
   std::lock_guard lock(impl_->mutex);
   if (auto r = impl_->check_axis(axis); !r) return r;
   if (!(l.min_deg < l.max_deg) || !(l.rate_dps > 0.0) || !(l.accel_dps2 > 0.0) || !std::isfinite(l.rate_dps) ||
       !std::isfinite(l.accel_dps2))
     return {DriverErrc::invalid_argument, impl_->who() + ": limits need min < max and positive finite rate and acceleration"};
-  acl::Command c;
-  c.axis = axis + 1;
+  dialect::Command c;
+  c.axis = axis;
   c.mode = mode;
-  c.op = acl::Op::limit_position;
+  c.op = dialect::Op::limit_position;
   c.args = {l.min_deg, l.max_deg, 0.0};
   if (auto r = impl_->command(c); !r) return r;
-  c.op = acl::Op::limit_rate;
+  c.op = dialect::Op::limit_rate;
   c.args = {l.rate_dps, 0.0, 0.0};
   if (auto r = impl_->command(c); !r) return r;
-  c.op = acl::Op::limit_accel;
+  c.op = dialect::Op::limit_accel;
   c.args = {l.accel_dps2, 0.0, 0.0};
   return impl_->command(c);
 }
 
-Result<void> AclTable::set_watchdog(double period_s) {
+Result<void> TcpTable::set_watchdog(double period_s) {
   std::lock_guard lock(impl_->mutex);
   if (!(period_s >= 0.0) || !std::isfinite(period_s))
     return {DriverErrc::invalid_argument, impl_->who() + ": watchdog period must be >= 0"};
-  acl::Command c;
-  c.op = acl::Op::watchdog;
+  dialect::Command c;
+  c.op = dialect::Op::watchdog;
   c.args[0] = period_s;
   return impl_->command(c);
 }
 
-Result<TablePositions> AclTable::read_positions() {
+Result<TablePositions> TcpTable::read_positions() {
   std::lock_guard lock(impl_->mutex);
   Impl& m = *impl_;
-  acl::Command c;
-  c.op = acl::Op::read_positions;
+  dialect::Command c;
+  c.op = dialect::Op::read_positions;
   std::int64_t t_send = 0, t_recv = 0;
   auto r = m.transact(c, &t_send, &t_recv);
   if (!r) return r.error();
-  if (r->kind == acl::Reply::Kind::error) return m.error_of(*r, c);
-  if (r->kind != acl::Reply::Kind::positions) {
-    m.close_link("unexpected reply");
-    return {DriverErrc::protocol_error, m.who() + ": unexpected reply to a position request"};
-  }
+  if (r->kind == dialect::Reply::Kind::error) return m.error_of(*r, c);
   TablePositions p;
   p.device_time_us = r->time_us;
   p.angle_deg = r->angle_deg;
@@ -518,7 +520,7 @@ Result<TablePositions> AclTable::read_positions() {
   return p;
 }
 
-Result<TableStatus> AclTable::read_status() {
+Result<TableStatus> TcpTable::read_status() {
   std::lock_guard lock(impl_->mutex);
   return impl_->status();
 }
