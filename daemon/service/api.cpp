@@ -171,6 +171,18 @@ json chamber_map_json(const DaemonConfig& config) {
           {"unchecked", unchecked}};
 }
 
+// The table controller's dialect (null on the in-process simulation): which language the driver
+// speaks and what it was written from.
+json table_dialect_json(const DaemonConfig& config) {
+  if (config.device_addresses) {
+    const auto& t = config.device_addresses->table;
+    return {{"name", t.dialect.name}, {"configured", t.dialect_name}, {"source", t.dialect.source}};
+  }
+  if (config.devices != "sim-wire") return nullptr;
+  const auto& d = drivers::dialect::imucal_acl();
+  return {{"name", d.name}, {"configured", d.name}, {"source", d.source}};
+}
+
 }  // namespace
 
 Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth)
@@ -190,6 +202,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
   // job is still inside it (the HTTP server it points to may then go).
   jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); });
   chamber_map_ = chamber_map_json(config);
+  table_dialect_ = table_dialect_json(config);
   // Without a configuration file the sequence can only live in the data directory.
   if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
@@ -258,6 +271,7 @@ json Api::status() {
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
           {"chamber_map", chamber_map_},
+          {"table_dialect", table_dialect_},
           {"started", iso8601_utc(started_ms_)},
           {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
           {"devices", config_.devices},

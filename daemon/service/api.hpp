@@ -105,6 +105,7 @@ class Api {
   std::mutex certificate_mutex_;  // a campaign's number is looked up and issued as one step
   nlohmann::json programs_;  // built once: the built-in programs do not change
   nlohmann::json chamber_map_;  // built once: the configured register map does not change
+  nlohmann::json table_dialect_;  // built once, as the chamber map
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;
   std::atomic<bool> shutting_down_{false};

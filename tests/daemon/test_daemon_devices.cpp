@@ -224,6 +224,46 @@ TEST(ConfiguredDevices, ACampaignThroughTheConfiguredAddressesRecordsEveryFrame)
   EXPECT_NE(text.find("stopping after 3 IMU link(s)"), std::string::npos) << text;
 }
 
+// A table controller of another family is a configuration file: `imucal sim-devices` given a
+// dialect only the tests define (tests/data/table-dialect-test-rtc.json), the daemon configured
+// with the same file, a campaign runs through it.
+TEST(ConfiguredDevices, ATableSpeakingADialectOnlyTheTestDefinesRunsACampaign) {
+  const std::string dir = scratch_dir("devices-dialect");
+  const std::string socket_path = socket_path_for("dialect");
+  const std::string dialect = std::string(IMUCAL_TEST_DATA) + "/table-dialect-test-rtc.json";
+  SimDevicesProcess devices({"--imu-socket", socket_path, "--rate-hz", "100", "--seed", "6", "--table-dialect", dialect},
+                            dir + "/sim-devices.stderr");
+  ASSERT_TRUE(devices.config.is_object()) << "imucal sim-devices printed no configuration; see " << dir;
+  EXPECT_EQ(devices.config["devices"]["table"]["dialect"], dialect);
+  write_file(dir + "/imucald.json", devices.config);
+
+  LocalDaemon d("dialect-run", false, [&](daemon::DaemonConfig& c) { use_devices_of(dir + "/imucald.json", c); });
+  ASSERT_TRUE(d.config.device_addresses.has_value());
+  EXPECT_EQ(d.config.device_addresses->table.dialect.name, "test-rtc");
+  const auto id = d.post_campaign(short_campaign("dialect"));
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id, 60.0);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  EXPECT_TRUE(has_event(c, "info", "table test-rtc://127.0.0.1:")) << c.dump();
+  const auto frames = run_frames(d.run_path(c));
+  ASSERT_GE(static_cast<double>(frames.size()), c.at("duration_s").get<double>() * 100.0 - 1.0);
+  EXPECT_EQ(off_grid(frames, 10'000'000), 0u);
+  // The table went where the program said, read back through the dialect's replies.
+  int level = 0;
+  for (const ImuFrame& f : frames) {
+    const double t_s = static_cast<double>(f.t_ns) * 1e-9;
+    if (t_s > 3.7 && t_s < 4.4) {
+      EXPECT_NEAR(f.table_deg.y(), 90.0, 1e-3) << t_s;
+      ++level;
+    }
+  }
+  EXPECT_GT(level, 50);
+  EXPECT_FALSE(d.service->sequencer().telemetry().at("table").at("interlock_closed").get<bool>());
+  d.service->stop();
+  d.service.reset();
+  EXPECT_EQ(devices.stop(), 0);
+}
+
 // The simulated table and chamber of `imucal sim-devices`, in-process, so that the test can see
 // the table as it is.
 drivers::sim::SimDevicesConfig in_process_devices(const std::string& socket_path) {

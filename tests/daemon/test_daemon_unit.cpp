@@ -227,7 +227,8 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
   std::string m;
   try {
     parse_config(R"({"devices": {
-      "table": {"host": "t", "port": 70000, "response_timeout_ms": -5, "watchdog": 1, "reply_checksum": "yes"},
+      "table": {"host": "t", "port": 70000, "response_timeout_ms": -5, "watchdog": 1, "reply_checksum": "yes",
+                "dialect": "acutrol-3000"},
       "chamber": {"port": 1502, "map": "no-such-map", "parity": "X"},
       "imu": {"interface": "can0", "socket": "/tmp/imu.sock", "framing": "flexray", "gyro_lsb_rad": 0,
               "accel_lsb_mps": 1e-7, "serial": "", "rate": 100},
@@ -245,6 +246,7 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
            "config.devices.table.response_timeout_ms: 'response_timeout_ms' must be positive",
            "config.devices.table: unknown key \"watchdog\"",
            "config.devices.table.reply_checksum:",
+           "config.devices.table.dialect: table dialect 'acutrol-3000': no such built-in one (imucal-acl) or file",
            "config.devices.chamber.host is required",
            "config.devices.chamber.map: register map 'no-such-map': no such built-in one (watlow-f4t, csz-ezt570i) or file",
            "config.devices.chamber.parity:",

@@ -148,6 +148,10 @@ TEST(SimWire, APowerCycleSwitchesTheRelayWithoutAskingAnyone) {
   EXPECT_EQ(map.at("checked"), "partly");
   EXPECT_EQ(map.at("unchecked"), json({"control_mode", "alarms"}));
   EXPECT_NE(map.at("summary").get<std::string>().find("partly checked against Watlow F4T"), std::string::npos);
+  // The table controller's language, as the table card shows it.
+  const json dialect = d.get("/api/status").at("table_dialect");
+  EXPECT_EQ(dialect.at("name"), "imucal-acl");
+  EXPECT_NE(dialect.at("source").get<std::string>().find("Not a maker's manual"), std::string::npos) << dialect.dump();
   const auto id = d.post_campaign(power_cycle_campaign("relay"));
   ASSERT_EQ(d.command(id, "start"), 200);
   const json c = d.wait_final(id, 120.0);
@@ -188,6 +192,7 @@ TEST(SimWire, ARelayThatDoesNotSwitchAsksTheOperatorInstead) {
 TEST(SimWire, AStuckRelayNeedsTheSimWireDevices) {
   LocalDaemon d("relay-fault-sim");
   EXPECT_TRUE(d.get("/api/status").at("chamber_map").is_null()) << "the in-process simulation has no register map";
+  EXPECT_TRUE(d.get("/api/status").at("table_dialect").is_null()) << "nor a table dialect";
   json campaign = power_cycle_campaign("stuck");
   campaign["sim_faults"] = {{{"kind", "relay_stuck"}, {"at_s", 0.5}}};
   const auto r = d.call("POST", "/api/campaigns", campaign.dump());

@@ -468,6 +468,102 @@ TEST(TcpTable, ConfigurationFromJson) {
   EXPECT_THROW(tcp_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
 }
 
+// A second controller family is a file: the driver and the simulated table both given a dialect
+// only the tests define (tests/data/table-dialect-test-rtc.json: other tokens, time tags in
+// seconds, error codes that are not numbers, no reply checksum).
+namespace {
+const std::string kTestDialectPath = std::string(IMUCAL_TEST_DATA) + "/table-dialect-test-rtc.json";
+
+Rig rtc_rig(std::function<void(TcpTableConfig&)> tweak = {}) {
+  sim::SimTableConfig tc;
+  tc.dialect = dialect::load_dialect(kTestDialectPath);
+  tc.clock_offset_us = 7'000'000;
+  return Rig(tc, [tweak](TcpTableConfig& c) {
+    c.dialect = dialect::load_dialect(kTestDialectPath);
+    if (tweak) tweak(c);
+  });
+}
+}  // namespace
+
+TEST(TcpTable, ATableSpeakingADialectOnlyTheTestDefinesRunsEveryCommand) {
+  Rig rig = rtc_rig([](TcpTableConfig& c) {
+    c.limits[1][static_cast<int>(TableMode::position)] = AxisLimitSetting{-95.0, 95.0, 50.0, 100.0};
+    c.watchdog_s = 30.0;
+  });
+  EXPECT_NE(rig.driver.describe().find("test-rtc://127.0.0.1:"), std::string::npos) << rig.driver.describe();
+  rig.up();
+  const auto st = rig.driver.read_status();
+  ASSERT_TRUE(st) << st.error().message;
+  EXPECT_EQ(st->interlock, InterlockState::closed);
+  // Errors arrive as the dialect's codes and leave the driver typed.
+  EXPECT_EQ(rig.driver.demand_rate(kOuter, 5.0).code(), DriverErrc::invalid_state);  // the axis is off
+  ASSERT_TRUE(rig.driver.set_mode(kMiddle, TableMode::position));
+  const auto far = rig.driver.demand_position(kMiddle, 100.0);
+  EXPECT_EQ(far.code(), DriverErrc::limit_exceeded);
+  EXPECT_NE(far.error().message.find("'B GOTO 100.000000' refused: E11"), std::string::npos) << far.error().message;
+  ASSERT_TRUE(rig.driver.demand_position(kMiddle, 10.0));
+  ASSERT_TRUE(rig.driver.set_mode(kOuter, TableMode::rate));
+  ASSERT_TRUE(rig.driver.demand_rate(kOuter, 30.0));
+  ASSERT_TRUE(rig.driver.set_mode(kInner, TableMode::synthesis));
+  ASSERT_TRUE(rig.driver.demand_oscillation(kInner, {2.0, 0.5, 0.0}));
+  // Positions in the dialect's fixed decimals, time tags in seconds mapped onto the host clock.
+  ASSERT_TRUE(eventually([&] {
+    auto p = rig.driver.read_positions();
+    return p && std::fabs(p->rate_dps[0] - 30.0) < 1e-6 && std::fabs(p->angle_deg[1] - 10.0) < 1e-6;
+  }));
+  const auto p = rig.driver.read_positions();
+  ASSERT_TRUE(p);
+  const auto truth = rig.world.with_servo([](sim::TableServo& s, double t) { return s.sample(t); });
+  EXPECT_NEAR(p->angle_deg[1], truth[1].angle_deg, 1e-6);
+  EXPECT_GE(p->device_time_us, 7'000'000);
+  ASSERT_TRUE(rig.driver.interlock_open());
+  EXPECT_EQ(rig.driver.demand_rate(kOuter, 10.0).code(), DriverErrc::interlock_open);
+  ASSERT_TRUE(rig.driver.interlock_reset());
+  ASSERT_TRUE(rig.driver.interlock_close());
+  ASSERT_TRUE(rig.driver.safe_stop());
+  EXPECT_EQ(rig.driver.read_status()->interlock, InterlockState::open);
+  // The wire is the dialect's: a raw client sees its line end and its replies.
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(static_cast<std::uint16_t>(rig.table.port()));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  auto ask = [&](const std::string& line) {
+    (void)::send(s, line.data(), line.size(), MSG_NOSIGNAL);
+    std::string reply;
+    char ch;
+    while (::recv(s, &ch, 1, 0) == 1 && ch != '\n') reply += ch;
+    return reply;
+  };
+  EXPECT_EQ(ask("WHO\r\n"), "IMUCAL,SIM-TABLE,0,1.0\r");
+  EXPECT_EQ(ask("STATE\r\n").rfind("#", 0), 0u);
+  EXPECT_EQ(ask(":READ:POS?\r\n").rfind("!E1 ", 0), 0u);  // the other dialect is unknown here
+  EXPECT_EQ(ask("D GOTO 1\r\n").rfind("!E2 ", 0), 0u);
+  ::close(s);
+}
+
+TEST(TcpTable, ADialectIsConfiguredByNameOrFile) {
+  const auto c = tcp_table_config_from_json(R"({"port": 5001, "dialect": ")" + kTestDialectPath + R"("})");
+  EXPECT_EQ(c.dialect.name, "test-rtc");
+  EXPECT_FALSE(c.reply_checksum);  // the dialect has none
+  EXPECT_TRUE(tcp_table_config_from_json(R"({"dialect": "imucal-acl"})").reply_checksum);
+  auto message = [](const std::string& json_text) {
+    try {
+      (void)tcp_table_config_from_json(json_text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(message(R"({"dialect": ")" + kTestDialectPath + R"(", "reply_checksum": true})")
+                .find("'reply_checksum' is true but dialect 'test-rtc' has no reply checksum"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"dialect": "acutrol-3000"})").find("table dialect 'acutrol-3000': no such built-in one (imucal-acl) or file"),
+            std::string::npos)
+      << message(R"({"dialect": "acutrol-3000"})");
+}
+
 // Fuzz at the wire: a table that answers the connection handshake properly and every position
 // request with a damaged reply (one byte changed, a truncated line, random printable garbage or
 // random bytes). With reply checksums on, the driver must never return a position.

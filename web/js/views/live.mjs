@@ -63,7 +63,8 @@ export function mount(root, ctx) {
     h('section', { class: 'card small', id: 'table-card' }, h('h2', {}, 'Table'),
       h('table', { class: 'axes' }, h('thead', {}, h('tr', {}, h('th', {}, ''), h('th', { class: 'num' }, 'angle °'), h('th', { class: 'num' }, 'rate °/s'))),
         h('tbody', {}, ...AXES.map((a) => h('tr', {}, h('th', { style: `color:${AXIS_COLORS[a]}` }, a), h('td', { class: 'num', id: `angle-${a}` }), h('td', { class: 'num', id: `rate-${a}` }))))),
-      h('div', { class: 'flags', id: 'table-flags' })),
+      h('div', { class: 'flags', id: 'table-flags' }),
+      h('p', { class: 'map-note', id: 'table-dialect', hidden: true })),
     h('section', { class: 'card small', id: 'chamber-card' }, h('h2', {}, 'Chamber'),
       kv('temperature', 'chamber-temp', '°C'), kv('set point', 'chamber-sp', '°C'), kv('tolerance', 'chamber-tol', '± °C'),
       h('div', { class: 'flags', id: 'chamber-flags' }),
@@ -74,9 +75,17 @@ export function mount(root, ctx) {
       h('div', { class: 'flags', id: 'imu-flags' })),
     h('section', { class: 'card small', id: 'estimators-card' }, h('h2', {}, 'Estimators'), h('div', { id: 'estimator-status' })));
 
-  // The chamber controller's register map, and whether the maker's manual vouches for it
-  // (GET /api/status chamber_map; none on the in-process simulation).
+  // The chamber controller's register map, and whether the maker's manual vouches for it; the
+  // table controller's dialect and what it was written from (GET /api/status chamber_map and
+  // table_dialect; none on the in-process simulation).
   ctx.status().then((s) => {
+    const td = s?.table_dialect;
+    const tel = cards.querySelector('#table-dialect');
+    if (td && tel) {
+      tel.textContent = `Dialect ${td.name}`;
+      tel.title = td.source;
+      tel.hidden = false;
+    }
     const cm = s?.chamber_map;
     const el = cards.querySelector('#chamber-map');
     if (!cm || !el) return;
