@@ -35,7 +35,6 @@
 // table xyz, so that plots of long ranges need no decoding.
 #include "storage/run_db.hpp"
 
-#include <sqlite3.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -48,6 +47,8 @@
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+
+#include "storage/sqlite.hpp"
 
 namespace imucal::storage {
 
@@ -76,185 +77,17 @@ constexpr int kPageSizeBytes = 16384;
   throw StorageError("run database '" + path + "': " + reason);
 }
 
-// SQLite's message, with what it means for a run where a person can act on it.
-std::string sqlite_reason(sqlite3* db, int rc) {
-  const std::string message = db != nullptr ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
-  switch (rc & 0xff) {
-    case SQLITE_FULL:
-      return "the disk is full or the run reached its size limit (" + message +
-             "); the uncommitted writes were rolled back, everything committed before is intact";
-    case SQLITE_CORRUPT:
-    case SQLITE_NOTADB:
-      return "the file is damaged (" + message + ")";
-    case SQLITE_BUSY:
-    case SQLITE_LOCKED:
-      return "the run is locked by another connection (" + message + ")";
-    case SQLITE_IOERR:
-      return "I/O error (" + message + ")";
-    case SQLITE_READONLY:
-      return "the file cannot be written (" + message + ")";
-    default:
-      return message;
-  }
-}
+using sql::Connection;
+using sql::Statement;
 
-// ---------------------------------------------------------------------------------------------
-// RAII handles
-
-struct DbCloser {
-  void operator()(sqlite3* db) const noexcept { sqlite3_close_v2(db); }
-};
-using DbHandle = std::unique_ptr<sqlite3, DbCloser>;
-
-struct StmtFinalizer {
-  void operator()(sqlite3_stmt* stmt) const noexcept { sqlite3_finalize(stmt); }
-};
-
-// A statement prepared once and reused; errors carry the file name and SQLite's message.
-class Statement {
- public:
-  Statement() = default;
-  Statement(sqlite3* db, const std::string* path, const char* sql) : db_(db), path_(path) {
-    sqlite3_stmt* raw = nullptr;
-    if (sqlite3_prepare_v3(db, sql, -1, SQLITE_PREPARE_PERSISTENT, &raw, nullptr) != SQLITE_OK) {
-      fail(*path, std::string("cannot prepare '") + sql + "': " + sqlite3_errmsg(db));
-    }
-    stmt_.reset(raw);
-  }
-
-  void bind(int index, std::int64_t value) {
-    check(sqlite3_bind_int64(stmt_.get(), index, static_cast<sqlite3_int64>(value)), "bind");
-  }
-  void bind(int index, double value) { check(sqlite3_bind_double(stmt_.get(), index, value), "bind"); }
-  void bind(int index, const std::string& text) {
-    // SQLITE_STATIC: every caller steps the statement while `text` is alive.
-    check(sqlite3_bind_text64(stmt_.get(), index, text.data(), text.size(), SQLITE_STATIC,
-                              SQLITE_UTF8),
-          "bind");
-  }
-  void bind_blob(int index, const void* data, std::size_t size) {
-    check(sqlite3_bind_blob64(stmt_.get(), index, data, size, SQLITE_STATIC), "bind");
-  }
-  void bind_null(int index) { check(sqlite3_bind_null(stmt_.get(), index), "bind"); }
-  void bind(int index, const std::optional<double>& value) {
-    if (value) {
-      bind(index, *value);
-    } else {
-      bind_null(index);
-    }
-  }
-  void bind(int index, const std::optional<std::int64_t>& value) {
-    if (value) {
-      bind(index, *value);
-    } else {
-      bind_null(index);
-    }
-  }
-
-  // True while a row is available.
-  bool step() {
-    const int rc = sqlite3_step(stmt_.get());
-    if (rc == SQLITE_ROW) return true;
-    if (rc == SQLITE_DONE) return false;
-    fail(*path_, std::string("'") + sqlite3_sql(stmt_.get()) + "' failed: " + sqlite_reason(db_, rc));
-  }
-  // For statements without result rows.
-  void run() {
-    Reset reset(*this);
-    while (step()) {
-    }
-  }
-  void reset() noexcept {
-    sqlite3_reset(stmt_.get());
-    sqlite3_clear_bindings(stmt_.get());
-  }
-
-  std::int64_t column_int64(int col) const { return sqlite3_column_int64(stmt_.get(), col); }
-  double column_double(int col) const { return sqlite3_column_double(stmt_.get(), col); }
-  bool column_is_null(int col) const { return sqlite3_column_type(stmt_.get(), col) == SQLITE_NULL; }
-  std::optional<double> column_optional_double(int col) const {
-    if (column_is_null(col)) return std::nullopt;
-    return column_double(col);
-  }
-  std::optional<std::int64_t> column_optional_int64(int col) const {
-    if (column_is_null(col)) return std::nullopt;
-    return column_int64(col);
-  }
-  std::string column_text(int col) const {
-    const auto* text = sqlite3_column_text(stmt_.get(), col);
-    const int size = sqlite3_column_bytes(stmt_.get(), col);
-    if (text == nullptr) return {};
-    return std::string(reinterpret_cast<const char*>(text), static_cast<std::size_t>(size));
-  }
-  std::span<const unsigned char> column_blob(int col) const {
-    const void* data = sqlite3_column_blob(stmt_.get(), col);
-    const int size = sqlite3_column_bytes(stmt_.get(), col);  // after column_blob, as documented
-    if (data == nullptr) return {};
-    return {static_cast<const unsigned char*>(data), static_cast<std::size_t>(size)};
-  }
-
-  // Resets the statement when a use ends, also by an exception, so that it never holds a read
-  // transaction open or keeps stale bindings.
-  class Reset {
-   public:
-    explicit Reset(Statement& stmt) : stmt_(stmt) {}
-    ~Reset() { stmt_.reset(); }
-    Reset(const Reset&) = delete;
-    Reset& operator=(const Reset&) = delete;
-
-   private:
-    Statement& stmt_;
-  };
-
- private:
-  void check(int rc, const char* what) const {
-    if (rc != SQLITE_OK) {
-      fail(*path_, std::string(what) + " '" + sqlite3_sql(stmt_.get()) + "': " + sqlite3_errmsg(db_));
-    }
-  }
-
-  sqlite3* db_ = nullptr;
-  const std::string* path_ = nullptr;  // owned by RunDb::Impl, which outlives its statements
-  std::unique_ptr<sqlite3_stmt, StmtFinalizer> stmt_;
-};
-
-void exec(sqlite3* db, const std::string& path, const char* sql) {
-  char* message = nullptr;
-  if (sqlite3_exec(db, sql, nullptr, nullptr, &message) != SQLITE_OK) {
-    std::string reason = message != nullptr ? message : sqlite3_errmsg(db);
-    sqlite3_free(message);
-    fail(path, std::string("'") + sql + "' failed: " + reason);
-  }
-}
-
-std::int64_t pragma_int(sqlite3* db, const std::string& path, const char* sql) {
-  Statement stmt(db, &path, sql);
-  Statement::Reset reset(stmt);
-  if (!stmt.step()) fail(path, std::string("'") + sql + "' returned nothing");
-  return stmt.column_int64(0);
-}
-
-DbHandle open_handle(const std::string& path, int flags) {
-  sqlite3* raw = nullptr;
-  const int rc = sqlite3_open_v2(path.c_str(), &raw, flags, nullptr);
-  DbHandle db(raw);  // sqlite3_open_v2 may hand out a handle even when it fails
-  if (rc != SQLITE_OK) {
-    fail(path, std::string("cannot open: ") + (raw != nullptr ? sqlite3_errmsg(raw) : sqlite3_errstr(rc)));
-  }
-  sqlite3_extended_result_codes(db.get(), 1);
-  // A reader (the web UI, `imucal calibrate`) may hold the file briefly; wait instead of failing.
-  sqlite3_busy_timeout(db.get(), 5000);
-  return db;
-}
-
-void use_wal(sqlite3* db, const std::string& path) {
+void use_wal(Connection& db) {
   // WAL lets readers work during recording; NORMAL is durable up to the last checkpointed commit
   // on power loss and never corrupts the file (rosbag2's "OFF" can).
-  exec(db, path, "PRAGMA journal_mode=WAL");
-  exec(db, path, "PRAGMA synchronous=NORMAL");
+  db.exec("PRAGMA journal_mode=WAL");
+  db.exec("PRAGMA synchronous=NORMAL");
   // A burst (a benchmark, a backlog) can grow the WAL to a few hundred MB; give the space back
   // once a checkpoint has emptied it.
-  exec(db, path, "PRAGMA journal_size_limit=67108864");
+  db.exec("PRAGMA journal_size_limit=67108864");
 }
 
 // Version 2, as create() makes it. `summary` precedes `data` on purpose: SQLite stores columns in
@@ -316,20 +149,20 @@ CREATE TABLE dropped_span(
 
 // Turns version `from` into version `from` + 1. The caller runs every step and the new
 // user_version in one transaction, so that a failed migration leaves the old version intact.
-void migrate_one_step(sqlite3* db, const std::string& path, std::int64_t from) {
+void migrate_one_step(Connection& db, std::int64_t from) {
   switch (from) {
     case 1:
       // Chunk summaries for plots (NULL for the chunks already written; they are decoded when a
       // plot needs them) and the writer sessions with their unclean-shutdown marker.
-      exec(db, path, "ALTER TABLE imu_chunk ADD COLUMN summary BLOB");
-      exec(db, path, kSessionTablesSql);
+      db.exec("ALTER TABLE imu_chunk ADD COLUMN summary BLOB");
+      db.exec(kSessionTablesSql);
       return;
     case 2:
       // The eight sensors of each FOG coil (NULL for the samples already written).
-      exec(db, path, "ALTER TABLE temp_sample ADD COLUMN coil_sensors_C BLOB");
+      db.exec("ALTER TABLE temp_sample ADD COLUMN coil_sensors_C BLOB");
       return;
     default:
-      fail(path, "no migration from schema version " + std::to_string(from));
+      db.fail("no migration from schema version " + std::to_string(from));
   }
 }
 
@@ -627,7 +460,7 @@ constexpr const char* kSelectSummariesSql = "SELECT id, t0_ns, t1_ns, n, summary
 struct RunDb::Impl {
   // Declared first so that it is destroyed last: the statements below finalize before the close.
   std::string path;
-  DbHandle db;
+  Connection db;
   OpenMode mode = OpenMode::Auto;
 
   Statement begin, commit, rollback;
@@ -666,8 +499,8 @@ struct RunDb::Impl {
   std::vector<DroppedSpan> pending_drops;
   std::optional<RecoveryReport> recovery;
 
-  Impl(std::string path_in, DbHandle db_in) : path(std::move(path_in)), db(std::move(db_in)) {
-    auto prepare = [&](const char* sql) { return Statement(db.get(), &path, sql); };
+  Impl(std::string path_in, Connection db_in) : path(std::move(path_in)), db(std::move(db_in)) {
+    auto prepare = [&](const char* sql) { return Statement(db, sql, true); };
     begin = prepare("BEGIN IMMEDIATE");
     commit = prepare("COMMIT");
     rollback = prepare("ROLLBACK");
@@ -761,7 +594,7 @@ struct RunDb::Impl {
     try {
       rollback.run();
     } catch (const StorageError&) {
-      // SQLite may have rolled back by itself (SQLITE_FULL at COMMIT does).
+      // SQLite may have rolled back by itself (a full disk at COMMIT does).
     }
     poisoned = "a write of the batch failed and the batch was rolled back";
     buffer.clear();
@@ -782,7 +615,7 @@ struct RunDb::Impl {
     stmt.bind_blob(6, encoded.data.data(), encoded.data.size());
     if (id) stmt.bind(7, *id);
     stmt.run();
-    return id ? *id : static_cast<std::int64_t>(sqlite3_last_insert_rowid(db.get()));
+    return id ? *id : db.last_insert_rowid();
   }
 
   void load_state() {
@@ -793,7 +626,7 @@ struct RunDb::Impl {
     }();
     last_frame_t_ns = query_optional_int(last_frame_time);
     {
-      Statement stmt(db.get(), &path, "SELECT MAX(t_ns) FROM temp_sample");
+      Statement stmt(db, "SELECT MAX(t_ns) FROM temp_sample");
       last_temp_t_ns = query_optional_int(stmt);
     }
   }
@@ -836,7 +669,7 @@ struct RunDb::Impl {
       insert_session.bind(4, frames_in_db);
       insert_session.run();  // its own transaction: the marker must be on disk before any frame
     }
-    session_id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(db.get()));
+    session_id = db.last_insert_rowid();
     frames_at_open = frames_in_db;
     high_water_frames = 0;
     dropped_frames = 0;
@@ -853,7 +686,7 @@ struct RunDb::Impl {
     };
     std::vector<Open> open_sessions;
     {
-      Statement stmt(db.get(), &path,
+      Statement stmt(db,
                      "SELECT id, pid, frames_at_open FROM recorder_session WHERE closed_unix_ms IS NULL ORDER BY id");
       Statement::Reset reset(stmt);
       while (stmt.step()) open_sessions.push_back({stmt.column_int64(0), stmt.column_int64(1), stmt.column_int64(2)});
@@ -861,7 +694,7 @@ struct RunDb::Impl {
     if (open_sessions.empty()) return;
     const Open& last = open_sessions.back();
     {
-      Statement stmt(db.get(), &path, "PRAGMA integrity_check");
+      Statement stmt(db, "PRAGMA integrity_check");
       Statement::Reset reset(stmt);
       std::string problems;
       int shown = 0;
@@ -893,7 +726,7 @@ struct RunDb::Impl {
     Transaction txn(*this);
     for (const auto& session : open_sessions) {
       const bool is_last = session.id == last.id;
-      Statement stmt(db.get(), &path,
+      Statement stmt(db,
                      "UPDATE recorder_session SET closed_unix_ms = ?2, unclean = 1, integrity = 'ok', "
                      "lost_uncommitted_frames = ?3, committed_frames = ?4, committed_t_ns = ?5, "
                      "queue_high_water_frames = MAX(queue_high_water_frames, ?6), "
@@ -976,21 +809,21 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
   try {
     remove_db_files(making);
     {
-      auto db = open_handle(making, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
-      exec(db.get(), making, ("PRAGMA page_size = " + std::to_string(kPageSizeBytes)).c_str());
-      use_wal(db.get(), making);
-      exec(db.get(), making, "BEGIN IMMEDIATE");
-      exec(db.get(), making, kSchemaSql);
-      exec(db.get(), making, kSessionTablesSql);
-      exec(db.get(), making, ("PRAGMA application_id = " + std::to_string(kApplicationId)).c_str());
-      exec(db.get(), making, ("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
+      Connection db(making, Connection::Open::create, "run database");
+      db.exec(("PRAGMA page_size = " + std::to_string(kPageSizeBytes)).c_str());
+      use_wal(db);
+      db.exec("BEGIN IMMEDIATE");
+      db.exec(kSchemaSql);
+      db.exec(kSessionTablesSql);
+      db.exec(("PRAGMA application_id = " + std::to_string(kApplicationId)).c_str());
+      db.exec(("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
       {
         const std::string json = meta_to_json(meta);
-        Statement stmt(db.get(), &making, "INSERT INTO run_meta(id, json) VALUES (1, ?1)");
+        Statement stmt(db, "INSERT INTO run_meta(id, json) VALUES (1, ?1)");
         stmt.bind(1, json);
         stmt.run();
       }
-      exec(db.get(), making, "COMMIT");
+      db.exec("COMMIT");
     }  // closing the only connection checkpoints the WAL into the file and removes it
     std::filesystem::rename(making, path);
   } catch (const std::filesystem::filesystem_error& e) {
@@ -1003,8 +836,8 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
     throw;
   }
   try {
-    auto db = open_handle(path, SQLITE_OPEN_READWRITE);
-    use_wal(db.get(), path);
+    Connection db(path, Connection::Open::read_write, "run database");
+    use_wal(db);
     auto impl = std::make_unique<Impl>(path, std::move(db));
     impl->mode = OpenMode::Write;
     impl->start_session(std::move(lease));
@@ -1021,31 +854,31 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
 RunDb RunDb::open(const std::string& path, OpenMode mode) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) fail(path, "no such file");
-  auto db = open_handle(path, SQLITE_OPEN_READWRITE);
+  Connection db(path, Connection::Open::read_write, "run database");
   // SQLite silently falls back to read-only; say so now rather than at the first append.
-  if (sqlite3_db_readonly(db.get(), "main") == 1) fail(path, "the file is read-only");
+  if (db.read_only()) fail(path, "the file is read-only");
 
   // Any SQLite file opens; the first read tells whether it is a database at all.
-  const std::int64_t application_id = pragma_int(db.get(), path, "PRAGMA application_id");
+  const std::int64_t application_id = db.query_int("PRAGMA application_id");
   if (application_id != kApplicationId) fail(path, "not an imucal run database (wrong application_id)");
-  const std::int64_t version = pragma_int(db.get(), path, "PRAGMA user_version");
+  const std::int64_t version = db.query_int("PRAGMA user_version");
   if (version > kSchemaVersion) {
     fail(path, "schema version " + std::to_string(version) + " is newer than this imucal supports (" +
                    std::to_string(kSchemaVersion) + "); open it with a newer imucal");
   }
   if (version < 1) fail(path, "unknown schema version " + std::to_string(version));
-  use_wal(db.get(), path);
+  use_wal(db);
   if (version < kSchemaVersion) {
     // BEGIN IMMEDIATE: two processes opening an old file at once migrate it once, one after the
     // other (the second sees the new version and does nothing).
-    exec(db.get(), path, "BEGIN IMMEDIATE");
+    db.exec("BEGIN IMMEDIATE");
     try {
-      const std::int64_t now = pragma_int(db.get(), path, "PRAGMA user_version");
-      for (std::int64_t v = now; v < kSchemaVersion; ++v) migrate_one_step(db.get(), path, v);
-      exec(db.get(), path, ("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
-      exec(db.get(), path, "COMMIT");
+      const std::int64_t now = db.query_int("PRAGMA user_version");
+      for (std::int64_t v = now; v < kSchemaVersion; ++v) migrate_one_step(db, v);
+      db.exec(("PRAGMA user_version = " + std::to_string(kSchemaVersion)).c_str());
+      db.exec("COMMIT");
     } catch (...) {
-      sqlite3_exec(db.get(), "ROLLBACK", nullptr, nullptr, nullptr);
+      sql::rollback_quietly(db);
       throw;
     }
     spdlog::info("run '{}': schema migrated from version {} to {}", path, version, kSchemaVersion);
@@ -1057,7 +890,7 @@ RunDb RunDb::open(const std::string& path, OpenMode mode) {
   if (mode == OpenMode::Write) {
     impl->claim();
   } else {
-    Statement stmt(impl->db.get(), &impl->path,
+    Statement stmt(impl->db,
                    "SELECT EXISTS(SELECT 1 FROM recorder_session WHERE closed_unix_ms IS NULL)");
     if (impl->query_int(stmt) != 0 && !WriterLease::probe(path).held) {
       // The marker without a live writer: the writer died. Recover now, under the lease, so
@@ -1271,9 +1104,7 @@ void RunDb::claim_writer() { impl().ensure_writable(); }
 void RunDb::checkpoint() {
   Impl& d = impl();
   if (d.batch_open) fail(d.path, "checkpoint() inside a batch");
-  const int rc = sqlite3_wal_checkpoint_v2(d.db.get(), nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
-  // BUSY: another connection is checkpointing right now, which does the same job.
-  if (rc != SQLITE_OK && (rc & 0xff) != SQLITE_BUSY) fail(d.path, "checkpoint failed: " + sqlite_reason(d.db.get(), rc));
+  d.db.checkpoint();
 }
 
 bool RunDb::is_writer() const { return impl().lease != nullptr; }
@@ -1301,9 +1132,9 @@ void RunDb::record_dropped(std::int64_t t0_ns, std::int64_t t1_ns, std::int64_t 
 
 void RunDb::set_size_limit_bytes(std::int64_t bytes) {
   Impl& d = impl();
-  const std::int64_t page_bytes = pragma_int(d.db.get(), d.path, "PRAGMA page_size");
+  const std::int64_t page_bytes = d.db.query_int("PRAGMA page_size");
   const std::int64_t pages = std::max<std::int64_t>(1, bytes / page_bytes);
-  pragma_int(d.db.get(), d.path, ("PRAGMA max_page_count = " + std::to_string(pages)).c_str());
+  d.db.query_int(("PRAGMA max_page_count = " + std::to_string(pages)).c_str());
 }
 
 // ---- reading ----
@@ -1335,6 +1166,8 @@ std::int64_t RunDb::frame_count() const {
 
 std::optional<std::int64_t> RunDb::last_frame_t_ns() const { return impl().last_frame_t_ns; }
 
+std::optional<std::int64_t> RunDb::last_temperature_t_ns() const { return impl().last_temp_t_ns; }
+
 void RunDb::for_each_block(const std::function<void(std::span<const ImuFrame>)>& fn, std::int64_t t0_ns,
                            std::int64_t t1_ns) const {
   Impl& d = impl();
@@ -1349,7 +1182,7 @@ void RunDb::for_each_block(const std::function<void(std::span<const ImuFrame>)>&
   std::optional<Statement> nested;
   Statement* stmt = &d.select_chunks;
   if (d.select_chunks_busy) {
-    nested.emplace(d.db.get(), &d.path, kSelectChunksSql);
+    nested.emplace(d.db, kSelectChunksSql);
     stmt = &*nested;
   }
   struct BusyFlag {

@@ -28,16 +28,13 @@
 #include <vector>
 
 #include "core/recording.hpp"
+#include "storage/sqlite.hpp"
 #include "storage/writer_lease.hpp"
 
 namespace imucal::storage {
 
-// Every failure of the storage layer; the message names the file and the reason, so that it can be
-// shown to a person as it is.
-class StorageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+// StorageError (storage/sqlite.hpp): every failure of the storage layer; the message names the
+// file and the reason, so that it can be shown to a person as it is.
 
 // Space accounting of the frame table (for tests and `imucal bench`).
 struct FrameStorageStats {
@@ -193,6 +190,8 @@ class RunDb {
   std::int64_t frame_count() const;
   // Time of the last frame (buffered ones included); absent for a run without frames.
   std::optional<std::int64_t> last_frame_t_ns() const;
+  // Time of the last temperature sample (appended ones included); absent for a run without any.
+  std::optional<std::int64_t> last_temperature_t_ns() const;
   // Streams the frames with t0_ns <= t_ns <= t1_ns in time order, a decoded chunk at a time.
   // `fn` may call other reading functions of this RunDb, but not append().
   void for_each_frame(const std::function<void(const ImuFrame&)>& fn,

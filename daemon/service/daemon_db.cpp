@@ -1,6 +1,5 @@
 #include "daemon/service/daemon_db.hpp"
 
-#include <sqlite3.h>
 
 #include <chrono>
 #include <cstdio>
@@ -105,58 +104,7 @@ CREATE TABLE IF NOT EXISTS alarm(
 CREATE INDEX IF NOT EXISTS alarm_campaign ON alarm(campaign_id);
 )sql";
 
-// A prepared statement, finalized when it goes out of scope. The daemon database sees a few
-// statements a second, so preparing per call costs nothing worth caching.
-class Stmt {
- public:
-  Stmt(sqlite3* db, const std::string& path, const char* sql) : db_(db), path_(path) {
-    if (sqlite3_prepare_v2(db, sql, -1, &stmt_, nullptr) != SQLITE_OK)
-      throw DbError("daemon database '" + path + "': cannot prepare '" + sql + "': " + sqlite3_errmsg(db));
-  }
-  ~Stmt() { sqlite3_finalize(stmt_); }
-  Stmt(const Stmt&) = delete;
-  Stmt& operator=(const Stmt&) = delete;
-
-  Stmt& bind(int i, std::int64_t v) { return check(sqlite3_bind_int64(stmt_, i, v)); }
-  Stmt& bind(int i, double v) { return check(sqlite3_bind_double(stmt_, i, v)); }
-  Stmt& bind(int i, const std::string& v) {
-    return check(sqlite3_bind_text(stmt_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT));
-  }
-  Stmt& bind(int i, std::optional<std::int64_t> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
-  Stmt& bind(int i, std::optional<double> v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
-  Stmt& bind(int i, const std::optional<std::string>& v) { return v ? bind(i, *v) : check(sqlite3_bind_null(stmt_, i)); }
-  Stmt& bind_null(int i) { return check(sqlite3_bind_null(stmt_, i)); }
-
-  bool step() {
-    const int rc = sqlite3_step(stmt_);
-    if (rc == SQLITE_ROW) return true;
-    if (rc == SQLITE_DONE) return false;
-    throw DbError("daemon database '" + path_ + "': '" + sqlite3_sql(stmt_) + "' failed: " + sqlite3_errmsg(db_));
-  }
-  void run() {
-    while (step()) {
-    }
-  }
-  std::int64_t i64(int c) const { return sqlite3_column_int64(stmt_, c); }
-  double f64(int c) const { return sqlite3_column_double(stmt_, c); }
-  bool null(int c) const { return sqlite3_column_type(stmt_, c) == SQLITE_NULL; }
-  std::string text(int c) const {
-    const auto* p = sqlite3_column_text(stmt_, c);
-    return p == nullptr ? std::string() : std::string(reinterpret_cast<const char*>(p), static_cast<std::size_t>(sqlite3_column_bytes(stmt_, c)));
-  }
-  std::optional<std::int64_t> opt_i64(int c) const { return null(c) ? std::nullopt : std::optional(i64(c)); }
-  std::optional<double> opt_f64(int c) const { return null(c) ? std::nullopt : std::optional(f64(c)); }
-  std::optional<std::string> opt_text(int c) const { return null(c) ? std::nullopt : std::optional(text(c)); }
-
- private:
-  Stmt& check(int rc) {
-    if (rc != SQLITE_OK) throw DbError("daemon database '" + path_ + "': bind failed: " + sqlite3_errmsg(db_));
-    return *this;
-  }
-  sqlite3* db_;
-  const std::string& path_;
-  sqlite3_stmt* stmt_ = nullptr;
-};
+using storage::sql::Statement;
 
 constexpr const char* kCampaignColumns =
     "c.id, c.name, c.spec_json, c.program_label, c.duration_s, c.state, c.created_ms, c.started_ms, c.ended_ms, "
@@ -182,110 +130,62 @@ UPDATE campaign SET complete = (state = 'done' AND program_time_s >= duration_s 
 
 }  // namespace
 
-DaemonDb::DaemonDb(const std::string& path) : path_(path) {
-  if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
-    std::string message = db_ != nullptr ? sqlite3_errmsg(db_) : "out of memory";
-    sqlite3_close_v2(db_);
-    db_ = nullptr;
-    throw DbError("daemon database '" + path + "': cannot open: " + message);
+DaemonDb::DaemonDb(const std::string& path)
+    : path_(path), db_(path, storage::sql::Connection::Open::create, "daemon database") {
+  // WAL + NORMAL: readers never block the writer, and a crash loses at most the last commits,
+  // never the file.
+  db_.exec("PRAGMA journal_mode=WAL");
+  db_.exec("PRAGMA synchronous=NORMAL");
+  db_.exec("PRAGMA foreign_keys=ON");
+  const auto version = static_cast<int>(db_.query_int("PRAGMA user_version"));
+  if (version > kSchemaVersion)
+    throw DbError("daemon database '" + path + "' has schema version " + std::to_string(version) +
+                  ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
+  {
+    Statement s(db_, "PRAGMA quick_check");
+    while (s.step())
+      if (s.column_text(0) != "ok") throw DbError("daemon database '" + path + "' is damaged: " + s.column_text(0));
   }
-  sqlite3_busy_timeout(db_, 5000);
-  try {
-    // WAL + NORMAL: readers never block the writer, and a crash loses at most the last commits,
-    // never the file.
-    exec("PRAGMA journal_mode=WAL");
-    exec("PRAGMA synchronous=NORMAL");
-    exec("PRAGMA foreign_keys=ON");
-    int version = 0;
-    {
-      Stmt s(db_, path_, "PRAGMA user_version");
-      if (s.step()) version = static_cast<int>(s.i64(0));
-    }
-    if (version > kSchemaVersion)
-      throw DbError("daemon database '" + path + "' has schema version " + std::to_string(version) +
-                    ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
-    {
-      Stmt s(db_, path_, "PRAGMA quick_check");
-      while (s.step())
-        if (s.text(0) != "ok") throw DbError("daemon database '" + path + "' is damaged: " + s.text(0));
-    }
-    exec("BEGIN IMMEDIATE");
-    exec(kSchema);
-    if (version < 2) exec(kMigrationTo2);
-    exec(("PRAGMA user_version=" + std::to_string(kSchemaVersion)).c_str());
-    exec("COMMIT");
-  } catch (...) {
-    sqlite3_close_v2(db_);
-    db_ = nullptr;
-    throw;
-  }
+  storage::sql::Transaction txn(db_);
+  db_.exec(kSchema);
+  if (version < 2) db_.exec(kMigrationTo2);
+  db_.exec("PRAGMA user_version=" + std::to_string(kSchemaVersion));
+  txn.commit();
 }
 
-DaemonDb::~DaemonDb() {
-  if (db_ != nullptr) sqlite3_close_v2(db_);
-}
+DaemonDb::~DaemonDb() = default;
 
-void DaemonDb::exec(const char* sql) {
-  char* message = nullptr;
-  if (sqlite3_exec(db_, sql, nullptr, nullptr, &message) != SQLITE_OK) {
-    std::string reason = message != nullptr ? message : sqlite3_errmsg(db_);
-    sqlite3_free(message);
-    throw DbError("daemon database '" + path_ + "': '" + sql + "' failed: " + reason);
-  }
-}
 
-namespace {
-// BEGIN IMMEDIATE .. COMMIT, rolled back when left by an exception.
-class Txn {
- public:
-  explicit Txn(sqlite3* db) : db_(db) { sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr); }
-  void commit() {
-    if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
-      throw DbError(std::string("daemon database: commit failed: ") + sqlite3_errmsg(db_));
-    done_ = true;
-  }
-  ~Txn() {
-    if (!done_) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-  }
-  Txn(const Txn&) = delete;
-  Txn& operator=(const Txn&) = delete;
-
- private:
-  sqlite3* db_;
-  bool done_ = false;
-};
-}  // namespace
-
-CampaignRow DaemonDb::read_campaign_row(void* raw) {
-  Stmt& s = *static_cast<Stmt*>(raw);
+CampaignRow DaemonDb::read_campaign_row(const storage::sql::Statement& raw) {
+  const Statement& s = raw;
   CampaignRow r;
-  r.id = s.i64(0);
-  r.name = s.text(1);
-  r.spec_json = s.text(2);
-  r.program_label = s.text(3);
-  r.duration_s = s.f64(4);
-  r.state = parse_run_state(s.text(5)).value_or(RunState::Failed);
-  r.created_ms = s.i64(6);
-  r.started_ms = s.opt_i64(7);
-  r.ended_ms = s.opt_i64(8);
-  r.checkpoint_segment = s.opt_i64(9);
-  r.checkpoint_s = s.opt_f64(10);
-  r.program_time_s = s.f64(11);
-  r.frames = s.i64(12);
-  r.lost_frames = s.i64(13);
-  r.bad_frames = s.i64(14);
-  r.run_db = s.text(15);
-  r.model_json = s.opt_text(16);
-  r.results_json = s.opt_text(17);
-  r.estimators_json = s.opt_text(18);
-  r.error = s.opt_text(19);
-  if (s.i64(21) != 0) r.queue_position = s.i64(20);
-  r.imu_serial = s.opt_text(22);
-  r.imu_part_number = s.opt_text(23);
-  if (const auto c = s.opt_i64(24)) r.complete = *c != 0;
-  r.accepted_reason = s.opt_text(25);
-  r.accepted_by = s.opt_text(26);
-  r.accepted_ms = s.opt_i64(27);
+  r.id = s.column_int64(0);
+  r.name = s.column_text(1);
+  r.spec_json = s.column_text(2);
+  r.program_label = s.column_text(3);
+  r.duration_s = s.column_double(4);
+  r.state = parse_run_state(s.column_text(5)).value_or(RunState::Failed);
+  r.created_ms = s.column_int64(6);
+  r.started_ms = s.column_optional_int64(7);
+  r.ended_ms = s.column_optional_int64(8);
+  r.checkpoint_segment = s.column_optional_int64(9);
+  r.checkpoint_s = s.column_optional_double(10);
+  r.program_time_s = s.column_double(11);
+  r.frames = s.column_int64(12);
+  r.lost_frames = s.column_int64(13);
+  r.bad_frames = s.column_int64(14);
+  r.run_db = s.column_text(15);
+  r.model_json = s.column_optional_text(16);
+  r.results_json = s.column_optional_text(17);
+  r.estimators_json = s.column_optional_text(18);
+  r.error = s.column_optional_text(19);
+  if (s.column_int64(21) != 0) r.queue_position = s.column_int64(20);
+  r.imu_serial = s.column_optional_text(22);
+  r.imu_part_number = s.column_optional_text(23);
+  if (const auto c = s.column_optional_int64(24)) r.complete = *c != 0;
+  r.accepted_reason = s.column_optional_text(25);
+  r.accepted_by = s.column_optional_text(26);
+  r.accepted_ms = s.column_optional_int64(27);
   return r;
 }
 
@@ -293,9 +193,9 @@ std::int64_t DaemonDb::insert_campaign(const std::string& name, const std::strin
                                        const std::string& program_label, double duration_s, const std::string& reason,
                                        const std::optional<CampaignUnit>& unit) {
   std::lock_guard lock(mutex_);
-  Txn txn(db_);
+  storage::sql::Transaction txn(db_);
   const std::int64_t now = now_unix_ms();
-  Stmt s(db_, path_,
+  Statement s(db_,
          "INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms, imu_serial, "
          "imu_part_number) VALUES (?1,?2,?3,?4,?5,?6,?7,?8)");
   s.bind(1, name).bind(2, spec_json).bind(3, program_label).bind(4, duration_s);
@@ -306,8 +206,8 @@ std::int64_t DaemonDb::insert_campaign(const std::string& name, const std::strin
     s.bind_null(7).bind_null(8);
   }
   s.run();
-  const std::int64_t id = sqlite3_last_insert_rowid(db_);
-  Stmt t(db_, path_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,NULL,?3,?4)");
+  const std::int64_t id = db_.last_insert_rowid();
+  Statement t(db_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,NULL,?3,?4)");
   t.bind(1, id).bind(2, now).bind(3, std::string(to_string(RunState::Created))).bind(4, reason);
   t.run();
   txn.commit();
@@ -318,20 +218,20 @@ std::optional<CampaignRow> DaemonDb::campaign(std::int64_t id) {
   std::lock_guard lock(mutex_);
   const std::string sql = std::string("SELECT ") + kCampaignColumns +
                           " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.id = ?1";
-  Stmt s(db_, path_, sql.c_str());
+  Statement s(db_, sql.c_str());
   s.bind(1, id);
   if (!s.step()) return std::nullopt;
-  return read_campaign_row(&s);
+  return read_campaign_row(s);
 }
 
 std::vector<CampaignRow> DaemonDb::campaigns(std::int64_t limit) {
   std::lock_guard lock(mutex_);
   const std::string sql = std::string("SELECT ") + kCampaignColumns +
                           " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id ORDER BY c.id DESC LIMIT ?1";
-  Stmt s(db_, path_, sql.c_str());
+  Statement s(db_, sql.c_str());
   s.bind(1, limit);
   std::vector<CampaignRow> rows;
-  while (s.step()) rows.push_back(read_campaign_row(&s));
+  while (s.step()) rows.push_back(read_campaign_row(s));
   return rows;
 }
 
@@ -340,43 +240,43 @@ std::vector<CampaignRow> DaemonDb::unit_campaigns(const std::optional<std::strin
   const std::string sql = std::string("SELECT ") + kCampaignColumns +
                           " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.imu_serial IS NOT NULL" +
                           (serial ? " AND c.imu_serial = ?1" : "") + " ORDER BY c.created_ms, c.id";
-  Stmt s(db_, path_, sql.c_str());
+  Statement s(db_, sql.c_str());
   if (serial) s.bind(1, *serial);
   std::vector<CampaignRow> rows;
-  while (s.step()) rows.push_back(read_campaign_row(&s));
+  while (s.step()) rows.push_back(read_campaign_row(s));
   return rows;
 }
 
 void DaemonDb::set_complete(std::int64_t id, bool complete) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "UPDATE campaign SET complete = ?2 WHERE id = ?1");
+  Statement s(db_, "UPDATE campaign SET complete = ?2 WHERE id = ?1");
   s.bind(1, id).bind(2, std::int64_t{complete ? 1 : 0});
   s.run();
 }
 
 void DaemonDb::accept(std::int64_t id, const std::string& reason, const std::string& who) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "UPDATE campaign SET accepted_reason = ?2, accepted_by = ?3, accepted_ms = ?4 WHERE id = ?1");
+  Statement s(db_, "UPDATE campaign SET accepted_reason = ?2, accepted_by = ?3, accepted_ms = ?4 WHERE id = ?1");
   s.bind(1, id).bind(2, reason).bind(3, who).bind(4, now_unix_ms());
   s.run();
 }
 
 bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
   std::lock_guard lock(mutex_);
-  Txn txn(db_);
+  storage::sql::Transaction txn(db_);
   std::optional<RunState> from;
   {
-    Stmt s(db_, path_, "SELECT state FROM campaign WHERE id = ?1");
+    Statement s(db_, "SELECT state FROM campaign WHERE id = ?1");
     s.bind(1, id);
     if (!s.step()) return false;
-    from = parse_run_state(s.text(0));
+    from = parse_run_state(s.column_text(0));
   }
   if (expected && from != expected) return false;
   // Every change, the operator's and the sequencer's, against the one table.
   if (from && !transition_allowed(*from, to)) throw InvalidTransition(id, *from, to);
   const std::int64_t now = now_unix_ms();
   {
-    Stmt s(db_, path_,
+    Statement s(db_,
            "UPDATE campaign SET state = ?2, "
            "started_ms = CASE WHEN ?2 = 'running' AND started_ms IS NULL THEN ?3 ELSE started_ms END, "
            "ended_ms = CASE WHEN ?2 IN ('done', 'failed', 'aborted') THEN ?3 ELSE ended_ms END WHERE id = ?1");
@@ -384,7 +284,7 @@ bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason
     s.run();
   }
   {
-    Stmt s(db_, path_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,?3,?4,?5)");
+    Statement s(db_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,?3,?4,?5)");
     s.bind(1, id).bind(2, now);
     if (from) {
       s.bind(3, std::string(to_string(*from)));
@@ -395,7 +295,7 @@ bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason
     s.run();
   }
   if (is_final(to)) {
-    Stmt s(db_, path_, "DELETE FROM queue WHERE campaign_id = ?1");
+    Statement s(db_, "DELETE FROM queue WHERE campaign_id = ?1");
     s.bind(1, id);
     s.run();
   }
@@ -405,15 +305,15 @@ bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason
 
 std::vector<TransitionRow> DaemonDb::transitions(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT t_ms, from_state, to_state, reason FROM transition WHERE campaign_id = ?1 ORDER BY id");
+  Statement s(db_, "SELECT t_ms, from_state, to_state, reason FROM transition WHERE campaign_id = ?1 ORDER BY id");
   s.bind(1, id);
   std::vector<TransitionRow> rows;
   while (s.step()) {
     TransitionRow r;
-    r.t_ms = s.i64(0);
-    if (!s.null(1)) r.from = parse_run_state(s.text(1));
-    r.to = parse_run_state(s.text(2)).value_or(RunState::Failed);
-    r.reason = s.text(3);
+    r.t_ms = s.column_int64(0);
+    if (!s.column_is_null(1)) r.from = parse_run_state(s.column_text(1));
+    r.to = parse_run_state(s.column_text(2)).value_or(RunState::Failed);
+    r.reason = s.column_text(3);
     rows.push_back(std::move(r));
   }
   return rows;
@@ -423,10 +323,10 @@ std::vector<std::int64_t> DaemonDb::recover_after_restart(const std::string& rea
   std::vector<std::pair<std::int64_t, RunState>> found;
   {
     std::lock_guard lock(mutex_);
-    Stmt s(db_, path_, "SELECT id, state FROM campaign ORDER BY id");
+    Statement s(db_, "SELECT id, state FROM campaign ORDER BY id");
     while (s.step()) {
-      const auto state = parse_run_state(s.text(1));
-      if (state && is_active(*state)) found.emplace_back(s.i64(0), *state);
+      const auto state = parse_run_state(s.column_text(1));
+      if (state && is_active(*state)) found.emplace_back(s.column_int64(0), *state);
     }
   }
   std::vector<std::int64_t> changed;
@@ -443,37 +343,37 @@ std::vector<std::int64_t> DaemonDb::recover_after_restart(const std::string& rea
 
 void DaemonDb::queue_push_back(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MAX(position), 0) + 1, ?1 FROM queue");
+  Statement s(db_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MAX(position), 0) + 1, ?1 FROM queue");
   s.bind(1, id);
   s.run();
 }
 
 void DaemonDb::queue_push_front(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MIN(position), 0) - 1, ?1 FROM queue");
+  Statement s(db_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MIN(position), 0) - 1, ?1 FROM queue");
   s.bind(1, id);
   s.run();
 }
 
 void DaemonDb::queue_remove(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "DELETE FROM queue WHERE campaign_id = ?1");
+  Statement s(db_, "DELETE FROM queue WHERE campaign_id = ?1");
   s.bind(1, id);
   s.run();
 }
 
 std::vector<std::int64_t> DaemonDb::queue() {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT campaign_id FROM queue ORDER BY position");
+  Statement s(db_, "SELECT campaign_id FROM queue ORDER BY position");
   std::vector<std::int64_t> ids;
-  while (s.step()) ids.push_back(s.i64(0));
+  while (s.step()) ids.push_back(s.column_int64(0));
   return ids;
 }
 
 void DaemonDb::add_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
                          std::optional<double> program_time_s, const std::string& reason) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_,
+  Statement s(db_,
          "INSERT INTO event(campaign_id, t_ms, kind, segment, program_time_s, reason) VALUES (?1,?2,?3,?4,?5,?6)");
   s.bind(1, id).bind(2, now_unix_ms()).bind(3, kind).bind(4, segment).bind(5, program_time_s).bind(6, reason);
   s.run();
@@ -481,17 +381,17 @@ void DaemonDb::add_event(std::int64_t id, const std::string& kind, std::optional
 
 std::vector<EventRow> DaemonDb::events(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT t_ms, kind, segment, program_time_s, reason FROM event WHERE campaign_id = ?1 ORDER BY id");
+  Statement s(db_, "SELECT t_ms, kind, segment, program_time_s, reason FROM event WHERE campaign_id = ?1 ORDER BY id");
   s.bind(1, id);
   std::vector<EventRow> rows;
-  while (s.step()) rows.push_back({s.i64(0), s.text(1), s.opt_i64(2), s.opt_f64(3), s.text(4)});
+  while (s.step()) rows.push_back({s.column_int64(0), s.column_text(1), s.column_optional_int64(2), s.column_optional_double(3), s.column_text(4)});
   return rows;
 }
 
 void DaemonDb::add_progress(std::int64_t id, const std::string& estimator, double program_time_s,
                             const std::string& json) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_,
+  Statement s(db_,
          "INSERT INTO progress(campaign_id, estimator, t_ms, program_time_s, json) VALUES (?1,?2,?3,?4,?5)");
   s.bind(1, id).bind(2, estimator).bind(3, now_unix_ms()).bind(4, program_time_s).bind(5, json);
   s.run();
@@ -499,16 +399,16 @@ void DaemonDb::add_progress(std::int64_t id, const std::string& estimator, doubl
 
 std::vector<ProgressRow> DaemonDb::progress(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT estimator, t_ms, program_time_s, json FROM progress WHERE campaign_id = ?1 ORDER BY id");
+  Statement s(db_, "SELECT estimator, t_ms, program_time_s, json FROM progress WHERE campaign_id = ?1 ORDER BY id");
   s.bind(1, id);
   std::vector<ProgressRow> rows;
-  while (s.step()) rows.push_back({s.text(0), s.i64(1), s.f64(2), s.text(3)});
+  while (s.step()) rows.push_back({s.column_text(0), s.column_int64(1), s.column_double(2), s.column_text(3)});
   return rows;
 }
 
 void DaemonDb::set_run_db(std::int64_t id, const std::string& relative_path) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "UPDATE campaign SET run_db = ?2 WHERE id = ?1");
+  Statement s(db_, "UPDATE campaign SET run_db = ?2 WHERE id = ?1");
   s.bind(1, id).bind(2, relative_path);
   s.run();
 }
@@ -516,7 +416,7 @@ void DaemonDb::set_run_db(std::int64_t id, const std::string& relative_path) {
 void DaemonDb::update_run(std::int64_t id, double program_time_s, std::int64_t frames, std::int64_t lost_frames,
                           std::int64_t bad_frames) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_,
+  Statement s(db_,
          "UPDATE campaign SET program_time_s = ?2, frames = ?3, lost_frames = ?4, bad_frames = ?5 WHERE id = ?1");
   s.bind(1, id).bind(2, program_time_s).bind(3, frames).bind(4, lost_frames).bind(5, bad_frames);
   s.run();
@@ -524,14 +424,14 @@ void DaemonDb::update_run(std::int64_t id, double program_time_s, std::int64_t f
 
 void DaemonDb::set_checkpoint(std::int64_t id, std::int64_t segment, double t_s) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "UPDATE campaign SET checkpoint_segment = ?2, checkpoint_s = ?3 WHERE id = ?1");
+  Statement s(db_, "UPDATE campaign SET checkpoint_segment = ?2, checkpoint_s = ?3 WHERE id = ?1");
   s.bind(1, id).bind(2, segment).bind(3, t_s);
   s.run();
 }
 
 namespace {
-void set_text_column(sqlite3* db, const std::string& path, const char* sql, std::int64_t id, const std::string& v) {
-  Stmt s(db, path, sql);
+void set_text_column(storage::sql::Connection& db, const char* sql, std::int64_t id, const std::string& v) {
+  Statement s(db, sql);
   s.bind(1, id).bind(2, v);
   s.run();
 }
@@ -539,47 +439,47 @@ void set_text_column(sqlite3* db, const std::string& path, const char* sql, std:
 
 void DaemonDb::set_model(std::int64_t id, const std::string& model_json) {
   std::lock_guard lock(mutex_);
-  set_text_column(db_, path_, "UPDATE campaign SET model_json = ?2 WHERE id = ?1", id, model_json);
+  set_text_column(db_, "UPDATE campaign SET model_json = ?2 WHERE id = ?1", id, model_json);
 }
 void DaemonDb::set_results(std::int64_t id, const std::string& results_json) {
   std::lock_guard lock(mutex_);
-  set_text_column(db_, path_, "UPDATE campaign SET results_json = ?2 WHERE id = ?1", id, results_json);
+  set_text_column(db_, "UPDATE campaign SET results_json = ?2 WHERE id = ?1", id, results_json);
 }
 void DaemonDb::set_estimators(std::int64_t id, const std::string& estimators_json) {
   std::lock_guard lock(mutex_);
-  set_text_column(db_, path_, "UPDATE campaign SET estimators_json = ?2 WHERE id = ?1", id, estimators_json);
+  set_text_column(db_, "UPDATE campaign SET estimators_json = ?2 WHERE id = ?1", id, estimators_json);
 }
 void DaemonDb::set_error(std::int64_t id, const std::string& error) {
   std::lock_guard lock(mutex_);
-  set_text_column(db_, path_, "UPDATE campaign SET error = ?2 WHERE id = ?1", id, error);
+  set_text_column(db_, "UPDATE campaign SET error = ?2 WHERE id = ?1", id, error);
 }
 
 std::optional<std::string> DaemonDb::setting(const std::string& key) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT value FROM setting WHERE key = ?1");
+  Statement s(db_, "SELECT value FROM setting WHERE key = ?1");
   s.bind(1, key);
   if (!s.step()) return std::nullopt;
-  return s.text(0);
+  return s.column_text(0);
 }
 
 void DaemonDb::set_setting(const std::string& key, const std::string& value) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
+  Statement s(db_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
   s.bind(1, key).bind(2, value);
   s.run();
 }
 
 std::optional<CertificateRow> DaemonDb::certificate(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE campaign_id = ?1");
+  Statement s(db_, "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE campaign_id = ?1");
   s.bind(1, campaign_id);
   if (!s.step()) return std::nullopt;
-  return CertificateRow{s.i64(0), s.text(1), s.i64(2), s.i64(3), s.text(4)};
+  return CertificateRow{s.column_int64(0), s.column_text(1), s.column_int64(2), s.column_int64(3), s.column_text(4)};
 }
 
 void DaemonDb::insert_certificate(const CertificateRow& row) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_,
+  Statement s(db_,
          "INSERT INTO certificate(campaign_id, number, sequence, issued_ms, bench_json) VALUES (?1, ?2, ?3, ?4, ?5)");
   s.bind(1, row.campaign_id).bind(2, row.number).bind(3, row.sequence).bind(4, row.issued_ms).bind(5, row.bench_json);
   s.run();
@@ -587,8 +487,8 @@ void DaemonDb::insert_certificate(const CertificateRow& row) {
 
 std::int64_t DaemonDb::max_certificate_sequence() {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
-  return s.step() ? s.i64(0) : 0;
+  Statement s(db_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
+  return s.step() ? s.column_int64(0) : 0;
 }
 
 namespace {
@@ -598,27 +498,27 @@ constexpr const char* kAlarmColumns =
     "a.raised_ms, a.cleared_ms, a.cleared_reason, a.acknowledged_by, a.acknowledged_ms "
     "FROM alarm a LEFT JOIN campaign c ON c.id = a.campaign_id";
 
-AlarmRow read_alarm_row(const Stmt& s) {
+AlarmRow read_alarm_row(const Statement& s) {
   AlarmRow r;
-  r.id = s.i64(0);
-  r.campaign_id = s.i64(1);
-  r.campaign_name = s.text(2);
-  r.severity = s.text(3);
-  r.source = s.text(4);
-  r.message = s.text(5);
-  r.segment = s.opt_i64(6);
-  r.program_time_s = s.opt_f64(7);
-  r.raised_ms = s.i64(8);
-  r.cleared_ms = s.opt_i64(9);
-  r.cleared_reason = s.opt_text(10);
-  r.acknowledged_by = s.opt_text(11);
-  r.acknowledged_ms = s.opt_i64(12);
+  r.id = s.column_int64(0);
+  r.campaign_id = s.column_int64(1);
+  r.campaign_name = s.column_text(2);
+  r.severity = s.column_text(3);
+  r.source = s.column_text(4);
+  r.message = s.column_text(5);
+  r.segment = s.column_optional_int64(6);
+  r.program_time_s = s.column_optional_double(7);
+  r.raised_ms = s.column_int64(8);
+  r.cleared_ms = s.column_optional_int64(9);
+  r.cleared_reason = s.column_optional_text(10);
+  r.acknowledged_by = s.column_optional_text(11);
+  r.acknowledged_ms = s.column_optional_int64(12);
   return r;
 }
 
-std::optional<AlarmRow> select_alarm(sqlite3* db, const std::string& path, std::int64_t id) {
+std::optional<AlarmRow> select_alarm(storage::sql::Connection& db, std::int64_t id) {
   const std::string sql = std::string("SELECT ") + kAlarmColumns + " WHERE a.id = ?1";
-  Stmt s(db, path, sql.c_str());
+  Statement s(db, sql.c_str());
   s.bind(1, id);
   if (!s.step()) return std::nullopt;
   return read_alarm_row(s);
@@ -630,34 +530,34 @@ AlarmRow DaemonDb::raise_alarm(std::int64_t campaign_id, const std::string& seve
                                const std::string& message, std::optional<std::int64_t> segment,
                                std::optional<double> program_time_s) {
   std::lock_guard lock(mutex_);
-  Stmt s(db_, path_,
+  Statement s(db_,
          "INSERT INTO alarm(campaign_id, severity, source, message, segment, program_time_s, raised_ms) "
          "VALUES (?1,?2,?3,?4,?5,?6,?7)");
   s.bind(1, campaign_id).bind(2, severity).bind(3, source).bind(4, message).bind(5, segment).bind(6, program_time_s);
   s.bind(7, now_unix_ms());
   s.run();
-  return *select_alarm(db_, path_, sqlite3_last_insert_rowid(db_));
+  return *select_alarm(db_, db_.last_insert_rowid());
 }
 
 std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
                                              const std::string& reason) {
   std::lock_guard lock(mutex_);
-  Txn txn(db_);
+  storage::sql::Transaction txn(db_);
   std::vector<std::int64_t> ids;
   {
-    Stmt s(db_, path_,
+    Statement s(db_,
            "SELECT id FROM alarm WHERE campaign_id = ?1 AND cleared_ms IS NULL AND (?2 IS NULL OR source = ?2) "
            "ORDER BY id");
     s.bind(1, campaign_id).bind(2, source);
-    while (s.step()) ids.push_back(s.i64(0));
+    while (s.step()) ids.push_back(s.column_int64(0));
   }
   const std::int64_t now = now_unix_ms();
   std::vector<AlarmRow> cleared;
   for (const std::int64_t id : ids) {
-    Stmt u(db_, path_, "UPDATE alarm SET cleared_ms = ?2, cleared_reason = ?3 WHERE id = ?1");
+    Statement u(db_, "UPDATE alarm SET cleared_ms = ?2, cleared_reason = ?3 WHERE id = ?1");
     u.bind(1, id).bind(2, now).bind(3, reason);
     u.run();
-    cleared.push_back(*select_alarm(db_, path_, id));
+    cleared.push_back(*select_alarm(db_, id));
   }
   txn.commit();
   return cleared;
@@ -665,21 +565,21 @@ std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std
 
 std::pair<DaemonDb::Ack, std::optional<AlarmRow>> DaemonDb::acknowledge_alarm(std::int64_t id, const std::string& who) {
   std::lock_guard lock(mutex_);
-  Txn txn(db_);
-  const auto before = select_alarm(db_, path_, id);
+  storage::sql::Transaction txn(db_);
+  const auto before = select_alarm(db_, id);
   if (!before) return {Ack::NoSuchAlarm, std::nullopt};
   if (before->acknowledged_ms) return {Ack::AlreadyAcknowledged, before};
-  Stmt u(db_, path_, "UPDATE alarm SET acknowledged_by = ?2, acknowledged_ms = ?3 WHERE id = ?1");
+  Statement u(db_, "UPDATE alarm SET acknowledged_by = ?2, acknowledged_ms = ?3 WHERE id = ?1");
   u.bind(1, id).bind(2, who).bind(3, now_unix_ms());
   u.run();
-  auto after = select_alarm(db_, path_, id);
+  auto after = select_alarm(db_, id);
   txn.commit();
   return {Ack::Acknowledged, after};
 }
 
 std::optional<AlarmRow> DaemonDb::alarm(std::int64_t id) {
   std::lock_guard lock(mutex_);
-  return select_alarm(db_, path_, id);
+  return select_alarm(db_, id);
 }
 
 std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit) {
@@ -689,7 +589,7 @@ std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campai
                           " WHERE (?1 IS NULL OR a.campaign_id = ?1)" +
                           (all ? "" : " AND (a.cleared_ms IS NULL OR a.acknowledged_ms IS NULL)") +
                           " ORDER BY a.id DESC LIMIT ?2) ORDER BY 1";
-  Stmt s(db_, path_, sql.c_str());
+  Statement s(db_, sql.c_str());
   s.bind(1, campaign).bind(2, limit);
   std::vector<AlarmRow> rows;
   while (s.step()) rows.push_back(read_alarm_row(s));

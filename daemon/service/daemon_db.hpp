@@ -1,7 +1,7 @@
 // The daemon's own database (DATA_DIR/imucald.db, SQLite in WAL mode): campaigns with their run
 // state, the queue, every state transition, run events (suspensions, redos, alarms), the alarms an
-// operator acknowledges, and estimator progress. Frames live elsewhere, one storage::RunDb per run. Thread-safe: one connection behind
-// a mutex; every call is short.
+// operator acknowledges, and estimator progress. Frames live elsewhere, one storage::RunDb per run.
+// Thread-safe: one connection (storage/sqlite.hpp) behind a mutex; every call is short.
 #pragma once
 
 #include <cstdint>
@@ -14,14 +14,15 @@
 #include <vector>
 
 #include "daemon/service/run_state.hpp"
-
-struct sqlite3;
+#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
-class DbError : public std::runtime_error {
+// What the daemon database itself refuses (a newer schema, a damaged file); SQLite's own failures
+// are storage::sql::SqliteError. Both are storage::StorageError.
+class DbError : public storage::StorageError {
  public:
-  using std::runtime_error::runtime_error;
+  using storage::StorageError::StorageError;
 };
 
 struct CampaignRow {
@@ -188,11 +189,10 @@ class DaemonDb {
   void set_setting(const std::string& key, const std::string& value);
 
  private:
-  void exec(const char* sql);
-  CampaignRow read_campaign_row(void* stmt);
+  CampaignRow read_campaign_row(const storage::sql::Statement& stmt);
   std::string path_;
   std::mutex mutex_;
-  sqlite3* db_ = nullptr;
+  storage::sql::Connection db_;
 };
 
 }  // namespace imucal::daemon

@@ -1,7 +1,5 @@
 #include "daemon/service/sequencer.hpp"
 
-#include <sqlite3.h>
-
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -32,32 +30,6 @@ constexpr std::int64_t kNoTime = std::numeric_limits<std::int64_t>::min();
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
 json vec3(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
-
-// The last frame and temperature times committed in a run file (resume point after a restart).
-// Raw SQL on storage's schema (run_db.cpp: imu_chunk.t1_ns, temp_sample.t_ns): RunDb does not
-// expose them.
-void committed_times(const std::string& path, std::optional<std::int64_t>& frame_t_ns,
-                     std::optional<std::int64_t>& temp_t_ns) {
-  sqlite3* db = nullptr;
-  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) {
-    std::string message = db != nullptr ? sqlite3_errmsg(db) : "out of memory";
-    sqlite3_close_v2(db);
-    throw storage::StorageError("run database '" + path + "': cannot open: " + message);
-  }
-  sqlite3_busy_timeout(db, 5000);
-  auto query = [&](const char* sql) -> std::optional<std::int64_t> {
-    sqlite3_stmt* stmt = nullptr;
-    std::optional<std::int64_t> out;
-    if (sqlite3_prepare_v2(db, sql, -1, &stmt, nullptr) == SQLITE_OK && sqlite3_step(stmt) == SQLITE_ROW &&
-        sqlite3_column_type(stmt, 0) != SQLITE_NULL)
-      out = sqlite3_column_int64(stmt, 0);
-    sqlite3_finalize(stmt);
-    return out;
-  };
-  frame_t_ns = query("SELECT MAX(t1_ns) FROM imu_chunk");
-  temp_t_ns = query("SELECT MAX(t_ns) FROM temp_sample");
-  sqlite3_close_v2(db);
-}
 
 }  // namespace
 
@@ -188,9 +160,9 @@ void Sequencer::open_recorder(RunContext& run) {
   const bool exists = fs::exists(run.run_db_path);
   storage::RunDb db = exists ? storage::RunDb::open(run.run_db_path)
                              : storage::RunDb::create(run.run_db_path, recording_meta(run));
-  run.last_t_ns.reset();
-  run.last_temp_t_ns.reset();
-  if (exists) committed_times(run.run_db_path, run.last_t_ns, run.last_temp_t_ns);
+  // Where the file leaves off: the resume point after a restart.
+  run.last_t_ns = db.last_frame_t_ns();
+  run.last_temp_t_ns = db.last_temperature_t_ns();
   run.frames = db.frame_count();
   if (hooks.on_open) hooks.on_open(db, run.recorder_opens);
   ++run.recorder_opens;
@@ -613,6 +585,14 @@ void Sequencer::run_campaign(std::int64_t id) {
       }
       if (outcome != Outcome::Completed && outcome != Outcome::Redo) break;
       if (run.segment >= run.segments.size()) {
+        // The last frames are in the file before the run is done: a write that fails at the end
+        // (a full disk found only by the final commit on a loaded machine) suspends the run and
+        // redoes what was lost, as anywhere else in the program.
+        if (run.recorder && !run.recorder->commit_and_wait()) {
+          run.recorder_failed = true;
+          outcome = hold(run, "recording failed: " + run.recorder->error().value_or("write failed"));
+          continue;
+        }
         outcome = Outcome::Completed;
         break;
       }

@@ -9,8 +9,6 @@
 #include <map>
 #include <sstream>
 
-#include <sqlite3.h>
-
 #include "daemon/service/campaign_runner.hpp"
 #include "service_fixture.hpp"
 #include "storage/run_db.hpp"
@@ -272,8 +270,6 @@ TEST(Units, AnInvalidUnitIsRefusedWithItsProblem) {
 TEST(Units, AVersion1DatabaseIsMigrated) {
   const std::string dir = scratch_dir("units-migration");
   const std::string path = dir + "/imucald.db";
-  sqlite3* db = nullptr;
-  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
   const char* v1 = R"sql(
 CREATE TABLE campaign(id INTEGER PRIMARY KEY, name TEXT NOT NULL, spec_json TEXT NOT NULL,
   program_label TEXT NOT NULL, duration_s REAL NOT NULL, state TEXT NOT NULL, created_ms INTEGER NOT NULL,
@@ -285,8 +281,10 @@ INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_
   VALUES ('whole', '{}', 'direct-short', 100, 'done', 1, 100), ('stopped', '{}', 'direct-short', 100, 'done', 2, 60);
 PRAGMA user_version=1;
 )sql";
-  ASSERT_EQ(sqlite3_exec(db, v1, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
-  sqlite3_close(db);
+  {
+    storage::sql::Connection db(path, storage::sql::Connection::Open::create, "test database");
+    db.exec(v1);
+  }
 
   daemon::DaemonDb migrated(path);
   const auto whole = migrated.campaign(1);
