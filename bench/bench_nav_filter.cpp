@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/nav_filter.hpp"
 
 using namespace imucal;

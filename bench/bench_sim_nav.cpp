@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/navigation_run.hpp"
 
 using namespace imucal;

@@ -26,7 +26,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "motion_programs/program.hpp"
 #include "storage/recorder.hpp"

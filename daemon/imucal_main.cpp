@@ -28,9 +28,9 @@
 #include "daemon/service/device_config.hpp"
 #include "daemon/service/password_hash.hpp"
 #include "daemon/service/service.hpp"
-#include "drivers/sim/sim_devices.hpp"
-#include "drivers/sim/simulator.hpp"
-#include "drivers/sim/thermal_model.hpp"
+#include "sim/sim_devices.hpp"
+#include "sim/simulator.hpp"
+#include "sim/thermal_model.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
 #include "estimators/evaluate.hpp"
@@ -501,7 +501,7 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
   // do: the simulated IMU must sense the same site the daemon calibrates for.
   const daemon::DaemonConfig config = a.config_file.empty() ? daemon::DaemonConfig{}
                                                             : daemon::load_config_file(a.config_file);
-  drivers::sim::SimDevicesConfig c;
+  sim::SimDevicesConfig c;
   for (std::size_t axis = 0; axis < 3; ++axis)
     c.servo.limits[axis].fill(daemon::table_limit_setting(config.table_limits.axis[axis]));
   c.table_port = a.table_port;
@@ -521,7 +521,7 @@ int cmd_sim_devices(const SimDevicesArgs& a) {
   if (c.imu.framing == drivers::can::Framing::classic && a.rate_hz > drivers::can::kClassicMaxRate_hz)
     throw std::invalid_argument("--framing classic carries at most 200 samples/s; --rate-hz is " + std::to_string(a.rate_hz));
 
-  drivers::sim::SimDevices devices(c);
+  sim::SimDevices devices(c);
   if (devices.imu_serial_device().empty() && a.imu_socket.empty())
     throw std::invalid_argument("--imu-socket is required for a CAN IMU link ('" + a.imu_link + "')");
   const std::string imu_where = devices.imu_serial_device().empty()

@@ -1,7 +1,7 @@
 // The driver interfaces the daemon programs against: a three-axis rate table, a thermal chamber
 // and the IMU under test, each with the same lifecycle and the same typed errors. Real devices
 // (ACL over TCP, Modbus, IMU links described as data over CAN, serial or UDP) and the simulated
-// devices of drivers/sim/ sit behind these.
+// devices of sim/ sit behind these.
 //
 // Rules every implementation keeps:
 // - No exception leaves a driver call (nor an Asio handler inside one): failures come back as

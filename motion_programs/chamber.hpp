@@ -50,7 +50,7 @@ std::string builtin_chamber_json(const std::string& name);  // throws for an unk
 // A built-in name or a path to a JSON file.
 ChamberProfile load_chamber_profile(const std::string& name_or_path);
 
-// First-order lags of the thermal path; the simulator's defaults (drivers/sim/thermal_model.hpp)
+// First-order lags of the thermal path; the simulator's defaults (sim/thermal_model.hpp)
 // are the same numbers, so the predicted coverage is what the simulated run reaches.
 struct ThermalLags {
   double chamber_tau_s = 180.0;               // chamber air behind the set point

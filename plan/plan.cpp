@@ -6,7 +6,7 @@
 #include <stdexcept>
 
 #include "core/units.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/nav_filter.hpp"
 #include "pipeline/pipeline.hpp"
 

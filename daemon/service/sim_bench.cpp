@@ -7,7 +7,7 @@
 
 #include "core/number_text.hpp"
 #include "core/units.hpp"
-#include "drivers/sim/thermal_model.hpp"
+#include "sim/thermal_model.hpp"
 
 namespace imucal::daemon {
 

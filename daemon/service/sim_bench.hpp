@@ -20,7 +20,7 @@
 #include "core/imu_model.hpp"
 #include "daemon/service/campaign.hpp"
 #include "daemon/service/devices.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::sim {

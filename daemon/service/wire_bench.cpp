@@ -17,12 +17,11 @@
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/power_relay.hpp"
 #include "drivers/register_map.hpp"
-#include "drivers/sim/sim_devices.hpp"
+#include "sim/sim_devices.hpp"
 
 namespace imucal::daemon {
 
 namespace dr = imucal::drivers;
-namespace drsim = imucal::drivers::sim;
 
 namespace {
 
@@ -242,7 +241,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
       settings_(settings),
       dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)),
       epoch_ns_(dr::host_time_ns()) {
-  drsim::SimDevicesConfig sim;
+  sim::SimDevicesConfig sim;
   for (std::size_t a = 0; a < 3; ++a)
     for (auto& mode : sim.servo.limits[a]) mode = table_limit_setting(settings.limits.axis[a]);
   sim.chamber_map = kSimWireChamberMap;
@@ -255,7 +254,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   sim.imu.site = settings.site;
   sim.imu.temperature_C = simulated.chamber_start_C;
   sim.imu_serial = simulated.imu_serial.empty() ? "SIM-WIRE-" + std::to_string(simulated.seed) : simulated.imu_serial;
-  sim_ = std::make_unique<drsim::SimDevices>(sim);
+  sim_ = std::make_unique<sim::SimDevices>(sim);
 
   // The addresses an operator would configure for these devices.
   addresses_.table.host = "127.0.0.1";
@@ -274,7 +273,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   dr::PowerRelayConfig relay;
   relay.host = "127.0.0.1";
   relay.port = sim_->chamber_port();
-  relay.coil = drsim::SimDevices::kImuPowerCoil;
+  relay.coil = sim::SimDevices::kImuPowerCoil;
   relay.off_s = 2.0;  // the simulated IMU has no supply to drain: short rehearsals
   addresses_.power_relay = relay;
   truth_json_ = imu_model_to_json_text(simulated.truth);
@@ -496,11 +495,11 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
         sim_->chamber().set_reading_offset(f.fault.offset_C);
         break;
       case SimFault::Kind::ImuDropout:
-        sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+        sim_->with_imu([&](sim::SimImu& imu) { imu.pause(pause); });
         break;
       case SimFault::Kind::ImuCorrupt:
         // Damaged frames on the link: the driver's CRC check drops them, the sequencer sees a gap.
-        sim_->with_imu([&](drsim::SimImu& imu) { imu.corrupt_next_samples(static_cast<int>(f.fault.frames)); });
+        sim_->with_imu([&](sim::SimImu& imu) { imu.corrupt_next_samples(static_cast<int>(f.fault.frames)); });
         break;
       case SimFault::Kind::Disconnect:
         // A device that stops answering; the IMU's link cannot be reopened within a run, so the
@@ -510,7 +509,7 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
         } else if (f.fault.device == "chamber") {
           sim_->chamber().set_silent(true);
         } else {
-          sim_->with_imu([&](drsim::SimImu& imu) { imu.pause(pause); });
+          sim_->with_imu([&](sim::SimImu& imu) { imu.pause(pause); });
         }
         break;
       case SimFault::Kind::TableFault:

@@ -44,7 +44,7 @@
 #include "drivers/interfaces.hpp"
 #include "motion_programs/program.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 class SimDevices;
 }
 
@@ -97,7 +97,7 @@ class WireBench final : public Bench {
   std::string describe() const override;
 
   // sim-wire: the simulated devices; nullptr with real devices.
-  drivers::sim::SimDevices* simulated_devices() { return sim_.get(); }
+  sim::SimDevices* simulated_devices() { return sim_.get(); }
 
  private:
   struct Devices;  // the drivers (Asio, libmodbus stay in the .cpp)
@@ -160,7 +160,7 @@ class WireBench final : public Bench {
   std::int64_t epoch_ns_;         // host time of the bench's start (now_s() counts from it)
   std::int64_t keep_alive_ns_ = 0;  // demand repeat period; 0: the table's watchdog is off
   // Declared before the drivers: the drivers close their links before the devices stop.
-  std::unique_ptr<drivers::sim::SimDevices> sim_;
+  std::unique_ptr<sim::SimDevices> sim_;
   std::unique_ptr<Devices> dev_;
   std::unique_ptr<TableFacade> table_;
   std::unique_ptr<ChamberFacade> chamber_;

@@ -11,7 +11,7 @@
 #include "daemon/service/password_hash.hpp"
 #include "daemon/service/service.hpp"
 #include "daemon_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 
 namespace imucal::daemontest {
 

@@ -16,7 +16,7 @@
 
 #include "drivers/tcp_table.hpp"
 #include "drivers/register_map.hpp"
-#include "drivers/sim/sim_devices.hpp"
+#include "sim/sim_devices.hpp"
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
 
@@ -110,8 +110,8 @@ int closed_loopback_port() {
   return port;
 }
 
-drivers::TableStatus table_truth(drivers::sim::SimDevices& sim) {
-  return sim.world().with_servo([](drivers::sim::TableServo& s, double t) { return s.status(t); });
+drivers::TableStatus table_truth(sim::SimDevices& sim) {
+  return sim.world().with_servo([](sim::TableServo& s, double t) { return s.status(t); });
 }
 
 }  // namespace
@@ -266,8 +266,8 @@ TEST(ConfiguredDevices, ATableSpeakingADialectOnlyTheTestDefinesRunsACampaign) {
 
 // The simulated table and chamber of `imucal sim-devices`, in-process, so that the test can see
 // the table as it is.
-drivers::sim::SimDevicesConfig in_process_devices(const std::string& socket_path) {
-  drivers::sim::SimDevicesConfig c;
+sim::SimDevicesConfig in_process_devices(const std::string& socket_path) {
+  sim::SimDevicesConfig c;
   for (auto& axis : c.servo.limits) axis.fill(drivers::AxisLimitSetting{-1e9, 1e9, 300, 300});
   c.imu_socket_path = socket_path;
   c.imu.rate_hz = 100;
@@ -276,7 +276,7 @@ drivers::sim::SimDevicesConfig in_process_devices(const std::string& socket_path
 
 TEST(ConfiguredDevices, ACanInterfaceThisKernelCannotOpenFailsTheRunWithTheReason) {
   const std::string dir = scratch_dir("devices-can");
-  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
   json devices = json::parse(sim.devices_config_json());
   devices["imu"].erase("socket");
   devices["imu"]["interface"] = "can0";
@@ -304,7 +304,7 @@ TEST(ConfiguredDevices, ACanInterfaceThisKernelCannotOpenFailsTheRunWithTheReaso
 
 TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) {
   const std::string dir = scratch_dir("devices-chamber");
-  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
   // Someone left the table spinning: a failed start must not leave it so once it took it over.
   {
     drivers::TcpTableConfig tc;
@@ -346,7 +346,7 @@ TEST(ConfiguredDevices, AChamberThatDoesNotAnswerFailsTheStartAndParksTheTable) 
 // fails it naming its address.
 TEST(ConfiguredDevices, APowerRelayThatCannotServeTheProgramFailsTheStart) {
   const std::string dir = scratch_dir("devices-relay");
-  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
   json campaign = short_campaign("relay");
   campaign["program"]["segments"] = json::parse(R"([{"type": "hold", "name": "a", "duration_s": 1},
     {"type": "power-cycle", "name": "power-on-2", "duration_s": 1}])");
@@ -386,7 +386,7 @@ TEST(ConfiguredDevices, APowerRelayThatCannotServeTheProgramFailsTheStart) {
 // the IMU powered); the resumed run power-cycles it again, for the whole off time.
 TEST(ConfiguredDevices, APauseWhileTheRelayHoldsTheImuOffSwitchesItOnFirst) {
   const std::string dir = scratch_dir("devices-relay-pause-config");
-  drivers::sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
+  sim::SimDevices sim(in_process_devices(socket_path_for(::testing::UnitTest::GetInstance()->current_test_info()->name())));
   json devices = json::parse(sim.devices_config_json());
   devices["power_relay"]["off_s"] = 5;  // room for the pause on a loaded machine
   write_file(dir + "/imucald.json", json{{"devices", devices}});
@@ -400,7 +400,7 @@ TEST(ConfiguredDevices, APauseWhileTheRelayHoldsTheImuOffSwitchesItOnFirst) {
   ASSERT_EQ(d.command(id, "pause"), 200);
   const json paused = d.wait_state(id, "paused", 30.0);
   EXPECT_TRUE(has_event(paused, "power-on")) << paused.at("events").dump();
-  EXPECT_TRUE(sim.chamber().coil(drivers::sim::SimDevices::kImuPowerCoil)) << "the IMU is on while the run is paused";
+  EXPECT_TRUE(sim.chamber().coil(sim::SimDevices::kImuPowerCoil)) << "the IMU is on while the run is paused";
   ASSERT_EQ(d.command(id, "resume"), 200);
   const json c = d.wait_final(id, 60.0);
   ASSERT_EQ(c.at("state"), "done") << c.dump();
@@ -409,7 +409,7 @@ TEST(ConfiguredDevices, APauseWhileTheRelayHoldsTheImuOffSwitchesItOnFirst) {
   for (std::size_t i = 0; i < changes.size(); ++i) EXPECT_EQ(changes[i].set, i % 2 == 1) << i;
   EXPECT_LT(changes[1].t_s - changes[0].t_s, 5.0) << "the pause cut the first off time short";
   EXPECT_GE(changes[3].t_s - changes[2].t_s, 5.0) << "the second power cycle is whole";
-  EXPECT_TRUE(sim.chamber().coil(drivers::sim::SimDevices::kImuPowerCoil));
+  EXPECT_TRUE(sim.chamber().coil(sim::SimDevices::kImuPowerCoil));
 }
 
 // A KVH-style serial IMU (the built-in kvh-1750 description: float32 delta angles, accelerations in
@@ -419,10 +419,10 @@ TEST(ConfiguredDevices, APauseWhileTheRelayHoldsTheImuOffSwitchesItOnFirst) {
 // frame is never recorded wrong), which redoes the segment and still records every frame once.
 TEST(ConfiguredDevices, AKvhSerialImuOverAPseudoTerminalRecordsEveryFrameOnceThroughFaults) {
   const std::string dir = scratch_dir("devices-kvh-config");
-  drivers::sim::SimDevicesConfig sc = in_process_devices("");
+  sim::SimDevicesConfig sc = in_process_devices("");
   sc.imu_link = "kvh-1750";
   sc.imu_serial = "KVH-TEST-1";
-  drivers::sim::SimDevices sim(sc);
+  sim::SimDevices sim(sc);
   ASSERT_FALSE(sim.imu_serial_device().empty());
   json devices = json::parse(sim.devices_config_json());
   EXPECT_EQ(devices["imu"]["link"], "kvh-1750");
@@ -433,11 +433,11 @@ TEST(ConfiguredDevices, AKvhSerialImuOverAPseudoTerminalRecordsEveryFrameOnceThr
   const auto id = d.post_campaign(short_campaign("kvh"));
   ASSERT_EQ(d.command(id, "start"), 200);
   // Faults on the line while it runs, one after the other, each once the run is going again.
-  using Fault = std::function<void(drivers::sim::SimImu&)>;
+  using Fault = std::function<void(sim::SimImu&)>;
   const std::vector<std::pair<std::string, Fault>> faults = {
-      {"corrupted CRC", [](drivers::sim::SimImu& imu) { imu.corrupt_next_samples(1); }},
-      {"dropped byte", [](drivers::sim::SimImu& imu) { imu.drop_byte_of_next_sample(); }},
-      {"sequence jump", [](drivers::sim::SimImu& imu) { imu.skip_sequence(3); }},
+      {"corrupted CRC", [](sim::SimImu& imu) { imu.corrupt_next_samples(1); }},
+      {"dropped byte", [](sim::SimImu& imu) { imu.drop_byte_of_next_sample(); }},
+      {"sequence jump", [](sim::SimImu& imu) { imu.skip_sequence(3); }},
   };
   std::size_t suspensions = 0;
   for (const auto& [name, fault] : faults) {

@@ -14,7 +14,7 @@
 #include "../estimators/test_thermal_fixture.hpp"
 #include "core/turn_on.hpp"
 #include "daemon/service/estimator_worker.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
 #include "storage/run_db.hpp"

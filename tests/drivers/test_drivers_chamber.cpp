@@ -15,10 +15,11 @@
 
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/power_relay.hpp"
-#include "drivers/sim/sim_chamber.hpp"
+#include "sim/sim_chamber.hpp"
 #include "test_helpers.hpp"
 
 using namespace imucal::drivers;
+namespace sim = imucal::sim;
 using namespace std::chrono_literals;
 using imucal::drivers::test::eventually;
 using imucal::drivers::test::Stopwatch;

@@ -20,7 +20,7 @@
 #include "core/units.hpp"
 #include "drivers/imu_codec.hpp"
 #include "drivers/link_imu.hpp"
-#include "drivers/sim/sim_imu.hpp"
+#include "sim/sim_imu.hpp"
 #include "test_helpers.hpp"
 
 using namespace imucal;

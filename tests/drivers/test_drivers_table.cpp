@@ -16,8 +16,8 @@
 #include "core/units.hpp"
 #include "drivers/table_dialect.hpp"
 #include "drivers/tcp_table.hpp"
-#include "drivers/sim/sim_table.hpp"
-#include "drivers/sim/table_servo.hpp"
+#include "sim/sim_table.hpp"
+#include "sim/table_servo.hpp"
 #include "test_helpers.hpp"
 
 using namespace imucal;

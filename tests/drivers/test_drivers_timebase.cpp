@@ -13,9 +13,9 @@
 #include "core/units.hpp"
 #include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
-#include "drivers/sim/bench_campaign.hpp"
-#include "drivers/sim/sim_imu.hpp"
-#include "drivers/sim/sim_table.hpp"
+#include "sim/bench_campaign.hpp"
+#include "sim/sim_imu.hpp"
+#include "sim/sim_table.hpp"
 #include "test_helpers.hpp"
 
 using namespace imucal;

@@ -1,7 +1,7 @@
 // The lever-arm program simulated once and fed to the stage-1 lever-arm filter (tests only).
 #pragma once
 
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/lever_arm.hpp"
 #include "motion_programs/program.hpp"
 

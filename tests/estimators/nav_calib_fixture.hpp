@@ -4,7 +4,7 @@
 #include <random>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/nav_filter.hpp"
 

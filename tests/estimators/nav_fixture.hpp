@@ -8,7 +8,7 @@
 
 #include "core/earth.hpp"
 #include "core/units.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/navigation_run.hpp"
 
 namespace imucal::navtest {

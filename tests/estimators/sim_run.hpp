@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::simrun {

@@ -2,7 +2,7 @@
 #include <gtest/gtest.h>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "core/table.hpp"
 #include "storage/bundle.hpp"

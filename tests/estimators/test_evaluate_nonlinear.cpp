@@ -8,7 +8,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/evaluate.hpp"
 #include "motion_programs/program.hpp"
 

@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
 #include "estimators/nav_filter.hpp"

@@ -2,7 +2,7 @@
 #include <gtest/gtest.h>
 
 #include "calib_fixture.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/lever_arm.hpp"
 #include "lever_fixture.hpp"
 

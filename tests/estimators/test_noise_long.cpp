@@ -2,7 +2,7 @@
 #include <gtest/gtest.h>
 
 #include "core/units.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/noise.hpp"
 
 using namespace imucal;

@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
-#include "drivers/sim/simulator.hpp"
-#include "drivers/sim/thermal_model.hpp"
+#include "sim/simulator.hpp"
+#include "sim/thermal_model.hpp"
 #include "estimators/thermal.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"

@@ -6,7 +6,7 @@
 #include "core/earth.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 
 using namespace imucal;
 using Eigen::Vector3d;

@@ -12,14 +12,14 @@
 #include "drivers/interfaces.hpp"
 #include "drivers/register_map.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 struct SimChamberConfig {
-  RegisterMap map;
+  drivers::RegisterMap map;
   double initial_C = 22.0;
   double ambient_C = 22.0;          // where the air goes with control off
   double time_constant_s = 60.0;    // first-order lag of the air to the working set point
-  TemperatureUnit unit = TemperatureUnit::celsius;  // for maps with a units register
+  drivers::TemperatureUnit unit = drivers::TemperatureUnit::celsius;  // for maps with a units register
   int port = 0;                     // 0: any free port (see port())
   // Digital outputs served as coils 0.. (a controller's relay outputs; one may switch the IMU's
   // supply, drivers/power_relay.hpp). They start clear.
@@ -53,7 +53,7 @@ class SimChamber {
   std::vector<CoilChange> coil_changes() const;
 
   // What the front panel would change.
-  void set_unit(TemperatureUnit unit);
+  void set_unit(drivers::TemperatureUnit unit);
   void set_coil(int address, bool set);  // not recorded as a change
   // The outputs forced by hand on the front panel: coil writes are acknowledged but not taken.
   void set_outputs_forced(bool forced);
@@ -75,4 +75,4 @@ class SimChamber {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

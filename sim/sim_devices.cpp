@@ -1,4 +1,4 @@
-#include "drivers/sim/sim_devices.hpp"
+#include "sim/sim_devices.hpp"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -21,7 +21,10 @@
 #include "drivers/imu_link.hpp"
 #include "drivers/register_map.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 namespace {
 
@@ -201,4 +204,4 @@ std::string SimDevices::devices_config_json() const {
   return devices.dump(2);
 }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

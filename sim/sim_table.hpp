@@ -11,17 +11,17 @@
 #include <memory>
 #include <string>
 
-#include "drivers/sim/sim_world.hpp"
+#include "sim/sim_world.hpp"
 #include "drivers/table_dialect.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 struct SimTableConfig {
   int port = 0;  // 0: any free port (see port())
   double clock_drift_ppm = 0.0;   // the controller's clock against the world clock
   std::int64_t clock_offset_us = 0;
   std::string identity = "IMUCAL,SIM-TABLE,0,1.0";
-  dialect::Dialect dialect = dialect::imucal_acl();
+  drivers::dialect::Dialect dialect = drivers::dialect::imucal_acl();
 };
 
 class SimTable {
@@ -49,4 +49,4 @@ class SimTable {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

@@ -1,11 +1,14 @@
-#include "drivers/sim/table_servo.hpp"
+#include "sim/table_servo.hpp"
 
 #include <algorithm>
 #include <cmath>
 
 #include "core/units.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 using motion::AxisFunc;
 using units::kDegToRad;
@@ -523,4 +526,4 @@ motion::Program TableServo::program_from(double t_from) const {
   return p;
 }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

@@ -1,4 +1,4 @@
-#include "drivers/sim/bench_campaign.hpp"
+#include "sim/bench_campaign.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -15,11 +15,14 @@
 #include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
-#include "drivers/sim/sim_chamber.hpp"
-#include "drivers/sim/sim_imu.hpp"
-#include "drivers/sim/sim_table.hpp"
+#include "sim/sim_chamber.hpp"
+#include "sim/sim_imu.hpp"
+#include "sim/sim_table.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 namespace {
 
@@ -324,4 +327,4 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   return rep;
 }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

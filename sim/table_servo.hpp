@@ -22,19 +22,19 @@
 #include "drivers/table_dialect.hpp"
 #include "motion_programs/program.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 struct ServoConfig {
   std::array<double, 3> start_deg{};
-  // [axis][mode], mode indexed by TableMode (off, position, rate, synthesis).
-  std::array<std::array<AxisLimitSetting, 4>, 3> limits{};
+  // [axis][mode], mode indexed by drivers::TableMode (off, position, rate, synthesis).
+  std::array<std::array<drivers::AxisLimitSetting, 4>, 3> limits{};
   double moving_threshold_dps = 1e-6;
 };
 
 struct ServoResult {
-  dialect::Refusal refusal = dialect::Refusal::none;
+  drivers::dialect::Refusal refusal = drivers::dialect::Refusal::none;
   std::string text;
-  bool ok() const noexcept { return refusal == dialect::Refusal::none; }
+  bool ok() const noexcept { return refusal == drivers::dialect::Refusal::none; }
 };
 
 struct AxisSample {
@@ -53,20 +53,20 @@ class TableServo {
   ServoResult interlock_close(double t_s);
   ServoResult interlock_open(double t_s);
   ServoResult interlock_reset(double t_s);
-  ServoResult set_mode(double t_s, int axis, TableMode mode);
+  ServoResult set_mode(double t_s, int axis, drivers::TableMode mode);
   ServoResult demand_position(double t_s, int axis, double angle_deg);
   ServoResult demand_rate(double t_s, int axis, double rate_dps);
-  ServoResult demand_oscillation(double t_s, int axis, const OscillationDemand& d);
-  ServoResult set_limit_position(double t_s, int axis, TableMode mode, double min_deg, double max_deg);
-  ServoResult set_limit_rate(double t_s, int axis, TableMode mode, double rate_dps);
-  ServoResult set_limit_accel(double t_s, int axis, TableMode mode, double accel_dps2);
+  ServoResult demand_oscillation(double t_s, int axis, const drivers::OscillationDemand& d);
+  ServoResult set_limit_position(double t_s, int axis, drivers::TableMode mode, double min_deg, double max_deg);
+  ServoResult set_limit_rate(double t_s, int axis, drivers::TableMode mode, double rate_dps);
+  ServoResult set_limit_accel(double t_s, int axis, drivers::TableMode mode, double accel_dps2);
   ServoResult set_watchdog(double t_s, double period_s);
 
   // The commanded motion at t (call advance(t) first for events to be applied).
   std::array<AxisSample, 3> sample(double t_s) const;
-  TableStatus status(double t_s) const;
-  InterlockState interlock() const noexcept { return interlock_; }
-  const AxisLimitSetting& limits(int axis, TableMode mode) const;
+  drivers::TableStatus status(double t_s) const;
+  drivers::InterlockState interlock() const noexcept { return interlock_; }
+  const drivers::AxisLimitSetting& limits(int axis, drivers::TableMode mode) const;
 
   // The motion from t_from on as a program whose time 0 is t_from (pieces for the physics).
   motion::Program program_from(double t_from_s) const;
@@ -81,7 +81,7 @@ class TableServo {
   };
   struct Axis {
     std::vector<Seg> segs;
-    TableMode mode = TableMode::off;
+    drivers::TableMode mode = drivers::TableMode::off;
     bool at_limit = false;
     bool watchdog = false;
     double last_feed_s = 0.0;
@@ -97,16 +97,16 @@ class TableServo {
   std::pair<double, double> graceful_stop(int axis, double t, double accel_radps2);
   void emergency_stop(int axis, double t);
   void update_limit_event(int axis, double t);
-  ServoResult check_motion_allowed(int axis, TableMode needed) const;
+  ServoResult check_motion_allowed(int axis, drivers::TableMode needed) const;
   ServoResult bad_axis(int axis) const;
-  AxisLimitSetting& lim(int axis, TableMode mode);
+  drivers::AxisLimitSetting& lim(int axis, drivers::TableMode mode);
 
   ServoConfig config_;
   std::array<Axis, 3> axes_;
-  InterlockState interlock_ = InterlockState::open;
+  drivers::InterlockState interlock_ = drivers::InterlockState::open;
   double watchdog_period_s_ = 0.0;
   double now_ = 0.0;
   std::uint64_t version_ = 0;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

@@ -23,15 +23,15 @@
 #include "drivers/can_protocol.hpp"
 #include "drivers/imu_link.hpp"
 #include "drivers/link_imu.hpp"
-#include "drivers/sim/sim_world.hpp"
+#include "sim/sim_world.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 struct SimImuConfig {
   // The frames it speaks. Per-unit LSBs are its own (gyro_lsb_rad_at(rate_hz)); a description
   // that fixes them is used as it is.
-  link::ImuLink link = link::load_imu_link("imucal-can");
-  can::Framing framing = can::Framing::fd;  // socketcan only
+  drivers::link::ImuLink link = drivers::link::load_imu_link("imucal-can");
+  drivers::can::Framing framing = drivers::can::Framing::fd;  // socketcan only
   double rate_hz = 1000.0;
   std::uint64_t seed = 1;
   ImuModel truth;  // instrument frame (see sim::Simulator)
@@ -77,7 +77,7 @@ class SimImu {
   static double gyro_lsb_rad_at(double rate_hz) noexcept;
   static double accel_lsb_mps_at(double rate_hz) noexcept;
   // What a driver reading this device is configured with: its link (LSBs resolved) and rate.
-  LinkImuConfig driver_config() const;
+  drivers::LinkImuConfig driver_config() const;
   bool streaming() const noexcept;
   std::uint64_t samples_sent() const noexcept;
   std::uint64_t samples_not_sent() const noexcept;  // dropped by injection or a full link
@@ -102,4 +102,4 @@ class SimImu {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

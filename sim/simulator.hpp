@@ -20,7 +20,7 @@
 
 namespace imucal::sim {
 
-// Temperatures and truth coefficients that change over the run (drivers/sim/thermal_model.hpp).
+// Temperatures and truth coefficients that change over the run (sim/thermal_model.hpp).
 // Without one the simulator logs the constant temperature_C and uses the truth's constants, bit
 // for bit as it always has.
 class ThermalSource {

@@ -1,4 +1,4 @@
-#include "drivers/sim/sim_chamber.hpp"
+#include "sim/sim_chamber.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -18,7 +18,10 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 using Clock = std::chrono::steady_clock;
 
@@ -356,4 +359,4 @@ void SimChamber::set_reading_offset(double delta_C) {
   impl_->reading_offset_C = delta_C;
 }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

@@ -13,12 +13,12 @@
 #include <memory>
 #include <string>
 
-#include "drivers/sim/sim_chamber.hpp"
-#include "drivers/sim/sim_imu.hpp"
-#include "drivers/sim/sim_table.hpp"
-#include "drivers/sim/sim_world.hpp"
+#include "sim/sim_chamber.hpp"
+#include "sim/sim_imu.hpp"
+#include "sim/sim_table.hpp"
+#include "sim/sim_world.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 struct SimDevicesConfig {
   ServoConfig servo;                  // the table's limits per axis and mode
@@ -79,4 +79,4 @@ class SimDevices {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

@@ -1,4 +1,4 @@
-#include "drivers/sim/thermal_model.hpp"
+#include "sim/thermal_model.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "drivers/sim/sim_imu.hpp"
+#include "sim/sim_imu.hpp"
 
 #include <atomic>
 #include <cerrno>
@@ -15,9 +15,12 @@
 #include <unistd.h>
 
 #include "drivers/imu_codec.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 using ::imucal::sim::SimConfig;
 using ::imucal::sim::Simulator;
@@ -412,4 +415,4 @@ void SimImu::pause(std::chrono::milliseconds duration) {
 void SimImu::close_link() { impl_->close_requested = true; }
 void SimImu::set_temperature(double celsius) { impl_->temperature_C = celsius; }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

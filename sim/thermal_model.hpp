@@ -23,7 +23,7 @@
 #include <Eigen/Core>
 
 #include "core/imu_model.hpp"
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 #include "estimators/thermal.hpp"
 #include "motion_programs/chamber.hpp"
 

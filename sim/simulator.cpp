@@ -1,4 +1,4 @@
-#include "drivers/sim/simulator.hpp"
+#include "sim/simulator.hpp"
 
 #include <algorithm>
 #include <cmath>

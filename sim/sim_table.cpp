@@ -1,4 +1,4 @@
-#include "drivers/sim/sim_table.hpp"
+#include "sim/sim_table.hpp"
 
 #include <atomic>
 #include <future>
@@ -16,7 +16,10 @@
 #include <boost/asio/write.hpp>
 
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
+
+// The simulated devices speak the drivers' types and protocols.
+using namespace imucal::drivers;
 
 namespace asio = boost::asio;
 using asio::ip::tcp;
@@ -272,4 +275,4 @@ void SimTable::trip_interlock() {
   impl_->world.with_servo([](TableServo& s, double t) { return s.interlock_open(t); });
 }
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim

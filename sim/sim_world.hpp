@@ -8,13 +8,13 @@
 #include <mutex>
 
 #include "drivers/interfaces.hpp"
-#include "drivers/sim/table_servo.hpp"
+#include "sim/table_servo.hpp"
 
-namespace imucal::drivers::sim {
+namespace imucal::sim {
 
 class SimWorld {
  public:
-  explicit SimWorld(const ServoConfig& servo, std::int64_t epoch_ns = host_time_ns())
+  explicit SimWorld(const ServoConfig& servo, std::int64_t epoch_ns = drivers::host_time_ns())
       : servo_(servo), epoch_ns_(epoch_ns) {}
 
   std::int64_t epoch_ns() const noexcept { return epoch_ns_; }
@@ -22,7 +22,7 @@ class SimWorld {
   std::int64_t host_ns(double world_s) const noexcept {
     return epoch_ns_ + static_cast<std::int64_t>(world_s * 1e9 + (world_s >= 0 ? 0.5 : -0.5));
   }
-  double now_s() const noexcept { return world_s(host_time_ns()); }
+  double now_s() const noexcept { return world_s(drivers::host_time_ns()); }
 
   // f(TableServo&, double t_now) under the world lock, events processed up to now.
   template <class F>
@@ -39,4 +39,4 @@ class SimWorld {
   std::int64_t epoch_ns_;
 };
 
-}  // namespace imucal::drivers::sim
+}  // namespace imucal::sim
