@@ -832,12 +832,17 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
     }
     (void)recorder_problem(run);
   }
-  const bool ramp = run.spec.chamber.ramps_within(run.segments[run.segment].t0_s, run.segments[run.segment].t1_s);
-  const std::string text =
-      "condition cleared and settled " + number_text(run.spec.suspenders.settle_s) + " s; redoing segment " +
-      std::to_string(run.segment) + " '" + run.segments[run.segment].name + "' from " + number_text(run.checkpoint_s()) +
-      " s" +
-      (ramp ? " (not redoable as it was: it overlaps a chamber ramp, which restarts from the checkpoint's set point)" : "");
+  std::string text = "condition cleared and settled " + number_text(run.spec.suspenders.settle_s) + " s; ";
+  if (run.segment >= run.segments.size()) {
+    // The file holds every frame of the program (what failed came after the last one).
+    text += "every frame of the program is in the run file";
+  } else {
+    const bool ramp = run.spec.chamber.ramps_within(run.segments[run.segment].t0_s, run.segments[run.segment].t1_s);
+    text += "redoing segment " + std::to_string(run.segment) + " '" + run.segments[run.segment].name + "' from " +
+            number_text(run.checkpoint_s()) + " s" +
+            (ramp ? " (not redoable as it was: it overlaps a chamber ramp, which restarts from the checkpoint's set point)"
+                  : "");
+  }
   // The transition says what cleared; the UI says "resumed" itself.
   if (!transition(run.id, RunState::Running, reason + " cleared", RunState::Suspended)) {
     if (auto c = pending_command()) return *c;

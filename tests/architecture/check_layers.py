@@ -19,7 +19,8 @@ ALLOWED = {
     "sim": {"core", "motion_programs", "estimators", "drivers"},
     "pipeline": {"core", "motion_programs", "estimators", "storage"},
     "plan": {"core", "motion_programs", "estimators", "pipeline", "sim"},
-    "daemon": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan", "bench"},
+    "daemon": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"},
+    "cli": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan", "daemon", "bench"},
     "bench": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"},
 }
 TARGETS = {
