@@ -4,10 +4,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
+#include <vector>
+
+#include <archive.h>
+#include <archive_entry.h>
 
 #include "core/units.hpp"
 #include "estimators/evaluate.hpp"
@@ -28,51 +32,51 @@ storage::RunDb open_run(const std::string& run_path) {
   return storage::RunDb::open(run_path, storage::OpenMode::Read);
 }
 
-// ---- tar (POSIX ustar): a 512-byte header per file, the data padded to 512 bytes, two zero
-// blocks at the end. Names are short here (folder/file), so the 100-byte name field suffices.
-
-void put_octal(char* field, std::size_t width, unsigned long long value) {
-  // width - 1 octal digits and a NUL.
-  std::snprintf(field, width, "%0*llo", static_cast<int>(width - 1), value);
-}
-
-void write_tar_entry(std::ofstream& out, const std::string& name, const fs::path& file) {
-  if (name.size() >= 100) throw std::runtime_error("tar: name too long: " + name);
-  const auto size = fs::file_size(file);
-  char header[512];
-  std::memset(header, 0, sizeof header);
-  std::memcpy(header, name.data(), name.size());
-  put_octal(header + 100, 8, 0644);                                       // mode
-  put_octal(header + 108, 8, 0);                                          // uid
-  put_octal(header + 116, 8, 0);                                          // gid
-  put_octal(header + 124, 12, size);                                      // size
+// The files as one tar archive (POSIX pax, which is plain ustar while names are short), written by
+// libarchive under `path`; `top_dir` prefixes every name.
+void write_tar(const std::string& path, const std::string& top_dir, const std::vector<fs::path>& files) {
+  struct ArchiveFree {
+    void operator()(archive* a) const noexcept { archive_write_free(a); }
+  };
+  struct EntryFree {
+    void operator()(archive_entry* e) const noexcept { archive_entry_free(e); }
+  };
+  const std::unique_ptr<archive, ArchiveFree> a(archive_write_new());
+  if (!a) throw std::runtime_error("tar " + path + ": out of memory");
+  auto check = [&](la_ssize_t rc, const std::string& what) {
+    if (rc < ARCHIVE_OK) {
+      const char* why = archive_error_string(a.get());
+      throw std::runtime_error("tar " + path + ": " + what + ": " + (why != nullptr ? why : "failed"));
+    }
+  };
+  check(archive_write_set_format_pax_restricted(a.get()), "setting the format");
+  check(archive_write_open_filename(a.get(), path.c_str()), "opening");
   const auto mtime = std::chrono::duration_cast<std::chrono::seconds>(
-      std::chrono::system_clock::now().time_since_epoch()).count();
-  put_octal(header + 136, 12, static_cast<unsigned long long>(mtime));    // mtime
-  header[156] = '0';                                                      // regular file
-  std::memcpy(header + 257, "ustar", 6);                                  // magic + NUL
-  std::memcpy(header + 263, "00", 2);                                     // version
-  std::memset(header + 148, ' ', 8);                                      // checksum: spaces first
-  unsigned sum = 0;
-  for (unsigned char c : header) sum += c;
-  std::snprintf(header + 148, 8, "%06o", sum);  // six digits, NUL, and the space already there
-  header[155] = ' ';
-  out.write(header, sizeof header);
-
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw std::runtime_error("tar: cannot read " + file.string());
-  char buf[1 << 16];
-  std::uintmax_t copied = 0;
-  while (in) {
-    in.read(buf, sizeof buf);
-    const auto n = in.gcount();
-    if (n <= 0) break;
-    out.write(buf, n);
-    copied += static_cast<std::uintmax_t>(n);
+                         std::chrono::system_clock::now().time_since_epoch()).count();
+  std::vector<char> buf(1 << 16);
+  for (const fs::path& file : files) {
+    const auto size = fs::file_size(file);
+    const std::string name = top_dir + "/" + file.filename().string();
+    const std::unique_ptr<archive_entry, EntryFree> entry(archive_entry_new());
+    archive_entry_set_pathname(entry.get(), name.c_str());
+    archive_entry_set_size(entry.get(), static_cast<la_int64_t>(size));
+    archive_entry_set_filetype(entry.get(), AE_IFREG);
+    archive_entry_set_perm(entry.get(), 0644);
+    archive_entry_set_mtime(entry.get(), static_cast<time_t>(mtime), 0);
+    check(archive_write_header(a.get(), entry.get()), "the header of " + name);
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw std::runtime_error("tar " + path + ": cannot read " + file.string());
+    std::uintmax_t copied = 0;
+    while (in) {
+      in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+      const auto n = in.gcount();
+      if (n <= 0) break;
+      check(archive_write_data(a.get(), buf.data(), static_cast<std::size_t>(n)), "writing " + name + " (disk full?)");
+      copied += static_cast<std::uintmax_t>(n);
+    }
+    if (copied != size) throw std::runtime_error("tar " + path + ": " + file.string() + " changed while being archived");
   }
-  if (copied != size) throw std::runtime_error("tar: " + file.string() + " changed while being archived");
-  static const char zeros[512] = {};
-  if (const auto rest = size % 512; rest != 0) out.write(zeros, static_cast<std::streamsize>(512 - rest));
+  check(archive_write_close(a.get()), "closing (disk full?)");
 }
 
 // One stage of the calibration pipeline on the finished run, as `imucal calibrate --stage X`
@@ -212,15 +216,7 @@ void write_recording_tar(const std::string& run_path, const std::string& tar_pat
     if (e.is_regular_file()) files.push_back(e.path());
   std::sort(files.begin(), files.end());
   const std::string partial = tar_path + ".partial";
-  {
-    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
-    if (!out) throw std::runtime_error("cannot write " + partial);
-    for (const auto& f : files) write_tar_entry(out, top_dir + "/" + f.filename().string(), f);
-    static const char zeros[1024] = {};
-    out.write(zeros, sizeof zeros);
-    out.flush();
-    if (!out) throw std::runtime_error("writing " + partial + " failed (disk full?)");
-  }
+  write_tar(partial, top_dir, files);
   fs::rename(partial, tar_path);
   fs::remove_all(work, ec);
 }

@@ -354,6 +354,24 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   EXPECT_NE(tar.body.find(top + "frames.csv"), std::string::npos);
   EXPECT_NE(tar.body.find(top + "meta.json"), std::string::npos);
   EXPECT_NE(tar.body.find("imucal-recording/1"), std::string::npos);
+  {
+    // An archive another tool reads: GNU tar lists the bundle and extracts its meta.json.
+    const std::string file = d.config.data_dir + "/recording.tar";
+    std::ofstream(file, std::ios::binary) << tar.body;
+    auto run = [](const std::string& command) {
+      std::string out;
+      if (FILE* p = ::popen(command.c_str(), "r")) {
+        char buf[4096];
+        for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, p)) > 0;) out.append(buf, n);
+        ::pclose(p);
+      }
+      return out;
+    };
+    const std::string listing = run("tar -tf '" + file + "'");
+    EXPECT_NE(listing.find(top + "frames.csv\n"), std::string::npos) << listing;
+    EXPECT_NE(listing.find(top + "meta.json\n"), std::string::npos) << listing;
+    EXPECT_NE(run("tar -xOf '" + file + "' " + top + "meta.json").find("imucal-recording/1"), std::string::npos);
+  }
   const auto head = http_request(d.service->port(), "HEAD", base + "/recording", "", op.auth());
   EXPECT_EQ(head.status, 200);
   EXPECT_EQ(head.headers.at("content-length"), std::to_string(tar.body.size()));
