@@ -79,7 +79,14 @@ struct LinkImu::Impl {
     published_clock = clock.state();
   }
 
-  void handle(const link::Decoded& d, std::int64_t rx_ns, ImuBatch& out) {
+  // `read_after`: samples read after this one in the same drain. They were waiting together, so
+  // this one came at least that many periods before its stamp (a reader descheduled for a while
+  // reads its backlog at once).
+  bool is_sample(const link::Decoded& d) const {
+    return d.status == link::DecodeStatus::ok && cfg.link.messages[d.message].kind == link::MessageKind::sample;
+  }
+
+  void handle(const link::Decoded& d, std::int64_t rx_ns, ImuBatch& out, std::size_t read_after = 0) {
     ++counts.frames_received;
     if (d.status == link::DecodeStatus::bad_checksum) {
       ++counts.crc_failures;
@@ -90,7 +97,7 @@ struct LinkImu::Impl {
       return;
     }
     switch (cfg.link.messages[d.message].kind) {
-      case link::MessageKind::sample: handle_sample(d.values, rx_ns, out); break;
+      case link::MessageKind::sample: handle_sample(d.values, rx_ns, read_after, out); break;
       case link::MessageKind::temperature: handle_temperature(d.message, d.values, rx_ns, out); break;
       case link::MessageKind::identity: {
         std::lock_guard lock(published_mutex);
@@ -100,9 +107,12 @@ struct LinkImu::Impl {
     }
   }
 
-  void handle_sample(const link::Values& v, std::int64_t rx_ns, ImuBatch& out) {
-    // Time since the last sample in periods: on the IMU's clock when the frame carries it.
-    double elapsed_periods = static_cast<double>(rx_ns - last_rx_ns) / period_ns;
+  void handle_sample(const link::Values& v, std::int64_t rx_ns, std::size_t read_after, ImuBatch& out) {
+    // Time since the last sample in periods: on the IMU's clock when the frame carries it, else
+    // from the stamps, less the backlog read with it (a 7-bit counter would otherwise take a
+    // reader's 256 ms stall for 128 lost samples).
+    double elapsed_periods =
+        std::max(0.0, static_cast<double>(rx_ns - last_rx_ns) / period_ns - static_cast<double>(read_after));
     std::uint64_t time_delta = 0;
     if (time_field && last_time_raw) {
       const std::uint64_t raw = *v.time_raw, last = *last_time_raw;
@@ -204,16 +214,23 @@ struct LinkImu::Impl {
   bool drain(ImuBatch& out, Result<void>& error) {
     std::vector<LinkChunk> chunks;
     const Result<void> r = transport->drain(chunks);
+    std::vector<std::pair<link::Decoded, std::int64_t>> on_line;  // a byte stream's frames, as read
     for (const LinkChunk& c : chunks) {
       if (cfg.link.stream()) {
         const std::uint64_t resyncs = stream.resyncs(), discarded = stream.bytes_discarded();
         stream.feed(c.bytes);
-        while (const auto d = stream.next()) handle(*d, c.rx_ns, out);
+        while (auto d = stream.next()) on_line.emplace_back(std::move(*d), c.rx_ns);
         counts.resyncs += stream.resyncs() - resyncs;
         counts.bytes_discarded += stream.bytes_discarded() - discarded;
       } else {
         handle(link::decode(cfg.link, c.bytes, c.message), c.rx_ns, out);
       }
+    }
+    std::size_t samples_after = 0;
+    for (const auto& [d, rx_ns] : on_line) samples_after += is_sample(d) ? 1 : 0;
+    for (const auto& [d, rx_ns] : on_line) {
+      if (is_sample(d)) --samples_after;
+      handle(d, rx_ns, out, samples_after);
     }
     const std::uint64_t transport_now = transport->malformed();
     counts.malformed_frames += transport_now - transport_malformed;

@@ -5,7 +5,7 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
-  libeigen3-dev libmodbus-dev libboost1.81-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
+  libeigen3-dev libmodbus-dev libboost1.81-dev libboost-url1.81-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
   libsqlite3-dev sqlite3 libgtest-dev libgmock-dev libcli11-dev libbenchmark-dev libsodium-dev libarchive-dev
 )
 # The browser tests (tests/browser, ctest label `browser`): Debian's Chromium driven by Playwright,

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <limits>
 
+#include <boost/url/parse.hpp>
+#include <boost/url/url_view.hpp>
 #include <spdlog/spdlog.h>
 
 #include "daemon/service/alarms.hpp"
@@ -67,18 +69,6 @@ std::optional<std::int64_t> parse_id(const std::string& text) {
   return std::stoll(text);
 }
 
-std::vector<std::string> split_path(const std::string& path) {
-  std::vector<std::string> parts;
-  std::size_t start = 1;
-  while (start <= path.size()) {
-    const auto end = std::min(path.find('/', start), path.size());
-    parts.emplace_back(path.substr(start, end - start));
-    start = end + 1;
-  }
-  if (!parts.empty() && parts.back().empty()) parts.pop_back();
-  return parts;
-}
-
 // The unit a campaign names, as its campaign JSON gave it (null when it names none).
 json unit_json(const CampaignRow& row) {
   if (!row.imu_serial) return nullptr;
@@ -132,26 +122,15 @@ std::string session_from_cookie(const std::string& cookie_header) {
   return {};
 }
 
-bool split_target(const std::string& target, std::string& path, std::map<std::string, std::string>& query) {
-  const auto q = target.find('?');
-  path = target.substr(0, q);
-  query.clear();
-  if (q == std::string::npos) return true;
-  const std::string qs = target.substr(q + 1);
-  std::size_t start = 0;
-  while (start <= qs.size()) {
-    const auto end = std::min(qs.find('&', start), qs.size());
-    const std::string pair = qs.substr(start, end - start);
-    if (!pair.empty()) {
-      const auto eq = pair.find('=');
-      std::string key, value;
-      if (!percent_decode(pair.substr(0, eq), key, true)) return false;
-      if (eq != std::string::npos && !percent_decode(pair.substr(eq + 1), value, true)) return false;
-      query[key] = value;
-    }
-    start = end + 1;
-  }
-  return true;
+std::optional<Target> parse_target(const std::string& target) {
+  const auto url = boost::urls::parse_origin_form(target);
+  if (!url) return std::nullopt;
+  Target t;
+  t.path = std::string(url->encoded_path());
+  for (const std::string segment : url->segments()) t.segments.push_back(segment);
+  if (!t.segments.empty() && t.segments.back().empty()) t.segments.pop_back();
+  for (const auto& param : url->params(boost::urls::encoding_opts(true))) t.query[param.key] = param.value;
+  return t;
 }
 
 namespace {
@@ -247,11 +226,9 @@ std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow
     if (auto p = auth_.from_session(sid)) return p;
   }
   if (allow_query_token) {
-    std::string path;
-    std::map<std::string, std::string> query;
-    if (split_target(request.target, path, query)) {
-      const auto it = query.find("token");
-      if (it != query.end()) return auth_.from_token(it->second);
+    if (const auto t = parse_target(request.target)) {
+      const auto it = t->query.find("token");
+      if (it != t->query.end()) return auth_.from_token(it->second);
     }
   }
   return std::nullopt;
@@ -291,190 +268,212 @@ json Api::status() {
                           {"estimators", known_estimators()}}}}}};
 }
 
-HttpReply Api::handle(const ApiRequest& request) {
-  std::string path;
-  std::map<std::string, std::string> query;
-  if (!split_target(request.target, path, query)) return error_reply(400, "malformed URL");
-  try {
-    return route(request, path, query);
-  } catch (const std::exception& e) {
-    spdlog::error("{} {}: {}", request.method, path, e.what());
-    return error_reply(500, std::string("internal error: ") + e.what());
+// One endpoint. A pattern's segments are literal, or a placeholder: {id} a campaign id (a
+// segment that is not one answers 404 "no campaign"), {command} a run command (a segment that is
+// not one does not match), {alarm} and {serial} any segment. Where patterns of several
+// specificities match a path, the one with the most literal segments wins (/api/campaigns/1/model
+// is the model, not a command). GET routes answer HEAD too.
+struct Call {
+  const ApiRequest& request;
+  const Target& target;
+  const std::vector<std::string>& args;  // the placeholders' segments, in order
+  std::int64_t id = 0;                   // {id}
+  const Principal* who = nullptr;        // null on open routes
+};
+
+struct Api::Route {
+  enum class Access { open, viewer, operator_ };  // operator_: changes something
+  const char* method;
+  const char* pattern;
+  Access access;
+  std::function<HttpReply(Api&, const Call&)> handle;
+};
+
+namespace {
+
+std::vector<std::string_view> pattern_segments(std::string_view pattern) {
+  std::vector<std::string_view> out;
+  while (!pattern.empty()) {
+    pattern.remove_prefix(1);  // '/'
+    const auto end = std::min(pattern.find('/'), pattern.size());
+    out.push_back(pattern.substr(0, end));
+    pattern.remove_prefix(end);
   }
+  return out;
 }
 
-HttpReply Api::route(const ApiRequest& request, const std::string& path, const std::map<std::string, std::string>& query) {
-  const std::string& method = request.method;
-  auto only = [&](const char* allowed) -> std::optional<HttpReply> {
-    if (method == allowed || (std::string(allowed) == "GET" && method == "HEAD")) return std::nullopt;
-    HttpReply r = error_reply(405, method + " is not allowed on " + path);
-    r.headers.emplace_back("Allow", allowed);
-    return r;
+// The placeholders' segments when `segments` match `pattern`, with its count of literal segments.
+std::optional<std::pair<std::vector<std::string>, int>> match_route(std::string_view pattern,
+                                                                    const std::vector<std::string>& segments) {
+  const auto parts = pattern_segments(pattern);
+  if (parts.size() != segments.size()) return std::nullopt;
+  std::vector<std::string> args;
+  int literal = 0;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    if (parts[i].starts_with('{')) {
+      if (parts[i] == "{command}" && !parse_command(segments[i])) return std::nullopt;
+      args.push_back(segments[i]);
+    } else if (parts[i] == segments[i]) {
+      ++literal;
+    } else {
+      return std::nullopt;
+    }
+  }
+  return std::pair{std::move(args), literal};
+}
+
+}  // namespace
+
+const std::vector<Api::Route>& Api::routes() {
+  using A = Route::Access;
+  static const std::vector<Route> table = {
+      {"POST", "/api/login", A::open, [](Api& a, const Call& c) { return a.login(c.request); }},
+      {"POST", "/api/logout", A::open, [](Api& a, const Call& c) { return a.logout(c.request); }},
+      // For monitoring and systemd: no authentication, no details (whoever can reach the port may ask).
+      {"GET", "/api/health", A::open,
+       [](Api& a, const Call&) {
+         if (a.shutting_down_) return json_reply(503, {{"status", "shutting down"}});
+         return json_reply(200, {{"status", "ok"}});
+       }},
+      {"GET", "/api/me", A::viewer,
+       [](Api&, const Call& c) {
+         return json_reply(200, {{"user", c.who->user}, {"role", to_string(c.who->role)}, {"via", c.who->via}});
+       }},
+      {"GET", "/api/status", A::viewer, [](Api& a, const Call&) { return json_reply(200, a.status()); }},
+      {"GET", "/api/programs", A::viewer, [](Api& a, const Call&) { return json_reply(200, {{"programs", a.programs_}}); }},
+      // The conditions that hold a run, with the daemon's settings (a campaign may set its own:
+      // `suspenders` in its JSON).
+      {"GET", "/api/suspenders", A::viewer,
+       [](Api& a, const Call&) {
+         const auto& s = a.config_.suspenders;
+         return json_reply(200, {{"suspenders", Suspenders(s).describe()},
+                                 {"settings",
+                                  {{"settle_s", s.settle_s},
+                                   {"frame_timeout_s", s.frame_timeout_s},
+                                   {"chamber_persist_s", s.chamber_persist_s}}}});
+       }},
+      // Reads with a body: a viewer may ask.
+      {"POST", "/api/campaigns/validate", A::viewer, [](Api& a, const Call& c) { return a.validate_campaign(c.request); }},
+      {"POST", "/api/campaigns/plan", A::viewer, [](Api& a, const Call& c) { return a.plan_campaign(c.request); }},
+      {"GET", "/api/campaigns", A::viewer, [](Api& a, const Call& c) { return a.list_campaigns(c.target.query); }},
+      {"POST", "/api/campaigns", A::operator_, [](Api& a, const Call& c) { return a.create_campaign(c.request); }},
+      {"GET", "/api/limits", A::viewer,
+       [](Api& a, const Call&) {
+         json doc = a.limits_.document();
+         doc["source"] = a.limits_.current().source;
+         return json_reply(200, doc);
+       }},
+      {"PUT", "/api/limits", A::operator_, [](Api& a, const Call& c) { return a.replace_limits(c.request, *c.who); }},
+      {"GET", "/api/compare", A::viewer, [](Api& a, const Call& c) { return a.compare_campaigns(c.target.query); }},
+      {"GET", "/api/alarms", A::viewer, [](Api& a, const Call& c) { return a.list_alarms(c.target.query); }},
+      {"POST", "/api/alarms/{alarm}/ack", A::operator_,
+       [](Api& a, const Call& c) { return a.acknowledge_alarm(c.args[0], *c.who); }},
+      {"GET", "/api/imus", A::viewer,
+       [](Api& a, const Call&) {
+         return json_reply(200, unit_list_json(a.db_.unit_campaigns(std::nullopt), a.limits_.current()));
+       }},
+      {"GET", "/api/imus/{serial}", A::viewer,
+       [](Api& a, const Call& c) {
+         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
+         return json_reply(200, unit_detail_json(c.args[0], rows, a.limits_.current()));
+       }},
+      {"GET", "/api/imus/{serial}/history.csv", A::viewer,
+       [](Api& a, const Call& c) {
+         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
+         HttpReply r;
+         r.body = unit_history_csv(rows);
+         r.content_type = "text/csv; charset=utf-8";
+         r.headers.emplace_back("Cache-Control", "no-store");
+         r.headers.emplace_back("Content-Disposition",
+                                "attachment; filename=\"imu-" + file_name_part(c.args[0]) + "-history.csv\"");
+         return r;
+       }},
+      {"GET", "/api/campaigns/{id}", A::viewer, [](Api& a, const Call& c) { return a.campaign_detail(c.id); }},
+      {"GET", "/api/campaigns/{id}/model", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_model(c.id, c.target.query); }},
+      {"GET", "/api/campaigns/{id}/progress", A::viewer, [](Api& a, const Call& c) { return a.campaign_progress(c.id); }},
+      {"GET", "/api/campaigns/{id}/recording", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_recording(c.id, c.request.method == "HEAD"); }},
+      {"GET", "/api/campaigns/{id}/series", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_series(c.id, c.target.query); }},
+      {"GET", "/api/campaigns/{id}/allan", A::viewer, [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "allan"); }},
+      {"GET", "/api/campaigns/{id}/thermal", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "thermal"); }},
+      {"GET", "/api/campaigns/{id}/evaluation", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "evaluation"); }},
+      {"GET", "/api/campaigns/{id}/events.csv", A::viewer, [](Api& a, const Call& c) { return a.campaign_events_csv(c.id); }},
+      {"GET", "/api/campaigns/{id}/certificate", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_certificate(c.id); }},
+      {"GET", "/api/campaigns/{id}/report", A::viewer, [](Api& a, const Call& c) { return a.campaign_report(c.id); }},
+      {"POST", "/api/campaigns/{id}/accept", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_accept(c.id, c.request, *c.who); }},
+      {"POST", "/api/campaigns/{id}/prompt", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_prompt(c.id, c.request, *c.who); }},
+      {"POST", "/api/campaigns/{id}/{command}", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_command(c.id, c.args[1], c.request, *c.who); }},
   };
+  return table;
+}
 
-  if (path == "/api/login") {
-    if (auto r = only("POST")) return *r;
-    return login(request);
-  }
-  if (path == "/api/logout") {
-    if (auto r = only("POST")) return *r;
-    return logout(request);
-  }
-
-  // For monitoring and systemd: no authentication, no details (whoever can reach the port may ask).
-  if (path == "/api/health") {
-    if (auto r = only("GET")) return *r;
-    if (shutting_down_) return json_reply(503, {{"status", "shutting down"}});
-    return json_reply(200, {{"status", "ok"}});
-  }
-
-  const auto who = authenticate(request, false);
-  if (!who) {
-    HttpReply r = error_reply(401, "authentication required");
-    r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"imucald\"");
-    return r;
-  }
-  // Every POST changes something except validation and prediction (reads with a body).
-  const bool mutation = method != "GET" && method != "HEAD" && path != "/api/campaigns/validate" &&
-                        path != "/api/campaigns/plan";
-  if (mutation && who->role != Role::Operator) return error_reply(403, "operator role required");
-  if (mutation && shutting_down_) return error_reply(503, "the daemon is shutting down");
-
-  if (path == "/api/me") {
-    if (auto r = only("GET")) return *r;
-    return json_reply(200, {{"user", who->user}, {"role", to_string(who->role)}, {"via", who->via}});
-  }
-  if (path == "/api/status") {
-    if (auto r = only("GET")) return *r;
-    return json_reply(200, status());
-  }
-  if (path == "/api/programs") {
-    if (auto r = only("GET")) return *r;
-    return json_reply(200, {{"programs", programs_}});
-  }
-  if (path == "/api/suspenders") {
-    // The conditions that hold a run, with the daemon's settings (a campaign may set its own:
-    // `suspenders` in its JSON).
-    if (auto r = only("GET")) return *r;
-    return json_reply(200, {{"suspenders", Suspenders(config_.suspenders).describe()},
-                            {"settings",
-                             {{"settle_s", config_.suspenders.settle_s},
-                              {"frame_timeout_s", config_.suspenders.frame_timeout_s},
-                              {"chamber_persist_s", config_.suspenders.chamber_persist_s}}}});
-  }
-  if (path == "/api/campaigns/validate") {
-    if (auto r = only("POST")) return *r;
-    return validate_campaign(request);
-  }
-  if (path == "/api/campaigns/plan") {
-    if (auto r = only("POST")) return *r;
-    return plan_campaign(request);
-  }
-  if (path == "/api/campaigns") {
-    if (method == "GET" || method == "HEAD") return list_campaigns(query);
-    if (method == "POST") return create_campaign(request);
-    HttpReply r = error_reply(405, method + " is not allowed on " + path);
-    r.headers.emplace_back("Allow", "GET, POST");
-    return r;
-  }
-  if (path == "/api/limits") {
-    if (method == "GET" || method == "HEAD") {
-      json doc = limits_.document();
-      doc["source"] = limits_.current().source;
-      return json_reply(200, doc);
+HttpReply Api::handle(const ApiRequest& request) {
+  const auto target = parse_target(request.target);
+  if (!target) return error_reply(400, "malformed URL");
+  const std::string& path = target->path;
+  const std::string& method = request.method;
+  try {
+    // The routes of this path (the most specific pattern), then the one of this method.
+    std::vector<std::pair<const Route*, std::vector<std::string>>> on_path;
+    int best = -1;
+    for (const Route& r : routes()) {
+      auto m = match_route(r.pattern, target->segments);
+      if (!m || m->second < best) continue;
+      if (m->second > best) on_path.clear();
+      best = m->second;
+      on_path.emplace_back(&r, std::move(m->first));
     }
-    if (method == "PUT") return replace_limits(request, *who);
-    HttpReply r = error_reply(405, method + " is not allowed on " + path);
-    r.headers.emplace_back("Allow", "GET, PUT");
-    return r;
+    const bool open = !on_path.empty() && std::all_of(on_path.begin(), on_path.end(), [](const auto& r) {
+      return r.first->access == Route::Access::open;
+    });
+    std::optional<Principal> who;
+    if (!open) {
+      who = authenticate(request, false);
+      if (!who) {
+        HttpReply r = error_reply(401, "authentication required");
+        r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"imucald\"");
+        return r;
+      }
+    }
+    if (on_path.empty()) return error_reply(404, "no such endpoint: " + path);
+    const auto* chosen = static_cast<const std::pair<const Route*, std::vector<std::string>>*>(nullptr);
+    std::string allow;
+    for (const auto& r : on_path) {
+      allow += (allow.empty() ? "" : ", ") + std::string(r.first->method);
+      if (method == r.first->method || (method == "HEAD" && std::string_view(r.first->method) == "GET")) chosen = &r;
+    }
+    // Every other method changes something: an operator's, and not while shutting down.
+    const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->first->access != Route::Access::operator_);
+    if (!open && !reads && who->role != Role::Operator) return error_reply(403, "operator role required");
+    if (!open && !reads && shutting_down_) return error_reply(503, "the daemon is shutting down");
+    if (!chosen) {
+      HttpReply r = error_reply(405, method + " is not allowed on " + path);
+      r.headers.emplace_back("Allow", allow);
+      return r;
+    }
+    const Route& route = *chosen->first;
+    Call call{request, *target, chosen->second};
+    call.who = who ? &*who : nullptr;
+    if (std::string_view(route.pattern).find("{id}") != std::string_view::npos) {
+      const auto id = parse_id(call.args.front());
+      if (!id) return error_reply(404, "no campaign '" + call.args.front() + "'");
+      call.id = *id;
+    }
+    return route.handle(*this, call);
+  } catch (const std::exception& e) {
+    spdlog::error("{} {}: {}", method, path, e.what());
+    return error_reply(500, std::string("internal error: ") + e.what());
   }
-  if (path == "/api/compare") {
-    if (auto r = only("GET")) return *r;
-    return compare_campaigns(query);
-  }
-  const auto parts = split_path(path);
-  if (path == "/api/alarms") {
-    if (auto r = only("GET")) return *r;
-    return list_alarms(query);
-  }
-  if (parts.size() >= 3 && parts[0] == "api" && parts[1] == "alarms") {
-    if (parts.size() != 4 || parts[3] != "ack") return error_reply(404, "no such endpoint: " + path + " (POST /api/alarms/{id}/ack)");
-    if (auto r = only("POST")) return *r;
-    return acknowledge_alarm(parts[2], *who);
-  }
-  if (path == "/api/imus") {
-    if (auto r = only("GET")) return *r;
-    return json_reply(200, unit_list_json(db_.unit_campaigns(std::nullopt), limits_.current()));
-  }
-  if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "imus") {
-    if (auto r = only("GET")) return *r;
-    std::string serial;
-    if (!percent_decode(parts[2], serial, false)) return error_reply(400, "malformed serial in the URL");
-    const auto rows = db_.unit_campaigns(serial);
-    if (rows.empty()) return error_reply(404, "no campaign names the unit '" + serial + "'");
-    if (parts.size() == 3) return json_reply(200, unit_detail_json(serial, rows, limits_.current()));
-    if (parts[3] != "history.csv") return error_reply(404, "no such endpoint: " + path);
-    HttpReply r;
-    r.body = unit_history_csv(rows);
-    r.content_type = "text/csv; charset=utf-8";
-    r.headers.emplace_back("Cache-Control", "no-store");
-    r.headers.emplace_back("Content-Disposition", "attachment; filename=\"imu-" + file_name_part(serial) + "-history.csv\"");
-    return r;
-  }
-  if (parts.size() >= 3 && parts.size() <= 4 && parts[0] == "api" && parts[1] == "campaigns") {
-    const auto id = parse_id(parts[2]);
-    if (!id) return error_reply(404, "no campaign '" + parts[2] + "'");
-    if (parts.size() == 3) {
-      if (auto r = only("GET")) return *r;
-      return campaign_detail(*id);
-    }
-    const std::string& action = parts[3];
-    if (action == "model") {
-      if (auto r = only("GET")) return *r;
-      return campaign_model(*id, query);
-    }
-    if (action == "progress") {
-      if (auto r = only("GET")) return *r;
-      return campaign_progress(*id);
-    }
-    if (action == "recording") {
-      if (auto r = only("GET")) return *r;
-      return campaign_recording(*id, method == "HEAD");
-    }
-    if (action == "series") {
-      if (auto r = only("GET")) return *r;
-      return campaign_series(*id, query);
-    }
-    if (action == "allan" || action == "thermal" || action == "evaluation") {
-      if (auto r = only("GET")) return *r;
-      return campaign_analysis(*id, action);
-    }
-    if (action == "events.csv") {
-      if (auto r = only("GET")) return *r;
-      return campaign_events_csv(*id);
-    }
-    if (action == "certificate") {
-      if (auto r = only("GET")) return *r;
-      return campaign_certificate(*id);
-    }
-    if (action == "report") {
-      if (auto r = only("GET")) return *r;
-      return campaign_report(*id);
-    }
-    if (action == "accept") {
-      if (auto r = only("POST")) return *r;
-      return campaign_accept(*id, request, *who);
-    }
-    if (action == "prompt") {
-      if (auto r = only("POST")) return *r;
-      return campaign_prompt(*id, request, *who);
-    }
-    if (parse_command(action)) {
-      if (auto r = only("POST")) return *r;
-      return campaign_command(*id, action, request, *who);
-    }
-  }
-  return error_reply(404, "no such endpoint: " + path);
 }
 
 HttpReply Api::login(const ApiRequest& request) {

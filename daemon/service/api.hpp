@@ -11,6 +11,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -53,7 +54,8 @@ class Api {
   void set_event_listener(std::function<void(const nlohmann::json&)> listener);
 
  private:
-  HttpReply route(const ApiRequest& request, const std::string& path, const std::map<std::string, std::string>& query);
+  struct Route;  // one endpoint: method, path pattern, handler (api.cpp)
+  static const std::vector<Route>& routes();
   HttpReply login(const ApiRequest& request);
   HttpReply logout(const ApiRequest& request);
   HttpReply list_campaigns(const std::map<std::string, std::string>& query);
@@ -122,7 +124,14 @@ class Api {
 
 // The session id in a Cookie header, or empty.
 std::string session_from_cookie(const std::string& cookie_header);
-// Splits "/a/b?x=1&y=2" into the path and the decoded query; false when malformed.
-bool split_target(const std::string& target, std::string& path, std::map<std::string, std::string>& query);
+// A request target parsed (Boost.URL): the path as received, its segments percent-decoded (a
+// trailing empty one dropped), and the query's parameters decoded ('+' is a space). Nothing for a
+// malformed target (a bad percent escape).
+struct Target {
+  std::string path;
+  std::vector<std::string> segments;
+  std::map<std::string, std::string> query;
+};
+std::optional<Target> parse_target(const std::string& target);
 
 }  // namespace imucal::daemon

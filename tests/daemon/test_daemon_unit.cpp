@@ -500,13 +500,14 @@ TEST(Auth, SessionsAndThrottling) {
 }
 
 TEST(Api, TargetsAndCookies) {
-  std::string path;
-  std::map<std::string, std::string> q;
-  ASSERT_TRUE(split_target("/api/campaigns?limit=5&x=a%20b+c", path, q));
-  EXPECT_EQ(path, "/api/campaigns");
-  EXPECT_EQ(q["limit"], "5");
-  EXPECT_EQ(q["x"], "a b c");
-  EXPECT_FALSE(split_target("/a?x=%zz", path, q));
+  const auto t = parse_target("/api/imus/FOG%2F7/?limit=5&x=a%20b+c");
+  ASSERT_TRUE(t);
+  EXPECT_EQ(t->path, "/api/imus/FOG%2F7/");
+  EXPECT_EQ(t->segments, (std::vector<std::string>{"api", "imus", "FOG/7"}));  // decoded, no trailing empty one
+  EXPECT_EQ(t->query.at("limit"), "5");
+  EXPECT_EQ(t->query.at("x"), "a b c");
+  EXPECT_FALSE(parse_target("/a?x=%zz"));
+  EXPECT_FALSE(parse_target("/a/%zz"));
   EXPECT_EQ(session_from_cookie("a=1; imucal_session=abc; b=2"), "abc");
   EXPECT_EQ(session_from_cookie("imucal_sessionx=1"), "");
 }

@@ -413,6 +413,24 @@ TEST(CanImuFuzz, RandomLinkTrafficIsCountedNeverDelivered) {
 // The KVH 1750 frames (kvh-1750: float32 delta angles in rad, accelerations in g, a 7-bit counter,
 // CRC-32/MPEG-2) on a serial line: a pseudo-terminal pair.
 
+// A reader descheduled for longer than the 7-bit counter's wrap (128 samples: 256 ms at 500 Hz)
+// reads its backlog at once. The frames read together waited together: the stall must not be
+// taken for 128 lost samples (every sample keeps the content of its sequence number), and what
+// the line really dropped (a pseudo-terminal holds a few kB) is counted as lost.
+TEST(KvhSerial, AReaderStalledLongerThanAWrapCountsItsBacklogRight) {
+  Rig rig(kvh(500.0));
+  rig.up();
+  ImuBatch all = rig.collect(0.3);
+  std::this_thread::sleep_for(400ms);  // 200 samples, 7.2 kB on the line
+  const ImuBatch more = rig.collect(0.3);
+  all.samples.insert(all.samples.end(), more.samples.begin(), more.samples.end());
+  ASSERT_GT(all.samples.size(), 250u);
+  rig.expect_truth(all);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_EQ(c.samples_delivered + c.samples_lost, all.samples.back().sequence - all.samples.front().sequence + 1);
+  EXPECT_LT(c.samples_lost, 128u) << "a whole wrap counted as lost";
+}
+
 TEST(KvhSerial, StreamsOverAPseudoTerminalWithThePhysicsInIt) {
   Rig rig(kvh());
   rig.up();
