@@ -201,6 +201,34 @@ struct Rig {
   }
 };
 
+// A client on the table's port that types lines itself, as a person with a terminal would.
+class RawClient {
+ public:
+  explicit RawClient(int port) : fd_(::socket(AF_INET, SOCK_STREAM, 0)) {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(static_cast<std::uint16_t>(port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+  }
+  ~RawClient() { ::close(fd_); }
+  RawClient(const RawClient&) = delete;
+  RawClient& operator=(const RawClient&) = delete;
+  bool connected() const { return connected_; }
+  // Sends `line` as it is and returns the reply up to its '\n' (a '\r' before it kept).
+  std::string ask(const std::string& line) {
+    (void)::send(fd_, line.data(), line.size(), MSG_NOSIGNAL);
+    std::string reply;
+    char ch;
+    while (::recv(fd_, &ch, 1, 0) == 1 && ch != '\n') reply += ch;
+    return reply;
+  }
+
+ private:
+  int fd_;
+  bool connected_ = false;
+};
+
 }  // namespace
 
 TEST(TcpTable, LifecycleConfiguresLimitsAndClosesTheInterlock) {
@@ -352,24 +380,13 @@ TEST(TcpTable, BadCommandsGetErrorRepliesAndBadArgumentsNeverLeave) {
   EXPECT_EQ(rig.driver.demand_position(0, std::nan("")).code(), DriverErrc::invalid_argument);
   EXPECT_EQ(rig.driver.set_limits(0, TableMode::rate, {5.0, -5.0, 1.0, 1.0}).code(), DriverErrc::invalid_argument);
   // A raw client: unknown command, bad arguments, an over-long line.
-  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<std::uint16_t>(rig.table.port()));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-  auto ask = [&](const std::string& line) {
-    (void)::send(s, line.data(), line.size(), MSG_NOSIGNAL);
-    std::string reply;
-    char ch;
-    while (::recv(s, &ch, 1, 0) == 1 && ch != '\n') reply += ch;
-    return reply;
-  };
+  RawClient client(rig.table.port());
+  ASSERT_TRUE(client.connected());
+  auto ask = [&](const std::string& line) { return client.ask(line); };
   EXPECT_EQ(ask(":FOO:BAR 1\n").rfind("ERR 100,", 0), 0u);
   EXPECT_EQ(ask(":DEM:RATE 7,1\n").rfind("ERR 101,", 0), 0u);
   EXPECT_EQ(ask(":READ:POS?\r\n").rfind("POS ", 0), 0u);
   EXPECT_EQ(ask(std::string(2000, 'A') + "\n").rfind("ERR 100,", 0), 0u);
-  ::close(s);
 }
 
 TEST(TcpTable, DroppedConnectionIsReportedThenReconnected) {
@@ -523,24 +540,13 @@ TEST(TcpTable, ATableSpeakingADialectOnlyTheTestDefinesRunsEveryCommand) {
   ASSERT_TRUE(rig.driver.safe_stop());
   EXPECT_EQ(rig.driver.read_status()->interlock, InterlockState::open);
   // The wire is the dialect's: a raw client sees its line end and its replies.
-  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<std::uint16_t>(rig.table.port()));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-  auto ask = [&](const std::string& line) {
-    (void)::send(s, line.data(), line.size(), MSG_NOSIGNAL);
-    std::string reply;
-    char ch;
-    while (::recv(s, &ch, 1, 0) == 1 && ch != '\n') reply += ch;
-    return reply;
-  };
+  RawClient client(rig.table.port());
+  ASSERT_TRUE(client.connected());
+  auto ask = [&](const std::string& line) { return client.ask(line); };
   EXPECT_EQ(ask("WHO\r\n"), "IMUCAL,SIM-TABLE,0,1.0\r");
   EXPECT_EQ(ask("STATE\r\n").rfind("#", 0), 0u);
   EXPECT_EQ(ask(":READ:POS?\r\n").rfind("!E1 ", 0), 0u);  // the other dialect is unknown here
   EXPECT_EQ(ask("D GOTO 1\r\n").rfind("!E2 ", 0), 0u);
-  ::close(s);
 }
 
 TEST(TcpTable, ADialectIsConfiguredByNameOrFile) {
