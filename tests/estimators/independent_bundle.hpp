@@ -1,6 +1,6 @@
 // A test-only generator of `imucal-recording/1` bundles (meta.json, frames.csv, truth.json),
 // written from the spec's CONVENTIONS.md and formats.md alone. It shares no code with the
-// project's simulator (drivers/sim), its motion programs (motion_programs/), the table and Earth
+// project's simulator (sim/), its motion programs (motion_programs/), the table and Earth
 // functions (core/table, core/earth) or the sensor model (core/imu_model): its own quaternions,
 // its own Earth rate and normal gravity, its own table motion and its own sensor-error model.
 // Only Eigen's plain vectors and nlohmann::json are shared, as libraries.
