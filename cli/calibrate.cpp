@@ -1,4 +1,5 @@
-// imucal calibrate: the calibration pipeline (pipeline/pipeline.hpp) on a stored run, and what each stage says.
+// imucal calibrate: the calibration pipeline (pipeline/pipeline.hpp) on a stored run, and what each
+// stage says.
 #include "cli/commands.hpp"
 
 #include <algorithm>

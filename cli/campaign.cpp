@@ -6,6 +6,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/service/campaign_runner.hpp"
+
 namespace imucal::cli {
 
 int run_campaign(const std::string& file, const daemon::CampaignRunOptions& options, bool json) {

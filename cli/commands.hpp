@@ -8,9 +8,14 @@
 #include <string>
 #include <vector>
 
-#include "daemon/service/campaign_runner.hpp"
-#include "plan/optimize.hpp"
-#include "plan/plan.hpp"
+// Declared only: the heavy headers (the pipeline, the estimators) stay in the files that use them.
+namespace imucal::plan {
+struct Options;
+struct OptimizeOptions;
+}  // namespace imucal::plan
+namespace imucal::daemon {
+struct CampaignRunOptions;
+}  // namespace imucal::daemon
 
 namespace imucal::cli {
 

@@ -1,4 +1,5 @@
-// imucal compare: a calibration result against the truth of a simulated run, coefficient by coefficient.
+// imucal compare: a calibration result against the truth of a simulated run, coefficient by
+// coefficient.
 #include "cli/commands.hpp"
 
 #include <cstdio>

@@ -9,8 +9,11 @@
 #include "bench/storage_bench.hpp"
 #include "cli/commands.hpp"
 #include "core/units.hpp"
+#include "daemon/service/campaign_runner.hpp"
 #include "daemon/service/command_line.hpp"
 #include "pipeline/pipeline.hpp"
+#include "plan/optimize.hpp"
+#include "plan/plan.hpp"
 
 using namespace imucal;
 

@@ -1,4 +1,5 @@
-// imucal plan: the predicted 1-sigma of every coefficient before the table moves, and the program search.
+// imucal plan: the predicted 1-sigma of every coefficient before the table moves, and the program
+// search.
 #include "cli/commands.hpp"
 
 #include <algorithm>

@@ -1,4 +1,5 @@
-// imucal sim-devices: the simulated table controller, chamber controller and IMU standalone on real addresses.
+// imucal sim-devices: the simulated table controller, chamber controller and IMU standalone on real
+// addresses.
 #include "cli/commands.hpp"
 
 #include <signal.h>

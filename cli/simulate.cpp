@@ -1,4 +1,5 @@
-// imucal simulate: a motion program run by the physics simulator with a truth IMU (and a chamber profile driving the temperatures) into a run database.
+// imucal simulate: a motion program run by the physics simulator with a truth IMU (and a chamber
+// profile driving the temperatures) into a run database.
 #include "cli/commands.hpp"
 
 #include <cstdio>

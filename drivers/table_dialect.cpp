@@ -161,10 +161,11 @@ int token_index(const std::array<std::string, N>& tokens, std::string_view s) {
   return -1;
 }
 
+// "1, 2 or 3".
 template <std::size_t N>
-std::string tokens_text(const std::array<std::string, N>& tokens, std::size_t from = 0) {
+std::string tokens_text(const std::array<std::string, N>& tokens) {
   std::string s;
-  for (std::size_t i = from; i < N; ++i) s += (i == from ? "" : i + 1 == N ? " or " : ", ") + tokens[i];
+  for (std::size_t i = 0; i < N; ++i) s += (i == 0 ? "" : i + 1 == N ? " or " : ", ") + tokens[i];
   return s;
 }
 
@@ -216,7 +217,7 @@ std::optional<std::vector<std::string_view>> match(const Template& t, std::strin
   return captures;
 }
 
-// The value of placeholder `name` among `t`'s captures (empty view when the template has none).
+// The value of placeholder `name` among `t`'s captures (nothing when the template has none).
 std::optional<std::string_view> capture(const Template& t, const std::vector<std::string_view>& caps,
                                         std::string_view name) {
   std::size_t k = 0;

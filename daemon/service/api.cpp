@@ -302,9 +302,16 @@ std::vector<std::string_view> pattern_segments(std::string_view pattern) {
   return out;
 }
 
-// The placeholders' segments when `segments` match `pattern`, with its count of literal segments.
-std::optional<std::pair<std::vector<std::string>, int>> match_route(std::string_view pattern,
-                                                                    const std::vector<std::string>& segments) {
+// A route whose pattern matches a path: the placeholders' segments, and how many of the
+// pattern's segments are literal (the most specific match wins).
+struct Matched {
+  const Api::Route* route = nullptr;
+  std::vector<std::string> args;
+  int literal = 0;
+};
+
+std::optional<Matched> match_route(const Api::Route& route, const std::vector<std::string>& segments) {
+  const std::string_view pattern = route.pattern;
   const auto parts = pattern_segments(pattern);
   if (parts.size() != segments.size()) return std::nullopt;
   std::vector<std::string> args;
@@ -319,7 +326,7 @@ std::optional<std::pair<std::vector<std::string>, int>> match_route(std::string_
       return std::nullopt;
     }
   }
-  return std::pair{std::move(args), literal};
+  return Matched{&route, std::move(args), literal};
 }
 
 }  // namespace
@@ -424,17 +431,15 @@ HttpReply Api::handle(const ApiRequest& request) {
   const std::string& method = request.method;
   try {
     // The routes of this path (the most specific pattern), then the one of this method.
-    std::vector<std::pair<const Route*, std::vector<std::string>>> on_path;
-    int best = -1;
+    std::vector<Matched> on_path;
     for (const Route& r : routes()) {
-      auto m = match_route(r.pattern, target->segments);
-      if (!m || m->second < best) continue;
-      if (m->second > best) on_path.clear();
-      best = m->second;
-      on_path.emplace_back(&r, std::move(m->first));
+      auto m = match_route(r, target->segments);
+      if (!m || (!on_path.empty() && m->literal < on_path.front().literal)) continue;
+      if (!on_path.empty() && m->literal > on_path.front().literal) on_path.clear();
+      on_path.push_back(std::move(*m));
     }
-    const bool open = !on_path.empty() && std::all_of(on_path.begin(), on_path.end(), [](const auto& r) {
-      return r.first->access == Route::Access::open;
+    const bool open = !on_path.empty() && std::all_of(on_path.begin(), on_path.end(), [](const Matched& m) {
+      return m.route->access == Route::Access::open;
     });
     std::optional<Principal> who;
     if (!open) {
@@ -446,14 +451,14 @@ HttpReply Api::handle(const ApiRequest& request) {
       }
     }
     if (on_path.empty()) return error_reply(404, "no such endpoint: " + path);
-    const auto* chosen = static_cast<const std::pair<const Route*, std::vector<std::string>>*>(nullptr);
+    const Matched* chosen = nullptr;
     std::string allow;
-    for (const auto& r : on_path) {
-      allow += (allow.empty() ? "" : ", ") + std::string(r.first->method);
-      if (method == r.first->method || (method == "HEAD" && std::string_view(r.first->method) == "GET")) chosen = &r;
+    for (const Matched& m : on_path) {
+      allow += (allow.empty() ? "" : ", ") + std::string(m.route->method);
+      if (method == m.route->method || (method == "HEAD" && std::string_view(m.route->method) == "GET")) chosen = &m;
     }
     // Every other method changes something: an operator's, and not while shutting down.
-    const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->first->access != Route::Access::operator_);
+    const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->route->access != Route::Access::operator_);
     if (!open && !reads && who->role != Role::Operator) return error_reply(403, "operator role required");
     if (!open && !reads && shutting_down_) return error_reply(503, "the daemon is shutting down");
     if (!chosen) {
@@ -461,8 +466,8 @@ HttpReply Api::handle(const ApiRequest& request) {
       r.headers.emplace_back("Allow", allow);
       return r;
     }
-    const Route& route = *chosen->first;
-    Call call{request, *target, chosen->second};
+    const Route& route = *chosen->route;
+    Call call{request, *target, chosen->args};
     call.who = who ? &*who : nullptr;
     if (std::string_view(route.pattern).find("{id}") != std::string_view::npos) {
       const auto id = parse_id(call.args.front());

@@ -40,6 +40,7 @@ inline constexpr const char* kSessionCookie = "imucal_session";
 class Api {
  public:
   Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth);
+  struct Route;  // one endpoint: method, path pattern, access, handler (api.cpp)
 
   // Any /api/ request except the WebSocket.
   HttpReply handle(const ApiRequest& request);
@@ -54,7 +55,6 @@ class Api {
   void set_event_listener(std::function<void(const nlohmann::json&)> listener);
 
  private:
-  struct Route;  // one endpoint: method, path pattern, handler (api.cpp)
   static const std::vector<Route>& routes();
   HttpReply login(const ApiRequest& request);
   HttpReply logout(const ApiRequest& request);
