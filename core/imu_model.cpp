@@ -3,8 +3,6 @@
 #include <array>
 #include <cmath>
 #include <fstream>
-#include <initializer_list>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -167,35 +165,30 @@ CompensatedIncrements compensate_imu_increments(const GyroErrors& g, const Accel
 
 namespace model_json {
 
-[[noreturn]] void fail(const std::string& where, const std::string& what) {
-  throw std::runtime_error(where + ": " + what);
+ObjectReader section(const json& j, const std::string& where) {
+  return ObjectReader(j, where, ObjectReader::ThrowAtFirst{});
 }
 
-void check_keys(const json& j, const std::string& where, std::initializer_list<const char*> allowed) {
-  if (!j.is_object()) fail(where, "expected an object");
-  const std::set<std::string> ok(allowed.begin(), allowed.end());
-  for (const auto& [key, value] : j.items())
-    if (!ok.count(key)) fail(where, "unknown key '" + key + "' (a typo must not become a silent zero)");
+void fail(const ObjectReader& r, const std::string& path, const std::string& what) { r.fail(path + ": " + what); }
+
+double num(const ObjectReader& r, const json& v, const std::string& path) {
+  if (!v.is_number()) fail(r, path, "expected a number");
+  const double x = v.get<double>();
+  if (!std::isfinite(x)) fail(r, path, "not a finite number");
+  return x;
 }
 
-double num(const json& j, const std::string& where) {
-  if (!j.is_number()) fail(where, "expected a number");
-  const double v = j.get<double>();
-  if (!std::isfinite(v)) fail(where, "not a finite number");
-  return v;
+Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale) {
+  const json* a = r.get(key);
+  if (a == nullptr) return Eigen::Vector3d::Zero();
+  const std::string w = r.at(key);
+  if (!a->is_array() || a->size() != 3) fail(r, w, "expected an array of 3 numbers");
+  return Eigen::Vector3d(num(r, (*a)[0], w + "[0]"), num(r, (*a)[1], w + "[1]"), num(r, (*a)[2], w + "[2]")) * scale;
 }
 
-Eigen::Vector3d vec3(const json& j, const char* key, const std::string& where, double scale) {
-  if (!j.contains(key)) return Eigen::Vector3d::Zero();
-  const json& a = j.at(key);
-  const std::string w = where + "." + key;
-  if (!a.is_array() || a.size() != 3) fail(w, "expected an array of 3 numbers");
-  return Eigen::Vector3d(num(a[0], w + "[0]"), num(a[1], w + "[1]"), num(a[2], w + "[2]")) * scale;
-}
-
-double scalar(const json& j, const char* key, const std::string& where, double scale) {
-  if (!j.contains(key)) return 0.0;
-  return num(j.at(key), where + "." + key) * scale;
+double scalar(ObjectReader& r, const char* key, double scale) {
+  const json* v = r.get(key);
+  return v == nullptr ? 0.0 : num(r, *v, r.at(key)) * scale;
 }
 
 json arr(const Eigen::Vector3d& v, double scale) { return {v[0] * scale, v[1] * scale, v[2] * scale}; }
@@ -206,13 +199,13 @@ namespace {
 
 using namespace model_json;
 
-Misalignment misalignment_from(const json& j, const std::string& where) {
+Misalignment misalignment_from(ObjectReader& parent) {
   Misalignment m;
-  if (!j.contains("misalignment_arcsec")) return m;
-  const json& a = j.at("misalignment_arcsec");
-  const std::string w = where + ".misalignment_arcsec";
-  check_keys(a, w, {"xy", "xz", "yx", "yz", "zx", "zy"});
-  for (const MisalignmentKey& k : kMisalignmentKeys) m.*k.member = scalar(a, k.name, w, kArcsecToRad);
+  const json* a = parent.get("misalignment_arcsec");
+  if (a == nullptr) return m;
+  ObjectReader r = section(*a, parent.at("misalignment_arcsec"));
+  for (const MisalignmentKey& k : kMisalignmentKeys) m.*k.member = scalar(r, k.name, kArcsecToRad);
+  r.finish();
   return m;
 }
 
@@ -224,18 +217,19 @@ json misalignment_to(const Misalignment& m) {
 
 
 // 3x3 as three rows of three numbers (g_sensitivity_dph_per_g).
-Eigen::Matrix3d mat3(const json& j, const char* key, const std::string& where, double scale) {
-  if (!j.contains(key)) return Eigen::Matrix3d::Zero();
-  const json& m = j.at(key);
-  const std::string w = where + "." + key;
-  if (!m.is_array() || m.size() != 3) fail(w, "expected 3 rows of 3 numbers");
+Eigen::Matrix3d mat3(ObjectReader& parent, const char* key, double scale) {
+  const json* m = parent.get(key);
+  if (m == nullptr) return Eigen::Matrix3d::Zero();
+  const std::string w = parent.at(key);
+  if (!m->is_array() || m->size() != 3) fail(parent, w, "expected 3 rows of 3 numbers");
   Eigen::Matrix3d out;
   for (std::size_t r = 0; r < 3; ++r) {
+    const json& row = (*m)[r];
     const std::string wr = w + "[" + std::to_string(r) + "]";
-    if (!m[r].is_array() || m[r].size() != 3) fail(wr, "expected a row of 3 numbers");
+    if (!row.is_array() || row.size() != 3) fail(parent, wr, "expected a row of 3 numbers");
     for (std::size_t c = 0; c < 3; ++c)
       out(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) =
-          num(m[r][c], wr + "[" + std::to_string(c) + "]") * scale;
+          num(parent, row[c], wr + "[" + std::to_string(c) + "]") * scale;
   }
   return out;
 }
@@ -250,22 +244,22 @@ json mat3_to(const Eigen::Matrix3d& m, double scale) {
 // terms zero; rows of the matrix are the axes.
 constexpr std::array<const char*, 3> kAxisKeys = {"x", "y", "z"};
 
-Eigen::Matrix3d scale_nonlinear_from(const json& j, const std::string& where) {
+Eigen::Matrix3d scale_nonlinear_from(ObjectReader& parent) {
   Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
-  if (!j.contains("scale_nonlinear_ppm")) return c;
-  const json& o = j.at("scale_nonlinear_ppm");
-  const std::string w = where + ".scale_nonlinear_ppm";
-  check_keys(o, w, {"x", "y", "z"});
+  const json* o = parent.get("scale_nonlinear_ppm");
+  if (o == nullptr) return c;
+  ObjectReader r = section(*o, parent.at("scale_nonlinear_ppm"));
   for (int axis = 0; axis < 3; ++axis) {
     const char* key = kAxisKeys[static_cast<std::size_t>(axis)];
-    if (!o.contains(key)) continue;
-    const json& terms = o.at(key);
-    const std::string wa = w + "." + key;
-    if (!terms.is_array() || terms.empty() || terms.size() > 3)
-      fail(wa, "expected an array of 1 to 3 numbers (c1, c2, c3 in ppm)");
-    for (std::size_t k = 0; k < terms.size(); ++k)
-      c(axis, static_cast<Eigen::Index>(k)) = num(terms[k], wa + "[" + std::to_string(k) + "]") * kPpm;
+    const json* terms = r.get(key);
+    if (terms == nullptr) continue;
+    const std::string wa = r.at(key);
+    if (!terms->is_array() || terms->empty() || terms->size() > 3)
+      fail(r, wa, "expected an array of 1 to 3 numbers (c1, c2, c3 in ppm)");
+    for (std::size_t k = 0; k < terms->size(); ++k)
+      c(axis, static_cast<Eigen::Index>(k)) = num(r, (*terms)[k], wa + "[" + std::to_string(k) + "]") * kPpm;
   }
+  r.finish();
   return c;
 }
 
@@ -289,55 +283,52 @@ constexpr double kDphRthToRadpsRts = kDphToRadps / 60.0;
 constexpr double kMps2RthToMps2Rts = 1.0 / 60.0;
 
 GyroErrors gyro_from(const json& j, const std::string& w) {
-  check_keys(j, w, {"bias_dph", "scale_pos_ppm", "scale_neg_ppm", "misalignment_arcsec", "delay_us", "noise",
-                    "scale_nonlinear_ppm", "g_sensitivity_dph_per_g"});
+  ObjectReader r = section(j, w);
   GyroErrors g;
-  g.bias_radps = vec3(j, "bias_dph", w, kDphToRadps);
-  g.scale_pos = vec3(j, "scale_pos_ppm", w, kPpm);
-  g.scale_neg = vec3(j, "scale_neg_ppm", w, kPpm);
-  g.misalignment_rad = misalignment_from(j, w);
-  g.delay_s = vec3(j, "delay_us", w, kUsToS);
-  g.scale_nonlinear = scale_nonlinear_from(j, w);
-  g.g_sensitivity_radps_per_g = mat3(j, "g_sensitivity_dph_per_g", w, kDphToRadps);
-  if (j.contains("noise")) {
-    const json& n = j.at("noise");
-    const std::string wn = w + ".noise";
-    check_keys(n, wn, {"arw_deg_rth", "bias_instability_dph", "bias_corr_time_s", "bias_rw_dph_rth"});
-    g.noise.arw_rad_rts = scalar(n, "arw_deg_rth", wn, kDegRthToRadRts);
-    g.noise.bias_instability_radps = scalar(n, "bias_instability_dph", wn, kDphToRadps);
-    g.noise.bias_corr_time_s = scalar(n, "bias_corr_time_s", wn, 1.0);
-    g.noise.rate_random_walk_radps_rts = scalar(n, "bias_rw_dph_rth", wn, kDphRthToRadpsRts);
+  g.bias_radps = vec3(r, "bias_dph", kDphToRadps);
+  g.scale_pos = vec3(r, "scale_pos_ppm", kPpm);
+  g.scale_neg = vec3(r, "scale_neg_ppm", kPpm);
+  g.misalignment_rad = misalignment_from(r);
+  g.delay_s = vec3(r, "delay_us", kUsToS);
+  g.scale_nonlinear = scale_nonlinear_from(r);
+  g.g_sensitivity_radps_per_g = mat3(r, "g_sensitivity_dph_per_g", kDphToRadps);
+  if (const json* nj = r.get("noise")) {
+    ObjectReader n = section(*nj, r.at("noise"));
+    g.noise.arw_rad_rts = scalar(n, "arw_deg_rth", kDegRthToRadRts);
+    g.noise.bias_instability_radps = scalar(n, "bias_instability_dph", kDphToRadps);
+    g.noise.bias_corr_time_s = scalar(n, "bias_corr_time_s", 1.0);
+    g.noise.rate_random_walk_radps_rts = scalar(n, "bias_rw_dph_rth", kDphRthToRadpsRts);
+    n.finish();
   }
+  r.finish();
   return g;
 }
 
 AccelErrors accel_from(const json& j, const std::string& w) {
-  check_keys(j, w, {"bias_mps2", "scale_ppm", "misalignment_arcsec", "lever_arm_mm", "delay_us", "noise",
-                    "k2_ug_per_g2", "k3_ug_per_g3"});
+  ObjectReader r = section(j, w);
   AccelErrors a;
-  a.bias_mps2 = vec3(j, "bias_mps2", w, 1.0);
-  a.scale = vec3(j, "scale_ppm", w, kPpm);
-  a.misalignment_rad = misalignment_from(j, w);
-  a.delay_s = vec3(j, "delay_us", w, kUsToS);
+  a.bias_mps2 = vec3(r, "bias_mps2", 1.0);
+  a.scale = vec3(r, "scale_ppm", kPpm);
+  a.misalignment_rad = misalignment_from(r);
+  a.delay_s = vec3(r, "delay_us", kUsToS);
   // ug per g^2 (g^3) is 1e-6 of scale error per g (g^2): see AccelErrors.
-  a.k2_per_g = vec3(j, "k2_ug_per_g2", w, kPpm);
-  a.k3_per_g2 = vec3(j, "k3_ug_per_g3", w, kPpm);
-  if (j.contains("lever_arm_mm")) {
-    const json& l = j.at("lever_arm_mm");
-    const std::string wl = w + ".lever_arm_mm";
-    check_keys(l, wl, {"y", "z"});
-    a.lever_arm_y_m = vec3(l, "y", wl, kMmToM);
-    a.lever_arm_z_m = vec3(l, "z", wl, kMmToM);
+  a.k2_per_g = vec3(r, "k2_ug_per_g2", kPpm);
+  a.k3_per_g2 = vec3(r, "k3_ug_per_g3", kPpm);
+  if (const json* lj = r.get("lever_arm_mm")) {
+    ObjectReader l = section(*lj, r.at("lever_arm_mm"));
+    a.lever_arm_y_m = vec3(l, "y", kMmToM);
+    a.lever_arm_z_m = vec3(l, "z", kMmToM);
+    l.finish();
   }
-  if (j.contains("noise")) {
-    const json& n = j.at("noise");
-    const std::string wn = w + ".noise";
-    check_keys(n, wn, {"vrw_mps_rth", "bias_instability_mps2", "bias_corr_time_s", "bias_rw_mps2_rth"});
-    a.noise.vrw_mps_rts = scalar(n, "vrw_mps_rth", wn, kMpsRthToMpsRts);
-    a.noise.bias_instability_mps2 = scalar(n, "bias_instability_mps2", wn, 1.0);
-    a.noise.bias_corr_time_s = scalar(n, "bias_corr_time_s", wn, 1.0);
-    a.noise.accel_random_walk_mps2_rts = scalar(n, "bias_rw_mps2_rth", wn, kMps2RthToMps2Rts);
+  if (const json* nj = r.get("noise")) {
+    ObjectReader n = section(*nj, r.at("noise"));
+    a.noise.vrw_mps_rts = scalar(n, "vrw_mps_rth", kMpsRthToMpsRts);
+    a.noise.bias_instability_mps2 = scalar(n, "bias_instability_mps2", 1.0);
+    a.noise.bias_corr_time_s = scalar(n, "bias_corr_time_s", 1.0);
+    a.noise.accel_random_walk_mps2_rts = scalar(n, "bias_rw_mps2_rth", kMps2RthToMps2Rts);
+    n.finish();
   }
+  r.finish();
   return a;
 }
 
@@ -383,47 +374,60 @@ json accel_to(const AccelErrors& a, bool with_noise) {
 
 }  // namespace
 
+namespace {
+
+ImuModel model_from(const json& j, const std::string& source) {
+  ObjectReader r = section(j, source);
+  if (r.string("format") != std::string("imucal-imu-model/1"))
+    fail(r, source, "\"format\" must be \"imucal-imu-model/1\"");
+  ImuModel m;
+  if (const auto frame = r.string("frame")) {
+    m.frame = *frame;
+    if (m.frame != "instrument" && m.frame != "body")
+      fail(r, r.at("frame"), "must be \"instrument\" or \"body\", not \"" + m.frame + "\"");
+  }
+  if (const json* g = r.get("gyro")) m.gyro = gyro_from(*g, r.at("gyro"));
+  if (const json* a = r.get("accel")) m.accel = accel_from(*a, r.at("accel"));
+  if (const json* sj = r.get("sigma")) {
+    ObjectReader s = section(*sj, r.at("sigma"));
+    ImuErrorSet set;
+    if (const json* g = s.get("gyro")) set.gyro = gyro_from(*g, s.at("gyro"));
+    if (const json* a = s.get("accel")) set.accel = accel_from(*a, s.at("accel"));
+    s.finish();
+    m.sigma = set;
+  }
+  if (r.has("body_to_instrument_arcsec")) m.body_to_instrument_rad = vec3(r, "body_to_instrument_arcsec", kArcsecToRad);
+  if (const json* mj = r.get("mount")) {
+    ObjectReader mount = section(*mj, r.at("mount"));
+    m.mount_r0_p_m = vec3(mount, "r0_p_mm", kMmToM);
+    mount.finish();
+  }
+  if (const json* t = r.get("thermal")) m.thermal_json = t->dump();
+  json extra = json::object();
+  for (const char* k : {"serial", "status", "stages", "comment", "turn_on"})
+    if (const json* v = r.get(k)) extra[k] = *v;
+  // Checked here, kept as written: the turn-on terms are read where they are used (turn_on.hpp).
+  if (const json* t = r.get("turn_on")) turn_on_from_json(*t, r.at("turn_on"));
+  r.finish();
+  if (!extra.empty()) m.extra_json = extra.dump();
+  return m;
+}
+
+}  // namespace
+
 ImuModel imu_model_from_json_text(const std::string& text, const std::string& source) {
   json j;
   try {
     j = json::parse(text);
   } catch (const json::parse_error& e) {
-    fail(source, std::string("not valid JSON: ") + e.what());
+    throw std::runtime_error(source + ": not valid JSON: " + e.what());
   }
-  check_keys(j, source, {"format", "frame", "gyro", "accel", "sigma", "thermal", "body_to_instrument_arcsec",
-                         "mount", "serial", "status", "stages", "comment", "turn_on"});
-  if (!j.contains("format") || j.at("format") != "imucal-imu-model/1")
-    fail(source, "\"format\" must be \"imucal-imu-model/1\"");
-  ImuModel m;
-  if (j.contains("frame")) {
-    m.frame = j.at("frame").get<std::string>();
-    if (m.frame != "instrument" && m.frame != "body")
-      fail(source + ".frame", "must be \"instrument\" or \"body\", not \"" + m.frame + "\"");
+  // A model that is wrong is a runtime error of the file, whatever section found it.
+  try {
+    return model_from(j, source);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(e.what());
   }
-  if (j.contains("gyro")) m.gyro = gyro_from(j.at("gyro"), source + ".gyro");
-  if (j.contains("accel")) m.accel = accel_from(j.at("accel"), source + ".accel");
-  if (j.contains("sigma")) {
-    const json& s = j.at("sigma");
-    check_keys(s, source + ".sigma", {"gyro", "accel"});
-    ImuErrorSet set;
-    if (s.contains("gyro")) set.gyro = gyro_from(s.at("gyro"), source + ".sigma.gyro");
-    if (s.contains("accel")) set.accel = accel_from(s.at("accel"), source + ".sigma.accel");
-    m.sigma = set;
-  }
-  if (j.contains("body_to_instrument_arcsec"))
-    m.body_to_instrument_rad = vec3(j, "body_to_instrument_arcsec", source, kArcsecToRad);
-  if (j.contains("mount")) {
-    check_keys(j.at("mount"), source + ".mount", {"r0_p_mm"});
-    m.mount_r0_p_m = vec3(j.at("mount"), "r0_p_mm", source + ".mount", kMmToM);
-  }
-  if (j.contains("thermal")) m.thermal_json = j.at("thermal").dump();
-  json extra = json::object();
-  for (const char* k : {"serial", "status", "stages", "comment", "turn_on"})
-    if (j.contains(k)) extra[k] = j.at(k);
-  // Checked here, kept as written: the turn-on terms are read where they are used (turn_on.hpp).
-  if (j.contains("turn_on")) turn_on_from_json(j.at("turn_on"), source + ".turn_on");
-  if (!extra.empty()) m.extra_json = extra.dump();
-  return m;
 }
 
 ImuModel read_imu_model_file(const std::string& path) {

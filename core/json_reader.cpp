@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace imucal {
 
@@ -22,15 +23,33 @@ std::string json_type_name(const json& value) {
 }
 
 ObjectReader::ObjectReader(const json& object, std::string where, std::vector<std::string>& problems)
-    : where_(std::move(where)), problems_(problems) {
+    : where_(std::move(where)), problems_(&problems) {
   if (object.is_object()) {
     object_ = &object;
   } else {
-    problems_.push_back(where_ + " must be an object, not " + json_type_name(object));
+    problem((where_.empty() ? std::string("the document") : where_) + " must be an object, not " + json_type_name(object));
   }
 }
 
-ObjectReader::~ObjectReader() { finish(); }
+ObjectReader::ObjectReader(const json& object, std::string where, ThrowAtFirst mode)
+    : where_(std::move(where)), throw_prefix_(std::move(mode.prefix)) {
+  if (!object.is_object()) fail((where_.empty() ? std::string("the document") : where_) + " must be an object, not " + json_type_name(object));
+  object_ = &object;
+}
+
+ObjectReader::~ObjectReader() {
+  if (problems_ != nullptr) finish();
+}
+
+void ObjectReader::problem(const std::string& text) {
+  if (problems_ == nullptr) fail(text);
+  problems_->push_back(text);
+}
+
+void ObjectReader::fail(const std::string& text) const {
+  if (problems_ != nullptr) throw std::logic_error("ObjectReader::fail on a collecting reader: " + text);
+  throw std::invalid_argument(throw_prefix_ + text);
+}
 
 bool ObjectReader::has(const char* key) const { return object_ != nullptr && object_->contains(key); }
 
@@ -39,7 +58,7 @@ const json* ObjectReader::get(const char* key, bool required) {
   known_.insert(key);
   const auto it = object_->find(key);
   if (it == object_->end()) {
-    if (required) problems_.push_back(at(key) + " is required");
+    if (required) problem(at(key) + " is required");
     return nullptr;
   }
   return &*it;
@@ -49,12 +68,12 @@ std::optional<double> ObjectReader::number(const char* key, bool required) {
   const json* v = get(key, required);
   if (v == nullptr) return std::nullopt;
   if (!v->is_number()) {
-    problems_.push_back(at(key) + " must be a number, not " + json_type_name(*v));
+    problem(at(key) + " must be a number, not " + json_type_name(*v));
     return std::nullopt;
   }
   const double x = v->get<double>();
   if (!std::isfinite(x)) {
-    problems_.push_back(at(key) + " must be finite");
+    problem(at(key) + " must be finite");
     return std::nullopt;
   }
   return x;
@@ -65,7 +84,7 @@ std::optional<double> ObjectReader::number_in(const char* key, double min, std::
   if (!x) return std::nullopt;
   if (*x < min || (max && *x > *max)) {
     std::string range = max ? "between " + json(min).dump() + " and " + json(*max).dump() : "at least " + json(min).dump();
-    problems_.push_back(at(key) + " is " + json(*x).dump() + ", must be " + range);
+    problem(at(key) + " is " + json(*x).dump() + ", must be " + range);
     return std::nullopt;
   }
   return x;
@@ -75,13 +94,13 @@ std::optional<std::int64_t> ObjectReader::integer(const char* key, std::int64_t 
   const json* v = get(key, required);
   if (v == nullptr) return std::nullopt;
   if (!v->is_number_integer()) {
-    problems_.push_back(at(key) + " must be an integer, not " + json_type_name(*v));
+    problem(at(key) + " must be an integer, not " + json_type_name(*v));
     return std::nullopt;
   }
   // Unsigned values above int64 range read as negative here and fail the range check below.
   const auto x = v->get<std::int64_t>();
   if (x < min || x > max) {
-    problems_.push_back(at(key) + " is " + std::to_string(x) + ", must be between " + std::to_string(min) + " and " +
+    problem(at(key) + " is " + std::to_string(x) + ", must be between " + std::to_string(min) + " and " +
                         std::to_string(max));
     return std::nullopt;
   }
@@ -92,7 +111,7 @@ std::optional<std::string> ObjectReader::string(const char* key, bool required) 
   const json* v = get(key, required);
   if (v == nullptr) return std::nullopt;
   if (!v->is_string()) {
-    problems_.push_back(at(key) + " must be a string, not " + json_type_name(*v));
+    problem(at(key) + " must be a string, not " + json_type_name(*v));
     return std::nullopt;
   }
   return v->get<std::string>();
@@ -102,7 +121,7 @@ std::optional<bool> ObjectReader::boolean(const char* key, bool required) {
   const json* v = get(key, required);
   if (v == nullptr) return std::nullopt;
   if (!v->is_boolean()) {
-    problems_.push_back(at(key) + " must be true or false, not " + json_type_name(*v));
+    problem(at(key) + " must be true or false, not " + json_type_name(*v));
     return std::nullopt;
   }
   return v->get<bool>();
@@ -113,7 +132,7 @@ void ObjectReader::finish() {
   finished_ = true;
   for (const auto& [key, value] : object_->items()) {
     if (!key.empty() && key.front() == '_') continue;
-    if (known_.count(key) == 0) problems_.push_back(where_ + ": unknown key \"" + key + "\"");
+    if (known_.count(key) == 0) problem((where_.empty() ? "" : where_ + ": ") + "unknown key \"" + key + "\"");
   }
 }
 

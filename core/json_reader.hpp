@@ -1,7 +1,9 @@
 // Strict reading of JSON objects written by people (the daemon configuration, campaigns, API
-// bodies, device descriptions): every problem is collected with its location instead of stopping
-// at the first, an unknown key is a problem (a typo must not become a silent default), and keys
-// starting with '_' are comments (JSON has none) and ignored.
+// bodies, device descriptions): every problem names its location, an unknown key is a problem (a
+// typo must not become a silent default), and keys starting with '_' are comments (JSON has none)
+// and ignored. Two ways to report: collect every problem (a configuration is answered with all of
+// them at once), or throw at the first, for a description whose later checks need the values read
+// before (an IMU link's field offsets against its frame length).
 #pragma once
 
 #include <cstdint>
@@ -16,12 +18,19 @@ namespace imucal {
 
 class ObjectReader {
  public:
+  // Throw std::invalid_argument(prefix + problem) at the first problem.
+  struct ThrowAtFirst {
+    std::string prefix;  // names the document ("imu link 'kvh-1750': ")
+  };
+
   // `where` names the object in messages ("config", "campaign.chamber"). A non-object is reported
   // at once and every getter then returns nothing.
   ObjectReader(const nlohmann::json& object, std::string where, std::vector<std::string>& problems);
+  // Throwing: a required getter then never returns nothing, and the caller calls finish() itself.
+  ObjectReader(const nlohmann::json& object, std::string where, ThrowAtFirst mode);
   ObjectReader(const ObjectReader&) = delete;
   ObjectReader& operator=(const ObjectReader&) = delete;
-  // Reports the unknown keys (once).
+  // Collecting: reports the unknown keys (once). Throwing: nothing (a destructor must not throw).
   ~ObjectReader();
 
   bool is_object() const { return object_ != nullptr; }
@@ -41,13 +50,18 @@ class ObjectReader {
   void finish();
 
   const std::string& where() const { return where_; }
-  void problem(const std::string& text) { problems_.push_back(text); }
-  std::string at(const char* key) const { return where_ + "." + key; }
+  // Records the problem, or throws it when throwing.
+  void problem(const std::string& text);
+  // Throws the problem (prefixed); for readers that throw at the first problem only.
+  [[noreturn]] void fail(const std::string& text) const;
+  // The key's path: "where.key", or the key alone in a top-level reader whose `where` is empty.
+  std::string at(const char* key) const { return where_.empty() ? std::string(key) : where_ + "." + key; }
 
  private:
   const nlohmann::json* object_ = nullptr;
   std::string where_;
-  std::vector<std::string>& problems_;
+  std::vector<std::string>* problems_ = nullptr;  // null when throwing
+  std::string throw_prefix_;
   std::set<std::string> known_;
   bool finished_ = false;
 };

@@ -1,24 +1,27 @@
-// The readers the imucal-imu-model/1 JSON is parsed with (core/imu_model.cpp), shared with the
-// sections parsed elsewhere (core/turn_on.cpp), so that every section reports a wrong key or
-// value the same way: the path of what is wrong, then what.
+// The helpers the imucal-imu-model/1 JSON is read with (core/imu_model.cpp), shared with the
+// sections read elsewhere (core/turn_on.cpp). Every section is read by the one strict reader
+// (core/json_reader.hpp), throwing at the first problem: the path of what is wrong, then what.
 #pragma once
 
-#include <initializer_list>
 #include <string>
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::model_json {
 
-[[noreturn]] void fail(const std::string& where, const std::string& what);
-// An object whose keys are all in `allowed` (a typo must not become a silent zero).
-void check_keys(const nlohmann::json& j, const std::string& where, std::initializer_list<const char*> allowed);
-double num(const nlohmann::json& j, const std::string& where);  // a finite number
-// j[key] (three numbers) times scale; zero when absent.
-Eigen::Vector3d vec3(const nlohmann::json& j, const char* key, const std::string& where, double scale);
-// j[key] times scale; zero when absent.
-double scalar(const nlohmann::json& j, const char* key, const std::string& where, double scale);
+// A reader of the object `j` at `where` ("m.json.gyro"); its problems throw std::invalid_argument,
+// which imu_model_from_json_text() passes on as the model's std::runtime_error.
+ObjectReader section(const nlohmann::json& j, const std::string& where);
+// A problem with a value: "path: what".
+[[noreturn]] void fail(const ObjectReader& r, const std::string& path, const std::string& what);
+double num(const ObjectReader& r, const nlohmann::json& v, const std::string& path);  // a finite number
+// r[key] (three numbers) times scale; zero when absent.
+Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale);
+// r[key] times scale; zero when absent.
+double scalar(ObjectReader& r, const char* key, double scale);
 nlohmann::json arr(const Eigen::Vector3d& v, double scale);
 
 }  // namespace imucal::model_json

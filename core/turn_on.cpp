@@ -33,29 +33,32 @@ constexpr SensorKeys kAccelKeys{"bias_repeatability_mps2", "warm_up_mps2", 1.0};
 
 void read_sensor(const json& j, const std::string& where, const SensorKeys& k, bool is_sigma, Eigen::Vector3d& rep,
                  Eigen::Vector3d& warm, Eigen::Vector3d& tau) {
-  check_keys(j, where, {k.repeatability, k.warm_up, "warm_up_time_constant_s"});
-  rep = vec3(j, k.repeatability, where, k.to_si);
-  warm = vec3(j, k.warm_up, where, k.to_si);
-  tau = vec3(j, "warm_up_time_constant_s", where, 1.0);
+  ObjectReader r = section(j, where);
+  rep = vec3(r, k.repeatability, k.to_si);
+  warm = vec3(r, k.warm_up, k.to_si);
+  tau = vec3(r, "warm_up_time_constant_s", 1.0);
+  r.finish();
   for (int i = 0; i < 3; ++i) {
     const std::string at = "[" + std::to_string(i) + "]";
-    if (rep[i] < 0.0) fail(where + "." + k.repeatability + at, "must not be negative (a 1-sigma)");
-    if (tau[i] < 0.0) fail(where + ".warm_up_time_constant_s" + at, "must not be negative");
+    if (rep[i] < 0.0) fail(r, where + "." + k.repeatability + at, "must not be negative (a 1-sigma)");
+    if (tau[i] < 0.0) fail(r, where + ".warm_up_time_constant_s" + at, "must not be negative");
     if (!is_sigma && warm[i] != 0.0 && !(tau[i] > 0.0))
-      fail(where + ".warm_up_time_constant_s" + at, std::string("must be positive where ") + k.warm_up + " is not zero");
+      fail(r, where + ".warm_up_time_constant_s" + at, std::string("must be positive where ") + k.warm_up + " is not zero");
   }
 }
 
 TurnOnTerms terms_from(const json& j, const std::string& where, bool is_sigma) {
-  check_keys(j, where, is_sigma ? std::initializer_list<const char*>{"gyro", "accel"}
-                                : std::initializer_list<const char*>{"gyro", "accel", "sigma"});
+  ObjectReader r = section(j, where);
   TurnOnTerms t;
-  if (j.contains("gyro"))
-    read_sensor(j.at("gyro"), where + ".gyro", kGyroKeys, is_sigma, t.gyro_repeatability_radps, t.gyro_warm_up_radps,
+  if (const json* g = r.get("gyro"))
+    read_sensor(*g, r.at("gyro"), kGyroKeys, is_sigma, t.gyro_repeatability_radps, t.gyro_warm_up_radps,
                 t.gyro_time_constant_s);
-  if (j.contains("accel"))
-    read_sensor(j.at("accel"), where + ".accel", kAccelKeys, is_sigma, t.accel_repeatability_mps2,
-                t.accel_warm_up_mps2, t.accel_time_constant_s);
+  if (const json* a = r.get("accel"))
+    read_sensor(*a, r.at("accel"), kAccelKeys, is_sigma, t.accel_repeatability_mps2, t.accel_warm_up_mps2,
+                t.accel_time_constant_s);
+  // The value section holds its sigma; a sigma section holds no further one.
+  if (!is_sigma) r.get("sigma");
+  r.finish();
   return t;
 }
 

@@ -20,6 +20,7 @@
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
 #include "core/units.hpp"
 #include "estimators/held_back.hpp"
 
@@ -121,36 +122,27 @@ bool ThermalSection::has_models() const {
 
 namespace {
 
-[[noreturn]] void fail(const std::string& where, const std::string& what) {
-  throw std::runtime_error(where + ": " + what);
-}
+// The section is read with the one strict reader (core/json_reader.hpp), throwing at the first
+// problem; parse_thermal() passes it on as the model's std::runtime_error.
+[[noreturn]] void fail(const ObjectReader& r, const std::string& path, const std::string& what) { r.fail(path + ": " + what); }
 
-void check_keys(const json& j, const std::string& where, std::initializer_list<const char*> allowed) {
-  if (!j.is_object()) fail(where, "expected an object");
-  for (const auto& [key, value] : j.items()) {
-    bool ok = false;
-    for (const char* a : allowed) ok |= key == a;
-    if (!ok) fail(where, "unknown key \"" + key + "\"");
-  }
-}
-
-double number(const json& j, const std::string& where) {
-  if (!j.is_number()) fail(where, "expected a number");
+double number(const ObjectReader& r, const json& j, const std::string& where) {
+  if (!j.is_number()) fail(r, where, "expected a number");
   const double v = j.get<double>();
-  if (!std::isfinite(v)) fail(where, "not finite");
+  if (!std::isfinite(v)) fail(r, where, "not finite");
   return v;
 }
 
-std::vector<double> numbers(const json& j, const std::string& where) {
-  if (!j.is_array()) fail(where, "expected a list of numbers");
+std::vector<double> numbers(const ObjectReader& r, const json& j, const std::string& where) {
+  if (!j.is_array()) fail(r, where, "expected a list of numbers");
   std::vector<double> out;
-  for (std::size_t k = 0; k < j.size(); ++k) out.push_back(number(j[k], where + "[" + std::to_string(k) + "]"));
+  for (std::size_t k = 0; k < j.size(); ++k) out.push_back(number(r, j[k], where + "[" + std::to_string(k) + "]"));
   return out;
 }
 
-std::array<double, 2> range(const json& j, const std::string& where) {
-  const auto v = numbers(j, where);
-  if (v.size() != 2 || v[0] > v[1]) fail(where, "expected [low, high]");
+std::array<double, 2> range(const ObjectReader& r, const json& j, const std::string& where) {
+  const auto v = numbers(r, j, where);
+  if (v.size() != 2 || v[0] > v[1]) fail(r, where, "expected [low, high]");
   return {v[0], v[1]};
 }
 
@@ -166,69 +158,79 @@ int index_of(bool gyro, const std::string& group_key, const std::string& member)
 
 }  // namespace
 
+namespace {
+
+ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& throwing) {
+  ObjectReader r(j, "thermal", throwing);
+  ThermalSection s;
+  if (const auto format = r.string("format"); format && *format != "imucal-thermal/1")
+    fail(r, r.at("format"), "expected \"imucal-thermal/1\"");
+  if (const auto t = r.number("T_ref_C")) s.T_ref_C = *t;
+  if (const auto unit = r.string("dTdt_unit"); unit && *unit != "C/min")
+    fail(r, r.at("dTdt_unit"), "only \"C/min\" is defined (the rate polynomials are in C/min)");
+  if (const json* v = r.get("fitted_T_C")) s.fitted_T_C = range(r, *v, r.at("fitted_T_C"));
+  if (const json* v = r.get("fitted_dTdt_C_per_min"))
+    s.fitted_rate_C_per_min = range(r, *v, r.at("fitted_dTdt_C_per_min"));
+  r.get("comment");
+  for (const bool gyro : {true, false}) {
+    const char* triad = gyro ? "gyro" : "accel";
+    const json* tj = r.get(triad);
+    if (tj == nullptr) continue;
+    ObjectReader t(*tj, r.at(triad), throwing);
+    const auto groups = gyro ? std::vector<const char*>{"bias_dph", "scale_pos_ppm", "scale_neg_ppm", "misalignment_arcsec"}
+                             : std::vector<const char*>{"bias_mps2", "scale_ppm", "misalignment_arcsec"};
+    for (const char* group : groups) {
+      const json* members = t.get(group);
+      if (members == nullptr) continue;
+      ObjectReader g(*members, t.at(group), throwing);
+      for (const auto& [member, entry] : members->items()) {
+        const int i = index_of(gyro, group, member);
+        if (i < 0) fail(g, g.at(member.c_str()), "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
+        ObjectReader e(*g.get(member.c_str()), g.at(member.c_str()), throwing);
+        Poly& p = s.poly[static_cast<std::size_t>(i)];
+        if (const json* v = e.get("T")) p.T = numbers(e, *v, e.at("T"));
+        if (const json* v = e.get("dTdt")) p.dTdt = numbers(e, *v, e.at("dTdt"));
+        e.finish();
+      }
+    }
+    t.finish();
+  }
+  if (const json* oj = r.get("sim_oscillation")) {
+    ObjectReader o(*oj, r.at("sim_oscillation"), throwing);
+    Oscillation osc;
+    if (const auto v = o.number("gyro_bias_amplitude_dph")) osc.amplitude_dph = *v;
+    if (const auto v = o.number("period_s")) osc.period_s = *v;
+    if (const auto v = o.number("onset_C_per_min")) osc.onset_C_per_min = *v;
+    if (const auto v = o.number("full_C_per_min")) osc.full_C_per_min = *v;
+    if (const json* v = o.get("phase_deg")) {
+      const auto ph = numbers(o, *v, o.at("phase_deg"));
+      if (ph.size() != 3) fail(o, o.at("phase_deg"), "expected three numbers (gyro x, y, z)");
+      osc.phase_deg = {ph[0], ph[1], ph[2]};
+    }
+    o.finish();
+    if (osc.period_s <= 0) fail(o, o.at("period_s"), "must be positive");
+    if (osc.full_C_per_min <= osc.onset_C_per_min) fail(o, o.where(), "full_C_per_min must exceed onset_C_per_min");
+    s.sim_oscillation = osc;
+  }
+  r.finish();
+  return s;
+}
+
+}  // namespace
+
 ThermalSection parse_thermal(const std::string& text, const std::string& where0) {
-  const std::string where = where0 + ": thermal";
   json j;
   try {
     j = json::parse(text);
   } catch (const json::parse_error& e) {
-    fail(where, std::string("not valid JSON: ") + e.what());
+    throw std::runtime_error(where0 + ": thermal: not valid JSON: " + e.what());
   }
-  check_keys(j, where,
-             {"format", "T_ref_C", "dTdt_unit", "fitted_T_C", "fitted_dTdt_C_per_min", "gyro", "accel", "sim_oscillation",
-              "comment"});
-  ThermalSection s;
-  if (j.contains("format") && j.at("format") != "imucal-thermal/1")
-    fail(where + ".format", "expected \"imucal-thermal/1\"");
-  if (j.contains("T_ref_C")) s.T_ref_C = number(j.at("T_ref_C"), where + ".T_ref_C");
-  if (j.contains("dTdt_unit") && j.at("dTdt_unit") != "C/min")
-    fail(where + ".dTdt_unit", "only \"C/min\" is defined (the rate polynomials are in C/min)");
-  if (j.contains("fitted_T_C")) s.fitted_T_C = range(j.at("fitted_T_C"), where + ".fitted_T_C");
-  if (j.contains("fitted_dTdt_C_per_min"))
-    s.fitted_rate_C_per_min = range(j.at("fitted_dTdt_C_per_min"), where + ".fitted_dTdt_C_per_min");
-  for (const bool gyro : {true, false}) {
-    const char* triad = gyro ? "gyro" : "accel";
-    if (!j.contains(triad)) continue;
-    const json& t = j.at(triad);
-    const std::string tw = where + "." + triad;
-    if (gyro)
-      check_keys(t, tw, {"bias_dph", "scale_pos_ppm", "scale_neg_ppm", "misalignment_arcsec"});
-    else
-      check_keys(t, tw, {"bias_mps2", "scale_ppm", "misalignment_arcsec"});
-    for (const auto& [group, members] : t.items()) {
-      const std::string gw = tw + "." + group;
-      if (!members.is_object()) fail(gw, "expected an object keyed by axis");
-      for (const auto& [member, entry] : members.items()) {
-        const std::string mw = gw + "." + member;
-        const int i = index_of(gyro, group, member);
-        if (i < 0) fail(mw, "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
-        check_keys(entry, mw, {"T", "dTdt"});
-        Poly& p = s.poly[static_cast<std::size_t>(i)];
-        if (entry.contains("T")) p.T = numbers(entry.at("T"), mw + ".T");
-        if (entry.contains("dTdt")) p.dTdt = numbers(entry.at("dTdt"), mw + ".dTdt");
-      }
-    }
+  // A thermal section that is wrong is a runtime error of the model file, as in imu_model.cpp.
+  try {
+    return thermal_from(j, ObjectReader::ThrowAtFirst{where0 + ": "});
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(e.what());
   }
-  if (j.contains("sim_oscillation")) {
-    const json& o = j.at("sim_oscillation");
-    const std::string ow = where + ".sim_oscillation";
-    check_keys(o, ow, {"gyro_bias_amplitude_dph", "period_s", "onset_C_per_min", "full_C_per_min", "phase_deg"});
-    Oscillation osc;
-    if (o.contains("gyro_bias_amplitude_dph"))
-      osc.amplitude_dph = number(o.at("gyro_bias_amplitude_dph"), ow + ".gyro_bias_amplitude_dph");
-    if (o.contains("period_s")) osc.period_s = number(o.at("period_s"), ow + ".period_s");
-    if (o.contains("onset_C_per_min")) osc.onset_C_per_min = number(o.at("onset_C_per_min"), ow + ".onset_C_per_min");
-    if (o.contains("full_C_per_min")) osc.full_C_per_min = number(o.at("full_C_per_min"), ow + ".full_C_per_min");
-    if (o.contains("phase_deg")) {
-      const auto ph = numbers(o.at("phase_deg"), ow + ".phase_deg");
-      if (ph.size() != 3) fail(ow + ".phase_deg", "expected three numbers (gyro x, y, z)");
-      osc.phase_deg = {ph[0], ph[1], ph[2]};
-    }
-    if (osc.period_s <= 0) fail(ow + ".period_s", "must be positive");
-    if (osc.full_C_per_min <= osc.onset_C_per_min) fail(ow, "full_C_per_min must exceed onset_C_per_min");
-    s.sim_oscillation = osc;
-  }
-  return s;
 }
 
 std::string thermal_to_json_text(const ThermalSection& s) {

@@ -9,6 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::motion {
 
 using nlohmann::json;
@@ -28,30 +30,6 @@ const ChamberStep* ChamberProfile::step_at(double t_s) const {
   return &*it;
 }
 
-namespace {
-
-[[noreturn]] void fail(const std::string& where, const std::string& what) {
-  throw std::invalid_argument("chamber profile " + where + ": " + what);
-}
-
-double number(const json& j, const char* key, const std::string& where) {
-  if (!j.contains(key)) fail(where, std::string("missing \"") + key + "\"");
-  if (!j.at(key).is_number()) fail(where, std::string("\"") + key + "\" must be a number");
-  const double v = j.at(key).get<double>();
-  if (!std::isfinite(v)) fail(where, std::string("\"") + key + "\" is not finite");
-  return v;
-}
-
-void check_keys(const json& j, const std::string& where, std::initializer_list<const char*> allowed) {
-  for (const auto& [key, value] : j.items()) {
-    bool ok = false;
-    for (const char* a : allowed) ok |= key == a;
-    if (!ok) fail(where, "unknown key \"" + key + "\"");
-  }
-}
-
-}  // namespace
-
 ChamberProfile compile_chamber_profile(const std::string& json_text) {
   json j;
   try {
@@ -59,58 +37,58 @@ ChamberProfile compile_chamber_profile(const std::string& json_text) {
   } catch (const json::parse_error& e) {
     throw std::invalid_argument(std::string("chamber profile: not valid JSON: ") + e.what());
   }
-  if (!j.is_object()) fail("", "must be a JSON object");
-  check_keys(j, "", {"name", "comment", "start_C", "steps"});
+  const ObjectReader::ThrowAtFirst throwing{"chamber profile: "};
+  ObjectReader r(j, "", throwing);
   ChamberProfile p;
-  p.name = j.value("name", std::string("unnamed"));
+  p.name = r.string("name").value_or("unnamed");
+  r.get("comment");
   p.source_json = j.dump();
-  p.start_C = number(j, "start_C", "");
-  if (!j.contains("steps") || !j.at("steps").is_array() || j.at("steps").empty())
-    fail("", "\"steps\" must be a non-empty list");
+  p.start_C = *r.number("start_C", true);
+  const json* steps = r.get("steps", true);
+  if (!steps->is_array() || steps->empty()) r.fail("steps must be a non-empty list");
+  r.finish();
   double t = 0, sp = p.start_C;
   int index = 0;
-  for (const json& st : j.at("steps")) {
+  for (const json& st : *steps) {
+    ObjectReader sr(st, "steps[" + std::to_string(index) + "]", throwing);
     ++index;
-    if (!st.is_object() || !st.contains("type") || !st.at("type").is_string())
-      fail("step " + std::to_string(index), "needs a \"type\" (soak, ramp, set)");
-    const std::string type = st.at("type").get<std::string>();
-    const std::string name = st.value("name", type + "-" + std::to_string(index));
+    const std::string type = *sr.string("type", true);
+    const std::string name = sr.string("name").value_or(type + "-" + std::to_string(index));
     const std::string where = "step " + std::to_string(index) + " '" + name + "'";
+    const auto fail = [&](const std::string& what) { sr.fail(where + ": " + what); };
+    const auto positive = [&](const char* key) {
+      const double v = *sr.number(key, true);
+      if (v <= 0) fail(std::string(key) + " must be positive");
+      return v;
+    };
     ChamberStep s;
     s.name = name;
     s.kind = type;
     s.t0_s = t;
     if (type == "soak") {
-      check_keys(st, where, {"type", "name", "duration_s"});
-      const double d = number(st, "duration_s", where);
-      if (d <= 0) fail(where, "duration_s must be positive");
       s.from_C = s.to_C = sp;
-      s.t1_s = t + d;
+      s.t1_s = t + positive("duration_s");
     } else if (type == "ramp") {
-      check_keys(st, where, {"type", "name", "to_C", "rate_C_per_min", "duration_s"});
       s.from_C = sp;
-      s.to_C = number(st, "to_C", where);
-      if (st.contains("rate_C_per_min") == st.contains("duration_s"))
-        fail(where, "give either \"rate_C_per_min\" or \"duration_s\"");
+      s.to_C = *sr.number("to_C", true);
+      if (sr.has("rate_C_per_min") == sr.has("duration_s")) fail("give either \"rate_C_per_min\" or \"duration_s\"");
       double d;
-      if (st.contains("rate_C_per_min")) {
-        const double r = number(st, "rate_C_per_min", where);
-        if (r <= 0) fail(where, "rate_C_per_min must be positive (the direction follows from to_C)");
-        d = std::abs(s.to_C - s.from_C) / r * 60.0;
+      if (sr.has("rate_C_per_min")) {
+        const double rate = *sr.number("rate_C_per_min");
+        if (rate <= 0) fail("rate_C_per_min must be positive (the direction follows from to_C)");
+        d = std::abs(s.to_C - s.from_C) / rate * 60.0;
       } else {
-        d = number(st, "duration_s", where);
+        d = *sr.number("duration_s");
       }
-      if (d <= 0) fail(where, "the ramp has no length (to_C equals the set point before it?)");
+      if (d <= 0) fail("the ramp has no length (to_C equals the set point before it?)");
       s.t1_s = t + d;
     } else if (type == "set") {
-      check_keys(st, where, {"type", "name", "to_C", "duration_s"});
-      s.from_C = s.to_C = number(st, "to_C", where);
-      const double d = number(st, "duration_s", where);
-      if (d <= 0) fail(where, "duration_s must be positive");
-      s.t1_s = t + d;
+      s.from_C = s.to_C = *sr.number("to_C", true);
+      s.t1_s = t + positive("duration_s");
     } else {
-      fail(where, "unknown type \"" + type + "\" (soak, ramp, set)");
+      fail("unknown type \"" + type + "\" (soak, ramp, set)");
     }
+    sr.finish();
     t = s.t1_s;
     sp = s.to_C;
     p.steps.push_back(s);

@@ -9,6 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 #include "core/units.hpp"
 
 namespace imucal::motion {
@@ -169,15 +171,18 @@ struct Builder {
     throw std::invalid_argument("program " + where + ": " + what);
   }
 
-  static double number(const json& seg, const char* key, const std::string& where) {
-    if (!seg.contains(key)) fail(where, std::string("missing \"") + key + "\"");
-    if (!seg.at(key).is_number()) fail(where, std::string("\"") + key + "\" must be a number");
-    const double v = seg.at(key).get<double>();
-    if (!std::isfinite(v)) fail(where, std::string("\"") + key + "\" is not finite");
-    return v;
+  // The segment's keys through the one strict reader (core/json_reader.hpp): every key read here
+  // is known, any other is refused by finish() in compile_program().
+  static double number(ObjectReader& seg, const char* key, const std::string& where) {
+    const json* v = seg.get(key);
+    if (v == nullptr) fail(where, std::string("missing \"") + key + "\"");
+    if (!v->is_number()) fail(where, std::string("\"") + key + "\" must be a number");
+    const double x = v->get<double>();
+    if (!std::isfinite(x)) fail(where, std::string("\"") + key + "\" is not finite");
+    return x;
   }
-  static double number_or(const json& seg, const char* key, double fallback, const std::string& where) {
-    return seg.contains(key) ? number(seg, key, where) : fallback;
+  static double number_or(ObjectReader& seg, const char* key, double fallback, const std::string& where) {
+    return seg.has(key) ? number(seg, key, where) : fallback;
   }
   static Eigen::Vector3d angles3(const json& a, const std::string& where) {
     if (!a.is_array() || a.size() != 3) fail(where, "expected [outer, middle, inner] in degrees");
@@ -188,12 +193,15 @@ struct Builder {
     }
     return v;
   }
-  static int axis_index(const json& seg, const char* key, const std::string& where) {
-    if (!seg.contains(key) || !seg.at(key).is_string()) fail(where, std::string("missing \"") + key + "\" (outer, middle or inner)");
-    const std::string name = seg.at(key).get<std::string>();
+  static int axis_named(const json* v, const char* key, const std::string& where) {
+    if (v == nullptr || !v->is_string()) fail(where, std::string("missing \"") + key + "\" (outer, middle or inner)");
+    const std::string name = v->get<std::string>();
     for (int a = 0; a < 3; ++a)
       if (name == kAxisNames[static_cast<std::size_t>(a)]) return a;
     fail(where, "unknown axis \"" + name + "\" (outer, middle or inner)");
+  }
+  static int axis_index(ObjectReader& seg, const char* key, const std::string& where) {
+    return axis_named(seg.get(key), key, where);
   }
 
   Piece make_piece(double duration_s, const std::string& segment, const std::string& kind) const {
@@ -253,13 +261,14 @@ struct Builder {
     push(std::move(p));
   }
 
-  void positions(const json& seg, const std::string& name, const std::string& kind, const std::string& where) {
-    if (!seg.contains("positions_deg") || !seg.at("positions_deg").is_array() || seg.at("positions_deg").empty())
+  void positions(ObjectReader& seg, const std::string& name, const std::string& kind, const std::string& where) {
+    const json* list = seg.get("positions_deg");
+    if (list == nullptr || !list->is_array() || list->empty())
       fail(where, "\"positions_deg\" must be a non-empty list of [outer, middle, inner]");
     const double dwell = number(seg, "dwell_s", where);
     const double move_s = number_or(seg, "move_s", 0.0, where);
     int k = 0;
-    for (const json& pos : seg.at("positions_deg")) {
+    for (const json& pos : *list) {
       ++k;
       char label[32];
       std::snprintf(label, sizeof label, "-%02d", k);
@@ -269,7 +278,7 @@ struct Builder {
     }
   }
 
-  void rate(const json& seg, const std::string& name, const std::string& where) {
+  void rate(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
     const double w = number(seg, "rate_dps", where) * kDegToRad;
     if (w == 0) fail(where, "rate_dps must not be zero");
@@ -281,7 +290,7 @@ struct Builder {
     const bool beyond_limits = std::abs(w) * kRadToDeg > lim.rate_dps * (1 + 1e-9) || acc * kRadToDeg > lim.accel_dps2 * (1 + 1e-9);
     const double t_ramp = std::abs(w) / acc;
     double t_cruise;
-    if (seg.contains("revolutions")) {
+    if (seg.has("revolutions")) {
       const double revs = number(seg, "revolutions", where);
       const double ramp_angle = w * w / acc;  // both ramps together
       t_cruise = (revs * 2.0 * kPi - ramp_angle) / std::abs(w);
@@ -322,7 +331,7 @@ struct Builder {
     return f;
   }
 
-  void sine(const json& seg, const std::string& name, const std::string& where) {
+  void sine(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
     const double period = number(seg, "period_s", where), cycles = number(seg, "cycles", where);
     Piece p = make_piece(period * cycles, name, "sine");
@@ -332,15 +341,14 @@ struct Builder {
     push(std::move(p));
   }
 
-  void coning(const json& seg, const std::string& name, const std::string& where) {
-    if (!seg.contains("axes") || !seg.at("axes").is_array() || seg.at("axes").size() != 2)
-      fail(where, "\"axes\" must name two axes");
-    json a0 = {{"axis", seg.at("axes")[0]}}, a1 = {{"axis", seg.at("axes")[1]}};
-    const int ia = axis_index(a0, "axis", where), ib = axis_index(a1, "axis", where);
+  void coning(ObjectReader& seg, const std::string& name, const std::string& where) {
+    const json* axes = seg.get("axes");
+    if (axes == nullptr || !axes->is_array() || axes->size() != 2) fail(where, "\"axes\" must name two axes");
+    const int ia = axis_named(&(*axes)[0], "axes", where), ib = axis_named(&(*axes)[1], "axes", where);
     if (ia == ib) fail(where, "coning needs two different axes");
     double amp_a, amp_b;
-    if (seg.contains("amplitude_deg") && seg.at("amplitude_deg").is_array()) {
-      const json& am = seg.at("amplitude_deg");
+    if (seg.has("amplitude_deg") && seg.get("amplitude_deg")->is_array()) {
+      const json& am = *seg.get("amplitude_deg");
       if (am.size() != 2 || !am[0].is_number() || !am[1].is_number()) fail(where, "amplitude_deg: one number or two");
       amp_a = am[0].get<double>();
       amp_b = am[1].get<double>();
@@ -366,45 +374,51 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
     throw std::invalid_argument(std::string("program: not valid JSON: ") + e.what());
   }
   Builder b{limits, {}, Eigen::Vector3d::Zero(), 0.0};
-  if (!j.is_object()) Builder::fail("", "must be a JSON object");
-  for (const auto& [key, value] : j.items())
-    if (key != "name" && key != "start_deg" && key != "segments" && key != "comment")
-      Builder::fail("", "unknown key \"" + key + "\"");
-  b.program.name = j.value("name", std::string("unnamed"));
+  const ObjectReader::ThrowAtFirst throwing{"program "};
+  ObjectReader r(j, "", throwing);
+  b.program.name = r.string("name").value_or("unnamed");
   b.program.source_json = j.dump();
-  if (j.contains("start_deg")) b.pose_rad = Builder::angles3(j.at("start_deg"), "start_deg");
-  if (!j.contains("segments") || !j.at("segments").is_array() || j.at("segments").empty())
+  if (const json* start = r.get("start_deg")) b.pose_rad = Builder::angles3(*start, "start_deg");
+  r.get("comment");
+  const json* segments = r.get("segments");
+  if (segments == nullptr || !segments->is_array() || segments->empty())
     Builder::fail("", "\"segments\" must be a non-empty list");
+  r.finish();
   int index = 0;
-  for (const json& seg : j.at("segments")) {
+  for (const json& seg : *segments) {
     ++index;
     if (!seg.is_object() || !seg.contains("type") || !seg.at("type").is_string())
       Builder::fail("segment " + std::to_string(index), "needs a \"type\"");
     const std::string type = seg.at("type").get<std::string>();
     const std::string name = seg.value("name", type + "-" + std::to_string(index));
     const std::string where = "segment " + std::to_string(index) + " '" + name + "'";
+    ObjectReader sr(seg, where, throwing);
+    sr.get("type");
+    sr.get("name");
     if (type == "hold") {
-      b.hold(Builder::number(seg, "duration_s", where), name, seg.value("kind", std::string("static")), where);
+      b.hold(Builder::number(sr, "duration_s", where), name, sr.string("kind").value_or("static"), where);
     } else if (type == "power-cycle") {
       // The IMU is switched off and on before it (imucald prompts the operator and waits); the
       // table rests for duration_s after the power-on.
-      b.hold(Builder::number(seg, "duration_s", where), name, "power-cycle", where);
+      b.hold(Builder::number(sr, "duration_s", where), name, "power-cycle", where);
     } else if (type == "move") {
-      if (!seg.contains("to_deg")) Builder::fail(where, "missing \"to_deg\"");
-      b.move(Builder::angles3(seg.at("to_deg"), where), Builder::number_or(seg, "duration_s", 0.0, where), name);
+      const json* to = sr.get("to_deg");
+      if (to == nullptr) Builder::fail(where, "missing \"to_deg\"");
+      b.move(Builder::angles3(*to, where), Builder::number_or(sr, "duration_s", 0.0, where), name);
     } else if (type == "positions") {
-      b.positions(seg, name, "static", where);
+      b.positions(sr, name, "static", where);
     } else if (type == "tilts") {
-      b.positions(seg, name, "tilt", where);
+      b.positions(sr, name, "tilt", where);
     } else if (type == "rate") {
-      b.rate(seg, name, where);
+      b.rate(sr, name, where);
     } else if (type == "sine") {
-      b.sine(seg, name, where);
+      b.sine(sr, name, where);
     } else if (type == "coning") {
-      b.coning(seg, name, where);
+      b.coning(sr, name, where);
     } else {
       Builder::fail(where, "unknown type \"" + type + "\" (hold, move, positions, tilts, rate, sine, coning, power-cycle)");
     }
+    sr.finish();
   }
   return b.program;
 }

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "core/imu_model.hpp"
+#include "core/json_reader.hpp"
 
 namespace imucal::daemon {
 
@@ -87,13 +88,14 @@ bool determined(const std::string& key, double value, std::optional<double> sigm
 }
 
 std::map<std::string, PartLimits> limits_from_json(const json& file) {
-  if (!file.is_object()) throw std::invalid_argument("the limits must be a JSON object (imucal-limits/1)");
-  for (const auto& [key, v] : file.items())
-    if (key != "format" && key != "part_numbers" && key != "comment")
-      throw std::invalid_argument("limits: unknown key '" + key + "' (expected format, part_numbers, comment)");
-  if (file.value("format", std::string()) != "imucal-limits/1")
-    throw std::invalid_argument("limits: format must be \"imucal-limits/1\"");
-  const json parts = file.value("part_numbers", json::object());
+  // The one strict reader (core/json_reader.hpp), throwing at the first problem.
+  const ObjectReader::ThrowAtFirst throwing{""};
+  ObjectReader r(file, "limits", throwing);
+  if (r.string("format") != std::string("imucal-limits/1")) r.fail("limits.format must be \"imucal-limits/1\"");
+  r.get("comment");
+  const json* parts_json = r.get("part_numbers");
+  r.finish();
+  const json parts = parts_json != nullptr ? *parts_json : json::object();
   if (!parts.is_object()) throw std::invalid_argument("limits: part_numbers must be an object of part numbers");
   std::map<std::string, PartLimits> out;
   for (const auto& [part_number, entries] : parts.items()) {
@@ -110,15 +112,14 @@ std::map<std::string, PartLimits> limits_from_json(const json& file) {
       if (!exists)
         throw std::invalid_argument(at + ": no coefficient of the model is named so (e.g. \"gyro.bias_dph\", "
                                          "\"gyro.bias_dph.x\", \"accel.misalignment_arcsec.yz\")");
-      if (!spec.is_object()) throw std::invalid_argument(at + " must be {\"max_abs\": ..., \"max_sigma\": ...}");
+      ObjectReader spec_reader(spec, at, throwing);
       Limit limit;
-      for (const auto& [field, v] : spec.items()) {
-        if (field != "max_abs" && field != "max_sigma")
-          throw std::invalid_argument(at + ": unknown field '" + field + "' (max_abs, max_sigma)");
-        if (!v.is_number() || !(v.get<double>() > 0) || !std::isfinite(v.get<double>()))
-          throw std::invalid_argument(at + "." + field + " must be a positive number in the key's unit");
-        (field == "max_abs" ? limit.max_abs : limit.max_sigma) = v.get<double>();
+      for (const char* field : {"max_abs", "max_sigma"}) {
+        const auto v = spec_reader.number(field);
+        if (v && !(*v > 0)) spec_reader.fail(spec_reader.at(field) + " must be a positive number in the key's unit");
+        (std::string(field) == "max_abs" ? limit.max_abs : limit.max_sigma) = v;
       }
+      spec_reader.finish();
       if (!limit.max_abs && !limit.max_sigma) throw std::invalid_argument(at + " has neither max_abs nor max_sigma");
       if (limit.max_sigma && is_noise(key))
         throw std::invalid_argument(at + ": noise terms carry no sigma; give max_abs only");

@@ -10,6 +10,7 @@
 
 #include "core/earth.hpp"
 #include "core/imu_model.hpp"
+#include "core/json_reader.hpp"
 #include "core/number_text.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
@@ -159,7 +160,7 @@ TEST(ModelJson, UnknownKeysAndBadValuesAreNamed) {
     imu_model_from_json_text(R"({"format":"imucal-imu-model/1","gyro":{"bias_dhp":[0,0,0]}})", "m.json");
     FAIL() << "typo accepted";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("m.json.gyro: unknown key 'bias_dhp'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("m.json.gyro: unknown key \"bias_dhp\""), std::string::npos) << e.what();
   }
   EXPECT_THROW(imu_model_from_json_text(R"({"format":"other"})", "m"), std::runtime_error);
   EXPECT_THROW(imu_model_from_json_text(R"({"format":"imucal-imu-model/1","accel":{"bias_mps2":[0,0]}})", "m"),
@@ -368,10 +369,10 @@ TEST(ModelJson, MalformedNonlinearTermsAreNamed) {
       return what.find(expected) != std::string::npos ? std::string() : what;
     }
   };
-  EXPECT_EQ(refused(R"("accel":{"k2_ug_per_g":[1,2,3]})", "m.json.accel: unknown key 'k2_ug_per_g'"), "");
+  EXPECT_EQ(refused(R"("accel":{"k2_ug_per_g":[1,2,3]})", "m.json.accel: unknown key \"k2_ug_per_g\""), "");
   EXPECT_EQ(refused(R"("gyro":{"g_sensitivity_dps_per_g":[[0,0,0],[0,0,0],[0,0,0]]})",
-                    "m.json.gyro: unknown key 'g_sensitivity_dps_per_g'"), "");
-  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"w":[1]}})", "m.json.gyro.scale_nonlinear_ppm: unknown key 'w'"), "");
+                    "m.json.gyro: unknown key \"g_sensitivity_dps_per_g\""), "");
+  EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"w":[1]}})", "m.json.gyro.scale_nonlinear_ppm: unknown key \"w\""), "");
   EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"x":[1,2,3,4]}})", "m.json.gyro.scale_nonlinear_ppm.x"), "");
   EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":{"x":[]}})", "m.json.gyro.scale_nonlinear_ppm.x"), "");
   EXPECT_EQ(refused(R"("gyro":{"scale_nonlinear_ppm":[1,2,3]})", "m.json.gyro.scale_nonlinear_ppm"), "");
@@ -380,7 +381,7 @@ TEST(ModelJson, MalformedNonlinearTermsAreNamed) {
                     "m.json.gyro.g_sensitivity_dph_per_g[1]"), "");
   EXPECT_EQ(refused(R"("gyro":{"g_sensitivity_dph_per_g":[0,0,0]})", "m.json.gyro.g_sensitivity_dph_per_g"), "");
   EXPECT_EQ(refused(R"("accel":{"k3_ug_per_g3":[1,2]})", "m.json.accel.k3_ug_per_g3"), "");
-  EXPECT_EQ(refused(R"("sigma":{"accel":{"k2_ug_per_g3":[1,2,3]}})", "m.json.sigma.accel: unknown key 'k2_ug_per_g3'"), "");
+  EXPECT_EQ(refused(R"("sigma":{"accel":{"k2_ug_per_g3":[1,2,3]}})", "m.json.sigma.accel: unknown key \"k2_ug_per_g3\""), "");
 }
 
 // Numbers in messages for people (issue 18, item 3): no noise digits, units as people write them.
@@ -401,4 +402,38 @@ TEST(NumberText, TheWholeTextIsANumberOrNothing) {
   EXPECT_EQ(imucal::parse_number_text("-1.5e-3"), -1.5e-3);
   EXPECT_EQ(imucal::parse_number_text("+3"), 3.0);
   for (const char* text : {"", "soon", "3 s", "-", "-x", "1,5"}) EXPECT_FALSE(imucal::parse_number_text(text)) << text;
+}
+
+// The one strict reader of people's JSON (core/json_reader.hpp), in both ways of reporting.
+TEST(ObjectReader, CollectsEveryProblemOrThrowsTheFirst) {
+  const auto j = nlohmann::json::parse(R"({"rate": "fast", "count": 7, "speling": 1, "_note": "a comment"})");
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(j, "cfg", problems);
+    EXPECT_FALSE(r.number("rate").has_value());
+    EXPECT_EQ(r.integer("count", 0, 5), std::nullopt);
+    EXPECT_FALSE(r.string("name", true).has_value());
+  }
+  EXPECT_EQ(problems, (std::vector<std::string>{"cfg.rate must be a number, not a string",
+                                                 "cfg.count is 7, must be between 0 and 5", "cfg.name is required",
+                                                 "cfg: unknown key \"speling\""}));
+
+  const auto first = [&](auto&& read) {
+    try {
+      ObjectReader r(j, "cfg", ObjectReader::ThrowAtFirst{"unit.json: "});
+      read(r);
+      r.finish();
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(first([](ObjectReader& r) { r.number("rate"); }), "unit.json: cfg.rate must be a number, not a string");
+  EXPECT_EQ(first([](ObjectReader& r) { r.get("rate"); r.get("count"); }), "unit.json: cfg: unknown key \"speling\"");
+  EXPECT_EQ(first([](ObjectReader& r) { r.get("rate"); r.get("count"); r.get("speling"); }), "accepted");
+  // A top-level reader without a name: the key alone.
+  EXPECT_EQ(first([&](ObjectReader&) {
+              ObjectReader top(nlohmann::json::array(), "", ObjectReader::ThrowAtFirst{"x: "});
+            }),
+            "x: the document must be an object, not an array");
 }

@@ -133,3 +133,24 @@ TEST(Program, BadJsonNamesTheSegment) {
   EXPECT_THROW(compile_program(R"({"segments":[{"type":"spin"}]})", TableLimits{}), std::invalid_argument);
   EXPECT_THROW(load_program("no-such-program", TableLimits{}), std::invalid_argument);
 }
+
+TEST(Program, AMisspeltOptionalKeyIsRefusedNotDefaulted) {
+  // "rampp_s" would otherwise leave ramp_s at its default of 0 without a word.
+  const auto error_of = [](const std::string& json) {
+    try {
+      compile_program(json, TableLimits{});
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(error_of(R"({"segments":[{"type":"sine","name":"osc","axis":"inner","amplitude_deg":10,"period_s":10,)"
+                     R"("cycles":2,"rampp_s":1}]})"),
+            "program segment 1 'osc': unknown key \"rampp_s\"");
+  // A key of another segment type is as wrong: a hold has no rate.
+  EXPECT_EQ(error_of(R"({"segments":[{"type":"hold","duration_s":5,"rate_dps":10}]})"),
+            "program segment 1 'hold-1': unknown key \"rate_dps\"");
+  EXPECT_EQ(error_of(R"({"segments":[{"type":"hold","duration_s":5}],"segmnets":[]})"), "program unknown key \"segmnets\"");
+  // '_' keys are comments.
+  EXPECT_EQ(error_of(R"({"_why":"x","segments":[{"type":"hold","duration_s":5,"_note":"settle"}]})"), "accepted");
+}
