@@ -169,12 +169,10 @@ ObjectReader section(const json& j, const std::string& where) {
   return ObjectReader(j, where, ObjectReader::ThrowAtFirst{});
 }
 
-void fail(const ObjectReader& r, const std::string& path, const std::string& what) { r.fail(path + ": " + what); }
-
 double num(const ObjectReader& r, const json& v, const std::string& path) {
-  if (!v.is_number()) fail(r, path, "expected a number");
+  if (!v.is_number()) r.fail(path, "expected a number");
   const double x = v.get<double>();
-  if (!std::isfinite(x)) fail(r, path, "not a finite number");
+  if (!std::isfinite(x)) r.fail(path, "not a finite number");
   return x;
 }
 
@@ -182,7 +180,7 @@ Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale) {
   const json* a = r.get(key);
   if (a == nullptr) return Eigen::Vector3d::Zero();
   const std::string w = r.at(key);
-  if (!a->is_array() || a->size() != 3) fail(r, w, "expected an array of 3 numbers");
+  if (!a->is_array() || a->size() != 3) r.fail(w, "expected an array of 3 numbers");
   return Eigen::Vector3d(num(r, (*a)[0], w + "[0]"), num(r, (*a)[1], w + "[1]"), num(r, (*a)[2], w + "[2]")) * scale;
 }
 
@@ -221,12 +219,12 @@ Eigen::Matrix3d mat3(ObjectReader& parent, const char* key, double scale) {
   const json* m = parent.get(key);
   if (m == nullptr) return Eigen::Matrix3d::Zero();
   const std::string w = parent.at(key);
-  if (!m->is_array() || m->size() != 3) fail(parent, w, "expected 3 rows of 3 numbers");
+  if (!m->is_array() || m->size() != 3) parent.fail(w, "expected 3 rows of 3 numbers");
   Eigen::Matrix3d out;
   for (std::size_t r = 0; r < 3; ++r) {
     const json& row = (*m)[r];
     const std::string wr = w + "[" + std::to_string(r) + "]";
-    if (!row.is_array() || row.size() != 3) fail(parent, wr, "expected a row of 3 numbers");
+    if (!row.is_array() || row.size() != 3) parent.fail(wr, "expected a row of 3 numbers");
     for (std::size_t c = 0; c < 3; ++c)
       out(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) =
           num(parent, row[c], wr + "[" + std::to_string(c) + "]") * scale;
@@ -255,7 +253,7 @@ Eigen::Matrix3d scale_nonlinear_from(ObjectReader& parent) {
     if (terms == nullptr) continue;
     const std::string wa = r.at(key);
     if (!terms->is_array() || terms->empty() || terms->size() > 3)
-      fail(r, wa, "expected an array of 1 to 3 numbers (c1, c2, c3 in ppm)");
+      r.fail(wa, "expected an array of 1 to 3 numbers (c1, c2, c3 in ppm)");
     for (std::size_t k = 0; k < terms->size(); ++k)
       c(axis, static_cast<Eigen::Index>(k)) = num(r, (*terms)[k], wa + "[" + std::to_string(k) + "]") * kPpm;
   }
@@ -379,12 +377,12 @@ namespace {
 ImuModel model_from(const json& j, const std::string& source) {
   ObjectReader r = section(j, source);
   if (r.string("format") != std::string("imucal-imu-model/1"))
-    fail(r, source, "\"format\" must be \"imucal-imu-model/1\"");
+    r.fail(source, "\"format\" must be \"imucal-imu-model/1\"");
   ImuModel m;
   if (const auto frame = r.string("frame")) {
     m.frame = *frame;
     if (m.frame != "instrument" && m.frame != "body")
-      fail(r, r.at("frame"), "must be \"instrument\" or \"body\", not \"" + m.frame + "\"");
+      r.fail(r.at("frame"), "must be \"instrument\" or \"body\", not \"" + m.frame + "\"");
   }
   if (const json* g = r.get("gyro")) m.gyro = gyro_from(*g, r.at("gyro"));
   if (const json* a = r.get("accel")) m.accel = accel_from(*a, r.at("accel"));
@@ -416,18 +414,7 @@ ImuModel model_from(const json& j, const std::string& source) {
 }  // namespace
 
 ImuModel imu_model_from_json_text(const std::string& text, const std::string& source) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw std::runtime_error(source + ": not valid JSON: " + e.what());
-  }
-  // A model that is wrong is a runtime error of the file, whatever section found it.
-  try {
-    return model_from(j, source);
-  } catch (const std::invalid_argument& e) {
-    throw std::runtime_error(e.what());
-  }
+  return read_model_text(text, source, [&](const json& j) { return model_from(j, source); });
 }
 
 ImuModel read_imu_model_file(const std::string& path) {

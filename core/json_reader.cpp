@@ -22,18 +22,26 @@ std::string json_type_name(const json& value) {
   }
 }
 
+namespace {
+
+std::string not_an_object(const std::string& where, const json& value) {
+  return (where.empty() ? std::string("the document") : where) + " must be an object, not " + json_type_name(value);
+}
+
+}  // namespace
+
 ObjectReader::ObjectReader(const json& object, std::string where, std::vector<std::string>& problems)
     : where_(std::move(where)), problems_(&problems) {
   if (object.is_object()) {
     object_ = &object;
   } else {
-    problem((where_.empty() ? std::string("the document") : where_) + " must be an object, not " + json_type_name(object));
+    problem(not_an_object(where_, object));
   }
 }
 
 ObjectReader::ObjectReader(const json& object, std::string where, ThrowAtFirst mode)
     : where_(std::move(where)), throw_prefix_(std::move(mode.prefix)) {
-  if (!object.is_object()) fail((where_.empty() ? std::string("the document") : where_) + " must be an object, not " + json_type_name(object));
+  if (!object.is_object()) fail(not_an_object(where_, object));
   object_ = &object;
 }
 

@@ -54,6 +54,8 @@ class ObjectReader {
   void problem(const std::string& text);
   // Throws the problem (prefixed); for readers that throw at the first problem only.
   [[noreturn]] void fail(const std::string& text) const;
+  // Throws "path: what" (a value's problem found by the caller), as fail(text).
+  [[noreturn]] void fail(const std::string& path, const std::string& what) const { fail(path + ": " + what); }
   // The key's path: "where.key", or the key alone in a top-level reader whose `where` is empty.
   std::string at(const char* key) const { return where_.empty() ? std::string(key) : where_ + "." + key; }
 

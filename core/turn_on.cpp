@@ -40,10 +40,10 @@ void read_sensor(const json& j, const std::string& where, const SensorKeys& k, b
   r.finish();
   for (int i = 0; i < 3; ++i) {
     const std::string at = "[" + std::to_string(i) + "]";
-    if (rep[i] < 0.0) fail(r, where + "." + k.repeatability + at, "must not be negative (a 1-sigma)");
-    if (tau[i] < 0.0) fail(r, where + ".warm_up_time_constant_s" + at, "must not be negative");
+    if (rep[i] < 0.0) r.fail(where + "." + k.repeatability + at, "must not be negative (a 1-sigma)");
+    if (tau[i] < 0.0) r.fail(where + ".warm_up_time_constant_s" + at, "must not be negative");
     if (!is_sigma && warm[i] != 0.0 && !(tau[i] > 0.0))
-      fail(r, where + ".warm_up_time_constant_s" + at, std::string("must be positive where ") + k.warm_up + " is not zero");
+      r.fail(where + ".warm_up_time_constant_s" + at, std::string("must be positive where ") + k.warm_up + " is not zero");
   }
 }
 

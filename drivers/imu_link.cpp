@@ -112,10 +112,6 @@ ObjectReader reader(const json& j, const std::string& where, const std::string& 
   return ObjectReader(j, where, ObjectReader::ThrowAtFirst{who});
 }
 
-[[noreturn]] void fail(const ObjectReader& r, const std::string& path, const std::string& why) {
-  r.fail(path + ": " + why);
-}
-
 // An unsigned integer, written as a JSON number or a "0x..." string (masks, polynomials).
 std::optional<std::uint64_t> unsigned_int(ObjectReader& r, const char* key, std::uint64_t max, bool required = false) {
   const json* v = r.get(key, required);
@@ -131,11 +127,11 @@ std::optional<std::uint64_t> unsigned_int(ObjectReader& r, const char* key, std:
     } catch (const std::exception&) {
       used = 0;
     }
-    if (used == 0 || used != s.size()) fail(r, r.at(key), "\"" + s + "\" is not an integer (decimal or 0x hex)");
+    if (used == 0 || used != s.size()) r.fail(r.at(key), "\"" + s + "\" is not an integer (decimal or 0x hex)");
   } else {
-    fail(r, r.at(key), "must be a non-negative integer (or a \"0x...\" string)");
+    r.fail(r.at(key), "must be a non-negative integer (or a \"0x...\" string)");
   }
-  if (value > max) fail(r, r.at(key), "must be at most " + std::to_string(max));
+  if (value > max) r.fail(r.at(key), "must be at most " + std::to_string(max));
   return value;
 }
 
@@ -147,7 +143,7 @@ auto choice(ObjectReader& r, const char* key, const Table& table, bool required 
   if (!s) return std::nullopt;
   for (const auto& e : table)
     if (*s == e.name) return e;
-  fail(r, r.at(key), "\"" + *s + "\" is not one of " + names_of(table));
+  r.fail(r.at(key), "\"" + *s + "\" is not one of " + names_of(table));
 }
 
 std::vector<std::uint8_t> parse_hex_bytes(const std::string& text, const ObjectReader& r, const std::string& path) {
@@ -155,10 +151,10 @@ std::vector<std::uint8_t> parse_hex_bytes(const std::string& text, const ObjectR
   std::string digits;
   for (const char c : text) {
     if (c == ' ' || c == ':' || c == '-') continue;
-    if (!std::isxdigit(static_cast<unsigned char>(c))) fail(r, path, "\"" + text + "\" is not hex bytes (\"FE 81 FF 55\")");
+    if (!std::isxdigit(static_cast<unsigned char>(c))) r.fail(path, "\"" + text + "\" is not hex bytes (\"FE 81 FF 55\")");
     digits += c;
   }
-  if (digits.empty() || digits.size() % 2 != 0) fail(r, path, "\"" + text + "\" must be whole hex bytes (\"FE 81 FF 55\")");
+  if (digits.empty() || digits.size() % 2 != 0) r.fail(path, "\"" + text + "\" must be whole hex bytes (\"FE 81 FF 55\")");
   for (std::size_t i = 0; i < digits.size(); i += 2)
     out.push_back(static_cast<std::uint8_t>(std::stoul(digits.substr(i, 2), nullptr, 16)));
   return out;
@@ -169,7 +165,7 @@ ByteOrder read_byte_order(ObjectReader& r, const char* key, std::optional<ByteOr
   if (!s) return *fallback;
   if (*s == "big") return ByteOrder::big;
   if (*s == "little") return ByteOrder::little;
-  fail(r, r.at(key), "must be \"big\" or \"little\"");
+  r.fail(r.at(key), "must be \"big\" or \"little\"");
 }
 
 bool is_gyro(Role r) { return r == Role::gyro_x || r == Role::gyro_y || r == Role::gyro_z; }
@@ -189,30 +185,30 @@ Field read_field(const json& j, const std::string& where, const std::string& who
   Field f;
   f.role = choice(r, "role", kRoles, true)->role;
   if (kind == MessageKind::sample && (f.role == Role::coil_temperature || f.role == Role::accel_sensor_temperature))
-    fail(r, r.at("role"), std::string(to_string(f.role)) + " belongs in a temperature message");
+    r.fail(r.at("role"), std::string(to_string(f.role)) + " belongs in a temperature message");
   if (kind == MessageKind::temperature && f.role != Role::sequence && f.role != Role::time &&
       f.role != Role::coil_temperature && f.role != Role::accel_sensor_temperature)
-    fail(r, r.at("role"), "a temperature message carries sequence, time, coil_temperature and accel_sensor_temperature");
+    r.fail(r.at("role"), "a temperature message carries sequence, time, coil_temperature and accel_sensor_temperature");
   if ((kind == MessageKind::identity) != (f.role == Role::serial))
-    fail(r, r.at("role"), "an identity message carries the serial field, and only it");
+    r.fail(r.at("role"), "an identity message carries the serial field, and only it");
   f.offset = static_cast<std::size_t>(*unsigned_int(r, "offset", 1 << 16, true));
   f.type = choice(r, "type", kTypes, true)->type;
   if ((f.type == FieldType::ascii) != (f.role == Role::serial))
-    fail(r, r.at("type"), "the serial field is ascii, and only it");
+    r.fail(r.at("type"), "the serial field is ascii, and only it");
   f.byte_order = read_byte_order(r, "byte_order", default_order);
   // A serial number is up to 64 characters (NUL- or space-padded to `count`).
   const std::size_t slots = f.role == Role::coil_temperature ? 24
                             : f.role == Role::accel_sensor_temperature ? 3
                             : f.role == Role::serial ? 64 : 1;
   if (const auto c = unsigned_int(r, "count", slots)) {
-    if (slots == 1 && *c != 1) fail(r, r.at("count"), "only temperatures and the serial's characters repeat");
-    if (*c == 0) fail(r, r.at("count"), "must be at least 1");
+    if (slots == 1 && *c != 1) r.fail(r.at("count"), "only temperatures and the serial's characters repeat");
+    if (*c == 0) r.fail(r.at("count"), "must be at least 1");
     f.count = static_cast<std::size_t>(*c);
   }
   if (const auto i = unsigned_int(r, "index", slots - 1)) f.index = static_cast<std::size_t>(*i);
-  if (f.role == Role::serial && !r.has("count")) fail(r, where, "the serial field needs count (its characters)");
+  if (f.role == Role::serial && !r.has("count")) r.fail(where, "the serial field needs count (its characters)");
   if (f.index + f.count > slots)
-    fail(r, where, "index + count must stay within the " + std::to_string(slots) + " " + to_string(f.role) + " slots");
+    r.fail(where, "index + count must stay within the " + std::to_string(slots) + " " + to_string(f.role) + " slots");
 
   // The unit: SI factor, and for the inertial channels whether it is an increment or a rate.
   std::optional<Unit> unit;
@@ -234,36 +230,36 @@ Field read_field(const json& j, const std::string& where, const std::string& who
   if (const json* v = r.get("lsb", false)) {
     if (v->is_string() && v->get<std::string>() == "per-unit") {
       if (!(is_gyro(f.role) || is_accel(f.role)) || f.measures != Measures::increment || !is_integer(f.type))
-        fail(r, r.at("lsb"), "\"per-unit\" is for integer gyro or accelerometer increments only");
+        r.fail(r.at("lsb"), "\"per-unit\" is for integer gyro or accelerometer increments only");
       per_unit = true;
     } else if (v->is_number() && std::isfinite(v->get<double>()) && v->get<double>() > 0.0) {
       lsb = v->get<double>();
     } else {
-      fail(r, r.at("lsb"), "must be a positive number (the value of one count in the field's unit) or \"per-unit\"");
+      r.fail(r.at("lsb"), "must be a positive number (the value of one count in the field's unit) or \"per-unit\"");
     }
   }
-  if (!unit && r.has("lsb")) fail(r, r.at("lsb"), std::string("a ") + to_string(f.role) + " field has no LSB");
-  if (!unit && r.has("unit")) fail(r, r.at("unit"), std::string("a ") + to_string(f.role) + " field has no unit");
+  if (!unit && r.has("lsb")) r.fail(r.at("lsb"), std::string("a ") + to_string(f.role) + " field has no LSB");
+  if (!unit && r.has("unit")) r.fail(r.at("unit"), std::string("a ") + to_string(f.role) + " field has no unit");
   if (!unit) r.get("unit", false);
   f.scale = per_unit ? std::nullopt : std::optional<double>(lsb * (unit ? unit->si : 1.0));
 
   if (f.role == Role::status || f.role == Role::sequence || f.role == Role::time || f.role == Role::latency) {
     if (!is_integer(f.type) || is_signed(f.type))
-      fail(r, r.at("type"), std::string("a ") + to_string(f.role) + " field is an unsigned integer");
+      r.fail(r.at("type"), std::string("a ") + to_string(f.role) + " field is an unsigned integer");
   }
   if (const auto m = unsigned_int(r, "fault_when_set", type_modulus_minus_one(f.type))) f.fault_when_set = *m;
   if (const auto m = unsigned_int(r, "fault_when_clear", type_modulus_minus_one(f.type))) f.fault_when_clear = *m;
   if ((f.fault_when_set || f.fault_when_clear) && f.role != Role::status)
-    fail(r, where, "fault_when_set/fault_when_clear belong to the status field");
+    r.fail(where, "fault_when_set/fault_when_clear belong to the status field");
   if (const auto w = unsigned_int(r, "wrap", std::numeric_limits<std::uint64_t>::max())) {
-    if (f.role != Role::sequence && f.role != Role::time) fail(r, r.at("wrap"), "only a sequence or time field wraps");
+    if (f.role != Role::sequence && f.role != Role::time) r.fail(r.at("wrap"), "only a sequence or time field wraps");
     if (*w < 2 || (type_size(f.type) < 8 && *w - 1 > type_modulus_minus_one(f.type)))
-      fail(r, r.at("wrap"), "must be 2 .. 2^bits of the field's type");
+      r.fail(r.at("wrap"), "must be 2 .. 2^bits of the field's type");
     f.wrap = *w;
   }
   if (const json* v = r.get("invalid", false)) {
     if (!v->is_number_integer() || !is_integer(f.type) || !is_temperature(f.role))
-      fail(r, r.at("invalid"), "is an integer raw value meaning \"no sensor\", for integer temperature fields");
+      r.fail(r.at("invalid"), "is an integer raw value meaning \"no sensor\", for integer temperature fields");
     f.invalid_raw = v->get<std::int64_t>();
   }
   r.finish();
@@ -279,7 +275,7 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
     c.kind = ChecksumKind::crc;
     if (const auto preset = r.string("preset")) {
       const auto it = std::find_if(kCrcPresets.begin(), kCrcPresets.end(), [&](const CrcPreset& p) { return *preset == p.name; });
-      if (it == kCrcPresets.end()) fail(r, r.at("preset"), "\"" + *preset + "\" is not one of " + names_of(kCrcPresets));
+      if (it == kCrcPresets.end()) r.fail(r.at("preset"), "\"" + *preset + "\" is not one of " + names_of(kCrcPresets));
       c.width_bits = it->width;
       c.poly = it->poly;
       c.init = it->init;
@@ -287,10 +283,10 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
       c.reflect_out = it->reflect_out;
       c.xor_out = it->xor_out;
       for (const char* k : {"width", "poly", "init", "reflect_in", "reflect_out", "xor_out"})
-        if (r.has(k)) fail(r, r.at(k), "give a preset or the parameters, not both");
+        if (r.has(k)) r.fail(r.at(k), "give a preset or the parameters, not both");
     } else {
       const auto width = unsigned_int(r, "width", 32, true);
-      if (*width != 8 && *width != 16 && *width != 32) fail(r, r.at("width"), "must be 8, 16 or 32");
+      if (*width != 8 && *width != 16 && *width != 32) r.fail(r.at("width"), "must be 8, 16 or 32");
       c.width_bits = static_cast<int>(*width);
       const std::uint64_t max = (std::uint64_t{1} << *width) - 1;
       c.poly = static_cast<std::uint32_t>(*unsigned_int(r, "poly", max, true));
@@ -304,15 +300,15 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
   } else if (*type == "xor8") {
     c.kind = ChecksumKind::xor8;
   } else {
-    fail(r, r.at("type"), "\"" + *type + "\" is not one of crc, sum8, xor8");
+    r.fail(r.at("type"), "\"" + *type + "\" is not one of crc, sum8, xor8");
   }
   c.offset = static_cast<std::size_t>(*unsigned_int(r, "offset", length, true));
   c.from = static_cast<std::size_t>(unsigned_int(r, "from", length).value_or(0));
   c.to = static_cast<std::size_t>(unsigned_int(r, "to", length).value_or(c.offset));
   c.byte_order = read_byte_order(r, "byte_order", default_order);
-  if (c.from >= c.to) fail(r, where, "from must be below to (the checksum covers bytes [from, to))");
-  if (c.offset + c.size() > length) fail(r, r.at("offset"), "the checksum must lie within the frame's length");
-  if (c.offset < c.to && c.offset + c.size() > c.from) fail(r, r.at("offset"), "the checksum cannot cover itself");
+  if (c.from >= c.to) r.fail(where, "from must be below to (the checksum covers bytes [from, to))");
+  if (c.offset + c.size() > length) r.fail(r.at("offset"), "the checksum must lie within the frame's length");
+  if (c.offset < c.to && c.offset + c.size() > c.from) r.fail(r.at("offset"), "the checksum cannot cover itself");
   r.finish();
   return c;
 }
@@ -323,10 +319,10 @@ Command read_command(const json& j, const std::string& where, const std::string&
   c.bytes = parse_hex_bytes(*r.string("bytes", true), r, r.at("bytes"));
   if (const auto id = unsigned_int(r, "can_id", 0x7FF)) c.can_id = static_cast<std::uint32_t>(*id);
   if (t == Transport::socketcan) {
-    if (!c.can_id) fail(r, r.at("can_id"), "is required on CAN");
-    if (c.bytes.size() > 8) fail(r, r.at("bytes"), "a classic CAN frame carries at most 8 bytes");
+    if (!c.can_id) r.fail(r.at("can_id"), "is required on CAN");
+    if (c.bytes.size() > 8) r.fail(r.at("bytes"), "a classic CAN frame carries at most 8 bytes");
   } else if (c.can_id) {
-    fail(r, r.at("can_id"), "only for a socketcan transport");
+    r.fail(r.at("can_id"), "only for a socketcan transport");
   }
   r.finish();
   return c;
@@ -345,29 +341,29 @@ Message read_message(const json& j, const std::string& where, const std::string&
   } else if (*kind == "identity") {
     m.kind = MessageKind::identity;
   } else {
-    fail(r, r.at("kind"), "must be \"sample\", \"temperature\" or \"identity\"");
+    r.fail(r.at("kind"), "must be \"sample\", \"temperature\" or \"identity\"");
   }
   if (const auto h = r.string("header")) m.header = parse_hex_bytes(*h, r, r.at("header"));
   if (t != Transport::socketcan && m.header.size() < 2)
-    fail(r, r.at("header"), "a serial or UDP frame needs a sync header of at least 2 bytes");
+    r.fail(r.at("header"), "a serial or UDP frame needs a sync header of at least 2 bytes");
   m.length = static_cast<std::size_t>(*unsigned_int(r, "length", 4096, true));
-  if (m.length <= m.header.size()) fail(r, r.at("length"), "must exceed the header");
+  if (m.length <= m.header.size()) r.fail(r.at("length"), "must exceed the header");
   if (const json* c = r.get("checksum", t != Transport::socketcan))
     m.checksum = read_checksum(*c, r.at("checksum"), who, m.length, default_order);
   if (const auto id = unsigned_int(r, "can_id", 0x7FF)) m.can_id = static_cast<std::uint32_t>(*id);
   if (const auto id = unsigned_int(r, "classic_base_id", 0x7FF)) m.classic_base_id = static_cast<std::uint32_t>(*id);
   if (t == Transport::socketcan) {
-    if (!m.can_id && !m.classic_base_id) fail(r, where, "a CAN message needs can_id (CAN FD) and/or classic_base_id");
-    if (m.length > 64) fail(r, r.at("length"), "a CAN message carries at most 64 bytes");
+    if (!m.can_id && !m.classic_base_id) r.fail(where, "a CAN message needs can_id (CAN FD) and/or classic_base_id");
+    if (m.length > 64) r.fail(r.at("length"), "a CAN message carries at most 64 bytes");
   } else if (m.can_id || m.classic_base_id) {
-    fail(r, where, "can_id and classic_base_id are for a socketcan transport");
+    r.fail(where, "can_id and classic_base_id are for a socketcan transport");
   }
   if (const auto c = r.boolean("completes")) {
-    if (m.kind != MessageKind::temperature) fail(r, r.at("completes"), "only temperature messages come in sets");
+    if (m.kind != MessageKind::temperature) r.fail(r.at("completes"), "only temperature messages come in sets");
     m.completes = *c;
   }
   const json* fields = r.get("fields", true);
-  if (!fields->is_array()) fail(r, r.at("fields"), "must be an array");
+  if (!fields->is_array()) r.fail(r.at("fields"), "must be an array");
   std::vector<std::pair<std::size_t, std::size_t>> used;  // byte ranges
   if (!m.header.empty()) used.emplace_back(0, m.header.size());
   if (m.checksum.kind != ChecksumKind::none) used.emplace_back(m.checksum.offset, m.checksum.offset + m.checksum.size());
@@ -375,19 +371,19 @@ Message read_message(const json& j, const std::string& where, const std::string&
     const std::string fw = r.at("fields") + "[" + std::to_string(i) + "]";
     Field f = read_field((*fields)[i], fw, who, m.kind, default_order);
     const std::size_t end = f.offset + f.count * type_size(f.type);
-    if (end > m.length) fail(r, fw, "ends at byte " + std::to_string(end) + ", beyond the frame's length " + std::to_string(m.length));
+    if (end > m.length) r.fail(fw, "ends at byte " + std::to_string(end) + ", beyond the frame's length " + std::to_string(m.length));
     for (const auto& [b, e] : used)
-      if (f.offset < e && end > b) fail(r, fw, "overlaps the header, the checksum or another field");
+      if (f.offset < e && end > b) r.fail(fw, "overlaps the header, the checksum or another field");
     used.emplace_back(f.offset, end);
     if (f.role != Role::coil_temperature && f.role != Role::accel_sensor_temperature && m.find(f.role))
-      fail(r, fw, std::string("a second ") + to_string(f.role) + " field");
+      r.fail(fw, std::string("a second ") + to_string(f.role) + " field");
     m.fields.push_back(f);
   }
   if (m.kind == MessageKind::identity && !m.find(Role::serial))
-    fail(r, r.at("fields"), "an identity message needs a serial field");
+    r.fail(r.at("fields"), "an identity message needs a serial field");
   if (m.kind == MessageKind::sample) {
     for (Role need : {Role::gyro_x, Role::gyro_y, Role::gyro_z, Role::accel_x, Role::accel_y, Role::accel_z, Role::sequence})
-      if (!m.find(need)) fail(r, r.at("fields"), std::string("a sample message needs a ") + to_string(need) + " field");
+      if (!m.find(need)) r.fail(r.at("fields"), std::string("a sample message needs a ") + to_string(need) + " field");
   }
   r.finish();
   return m;
@@ -510,10 +506,10 @@ ImuLink imu_link_from_json(const std::string& json_text) {
                                               : std::string("?")) +
                           "': ";
   ObjectReader r = reader(j, "", who);
-  if (r.string("format", true) != std::string(kFormat)) fail(r, "format", std::string("must be \"") + kFormat + "\"");
+  if (r.string("format", true) != std::string(kFormat)) r.fail("format", std::string("must be \"") + kFormat + "\"");
   ImuLink link;
   link.name = *r.string("name", true);
-  if (link.name.empty()) fail(r, "name", "must not be empty");
+  if (link.name.empty()) r.fail("name", "must not be empty");
   link.source = *r.string("source", true);
   const ByteOrder order = read_byte_order(r, "byte_order", std::nullopt);
   {
@@ -524,39 +520,39 @@ ImuLink imu_link_from_json(const std::string& json_text) {
     } else if (*type == "serial") {
       link.transport = Transport::serial;
       link.serial.baud = static_cast<unsigned>(*unsigned_int(t, "baud", 20'000'000, true));
-      if (link.serial.baud < 50) fail(t, t.at("baud"), "must be at least 50");
+      if (link.serial.baud < 50) t.fail(t.at("baud"), "must be at least 50");
       if (const auto p = t.string("parity")) {
         if (*p == "none") link.serial.parity = Parity::none;
         else if (*p == "odd") link.serial.parity = Parity::odd;
         else if (*p == "even") link.serial.parity = Parity::even;
-        else fail(t, t.at("parity"), "must be \"none\", \"odd\" or \"even\"");
+        else t.fail(t.at("parity"), "must be \"none\", \"odd\" or \"even\"");
       }
       if (const auto d = unsigned_int(t, "data_bits", 8)) {
-        if (*d < 5) fail(t, t.at("data_bits"), "must be 5..8");
+        if (*d < 5) t.fail(t.at("data_bits"), "must be 5..8");
         link.serial.data_bits = static_cast<unsigned>(*d);
       }
       if (const auto s = unsigned_int(t, "stop_bits", 2)) {
-        if (*s < 1) fail(t, t.at("stop_bits"), "must be 1 or 2");
+        if (*s < 1) t.fail(t.at("stop_bits"), "must be 1 or 2");
         link.serial.stop_bits = static_cast<unsigned>(*s);
       }
     } else if (*type == "udp") {
       link.transport = Transport::udp;
     } else {
-      fail(t, t.at("type"), "\"" + *type + "\" is not one of socketcan, serial, udp");
+      t.fail(t.at("type"), "\"" + *type + "\" is not one of socketcan, serial, udp");
     }
     t.finish();
   }
   const json* messages = r.get("messages", true);
-  if (!messages->is_array() || messages->empty()) fail(r, "messages", "must be a non-empty array");
+  if (!messages->is_array() || messages->empty()) r.fail("messages", "must be a non-empty array");
   std::set<std::string> names;
   for (std::size_t i = 0; i < messages->size(); ++i) {
     const std::string where = "messages[" + std::to_string(i) + "]";
     link.messages.push_back(read_message((*messages)[i], where, who, link.transport, order));
-    if (!names.insert(link.messages.back().name).second) fail(r, where + ".name", "a second message of that name");
+    if (!names.insert(link.messages.back().name).second) r.fail(where + ".name", "a second message of that name");
   }
   const auto samples = std::count_if(link.messages.begin(), link.messages.end(),
                                      [](const Message& m) { return m.kind == MessageKind::sample; });
-  if (samples != 1) fail(r, "messages", "must hold exactly one sample message");
+  if (samples != 1) r.fail("messages", "must hold exactly one sample message");
   // Frames must be told apart: by CAN identifier on CAN, else by their headers.
   for (std::size_t a = 0; a < link.messages.size(); ++a) {
     for (std::size_t b = a + 1; b < link.messages.size(); ++b) {
@@ -566,7 +562,7 @@ ImuLink imu_link_from_json(const std::string& json_text) {
       const bool same_header = std::equal(ma.header.begin(), ma.header.begin() + static_cast<std::ptrdiff_t>(prefix), mb.header.begin());
       const bool same_id = ma.can_id == mb.can_id && ma.classic_base_id == mb.classic_base_id;
       if (same_header && (link.transport != Transport::socketcan || same_id))
-        fail(r, "messages[" + std::to_string(b) + "].header", "cannot be told apart from message '" + ma.name + "'");
+        r.fail("messages[" + std::to_string(b) + "].header", "cannot be told apart from message '" + ma.name + "'");
     }
   }
   const auto completing = std::count_if(link.messages.begin(), link.messages.end(), [](const Message& m) {
@@ -574,11 +570,11 @@ ImuLink imu_link_from_json(const std::string& json_text) {
   });
   const auto temperature = std::count_if(link.messages.begin(), link.messages.end(),
                                          [](const Message& m) { return m.kind == MessageKind::temperature; });
-  if (temperature > 0 && completing != 1) fail(r, "messages", "exactly one temperature message completes a set (\"completes\": true)");
+  if (temperature > 0 && completing != 1) r.fail("messages", "exactly one temperature message completes a set (\"completes\": true)");
   if (temperature > 1) {
     for (std::size_t i = 0; i < link.messages.size(); ++i)
       if (link.messages[i].kind == MessageKind::temperature && !link.messages[i].find(Role::sequence))
-        fail(r, "messages[" + std::to_string(i) + "].fields", "temperature messages in a set need a sequence field to join them");
+        r.fail("messages[" + std::to_string(i) + "].fields", "temperature messages in a set need a sequence field to join them");
   }
   if (const json* c = r.get("start", false)) link.start = read_command(*c, "start", who, link.transport);
   if (const json* c = r.get("stop", false)) link.stop = read_command(*c, "stop", who, link.transport);

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/json_reader.hpp"
+#include "core/model_json.hpp"
 #include "core/units.hpp"
 #include "estimators/held_back.hpp"
 
@@ -122,27 +123,20 @@ bool ThermalSection::has_models() const {
 
 namespace {
 
-// The section is read with the one strict reader (core/json_reader.hpp), throwing at the first
-// problem; parse_thermal() passes it on as the model's std::runtime_error.
-[[noreturn]] void fail(const ObjectReader& r, const std::string& path, const std::string& what) { r.fail(path + ": " + what); }
-
-double number(const ObjectReader& r, const json& j, const std::string& where) {
-  if (!j.is_number()) fail(r, where, "expected a number");
-  const double v = j.get<double>();
-  if (!std::isfinite(v)) fail(r, where, "not finite");
-  return v;
-}
+// The section is read with the one strict reader (core/json_reader.hpp) and the model's helpers
+// (core/model_json.hpp), throwing at the first problem as a std::runtime_error.
+using model_json::num;
 
 std::vector<double> numbers(const ObjectReader& r, const json& j, const std::string& where) {
-  if (!j.is_array()) fail(r, where, "expected a list of numbers");
+  if (!j.is_array()) r.fail(where, "expected a list of numbers");
   std::vector<double> out;
-  for (std::size_t k = 0; k < j.size(); ++k) out.push_back(number(r, j[k], where + "[" + std::to_string(k) + "]"));
+  for (std::size_t k = 0; k < j.size(); ++k) out.push_back(num(r, j[k], where + "[" + std::to_string(k) + "]"));
   return out;
 }
 
 std::array<double, 2> range(const ObjectReader& r, const json& j, const std::string& where) {
   const auto v = numbers(r, j, where);
-  if (v.size() != 2 || v[0] > v[1]) fail(r, where, "expected [low, high]");
+  if (v.size() != 2 || v[0] > v[1]) r.fail(where, "expected [low, high]");
   return {v[0], v[1]};
 }
 
@@ -164,10 +158,10 @@ ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& thr
   ObjectReader r(j, "thermal", throwing);
   ThermalSection s;
   if (const auto format = r.string("format"); format && *format != "imucal-thermal/1")
-    fail(r, r.at("format"), "expected \"imucal-thermal/1\"");
+    r.fail(r.at("format"), "expected \"imucal-thermal/1\"");
   if (const auto t = r.number("T_ref_C")) s.T_ref_C = *t;
   if (const auto unit = r.string("dTdt_unit"); unit && *unit != "C/min")
-    fail(r, r.at("dTdt_unit"), "only \"C/min\" is defined (the rate polynomials are in C/min)");
+    r.fail(r.at("dTdt_unit"), "only \"C/min\" is defined (the rate polynomials are in C/min)");
   if (const json* v = r.get("fitted_T_C")) s.fitted_T_C = range(r, *v, r.at("fitted_T_C"));
   if (const json* v = r.get("fitted_dTdt_C_per_min"))
     s.fitted_rate_C_per_min = range(r, *v, r.at("fitted_dTdt_C_per_min"));
@@ -185,7 +179,7 @@ ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& thr
       ObjectReader g(*members, t.at(group), throwing);
       for (const auto& [member, entry] : members->items()) {
         const int i = index_of(gyro, group, member);
-        if (i < 0) fail(g, g.at(member.c_str()), "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
+        if (i < 0) g.fail(g.at(member.c_str()), "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
         ObjectReader e(*g.get(member.c_str()), g.at(member.c_str()), throwing);
         Poly& p = s.poly[static_cast<std::size_t>(i)];
         if (const json* v = e.get("T")) p.T = numbers(e, *v, e.at("T"));
@@ -204,12 +198,12 @@ ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& thr
     if (const auto v = o.number("full_C_per_min")) osc.full_C_per_min = *v;
     if (const json* v = o.get("phase_deg")) {
       const auto ph = numbers(o, *v, o.at("phase_deg"));
-      if (ph.size() != 3) fail(o, o.at("phase_deg"), "expected three numbers (gyro x, y, z)");
+      if (ph.size() != 3) o.fail(o.at("phase_deg"), "expected three numbers (gyro x, y, z)");
       osc.phase_deg = {ph[0], ph[1], ph[2]};
     }
     o.finish();
-    if (osc.period_s <= 0) fail(o, o.at("period_s"), "must be positive");
-    if (osc.full_C_per_min <= osc.onset_C_per_min) fail(o, o.where(), "full_C_per_min must exceed onset_C_per_min");
+    if (osc.period_s <= 0) o.fail(o.at("period_s"), "must be positive");
+    if (osc.full_C_per_min <= osc.onset_C_per_min) o.fail(o.where(), "full_C_per_min must exceed onset_C_per_min");
     s.sim_oscillation = osc;
   }
   r.finish();
@@ -219,18 +213,8 @@ ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& thr
 }  // namespace
 
 ThermalSection parse_thermal(const std::string& text, const std::string& where0) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw std::runtime_error(where0 + ": thermal: not valid JSON: " + e.what());
-  }
-  // A thermal section that is wrong is a runtime error of the model file, as in imu_model.cpp.
-  try {
-    return thermal_from(j, ObjectReader::ThrowAtFirst{where0 + ": "});
-  } catch (const std::invalid_argument& e) {
-    throw std::runtime_error(e.what());
-  }
+  return model_json::read_model_text(text, where0 + ": thermal",
+                                     [&](const json& j) { return thermal_from(j, ObjectReader::ThrowAtFirst{where0 + ": "}); });
 }
 
 std::string thermal_to_json_text(const ThermalSection& s) {

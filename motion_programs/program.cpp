@@ -171,19 +171,8 @@ struct Builder {
     throw std::invalid_argument("program " + where + ": " + what);
   }
 
-  // The segment's keys through the one strict reader (core/json_reader.hpp): every key read here
-  // is known, any other is refused by finish() in compile_program().
-  static double number(ObjectReader& seg, const char* key, const std::string& where) {
-    const json* v = seg.get(key);
-    if (v == nullptr) fail(where, std::string("missing \"") + key + "\"");
-    if (!v->is_number()) fail(where, std::string("\"") + key + "\" must be a number");
-    const double x = v->get<double>();
-    if (!std::isfinite(x)) fail(where, std::string("\"") + key + "\" is not finite");
-    return x;
-  }
-  static double number_or(ObjectReader& seg, const char* key, double fallback, const std::string& where) {
-    return seg.has(key) ? number(seg, key, where) : fallback;
-  }
+  // The segment's keys are read through the one strict reader (core/json_reader.hpp): every key
+  // read is known, any other is refused by finish() in compile_program().
   static Eigen::Vector3d angles3(const json& a, const std::string& where) {
     if (!a.is_array() || a.size() != 3) fail(where, "expected [outer, middle, inner] in degrees");
     Eigen::Vector3d v;
@@ -265,8 +254,8 @@ struct Builder {
     const json* list = seg.get("positions_deg");
     if (list == nullptr || !list->is_array() || list->empty())
       fail(where, "\"positions_deg\" must be a non-empty list of [outer, middle, inner]");
-    const double dwell = number(seg, "dwell_s", where);
-    const double move_s = number_or(seg, "move_s", 0.0, where);
+    const double dwell = *seg.number("dwell_s", true);
+    const double move_s = seg.number("move_s").value_or(0.0);
     int k = 0;
     for (const json& pos : *list) {
       ++k;
@@ -280,9 +269,9 @@ struct Builder {
 
   void rate(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
-    const double w = number(seg, "rate_dps", where) * kDegToRad;
+    const double w = *seg.number("rate_dps", true) * kDegToRad;
     if (w == 0) fail(where, "rate_dps must not be zero");
-    const double acc = number_or(seg, "accel_dps2", 0.5 * limits.axis[static_cast<std::size_t>(a)].accel_dps2, where) * kDegToRad;
+    const double acc = seg.number("accel_dps2").value_or(0.5 * limits.axis[static_cast<std::size_t>(a)].accel_dps2) * kDegToRad;
     if (acc <= 0) fail(where, "accel_dps2 must be positive");
     // Beyond the table's limits the ramps are not judged: validate_program names the rate or the
     // acceleration, which is the problem to fix (not the revolutions its ramps would need).
@@ -291,13 +280,13 @@ struct Builder {
     const double t_ramp = std::abs(w) / acc;
     double t_cruise;
     if (seg.has("revolutions")) {
-      const double revs = number(seg, "revolutions", where);
+      const double revs = *seg.number("revolutions", true);
       const double ramp_angle = w * w / acc;  // both ramps together
       t_cruise = (revs * 2.0 * kPi - ramp_angle) / std::abs(w);
       if (revs <= 0) fail(where, "revolutions must be positive");
       if (t_cruise < 0 && !beyond_limits) fail(where, "too few revolutions for the ramps at this rate and acceleration");
     } else {
-      t_cruise = number(seg, "duration_s", where) - 2.0 * t_ramp;
+      t_cruise = *seg.number("duration_s", true) - 2.0 * t_ramp;
       if (t_cruise < 0 && !beyond_limits) fail(where, "duration_s shorter than the two ramps");
     }
     const double sign = w > 0 ? 1.0 : -1.0;
@@ -333,11 +322,11 @@ struct Builder {
 
   void sine(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
-    const double period = number(seg, "period_s", where), cycles = number(seg, "cycles", where);
+    const double period = *seg.number("period_s", true), cycles = *seg.number("cycles", true);
     Piece p = make_piece(period * cycles, name, "sine");
     p.axis[static_cast<std::size_t>(a)] =
-        sine_func(a, number(seg, "amplitude_deg", where), period, cycles, number_or(seg, "phase_deg", 90.0, where),
-                  number_or(seg, "ramp_s", 0.0, where), where);
+        sine_func(a, *seg.number("amplitude_deg", true), period, cycles, seg.number("phase_deg").value_or(90.0),
+                  seg.number("ramp_s").value_or(0.0), where);
     push(std::move(p));
   }
 
@@ -353,10 +342,10 @@ struct Builder {
       amp_a = am[0].get<double>();
       amp_b = am[1].get<double>();
     } else {
-      amp_a = amp_b = number(seg, "amplitude_deg", where);
+      amp_a = amp_b = *seg.number("amplitude_deg", true);
     }
-    const double period = number(seg, "period_s", where), cycles = number(seg, "cycles", where);
-    const double ramp = number_or(seg, "ramp_s", period, where);
+    const double period = *seg.number("period_s", true), cycles = *seg.number("cycles", true);
+    const double ramp = seg.number("ramp_s").value_or(period);
     Piece p = make_piece(period * cycles, name, "coning");
     p.axis[static_cast<std::size_t>(ia)] = sine_func(ia, amp_a, period, cycles, 0.0, ramp, where);
     p.axis[static_cast<std::size_t>(ib)] = sine_func(ib, amp_b, period, cycles, 90.0, ramp, where);
@@ -396,15 +385,15 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
     sr.get("type");
     sr.get("name");
     if (type == "hold") {
-      b.hold(Builder::number(sr, "duration_s", where), name, sr.string("kind").value_or("static"), where);
+      b.hold(*sr.number("duration_s", true), name, sr.string("kind").value_or("static"), where);
     } else if (type == "power-cycle") {
       // The IMU is switched off and on before it (imucald prompts the operator and waits); the
       // table rests for duration_s after the power-on.
-      b.hold(Builder::number(sr, "duration_s", where), name, "power-cycle", where);
+      b.hold(*sr.number("duration_s", true), name, "power-cycle", where);
     } else if (type == "move") {
       const json* to = sr.get("to_deg");
       if (to == nullptr) Builder::fail(where, "missing \"to_deg\"");
-      b.move(Builder::angles3(*to, where), Builder::number_or(sr, "duration_s", 0.0, where), name);
+      b.move(Builder::angles3(*to, where), sr.number("duration_s").value_or(0.0), name);
     } else if (type == "positions") {
       b.positions(sr, name, "static", where);
     } else if (type == "tilts") {
