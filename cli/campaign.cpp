@@ -1,12 +1,12 @@
 // imucal campaign run: a whole campaign through the daemon's sequencer in-process, on the simulated
-// bench in accelerated time (daemon/service/campaign_runner.hpp).
+// bench in accelerated time (daemon/campaign_runner.hpp).
 #include "cli/commands.hpp"
 
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/service/campaign_runner.hpp"
+#include "daemon/campaign_runner.hpp"
 
 namespace imucal::cli {
 

@@ -8,7 +8,7 @@
 #include <iostream>
 #include <string>
 
-#include "daemon/service/password_hash.hpp"
+#include "daemon/config/password_hash.hpp"
 
 namespace imucal::cli {
 

@@ -8,9 +8,9 @@
 #include <string>
 
 #include "core/imu_model.hpp"
-#include "daemon/service/config.hpp"
-#include "daemon/service/device_config.hpp"
-#include "daemon/service/service.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/config/device_config.hpp"
+#include "daemon/service.hpp"
 #include "sim/sim_devices.hpp"
 
 namespace imucal::cli {

@@ -9,9 +9,9 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include "daemon/service/command_line.hpp"
-#include "daemon/service/config.hpp"
-#include "daemon/service/service.hpp"
+#include "daemon/config/command_line.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/service.hpp"
 
 using namespace imucal::daemon;
 

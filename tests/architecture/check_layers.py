@@ -9,7 +9,10 @@ import os
 import re
 import sys
 
-# folder -> the folders its code may use. Tests (tests/) may use anything.
+# folder -> the folders its code may use. Tests (tests/) may use anything. The daemon's folders
+# are checked one by one ("daemon/run"), "daemon" itself being only the files directly in daemon/;
+# "daemon/*" allows every one of them.
+BELOW_DAEMON = {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"}
 ALLOWED = {
     "core": set(),
     "motion_programs": {"core"},
@@ -19,9 +22,19 @@ ALLOWED = {
     "sim": {"core", "motion_programs", "estimators", "drivers"},
     "pipeline": {"core", "motion_programs", "estimators", "storage"},
     "plan": {"core", "motion_programs", "estimators", "pipeline", "sim"},
-    "daemon": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"},
-    "cli": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan", "daemon", "bench"},
-    "bench": {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"},
+    "daemon/config": {"core", "motion_programs", "drivers"},
+    "daemon/db": {"core", "storage"},
+    "daemon/campaign": {"core", "motion_programs", "pipeline", "daemon/config", "daemon/db"},
+    "daemon/production": {"core", "daemon/config", "daemon/db"},
+    "daemon/devices": {"core", "motion_programs", "drivers", "sim", "daemon/config", "daemon/campaign"},
+    "daemon/run": {"core", "motion_programs", "estimators", "storage", "pipeline",
+                   "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices"},
+    "daemon/analysis": {"core", "motion_programs", "estimators", "storage", "pipeline"},
+    "daemon/http": BELOW_DAEMON | {"daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
+                                   "daemon/devices", "daemon/run", "daemon/analysis"},
+    "daemon": BELOW_DAEMON | {"daemon/*"},
+    "cli": BELOW_DAEMON | {"daemon", "daemon/*", "bench"},
+    "bench": BELOW_DAEMON,
 }
 TARGETS = {
     "imucal_core": "core", "imucal_motion": "motion_programs", "imucal_drivers": "drivers",
@@ -29,35 +42,56 @@ TARGETS = {
     "imucal_pipeline": "pipeline", "imucal_plan": "plan", "imucal_daemon": "daemon",
     "imucal_bench_storage": "bench",
 }
+for sub in ("config", "db", "campaign", "production", "devices", "run", "analysis", "http"):
+    TARGETS[f"imucal_daemon_{sub}"] = f"daemon/{sub}"
 SQLITE_LAYER = {"storage/sqlite.hpp", "storage/sqlite.cpp"}
+
+
+def unit_of(path):
+    """The folder a file (or an included path) belongs to: its top folder, or daemon/<sub>."""
+    parts = path.split("/")
+    if parts[0] == "daemon" and len(parts) > 2:
+        return f"daemon/{parts[1]}"
+    return parts[0]
+
+
+def allows(frm, to):
+    allowed = ALLOWED[frm]
+    return to == frm or to in allowed or (to.startswith("daemon/") and "daemon/*" in allowed)
 
 
 def main(root):
     problems = []
-    for folder, allowed in ALLOWED.items():
-        for dirpath, _, files in os.walk(os.path.join(root, folder)):
-            for name in files:
-                path = os.path.join(dirpath, name)
-                rel = os.path.relpath(path, root)
-                if name == "CMakeLists.txt":
-                    text = open(path, encoding="utf-8").read()
-                    for m in re.finditer(r"target_link_libraries\(\s*(\w+)([^)]*)\)", text):
-                        if TARGETS.get(m.group(1)) != folder:
-                            continue
-                        for lib in re.findall(r"\bimucal_\w+", m.group(2)):
-                            to = TARGETS.get(lib)
-                            if to and to != folder and to not in allowed:
-                                problems.append(f"{rel}: {m.group(1)} links {lib} ({folder} -> {to})")
-                    continue
-                if not name.endswith((".cpp", ".hpp")):
-                    continue
+    for dirpath, dirs, files in os.walk(root):
+        if dirpath == root:  # only the source folders (not build/, web/, tests/)
+            dirs[:] = [d for d in dirs if d in {u.split("/")[0] for u in ALLOWED}]
+        for name in files:
+            path = os.path.join(dirpath, name)
+            rel = os.path.relpath(path, root)
+            folder = unit_of(rel)
+            if folder not in ALLOWED:
+                continue
+            if name == "CMakeLists.txt":
                 text = open(path, encoding="utf-8").read()
-                for n, line in enumerate(text.splitlines(), 1):
-                    m = re.match(r'\s*#include "([\w.]+)/', line)
-                    if m and m.group(1) in ALLOWED and m.group(1) != folder and m.group(1) not in allowed:
-                        problems.append(f"{rel}:{n}: includes {m.group(1)}/ ({folder} -> {m.group(1)})")
-                    if rel not in SQLITE_LAYER and ("sqlite3_" in line or "<sqlite3.h>" in line):
-                        problems.append(f"{rel}:{n}: calls SQLite outside the SQLite layer (storage/sqlite.hpp)")
+                for m in re.finditer(r"target_link_libraries\(\s*(\w+)([^)]*)\)", text):
+                    if TARGETS.get(m.group(1)) != folder:
+                        continue
+                    for lib in re.findall(r"\bimucal_\w+", m.group(2)):
+                        to = TARGETS.get(lib)
+                        if to and not allows(folder, to):
+                            problems.append(f"{rel}: {m.group(1)} links {lib} ({folder} -> {to})")
+                continue
+            if not name.endswith((".cpp", ".hpp")):
+                continue
+            text = open(path, encoding="utf-8").read()
+            for n, line in enumerate(text.splitlines(), 1):
+                m = re.match(r'\s*#include "([\w./]+)"', line)
+                if m and "/" in m.group(1):
+                    to = unit_of(m.group(1))
+                    if to in ALLOWED and not allows(folder, to):
+                        problems.append(f"{rel}:{n}: includes {m.group(1)} ({folder} -> {to})")
+                if rel not in SQLITE_LAYER and ("sqlite3_" in line or "<sqlite3.h>" in line):
+                    problems.append(f"{rel}:{n}: calls SQLite outside the SQLite layer (storage/sqlite.hpp)")
     for p in problems:
         print(p)
     if problems:

@@ -1,4 +1,4 @@
-// The command-line rule of imucal and imucald (daemon/service/command_line.hpp): unknown words
+// The command-line rule of imucal and imucald (daemon/config/command_line.hpp): unknown words
 // named first, with the nearest known one.
 #include <string>
 #include <vector>
@@ -6,7 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <gtest/gtest.h>
 
-#include "daemon/service/command_line.hpp"
+#include "daemon/config/command_line.hpp"
 
 using imucal::daemon::nearest_word;
 using imucal::daemon::unknown_word;

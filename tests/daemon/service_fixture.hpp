@@ -7,9 +7,9 @@
 
 #include <spdlog/spdlog.h>
 
-#include "daemon/service/campaign.hpp"
-#include "daemon/service/password_hash.hpp"
-#include "daemon/service/service.hpp"
+#include "daemon/campaign/campaign.hpp"
+#include "daemon/config/password_hash.hpp"
+#include "daemon/service.hpp"
 #include "daemon_fixture.hpp"
 #include "sim/simulator.hpp"
 

@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "daemon/service/analysis_jobs.hpp"
+#include "daemon/analysis/analysis_jobs.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;

@@ -1,10 +1,10 @@
 // Acceptance limits, verdicts, comparisons and repeatability as pure functions of model JSON
-// (daemon/service/acceptance.hpp); the daemon's endpoints are tested in test_daemon_units.cpp.
+// (daemon/production/acceptance.hpp); the daemon's endpoints are tested in test_daemon_units.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "daemon/service/acceptance.hpp"
+#include "daemon/production/acceptance.hpp"
 
 using namespace imucal::daemon;
 using nlohmann::json;

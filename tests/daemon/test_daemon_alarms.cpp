@@ -9,8 +9,8 @@
 #include <mutex>
 #include <vector>
 
-#include "daemon/service/alarms.hpp"
-#include "daemon/service/daemon_db.hpp"
+#include "daemon/db/daemon_db.hpp"
+#include "daemon/run/alarms.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;

@@ -12,7 +12,7 @@
 #include <thread>
 
 #include "core/earth.hpp"
-#include "daemon/service/certificates.hpp"
+#include "daemon/production/certificates.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <memory>
 
-#include "daemon/service/campaign_runner.hpp"
+#include "daemon/campaign_runner.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;

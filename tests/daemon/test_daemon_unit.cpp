@@ -6,15 +6,15 @@
 
 #include <gtest/gtest.h>
 
-#include "daemon/service/api.hpp"
-#include "daemon/service/auth.hpp"
-#include "daemon/service/campaign.hpp"
-#include "daemon/service/config.hpp"
-#include "daemon/service/daemon_db.hpp"
-#include "daemon/service/password_hash.hpp"
-#include "daemon/service/run_state.hpp"
-#include "daemon/service/suspenders.hpp"
-#include "daemon/service/static_files.hpp"
+#include "daemon/campaign/campaign.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/config/password_hash.hpp"
+#include "daemon/db/daemon_db.hpp"
+#include "daemon/db/run_state.hpp"
+#include "daemon/http/api.hpp"
+#include "daemon/http/auth.hpp"
+#include "daemon/http/static_files.hpp"
+#include "daemon/run/suspenders.hpp"
 #include "daemon_fixture.hpp"
 
 using namespace imucal;

@@ -9,7 +9,7 @@
 #include <map>
 #include <sstream>
 
-#include "daemon/service/campaign_runner.hpp"
+#include "daemon/campaign_runner.hpp"
 #include "service_fixture.hpp"
 #include "storage/run_db.hpp"
 

@@ -13,10 +13,10 @@
 
 #include "../estimators/test_thermal_fixture.hpp"
 #include "core/turn_on.hpp"
-#include "daemon/service/estimator_worker.hpp"
-#include "sim/simulator.hpp"
+#include "daemon/run/estimator_worker.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
+#include "sim/simulator.hpp"
 #include "storage/run_db.hpp"
 #include "subprocess.hpp"
 

@@ -146,7 +146,7 @@ export function coefficientName(key) {
 }
 
 /**
- * Whether a run determined a coefficient: the daemon's rule (daemon/service/acceptance.hpp,
+ * Whether a run determined a coefficient: the daemon's rule (daemon/production/acceptance.hpp,
  * determined()), so that the certificate says "not determined" exactly where a verdict does.
  * A run determines a coefficient when it gives it a positive sigma; noise terms carry no sigma
  * and are determined when positive. What a stage carried over unestimated has sigma 0 or none.

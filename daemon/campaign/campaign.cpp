@@ -1,0 +1,623 @@
+#include "daemon/campaign/campaign.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+
+#include "core/json_reader.hpp"
+#include "core/number_text.hpp"
+#include "core/units.hpp"
+#include "daemon/db/daemon_db.hpp"
+#include "motion_programs/chamber.hpp"
+#include "pipeline/pipeline.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+namespace {
+// The calibration stages imucald runs online, as the run file grows; thermal and noise are
+// analyses of the finished run (GET .../thermal, .../allan), on request.
+constexpr std::array<pipeline::Stage, 7> kOnlineStages = {
+    pipeline::Stage::Direct,     pipeline::Stage::RateSteps, pipeline::Stage::Tumble,       pipeline::Stage::LeverArm,
+    pipeline::Stage::Navigation, pipeline::Stage::WarmUp,    pipeline::Stage::Repeatability};
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// Chamber profile
+
+double ChamberProfile::setpoint_at(double program_time_s) const {
+  double value = setpoint_C;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const ChamberStep& s = steps[i];
+    if (program_time_s < s.at_s) break;
+    // `value` is the set point when this step begins; the step acts until the next one begins.
+    const double end_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
+    const double t = std::min(program_time_s, end_s);
+    if (s.ramp_C_per_min <= 0.0) {
+      value = s.setpoint_C;
+    } else {
+      const double max_change = s.ramp_C_per_min / 60.0 * (t - s.at_s);
+      const double delta = s.setpoint_C - value;
+      value += std::clamp(delta, -max_change, max_change);
+    }
+  }
+  return value;
+}
+
+bool ChamberProfile::ramps_within(double t0_s, double t1_s) const {
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const ChamberStep& s = steps[i];
+    if (s.ramp_C_per_min <= 0.0) continue;
+    const double next_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
+    // At its own start time a ramp has not changed anything yet: this is the value it starts from.
+    const double start_C = setpoint_at(s.at_s);
+    const double ramp_end_s = std::min(next_s, s.at_s + std::abs(s.setpoint_C - start_C) / (s.ramp_C_per_min / 60.0));
+    if (ramp_end_s > s.at_s && s.at_s < t1_s && ramp_end_s > t0_s) return true;
+  }
+  return false;
+}
+
+const std::vector<std::string>& known_estimators() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const auto stage : kOnlineStages) n.emplace_back(pipeline::names_of(stage).estimator);
+    n.emplace_back("navigation");
+    return n;
+  }();
+  return names;
+}
+
+bool CampaignSpec::has_estimator(const std::string& estimator) const {
+  return std::find(estimators.begin(), estimators.end(), estimator) != estimators.end();
+}
+
+// ------------------------------------------------------------------------------------------------
+
+namespace {
+
+// An IMU model given as "ideal", a file path, or an inline object.
+std::optional<ImuModel> read_model(const json& v, const std::string& where, std::vector<std::string>& problems) {
+  try {
+    if (v.is_string()) {
+      const auto text = v.get<std::string>();
+      if (text == "ideal") return ImuModel{};
+      return read_imu_model_file(text);
+    }
+    if (v.is_object()) return imu_model_from_json_text(v.dump(), where);
+    problems.push_back(where + " must be \"ideal\", a path to an imucal-imu-model/1 file or a model object");
+  } catch (const std::exception& e) {
+    problems.push_back(where + ": " + e.what());
+  }
+  return std::nullopt;
+}
+
+json model_json(const ImuModel& m) { return json::parse(imu_model_to_json_text(m)); }
+
+// The JSON of one program item (a built-in name or an inline object), or nothing with a problem.
+std::optional<json> program_item(const json& item, const std::string& where, std::vector<std::string>& problems,
+                                 bool& malformed) {
+  if (item.is_string()) {
+    const auto name = item.get<std::string>();
+    const auto names = motion::builtin_program_names();
+    if (std::find(names.begin(), names.end(), name) == names.end()) {
+      std::string list;
+      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+      problems.push_back(where + ": unknown built-in program \"" + name + "\" (known: " + list + ")");
+      return std::nullopt;
+    }
+    return json::parse(motion::builtin_program_json(name));
+  }
+  if (item.is_object()) return item;
+  malformed = true;
+  problems.push_back(where + " must be a built-in program name, a program object or a list of those");
+  return std::nullopt;
+}
+
+std::string item_name(const json& program, std::size_t index) {
+  if (program.contains("name") && program.at("name").is_string()) return program.at("name").get<std::string>();
+  return "part" + std::to_string(index + 1);
+}
+
+// Joins several programs into one: segment names get the part's name as prefix and a move to each
+// part's start pose is inserted, so the table never jumps.
+std::optional<json> join_programs(const std::vector<json>& parts, const motion::TableLimits& limits,
+                                  std::vector<std::string>& problems) {
+  json joined = {{"name", ""}, {"segments", json::array()}};
+  std::string name;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const json& part = parts[i];
+    const std::string part_name = item_name(part, i);
+    name += (name.empty() ? "" : "+") + part_name;
+    try {
+      // Each part alone first, so that a problem names the part it is in.
+      (void)motion::compile_program(part.dump(), limits);
+    } catch (const std::exception& e) {
+      problems.push_back("campaign.program[" + std::to_string(i) + "]: " + e.what());
+      return std::nullopt;
+    }
+    if (i == 0) {
+      if (part.contains("start_deg")) joined["start_deg"] = part.at("start_deg");
+    } else {
+      const json start = part.contains("start_deg") ? part.at("start_deg") : json::array({0.0, 0.0, 0.0});
+      joined["segments"].push_back({{"type", "move"}, {"name", part_name + "/to-start"}, {"to_deg", start}});
+    }
+    if (part.contains("segments") && part.at("segments").is_array()) {
+      for (json seg : part.at("segments")) {
+        if (seg.is_object() && seg.contains("name") && seg.at("name").is_string())
+          seg["name"] = part_name + "/" + seg.at("name").get<std::string>();
+        joined["segments"].push_back(std::move(seg));
+      }
+    }
+  }
+  joined["name"] = name;
+  joined["comment"] = "joined by imucald: " + name;
+  return joined;
+}
+
+// `imu`: {"serial", "part_number", "firmware", "customer", "notes"}, the serial required. A serial
+// names the unit in file names, URLs and certificates: printable, without slashes, at most 64
+// characters.
+void check_imu(const json& j, ImuIdentity& imu, std::vector<std::string>& problems) {
+  ObjectReader r(j, "campaign.imu", problems);
+  if (auto v = r.string("serial", true)) {
+    const bool printable = std::all_of(v->begin(), v->end(), [](char c) {
+      return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f && c != '/' && c != '\\';
+    });
+    const bool padded = !v->empty() && (v->front() == ' ' || v->back() == ' ');
+    // "." and ".." would be path steps in the unit's URL (GET /api/imus/{serial}).
+    const bool dots = v->find_first_not_of('.') == std::string::npos;
+    if (v->empty() || v->size() > 64 || !printable || padded || dots)
+      problems.push_back("campaign.imu.serial must have 1 to 64 printable characters, no slash, not only dots and "
+                         "no leading or trailing space");
+    else
+      imu.serial = *v;
+  }
+  constexpr std::size_t kMaxText = 2000;
+  auto text = [&](const char* key, std::string& out) {
+    if (auto v = r.string(key)) {
+      if (v->size() > kMaxText) problems.push_back(std::string("campaign.imu.") + key + " is longer than 2000 characters");
+      out = *v;
+    }
+  };
+  text("part_number", imu.part_number);
+  text("firmware", imu.firmware);
+  text("customer", imu.customer);
+  text("notes", imu.notes);
+  r.finish();
+}
+
+// The tolerance of a campaign run along a chamber profile that ramps, unless it gives its own: a
+// chamber's air lags a 1 C/min ramp by about 3 C (docs/daemon.md).
+constexpr double kProfileToleranceMin_C = 5.0;
+
+// A chamber profile in the format of motion_programs/chamber.hpp (soaks, ramps, sets; a built-in
+// name or an inline object) as the daemon's set-point steps.
+void profile_steps(const json& spec, const std::string& where, ChamberProfile& profile,
+                   std::vector<std::string>& problems) {
+  motion::ChamberProfile p;
+  try {
+    if (spec.is_string()) {
+      p = motion::load_chamber_profile(spec.get<std::string>());
+    } else if (spec.is_object()) {
+      p = motion::compile_chamber_profile(spec.dump());
+    } else {
+      problems.push_back(where + " must be a built-in chamber profile's name (" + [] {
+        std::string names;
+        for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
+        return names;
+      }() + ") or a profile object (docs/thermal.md)");
+      return;
+    }
+  } catch (const std::exception& e) {
+    problems.push_back(where + ": " + e.what());
+    return;
+  }
+  profile.setpoint_C = p.start_C;
+  profile.steps.clear();
+  for (const motion::ChamberStep& s : p.steps) {
+    if (s.kind == "soak") continue;  // a soak holds what the step before reached
+    ChamberStep step;
+    step.at_s = s.t0_s;
+    step.setpoint_C = s.to_C;
+    if (s.kind == "ramp" && s.t1_s > s.t0_s) step.ramp_C_per_min = std::abs(s.to_C - s.from_C) / (s.t1_s - s.t0_s) * 60.0;
+    profile.steps.push_back(step);
+  }
+  profile.tolerance_C = std::max(profile.tolerance_C, kProfileToleranceMin_C);
+}
+
+// `chamber`: {"setpoint_C", "tolerance_C", "steps": [...]} or {"profile": NAME|OBJECT,
+// "tolerance_C"}, or just the profile's name.
+void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
+                   std::vector<std::string>& problems) {
+  const ChamberLimits& lim = config.chamber;
+  auto in_limits = [&](double c, const std::string& where) {
+    if (c < lim.min_C || c > lim.max_C)
+      problems.push_back(where + ": " + celsius_text(c) + " is outside the chamber's limits " + celsius_text(lim.min_C) +
+                         " .. " + celsius_text(lim.max_C));
+  };
+  std::string where_steps = "campaign.chamber.steps";
+  if (j.is_string()) {
+    profile_steps(j, "campaign.chamber", profile, problems);
+    where_steps = "campaign.chamber (profile '" + j.get<std::string>() + "')";
+  } else {
+    ObjectReader r(j, "campaign.chamber", problems);
+    const json* named = r.get("profile");
+    const json* steps = r.get("steps");
+    if (named != nullptr && steps != nullptr) {
+      problems.push_back("campaign.chamber: give either a profile or steps, not both");
+      return;
+    }
+    if (named != nullptr && r.has("setpoint_C"))
+      problems.push_back("campaign.chamber.setpoint_C: a profile starts at its own start_C");
+    if (named != nullptr) {
+      profile_steps(*named, "campaign.chamber.profile", profile, problems);
+      where_steps = "campaign.chamber.profile";
+    }
+    if (auto v = r.number("setpoint_C")) {
+      profile.setpoint_C = *v;
+      in_limits(*v, "campaign.chamber.setpoint_C");
+    }
+    if (auto v = r.number_in("tolerance_C", 0.01, 50)) profile.tolerance_C = *v;
+    if (steps != nullptr) {
+      if (!steps->is_array()) {
+        problems.push_back("campaign.chamber.steps must be an array");
+        return;
+      }
+      std::size_t i = 0;
+      for (const json& s : *steps) {
+        ObjectReader sr(s, "campaign.chamber.steps[" + std::to_string(i++) + "]", problems);
+        ChamberStep step;
+        const auto at = sr.number_in("at_s", 0, std::nullopt, true);
+        const auto sp = sr.number("setpoint_C", true);
+        const auto ramp = sr.number_in("ramp_C_per_min", 0);
+        if (!at || !sp) continue;
+        step.at_s = *at;
+        step.setpoint_C = *sp;
+        step.ramp_C_per_min = ramp.value_or(0.0);
+        profile.steps.push_back(step);
+      }
+    }
+  }
+  // The same checks for steps given and steps from a profile.
+  if (where_steps != "campaign.chamber.steps") in_limits(profile.setpoint_C, where_steps + " start_C");
+  for (std::size_t i = 0; i < profile.steps.size(); ++i) {
+    const ChamberStep& step = profile.steps[i];
+    const std::string where = where_steps + "[" + std::to_string(i) + "]";
+    in_limits(step.setpoint_C, where + ".setpoint_C");
+    if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
+      problems.push_back(where + ".ramp_C_per_min: " + number_text(step.ramp_C_per_min) + " °C/min exceeds the chamber's limit " +
+                         number_text(lim.max_ramp_C_per_min) + " °C/min");
+    if (step.at_s > duration_s)
+      problems.push_back(where + ".at_s: " + number_text(step.at_s) + " s is after the program's end (" +
+                         number_text(duration_s) + " s)");
+    if (i > 0 && step.at_s <= profile.steps[i - 1].at_s)
+      problems.push_back(where + ".at_s must be later than the previous step's");
+  }
+}
+
+void check_faults(const json& j, double duration_s, std::vector<SimFault>& faults, std::vector<std::string>& problems) {
+  if (!j.is_array()) {
+    problems.push_back("campaign.sim_faults must be an array");
+    return;
+  }
+  std::size_t i = 0;
+  for (const json& f : j) {
+    const std::string where = "campaign.sim_faults[" + std::to_string(i++) + "]";
+    ObjectReader r(f, where, problems);
+    SimFault fault;
+    const auto kind = r.string("kind", true);
+    if (auto v = r.number_in("at_s", 0, duration_s, true)) fault.at_s = *v;
+    if (auto v = r.number_in("duration_s", 0, 86400)) fault.duration_s = *v;
+    if (!kind) continue;
+    if (*kind == "chamber_offset") {
+      fault.kind = SimFault::Kind::ChamberOffset;
+      if (auto v = r.number_in("offset_C", -100, 100, true)) fault.offset_C = *v;
+    } else if (*kind == "imu_dropout") {
+      fault.kind = SimFault::Kind::ImuDropout;
+    } else if (*kind == "imu_corrupt") {
+      fault.kind = SimFault::Kind::ImuCorrupt;
+      if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "disconnect") {
+      fault.kind = SimFault::Kind::Disconnect;
+      if (auto v = r.string("device", true)) {
+        if (*v != "table" && *v != "chamber" && *v != "imu")
+          problems.push_back(where + ".device must be table, chamber or imu");
+        fault.device = *v;
+      }
+    } else if (*kind == "table_fault") {
+      fault.kind = SimFault::Kind::TableFault;
+    } else if (*kind == "relay_stuck") {
+      fault.kind = SimFault::Kind::RelayStuck;
+    } else {
+      problems.push_back(where + ".kind \"" + *kind +
+                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, disconnect, table_fault, relay_stuck");
+    }
+    faults.push_back(fault);
+  }
+}
+
+}  // namespace
+
+CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
+  CampaignCheck check;
+  auto& problems = check.problems;
+  CampaignSpec spec;
+  // Real devices: the IMU samples at its own configured rate, which the frame grid must follow.
+  spec.rate_hz = config.device_addresses ? config.device_addresses->imu.rate_hz : config.sim.rate_hz;
+  spec.time_scale = config.sim.time_scale;
+  spec.seed = config.sim.seed;
+  spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
+  spec.chamber.tolerance_C = config.chamber.tolerance_C;
+  spec.suspenders = config.suspenders;
+
+  // Form first: a problem here is the client's JSON (400), not the campaign's content (422).
+  std::size_t form_problems = 0;
+  json normalized = json::object();
+  motion::Program program;
+  bool have_program = false;
+  {
+    ObjectReader r(campaign, "campaign", problems);
+    if (!r.is_object()) {
+      check.malformed = true;
+      return check;
+    }
+    if (auto v = r.string("name", true)) {
+      if (v->empty() || v->size() > 200) problems.push_back("campaign.name must have 1 to 200 characters");
+      spec.name = *v;
+    }
+    const json* program_spec = r.get("program", true);
+    // The built-in campaign `full`: the whole method in one run, each program made for its stage
+    // (stage 1, lever arms, stage 3 from their models, then the Schuler test of every stage's model).
+    const json full_programs = json::array({"direct", "lever-arm", "navigation", "evaluate"});
+    const bool builtin_full = program_spec != nullptr && *program_spec == "full";
+    if (builtin_full) program_spec = &full_programs;
+    // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
+    // built-in thermal campaign: it brings its profile, and its table cycle has no rate segments
+    // for stage 1, so no estimator runs online unless asked; stage 2 runs on the whole run (GET
+    // .../thermal, `imucal calibrate --stage thermal`).
+    const bool builtin_thermal =
+        program_spec != nullptr && program_spec->is_string() && motion::is_builtin_chamber(program_spec->get<std::string>());
+    if (auto v = r.number_in("rate_hz", 1e-3)) spec.rate_hz = *v;
+    if (auto v = r.number_in("time_scale", 0, 1e6)) spec.time_scale = *v;
+    if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) spec.seed = static_cast<std::uint64_t>(*v);
+    const json* estimators = r.get("estimators");
+    const json* truth = r.get("truth");
+    const json* nav_model = r.get("navigation_model");
+    const json* start_model = r.get("model");
+    const json* chamber = r.get("chamber");
+    const json* suspenders = r.get("suspenders");
+    const json* faults = r.get("sim_faults");
+    const json* imu = r.get("imu");
+    r.finish();
+    form_problems = problems.size();
+
+    if (estimators != nullptr) {
+      spec.estimators.clear();
+      if (!estimators->is_array()) {
+        problems.push_back("campaign.estimators must be an array of names");
+      } else {
+        for (const json& e : *estimators) {
+          if (!e.is_string()) {
+            problems.push_back("campaign.estimators must hold names (strings)");
+            continue;
+          }
+          const auto name = e.get<std::string>();
+          const auto& known = known_estimators();
+          if (std::find(known.begin(), known.end(), name) == known.end()) {
+            std::string list;
+            for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+            problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: " + list + ")");
+          } else if (spec.has_estimator(name)) {
+            problems.push_back("campaign.estimators: \"" + name + "\" is listed twice");
+          } else {
+            spec.estimators.push_back(name);
+          }
+        }
+      }
+      form_problems = problems.size();
+    }
+
+    // The program.
+    if (program_spec != nullptr) {
+      std::vector<json> parts;
+      bool malformed_program = false;
+      if (program_spec->is_array()) {
+        if (program_spec->empty()) {
+          problems.push_back("campaign.program must not be an empty list");
+          malformed_program = true;
+        }
+        for (std::size_t i = 0; i < program_spec->size(); ++i) {
+          if (auto p = program_item((*program_spec)[i], "campaign.program[" + std::to_string(i) + "]", problems,
+                                    malformed_program))
+            parts.push_back(std::move(*p));
+        }
+      } else if (auto p = program_item(*program_spec, "campaign.program", problems, malformed_program)) {
+        parts.push_back(std::move(*p));
+      }
+      if (malformed_program) form_problems = problems.size();
+      std::optional<json> program_json;
+      if (!parts.empty() && parts.size() == (program_spec->is_array() ? program_spec->size() : 1)) {
+        if (parts.size() == 1) {
+          program_json = parts.front();
+        } else {
+          program_json = join_programs(parts, config.table_limits, problems);
+        }
+      }
+      if (program_json) {
+        try {
+          program = motion::compile_program(program_json->dump(), config.table_limits);
+          have_program = true;
+          spec.program_json = program_json->dump();
+          if (builtin_full) {
+            spec.program_label = "full";
+          } else if (program_spec->is_string()) {
+            spec.program_label = program_spec->get<std::string>();
+          } else if (program_spec->is_array()) {
+            spec.program_label = program.name;
+          } else {
+            spec.program_label = "inline:" + program.name;
+          }
+        } catch (const std::exception& e) {
+          problems.push_back(std::string("campaign.program: ") + e.what());
+        }
+      }
+      normalized["program"] = builtin_full ? json("full") : *program_spec;
+    }
+    if (have_program) {
+      // The motion library reports a limit at every instant it is exceeded; one line per
+      // segment, axis and limit is what a person needs, with the count of the others.
+      std::vector<std::pair<std::string, int>> grouped;
+      for (const auto& p : motion::validate_program(program, config.table_limits)) {
+        std::string key = p;
+        const auto t0 = key.find(" (t=");
+        const auto t1 = t0 == std::string::npos ? t0 : key.find(" s)", t0);
+        if (t1 != std::string::npos) key.erase(t0, t1 + 3 - t0);
+        auto it = std::find_if(grouped.begin(), grouped.end(), [&](const auto& g) { return g.first == key; });
+        if (it == grouped.end()) {
+          grouped.emplace_back(key, 0);
+          problems.push_back("campaign.program: " + p);
+        } else {
+          ++it->second;
+        }
+      }
+      for (std::size_t i = 0, k = problems.size() - grouped.size(); i < grouped.size(); ++i, ++k)
+        if (grouped[i].second > 0) problems[k] += " (and " + std::to_string(grouped[i].second) + " more times)";
+      check.duration_s = program.duration_s();
+      check.segments = program.segments();
+      if (check.duration_s > config.campaign.max_duration_s)
+        problems.push_back("campaign.program lasts " + number_text(check.duration_s) + " s, more than the limit of " +
+                           number_text(config.campaign.max_duration_s) + " s");
+      // What the program's parts were made for decides the estimators unless the campaign lists
+      // them ({"program": "navigation"} runs stage 3); a listed one needs what its stage needs.
+      RecordingMeta meta;
+      meta.segments = check.segments;
+      meta.program_json = spec.program_json;
+      if (estimators == nullptr) {
+        for (const pipeline::Stage stage : pipeline::stages_for_parts(meta))
+          if (std::find(kOnlineStages.begin(), kOnlineStages.end(), stage) != kOnlineStages.end())
+            spec.estimators.emplace_back(pipeline::names_of(stage).estimator);
+      }
+      for (const std::string& name : spec.estimators) {
+        const auto stage = pipeline::stage_of_estimator(name);
+        if (!stage) continue;
+        if (const auto why = pipeline::requirement_unmet(*stage, pipeline::feed(*stage, meta, true).segments))
+          problems.push_back("estimator \"" + name + "\": " + *why);
+      }
+    }
+    if (spec.rate_hz > config.campaign.max_rate_hz)
+      problems.push_back("campaign.rate_hz: " + number_text(spec.rate_hz) + " Hz exceeds the limit of " +
+                         number_text(config.campaign.max_rate_hz) + " Hz");
+    if (truth != nullptr) {
+      if (auto m = read_model(*truth, "campaign.truth", problems)) spec.truth = *m;
+    } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", problems)) {
+      spec.truth = *m;
+    }
+    if (spec.truth.frame != "instrument") problems.push_back("campaign.truth must be in the instrument frame");
+    if (nav_model != nullptr) {
+      if (!spec.has_estimator("navigation"))
+        problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
+      if (auto m = read_model(*nav_model, "campaign.navigation_model", problems)) spec.navigation_model = *m;
+    }
+    if (start_model != nullptr) {
+      if (std::none_of(spec.estimators.begin(), spec.estimators.end(),
+                       [](const std::string& e) { return pipeline::stage_of_estimator(e).has_value(); }))
+        problems.push_back("campaign.model is given but no calibration estimator (direct, lever-arm, stage3) runs");
+      if (start_model->is_number_integer()) {
+        spec.start_model_campaign = start_model->get<std::int64_t>();
+      } else if (auto m = read_model(*start_model, "campaign.model", problems)) {
+        spec.start_model = *m;
+        if (m->frame != "instrument" && (spec.has_estimator("direct") || spec.has_estimator("lever-arm")))
+          problems.push_back("campaign.model is in the " + m->frame +
+                             " frame: stages direct and lever-arm start from an instrument-frame model");
+      }
+    }
+    if (chamber != nullptr) {
+      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
+    } else if (builtin_thermal) {
+      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems);
+    }
+    if (suspenders != nullptr) {
+      ObjectReader s(*suspenders, "campaign.suspenders", problems);
+      if (auto v = s.number_in("settle_s", 0, 86400)) spec.suspenders.settle_s = *v;
+      if (auto v = s.number_in("frame_timeout_s", 0.01, 3600)) spec.suspenders.frame_timeout_s = *v;
+      if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
+    }
+    if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+    for (std::size_t i = 0; i < spec.faults.size(); ++i)
+      if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
+    if (imu != nullptr) check_imu(*imu, spec.imu, problems);
+    if (config.device_addresses) {
+      if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {
+        char text[200];
+        std::snprintf(text, sizeof text,
+                      "campaign.rate_hz is %g Hz but the IMU runs at %g Hz (config.devices.imu.rate_hz): leave "
+                      "rate_hz out or set it to the IMU's rate",
+                      spec.rate_hz, config.device_addresses->imu.rate_hz);
+        problems.push_back(text);
+      }
+      if (faults != nullptr)
+        problems.push_back("campaign.sim_faults need simulated devices; the configured devices are real "
+                           "(config.devices names their addresses)");
+    }
+  }
+  check.malformed = form_problems > 0;
+  if (!problems.empty()) return check;
+
+  normalized["name"] = spec.name;
+  normalized["estimators"] = spec.estimators;
+  normalized["rate_hz"] = spec.rate_hz;
+  normalized["time_scale"] = spec.time_scale;
+  normalized["seed"] = spec.seed;
+  normalized["truth"] = model_json(spec.truth);
+  if (spec.navigation_model) normalized["navigation_model"] = model_json(*spec.navigation_model);
+  if (spec.start_model_campaign) normalized["model"] = *spec.start_model_campaign;
+  if (spec.start_model) normalized["model"] = model_json(*spec.start_model);
+  json steps = json::array();
+  for (const auto& s : spec.chamber.steps)
+    steps.push_back({{"at_s", s.at_s}, {"setpoint_C", s.setpoint_C}, {"ramp_C_per_min", s.ramp_C_per_min}});
+  normalized["chamber"] = {{"setpoint_C", spec.chamber.setpoint_C}, {"tolerance_C", spec.chamber.tolerance_C},
+                           {"steps", steps}};
+  normalized["suspenders"] = {{"settle_s", spec.suspenders.settle_s},
+                              {"frame_timeout_s", spec.suspenders.frame_timeout_s},
+                              {"chamber_persist_s", spec.suspenders.chamber_persist_s}};
+  if (campaign.contains("sim_faults")) normalized["sim_faults"] = campaign.at("sim_faults");
+  if (!spec.imu.serial.empty())
+    normalized["imu"] = {{"serial", spec.imu.serial},     {"part_number", spec.imu.part_number},
+                         {"firmware", spec.imu.firmware}, {"customer", spec.imu.customer},
+                         {"notes", spec.imu.notes}};
+  spec.normalized = std::move(normalized);
+  check.spec = std::move(spec);
+  return check;
+}
+
+CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config) {
+  json j;
+  try {
+    j = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    CampaignCheck check;
+    check.malformed = true;
+    check.problems.push_back(std::string("not valid JSON: ") + e.what());
+    return check;
+  }
+  return check_campaign(j, config);
+}
+
+std::int64_t store_campaign(DaemonDb& db, const CampaignCheck& check, const std::string& reason) {
+  const CampaignSpec& spec = check.spec.value();
+  std::optional<CampaignUnit> unit;
+  if (!spec.imu.serial.empty()) unit = CampaignUnit{spec.imu.serial, spec.imu.part_number};
+  return db.insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s, reason, unit);
+}
+
+motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config) {
+  return motion::compile_program(spec.program_json, config.table_limits);
+}
+
+}  // namespace imucal::daemon

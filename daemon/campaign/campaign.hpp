@@ -1,0 +1,106 @@
+// Campaigns as data: a motion program (built-in, inline, or several in a row), a chamber set-point
+// profile, the estimators to run online, and for simulated devices the IMU truth, rate, seed,
+// time scale and injected faults. Checked completely before anything is stored or moves: every
+// problem is listed (docs/api.md, "Campaign JSON").
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "daemon/config/config.hpp"
+#include "motion_programs/program.hpp"
+
+namespace imucal::daemon {
+
+// A set-point change at program time at_s, reached at ramp_C_per_min (0: a step).
+struct ChamberStep {
+  double at_s = 0.0;
+  double setpoint_C = 25.0;
+  double ramp_C_per_min = 0.0;
+};
+
+struct ChamberProfile {
+  double setpoint_C = 25.0;   // from program time 0 (the configured safe set point by default)
+  double tolerance_C = 2.0;   // suspender band around the profile's set point
+  std::vector<ChamberStep> steps;  // sorted by at_s
+
+  double setpoint_at(double program_time_s) const;
+  // Whether the set point changes gradually somewhere inside (t0_s, t1_s): a segment overlapping a
+  // ramp cannot be redone as it was (the chamber's history cannot be repeated).
+  bool ramps_within(double t0_s, double t1_s) const;
+};
+
+struct SimFault {
+  enum class Kind { ChamberOffset, ImuDropout, ImuCorrupt, Disconnect, TableFault, RelayStuck } kind = Kind::ChamberOffset;
+  std::string device;       // Disconnect: table, chamber or imu
+  double at_s = 0.0;        // program time of the first pass
+  double duration_s = 0.0;  // simulated (device) seconds
+  double offset_C = 0.0;    // ChamberOffset
+  std::int64_t frames = 1;  // ImuCorrupt
+};
+
+// The unit a campaign calibrates (docs/api.md, "Campaign JSON", `imu`). Empty serial: the campaign
+// names no unit (the run file then records the serial the bench reports) and no unit's history
+// holds it.
+struct ImuIdentity {
+  std::string serial, part_number, firmware, customer, notes;
+};
+
+struct CampaignSpec {
+  std::string name;
+  ImuIdentity imu;
+  std::string program_label;  // "direct", "direct+navigation", or "inline:<name>"
+  std::string program_json;   // the program actually run (several joined into one), JSON text
+  std::vector<std::string> estimators;
+  double rate_hz = 100.0;
+  double time_scale = 10.0;
+  std::uint64_t seed = 1;
+  ImuModel truth;                            // resolved (files are read when the campaign is posted)
+  std::optional<ImuModel> navigation_model;  // for the "navigation" estimator (default: ideal)
+  // The model the first calibration estimator starts from (stage 3 alone: the stage-1 model it
+  // refines): a model file or object, or a previous campaign's model by its id (resolved when the
+  // run starts). Ideal by default.
+  std::optional<ImuModel> start_model;
+  std::optional<std::int64_t> start_model_campaign;
+  ChamberProfile chamber;
+  SuspenderSettings suspenders;
+  std::vector<SimFault> faults;
+  nlohmann::json normalized;  // the stored form: defaults filled in, files resolved inline
+
+  bool has_estimator(const std::string& estimator) const;
+};
+
+struct CampaignCheck {
+  std::optional<CampaignSpec> spec;  // set when there is no problem
+  std::vector<std::string> problems;
+  bool malformed = false;  // problems of form (400) rather than of content (422)
+  double duration_s = 0.0;
+  std::vector<SegmentInfo> segments;
+};
+
+// The calibration stages that run online (pipeline::StageName::estimator: direct, lever-arm,
+// stage3) and the free-inertial display `navigation`.
+const std::vector<std::string>& known_estimators();
+
+// Parses and validates a campaign against the configuration (limits, defaults). Never throws for
+// bad input; reads truth and model files named in it.
+CampaignCheck check_campaign(const nlohmann::json& campaign, const DaemonConfig& config);
+CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config);
+
+class DaemonDb;
+// Stores a checked campaign in state `created` with its unit's identity (the one way the API and
+// `imucal campaign run` store campaigns). Returns its id.
+std::int64_t store_campaign(DaemonDb& db, const CampaignCheck& check, const std::string& reason);
+
+// The program of a checked campaign, compiled (cannot fail for a spec from check_campaign).
+motion::Program compile_campaign_program(const CampaignSpec& spec, const DaemonConfig& config);
+
+
+}  // namespace imucal::daemon

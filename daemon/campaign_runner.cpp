@@ -1,0 +1,115 @@
+#include "daemon/campaign_runner.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/campaign/campaign.hpp"
+#include "daemon/service.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+CampaignRunResult run_campaign_file(const std::string& campaign_file, const CampaignRunOptions& options) {
+  CampaignRunResult out;
+  DaemonConfig config;
+  try {
+    if (!options.config_file.empty()) config = load_config_file(options.config_file);
+  } catch (const std::exception& e) {
+    out.exit_code = 2;
+    out.error = e.what();
+    return out;
+  }
+  config.data_dir = options.data_dir;
+  // The simulated bench always: the configuration given is for its limits and site, and a
+  // regression run must never reach the real devices a daemon's configuration names.
+  config.devices = "sim";
+  config.device_addresses.reset();
+  config.sim.time_scale = 0.0;  // a regression run goes as fast as it can unless the campaign says otherwise
+  config.operator_token = "campaign-run-local-operator";  // no HTTP here: keeps Auth from generating a token file
+  config.queue_autostart = true;
+
+  std::string text;
+  {
+    std::ifstream in(campaign_file);
+    if (!in) {
+      out.exit_code = 2;
+      out.error = campaign_file + ": cannot read";
+      return out;
+    }
+    std::stringstream s;
+    s << in.rdbuf();
+    text = s.str();
+  }
+  json campaign;
+  try {
+    campaign = json::parse(text);
+    if (options.time_scale && campaign.is_object()) campaign["time_scale"] = *options.time_scale;
+  } catch (const json::exception& e) {
+    out.exit_code = 2;
+    out.error = campaign_file + ": not valid JSON: " + e.what();
+    return out;
+  }
+  const CampaignCheck check = check_campaign(campaign, config);
+  if (!check.spec) {
+    out.exit_code = 2;
+    out.error = campaign_file + ": the campaign is invalid:";
+    for (const auto& p : check.problems) out.error += "\n  - " + p;
+    return out;
+  }
+
+  try {
+    // The progress line and the summary say what a person needs; warnings (alarms) still show.
+    if (options.progress) spdlog::set_level(spdlog::level::warn);
+    Service service(config);
+    service.start(false);
+    out.id = store_campaign(service.db(), check, "imucal campaign run " + campaign_file);
+    const auto t0 = Clock::now();
+    const auto started = service.sequencer().command(out.id, Command::Start, "imucal", "campaign run");
+    if (started.http_status != 200) throw std::runtime_error(started.error);
+    int last_pct = -1;
+    for (;;) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      const auto row = service.db().campaign(out.id);
+      if (!row) throw std::runtime_error("campaign disappeared from the database");
+      const int pct = row->duration_s > 0 ? static_cast<int>(100.0 * row->program_time_s / row->duration_s) : 0;
+      if (options.progress && pct / 5 != last_pct / 5) {
+        std::fprintf(stderr, "\rcampaign %lld '%s': %s %3d %%", static_cast<long long>(out.id), row->name.c_str(),
+                     std::string(to_string(row->state)).c_str(), pct);
+        std::fflush(stderr);
+        last_pct = pct;
+      }
+      if (is_final(row->state) || row->state == RunState::Interrupted) break;
+    }
+    out.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    service.stop();
+    if (options.progress) std::fprintf(stderr, "\n");
+    const auto row = service.db().campaign(out.id);
+    out.state = std::string(to_string(row->state));
+    out.program_s = row->program_time_s;
+    out.frames = row->frames;
+    out.run_db = (std::filesystem::path(config.data_dir) / row->run_db).string();
+    out.error = row->error.value_or("");
+    if (row->results_json) out.results = json::parse(*row->results_json);
+    out.has_model = row->model_json.has_value();
+    if (row->model_json && !options.model_out.empty()) {
+      std::ofstream model(options.model_out);
+      if (!model) throw std::runtime_error(options.model_out + ": cannot write");
+      model << *row->model_json << "\n";
+    }
+    out.exit_code = row->state == RunState::Done ? 0 : 1;
+  } catch (const std::exception& e) {
+    out.exit_code = 1;
+    out.error = e.what();
+  }
+  return out;
+}
+
+}  // namespace imucal::daemon

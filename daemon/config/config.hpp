@@ -1,0 +1,160 @@
+// The daemon's configuration: one JSON file (docs/daemon.md, examples/imucald.json), every key
+// optional, overridden by command-line flags. The defaults run on a fresh machine with no file:
+// simulated devices, data in ./data, HTTP on 127.0.0.1:8080.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/recording.hpp"
+#include "daemon/config/device_config.hpp"
+#include "motion_programs/program.hpp"
+
+namespace imucal::daemon {
+
+// A configuration that cannot be used; the message lists every problem, one per line.
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class Role { Viewer, Operator };
+const char* to_string(Role role);
+
+struct UserEntry {
+  std::string name;
+  Role role = Role::Viewer;
+  std::string password_hash;  // for the browser sign-in, made by `imucal passwd` (empty: none)
+  std::string token;     // for `Authorization: Bearer` (empty: none)
+};
+
+struct ChamberLimits {
+  double min_C = -40.0;
+  double max_C = 85.0;
+  double max_ramp_C_per_min = 5.0;
+  double safe_setpoint_C = 25.0;     // where every exit path leaves the chamber
+  double tolerance_C = 2.0;          // default band of a campaign
+  double wait_timeout_s = 3600.0;    // longest wait for the chamber to reach a set point
+};
+
+// Defaults of the simulated devices (a campaign may override rate, time scale, seed, truth).
+struct SimDefaults {
+  double rate_hz = 100.0;
+  double time_scale = 10.0;    // program seconds per wall second; 0: as fast as possible
+  std::uint64_t seed = 1;
+  std::string truth = "ideal"; // "ideal" or a path to an imucal-imu-model/1 file
+  double chamber_tau_s = 20.0; // first-order time constant of the simulated chamber
+  double home_time_s = 5.0;    // simulated homing time
+};
+
+// The suspenders' settings (daemon/run/suspenders.hpp): the daemon's defaults (configuration
+// `suspenders`) and a campaign's own.
+struct SuspenderSettings {
+  double settle_s = 10.0;          // a cleared condition must stay clear this long before resuming
+  double frame_timeout_s = 1.0;    // no IMU frame for this long (device time): frames missing
+  double chamber_persist_s = 2.0;  // out of band for this long before suspending (noise immunity)
+};
+
+struct RecorderConfig {
+  double commit_interval_s = 1.0;
+  std::int64_t queue_frames = 1 << 18;  // bound of the recorder queue
+};
+
+struct HttpConfig {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 8080;
+  std::int64_t body_limit_bytes = 1 << 20;
+  double request_timeout_s = 30.0;
+  double session_idle_s = 12 * 3600.0;
+  double live_rate_hz = 10.0;
+  std::int64_t live_queue = 64;  // messages per WebSocket client before the oldest are dropped
+  int threads = 1;
+  std::string web_dir;  // empty: ./web if it exists, else the source tree's web/
+};
+
+struct LogConfig {
+  std::string level = "info";
+  std::string file = "logs/imucald.log";  // relative to the data directory; "" for none
+  double max_size_mb = 10.0;
+  int max_files = 5;
+};
+
+struct CampaignLimits {
+  double max_duration_s = 48 * 3600.0;
+  double max_rate_hz = 4000.0;
+};
+
+// One instrument of the bench's reference equipment, as a calibration certificate names it.
+struct ReferenceInstrument {
+  std::string make, model, serial;
+  std::string calibration_due;          // "YYYY-MM-DD": when its own calibration runs out
+  std::string calibration_certificate;  // optional: its own certificate's number
+};
+
+// The reference equipment of the bench (`reference_equipment`): printed on every certificate.
+struct ReferenceEquipment {
+  std::optional<ReferenceInstrument> table, chamber;
+};
+
+// Certificate numbers (`certificates`, docs/daemon.md "Certificates"): PREFIX-YYYY-NNNNNN, the
+// sequence kept in a small file outside the data directory, so that a new data directory never
+// hands out a number again.
+struct CertificateConfig {
+  std::string prefix;         // empty: derived from the site's name (certificate_prefix)
+  std::string sequence_file;  // empty: kDefaultSequenceFile; relative: to the configuration file's directory
+  static constexpr const char* kDefaultSequenceFile = "imucal-certificate-sequence.json";
+};
+
+struct DaemonConfig {
+  std::string site_name = "simulated lab";
+  // The directory of the configuration file this came from (empty: none was read); relative
+  // paths that belong to the site rather than to one data directory are resolved against it.
+  std::string config_dir;
+  Site site;
+  std::string data_dir = "./data";
+  // Acceptance limits per part number (imucal-limits/1, daemon/production/acceptance.hpp); relative
+  // to the data directory. A missing file means no limits; the UI writes it (PUT /api/limits).
+  std::string limits_file = "limits.json";
+  // "sim" (in-process, accelerated), "sim-wire" (simulated devices on loopback through the real
+  // drivers) or "real" (the devices named in `device_addresses`, from a `devices` object).
+  std::string devices = "sim";
+  std::optional<DeviceAddresses> device_addresses;  // set when `devices` named real devices
+  motion::TableLimits table_limits;
+  ChamberLimits chamber;
+  SimDefaults sim;
+  SuspenderSettings suspenders;
+  RecorderConfig recorder;
+  HttpConfig http;
+  LogConfig log;
+  CampaignLimits campaign;
+  std::string operator_token;
+  std::vector<UserEntry> users;
+  bool queue_autostart = true;  // run queued campaigns after a restart without an operator
+  ReferenceEquipment reference_equipment;
+  CertificateConfig certificates;
+};
+
+// Parses the configuration; throws ConfigError listing every problem. `source` names it in messages.
+DaemonConfig parse_config(const std::string& json_text, const std::string& source);
+DaemonConfig load_config_file(const std::string& path);
+
+// A date "YYYY-MM-DD" of the Gregorian calendar as its day number since 1970-01-01, or nothing
+// when it is not one (reference_equipment's calibration_due: checked here, compared by it).
+std::optional<std::int64_t> date_day_number(const std::string& text);
+
+// The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
+// every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most
+// 20 characters, else "IMUCAL".
+std::string certificate_prefix(const DaemonConfig& config);
+// The certificate sequence file: `certificates.sequence_file` (default kDefaultSequenceFile)
+// resolved against the configuration file's directory, or the data directory when the daemon
+// runs without a configuration file.
+std::string certificate_sequence_path(const DaemonConfig& config);
+
+// "HOST:PORT" (port 0: any free port). Throws ConfigError.
+void parse_listen(const std::string& text, std::string& host, std::uint16_t& port);
+
+}  // namespace imucal::daemon

@@ -1,0 +1,599 @@
+#include "daemon/db/daemon_db.hpp"
+
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+
+namespace imucal::daemon {
+
+std::int64_t now_unix_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string iso8601_utc(std::int64_t unix_ms) {
+  const std::time_t secs = static_cast<std::time_t>(unix_ms / 1000);
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday,
+                tm.tm_hour, tm.tm_min, tm.tm_sec, static_cast<int>(unix_ms % 1000));
+  return buf;
+}
+
+namespace {
+
+const char* const kSchema = R"sql(
+CREATE TABLE IF NOT EXISTS campaign(
+  id INTEGER PRIMARY KEY,
+  name TEXT NOT NULL,
+  spec_json TEXT NOT NULL,
+  program_label TEXT NOT NULL,
+  duration_s REAL NOT NULL,
+  state TEXT NOT NULL,
+  created_ms INTEGER NOT NULL,
+  started_ms INTEGER,
+  ended_ms INTEGER,
+  checkpoint_segment INTEGER,
+  checkpoint_s REAL,
+  program_time_s REAL NOT NULL DEFAULT 0,
+  frames INTEGER NOT NULL DEFAULT 0,
+  lost_frames INTEGER NOT NULL DEFAULT 0,
+  bad_frames INTEGER NOT NULL DEFAULT 0,
+  run_db TEXT NOT NULL DEFAULT '',
+  model_json TEXT,
+  results_json TEXT,
+  estimators_json TEXT,
+  error TEXT);
+CREATE TABLE IF NOT EXISTS queue(
+  position INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL UNIQUE REFERENCES campaign(id));
+CREATE TABLE IF NOT EXISTS transition(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  t_ms INTEGER NOT NULL,
+  from_state TEXT,
+  to_state TEXT NOT NULL,
+  reason TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS transition_campaign ON transition(campaign_id);
+CREATE TABLE IF NOT EXISTS event(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  t_ms INTEGER NOT NULL,
+  kind TEXT NOT NULL,
+  segment INTEGER,
+  program_time_s REAL,
+  reason TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS event_campaign ON event(campaign_id);
+CREATE TABLE IF NOT EXISTS progress(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  estimator TEXT NOT NULL,
+  t_ms INTEGER NOT NULL,
+  program_time_s REAL NOT NULL,
+  json TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS progress_campaign ON progress(campaign_id);
+CREATE TABLE IF NOT EXISTS setting(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+-- A campaign's certificate number, issued once (docs/api.md "Certificates"); bench_json is what the
+-- certificate states about the bench as configured then. A table of its own, created where
+-- missing, so that databases of schema version 2 take it without a migration.
+CREATE TABLE IF NOT EXISTS certificate(
+  campaign_id INTEGER PRIMARY KEY REFERENCES campaign(id),
+  number TEXT NOT NULL UNIQUE,
+  sequence INTEGER NOT NULL,
+  issued_ms INTEGER NOT NULL,
+  bench_json TEXT NOT NULL
+);
+-- Alarms (docs/api.md "Alarms"): raised, cleared (NULL while active), acknowledged by whom and
+-- when (NULL until then). Created where missing, as the certificate table, without a migration.
+CREATE TABLE IF NOT EXISTS alarm(
+  id INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  severity TEXT NOT NULL,
+  source TEXT NOT NULL,
+  message TEXT NOT NULL,
+  segment INTEGER,
+  program_time_s REAL,
+  raised_ms INTEGER NOT NULL,
+  cleared_ms INTEGER,
+  cleared_reason TEXT,
+  acknowledged_by TEXT,
+  acknowledged_ms INTEGER
+);
+CREATE INDEX IF NOT EXISTS alarm_campaign ON alarm(campaign_id);
+)sql";
+
+using storage::sql::Statement;
+
+constexpr const char* kCampaignColumns =
+    "c.id, c.name, c.spec_json, c.program_label, c.duration_s, c.state, c.created_ms, c.started_ms, c.ended_ms, "
+    "c.checkpoint_segment, c.checkpoint_s, c.program_time_s, c.frames, c.lost_frames, c.bad_frames, c.run_db, "
+    "c.model_json, c.results_json, c.estimators_json, c.error, "
+    "(SELECT COUNT(*) FROM queue q2 WHERE q2.position < q.position) AS queue_position, q.position IS NOT NULL, "
+    "c.imu_serial, c.imu_part_number, c.complete, c.accepted_reason, c.accepted_by, c.accepted_ms";
+
+// Version 1 -> 2, in the transaction that opens the database. A fresh database gets version 1's
+// tables from kSchema and then these, so there is one path to the current schema. Runs that ended
+// before version 2 count as complete when they ended done with the whole program's time.
+const char* const kMigrationTo2 = R"sql(
+ALTER TABLE campaign ADD COLUMN imu_serial TEXT;
+ALTER TABLE campaign ADD COLUMN imu_part_number TEXT;
+ALTER TABLE campaign ADD COLUMN complete INTEGER;
+ALTER TABLE campaign ADD COLUMN accepted_reason TEXT;
+ALTER TABLE campaign ADD COLUMN accepted_by TEXT;
+ALTER TABLE campaign ADD COLUMN accepted_ms INTEGER;
+CREATE INDEX IF NOT EXISTS campaign_imu ON campaign(imu_serial);
+UPDATE campaign SET complete = (state = 'done' AND program_time_s >= duration_s - 1e-6)
+  WHERE state IN ('done', 'failed', 'aborted');
+)sql";
+
+}  // namespace
+
+DaemonDb::DaemonDb(const std::string& path)
+    : path_(path), db_(path, storage::sql::Connection::Open::create, "daemon database") {
+  // WAL + NORMAL: readers never block the writer, and a crash loses at most the last commits,
+  // never the file.
+  db_.exec("PRAGMA journal_mode=WAL");
+  db_.exec("PRAGMA synchronous=NORMAL");
+  db_.exec("PRAGMA foreign_keys=ON");
+  const auto version = static_cast<int>(db_.query_int("PRAGMA user_version"));
+  if (version > kSchemaVersion)
+    throw DbError("daemon database '" + path + "' has schema version " + std::to_string(version) +
+                  ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
+  {
+    Statement s(db_, "PRAGMA quick_check");
+    while (s.step())
+      if (s.column_text(0) != "ok") throw DbError("daemon database '" + path + "' is damaged: " + s.column_text(0));
+  }
+  storage::sql::Transaction txn(db_);
+  db_.exec(kSchema);
+  if (version < 2) db_.exec(kMigrationTo2);
+  db_.exec("PRAGMA user_version=" + std::to_string(kSchemaVersion));
+  txn.commit();
+}
+
+DaemonDb::~DaemonDb() = default;
+
+
+CampaignRow DaemonDb::read_campaign_row(const storage::sql::Statement& raw) {
+  const Statement& s = raw;
+  CampaignRow r;
+  r.id = s.column_int64(0);
+  r.name = s.column_text(1);
+  r.spec_json = s.column_text(2);
+  r.program_label = s.column_text(3);
+  r.duration_s = s.column_double(4);
+  r.state = parse_run_state(s.column_text(5)).value_or(RunState::Failed);
+  r.created_ms = s.column_int64(6);
+  r.started_ms = s.column_optional_int64(7);
+  r.ended_ms = s.column_optional_int64(8);
+  r.checkpoint_segment = s.column_optional_int64(9);
+  r.checkpoint_s = s.column_optional_double(10);
+  r.program_time_s = s.column_double(11);
+  r.frames = s.column_int64(12);
+  r.lost_frames = s.column_int64(13);
+  r.bad_frames = s.column_int64(14);
+  r.run_db = s.column_text(15);
+  r.model_json = s.column_optional_text(16);
+  r.results_json = s.column_optional_text(17);
+  r.estimators_json = s.column_optional_text(18);
+  r.error = s.column_optional_text(19);
+  if (s.column_int64(21) != 0) r.queue_position = s.column_int64(20);
+  r.imu_serial = s.column_optional_text(22);
+  r.imu_part_number = s.column_optional_text(23);
+  if (const auto c = s.column_optional_int64(24)) r.complete = *c != 0;
+  r.accepted_reason = s.column_optional_text(25);
+  r.accepted_by = s.column_optional_text(26);
+  r.accepted_ms = s.column_optional_int64(27);
+  return r;
+}
+
+std::int64_t DaemonDb::insert_campaign(const std::string& name, const std::string& spec_json,
+                                       const std::string& program_label, double duration_s, const std::string& reason,
+                                       const std::optional<CampaignUnit>& unit) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  const std::int64_t now = now_unix_ms();
+  Statement s(db_,
+         "INSERT INTO campaign(name, spec_json, program_label, duration_s, state, created_ms, imu_serial, "
+         "imu_part_number) VALUES (?1,?2,?3,?4,?5,?6,?7,?8)");
+  s.bind(1, name).bind(2, spec_json).bind(3, program_label).bind(4, duration_s);
+  s.bind(5, std::string(to_string(RunState::Created))).bind(6, now);
+  if (unit) {
+    s.bind(7, unit->serial).bind(8, unit->part_number);
+  } else {
+    s.bind_null(7).bind_null(8);
+  }
+  s.run();
+  const std::int64_t id = db_.last_insert_rowid();
+  Statement t(db_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,NULL,?3,?4)");
+  t.bind(1, id).bind(2, now).bind(3, std::string(to_string(RunState::Created))).bind(4, reason);
+  t.run();
+  txn.commit();
+  return id;
+}
+
+std::optional<CampaignRow> DaemonDb::campaign(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.id = ?1";
+  Statement s(db_, sql.c_str());
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  return read_campaign_row(s);
+}
+
+std::vector<CampaignRow> DaemonDb::campaigns(std::int64_t limit) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id ORDER BY c.id DESC LIMIT ?1";
+  Statement s(db_, sql.c_str());
+  s.bind(1, limit);
+  std::vector<CampaignRow> rows;
+  while (s.step()) rows.push_back(read_campaign_row(s));
+  return rows;
+}
+
+std::vector<CampaignRow> DaemonDb::unit_campaigns(const std::optional<std::string>& serial) {
+  std::lock_guard lock(mutex_);
+  const std::string sql = std::string("SELECT ") + kCampaignColumns +
+                          " FROM campaign c LEFT JOIN queue q ON q.campaign_id = c.id WHERE c.imu_serial IS NOT NULL" +
+                          (serial ? " AND c.imu_serial = ?1" : "") + " ORDER BY c.created_ms, c.id";
+  Statement s(db_, sql.c_str());
+  if (serial) s.bind(1, *serial);
+  std::vector<CampaignRow> rows;
+  while (s.step()) rows.push_back(read_campaign_row(s));
+  return rows;
+}
+
+void DaemonDb::set_complete(std::int64_t id, bool complete) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE campaign SET complete = ?2 WHERE id = ?1");
+  s.bind(1, id).bind(2, std::int64_t{complete ? 1 : 0});
+  s.run();
+}
+
+void DaemonDb::accept(std::int64_t id, const std::string& reason, const std::string& who) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE campaign SET accepted_reason = ?2, accepted_by = ?3, accepted_ms = ?4 WHERE id = ?1");
+  s.bind(1, id).bind(2, reason).bind(3, who).bind(4, now_unix_ms());
+  s.run();
+}
+
+bool DaemonDb::set_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  std::optional<RunState> from;
+  {
+    Statement s(db_, "SELECT state FROM campaign WHERE id = ?1");
+    s.bind(1, id);
+    if (!s.step()) return false;
+    from = parse_run_state(s.column_text(0));
+  }
+  if (expected && from != expected) return false;
+  // Every change, the operator's and the sequencer's, against the one table.
+  if (from && !transition_allowed(*from, to)) throw InvalidTransition(id, *from, to);
+  const std::int64_t now = now_unix_ms();
+  {
+    Statement s(db_,
+           "UPDATE campaign SET state = ?2, "
+           "started_ms = CASE WHEN ?2 = 'running' AND started_ms IS NULL THEN ?3 ELSE started_ms END, "
+           "ended_ms = CASE WHEN ?2 IN ('done', 'failed', 'aborted') THEN ?3 ELSE ended_ms END WHERE id = ?1");
+    s.bind(1, id).bind(2, std::string(to_string(to))).bind(3, now);
+    s.run();
+  }
+  {
+    Statement s(db_, "INSERT INTO transition(campaign_id, t_ms, from_state, to_state, reason) VALUES (?1,?2,?3,?4,?5)");
+    s.bind(1, id).bind(2, now);
+    if (from) {
+      s.bind(3, std::string(to_string(*from)));
+    } else {
+      s.bind_null(3);
+    }
+    s.bind(4, std::string(to_string(to))).bind(5, reason);
+    s.run();
+  }
+  if (is_final(to)) {
+    Statement s(db_, "DELETE FROM queue WHERE campaign_id = ?1");
+    s.bind(1, id);
+    s.run();
+  }
+  txn.commit();
+  return true;
+}
+
+std::vector<TransitionRow> DaemonDb::transitions(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT t_ms, from_state, to_state, reason FROM transition WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<TransitionRow> rows;
+  while (s.step()) {
+    TransitionRow r;
+    r.t_ms = s.column_int64(0);
+    if (!s.column_is_null(1)) r.from = parse_run_state(s.column_text(1));
+    r.to = parse_run_state(s.column_text(2)).value_or(RunState::Failed);
+    r.reason = s.column_text(3);
+    rows.push_back(std::move(r));
+  }
+  return rows;
+}
+
+std::vector<std::int64_t> DaemonDb::recover_after_restart(const std::string& reason) {
+  std::vector<std::pair<std::int64_t, RunState>> found;
+  {
+    std::lock_guard lock(mutex_);
+    Statement s(db_, "SELECT id, state FROM campaign ORDER BY id");
+    while (s.step()) {
+      const auto state = parse_run_state(s.column_text(1));
+      if (state && is_active(*state)) found.emplace_back(s.column_int64(0), *state);
+    }
+  }
+  std::vector<std::int64_t> changed;
+  for (const auto& [id, state] : found) {
+    if (state == RunState::Aborting) {
+      set_state(id, RunState::Aborted, "abort completed at start-up (" + reason + ")", state);
+    } else {
+      set_state(id, RunState::Interrupted, reason, state);
+    }
+    changed.push_back(id);
+  }
+  return changed;
+}
+
+void DaemonDb::queue_push_back(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MAX(position), 0) + 1, ?1 FROM queue");
+  s.bind(1, id);
+  s.run();
+}
+
+void DaemonDb::queue_push_front(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "INSERT OR IGNORE INTO queue(position, campaign_id) SELECT COALESCE(MIN(position), 0) - 1, ?1 FROM queue");
+  s.bind(1, id);
+  s.run();
+}
+
+void DaemonDb::queue_remove(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "DELETE FROM queue WHERE campaign_id = ?1");
+  s.bind(1, id);
+  s.run();
+}
+
+std::vector<std::int64_t> DaemonDb::queue() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT campaign_id FROM queue ORDER BY position");
+  std::vector<std::int64_t> ids;
+  while (s.step()) ids.push_back(s.column_int64(0));
+  return ids;
+}
+
+void DaemonDb::add_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                         std::optional<double> program_time_s, const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+         "INSERT INTO event(campaign_id, t_ms, kind, segment, program_time_s, reason) VALUES (?1,?2,?3,?4,?5,?6)");
+  s.bind(1, id).bind(2, now_unix_ms()).bind(3, kind).bind(4, segment).bind(5, program_time_s).bind(6, reason);
+  s.run();
+}
+
+std::vector<EventRow> DaemonDb::events(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT t_ms, kind, segment, program_time_s, reason FROM event WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<EventRow> rows;
+  while (s.step()) rows.push_back({s.column_int64(0), s.column_text(1), s.column_optional_int64(2), s.column_optional_double(3), s.column_text(4)});
+  return rows;
+}
+
+void DaemonDb::add_progress(std::int64_t id, const std::string& estimator, double program_time_s,
+                            const std::string& json) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+         "INSERT INTO progress(campaign_id, estimator, t_ms, program_time_s, json) VALUES (?1,?2,?3,?4,?5)");
+  s.bind(1, id).bind(2, estimator).bind(3, now_unix_ms()).bind(4, program_time_s).bind(5, json);
+  s.run();
+}
+
+std::vector<ProgressRow> DaemonDb::progress(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT estimator, t_ms, program_time_s, json FROM progress WHERE campaign_id = ?1 ORDER BY id");
+  s.bind(1, id);
+  std::vector<ProgressRow> rows;
+  while (s.step()) rows.push_back({s.column_text(0), s.column_int64(1), s.column_double(2), s.column_text(3)});
+  return rows;
+}
+
+void DaemonDb::set_run_db(std::int64_t id, const std::string& relative_path) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE campaign SET run_db = ?2 WHERE id = ?1");
+  s.bind(1, id).bind(2, relative_path);
+  s.run();
+}
+
+void DaemonDb::update_run(std::int64_t id, double program_time_s, std::int64_t frames, std::int64_t lost_frames,
+                          std::int64_t bad_frames) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+         "UPDATE campaign SET program_time_s = ?2, frames = ?3, lost_frames = ?4, bad_frames = ?5 WHERE id = ?1");
+  s.bind(1, id).bind(2, program_time_s).bind(3, frames).bind(4, lost_frames).bind(5, bad_frames);
+  s.run();
+}
+
+void DaemonDb::set_checkpoint(std::int64_t id, std::int64_t segment, double t_s) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE campaign SET checkpoint_segment = ?2, checkpoint_s = ?3 WHERE id = ?1");
+  s.bind(1, id).bind(2, segment).bind(3, t_s);
+  s.run();
+}
+
+namespace {
+void set_text_column(storage::sql::Connection& db, const char* sql, std::int64_t id, const std::string& v) {
+  Statement s(db, sql);
+  s.bind(1, id).bind(2, v);
+  s.run();
+}
+}  // namespace
+
+void DaemonDb::set_model(std::int64_t id, const std::string& model_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, "UPDATE campaign SET model_json = ?2 WHERE id = ?1", id, model_json);
+}
+void DaemonDb::set_results(std::int64_t id, const std::string& results_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, "UPDATE campaign SET results_json = ?2 WHERE id = ?1", id, results_json);
+}
+void DaemonDb::set_estimators(std::int64_t id, const std::string& estimators_json) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, "UPDATE campaign SET estimators_json = ?2 WHERE id = ?1", id, estimators_json);
+}
+void DaemonDb::set_error(std::int64_t id, const std::string& error) {
+  std::lock_guard lock(mutex_);
+  set_text_column(db_, "UPDATE campaign SET error = ?2 WHERE id = ?1", id, error);
+}
+
+std::optional<std::string> DaemonDb::setting(const std::string& key) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT value FROM setting WHERE key = ?1");
+  s.bind(1, key);
+  if (!s.step()) return std::nullopt;
+  return s.column_text(0);
+}
+
+void DaemonDb::set_setting(const std::string& key, const std::string& value) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
+  s.bind(1, key).bind(2, value);
+  s.run();
+}
+
+std::optional<CertificateRow> DaemonDb::certificate(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE campaign_id = ?1");
+  s.bind(1, campaign_id);
+  if (!s.step()) return std::nullopt;
+  return CertificateRow{s.column_int64(0), s.column_text(1), s.column_int64(2), s.column_int64(3), s.column_text(4)};
+}
+
+void DaemonDb::insert_certificate(const CertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+         "INSERT INTO certificate(campaign_id, number, sequence, issued_ms, bench_json) VALUES (?1, ?2, ?3, ?4, ?5)");
+  s.bind(1, row.campaign_id).bind(2, row.number).bind(3, row.sequence).bind(4, row.issued_ms).bind(5, row.bench_json);
+  s.run();
+}
+
+std::int64_t DaemonDb::max_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
+  return s.step() ? s.column_int64(0) : 0;
+}
+
+namespace {
+
+constexpr const char* kAlarmColumns =
+    "a.id, a.campaign_id, COALESCE(c.name, ''), a.severity, a.source, a.message, a.segment, a.program_time_s, "
+    "a.raised_ms, a.cleared_ms, a.cleared_reason, a.acknowledged_by, a.acknowledged_ms "
+    "FROM alarm a LEFT JOIN campaign c ON c.id = a.campaign_id";
+
+AlarmRow read_alarm_row(const Statement& s) {
+  AlarmRow r;
+  r.id = s.column_int64(0);
+  r.campaign_id = s.column_int64(1);
+  r.campaign_name = s.column_text(2);
+  r.severity = s.column_text(3);
+  r.source = s.column_text(4);
+  r.message = s.column_text(5);
+  r.segment = s.column_optional_int64(6);
+  r.program_time_s = s.column_optional_double(7);
+  r.raised_ms = s.column_int64(8);
+  r.cleared_ms = s.column_optional_int64(9);
+  r.cleared_reason = s.column_optional_text(10);
+  r.acknowledged_by = s.column_optional_text(11);
+  r.acknowledged_ms = s.column_optional_int64(12);
+  return r;
+}
+
+std::optional<AlarmRow> select_alarm(storage::sql::Connection& db, std::int64_t id) {
+  const std::string sql = std::string("SELECT ") + kAlarmColumns + " WHERE a.id = ?1";
+  Statement s(db, sql.c_str());
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  return read_alarm_row(s);
+}
+
+}  // namespace
+
+AlarmRow DaemonDb::raise_alarm(std::int64_t campaign_id, const std::string& severity, const std::string& source,
+                               const std::string& message, std::optional<std::int64_t> segment,
+                               std::optional<double> program_time_s) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+         "INSERT INTO alarm(campaign_id, severity, source, message, segment, program_time_s, raised_ms) "
+         "VALUES (?1,?2,?3,?4,?5,?6,?7)");
+  s.bind(1, campaign_id).bind(2, severity).bind(3, source).bind(4, message).bind(5, segment).bind(6, program_time_s);
+  s.bind(7, now_unix_ms());
+  s.run();
+  return *select_alarm(db_, db_.last_insert_rowid());
+}
+
+std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
+                                             const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  std::vector<std::int64_t> ids;
+  {
+    Statement s(db_,
+           "SELECT id FROM alarm WHERE campaign_id = ?1 AND cleared_ms IS NULL AND (?2 IS NULL OR source = ?2) "
+           "ORDER BY id");
+    s.bind(1, campaign_id).bind(2, source);
+    while (s.step()) ids.push_back(s.column_int64(0));
+  }
+  const std::int64_t now = now_unix_ms();
+  std::vector<AlarmRow> cleared;
+  for (const std::int64_t id : ids) {
+    Statement u(db_, "UPDATE alarm SET cleared_ms = ?2, cleared_reason = ?3 WHERE id = ?1");
+    u.bind(1, id).bind(2, now).bind(3, reason);
+    u.run();
+    cleared.push_back(*select_alarm(db_, id));
+  }
+  txn.commit();
+  return cleared;
+}
+
+std::pair<DaemonDb::Ack, std::optional<AlarmRow>> DaemonDb::acknowledge_alarm(std::int64_t id, const std::string& who) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  const auto before = select_alarm(db_, id);
+  if (!before) return {Ack::NoSuchAlarm, std::nullopt};
+  if (before->acknowledged_ms) return {Ack::AlreadyAcknowledged, before};
+  Statement u(db_, "UPDATE alarm SET acknowledged_by = ?2, acknowledged_ms = ?3 WHERE id = ?1");
+  u.bind(1, id).bind(2, who).bind(3, now_unix_ms());
+  u.run();
+  auto after = select_alarm(db_, id);
+  txn.commit();
+  return {Ack::Acknowledged, after};
+}
+
+std::optional<AlarmRow> DaemonDb::alarm(std::int64_t id) {
+  std::lock_guard lock(mutex_);
+  return select_alarm(db_, id);
+}
+
+std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit) {
+  std::lock_guard lock(mutex_);
+  // The newest `limit`, handed back oldest first.
+  const std::string sql = std::string("SELECT * FROM (SELECT ") + kAlarmColumns +
+                          " WHERE (?1 IS NULL OR a.campaign_id = ?1)" +
+                          (all ? "" : " AND (a.cleared_ms IS NULL OR a.acknowledged_ms IS NULL)") +
+                          " ORDER BY a.id DESC LIMIT ?2) ORDER BY 1";
+  Statement s(db_, sql.c_str());
+  s.bind(1, campaign).bind(2, limit);
+  std::vector<AlarmRow> rows;
+  while (s.step()) rows.push_back(read_alarm_row(s));
+  return rows;
+}
+
+}  // namespace imucal::daemon

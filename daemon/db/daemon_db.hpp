@@ -1,0 +1,198 @@
+// The daemon's own database (DATA_DIR/imucald.db, SQLite in WAL mode): campaigns with their run
+// state, the queue, every state transition, run events (suspensions, redos, alarms), the alarms an
+// operator acknowledges, and estimator progress. Frames live elsewhere, one storage::RunDb per run.
+// Thread-safe: one connection (storage/sqlite.hpp) behind a mutex; every call is short.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "daemon/db/run_state.hpp"
+#include "storage/sqlite.hpp"
+
+namespace imucal::daemon {
+
+// What the daemon database itself refuses (a newer schema, a damaged file); SQLite's own failures
+// are storage::sql::SqliteError. Both are storage::StorageError.
+class DbError : public storage::StorageError {
+ public:
+  using storage::StorageError::StorageError;
+};
+
+struct CampaignRow {
+  std::int64_t id = 0;
+  std::string name;
+  std::string spec_json;       // normalized campaign
+  std::string program_label;
+  double duration_s = 0.0;
+  RunState state = RunState::Created;
+  std::int64_t created_ms = 0;
+  std::optional<std::int64_t> started_ms, ended_ms;
+  std::optional<std::int64_t> checkpoint_segment;
+  std::optional<double> checkpoint_s;
+  double program_time_s = 0.0;
+  std::int64_t frames = 0, lost_frames = 0, bad_frames = 0;
+  std::string run_db;          // relative to the data directory; empty before the first start
+  std::optional<std::string> model_json, results_json, estimators_json, error;
+  std::optional<std::int64_t> queue_position;  // 0 = head
+  // The unit it calibrates (campaign.imu; none for campaigns that name no unit).
+  std::optional<std::string> imu_serial, imu_part_number;
+  // Set when the run ends: true only when the whole program ran and the run ended done. A partial
+  // run (stopped, aborted, failed) is no calibration of its unit unless an operator accepted it.
+  std::optional<bool> complete;
+  std::optional<std::string> accepted_reason, accepted_by;
+  std::optional<std::int64_t> accepted_ms;
+};
+
+// What identifies a campaign's unit in the registry (GET /api/imus).
+struct CampaignUnit {
+  std::string serial, part_number;
+};
+
+// The certificate number a campaign was given (issued once, then always the same).
+struct CertificateRow {
+  std::int64_t campaign_id = 0;
+  std::string number;         // "LAB-2026-000123"
+  std::int64_t sequence = 0;  // its site-wide sequence number (123)
+  std::int64_t issued_ms = 0;
+  std::string bench_json;     // certificate_bench_json() when it was issued
+};
+
+struct TransitionRow {
+  std::int64_t t_ms = 0;
+  std::optional<RunState> from;
+  RunState to = RunState::Created;
+  std::string reason;
+};
+
+struct EventRow {
+  std::int64_t t_ms = 0;
+  std::string kind;
+  std::optional<std::int64_t> segment;
+  std::optional<double> program_time_s;
+  std::string reason;
+};
+
+// An alarm (docs/api.md "Alarms"): raised with a run's serious condition, cleared when the condition
+// ends (cleared_ms null while it is active), acknowledged once by an operator (null until then).
+struct AlarmRow {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  std::string campaign_name;
+  std::string severity;  // alarms.hpp: "major" or "minor"
+  std::string source;    // what raised it: the event kind (suspended, alarm, error) or "interrupted"
+  std::string message;
+  std::optional<std::int64_t> segment;
+  std::optional<double> program_time_s;
+  std::int64_t raised_ms = 0;
+  std::optional<std::int64_t> cleared_ms;
+  std::optional<std::string> cleared_reason;
+  std::optional<std::string> acknowledged_by;
+  std::optional<std::int64_t> acknowledged_ms;
+};
+
+struct ProgressRow {
+  std::string estimator;
+  std::int64_t t_ms = 0;
+  double program_time_s = 0.0;
+  std::string json;
+};
+
+std::int64_t now_unix_ms();
+std::string iso8601_utc(std::int64_t unix_ms);
+
+class DaemonDb {
+ public:
+  // 2: the unit (imu_serial, imu_part_number), `complete` and the operator's acceptance of a
+  // partial run; databases of version 1 are migrated when opened.
+  static constexpr int kSchemaVersion = 2;
+  explicit DaemonDb(const std::string& path);
+  ~DaemonDb();
+  DaemonDb(const DaemonDb&) = delete;
+  DaemonDb& operator=(const DaemonDb&) = delete;
+
+  const std::string& path() const { return path_; }
+
+  // Stores a checked campaign in state `created` (with its first transition). Returns its id.
+  std::int64_t insert_campaign(const std::string& name, const std::string& spec_json, const std::string& program_label,
+                               double duration_s, const std::string& reason,
+                               const std::optional<CampaignUnit>& unit = std::nullopt);
+  std::optional<CampaignRow> campaign(std::int64_t id);
+  std::vector<CampaignRow> campaigns(std::int64_t limit);  // newest first
+  // The campaigns that name a unit (one unit's with `serial`), oldest first.
+  std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial);
+  // Whether the run that ended ran its whole program (set before its final transition).
+  void set_complete(std::int64_t id, bool complete);
+  // An operator's acceptance of a partial run as a calibration of its unit.
+  void accept(std::int64_t id, const std::string& reason, const std::string& who);
+
+  // Changes the state and records the transition, in one transaction; sets started/ended times.
+  // With `expected`, only when the current state is that one (returns false otherwise).
+  bool set_state(std::int64_t id, RunState to, const std::string& reason,
+                 std::optional<RunState> expected = std::nullopt);
+  std::vector<TransitionRow> transitions(std::int64_t id);
+
+  // Crash recovery at start-up: active runs become interrupted (an abort in progress completes
+  // as aborted). Returns the ids changed.
+  std::vector<std::int64_t> recover_after_restart(const std::string& reason);
+
+  // The queue (FIFO; an interrupted run that is resumed goes to the head).
+  void queue_push_back(std::int64_t id);
+  void queue_push_front(std::int64_t id);
+  void queue_remove(std::int64_t id);
+  std::vector<std::int64_t> queue();
+
+  void add_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
+                 std::optional<double> program_time_s, const std::string& reason);
+  std::vector<EventRow> events(std::int64_t id);
+
+  void add_progress(std::int64_t id, const std::string& estimator, double program_time_s, const std::string& json);
+  std::vector<ProgressRow> progress(std::int64_t id);
+
+  void set_run_db(std::int64_t id, const std::string& relative_path);
+  void update_run(std::int64_t id, double program_time_s, std::int64_t frames, std::int64_t lost_frames,
+                  std::int64_t bad_frames);
+  void set_checkpoint(std::int64_t id, std::int64_t segment, double t_s);
+  void set_model(std::int64_t id, const std::string& model_json);
+  void set_results(std::int64_t id, const std::string& results_json);
+  void set_estimators(std::int64_t id, const std::string& estimators_json);
+  void set_error(std::int64_t id, const std::string& error);
+
+  std::optional<CertificateRow> certificate(std::int64_t campaign_id);
+  void insert_certificate(const CertificateRow& row);
+  // The highest certificate sequence number this database has recorded (0: none).
+  std::int64_t max_certificate_sequence();
+
+  // Alarms. raise_alarm returns the new row. clear_alarms ends the active alarms of a campaign
+  // (only those from `source` when given) and returns them as cleared.
+  AlarmRow raise_alarm(std::int64_t campaign_id, const std::string& severity, const std::string& source,
+                       const std::string& message, std::optional<std::int64_t> segment,
+                       std::optional<double> program_time_s);
+  std::vector<AlarmRow> clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
+                                     const std::string& reason);
+  enum class Ack { Acknowledged, NoSuchAlarm, AlreadyAcknowledged };
+  // Records who acknowledged the alarm and when, once: a second acknowledgement changes nothing
+  // (AlreadyAcknowledged, with the row as the first one left it).
+  std::pair<Ack, std::optional<AlarmRow>> acknowledge_alarm(std::int64_t id, const std::string& who);
+  std::optional<AlarmRow> alarm(std::int64_t id);
+  // Oldest first. `campaign`: that campaign's only. `all` false: only those that still need
+  // someone (active, or not acknowledged). At most `limit` (the newest ones).
+  std::vector<AlarmRow> alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit = 1000);
+
+  std::optional<std::string> setting(const std::string& key);
+  void set_setting(const std::string& key, const std::string& value);
+
+ private:
+  CampaignRow read_campaign_row(const storage::sql::Statement& stmt);
+  std::string path_;
+  std::mutex mutex_;
+  storage::sql::Connection db_;
+};
+
+}  // namespace imucal::daemon

@@ -1,0 +1,1106 @@
+#include "daemon/http/api.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include <boost/url/parse.hpp>
+#include <boost/url/url_view.hpp>
+#include <spdlog/spdlog.h>
+
+#include "core/json_reader.hpp"
+#include "core/number_text.hpp"
+#include "core/units.hpp"
+#include "daemon/analysis/analysis.hpp"
+#include "daemon/analysis/run_series.hpp"
+#include "daemon/campaign/campaign.hpp"
+#include "daemon/config/device_config.hpp"
+#include "daemon/production/test_report.hpp"
+#include "daemon/production/unit_registry.hpp"
+#include "daemon/run/alarms.hpp"
+#include "estimators/direct_calibration.hpp"
+#include "motion_programs/chamber.hpp"
+#include "motion_programs/program.hpp"
+#include "pipeline/pipeline.hpp"
+#include "plan/plan.hpp"
+#include "storage/run_db.hpp"
+
+#ifndef IMUCAL_VERSION
+#define IMUCAL_VERSION "0.0.0"
+#endif
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+
+namespace {
+
+HttpReply json_reply(int status, const json& body) {
+  HttpReply r;
+  r.status = status;
+  r.body = body.dump();
+  r.content_type = "application/json";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  return r;
+}
+
+HttpReply error_reply(int status, const std::string& message, json extra = json::object()) {
+  extra["error"] = message;
+  return json_reply(status, extra);
+}
+
+json opt_time(const std::optional<std::int64_t>& ms) { return ms ? json(iso8601_utc(*ms)) : json(nullptr); }
+
+json parse_or_null(const std::optional<std::string>& text) {
+  if (!text) return nullptr;
+  try {
+    return json::parse(*text);
+  } catch (const json::exception&) {
+    return nullptr;
+  }
+}
+
+std::optional<std::int64_t> parse_id(const std::string& text) {
+  if (text.empty() || text.size() > 18) return std::nullopt;
+  for (char c : text)
+    if (c < '0' || c > '9') return std::nullopt;
+  return std::stoll(text);
+}
+
+// The unit a campaign names, as its campaign JSON gave it (null when it names none).
+json unit_json(const CampaignRow& row) {
+  if (!row.imu_serial) return nullptr;
+  const json spec = json::parse(row.spec_json, nullptr, false);
+  if (spec.is_object() && spec.contains("imu")) return spec.at("imu");
+  return {{"serial", *row.imu_serial}, {"part_number", row.imu_part_number.value_or("")}};
+}
+
+// A serial as part of a download's file name: what is not a letter, digit, '-', '_' or '.'
+// becomes '_'.
+std::string file_name_part(const std::string& text) {
+  std::string out = text;
+  for (char& c : out)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_' && c != '.') c = '_';
+  return out;
+}
+
+constexpr std::size_t kAnalysisAnswersKept = 60;  // 20 campaigns' three results
+
+json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+// A JSON body for a command or a login: empty means {}. Only JSON content types are accepted, so
+// that a plain HTML form on another site cannot post to the API with the browser's cookie.
+std::optional<HttpReply> parse_body(const ApiRequest& request, json& out) {
+  if (request.body.empty()) {
+    out = json::object();
+    return std::nullopt;
+  }
+  const std::string& ct = request.content_type;
+  if (!ct.empty() && ct.rfind("application/json", 0) != 0)
+    return error_reply(415, "Content-Type must be application/json");
+  try {
+    out = json::parse(request.body);
+  } catch (const json::parse_error& e) {
+    return error_reply(400, std::string("malformed JSON: ") + e.what());
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string session_from_cookie(const std::string& cookie_header) {
+  const std::string key = std::string(kSessionCookie) + "=";
+  std::size_t pos = 0;
+  while (pos < cookie_header.size()) {
+    while (pos < cookie_header.size() && (cookie_header[pos] == ' ' || cookie_header[pos] == ';')) ++pos;
+    const auto end = std::min(cookie_header.find(';', pos), cookie_header.size());
+    if (cookie_header.compare(pos, key.size(), key) == 0) return cookie_header.substr(pos + key.size(), end - pos - key.size());
+    pos = end + 1;
+  }
+  return {};
+}
+
+std::optional<Target> parse_target(const std::string& target) {
+  const auto url = boost::urls::parse_origin_form(target);
+  if (!url) return std::nullopt;
+  Target t;
+  t.path = std::string(url->encoded_path());
+  for (const std::string segment : url->segments()) t.segments.push_back(segment);
+  if (!t.segments.empty() && t.segments.back().empty()) t.segments.pop_back();
+  for (const auto& param : url->params(boost::urls::encoding_opts(true))) t.query[param.key] = param.value;
+  return t;
+}
+
+namespace {
+
+// The chamber controller's register map and whether a maker's manual vouches for it (null on the
+// in-process simulation): an address nobody checked is worth a look before a chamber is trusted
+// overnight.
+json chamber_map_json(const DaemonConfig& config) {
+  std::optional<drivers::RegisterMap> map;
+  if (config.device_addresses) map = config.device_addresses->chamber.map;
+  else if (config.devices == "sim-wire") map = drivers::load_register_map(kSimWireChamberMap);
+  if (!map) return nullptr;
+  const auto unchecked = map->source.unchecked_keys();
+  return {{"name", map->name},
+          {"checked", unchecked.empty() ? "yes" : unchecked.size() == map->source.registers.size() ? "no" : "partly"},
+          {"summary", map->source.summary()},
+          {"unchecked", unchecked}};
+}
+
+// The table controller's dialect (null on the in-process simulation): which language the driver
+// speaks and what it was written from.
+json table_dialect_json(const DaemonConfig& config) {
+  if (config.device_addresses) {
+    const auto& t = config.device_addresses->table;
+    return {{"name", t.dialect.name}, {"configured", t.dialect_name}, {"source", t.dialect.source}};
+  }
+  if (config.devices != "sim-wire") return nullptr;
+  const auto& d = drivers::dialect::imucal_acl();
+  return {{"name", d.name}, {"configured", d.name}, {"source", d.source}};
+}
+
+}  // namespace
+
+Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth)
+    : config_(config),
+      db_(db),
+      sequencer_(sequencer),
+      auth_(auth),
+      limits_(std::filesystem::path(config.limits_file).is_absolute()
+                  ? config.limits_file
+                  : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
+      certificate_sequence_(certificate_sequence_path(config)),
+      programs_(json::array()),
+      started_ms_(now_unix_ms()),
+      started_(std::chrono::steady_clock::now()) {
+  // Two threads: one long analysis (a 12 h thermal run) does not hold up every other.
+  // The listener is called under its mutex, so that once set_event_listener({}) has returned no
+  // job is still inside it (the HTTP server it points to may then go).
+  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); });
+  chamber_map_ = chamber_map_json(config);
+  table_dialect_ = table_dialect_json(config);
+  // Without a configuration file the sequence can only live in the data directory.
+  if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
+    spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
+                 "again from 1; name certificates.sequence_file in a configuration file (--config)", certificate_sequence_path(config));
+  // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
+  // joined program, duration, segments, and the estimators a campaign of it runs by default (the
+  // builder offers those, so the rule lives in one place: check_campaign).
+  std::vector<std::string> names = motion::builtin_program_names();
+  names.push_back("full");
+  for (const auto& name : names) {
+    const CampaignCheck check = check_campaign({{"name", name}, {"program", name}}, config);
+    if (!check.spec) {
+      std::string why;
+      for (const auto& p : check.problems) why += (why.empty() ? "" : "; ") + p;
+      spdlog::warn("built-in program '{}' does not pass the campaign check with the configured limits: {}", name, why);
+      continue;
+    }
+    json segments = json::array();
+    for (const auto& s : check.segments)
+      segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
+    json program = json::parse(check.spec->program_json);
+    if (name == "full")
+      program["comment"] = "The whole method in one run: direct, lever-arm, navigation and evaluate, each stage from "
+                           "the models before, the Schuler test of every stage's model.";
+    json entry = {{"name", name},
+                  {"duration_s", check.duration_s},
+                  {"segments", segments},
+                  {"program", program},
+                  {"estimators", check.spec->estimators}};
+    // The built-in thermal campaigns bring their chamber profile: the builder shows its steps.
+    if (motion::is_builtin_chamber(name)) entry["chamber"] = check.spec->normalized.at("chamber");
+    programs_.push_back(std::move(entry));
+  }
+}
+
+std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow_query_token) {
+  const std::string& a = request.authorization;
+  if (a.size() > 7 && (a.compare(0, 7, "Bearer ") == 0 || a.compare(0, 7, "bearer ") == 0)) {
+    return auth_.from_token(std::string_view(a).substr(7));
+  }
+  if (const std::string sid = session_from_cookie(request.cookie); !sid.empty()) {
+    if (auto p = auth_.from_session(sid)) return p;
+  }
+  if (allow_query_token) {
+    if (const auto t = parse_target(request.target)) {
+      const auto it = t->query.find("token");
+      if (it != t->query.end()) return auth_.from_token(it->second);
+    }
+  }
+  return std::nullopt;
+}
+
+json Api::status() {
+  json limits_table = json::object();
+  for (std::size_t a = 0; a < 3; ++a) {
+    const auto& l = config_.table_limits.axis[a];
+    limits_table[motion::kAxisNames[a]] = {{"min_deg", limit_or_null(l.min_deg)}, {"max_deg", limit_or_null(l.max_deg)},
+                                           {"rate_dps", l.rate_dps}, {"accel_dps2", l.accel_dps2}};
+  }
+  json active = nullptr;
+  if (const auto id = sequencer_.active_id()) {
+    if (const auto row = db_.campaign(*id)) active = {{"id", row->id}, {"name", row->name}, {"state", to_string(row->state)}};
+  }
+  return {{"service", "imucald"},
+          {"version", IMUCAL_VERSION},
+          {"chamber_map", chamber_map_},
+          {"table_dialect", table_dialect_},
+          {"started", iso8601_utc(started_ms_)},
+          {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
+          {"devices", config_.devices},
+          {"site", {{"name", config_.site_name}, {"latitude_deg", config_.site.latitude_deg},
+                    {"longitude_deg", config_.site.longitude_deg}, {"height_m", config_.site.height_m},
+                    {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}}},
+          {"active", active},
+          {"queue", db_.queue()},
+          {"limits",
+           {{"table", limits_table},
+            {"chamber", {{"min_C", config_.chamber.min_C}, {"max_C", config_.chamber.max_C},
+                         {"max_ramp_C_per_min", config_.chamber.max_ramp_C_per_min},
+                         {"safe_setpoint_C", config_.chamber.safe_setpoint_C},
+                         {"tolerance_C", config_.chamber.tolerance_C}}},
+            {"campaign", {{"max_duration_s", config_.campaign.max_duration_s},
+                          {"max_rate_hz", config_.campaign.max_rate_hz},
+                          {"estimators", known_estimators()}}}}}};
+}
+
+// One endpoint. A pattern's segments are literal, or a placeholder: {id} a campaign id (a
+// segment that is not one answers 404 "no campaign"), {command} a run command (a segment that is
+// not one does not match), {alarm} and {serial} any segment. Where patterns of several
+// specificities match a path, the one with the most literal segments wins (/api/campaigns/1/model
+// is the model, not a command). GET routes answer HEAD too.
+struct Call {
+  const ApiRequest& request;
+  const Target& target;
+  const std::vector<std::string>& args;  // the placeholders' segments, in order
+  std::int64_t id = 0;                   // {id}
+  const Principal* who = nullptr;        // null on open routes
+};
+
+struct Api::Route {
+  enum class Access { open, viewer, operator_ };  // operator_: changes something
+  const char* method;
+  const char* pattern;
+  Access access;
+  std::function<HttpReply(Api&, const Call&)> handle;
+};
+
+namespace {
+
+std::vector<std::string_view> pattern_segments(std::string_view pattern) {
+  std::vector<std::string_view> out;
+  while (!pattern.empty()) {
+    pattern.remove_prefix(1);  // '/'
+    const auto end = std::min(pattern.find('/'), pattern.size());
+    out.push_back(pattern.substr(0, end));
+    pattern.remove_prefix(end);
+  }
+  return out;
+}
+
+// A route whose pattern matches a path: the placeholders' segments, and how many of the
+// pattern's segments are literal (the most specific match wins).
+struct Matched {
+  const Api::Route* route = nullptr;
+  std::vector<std::string> args;
+  int literal = 0;
+};
+
+std::optional<Matched> match_route(const Api::Route& route, const std::vector<std::string>& segments) {
+  const std::string_view pattern = route.pattern;
+  const auto parts = pattern_segments(pattern);
+  if (parts.size() != segments.size()) return std::nullopt;
+  std::vector<std::string> args;
+  int literal = 0;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    if (parts[i].starts_with('{')) {
+      if (parts[i] == "{command}" && !parse_command(segments[i])) return std::nullopt;
+      args.push_back(segments[i]);
+    } else if (parts[i] == segments[i]) {
+      ++literal;
+    } else {
+      return std::nullopt;
+    }
+  }
+  return Matched{&route, std::move(args), literal};
+}
+
+}  // namespace
+
+const std::vector<Api::Route>& Api::routes() {
+  using A = Route::Access;
+  static const std::vector<Route> table = {
+      {"POST", "/api/login", A::open, [](Api& a, const Call& c) { return a.login(c.request); }},
+      {"POST", "/api/logout", A::open, [](Api& a, const Call& c) { return a.logout(c.request); }},
+      // For monitoring and systemd: no authentication, no details (whoever can reach the port may ask).
+      {"GET", "/api/health", A::open,
+       [](Api& a, const Call&) {
+         if (a.shutting_down_) return json_reply(503, {{"status", "shutting down"}});
+         return json_reply(200, {{"status", "ok"}});
+       }},
+      {"GET", "/api/me", A::viewer,
+       [](Api&, const Call& c) {
+         return json_reply(200, {{"user", c.who->user}, {"role", to_string(c.who->role)}, {"via", c.who->via}});
+       }},
+      {"GET", "/api/status", A::viewer, [](Api& a, const Call&) { return json_reply(200, a.status()); }},
+      {"GET", "/api/programs", A::viewer, [](Api& a, const Call&) { return json_reply(200, {{"programs", a.programs_}}); }},
+      // The conditions that hold a run, with the daemon's settings (a campaign may set its own:
+      // `suspenders` in its JSON).
+      {"GET", "/api/suspenders", A::viewer,
+       [](Api& a, const Call&) {
+         const auto& s = a.config_.suspenders;
+         return json_reply(200, {{"suspenders", Suspenders(s).describe()},
+                                 {"settings",
+                                  {{"settle_s", s.settle_s},
+                                   {"frame_timeout_s", s.frame_timeout_s},
+                                   {"chamber_persist_s", s.chamber_persist_s}}}});
+       }},
+      // Reads with a body: a viewer may ask.
+      {"POST", "/api/campaigns/validate", A::viewer, [](Api& a, const Call& c) { return a.validate_campaign(c.request); }},
+      {"POST", "/api/campaigns/plan", A::viewer, [](Api& a, const Call& c) { return a.plan_campaign(c.request); }},
+      {"GET", "/api/campaigns", A::viewer, [](Api& a, const Call& c) { return a.list_campaigns(c.target.query); }},
+      {"POST", "/api/campaigns", A::operator_, [](Api& a, const Call& c) { return a.create_campaign(c.request); }},
+      {"GET", "/api/limits", A::viewer,
+       [](Api& a, const Call&) {
+         json doc = a.limits_.document();
+         doc["source"] = a.limits_.current().source;
+         return json_reply(200, doc);
+       }},
+      {"PUT", "/api/limits", A::operator_, [](Api& a, const Call& c) { return a.replace_limits(c.request, *c.who); }},
+      {"GET", "/api/compare", A::viewer, [](Api& a, const Call& c) { return a.compare_campaigns(c.target.query); }},
+      {"GET", "/api/alarms", A::viewer, [](Api& a, const Call& c) { return a.list_alarms(c.target.query); }},
+      {"POST", "/api/alarms/{alarm}/ack", A::operator_,
+       [](Api& a, const Call& c) { return a.acknowledge_alarm(c.args[0], *c.who); }},
+      {"GET", "/api/imus", A::viewer,
+       [](Api& a, const Call&) {
+         return json_reply(200, unit_list_json(a.db_.unit_campaigns(std::nullopt), a.limits_.current()));
+       }},
+      {"GET", "/api/imus/{serial}", A::viewer,
+       [](Api& a, const Call& c) {
+         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
+         return json_reply(200, unit_detail_json(c.args[0], rows, a.limits_.current()));
+       }},
+      {"GET", "/api/imus/{serial}/history.csv", A::viewer,
+       [](Api& a, const Call& c) {
+         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
+         HttpReply r;
+         r.body = unit_history_csv(rows);
+         r.content_type = "text/csv; charset=utf-8";
+         r.headers.emplace_back("Cache-Control", "no-store");
+         r.headers.emplace_back("Content-Disposition",
+                                "attachment; filename=\"imu-" + file_name_part(c.args[0]) + "-history.csv\"");
+         return r;
+       }},
+      {"GET", "/api/campaigns/{id}", A::viewer, [](Api& a, const Call& c) { return a.campaign_detail(c.id); }},
+      {"GET", "/api/campaigns/{id}/model", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_model(c.id, c.target.query); }},
+      {"GET", "/api/campaigns/{id}/progress", A::viewer, [](Api& a, const Call& c) { return a.campaign_progress(c.id); }},
+      {"GET", "/api/campaigns/{id}/recording", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_recording(c.id, c.request.method == "HEAD"); }},
+      {"GET", "/api/campaigns/{id}/series", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_series(c.id, c.target.query); }},
+      {"GET", "/api/campaigns/{id}/allan", A::viewer, [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "allan"); }},
+      {"GET", "/api/campaigns/{id}/thermal", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "thermal"); }},
+      {"GET", "/api/campaigns/{id}/evaluation", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "evaluation"); }},
+      {"GET", "/api/campaigns/{id}/events.csv", A::viewer, [](Api& a, const Call& c) { return a.campaign_events_csv(c.id); }},
+      {"GET", "/api/campaigns/{id}/certificate", A::viewer,
+       [](Api& a, const Call& c) { return a.campaign_certificate(c.id); }},
+      {"GET", "/api/campaigns/{id}/report", A::viewer, [](Api& a, const Call& c) { return a.campaign_report(c.id); }},
+      {"POST", "/api/campaigns/{id}/accept", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_accept(c.id, c.request, *c.who); }},
+      {"POST", "/api/campaigns/{id}/prompt", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_prompt(c.id, c.request, *c.who); }},
+      {"POST", "/api/campaigns/{id}/{command}", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_command(c.id, c.args[1], c.request, *c.who); }},
+  };
+  return table;
+}
+
+HttpReply Api::handle(const ApiRequest& request) {
+  const auto target = parse_target(request.target);
+  if (!target) return error_reply(400, "malformed URL");
+  const std::string& path = target->path;
+  const std::string& method = request.method;
+  try {
+    // The routes of this path (the most specific pattern), then the one of this method.
+    std::vector<Matched> on_path;
+    for (const Route& r : routes()) {
+      auto m = match_route(r, target->segments);
+      if (!m || (!on_path.empty() && m->literal < on_path.front().literal)) continue;
+      if (!on_path.empty() && m->literal > on_path.front().literal) on_path.clear();
+      on_path.push_back(std::move(*m));
+    }
+    const bool open = !on_path.empty() && std::all_of(on_path.begin(), on_path.end(), [](const Matched& m) {
+      return m.route->access == Route::Access::open;
+    });
+    std::optional<Principal> who;
+    if (!open) {
+      who = authenticate(request, false);
+      if (!who) {
+        HttpReply r = error_reply(401, "authentication required");
+        r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"imucald\"");
+        return r;
+      }
+    }
+    if (on_path.empty()) return error_reply(404, "no such endpoint: " + path);
+    const Matched* chosen = nullptr;
+    std::string allow;
+    for (const Matched& m : on_path) {
+      allow += (allow.empty() ? "" : ", ") + std::string(m.route->method);
+      if (method == m.route->method || (method == "HEAD" && std::string_view(m.route->method) == "GET")) chosen = &m;
+    }
+    // Every other method changes something: an operator's, and not while shutting down.
+    const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->route->access != Route::Access::operator_);
+    if (!open && !reads && who->role != Role::Operator) return error_reply(403, "operator role required");
+    if (!open && !reads && shutting_down_) return error_reply(503, "the daemon is shutting down");
+    if (!chosen) {
+      HttpReply r = error_reply(405, method + " is not allowed on " + path);
+      r.headers.emplace_back("Allow", allow);
+      return r;
+    }
+    const Route& route = *chosen->route;
+    Call call{request, *target, chosen->args};
+    call.who = who ? &*who : nullptr;
+    if (std::string_view(route.pattern).find("{id}") != std::string_view::npos) {
+      const auto id = parse_id(call.args.front());
+      if (!id) return error_reply(404, "no campaign '" + call.args.front() + "'");
+      call.id = *id;
+    }
+    return route.handle(*this, call);
+  } catch (const std::exception& e) {
+    spdlog::error("{} {}: {}", method, path, e.what());
+    return error_reply(500, std::string("internal error: ") + e.what());
+  }
+}
+
+HttpReply Api::login(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::optional<std::string> user, password, token;
+  {
+    ObjectReader r(body, "body", problems);
+    user = r.string("user");
+    password = r.string("password");
+    token = r.string("token");
+  }
+  if (problems.empty() && !token && !(user && password))
+    problems.push_back("body must hold {\"user\", \"password\"} or {\"token\"}");
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const Auth::Login l = token ? auth_.login_token(*token) : auth_.login_password(*user, *password);
+  if (l.status != 200) return error_reply(l.status, l.error);
+  HttpReply r = json_reply(200, {{"user", l.principal.user}, {"role", to_string(l.principal.role)},
+                                 {"idle_timeout_s", auth_.idle_timeout_s()}});
+  r.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) + "=" + l.session_id +
+                                           "; HttpOnly; SameSite=Strict; Path=/");
+  spdlog::info("sign-in: {} ({})", l.principal.user, to_string(l.principal.role));
+  return r;
+}
+
+HttpReply Api::logout(const ApiRequest& request) {
+  const std::string sid = session_from_cookie(request.cookie);
+  if (!sid.empty()) auth_.logout(sid);
+  HttpReply r = json_reply(200, {{"ok", true}});
+  r.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) + "=; HttpOnly; SameSite=Strict; Path=/; Max-Age=0");
+  return r;
+}
+
+json Api::summary(const CampaignRow& row) {
+  const double progress = row.duration_s > 0 ? std::clamp(row.program_time_s / row.duration_s, 0.0, 1.0) : 0.0;
+  return {{"id", row.id},
+          {"name", row.name},
+          {"state", to_string(row.state)},
+          {"program", row.program_label},
+          {"created", iso8601_utc(row.created_ms)},
+          {"started", opt_time(row.started_ms)},
+          {"ended", opt_time(row.ended_ms)},
+          {"duration_s", row.duration_s},
+          {"program_time_s", row.program_time_s},
+          {"progress", progress},
+          {"queue_position", row.queue_position ? json(*row.queue_position) : json(nullptr)},
+          {"has_model", row.model_json.has_value()},
+          {"error", row.error ? json(*row.error) : json(nullptr)},
+          {"imu", unit_json(row)},
+          {"complete", row.complete.value_or(false)},
+          {"accepted", completeness_json(row).at("accepted")}};
+}
+
+HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::optional<std::string> reason;
+  {
+    ObjectReader r(body, "body", problems);
+    reason = r.string("reason", true);
+  }
+  if (problems.empty() && reason->find_first_not_of(" \t\r\n") == std::string::npos)
+    problems.push_back("body.reason must say why the partial run is accepted");
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (const std::string why = cannot_accept(*row); !why.empty())
+    return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
+  db_.accept(id, *reason, who.user);
+  spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, *reason);
+  return json_reply(200, summary(*db_.campaign(id)));
+}
+
+HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
+  std::int64_t limit = 100;
+  if (const auto it = query.find("limit"); it != query.end()) {
+    const auto v = parse_id(it->second);
+    if (!v || *v < 1 || *v > 10000) return error_reply(400, "limit must be a number from 1 to 10000");
+    limit = *v;
+  }
+  json list = json::array();
+  for (const auto& row : db_.campaigns(limit)) list.push_back(summary(row));
+  return json_reply(200, {{"campaigns", list}});
+}
+
+HttpReply Api::validate_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  const CampaignCheck check = check_campaign(body, config_);
+  json segments = json::array();
+  for (const auto& s : check.segments)
+    segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
+  return json_reply(200, {{"valid", check.problems.empty()},
+                          {"problems", check.problems},
+                          {"duration_s", check.duration_s},
+                          {"segments", segments}});
+}
+
+HttpReply Api::create_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  const CampaignCheck check = check_campaign(body, config_);
+  if (check.malformed) {
+    return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
+  }
+  if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
+  const CampaignSpec& spec = *check.spec;
+  const auto who = authenticate(request, false);
+  const std::int64_t id = store_campaign(db_, check, "posted by " + (who ? who->user : std::string("?")));
+  spdlog::info("campaign {} '{}' posted ({}, {:.1f} s)", id, spec.name, spec.program_label, check.duration_s);
+  HttpReply r = json_reply(201, {{"id", id}, {"state", "created"}, {"duration_s", check.duration_s}});
+  r.headers.emplace_back("Location", "/api/campaigns/" + std::to_string(id));
+  return r;
+}
+
+HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
+  try {
+    limits_.replace(body);
+  } catch (const std::invalid_argument& e) {
+    return error_reply(400, e.what());
+  } catch (const std::exception& e) {
+    return error_reply(500, std::string("the limits were not saved: ") + e.what());
+  }
+  spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
+  json doc = limits_.document();
+  doc["source"] = limits_.current().source;
+  return json_reply(200, doc);
+}
+
+HttpReply Api::compare_campaigns(const std::map<std::string, std::string>& query) {
+  std::optional<CampaignRow> rows[2];
+  json models[2];
+  const char* names[2] = {"a", "b"};
+  for (int i = 0; i < 2; ++i) {
+    const auto it = query.find(names[i]);
+    const auto id = it == query.end() ? std::nullopt : parse_id(it->second);
+    if (!id) return error_reply(400, std::string("query ") + names[i] + " must be a campaign id (/api/compare?a=ID&b=ID)");
+    rows[i] = db_.campaign(*id);
+    if (!rows[i]) return error_reply(404, "no campaign " + std::to_string(*id));
+    if (!rows[i]->model_json) return error_reply(409, "campaign " + std::to_string(*id) + " has no model to compare");
+    models[i] = parse_or_null(*rows[i]->model_json);
+  }
+  // Misalignments of an instrument-frame model and a body-frame one are different angles.
+  if (models[0].value("frame", std::string("instrument")) != models[1].value("frame", std::string("instrument")))
+    return error_reply(409, "the two models are in different frames (" + models[0].value("frame", std::string("instrument")) +
+                                ", " + models[1].value("frame", std::string("instrument")) + ")");
+  json out = compare_json(models[0], models[1]);
+  for (int i = 0; i < 2; ++i)
+    out[names[i]] = {{"campaign_id", rows[i]->id},
+                     {"name", rows[i]->name},
+                     {"serial", rows[i]->imu_serial ? json(*rows[i]->imu_serial) : json(nullptr)},
+                     {"date", iso8601_utc(rows[i]->ended_ms.value_or(rows[i]->created_ms))},
+                     {"frame", models[i].value("frame", std::string("instrument"))}};
+  return json_reply(200, out);
+}
+
+HttpReply Api::campaign_detail(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  return json_reply(200, detail_json(*row));
+}
+
+json Api::detail_json(const CampaignRow& row) {
+  const std::int64_t id = row.id;
+  json out = summary(row);
+  out["verdict"] = run_verdict(row, limits_.current());
+  json spec = parse_or_null(row.spec_json);
+  out["spec"] = spec;
+  json segments = json::array();
+  const CampaignCheck check = check_campaign_text(row.spec_json, config_);
+  for (std::size_t i = 0; i < check.segments.size(); ++i) {
+    const auto& s = check.segments[i];
+    const bool redoable = !check.spec || !check.spec->chamber.ramps_within(s.t0_s, s.t1_s);
+    segments.push_back({{"index", i}, {"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s},
+                        {"redoable", redoable}});
+  }
+  out["segments"] = segments;
+  out["checkpoint"] = row.checkpoint_segment
+                          ? json{{"segment", *row.checkpoint_segment}, {"t_s", row.checkpoint_s.value_or(0.0)}}
+                          : json(nullptr);
+  out["frames"] = row.frames;
+  out["lost_frames"] = row.lost_frames;
+  out["bad_frames"] = row.bad_frames;
+  json transitions = json::array();
+  for (const auto& t : db_.transitions(id))
+    transitions.push_back({{"t", iso8601_utc(t.t_ms)},
+                           {"from", t.from ? json(to_string(*t.from)) : json(nullptr)},
+                           {"to", to_string(t.to)},
+                           {"reason", t.reason}});
+  out["transitions"] = transitions;
+  json events = json::array();
+  for (const auto& e : db_.events(id))
+    events.push_back({{"t", iso8601_utc(e.t_ms)},
+                      {"kind", e.kind},
+                      {"segment", e.segment ? json(*e.segment) : json(nullptr)},
+                      {"program_time_s", e.program_time_s ? json(*e.program_time_s) : json(nullptr)},
+                      {"reason", e.reason}});
+  out["events"] = events;
+  json alarms = json::array();
+  for (const auto& a : db_.alarms(id, true)) alarms.push_back(alarm_json(a));
+  out["alarms"] = alarms;
+  // What the run asks the operator now (a power cycle), or null.
+  out["prompt"] = sequencer_.prompt_of(id);
+  json estimators = sequencer_.active_id() == id ? sequencer_.active_estimators() : parse_or_null(row.estimators_json);
+  out["estimators"] = estimators.is_null() ? json::object() : estimators;
+  const json results = parse_or_null(row.results_json);
+  out["results"] = results.is_null() ? json::object() : results;
+  out["run_db"] = row.run_db.empty() ? json(nullptr) : json(row.run_db);
+  // The serial the run file records (the IMU's own report; the simulator's for simulated runs).
+  json serial = nullptr;
+  if (!row.run_db.empty()) {
+    std::lock_guard lock(serial_mutex_);
+    auto it = serial_cache_.find(id);
+    if (it == serial_cache_.end()) {
+      try {
+        it = serial_cache_.emplace(id, imu_serial_of_run(run_path(row))).first;
+      } catch (const std::exception& e) {
+        spdlog::warn("campaign {}: cannot read the IMU serial from {}: {}", id, row.run_db, e.what());
+      }
+    }
+    if (it != serial_cache_.end()) serial = it->second;
+  }
+  out["imu_serial"] = serial;
+  return out;
+}
+
+// The run's test report (test_report.hpp): its figures from the results, the temperatures from
+// its recording, the gravity as the certificate states it.
+HttpReply Api::campaign_report(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  TemperatureSummary temperatures;
+  if (!row->run_db.empty() && std::filesystem::exists(run_path(*row))) {
+    try {
+      const storage::RunDb db = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
+      temperatures = summarize_temperatures(db.temps());
+    } catch (const std::exception& e) {
+      spdlog::warn("campaign {}: the report goes without temperatures: {}", id, e.what());
+    }
+  }
+  return json_reply(200, test_report_json(detail_json(*row), certificate_bench_json(config_, row->ended_ms.value_or(0)),
+                                          temperatures));
+}
+
+HttpReply Api::campaign_certificate(std::int64_t id) {
+  const auto reply = [](const CertificateRow& c) {
+    json out = {{"campaign_id", c.campaign_id}, {"number", c.number}, {"sequence", c.sequence},
+                {"issued", iso8601_utc(c.issued_ms)}};
+    const json bench = parse_or_null(c.bench_json);
+    if (bench.is_object()) out.update(bench);
+    return json_reply(200, out);
+  };
+  std::lock_guard lock(certificate_mutex_);
+  if (const auto existing = db_.certificate(id)) return reply(*existing);
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  // A number is for a run whose results are final: one still running (or interrupted, which can
+  // resume) could change after its certificate was signed.
+  if (!is_final(row->state) || !row->ended_ms)
+    return error_reply(409, "campaign " + std::to_string(id) + " has not ended (state " + std::string(to_string(row->state)) +
+                                "): a certificate is issued only for an ended run with a model");
+  if (!row->model_json)
+    return error_reply(409, "campaign " + std::to_string(id) + " ended without a model: there is nothing to certify");
+  CertificateRow c;
+  c.campaign_id = id;
+  try {
+    c.sequence = certificate_sequence_.next(db_.max_certificate_sequence());
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: no certificate number: {}", id, e.what());
+    return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
+  }
+  c.issued_ms = now_unix_ms();
+  c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
+  c.bench_json = certificate_bench_json(config_, *row->ended_ms).dump();
+  db_.insert_certificate(c);
+  spdlog::info("campaign {}: certificate {} issued (sequence file {})", id, c.number, certificate_sequence_.path());
+  return reply(c);
+}
+
+HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (!row->model_json)
+    return error_reply(404, "campaign " + std::to_string(id) + " has no model (state " +
+                                std::string(to_string(row->state)) + ")");
+  std::string text = *row->model_json;
+  if (const auto stage = query.find("stage"); stage != query.end()) {
+    // One calibration stage's model, as the campaign kept it with its results.
+    const json results = row->results_json ? json::parse(*row->results_json, nullptr, false) : json::object();
+    if (!pipeline::stage_of_estimator(stage->second)) {
+      std::string names;
+      for (const pipeline::StageName& n : pipeline::stage_names()) names += (names.empty() ? "" : ", ") + std::string(n.estimator);
+      return error_reply(400, "stage must be one of " + names);
+    }
+    if (!results.is_object() || !results.contains(stage->second) || !results.at(stage->second).contains("model"))
+      return error_reply(404, "campaign " + std::to_string(id) + " has no model of stage " + stage->second);
+    text = results.at(stage->second).at("model").dump();
+  }
+  if (const auto it = query.find("frame"); it != query.end()) {
+    if (it->second == "body") {
+      text = imu_model_to_json_text(direct::to_body_frame(imu_model_from_json_text(text, "stored model")));
+    } else if (it->second != "instrument") {
+      return error_reply(400, "frame must be instrument or body");
+    }
+  }
+  HttpReply r;
+  r.body = text;
+  r.content_type = "application/json";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  // Each download its own name: the instrument- and body-frame models (and each stage's) must
+  // not overwrite each other in a downloads folder.
+  std::string file = "campaign-" + std::to_string(id);
+  if (const auto stage = query.find("stage"); stage != query.end()) file += "-" + stage->second;
+  // Named by the frame of what is sent (a stage-3 model is in the body frame already).
+  const json sent = json::parse(text, nullptr, false);
+  file += "-model-" + (sent.is_object() ? sent.value("frame", std::string("instrument")) : std::string("instrument"));
+  r.headers.emplace_back("Content-Disposition", "inline; filename=\"" + file + ".json\"");
+  return r;
+}
+
+HttpReply Api::campaign_progress(std::int64_t id) {
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  json out = json::object();
+  for (const auto& p : db_.progress(id)) {
+    json entry = parse_or_null(p.json);
+    if (!entry.is_object()) continue;
+    entry["program_time_s"] = p.program_time_s;
+    entry["t"] = iso8601_utc(p.t_ms);
+    out[p.estimator].push_back(std::move(entry));
+  }
+  return json_reply(200, out);
+}
+
+HttpReply Api::campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
+                                const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  std::string reason;
+  {
+    ObjectReader r(body, "body", problems);
+    if (auto v = r.string("reason")) reason = v->substr(0, 500);
+  }
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  const auto outcome = sequencer_.command(id, *parse_command(command), who.user, reason);
+  if (outcome.http_status != 200) {
+    json extra = json::object();
+    if (outcome.state) extra["state"] = to_string(*outcome.state);
+    return error_reply(outcome.http_status, outcome.error, extra);
+  }
+  return json_reply(200, {{"id", id}, {"state", to_string(*outcome.state)}});
+}
+
+// The operator's answer to what the run asks (a power cycle of the IMU): {"answer": "done"}.
+HttpReply Api::campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(body, "body", problems);
+    if (auto v = r.string("answer", true); v && *v != "done")
+      problems.push_back("body.answer must be \"done\" (the IMU was switched off and on again), not \"" + *v + "\"");
+  }
+  if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  const auto outcome = sequencer_.answer_prompt(id, who.user);
+  if (outcome.http_status != 200) return error_reply(outcome.http_status, outcome.error);
+  return json_reply(200, {{"id", id}, {"answered", "done"}});
+}
+
+std::string Api::run_path(const CampaignRow& row) const {
+  return (std::filesystem::path(config_.data_dir) / row.run_db).string();
+}
+
+HttpReply Api::campaign_recording(std::int64_t id, bool head) {
+  namespace fs = std::filesystem;
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (row->run_db.empty())
+    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  if (is_active(row->state) || row->state == RunState::Queued)
+    return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) +
+                                ": its recording can be downloaded when the run has ended",
+                       {{"state", to_string(row->state)}});
+  const std::string name = "campaign-" + std::to_string(id) + "-recording";
+  const fs::path dir = fs::path(config_.data_dir) / "exports";
+  const fs::path tar = dir / (name + ".tar");
+  const fs::path run = run_path(*row);
+  {
+    // Built once, and again when the run file is newer (an interrupted run resumed since).
+    std::lock_guard lock(export_mutex_);
+    std::error_code ec;
+    const bool fresh = fs::exists(tar, ec) && fs::last_write_time(tar, ec) >= fs::last_write_time(run, ec) && !ec;
+    if (!fresh) {
+      fs::create_directories(dir);
+      spdlog::info("campaign {}: exporting the recording bundle to {}", id, tar.string());
+      write_recording_tar(run.string(), tar.string(), name);
+    }
+  }
+  HttpReply r;
+  r.content_type = "application/x-tar";
+  r.file = tar.string();
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + name + ".tar\"");
+  (void)head;  // the server answers HEAD with the file's length and no body
+  return r;
+}
+
+HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {
+  std::optional<std::int64_t> campaign;
+  if (const auto it = query.find("campaign"); it != query.end()) {
+    campaign = parse_id(it->second);
+    if (!campaign) return error_reply(400, "campaign must be a campaign id (/api/alarms?campaign=ID), not '" + it->second + "'");
+    if (!db_.campaign(*campaign)) return error_reply(404, "no campaign " + std::to_string(*campaign));
+  }
+  bool all = false;
+  if (const auto it = query.find("all"); it != query.end()) {
+    if (it->second != "0" && it->second != "1") return error_reply(400, "all must be 0 or 1, not '" + it->second + "'");
+    all = it->second == "1";
+  }
+  auto rows = db_.alarms(campaign, all);
+  json list = json::array();
+  for (auto it = rows.rbegin(); it != rows.rend(); ++it) list.push_back(alarm_json(*it));
+  return json_reply(200, {{"alarms", list}});
+}
+
+HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& who) {
+  const auto id = parse_id(id_text);
+  if (!id) return error_reply(404, "no alarm '" + id_text + "': an alarm id is a number (GET /api/alarms lists them)");
+  const auto [outcome, row] = db_.acknowledge_alarm(*id, who.user);
+  if (outcome == DaemonDb::Ack::NoSuchAlarm) return error_reply(404, "no alarm " + std::to_string(*id));
+  if (outcome == DaemonDb::Ack::AlreadyAcknowledged)
+    return error_reply(409,
+                       "alarm " + std::to_string(*id) + " was already acknowledged by " + row->acknowledged_by.value_or("?") +
+                           " at " + iso8601_utc(row->acknowledged_ms.value_or(0)),
+                       {{"alarm", alarm_json(*row)}});
+  spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row->campaign_id, row->id, row->severity,
+               row->message, who.user);
+  broadcast(alarm_message("acknowledged", *row));
+  return json_reply(200, alarm_json(*row));
+}
+
+HttpReply Api::campaign_events_csv(std::int64_t id) {
+  if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
+  HttpReply r;
+  r.body = run_log_csv(db_.transitions(id), db_.events(id), db_.alarms(id, true, std::numeric_limits<std::int64_t>::max()));
+  r.content_type = "text/csv; charset=utf-8";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"campaign-" + std::to_string(id) + "-events.csv\"");
+  return r;
+}
+
+void Api::broadcast(const json& message) {
+  std::lock_guard lock(listener_mutex_);
+  if (event_listener_) event_listener_(message);
+}
+
+HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std::string>& query) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (row->run_db.empty())
+    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  SeriesRange range;
+  // A query value that is not a number is named, not read as 0.
+  for (const auto& [key, target] : {std::pair<const char*, double*>{"from_s", &range.from_s}, {"to_s", &range.to_s}}) {
+    const auto it = query.find(key);
+    if (it == query.end()) continue;
+    const auto seconds = parse_number_text(it->second);
+    if (!seconds) return error_reply(400, std::string(key) + " must be a number of seconds, not '" + it->second + "'");
+    *target = *seconds;
+  }
+  if (const auto it = query.find("points"); it != query.end()) {
+    const auto v = parse_id(it->second);
+    if (!v || *v < 1 || *v > kMaxSeriesColumns)
+      return error_reply(400, "points must be a number from 1 to " + std::to_string(kMaxSeriesColumns));
+    range.columns = static_cast<int>(*v);
+  }
+  try {
+    // Read-only beside a writer (WAL): a running campaign's recording so far.
+    const auto run = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
+    return json_reply(200, run_series_json(run, range));
+  } catch (const std::invalid_argument& e) {
+    return error_reply(400, e.what());
+  }
+}
+
+void Api::set_event_listener(std::function<void(const json&)> listener) {
+  std::lock_guard lock(listener_mutex_);
+  event_listener_ = std::move(listener);
+}
+
+HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  const std::string label = what == "allan" ? "Allan deviation" : what == "thermal" ? "thermal plots" : "Schuler test";
+  if (row->run_db.empty())
+    return error_reply(404, "not available for this run: campaign " + std::to_string(id) + " was never started");
+  if (is_active(row->state) || row->state == RunState::Queued)
+    return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) + ": the " +
+                                label + " is computed when the run has ended",
+                       {{"state", to_string(row->state)}});
+  // A job off the I/O thread (AnalysisJobs): the row is copied, the request answered at once.
+  auto compute = [this, id, what, row = *row](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    const std::string path = run_path(row);
+    std::optional<ImuModel> model;
+    if (row.model_json) model = imu_model_from_json_text(*row.model_json, "campaign " + std::to_string(id) + "'s model");
+    int status = 200;
+    json body;
+    try {
+      if (what == "allan") {
+        body = allan_from_run(path, progress);
+      } else if (what == "thermal") {
+        // Stage 2 starts from stage 1's model (instrument frame): the campaign's, or the one its
+        // direct stage kept when later stages (stage 3: body frame) followed it.
+        std::optional<ImuModel> stage1 = model && model->frame == "instrument" ? model : std::nullopt;
+        if (row.results_json) {
+          const json results = json::parse(*row.results_json, nullptr, false);
+          if (results.is_object() && results.contains("direct") && results.at("direct").contains("model"))
+            stage1 = imu_model_from_json_text(results.at("direct").at("model").dump(), "the direct stage's model");
+        }
+        body = thermal_from_run(path, stage1.value_or(ImuModel{}), progress);
+        body["input_model"] = stage1 ? "the campaign's stage-1 model" : "ideal (the campaign has no stage-1 model)";
+      } else {
+        std::vector<Variant> variants;
+        variants.push_back({"uncalibrated", "no compensation (the nominal sensor)", ImuModel{}});
+        // Each calibration stage's model when the campaign kept several (a `full` campaign: direct,
+        // lever-arm, stage3), else its one model.
+        std::vector<Variant> stages;
+        if (row.results_json) {
+          const json results = json::parse(*row.results_json, nullptr, false);
+          for (const pipeline::StageName& n : pipeline::stage_names()) {
+            if (!results.is_object() || !results.contains(n.estimator)) continue;
+            const json& r = results.at(n.estimator);
+            if (!r.is_object() || !r.contains("model")) continue;
+            stages.push_back({std::string("stage ") + n.estimator, std::string("this campaign's model after stage ") + n.name,
+                              imu_model_from_json_text(r.at("model").dump(), std::string("the ") + n.estimator + " model")});
+          }
+        }
+        if (stages.size() > 1) {
+          variants.insert(variants.end(), stages.begin(), stages.end());
+        } else if (model) {
+          variants.push_back({"campaign " + std::to_string(id), "this campaign's model", *model});
+        }
+        const CampaignCheck check = check_campaign_text(row.spec_json, config_);
+        if (check.spec && check.spec->navigation_model)
+          variants.push_back({"navigation_model", "the campaign's navigation_model", *check.spec->navigation_model});
+        if (const auto truth = truth_of_run(path)) variants.push_back({"truth", "the simulation's truth (the best any calibration can do)", *truth});
+        body = evaluation_from_run(path, variants, progress);
+      }
+    } catch (const NotAvailable& e) {
+      status = 404;
+      body = {{"error", e.what()}};
+    }
+    return {status, body};
+  };
+  AnalysisJobs::Key key;
+  key.campaign = id;
+  key.analysis = what;
+  key.state = to_string(row->state);
+  return job_reply(jobs_->request(key, std::move(compute)));
+}
+
+HttpReply Api::job_reply(const AnalysisJobs::Answer& a) {
+  if (a.ready) {
+    HttpReply r = json_reply(a.status, json::object());
+    r.body = a.body;
+    return r;
+  }
+  // 202: computing (or queued); ask again. The live WebSocket carries the same progress.
+  HttpReply r = json_reply(202, a.pending);
+  r.headers.emplace_back("Retry-After", "1");
+  return r;
+}
+
+// What the campaign's program will deliver, before it runs (`imucal plan`, docs/programs.md): the
+// body is a campaign as for validation, with an optional `plan` object: `rate_hz` (default 20: a
+// few seconds for the `navigation` program), `arw_deg_rth` and `vrw_mps_rth` (the unit's noise;
+// default the campaign's truth's). A job like the analyses: 202 with progress until ready; the
+// same body again finds the answer kept.
+HttpReply Api::plan_campaign(const ApiRequest& request) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  json options = json::object();
+  if (body.is_object() && body.contains("plan")) {
+    options = body.at("plan");
+    body.erase("plan");
+    if (!options.is_object()) return error_reply(400, "plan must be an object");
+  }
+  const CampaignCheck check = check_campaign(body, config_);
+  if (check.malformed) return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
+  if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
+  ImuModel unit = check.spec->truth;
+  double rate_hz = 20.0;
+  std::vector<std::string> problems;
+  {
+    ObjectReader r(options, "plan", problems);
+    if (auto v = r.number_in("rate_hz", 1.0, 1000.0)) rate_hz = *v;
+    if (auto v = r.number_in("arw_deg_rth", 0.0)) unit.gyro.noise.arw_rad_rts = *v * units::kDegRthToRadRts;
+    if (auto v = r.number_in("vrw_mps_rth", 0.0)) unit.accel.noise.vrw_mps_rts = *v * units::kMpsRthToMpsRts;
+  }
+  if (!problems.empty()) return error_reply(422, problems.front(), {{"problems", problems}});
+  const motion::Program program = compile_campaign_program(*check.spec, config_);
+  auto compute = [program, unit, rate_hz](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    plan::Options o;
+    o.rate_hz = rate_hz;
+    o.progress = progress;
+    try {
+      return {200, plan::predict(program, unit, o).to_json()};
+    } catch (const std::invalid_argument& e) {
+      return {422, {{"error", e.what()}}};
+    }
+  };
+  AnalysisJobs::Key key;
+  key.analysis = "plan";
+  key.state = json{{"campaign", check.spec->normalized}, {"plan", {{"rate_hz", rate_hz},
+              {"arw", unit.gyro.noise.arw_rad_rts}, {"vrw", unit.accel.noise.vrw_mps_rts}}}}.dump();
+  return job_reply(jobs_->request(key, std::move(compute)));
+}
+
+}  // namespace imucal::daemon

@@ -1,0 +1,137 @@
+// The HTTP API of docs/api.md as plain request -> reply functions, with no networking in them:
+// routing, authentication and roles, JSON bodies, error replies. The Beast server
+// (http_server.cpp) only moves bytes; tests can call handle() directly.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/analysis/analysis_jobs.hpp"
+#include "daemon/config/config.hpp"
+#include "daemon/db/daemon_db.hpp"
+#include "daemon/http/auth.hpp"
+#include "daemon/http/static_files.hpp"
+#include "daemon/production/certificates.hpp"
+#include "daemon/production/limits_file.hpp"
+#include "daemon/run/sequencer.hpp"
+
+namespace imucal::daemon {
+
+struct ApiRequest {
+  std::string method;  // "GET", "POST", ...
+  std::string target;  // path and query as received
+  std::string authorization;
+  std::string cookie;
+  std::string content_type;
+  std::string body;
+};
+
+inline constexpr const char* kSessionCookie = "imucal_session";
+
+class Api {
+ public:
+  Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth);
+  struct Route;  // one endpoint: method, path pattern, access, handler (api.cpp)
+
+  // Any /api/ request except the WebSocket.
+  HttpReply handle(const ApiRequest& request);
+  // Who is asking: bearer token, session cookie, or (WebSocket only) ?token= in the query.
+  std::optional<Principal> authenticate(const ApiRequest& request, bool allow_query_token);
+  nlohmann::json status();
+  // For the live WebSocket: has the session that opened it ended (sign-out, idle timeout)?
+  bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
+  // From now on every change is refused with 503.
+  void set_shutting_down() { shutting_down_ = true; }
+  // Where the analyses' progress is published ({"type": "analysis", ...}, docs/api.md).
+  void set_event_listener(std::function<void(const nlohmann::json&)> listener);
+
+ private:
+  static const std::vector<Route>& routes();
+  HttpReply login(const ApiRequest& request);
+  HttpReply logout(const ApiRequest& request);
+  HttpReply list_campaigns(const std::map<std::string, std::string>& query);
+  HttpReply create_campaign(const ApiRequest& request);
+  HttpReply validate_campaign(const ApiRequest& request);
+  HttpReply plan_campaign(const ApiRequest& request);
+  // An analysis job's answer when ready, else 202 with its progress.
+  static HttpReply job_reply(const AnalysisJobs::Answer& answer);
+  HttpReply campaign_detail(std::int64_t id);
+  // GET /api/campaigns/{id}'s body, which the test report is also made from.
+  nlohmann::json detail_json(const CampaignRow& row);
+  HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
+  HttpReply campaign_progress(std::int64_t id);
+  // The recording bundle as a tar file, built once per run under DATA_DIR/exports/.
+  HttpReply campaign_recording(std::int64_t id, bool head);
+  HttpReply campaign_series(std::int64_t id, const std::map<std::string, std::string>& query);
+  // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
+  HttpReply campaign_analysis(std::int64_t id, const std::string& what);
+  std::string run_path(const CampaignRow& row) const;
+  HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);
+  HttpReply campaign_report(std::int64_t id);
+  HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
+                             const Principal& who);
+  nlohmann::json summary(const CampaignRow& row);
+  // An operator's acceptance of a partial run as its unit's calibration.
+  HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
+  // GET /api/compare?a=ID&b=ID: two runs' models side by side (acceptance.hpp compare_json).
+  HttpReply compare_campaigns(const std::map<std::string, std::string>& query);
+  // GET /api/campaigns/{id}/certificate: the campaign's certificate number, issued on the first
+  // request (ended runs with a model only), then always the same.
+  HttpReply campaign_certificate(std::int64_t id);
+  // GET /api/alarms: those still needing someone (or all with ?all=1), of every campaign (or of
+  // ?campaign=ID), newest first.
+  HttpReply list_alarms(const std::map<std::string, std::string>& query);
+  // POST /api/alarms/{id}/ack: who acknowledged it and when, once; broadcast.
+  HttpReply acknowledge_alarm(const std::string& id_text, const Principal& who);
+  // GET /api/campaigns/{id}/events.csv: the run's log with its alarms (alarms.hpp run_log_csv).
+  HttpReply campaign_events_csv(std::int64_t id);
+  void broadcast(const nlohmann::json& message);
+  // PUT /api/limits: the whole limits file replaced by an operator.
+  HttpReply replace_limits(const ApiRequest& request, const Principal& who);
+
+  const DaemonConfig& config_;
+  DaemonDb& db_;
+  Sequencer& sequencer_;
+  Auth& auth_;
+  LimitsFile limits_;
+  CertificateSequence certificate_sequence_;
+  std::mutex certificate_mutex_;  // a campaign's number is looked up and issued as one step
+  nlohmann::json programs_;  // built once: the built-in programs do not change
+  nlohmann::json chamber_map_;  // built once: the configured register map does not change
+  nlohmann::json table_dialect_;  // built once, as the chamber map
+  std::int64_t started_ms_;
+  std::chrono::steady_clock::time_point started_;
+  std::atomic<bool> shutting_down_{false};
+  std::mutex export_mutex_;    // one recording export at a time
+  // The IMU serial of each run file.
+  std::mutex serial_mutex_;
+  std::map<std::int64_t, std::string> serial_cache_;
+  // Where analysis progress goes (the live WebSocket), once the HTTP server exists.
+  std::mutex listener_mutex_;
+  std::function<void(const nlohmann::json&)> event_listener_;
+  // Last: its threads stop (and its running jobs are cancelled) before the rest goes.
+  std::unique_ptr<AnalysisJobs> jobs_;
+};
+
+// The session id in a Cookie header, or empty.
+std::string session_from_cookie(const std::string& cookie_header);
+// A request target parsed (Boost.URL): the path as received, its segments percent-decoded (a
+// trailing empty one dropped), and the query's parameters decoded ('+' is a space). Nothing for a
+// malformed target (a bad percent escape).
+struct Target {
+  std::string path;
+  std::vector<std::string> segments;
+  std::map<std::string, std::string> query;
+};
+std::optional<Target> parse_target(const std::string& target);
+
+}  // namespace imucal::daemon

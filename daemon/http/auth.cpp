@@ -1,0 +1,191 @@
+#include "daemon/http/auth.hpp"
+
+#include "daemon/config/password_hash.hpp"
+
+#include <sys/stat.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+namespace imucal::daemon {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+constexpr std::size_t kMaxSessions = 1000;
+constexpr int kMaxFailuresPerMinute = 5;
+}  // namespace
+
+std::string random_token_hex() {
+  std::random_device entropy;  // /dev/urandom (or RDRAND) with libstdc++ on Linux
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  out.reserve(64);
+  for (int i = 0; i < 8; ++i) {
+    const auto word = static_cast<std::uint32_t>(entropy());
+    for (int nibble = 0; nibble < 8; ++nibble) out.push_back(kHex[(word >> (4 * nibble)) & 0xF]);
+  }
+  return out;
+}
+
+bool constant_time_equal(std::string_view a, std::string_view b) {
+  unsigned diff = a.size() == b.size() ? 0u : 1u;
+  const std::size_t n = std::max(a.size(), b.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto x = static_cast<unsigned char>(i < a.size() ? a[i] : 0);
+    const auto y = static_cast<unsigned char>(i < b.size() ? b[i] : 0);
+    diff |= static_cast<unsigned>(x ^ y);
+  }
+  return diff == 0;
+}
+
+Auth::Auth(const DaemonConfig& config, const std::string& data_dir)
+    : users_(config.users), idle_timeout_s_(config.http.session_idle_s) {
+  bool have_operator = false;
+  if (!config.operator_token.empty()) {
+    tokens_.push_back({config.operator_token, {"operator", Role::Operator, "token", ""}});
+    have_operator = true;
+  }
+  for (const UserEntry& u : config.users) {
+    if (!u.token.empty()) tokens_.push_back({u.token, {u.name, u.role, "token", ""}});
+    if (u.role == Role::Operator && (!u.token.empty() || !u.password_hash.empty())) have_operator = true;
+  }
+  if (!have_operator) {
+    // Nobody could ever change anything: use (or make) the generated operator token.
+    token_file_ = (fs::path(data_dir) / "operator-token").string();
+    std::string token;
+    if (std::ifstream in(token_file_); in) std::getline(in, token);
+    if (token.size() < 16) {
+      token = random_token_hex();
+      const mode_t old_mask = ::umask(077);  // the file is a credential: owner only
+      std::ofstream out(token_file_, std::ios::trunc);
+      ::umask(old_mask);
+      if (!out) throw ConfigError("cannot write the operator token file " + token_file_);
+      out << token << "\n";
+      out.close();
+      fs::permissions(token_file_, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::replace);
+      generated_token_ = token;
+    }
+    tokens_.push_back({token, {"operator", Role::Operator, "token", ""}});
+  }
+}
+
+std::optional<Principal> Auth::from_token(std::string_view token) const {
+  if (token.empty()) return std::nullopt;
+  std::optional<Principal> found;
+  // Compare against every token so that the time taken says nothing about which matched.
+  for (const TokenEntry& t : tokens_)
+    if (constant_time_equal(t.token, token) && !found) found = t.principal;
+  return found;
+}
+
+std::optional<Principal> Auth::from_session(std::string_view session_id) {
+  if (session_id.empty()) return std::nullopt;
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(session_id);
+  if (it == sessions_.end()) return std::nullopt;
+  const auto now = Clock::now();
+  if (std::chrono::duration<double>(now - it->second.last_use).count() > idle_timeout_s_) {
+    sessions_.erase(it);
+    return std::nullopt;
+  }
+  it->second.last_use = now;
+  Principal p = it->second.principal;
+  p.via = "session";
+  p.session_id = std::string(session_id);
+  return p;
+}
+
+bool Auth::throttled() {
+  const auto now = Clock::now();
+  while (!failures_.empty() && now - failures_.front() > std::chrono::minutes(1)) failures_.pop_front();
+  return static_cast<int>(failures_.size()) >= kMaxFailuresPerMinute;
+}
+
+void Auth::failed() { failures_.push_back(Clock::now()); }
+
+Auth::Login Auth::start_session(const Principal& p) {
+  const auto now = Clock::now();
+  // Drop expired sessions, and the oldest when there are too many.
+  for (auto it = sessions_.begin(); it != sessions_.end();) {
+    if (std::chrono::duration<double>(now - it->second.last_use).count() > idle_timeout_s_) {
+      it = sessions_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  if (sessions_.size() >= kMaxSessions) {
+    auto oldest = sessions_.begin();
+    for (auto it = sessions_.begin(); it != sessions_.end(); ++it)
+      if (it->second.last_use < oldest->second.last_use) oldest = it;
+    sessions_.erase(oldest);
+  }
+  Login login;
+  login.session_id = random_token_hex();
+  login.principal = p;
+  login.principal.via = "session";
+  sessions_[login.session_id] = {login.principal, now};
+  return login;
+}
+
+namespace {
+// A hash no password matches in practice, verified for unknown users (made once, lazily).
+const std::string& unknown_user_hash() {
+  static const std::string hash = hash_password("imucal: no such user, a fixed random-looking text 7f3a9c");
+  return hash;
+}
+}  // namespace
+
+Auth::Login Auth::login_password(const std::string& user, const std::string& password) {
+  std::vector<UserEntry> candidates;
+  {
+    std::lock_guard lock(mutex_);
+    if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
+    for (const UserEntry& u : users_)
+      if (!u.password_hash.empty() && constant_time_equal(u.name, user)) candidates.push_back(u);
+  }
+  // Outside the lock: a hash takes a fraction of a second by design, other requests go on.
+  // An unknown user costs a hash too, so the time does not tell which users exist.
+  const UserEntry* match = nullptr;
+  for (const UserEntry& u : candidates)
+    if (match == nullptr && verify_password(u.password_hash, password)) match = &u;
+  if (candidates.empty()) (void)verify_password(unknown_user_hash(), password);
+  std::lock_guard lock(mutex_);
+  if (match == nullptr) {
+    failed();
+    return {401, "wrong user or password", {}, {}};
+  }
+  return start_session({match->name, match->role, "session", ""});
+}
+
+Auth::Login Auth::login_token(const std::string& token) {
+  std::lock_guard lock(mutex_);
+  if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
+  const auto p = from_token(token);
+  if (!p) {
+    failed();
+    return {401, "unknown token", {}, {}};
+  }
+  return start_session(*p);
+}
+
+bool Auth::session_alive(std::string_view session_id) {
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(session_id);
+  if (it == sessions_.end()) return false;
+  if (std::chrono::duration<double>(Clock::now() - it->second.last_use).count() > idle_timeout_s_) {
+    sessions_.erase(it);
+    return false;
+  }
+  return true;
+}
+
+void Auth::logout(std::string_view session_id) {
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(session_id);
+  if (it != sessions_.end()) sessions_.erase(it);
+}
+
+}  // namespace imucal::daemon

@@ -1,0 +1,81 @@
+// Who may do what: API tokens (`Authorization: Bearer`), users with passwords for the browser
+// sign-in, and the sessions (cookie) it creates. Two roles: viewer (reads) and operator (reads and
+// changes). When no operator credential is configured, a token is generated on the first start,
+// kept in DATA_DIR/operator-token (mode 0600) and printed once.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/config/config.hpp"
+
+namespace imucal::daemon {
+
+struct Principal {
+  std::string user;
+  Role role = Role::Viewer;
+  std::string via;  // "token" or "session"
+  std::string session_id;  // the session's id when via == "session"
+};
+
+// 32 random bytes from the system's entropy source, as 64 hex digits.
+std::string random_token_hex();
+// Comparison whose time does not depend on where the strings differ.
+bool constant_time_equal(std::string_view a, std::string_view b);
+
+class Auth {
+ public:
+  Auth(const DaemonConfig& config, const std::string& data_dir);
+
+  // The token generated on this start (print it once), or empty.
+  const std::string& generated_token() const { return generated_token_; }
+  const std::string& token_file() const { return token_file_; }
+
+  std::optional<Principal> from_token(std::string_view token) const;
+  std::optional<Principal> from_session(std::string_view session_id);
+
+  struct Login {
+    int status = 200;  // 200, 401, 429
+    std::string error;
+    std::string session_id;
+    Principal principal;
+  };
+  Login login_password(const std::string& user, const std::string& password);
+  Login login_token(const std::string& token);
+  void logout(std::string_view session_id);
+  // Whether the session still exists and has not expired; unlike from_session() this is not a
+  // use (an open WebSocket does not keep its session alive).
+  bool session_alive(std::string_view session_id);
+  double idle_timeout_s() const { return idle_timeout_s_; }
+
+ private:
+  struct Session {
+    Principal principal;
+    std::chrono::steady_clock::time_point last_use;
+  };
+  Login start_session(const Principal& p);
+  bool throttled();
+  void failed();
+
+  struct TokenEntry {
+    std::string token;
+    Principal principal;
+  };
+  std::vector<TokenEntry> tokens_;
+  std::vector<UserEntry> users_;
+  std::string generated_token_, token_file_;
+  double idle_timeout_s_;
+
+  std::mutex mutex_;
+  std::map<std::string, Session, std::less<>> sessions_;
+  std::deque<std::chrono::steady_clock::time_point> failures_;
+};
+
+}  // namespace imucal::daemon

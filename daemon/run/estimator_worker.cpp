@@ -1,0 +1,224 @@
+#include "daemon/run/estimator_worker.hpp"
+
+#include <chrono>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <memory>
+
+#include <spdlog/spdlog.h>
+
+#include "core/units.hpp"
+#include "daemon/campaign/campaign.hpp"
+#include "estimators/navigation_run.hpp"
+#include "pipeline/pipeline.hpp"
+#include "storage/run_db.hpp"
+
+namespace imucal::daemon {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+EstimatorWorker::EstimatorWorker(std::string run_db_path, Spec spec, std::optional<std::int64_t> committed_t_ns, Sink sink)
+    : path_(std::move(run_db_path)), spec_(std::move(spec)), sink_(std::move(sink)) {
+  if (committed_t_ns) target_t_ns_ = *committed_t_ns;
+  thread_ = std::thread([this] { run(); });
+}
+
+EstimatorWorker::~EstimatorWorker() { cancel(); }
+
+void EstimatorWorker::committed(std::int64_t t_ns) {
+  {
+    std::lock_guard lock(mutex_);
+    target_t_ns_ = std::max(target_t_ns_, t_ns);
+  }
+  cv_.notify_one();
+}
+
+EstimatorWorker::Results EstimatorWorker::finish(std::optional<std::int64_t> final_t_ns) {
+  {
+    std::lock_guard lock(mutex_);
+    if (final_t_ns) target_t_ns_ = std::max(target_t_ns_, *final_t_ns);
+    finishing_ = true;
+  }
+  cv_.notify_one();
+  if (thread_.joinable()) thread_.join();
+  return results_;
+}
+
+void EstimatorWorker::cancel() {
+  {
+    std::lock_guard lock(mutex_);
+    cancelled_ = true;
+  }
+  cv_.notify_one();
+  if (thread_.joinable()) thread_.join();
+}
+
+namespace {
+
+bool listed(const std::vector<std::string>& names, const char* name) {
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// Free-inertial navigation of the whole run against the table reference (the `navigation`
+// estimator): the largest horizontal errors so far.
+class NavigationMonitor {
+ public:
+  NavigationMonitor(const RecordingMeta& meta, const ImuModel& model)
+      : run_(meta, model, 1.0, [this](const nav::NavErrorSample& e) {
+          t_s_ = e.t_s;
+          max_v_ = std::max(max_v_, std::hypot(e.dv_n_mps.x(), e.dv_n_mps.y()));
+          max_p_ = std::max(max_p_, std::hypot(e.dp_n_m.x(), e.dp_n_m.y()));
+        }) {}
+  void feed(const pipeline::FrameSource& source, std::int64_t available_t_ns) {
+    if (state_["status"] == "failed") return;
+    try {
+      feeder_.feed(
+          source, available_t_ns, [&](const TempSample& t) { run_.push_temp(t); }, [&](const ImuFrame& f) { run_.push(f); });
+      if (feeder_.fed_t_ns()) state_["status"] = "running";
+    } catch (const std::exception& e) {
+      state_["status"] = "failed";
+      state_["message"] = e.what();
+    }
+  }
+  const json& progress() {
+    state_["program_time_s"] = t_s_;
+    state_["max_velocity_error_mps"] = max_v_;
+    state_["max_position_error_m"] = max_p_;
+    return state_;
+  }
+  json finish() {
+    if (state_["status"] == "failed") return {{"status", "failed"}, {"message", state_["message"]}};
+    try {
+      const nav::NavSummary s = run_.finish();
+      state_["status"] = "done";
+      return {{"status", "done"},
+              {"duration_s", s.duration_s},
+              {"frames", s.frames},
+              {"max_velocity_error_mps", s.max_velocity_error_mps},
+              {"max_position_error_m", s.max_position_error_m},
+              {"max_attitude_error_arcsec", s.max_attitude_error_rad * units::kRadToArcsec}};
+    } catch (const std::exception& e) {
+      state_["status"] = "failed";
+      state_["message"] = e.what();
+      return {{"status", "failed"}, {"message", e.what()}};
+    }
+  }
+
+ private:
+  nav::NavigationRun run_;
+  pipeline::Feeder feeder_;
+  double max_v_ = 0.0, max_p_ = 0.0, t_s_ = 0.0;
+  json state_ = {{"status", "waiting"}, {"message", nullptr}};
+};
+
+}  // namespace
+
+void EstimatorWorker::run() {
+  std::unique_ptr<storage::RunDb> db;
+  RecordingMeta meta;
+  try {
+    // Read-only: the worker must never become the run's writer (the recorder holds the lease).
+    db = std::make_unique<storage::RunDb>(storage::RunDb::open(path_, storage::OpenMode::Read));
+    meta = db->meta();
+  } catch (const std::exception& e) {
+    spdlog::error("estimators: cannot open the run: {}", e.what());
+    std::lock_guard lock(mutex_);
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+    return;
+  }
+  const pipeline::RunDbSource source(*db);
+
+  // The calibration stages asked for, as one pipeline: each starts from the model of the ones before.
+  std::vector<pipeline::Stage> stages;
+  for (const auto& name : spec_.estimators)
+    if (const auto stage = pipeline::stage_of_estimator(name)) stages.push_back(*stage);
+  std::unique_ptr<pipeline::Pipeline> calibration;
+  std::unique_ptr<NavigationMonitor> monitor;
+  try {
+    if (!stages.empty())
+      calibration = std::make_unique<pipeline::Pipeline>(meta, stages, true, spec_.start_model);
+    if (listed(spec_.estimators, "navigation"))
+      monitor = std::make_unique<NavigationMonitor>(meta, spec_.navigation_model.value_or(ImuModel{}));
+  } catch (const std::exception& e) {
+    spdlog::error("estimators: {}", e.what());
+    std::lock_guard lock(mutex_);
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+    return;
+  }
+
+  std::optional<std::int64_t> fed_t_ns;
+  auto last_report = Clock::now() - std::chrono::seconds(10);
+  double last_report_t_s = -std::numeric_limits<double>::infinity();
+  // Progress of each estimator, when it changed (a finished or waiting stage stays quiet).
+  std::map<std::string, json> sent;
+  auto report = [&] {
+    const double t_s = fed_t_ns ? static_cast<double>(*fed_t_ns) / units::kNsPerS : 0.0;
+    auto send = [&](const std::string& name, const json& progress) {
+      json& last = sent[name];
+      if (last == progress) return;
+      last = progress;
+      sink_(name, t_s, progress);
+    };
+    if (calibration)
+      for (pipeline::Stage stage : stages) send(pipeline::names_of(stage).estimator, calibration->progress(stage));
+    if (monitor) send("navigation", monitor->progress());
+  };
+  auto feed = [&](std::int64_t upto_t_ns, bool final) {
+    if (calibration) calibration->advance(source, upto_t_ns, final);
+    if (monitor) monitor->feed(source, upto_t_ns);
+    fed_t_ns = upto_t_ns;
+  };
+
+  try {
+    for (;;) {
+      std::int64_t target;
+      bool finishing;
+      {
+        std::unique_lock lock(mutex_);
+        cv_.wait(lock, [&] {
+          return cancelled_ || finishing_ || (target_t_ns_ != std::numeric_limits<std::int64_t>::min() &&
+                                               (!fed_t_ns || target_t_ns_ > *fed_t_ns));
+        });
+        if (cancelled_) return;
+        target = target_t_ns_;
+        finishing = finishing_;
+      }
+      if (finishing) {
+        feed(target, true);
+        break;
+      }
+      if (target != std::numeric_limits<std::int64_t>::min()) feed(target, false);
+      // At most every 500 ms of wall time and 5 s of program time: each report is stored in the
+      // daemon's database (stage 3's holds every state: about 5 kB), so a real-time run of the
+      // navigation program stores about 1700, not 17 000.
+      const double fed_s = static_cast<double>(target) / units::kNsPerS;
+      if (Clock::now() - last_report >= std::chrono::milliseconds(500) && fed_s - last_report_t_s >= 5.0) {
+        report();
+        last_report = Clock::now();
+        last_report_t_s = fed_s;
+      }
+    }
+    // Final results: each stage's report (its model included) under its estimator's name.
+    Results out;
+    if (calibration) {
+      for (const pipeline::Outcome& o : calibration->outcomes())
+        out.results[pipeline::names_of(o.stage).estimator] = o.report();
+      if (std::any_of(calibration->outcomes().begin(), calibration->outcomes().end(),
+                      [](const pipeline::Outcome& o) { return o.status == pipeline::Status::Done; }))
+        out.model = calibration->model();
+    }
+    if (monitor) out.results["navigation"] = monitor->finish();
+    report();
+    std::lock_guard lock(mutex_);
+    results_ = std::move(out);
+  } catch (const std::exception& e) {
+    spdlog::error("estimators: {}", e.what());
+    std::lock_guard lock(mutex_);
+    for (const auto& name : spec_.estimators) results_.results[name] = {{"status", "failed"}, {"message", e.what()}};
+  }
+}
+
+}  // namespace imucal::daemon

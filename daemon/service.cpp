@@ -1,0 +1,126 @@
+#include "daemon/service.hpp"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include <spdlog/sinks/rotating_file_sink.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "daemon/http/http_server.hpp"
+#include "daemon/run/alarms.hpp"
+
+namespace imucal::daemon {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string find_web_dir(const std::string& configured) {
+  if (!configured.empty()) return configured;
+  std::error_code ec;
+  if (fs::is_directory("web", ec)) return "web";
+#ifdef IMUCAL_SOURCE_WEB_DIR
+  if (fs::is_directory(IMUCAL_SOURCE_WEB_DIR, ec)) return IMUCAL_SOURCE_WEB_DIR;
+#endif
+  return {};
+}
+
+}  // namespace
+
+sigset_t block_termination_signals() {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  ::signal(SIGPIPE, SIG_IGN);
+  return signals;
+}
+
+void setup_logging(const LogConfig& log, const std::string& data_dir) {
+  std::vector<spdlog::sink_ptr> sinks;
+  sinks.push_back(std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
+  std::string file_error;
+  if (!log.file.empty()) {
+    const fs::path path = fs::path(log.file).is_absolute() ? fs::path(log.file) : fs::path(data_dir) / log.file;
+    try {
+      fs::create_directories(path.parent_path());
+      sinks.push_back(std::make_shared<spdlog::sinks::rotating_file_sink_mt>(
+          path.string(), static_cast<std::size_t>(log.max_size_mb * 1024 * 1024), static_cast<std::size_t>(log.max_files)));
+    } catch (const std::exception& e) {
+      file_error = e.what();
+    }
+  }
+  auto logger = std::make_shared<spdlog::logger>("imucald", sinks.begin(), sinks.end());
+  logger->set_level(spdlog::level::from_str(log.level));
+  logger->flush_on(spdlog::level::warn);
+  spdlog::set_default_logger(logger);
+  spdlog::flush_every(std::chrono::seconds(2));
+  if (!file_error.empty()) spdlog::warn("no log file: {}", file_error);
+}
+
+Service::Service(DaemonConfig config) : config_(std::move(config)) {
+  std::error_code ec;
+  fs::create_directories(config_.data_dir, ec);
+  if (ec) throw ConfigError("cannot create the data directory '" + config_.data_dir + "': " + ec.message());
+  // One daemon per data directory: a second one would run the same queue on the same files.
+  const std::string lock_path = (fs::path(config_.data_dir) / "imucald.lock").string();
+  lock_fd_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (lock_fd_ < 0) throw ConfigError("cannot open " + lock_path);
+  if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    ::close(lock_fd_);
+    lock_fd_ = -1;
+    throw ConfigError("another imucald is using the data directory '" + config_.data_dir + "'");
+  }
+  db_ = std::make_unique<DaemonDb>((fs::path(config_.data_dir) / "imucald.db").string());
+  for (const auto id : db_->recover_after_restart("found active at start-up: the daemon stopped without parking it "
+                                                  "(crash or power loss)")) {
+    spdlog::warn("campaign {} was active when the daemon stopped; it is now interrupted (resume to continue)", id);
+    // The alarms the change implies (an interruption raises one), as for the sequencer's changes;
+    // nobody is connected yet to be told, GET /api/alarms lists them.
+    const auto transitions = db_->transitions(id);
+    if (!transitions.empty() && transitions.back().from)
+      (void)apply_transition_alarms(*db_, id, *transitions.back().from, transitions.back().to, transitions.back().reason);
+  }
+  auth_ = std::make_unique<Auth>(config_, config_.data_dir);
+  sequencer_ = std::make_unique<Sequencer>(config_, *db_);
+  api_ = std::make_unique<Api>(config_, *db_, *sequencer_, *auth_);
+  web_dir_ = find_web_dir(config_.http.web_dir);
+  files_ = std::make_unique<StaticFiles>(web_dir_);
+}
+
+Service::~Service() {
+  stop();
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
+
+void Service::start(bool http) {
+  if (http) {
+    server_ = std::make_unique<HttpServer>(config_.http, *api_, *sequencer_, *files_);
+    HttpServer* server = server_.get();
+    sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
+    api_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
+    server_->start(config_.http.host, config_.http.port);
+  }
+  sequencer_->start();
+}
+
+void Service::stop() {
+  if (stopped_) return;
+  stopped_ = true;
+  if (api_) {
+    api_->set_shutting_down();
+    api_->set_event_listener({});  // the analyses' progress no longer reaches the server
+  }
+  if (sequencer_) sequencer_->shutdown();
+  if (server_) server_->stop();
+  spdlog::default_logger()->flush();
+}
+
+std::uint16_t Service::port() const { return server_ ? server_->port() : 0; }
+
+}  // namespace imucal::daemon

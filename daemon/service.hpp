@@ -1,0 +1,67 @@
+// imucald assembled: the data directory (locked against a second daemon), the daemon database
+// with crash recovery, authentication, the sequencer, the API and the HTTP server. Used by
+// imucald's main and, in-process, by the tests and `imucal campaign run`.
+#pragma once
+
+#include <signal.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "daemon/config/config.hpp"
+#include "daemon/db/daemon_db.hpp"
+#include "daemon/http/api.hpp"
+#include "daemon/http/auth.hpp"
+#include "daemon/http/static_files.hpp"
+#include "daemon/run/sequencer.hpp"
+
+namespace imucal::daemon {
+
+class HttpServer;
+
+// For a main thread that ends on SIGTERM or SIGINT taken with sigwait(): blocks both in the
+// calling thread, before it starts any other (threads inherit the mask, so no worker is ever
+// interrupted by them), and ignores SIGPIPE (a peer closing a socket fails that call, not the
+// process). Returns the set to sigwait() on.
+sigset_t block_termination_signals();
+
+class Service {
+ public:
+  // Opens (creates) the data directory and the database, marks runs left active by a crash as
+  // interrupted. Throws with a message a person can act on.
+  explicit Service(DaemonConfig config);
+  ~Service();
+  Service(const Service&) = delete;
+  Service& operator=(const Service&) = delete;
+
+  // Starts the sequencer and, when `http`, the HTTP server on the configured address.
+  void start(bool http = true);
+  // Clean shutdown: refuse changes, park the active run (interrupted), close the server.
+  void stop();
+
+  std::uint16_t port() const;
+  const DaemonConfig& config() const { return config_; }
+  DaemonDb& db() { return *db_; }
+  Sequencer& sequencer() { return *sequencer_; }
+  Auth& auth() { return *auth_; }
+  Api& api() { return *api_; }
+  const std::string& web_dir() const { return web_dir_; }
+
+ private:
+  DaemonConfig config_;
+  int lock_fd_ = -1;
+  std::string web_dir_;
+  std::unique_ptr<DaemonDb> db_;
+  std::unique_ptr<Auth> auth_;
+  std::unique_ptr<Sequencer> sequencer_;
+  std::unique_ptr<Api> api_;
+  std::unique_ptr<StaticFiles> files_;
+  std::unique_ptr<HttpServer> server_;
+  bool stopped_ = false;
+};
+
+// Sets up spdlog: stderr and, when configured, a rotating file under the data directory.
+void setup_logging(const LogConfig& log, const std::string& data_dir);
+
+}  // namespace imucal::daemon
