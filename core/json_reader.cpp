@@ -144,4 +144,8 @@ void ObjectReader::finish() {
   }
 }
 
+void read_milliseconds(ObjectReader& r, const char* key, std::chrono::milliseconds& out) {
+  if (const auto v = r.integer(key, 1, 3'600'000)) out = std::chrono::milliseconds(*v);
+}
+
 }  // namespace imucal

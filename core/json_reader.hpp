@@ -6,6 +6,7 @@
 // before (an IMU link's field offsets against its frame length).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <optional>
 #include <set>
@@ -67,6 +68,10 @@ class ObjectReader {
   std::set<std::string> known_;
   bool finished_ = false;
 };
+
+// A device's timeout or back-off: a positive whole number of milliseconds, at most an hour (a
+// longer one is a typo, not a setting), under `key`; absent: `out` kept.
+void read_milliseconds(ObjectReader& r, const char* key, std::chrono::milliseconds& out);
 
 // "JSON type" in words for messages ("a string", "an array").
 std::string json_type_name(const nlohmann::json& value);

@@ -10,6 +10,8 @@
 #include <modbus/modbus.h>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::drivers {
 
 using Clock = std::chrono::steady_clock;
@@ -23,26 +25,27 @@ ModbusChamberConfig modbus_chamber_config_from_json(const std::string& json_text
     throw std::invalid_argument(std::string("chamber config: not valid JSON: ") + e.what());
   }
   ModbusChamberConfig c;
-  try {
-    read_modbus_link(j, "chamber", c);
-    if (!j.contains("map")) throw std::invalid_argument("chamber config: 'map' is required");
-    if (j["map"].is_string()) c.map = load_register_map(j["map"].get<std::string>());
-    else c.map = register_map_from_json(j["map"].dump());
-    if (j.contains("safe_setpoint_C")) {
-      if (j["safe_setpoint_C"].is_null()) c.safe_setpoint_C.reset();
-      else c.safe_setpoint_C = j["safe_setpoint_C"].get<double>();
-    }
-    if (j.contains("setpoint_range_C")) {
-      const auto r = j["setpoint_range_C"].get<std::vector<double>>();
-      if (r.size() != 2 || !(r[0] < r[1])) throw std::invalid_argument("chamber config: 'setpoint_range_C' must be [min, max]");
-      c.setpoint_min_C = r[0];
-      c.setpoint_max_C = r[1];
-    }
-  } catch (const json::exception& e) {
-    throw std::invalid_argument(std::string("chamber config: ") + e.what());
+  ObjectReader r(j, "", ObjectReader::ThrowAtFirst{"chamber config: "});
+  if (const auto f = r.string("format"); f && *f != "imucal-chamber/1") r.fail(r.at("format") + " must be \"imucal-chamber/1\"");
+  read_modbus_link(r, c);
+  const json& map = *r.get("map", true);
+  if (map.is_string()) c.map = load_register_map(map.get<std::string>());
+  else if (map.is_object()) c.map = register_map_from_json(map.dump());
+  else r.fail(r.at("map") + " must be a built-in map's name, a file or an imucal-chamber-map/1 object");
+  if (const json* safe = r.get("safe_setpoint_C")) {
+    if (safe->is_null()) c.safe_setpoint_C.reset();
+    else c.safe_setpoint_C = r.number("safe_setpoint_C");
   }
+  if (const json* range = r.get("setpoint_range_C")) {
+    if (!range->is_array() || range->size() != 2 || !(*range)[0].is_number() || !(*range)[1].is_number() ||
+        !((*range)[0].get<double>() < (*range)[1].get<double>()))
+      r.fail(r.at("setpoint_range_C") + " must be [min, max] with min < max");
+    c.setpoint_min_C = (*range)[0].get<double>();
+    c.setpoint_max_C = (*range)[1].get<double>();
+  }
+  r.finish();
   if (!c.safe_setpoint_C && !c.map.control_mode)
-    throw std::invalid_argument("chamber config: 'safe_setpoint_C' is null but the map has no control_mode register to switch off");
+    r.fail("safe_setpoint_C is null but the map has no control_mode register to switch off");
   return c;
 }
 

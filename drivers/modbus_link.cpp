@@ -7,6 +7,8 @@
 #include <modbus/modbus.h>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::drivers {
 
 using Clock = std::chrono::steady_clock;
@@ -16,31 +18,25 @@ std::string ModbusLinkConfig::address() const {
   return "modbus-rtu://" + serial_device + "@" + std::to_string(baud);
 }
 
-void read_modbus_link(const nlohmann::json& j, const std::string& device, ModbusLinkConfig& c) {
-  const std::string pre = device + " config: ";
-  const std::string transport = j.value("transport", std::string(c.transport == ModbusLinkConfig::Transport::tcp ? "tcp" : "rtu"));
-  if (transport == "tcp") c.transport = ModbusLinkConfig::Transport::tcp;
-  else if (transport == "rtu") c.transport = ModbusLinkConfig::Transport::rtu;
-  else throw std::invalid_argument(pre + "'transport' must be \"tcp\" or \"rtu\"");
-  c.host = j.value("host", c.host);
-  c.port = j.value("port", c.port);
-  if (c.port < 1 || c.port > 65535) throw std::invalid_argument(pre + "'port' must be 1..65535");
-  c.serial_device = j.value("serial_device", c.serial_device);
-  c.baud = j.value("baud", c.baud);
-  const std::string parity = j.value("parity", std::string(1, c.parity));
-  if (parity != "N" && parity != "E" && parity != "O")
-    throw std::invalid_argument(pre + "'parity' must be \"N\", \"E\" or \"O\"");
-  c.parity = parity[0];
-  c.data_bits = j.value("data_bits", c.data_bits);
-  c.stop_bits = j.value("stop_bits", c.stop_bits);
-  auto ms = [&](const char* key, std::chrono::milliseconds def) {
-    const int v = j.value(key, static_cast<int>(def.count()));
-    if (v <= 0) throw std::invalid_argument(pre + "'" + key + "' must be positive");
-    return std::chrono::milliseconds(v);
-  };
-  c.response_timeout = ms("response_timeout_ms", c.response_timeout);
-  c.backoff_initial = ms("backoff_initial_ms", c.backoff_initial);
-  c.backoff_max = ms("backoff_max_ms", c.backoff_max);
+void read_modbus_link(ObjectReader& r, ModbusLinkConfig& c) {
+  if (const auto t = r.string("transport")) {
+    if (*t == "tcp") c.transport = ModbusLinkConfig::Transport::tcp;
+    else if (*t == "rtu") c.transport = ModbusLinkConfig::Transport::rtu;
+    else r.fail(r.at("transport") + " must be \"tcp\" or \"rtu\", not \"" + *t + "\"");
+  }
+  if (const auto v = r.string("host")) c.host = *v;
+  if (const auto v = r.integer("port", 1, 65535)) c.port = static_cast<int>(*v);
+  if (const auto v = r.string("serial_device")) c.serial_device = *v;
+  if (const auto v = r.integer("baud", 1, 4'000'000)) c.baud = static_cast<int>(*v);
+  if (const auto p = r.string("parity")) {
+    if (*p != "N" && *p != "E" && *p != "O") r.fail(r.at("parity") + " must be \"N\", \"E\" or \"O\"");
+    c.parity = (*p)[0];
+  }
+  if (const auto v = r.integer("data_bits", 5, 8)) c.data_bits = static_cast<int>(*v);
+  if (const auto v = r.integer("stop_bits", 1, 2)) c.stop_bits = static_cast<int>(*v);
+  read_milliseconds(r, "response_timeout_ms", c.response_timeout);
+  read_milliseconds(r, "backoff_initial_ms", c.backoff_initial);
+  read_milliseconds(r, "backoff_max_ms", c.backoff_max);
 }
 
 ModbusLink::ModbusLink(ModbusLinkConfig config, int slave_id, std::string who)

@@ -14,6 +14,10 @@
 
 struct _modbus;
 
+namespace imucal {
+class ObjectReader;  // core/json_reader.hpp
+}
+
 namespace imucal::drivers {
 
 struct ModbusLinkConfig {
@@ -35,9 +39,9 @@ struct ModbusLinkConfig {
 
 // Reads the link keys of a device's JSON configuration ("transport", "host", "port",
 // "serial_device", "baud", "parity", "data_bits", "stop_bits", "response_timeout_ms",
-// "backoff_initial_ms", "backoff_max_ms"; absent keys keep `c`'s values). Throws
-// std::invalid_argument "<device> config: '<key>' ...".
-void read_modbus_link(const nlohmann::json& j, const std::string& device, ModbusLinkConfig& c);
+// "backoff_initial_ms", "backoff_max_ms"; absent keys keep `c`'s values) from a strict reader
+// (core/json_reader.hpp) that throws at the first problem, naming the key.
+void read_modbus_link(ObjectReader& r, ModbusLinkConfig& c);
 
 class ModbusLink {
  public:

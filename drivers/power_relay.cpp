@@ -8,6 +8,8 @@
 #include <modbus/modbus.h>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::drivers {
 
 PowerRelayConfig power_relay_config_from_json(const std::string& json_text) {
@@ -19,23 +21,18 @@ PowerRelayConfig power_relay_config_from_json(const std::string& json_text) {
   } catch (const json::exception& e) {
     throw std::invalid_argument(pre + "not valid JSON: " + e.what());
   }
-  if (!j.is_object()) throw std::invalid_argument(pre + "must be an object");
   PowerRelayConfig c;
-  try {
-    read_modbus_link(j, "power relay", c);
-    c.unit_id = j.value("unit_id", c.unit_id);
-    if (c.unit_id < 1 || c.unit_id > 247) throw std::invalid_argument(pre + "'unit_id' must be 1..247");
-    c.coil = j.value("coil", c.coil);
-    if (c.coil < 0 || c.coil > 65535) throw std::invalid_argument(pre + "'coil' must be 0..65535");
-    c.on_when_set = j.value("on_when_set", c.on_when_set);
-    c.off_s = j.value("off_s", c.off_s);
-    // Long enough for the supply's capacitors to drain and the IMU to boot afresh; short
-    // enough that a typo does not leave the unit off for hours.
-    if (!std::isfinite(c.off_s) || c.off_s < 1.0 || c.off_s > 600.0)
-      throw std::invalid_argument(pre + "'off_s' must be 1..600 seconds");
-  } catch (const json::exception& e) {
-    throw std::invalid_argument(pre + e.what());
-  }
+  ObjectReader r(j, "", ObjectReader::ThrowAtFirst{pre});
+  if (const auto f = r.string("format"); f && *f != "imucal-power-relay/1")
+    r.fail(r.at("format") + " must be \"imucal-power-relay/1\"");
+  read_modbus_link(r, c);
+  if (const auto v = r.integer("unit_id", 1, 247)) c.unit_id = static_cast<int>(*v);
+  if (const auto v = r.integer("coil", 0, 65535)) c.coil = static_cast<int>(*v);
+  c.on_when_set = r.boolean("on_when_set").value_or(c.on_when_set);
+  // Long enough for the supply's capacitors to drain and the IMU to boot afresh; short enough
+  // that a typo does not leave the unit off for hours.
+  if (const auto v = r.number_in("off_s", 1.0, 600.0)) c.off_s = *v;
+  r.finish();
   return c;
 }
 

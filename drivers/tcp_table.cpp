@@ -11,6 +11,8 @@
 #include <boost/asio/write.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 
 namespace imucal::drivers {
 
@@ -28,51 +30,45 @@ TcpTableConfig tcp_table_config_from_json(const std::string& json_text) {
     throw std::invalid_argument(std::string("table config: not valid JSON: ") + e.what());
   }
   TcpTableConfig c;
-  try {
-    c.host = j.value("host", c.host);
-    c.port = j.value("port", c.port);
-    if (c.port < 1 || c.port > 65535) throw std::invalid_argument("table config: 'port' must be 1..65535");
-    auto ms = [&](const char* key, std::chrono::milliseconds def) {
-      const int v = j.value(key, static_cast<int>(def.count()));
-      if (v <= 0) throw std::invalid_argument(std::string("table config: '") + key + "' must be positive");
-      return std::chrono::milliseconds(v);
-    };
-    c.response_timeout = ms("response_timeout_ms", c.response_timeout);
-    c.connect_timeout = ms("connect_timeout_ms", c.connect_timeout);
-    c.backoff_initial = ms("backoff_initial_ms", c.backoff_initial);
-    c.backoff_max = ms("backoff_max_ms", c.backoff_max);
-    c.safe_stop_timeout = ms("safe_stop_timeout_ms", c.safe_stop_timeout);
-    if (j.contains("dialect")) {
-      if (!j["dialect"].is_string()) throw std::invalid_argument("table config: 'dialect' must be a built-in name or a file");
-      c.dialect_name = j["dialect"].get<std::string>();
-      c.dialect = dialect::load_dialect(c.dialect_name);
-    }
-    c.reply_checksum = j.value("reply_checksum", c.dialect.has_reply_checksum);
-    if (c.reply_checksum && !c.dialect.has_reply_checksum)
-      throw std::invalid_argument("table config: 'reply_checksum' is true but dialect '" + c.dialect.name + "' has no reply checksum");
-    c.watchdog_s = j.value("watchdog_s", c.watchdog_s);
-    if (!(c.watchdog_s >= 0.0)) throw std::invalid_argument("table config: 'watchdog_s' must be >= 0");
-    if (j.contains("limits")) {
-      for (const json& l : j["limits"]) {
-        const std::string axis = l.at("axis").get<std::string>();
-        const std::string mode = l.at("mode").get<std::string>();
-        int a = axis == "outer" ? 0 : axis == "middle" ? 1 : axis == "inner" ? 2 : -1;
-        int m = mode == "off" ? 0 : mode == "position" ? 1 : mode == "rate" ? 2 : mode == "synthesis" ? 3 : -1;
-        if (a < 0) throw std::invalid_argument("table config: limits[].axis must be outer, middle or inner");
-        if (m < 0) throw std::invalid_argument("table config: limits[].mode must be off, position, rate or synthesis");
-        AxisLimitSetting s;
-        s.min_deg = l.value("min_deg", s.min_deg);
-        s.max_deg = l.value("max_deg", s.max_deg);
-        s.rate_dps = l.value("rate_dps", s.rate_dps);
-        s.accel_dps2 = l.value("accel_dps2", s.accel_dps2);
-        if (!(s.min_deg < s.max_deg) || !(s.rate_dps > 0) || !(s.accel_dps2 > 0))
-          throw std::invalid_argument("table config: limits for " + axis + "/" + mode + " need min < max and positive rate and acceleration");
-        c.limits[static_cast<std::size_t>(a)][static_cast<std::size_t>(m)] = s;
-      }
-    }
-  } catch (const json::exception& e) {
-    throw std::invalid_argument(std::string("table config: ") + e.what());
+  ObjectReader r(j, "", ObjectReader::ThrowAtFirst{"table config: "});
+  if (const auto f = r.string("format"); f && *f != "imucal-table/1") r.fail(r.at("format") + " must be \"imucal-table/1\"");
+  if (const auto v = r.string("host")) c.host = *v;
+  if (const auto v = r.integer("port", 1, 65535)) c.port = static_cast<int>(*v);
+  read_milliseconds(r, "response_timeout_ms", c.response_timeout);
+  read_milliseconds(r, "connect_timeout_ms", c.connect_timeout);
+  read_milliseconds(r, "backoff_initial_ms", c.backoff_initial);
+  read_milliseconds(r, "backoff_max_ms", c.backoff_max);
+  read_milliseconds(r, "safe_stop_timeout_ms", c.safe_stop_timeout);
+  if (const auto d = r.string("dialect")) {
+    c.dialect_name = *d;
+    c.dialect = dialect::load_dialect(c.dialect_name);
   }
+  c.reply_checksum = r.boolean("reply_checksum").value_or(c.dialect.has_reply_checksum);
+  if (c.reply_checksum && !c.dialect.has_reply_checksum)
+    r.fail(r.at("reply_checksum") + " is true but dialect '" + c.dialect.name + "' has no reply checksum");
+  if (const auto v = r.number_in("watchdog_s", 0.0)) c.watchdog_s = *v;
+  if (const json* limits = r.get("limits")) {
+    if (!limits->is_array()) r.fail(r.at("limits") + " must be an array, not " + json_type_name(*limits));
+    for (std::size_t i = 0; i < limits->size(); ++i) {
+      ObjectReader l((*limits)[i], "limits[" + std::to_string(i) + "]", ObjectReader::ThrowAtFirst{"table config: "});
+      const std::string axis = *l.string("axis", true);
+      const std::string mode = *l.string("mode", true);
+      const int a = axis == "outer" ? 0 : axis == "middle" ? 1 : axis == "inner" ? 2 : -1;
+      const int m = mode == "off" ? 0 : mode == "position" ? 1 : mode == "rate" ? 2 : mode == "synthesis" ? 3 : -1;
+      if (a < 0) l.fail(l.at("axis") + " must be outer, middle or inner, not \"" + axis + "\"");
+      if (m < 0) l.fail(l.at("mode") + " must be off, position, rate or synthesis, not \"" + mode + "\"");
+      AxisLimitSetting s;
+      s.min_deg = l.number("min_deg").value_or(s.min_deg);
+      s.max_deg = l.number("max_deg").value_or(s.max_deg);
+      s.rate_dps = l.number("rate_dps").value_or(s.rate_dps);
+      s.accel_dps2 = l.number("accel_dps2").value_or(s.accel_dps2);
+      if (!(s.min_deg < s.max_deg) || !(s.rate_dps > 0) || !(s.accel_dps2 > 0))
+        l.fail(l.where() + " (" + axis + "/" + mode + ") needs min_deg < max_deg and positive rate_dps and accel_dps2");
+      l.finish();
+      c.limits[static_cast<std::size_t>(a)][static_cast<std::size_t>(m)] = s;
+    }
+  }
+  r.finish();
   return c;
 }
 

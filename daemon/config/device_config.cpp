@@ -20,26 +20,6 @@ namespace dr = imucal::drivers;
 
 namespace {
 
-// The keys of imucal-table/1, imucal-chamber/1 and imucal-power-relay/1 (drivers/tcp_table.hpp,
-// modbus_chamber.hpp, power_relay.hpp).
-// The drivers' parsers ignore keys they do not know; the daemon's configuration refuses them, so
-// that a typo (`"watchdog"`) never becomes a silent default.
-constexpr std::array<const char*, 12> kTableKeys = {
-    "format",         "host",           "port",       "dialect", "response_timeout_ms",  "connect_timeout_ms", "backoff_initial_ms",
-    "backoff_max_ms", "reply_checksum", "watchdog_s", "safe_stop_timeout_ms", "limits"};
-// The Modbus link keys (drivers/modbus_link.hpp), which the chamber and the power relay share,
-// and each device's own.
-constexpr std::array<const char*, 11> kModbusLinkKeys = {
-    "transport", "host",      "port",      "serial_device",      "baud",          "parity",
-    "data_bits", "stop_bits", "response_timeout_ms", "backoff_initial_ms", "backoff_max_ms"};
-
-std::vector<const char*> modbus_device_keys(std::initializer_list<const char*> own) {
-  std::vector<const char*> keys = {"format"};
-  keys.insert(keys.end(), kModbusLinkKeys.begin(), kModbusLinkKeys.end());
-  keys.insert(keys.end(), own);
-  return keys;
-}
-
 // What a Modbus device object must give besides `own`: where its link is (the serial device over
 // RTU, host and port over TCP); no address is worth guessing.
 std::vector<std::string> modbus_required(const json& j, std::vector<std::string> own) {
@@ -53,78 +33,72 @@ std::vector<std::string> modbus_required(const json& j, std::vector<std::string>
   return own;
 }
 
-// A driver's message starts with its own context ("table config: "); the key path replaces it.
-// nlohmann's "[json.exception.type_error.302] " tag says nothing to an operator either.
-std::string without_prefix(const std::string& message, const std::string& prefix) {
-  std::string m = message.rfind(prefix, 0) == 0 ? message.substr(prefix.size()) : message;
-  if (m.rfind("[json.exception.", 0) == 0) {
-    if (const auto end = m.find("] "); end != std::string::npos) m.erase(0, end + 2);
-  }
-  return m;
+// A driver's message starts with its own context ("table config: "); `where` replaces it. The
+// drivers read with the strict reader (core/json_reader.hpp), whose messages start with the key's
+// path ("port is 70000, ...") or say "unknown key"; others (a dialect that cannot be loaded) are
+// put under the key they came from.
+std::string driver_problem(const std::string& message, const std::string& prefix, const std::string& where,
+                           const std::string& key) {
+  const std::string m = message.rfind(prefix, 0) == 0 ? message.substr(prefix.size()) : message;
+  if (m.rfind("unknown key", 0) == 0) return where + ": " + m;
+  if (!key.empty() && m.rfind(key, 0) == 0 && m.size() > key.size() && (m[key.size()] == ' ' || m[key.size()] == '['))
+    return where + "." + m;
+  return where + (key.empty() ? "" : "." + key) + ": " + m;
 }
 
-// One device object in a driver's own configuration form. Each key is first given to the
-// driver's parser alone (on `base`, which holds whatever the parser requires besides it), so that
-// every bad value is reported with its own key path rather than only the first; then the whole
-// object, for the rules that tie keys together.
+// One device object in a driver's own configuration form, read by the driver's strict parser.
+// Each key is first given to the parser alone (on `base`, which holds whatever the parser
+// requires besides it), so that every bad value and unknown key is reported rather than only the
+// first; then the whole object, for the rules that tie keys together.
 template <class Config, class Parse>
-std::optional<Config> read_driver_object(const json& j, const std::string& where, std::span<const char* const> keys,
-                                         const std::string& format, const std::string& driver_prefix,
+std::optional<Config> read_driver_object(const json& j, const std::string& where, const std::string& driver_prefix,
                                          const std::vector<std::string>& required, const json& base, Parse parse,
                                          std::vector<std::string>& problems) {
-  ObjectReader r(j, where, problems);
-  if (!r.is_object()) return std::nullopt;
-  const std::size_t before = problems.size();
-  json clean = json::object();  // without the '_' comments
-  for (const char* key : keys)
-    if (const json* v = r.get(key)) clean[key] = *v;
-  r.finish();
-  for (const std::string& key : required)
-    if (!clean.contains(key)) problems.push_back(where + "." + key + " is required");
-  if (const auto it = clean.find("format"); it != clean.end()) {
-    if (!it->is_string() || it->get<std::string>() != format)
-      problems.push_back(where + ".format must be \"" + format + "\" when given");
-    clean.erase("format");
+  if (!j.is_object()) {
+    problems.push_back(where + " must be an object, not " + json_type_name(j));
+    return std::nullopt;
   }
-  for (const auto& [key, value] : clean.items()) {
+  const std::size_t before = problems.size();
+  for (const std::string& key : required)
+    if (!j.contains(key)) problems.push_back(where + "." + key + " is required");
+  for (const auto& [key, value] : j.items()) {
+    if (key.rfind('_', 0) == 0) continue;  // a comment
     json alone = base;
     alone[key] = value;
     try {
       (void)parse(alone.dump());
     } catch (const std::exception& e) {
-      problems.push_back(where + "." + key + ": " + without_prefix(e.what(), driver_prefix));
+      problems.push_back(driver_problem(e.what(), driver_prefix, where, key));
     }
   }
   if (problems.size() != before) return std::nullopt;
   try {
-    return parse(clean.dump());
+    return parse(j.dump());
   } catch (const std::exception& e) {
-    problems.push_back(where + ": " + without_prefix(e.what(), driver_prefix));
+    problems.push_back(driver_problem(e.what(), driver_prefix, where, ""));
     return std::nullopt;
   }
 }
 
 std::optional<dr::TcpTableConfig> read_table(const json& j, const std::string& where, std::vector<std::string>& problems) {
   // A real controller has no default address worth guessing.
-  return read_driver_object<dr::TcpTableConfig>(j, where, kTableKeys, "imucal-table/1", "table config: ",
+  return read_driver_object<dr::TcpTableConfig>(j, where, "table config: ",
                                                 {"host", "port"}, json::object(), dr::tcp_table_config_from_json,
                                                 problems);
 }
 
 std::optional<dr::ModbusChamberConfig> read_chamber(const json& j, const std::string& where,
                                                     std::vector<std::string>& problems) {
-  static const std::vector<const char*> keys = modbus_device_keys({"map", "safe_setpoint_C", "setpoint_range_C"});
   // The parser requires a map: a key other than "map" is checked on a built-in one.
-  return read_driver_object<dr::ModbusChamberConfig>(j, where, keys, "imucal-chamber/1", "chamber config: ",
+  return read_driver_object<dr::ModbusChamberConfig>(j, where, "chamber config: ",
                                                      modbus_required(j, {"map"}), json{{"map", "watlow-f4t"}},
                                                      dr::modbus_chamber_config_from_json, problems);
 }
 
 std::optional<dr::PowerRelayConfig> read_power_relay(const json& j, const std::string& where,
                                                      std::vector<std::string>& problems) {
-  static const std::vector<const char*> keys = modbus_device_keys({"unit_id", "coil", "on_when_set", "off_s"});
   // No default coil: a relay switched by guess could cut the wrong supply.
-  return read_driver_object<dr::PowerRelayConfig>(j, where, keys, "imucal-power-relay/1", "power relay config: ",
+  return read_driver_object<dr::PowerRelayConfig>(j, where, "power relay config: ",
                                                   modbus_required(j, {"coil"}), json::object(),
                                                   dr::power_relay_config_from_json, problems);
 }

@@ -242,14 +242,14 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
   for (const char* part : {
            "bench.json:",
            "config.devices: unknown key \"spare\"",
-           "config.devices.table.port: 'port' must be 1..65535",
-           "config.devices.table.response_timeout_ms: 'response_timeout_ms' must be positive",
+           "config.devices.table.port is 70000, must be between 1 and 65535",
+           "config.devices.table.response_timeout_ms is -5, must be between 1 and 3600000",
            "config.devices.table: unknown key \"watchdog\"",
-           "config.devices.table.reply_checksum:",
+           "config.devices.table.reply_checksum must be true or false, not a string",
            "config.devices.table.dialect: table dialect 'acutrol-3000': no such built-in one (imucal-acl) or file",
            "config.devices.chamber.host is required",
            "config.devices.chamber.map: register map 'no-such-map': no such built-in one (watlow-f4t, csz-ezt570i) or file",
-           "config.devices.chamber.parity:",
+           "config.devices.chamber.parity must be \"N\", \"E\" or \"O\"",
            "config.devices.imu: give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both",
            "config.devices.imu.framing must be \"fd\" or \"classic\"",
            "config.devices.imu.rate_hz is required",
@@ -257,7 +257,7 @@ TEST(Config, ABadDevicesObjectListsEveryProblemWithItsKeyPath) {
            "config.devices.imu.serial must not be empty",
            "config.devices.imu: unknown key \"rate\"",
            "config.devices.power_relay.coil is required",
-           "config.devices.power_relay.off_s: 'off_s' must be 1..600 seconds",
+           "config.devices.power_relay.off_s is 3600.0, must be between 1.0 and 600.0",
            "config.devices.power_relay: unknown key \"coils\"",
        })
     EXPECT_NE(m.find(part), std::string::npos) << "missing: " << part << "\nin:\n" << m;

@@ -331,7 +331,13 @@ TEST(ModbusChamber, ConfigurationFromJson) {
     (void)modbus_chamber_config_from_json(R"({"map":"csz-ezt570i","safe_setpoint_C":null})");
     ADD_FAILURE() << "accepted";
   } catch (const std::invalid_argument& e) {
-    EXPECT_STREQ(e.what(), "chamber config: 'safe_setpoint_C' is null but the map has no control_mode register to switch off");
+    EXPECT_STREQ(e.what(), "chamber config: safe_setpoint_C is null but the map has no control_mode register to switch off");
+  }
+  try {
+    (void)modbus_chamber_config_from_json(R"({"map":"watlow-f4t","baudrate":9600})");
+    ADD_FAILURE() << "accepted a misspelt key";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "chamber config: unknown key \"baudrate\"");
   }
   EXPECT_THROW(modbus_chamber_config_from_json(R"({"transport":"udp","map":"watlow-f4t"})"), std::invalid_argument);
   EXPECT_THROW(modbus_chamber_config_from_json(R"({"port":70000,"map":"watlow-f4t"})"), std::invalid_argument);
@@ -441,10 +447,14 @@ TEST(PowerRelay, ConfigurationFromJson) {
     }
     return std::string("accepted");
   };
-  EXPECT_EQ(message(R"({"coil": -1})"), "power relay config: 'coil' must be 0..65535");
-  EXPECT_EQ(message(R"({"unit_id": 0})"), "power relay config: 'unit_id' must be 1..247");
-  EXPECT_EQ(message(R"({"off_s": 0.2})"), "power relay config: 'off_s' must be 1..600 seconds");
-  EXPECT_EQ(message(R"({"transport": "udp"})"), "power relay config: 'transport' must be \"tcp\" or \"rtu\"");
+  EXPECT_EQ(message(R"({"coil": -1})"), "power relay config: coil is -1, must be between 0 and 65535");
+  EXPECT_EQ(message(R"({"unit_id": 0})"), "power relay config: unit_id is 0, must be between 1 and 247");
+  EXPECT_EQ(message(R"({"off_s": 0.2})"), "power relay config: off_s is 0.2, must be between 1.0 and 600.0");
+  EXPECT_EQ(message(R"({"transport": "udp"})"), "power relay config: transport must be \"tcp\" or \"rtu\", not \"udp\"");
+  // Read on its own, the driver's configuration is as strict as the daemon's: a misspelt key is
+  // refused, not defaulted (an "of_s" would have left the IMU off for the default 10 s).
+  EXPECT_EQ(message(R"({"coil": 1, "of_s": 3})"), "power relay config: unknown key \"of_s\"");
+  EXPECT_EQ(message(R"({"coil": 1, "_note": "comments are ignored"})"), "accepted");
 }
 
 TEST(ModbusChamberFuzz, RandomRepliesNeverYieldAValue) {

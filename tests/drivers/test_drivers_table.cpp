@@ -482,7 +482,22 @@ TEST(TcpTable, ConfigurationFromJson) {
   EXPECT_FALSE(c.reply_checksum);
   ASSERT_TRUE(c.limits[1][2]);
   EXPECT_DOUBLE_EQ(c.limits[1][2]->max_deg, 90.0);
-  EXPECT_THROW(tcp_table_config_from_json(R"({"limits":[{"axis":"top","mode":"rate"}]})"), std::invalid_argument);
+  auto message = [](const char* text) {
+    try {
+      (void)tcp_table_config_from_json(text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(message(R"({"limits":[{"axis":"top","mode":"rate"}]})"),
+            "table config: limits[0].axis must be outer, middle or inner, not \"top\"");
+  EXPECT_EQ(message(R"({"limits":[{"axis":"outer","mode":"rate","rate":5}]})"),
+            "table config: limits[0]: unknown key \"rate\"");
+  // A misspelt key is refused, not defaulted (a "watchdog" would have left the watchdog off).
+  EXPECT_EQ(message(R"({"watchdog": 1})"), "table config: unknown key \"watchdog\"");
+  EXPECT_EQ(message(R"({"port": 0})"), "table config: port is 0, must be between 1 and 65535");
+  EXPECT_EQ(message(R"({"format": "imucal-table/2"})"), "table config: format must be \"imucal-table/1\"");
 }
 
 // A second controller family is a file: the driver and the simulated table both given a dialect
@@ -563,7 +578,7 @@ TEST(TcpTable, ADialectIsConfiguredByNameOrFile) {
     return std::string();
   };
   EXPECT_NE(message(R"({"dialect": ")" + kTestDialectPath + R"(", "reply_checksum": true})")
-                .find("'reply_checksum' is true but dialect 'test-rtc' has no reply checksum"),
+                .find("reply_checksum is true but dialect 'test-rtc' has no reply checksum"),
             std::string::npos);
   EXPECT_NE(message(R"({"dialect": "acutrol-3000"})").find("table dialect 'acutrol-3000': no such built-in one (imucal-acl) or file"),
             std::string::npos)
