@@ -29,7 +29,9 @@ struct LinkImuConfig {
   // The fixed part of the receive delay not covered by the IMU's latency field (transceiver,
   // driver, bus), measured once on the bench; subtracted before the fit (docs/drivers.md).
   std::int64_t transport_delay_ns = 0;
-  ClockFitConfig clock{100'000'000, 128, true, 50'000'000};
+  // Named fields: a positional list silently shifted when a field was added to ClockFitConfig (the
+  // reset threshold's 50 ms became the prompt tolerance, which turned the prompt filter off).
+  ClockFitConfig clock{.block_span_ns = 100'000'000, .window_blocks = 128, .lower_envelope = true};
 };
 
 class LinkImu final : public Imu {

@@ -39,7 +39,8 @@ struct TcpTableConfig {
   double watchdog_s = 0.0;
   // safe_stop() waits this long for every axis to be at rest before opening the interlock.
   std::chrono::milliseconds safe_stop_timeout{30000};
-  ClockFitConfig clock{500'000'000, 64, false, 50'000'000};
+  // Named fields, as in LinkImuConfig (a positional list shifted when a field was added).
+  ClockFitConfig clock{.block_span_ns = 500'000'000, .window_blocks = 64, .lower_envelope = false};
 };
 
 // "imucal-table/1" JSON: {"host", "port", "dialect" (a built-in name or a dialect file),

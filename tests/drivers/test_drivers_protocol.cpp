@@ -20,8 +20,10 @@
 #include "drivers/clock_model.hpp"
 #include "drivers/imu_codec.hpp"
 #include "drivers/imu_link.hpp"
+#include "drivers/link_imu.hpp"
 #include "drivers/register_map.hpp"
 #include "drivers/table_dialect.hpp"
+#include "drivers/tcp_table.hpp"
 #include "drivers/word_order.hpp"
 
 using namespace imucal::drivers;
@@ -936,6 +938,23 @@ TEST(ClockModel, BlocksDelayedWholeByALoadedHostDoNotTiltTheLine) {
   EXPECT_NEAR(static_cast<double>(fit.map(6'000'000'000LL) - 1'000'000'000'000LL - 6'000'000'000LL) / 1e3,
               10.0 - 6000.0 * drift * 1e3, 3.0)
       << "us: the model at the end of the run, against truth plus the 10 us floor";
+}
+
+TEST(ClockModel, TheDriversChangeOnlyTheFieldsTheyName) {
+  // The table's and the IMU's fits set block span, window and delay kind; the loaded-host filter
+  // (prompt tolerance) and the jump threshold are the model's. A positional initialiser once
+  // shifted the threshold into the tolerance (50 ms), which left whole delayed blocks in the fit:
+  // a 316 us table-to-IMU misalignment in TimeBase.ShortCampaignThroughAllThreeDriversAt1kHz on a
+  // loaded machine, against about 30 us.
+  const ClockFitConfig model;
+  for (const ClockFitConfig& c : {TcpTableConfig{}.clock, LinkImuConfig{}.clock}) {
+    EXPECT_EQ(c.prompt_tolerance_ns, model.prompt_tolerance_ns);
+    EXPECT_EQ(c.reset_threshold_ns, model.reset_threshold_ns);
+    EXPECT_EQ(c.late_confirm_ns, model.late_confirm_ns);
+    EXPECT_EQ(c.round_trip_floor_ns, model.round_trip_floor_ns);
+  }
+  EXPECT_FALSE(TcpTableConfig{}.clock.lower_envelope);
+  EXPECT_TRUE(LinkImuConfig{}.clock.lower_envelope);
 }
 
 TEST(ClockModel, SymmetricRoundTripFitAndResetOnJump) {
