@@ -943,9 +943,9 @@ TEST(ClockModel, BlocksDelayedWholeByALoadedHostDoNotTiltTheLine) {
 TEST(ClockModel, TheDriversChangeOnlyTheFieldsTheyName) {
   // The table's and the IMU's fits set block span, window and delay kind; the loaded-host filter
   // (prompt tolerance) and the jump threshold are the model's. A positional initialiser once
-  // shifted the threshold into the tolerance (50 ms), which left whole delayed blocks in the fit:
-  // a 316 us table-to-IMU misalignment in TimeBase.ShortCampaignThroughAllThreeDriversAt1kHz on a
-  // loaded machine, against about 30 us.
+  // shifted the threshold into the tolerance (50 ms), which left whole delayed blocks in the fit
+  // (found while looking for why TimeBase.ShortCampaignThroughAllThreeDriversAt1kHz misaligns by
+  // 300-460 us now and then on a loaded machine; that is not explained by this alone).
   const ClockFitConfig model;
   for (const ClockFitConfig& c : {TcpTableConfig{}.clock, LinkImuConfig{}.clock}) {
     EXPECT_EQ(c.prompt_tolerance_ns, model.prompt_tolerance_ns);
