@@ -185,6 +185,11 @@ struct TcpTable::Impl {
     error_code wec, rec;
     std::size_t n = 0;
     std::int64_t recv_ns = 0;
+    // Stamped before the write: Asio sends at once when it can, inside async_write, and a thread
+    // descheduled between that send and a later stamp made a read look instantaneous (3 us round
+    // trip, its midpoint 890 us late) and the clock model took it as its best point (a
+    // table-to-IMU misalignment of 0.3-2 ms on a loaded machine).
+    const std::int64_t send_ns = host_time_ns();
     asio::async_write(socket, asio::buffer(out), [&](const error_code& e, std::size_t) {
       wec = e;
       wrote = true;
@@ -196,7 +201,6 @@ struct TcpTable::Impl {
                              n = len;
                              read = true;
                            });
-    const std::int64_t send_ns = host_time_ns();
     if (!run_until(read, cfg.response_timeout)) {
       close_link("no reply to '" + body + "'");
       return {DriverErrc::timeout, who() + ": no reply to '" + body + "' within " + std::to_string(cfg.response_timeout.count()) + " ms"};

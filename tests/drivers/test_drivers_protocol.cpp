@@ -944,8 +944,9 @@ TEST(ClockModel, TheDriversChangeOnlyTheFieldsTheyName) {
   // The table's and the IMU's fits set block span, window and delay kind; the loaded-host filter
   // (prompt tolerance) and the jump threshold are the model's. A positional initialiser once
   // shifted the threshold into the tolerance (50 ms), which left whole delayed blocks in the fit
-  // (found while looking for why TimeBase.ShortCampaignThroughAllThreeDriversAt1kHz misaligns by
-  // 300-460 us now and then on a loaded machine; that is not explained by this alone).
+  // (found while looking for why TimeBase.ShortCampaignThroughAllThreeDriversAt1kHz misaligned by
+  // 0.3-2 ms now and then on a loaded machine; the cause was the table's send stamp, taken after
+  // Asio had sent: drivers/tcp_table.cpp).
   const ClockFitConfig model;
   for (const ClockFitConfig& c : {TcpTableConfig{}.clock, LinkImuConfig{}.clock}) {
     EXPECT_EQ(c.prompt_tolerance_ns, model.prompt_tolerance_ns);
