@@ -5,7 +5,6 @@
 #include <stdexcept>
 
 #include <modbus/modbus.h>
-#include <nlohmann/json.hpp>
 
 #include "core/json_reader.hpp"
 

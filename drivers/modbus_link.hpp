@@ -8,8 +8,6 @@
 #include <cstdint>
 #include <string>
 
-#include <nlohmann/json_fwd.hpp>
-
 #include "drivers/interfaces.hpp"
 
 struct _modbus;

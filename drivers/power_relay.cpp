@@ -1,7 +1,6 @@
 #include "drivers/power_relay.hpp"
 
 #include <cerrno>
-#include <cmath>
 #include <mutex>
 #include <stdexcept>
 

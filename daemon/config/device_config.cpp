@@ -2,12 +2,10 @@
 
 #include <sys/un.h>
 
-#include <array>
 #include <cmath>
 #include <cstdio>
 #include <exception>
 #include <optional>
-#include <span>
 
 #include <nlohmann/json.hpp>
 
