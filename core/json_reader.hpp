@@ -49,6 +49,11 @@ class ObjectReader {
 
   // Reports keys that no getter asked for (besides '_' comments). Called by the destructor too.
   void finish();
+  // For an exchange format other writers may extend (formats.md: a recording's meta.json): an
+  // unknown key is ignored unless it is a near miss of a key asked for ("gravity_mps" for
+  // "gravity_mps2"), which is reported with the key it resembles: a typo must not silently turn
+  // into a default there either.
+  void finish_extensible();
 
   const std::string& where() const { return where_; }
   // Records the problem, or throws it when throwing.

@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
 #include "drivers/chamber_maps_builtin.hpp"  // generated from drivers/chamber_maps/*.json
 
 namespace imucal::drivers {
@@ -31,26 +32,27 @@ int RegisterMap::address_end() const noexcept {
 
 namespace {
 
-int get_address(const json& j, const char* key) {
-  const json& v = j.at(key);
-  if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 65535)
-    throw std::invalid_argument(std::string("register map: '") + key +
-                                "' must be a register address 0..65535");
-  return v.get<int>();
+// A register address, or nothing when the key is absent or null (null: "this controller has none").
+std::optional<int> address(ObjectReader& r, const char* key, bool required = false) {
+  const json* v = r.get(key, required);
+  if (v == nullptr || v->is_null()) return std::nullopt;
+  return static_cast<int>(*r.integer(key, 0, 65535));
 }
 
-std::uint16_t get_u16(const json& j, const char* key, const char* where) {
-  const json& v = j.at(key);
-  if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 65535)
-    throw std::invalid_argument(std::string("register map: '") + where + "." + key +
-                                "' must be an integer 0..65535");
-  return static_cast<std::uint16_t>(v.get<int>());
+std::uint16_t word(ObjectReader& r, const char* key) { return static_cast<std::uint16_t>(*r.integer(key, 0, 65535, true)); }
+
+// The object under `key` (absent or null: nullptr); anything else than an object is refused.
+const json* object_or_null(ObjectReader& r, const char* key) {
+  const json* v = r.get(key);
+  if (v == nullptr || v->is_null()) return nullptr;
+  if (!v->is_object()) r.fail(r.at(key), "must be an object, not " + json_type_name(*v));
+  return v;
 }
 
-TemperatureUnit parse_unit(const std::string& s) {
-  if (s == "C") return TemperatureUnit::celsius;
-  if (s == "F") return TemperatureUnit::fahrenheit;
-  throw std::invalid_argument("register map: 'fixed_unit' must be \"C\" or \"F\"");
+const json& array_at(ObjectReader& r, const char* key) {
+  const json* v = r.get(key, true);
+  if (!v->is_array()) r.fail(r.at(key), "must be an array, not " + json_type_name(*v));
+  return *v;
 }
 
 // The keys of `j` that carry addresses or encodings, in the order the map format lists them.
@@ -62,37 +64,77 @@ std::vector<std::string> used_keys(const json& j) {
   return keys;
 }
 
+void read_value(ObjectReader& r, RegisterMap& m) {
+  const std::string type = *r.string("type", true);
+  if (type == "float32") {
+    m.encoding = ValueEncoding::float32;
+    const std::string order = *r.string("word_order", true);
+    try {
+      m.word_order = words::word_order_from_string(order);
+    } catch (const std::invalid_argument& e) {
+      r.fail(r.at("word_order"), e.what());
+    }
+  } else if (type == "int16") {
+    m.encoding = ValueEncoding::scaled_i16;
+    m.scale = *r.number("scale", true);
+    if (!(m.scale > 0.0)) r.fail(r.at("scale"), "must be a positive number");
+  } else {
+    r.fail(r.at("type"), "is \"" + type + "\", must be \"float32\" or \"int16\"");
+  }
+  r.finish();
+}
+
+AlarmRegister read_alarm(ObjectReader& r) {
+  AlarmRegister a;
+  a.name = *r.string("name", true);
+  a.address = *address(r, "address", true);
+  if (r.has("mask")) a.mask = word(r, "mask");
+  if (r.has("normal")) {
+    const json& normal = array_at(r, "normal");
+    for (std::size_t i = 0; i < normal.size(); ++i) {
+      const json& n = normal[i];
+      if (!n.is_number_integer() || n.get<long long>() < 0 || n.get<long long>() > 65535)
+        r.fail(r.at("normal") + "[" + std::to_string(i) + "]", "must be an integer between 0 and 65535");
+      a.normal.push_back(static_cast<std::uint16_t>(n.get<int>()));
+    }
+  }
+  if ((a.mask == 0) == a.normal.empty())
+    r.fail(r.where(), "alarm '" + a.name + "' needs exactly one of 'mask' (non-zero) or 'normal'");
+  r.finish();
+  return a;
+}
+
 // `source`: {"manual", "document", "registers": {key: {"checked", "where"}}, "note"}. Every key
 // the map uses is listed; one the source does not name is "not checked".
-MapSource read_source(const json& j, const RegisterMap& m) {
+MapSource read_source(const json* src, const std::vector<std::string>& used, const ObjectReader::ThrowAtFirst& mode) {
   MapSource s;
-  const json* src = j.contains("source") ? &j["source"] : nullptr;
-  if (src && !src->is_object()) throw std::invalid_argument("register map: 'source' must be an object");
-  if (src) {
-    s.manual = src->value("manual", std::string());
-    s.document = src->value("document", std::string());
-    s.note = src->value("note", std::string());
+  std::optional<ObjectReader> r;
+  const json* regs = nullptr;
+  if (src != nullptr) {
+    r.emplace(*src, "source", mode);
+    s.manual = r->string("manual").value_or("");
+    s.document = r->string("document").value_or("");
+    s.note = r->string("note").value_or("");
+    regs = object_or_null(*r, "registers");
+    r->finish();
   }
-  const json* regs = src && src->contains("registers") ? &(*src)["registers"] : nullptr;
-  if (regs && !regs->is_object()) throw std::invalid_argument("register map: 'source.registers' must be an object");
-  const std::vector<std::string> keys = used_keys(j);
-  if (regs)
+  if (regs != nullptr)
     for (const auto& [key, entry] : regs->items())
-      if (std::find(keys.begin(), keys.end(), key) == keys.end())
-        throw std::invalid_argument("register map '" + m.name + "': 'source.registers." + key + "' is not a key the map uses");
-  for (const std::string& key : keys) {
-    RegisterSource r;
-    r.key = key;
-    if (regs && regs->contains(key)) {
-      const json& e = (*regs)[key];
-      r.checked = e.value("checked", false);
-      r.where = e.value("where", std::string());
+      if (std::find(used.begin(), used.end(), key) == used.end())
+        r->fail("'source.registers." + key + "' is not a key the map uses");
+  for (const std::string& key : used) {
+    RegisterSource reg;
+    reg.key = key;
+    if (regs != nullptr && regs->contains(key)) {
+      ObjectReader e((*regs)[key], "source.registers." + key, mode);
+      reg.checked = e.boolean("checked").value_or(false);
+      reg.where = e.string("where").value_or("");
+      e.finish();
+      if (reg.checked && s.manual.empty()) e.fail("'" + e.where() + "' is checked but the source names no manual");
     } else {
-      r.where = "not named in the map's source";
+      reg.where = "not named in the map's source";
     }
-    if (r.checked && s.manual.empty())
-      throw std::invalid_argument("register map '" + m.name + "': 'source.registers." + key + "' is checked but the source names no manual");
-    s.registers.push_back(std::move(r));
+    s.registers.push_back(std::move(reg));
   }
   return s;
 }
@@ -106,76 +148,56 @@ RegisterMap register_map_from_json(const std::string& json_text) {
   } catch (const json::exception& e) {
     throw std::invalid_argument(std::string("register map: not valid JSON: ") + e.what());
   }
-  try {
-    if (j.value("format", std::string()) != "imucal-chamber-map/1")
-      throw std::invalid_argument("register map: 'format' must be \"imucal-chamber-map/1\"");
-    RegisterMap m;
-    m.name = j.value("name", std::string("custom"));
-    m.slave_id = j.value("slave_id", 1);
-    if (m.slave_id < 0 || m.slave_id > 247)
-      throw std::invalid_argument("register map: 'slave_id' must be 0..247");
-    const json& v = j.at("value");
-    const std::string type = v.at("type").get<std::string>();
-    if (type == "float32") {
-      m.encoding = ValueEncoding::float32;
-      m.word_order = words::word_order_from_string(v.at("word_order").get<std::string>());
-    } else if (type == "int16") {
-      m.encoding = ValueEncoding::scaled_i16;
-      m.scale = v.at("scale").get<double>();
-      if (!(m.scale > 0.0) || !std::isfinite(m.scale))
-        throw std::invalid_argument("register map: 'value.scale' must be a positive number");
-    } else {
-      throw std::invalid_argument("register map: 'value.type' must be \"float32\" or \"int16\"");
-    }
-    m.process_value = get_address(j, "process_value");
-    m.setpoint = get_address(j, "setpoint");
-    if (j.contains("working_setpoint") && !j["working_setpoint"].is_null())
-      m.working_setpoint = get_address(j, "working_setpoint");
-    if (j.contains("ramp_rate_per_min") && !j["ramp_rate_per_min"].is_null())
-      m.ramp_rate_per_min = get_address(j, "ramp_rate_per_min");
-    if (j.contains("control_mode") && !j["control_mode"].is_null()) {
-      const json& c = j["control_mode"];
-      m.control_mode = ControlModeRegister{get_address(c, "address"), get_u16(c, "auto", "control_mode"),
-                                           get_u16(c, "off", "control_mode")};
-    }
-    if (j.contains("units") && !j["units"].is_null()) {
-      const json& u = j["units"];
-      m.units = UnitsRegister{get_address(u, "address"), get_u16(u, "C", "units"), get_u16(u, "F", "units")};
-      if (m.units->celsius_value == m.units->fahrenheit_value)
-        throw std::invalid_argument("register map: 'units.C' and 'units.F' must differ");
-    }
-    if (j.contains("fixed_unit")) m.fixed_unit = parse_unit(j["fixed_unit"].get<std::string>());
-    if (j.contains("alarms")) {
-      for (const json& a : j.at("alarms")) {
-        AlarmRegister r;
-        r.name = a.at("name").get<std::string>();
-        r.address = get_address(a, "address");
-        if (a.contains("mask")) r.mask = get_u16(a, "mask", "alarms[]");
-        if (a.contains("normal"))
-          for (const json& n : a["normal"]) {
-            if (!n.is_number_integer() || n.get<long long>() < 0 || n.get<long long>() > 65535)
-              throw std::invalid_argument("register map: 'alarms[].normal' holds integers 0..65535");
-            r.normal.push_back(static_cast<std::uint16_t>(n.get<int>()));
-          }
-        if ((r.mask == 0) == r.normal.empty())
-          throw std::invalid_argument("register map: alarm '" + r.name +
-                                      "' needs exactly one of 'mask' (non-zero) or 'normal'");
-        m.alarms.push_back(std::move(r));
-      }
-    }
-    if (j.contains("plausible_range_C")) {
-      const auto r = j["plausible_range_C"].get<std::vector<double>>();
-      if (r.size() != 2 || !(r[0] < r[1]))
-        throw std::invalid_argument("register map: 'plausible_range_C' must be [min, max]");
-      m.plausible_min_C = r[0];
-      m.plausible_max_C = r[1];
-    }
-    m.source = read_source(j, m);
-    return m;
-  } catch (const json::exception& e) {
-    throw std::invalid_argument(std::string("register map '") + j.value("name", std::string("?")) +
-                                "': " + e.what());
+  // Messages name the map when it has a name: "register map 'x': process_value is 70000, ...".
+  const std::string name = j.is_object() && j.contains("name") && j["name"].is_string() ? j["name"].get<std::string>() : "";
+  const ObjectReader::ThrowAtFirst mode{"register map" + (name.empty() ? std::string() : " '" + name + "'") + ": "};
+  ObjectReader r(j, "", mode);
+  if (r.string("format").value_or("") != "imucal-chamber-map/1") r.fail("format", "must be \"imucal-chamber-map/1\"");
+  RegisterMap m;
+  m.name = r.string("name").value_or("custom");
+  m.slave_id = static_cast<int>(r.integer("slave_id", 0, 247).value_or(1));
+  {
+    ObjectReader value(*r.get("value", true), "value", mode);
+    read_value(value, m);
   }
+  m.process_value = *address(r, "process_value", true);
+  m.setpoint = *address(r, "setpoint", true);
+  m.working_setpoint = address(r, "working_setpoint");
+  m.ramp_rate_per_min = address(r, "ramp_rate_per_min");
+  if (const json* c = object_or_null(r, "control_mode")) {
+    ObjectReader cr(*c, "control_mode", mode);
+    m.control_mode = ControlModeRegister{*address(cr, "address", true), word(cr, "auto"), word(cr, "off")};
+    cr.finish();
+  }
+  if (const json* u = object_or_null(r, "units")) {
+    ObjectReader ur(*u, "units", mode);
+    m.units = UnitsRegister{*address(ur, "address", true), word(ur, "C"), word(ur, "F")};
+    ur.finish();
+    if (m.units->celsius_value == m.units->fahrenheit_value) ur.fail("units.C and units.F must differ");
+  }
+  if (const auto unit = r.string("fixed_unit")) {
+    if (*unit == "C") m.fixed_unit = TemperatureUnit::celsius;
+    else if (*unit == "F") m.fixed_unit = TemperatureUnit::fahrenheit;
+    else r.fail("fixed_unit", "is \"" + *unit + "\", must be \"C\" or \"F\"");
+  }
+  if (r.has("alarms")) {
+    const json& alarms = array_at(r, "alarms");
+    for (std::size_t i = 0; i < alarms.size(); ++i) {
+      ObjectReader ar(alarms[i], "alarms[" + std::to_string(i) + "]", mode);
+      m.alarms.push_back(read_alarm(ar));
+    }
+  }
+  if (r.has("plausible_range_C")) {
+    const json& range = *r.get("plausible_range_C");
+    if (!range.is_array() || range.size() != 2 || !range[0].is_number() || !range[1].is_number() ||
+        !(range[0].get<double>() < range[1].get<double>()))
+      r.fail("plausible_range_C", "must be [min, max] in Celsius with min < max");
+    m.plausible_min_C = range[0].get<double>();
+    m.plausible_max_C = range[1].get<double>();
+  }
+  m.source = read_source(object_or_null(r, "source"), used_keys(j), mode);
+  r.finish();
+  return m;
 }
 
 std::vector<std::string> builtin_register_map_names() { return embedded_names(builtin::kChamberMaps); }

@@ -20,6 +20,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::storage {
 
 namespace {
@@ -239,43 +241,86 @@ nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
   return root;
 }
 
-// Reads meta.json; every problem names the key.
-class MetaReader {
- public:
-  explicit MetaReader(std::string dir) : dir_(std::move(dir)) {}
+// meta.json through core's ObjectReader (path first: "site.height_m must be a number, not a
+// string"). Keys another writer added are ignored (formats.md lets the format be extended); a
+// near miss of a key of ours ("gravity_mps") is refused, or a typo would silently become normal
+// gravity.
+Eigen::Vector3d read_vector3(ObjectReader& r, const char* key) {
+  const json& value = *r.get(key, true);
+  if (!value.is_array() || value.size() != 3 || !std::all_of(value.begin(), value.end(), [](const json& x) { return x.is_number(); }))
+    r.fail(r.at(key), "must be an array of 3 numbers");
+  return {value[0].get<double>(), value[1].get<double>(), value[2].get<double>()};
+}
 
-  static std::string full_name(const std::string& parent_name, const char* key) {
-    return parent_name.empty() ? std::string(key) : parent_name + "." + key;
+RecordingMeta read_meta(const json& root) {
+  const ObjectReader::ThrowAtFirst mode{};
+  ObjectReader r(root, "", mode);
+  const std::string format = *r.string("format", true);
+  if (format != kRecordingFormat) r.fail("unknown format '" + format + "' (this imucal reads " + kRecordingFormat + ")");
+
+  RecordingMeta meta;
+  {
+    ObjectReader site(*r.get("site", true), "site", mode);
+    meta.site.latitude_deg = *site.number_in("latitude_deg", -90.0, 90.0, true);
+    meta.site.longitude_deg = *site.number_in("longitude_deg", -180.0, 360.0, true);
+    meta.site.height_m = *site.number("height_m", true);
+    meta.site.middle_axis_azimuth_deg = *site.number("middle_axis_azimuth_deg", true);
+    meta.site.gravity_mps2 = site.number_in("gravity_mps2", 9.7, 9.9);
+    site.finish_extensible();
   }
-  const json& at(const json& parent, const std::string& parent_name, const char* key) const {
-    if (!parent.is_object()) fail("'" + (parent_name.empty() ? "(top level)" : parent_name) + "' must be an object");
-    if (!parent.contains(key)) fail("missing key '" + full_name(parent_name, key) + "'");
-    return parent[key];
+  {
+    ObjectReader imu(*r.get("imu", true), "imu", mode);
+    meta.imu_serial = *imu.string("serial", true);
+    meta.rate_hz = *imu.number("rate_hz", true);
+    if (!(meta.rate_hz > 0.0)) imu.fail(imu.at("rate_hz"), "must be positive");
+    meta.gyro_lsb_rad = imu.number("gyro_lsb_rad");
+    meta.accel_lsb_mps = imu.number("accel_lsb_mps");
+    imu.finish_extensible();
   }
-  double number(const json& parent, const std::string& parent_name, const char* key) const {
-    const json& value = at(parent, parent_name, key);
-    if (!value.is_number()) fail("'" + full_name(parent_name, key) + "' must be a number");
-    return value.get<double>();
-  }
-  std::string string(const json& parent, const std::string& parent_name, const char* key) const {
-    const json& value = at(parent, parent_name, key);
-    if (!value.is_string()) fail("'" + full_name(parent_name, key) + "' must be a string");
-    return value.get<std::string>();
-  }
-  Eigen::Vector3d vector3(const json& value, const std::string& name) const {
-    if (!value.is_array() || value.size() != 3) fail("'" + name + "' must be an array of 3 numbers");
-    Eigen::Vector3d v;
-    for (std::size_t i = 0; i < 3; ++i) {
-      if (!value[i].is_number()) fail("'" + name + "' must be an array of 3 numbers");
-      v(static_cast<Eigen::Index>(i)) = value[i].get<double>();
+  {
+    ObjectReader mount(*r.get("mount", true), "mount", mode);
+    const json& c_o_p = *mount.get("C_o_p", true);
+    const auto is_row = [](const json& row) {
+      return row.is_array() && row.size() == 3 && std::all_of(row.begin(), row.end(), [](const json& x) { return x.is_number(); });
+    };
+    if (!c_o_p.is_array() || c_o_p.size() != 3 || !std::all_of(c_o_p.begin(), c_o_p.end(), is_row))
+      mount.fail(mount.at("C_o_p"), "must be a 3x3 array of numbers");
+    for (Eigen::Index row = 0; row < 3; ++row)
+      for (Eigen::Index col = 0; col < 3; ++col)
+        meta.mount.C_o_p(row, col) = c_o_p[static_cast<std::size_t>(row)][static_cast<std::size_t>(col)].get<double>();
+    const Eigen::Vector3d r0_p_mm = read_vector3(mount, "r0_p_mm");
+    meta.mount.r0_p_m = r0_p_mm / 1000.0;
+    if (mount.has("r0_p_m")) {
+      // Exact metres written by our export; used only while they still agree with the millimetres
+      // (someone may have edited r0_p_mm by hand).
+      const Eigen::Vector3d r0_p_m = read_vector3(mount, "r0_p_m");
+      if (((r0_p_m * 1000.0 - r0_p_mm).array().abs() <= 1e-9 * (1.0 + r0_p_mm.array().abs())).all()) {
+        meta.mount.r0_p_m = r0_p_m;
+      }
     }
-    return v;
+    mount.finish_extensible();
   }
-  [[noreturn]] void fail(const std::string& reason) const { fail_bundle(dir_, "meta.json: " + reason); }
 
- private:
-  std::string dir_;
-};
+  if (const json* segments = r.get("segments")) {
+    if (!segments->is_array()) r.fail("segments", "must be an array, not " + json_type_name(*segments));
+    static const std::array<std::string_view, 6> kKinds = {"static", "rate", "sine", "coning", "tilt", "move"};
+    for (std::size_t i = 0; i < segments->size(); ++i) {
+      ObjectReader sr((*segments)[i], "segments[" + std::to_string(i) + "]", mode);
+      SegmentInfo segment;
+      segment.name = *sr.string("name", true);
+      segment.kind = *sr.string("kind", true);
+      if (std::find(kKinds.begin(), kKinds.end(), segment.kind) == kKinds.end()) {
+        sr.fail(sr.at("kind"), "is '" + segment.kind + "', not one of static, rate, sine, coning, tilt, move");
+      }
+      segment.t0_s = *sr.number("t0_s", true);
+      segment.t1_s = *sr.number("t1_s", true);
+      sr.finish_extensible();
+      meta.segments.push_back(segment);
+    }
+  }
+  r.finish_extensible();
+  return meta;
+}
 
 RecordingMeta meta_from_bundle(const std::string& dir) {
   const std::string text = read_text_file(fs::path(dir) / "meta.json", dir);
@@ -285,61 +330,11 @@ RecordingMeta meta_from_bundle(const std::string& dir) {
   } catch (const json::parse_error& e) {
     fail_bundle(dir, std::string("meta.json: ") + e.what());
   }
-  const MetaReader r(dir);
-  const std::string format = r.string(root, "", "format");
-  if (format != kRecordingFormat) {
-    r.fail("unknown format '" + format + "' (this imucal reads " + kRecordingFormat + ")");
-  }
-
   RecordingMeta meta;
-  const json& site = r.at(root, "", "site");
-  meta.site.latitude_deg = r.number(site, "site", "latitude_deg");
-  meta.site.longitude_deg = r.number(site, "site", "longitude_deg");
-  meta.site.height_m = r.number(site, "site", "height_m");
-  meta.site.middle_axis_azimuth_deg = r.number(site, "site", "middle_axis_azimuth_deg");
-  if (site.contains("gravity_mps2")) meta.site.gravity_mps2 = r.number(site, "site", "gravity_mps2");
-
-  const json& imu = r.at(root, "", "imu");
-  meta.imu_serial = r.string(imu, "imu", "serial");
-  meta.rate_hz = r.number(imu, "imu", "rate_hz");
-  if (!(meta.rate_hz > 0.0)) r.fail("'imu.rate_hz' must be positive");
-  if (imu.contains("gyro_lsb_rad")) meta.gyro_lsb_rad = r.number(imu, "imu", "gyro_lsb_rad");
-  if (imu.contains("accel_lsb_mps")) meta.accel_lsb_mps = r.number(imu, "imu", "accel_lsb_mps");
-
-  const json& mount = r.at(root, "", "mount");
-  const json& c_o_p = r.at(mount, "mount", "C_o_p");
-  if (!c_o_p.is_array() || c_o_p.size() != 3) r.fail("'mount.C_o_p' must be a 3x3 array");
-  for (std::size_t row = 0; row < 3; ++row) {
-    meta.mount.C_o_p.row(static_cast<Eigen::Index>(row)) = r.vector3(c_o_p[row], "mount.C_o_p").transpose();
-  }
-  const Eigen::Vector3d r0_p_mm = r.vector3(r.at(mount, "mount", "r0_p_mm"), "mount.r0_p_mm");
-  meta.mount.r0_p_m = r0_p_mm / 1000.0;
-  if (mount.contains("r0_p_m")) {
-    // Exact metres written by our export; used only while they still agree with the millimetres
-    // (someone may have edited r0_p_mm by hand).
-    const Eigen::Vector3d r0_p_m = r.vector3(mount["r0_p_m"], "mount.r0_p_m");
-    if (((r0_p_m * 1000.0 - r0_p_mm).array().abs() <= 1e-9 * (1.0 + r0_p_mm.array().abs())).all()) {
-      meta.mount.r0_p_m = r0_p_m;
-    }
-  }
-
-  if (root.contains("segments")) {
-    const json& segments = root["segments"];
-    if (!segments.is_array()) r.fail("'segments' must be an array");
-    static const std::array<std::string_view, 6> kKinds = {"static", "rate", "sine", "coning", "tilt", "move"};
-    for (std::size_t i = 0; i < segments.size(); ++i) {
-      const std::string name = "segments[" + std::to_string(i) + "]";
-      SegmentInfo segment;
-      segment.name = r.string(segments[i], name, "name");
-      segment.kind = r.string(segments[i], name, "kind");
-      if (std::find(kKinds.begin(), kKinds.end(), segment.kind) == kKinds.end()) {
-        r.fail("'" + name + ".kind' is '" + segment.kind +
-               "', not one of static, rate, sine, coning, tilt, move");
-      }
-      segment.t0_s = r.number(segments[i], name, "t0_s");
-      segment.t1_s = r.number(segments[i], name, "t1_s");
-      meta.segments.push_back(segment);
-    }
+  try {
+    meta = read_meta(root);
+  } catch (const std::invalid_argument& e) {
+    fail_bundle(dir, std::string("meta.json: ") + e.what());
   }
 
   // Not part of the format: what a simulated run carries (see export_bundle).

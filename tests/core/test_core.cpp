@@ -437,3 +437,24 @@ TEST(ObjectReader, CollectsEveryProblemOrThrowsTheFirst) {
             }),
             "x: the document must be an object, not an array");
 }
+
+// An exchange format another writer may extend: foreign keys are read past, a near miss of a key
+// asked for is not (and says which key it resembles).
+TEST(ObjectReader, AnExtensibleObjectRefusesOnlyNearMisses) {
+  const auto finish = [](const char* text, std::vector<const char*> asked) {
+    const auto j = nlohmann::json::parse(text);
+    std::vector<std::string> problems;
+    ObjectReader r(j, "site", problems);
+    for (const char* key : asked) r.get(key);
+    r.finish_extensible();
+    return problems;
+  };
+  EXPECT_EQ(finish(R"({"height_m": 1, "vendor_tag": "x", "_c": 0})", {"height_m", "gravity_mps2"}),
+            std::vector<std::string>{});
+  EXPECT_EQ(finish(R"({"height_m": 1, "gravity_mps": 9.8})", {"height_m", "gravity_mps2"}),
+            std::vector<std::string>{"site: unknown key \"gravity_mps\" (is it \"gravity_mps2\"?)"});
+  EXPECT_EQ(finish(R"({"heigth_m": 1})", {"height_m"}),
+            std::vector<std::string>{"site: unknown key \"heigth_m\" (is it \"height_m\"?)"});
+  // Both present: the second is something else, not a typo of the first.
+  EXPECT_EQ(finish(R"({"t0_s": 0, "t1_s": 1, "t2_s": 2})", {"t0_s", "t1_s"}), std::vector<std::string>{});
+}

@@ -130,6 +130,23 @@ TEST(RegisterMap, RejectsBadConfigurationNamingTheKey) {
                    "alarms":[{"name":"a","address":3}]})")
                 .find("alarm 'a'"),
             std::string::npos);
+  // Path first, the rule broken, the map's name when it has one; a misspelt key is refused (it
+  // would otherwise leave the controller's ramping set point unread).
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"float32","word_order":"ABCD"},"process_value":70000,"setpoint":1})"),
+            "register map: process_value is 70000, must be between 0 and 65535");
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","name":"lab","value":{"type":"float32","word_order":"ABCD"},
+                   "process_value":1,"setpoint":3,"working_setpiont":5})"),
+            "register map 'lab': unknown key \"working_setpiont\"");
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"float32","word_order":"ABCD","scale":10},"process_value":1,"setpoint":3})"),
+            "register map: value: unknown key \"scale\"");
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"float32","word_order":"XY"},"process_value":1,"setpoint":3})"),
+            "register map: value.word_order: unknown word order 'XY' (expected ABCD, CDAB, BADC or DCBA)");
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"int16","scale":10},"process_value":1,"setpoint":2,
+                   "alarms":[{"name":"a","address":3,"normal":[1,-2]}]})"),
+            "register map: alarms[0].normal[1]: must be an integer between 0 and 65535");
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"int16","scale":10},"process_value":1,"setpoint":2,
+                   "control_mode":{"address":4,"auto":1}})"),
+            "register map: control_mode.off is required");
   EXPECT_THROW(load_register_map("no-such-map"), std::invalid_argument);
 }
 

@@ -738,7 +738,29 @@ TEST_F(BundleTest, RejectsMetaWithoutARequiredKey) {
   auto meta = nlohmann::json::parse(std::ifstream(dir + "/meta.json"));
   meta["site"].erase("middle_axis_azimuth_deg");
   std::ofstream(dir + "/meta.json") << meta.dump();
-  expect_rejected(dir, {"meta.json", "missing key 'site.middle_axis_azimuth_deg'"});
+  expect_rejected(dir, {"meta.json", "site.middle_axis_azimuth_deg is required"});
+}
+
+TEST_F(BundleTest, MetaKeysAnotherWriterAddedAreReadPastButANearMissIsRefused) {
+  const std::string dir = write_bundle("extended", kHeader + "\n" + csv_line("0.1") + csv_line("0.2"));
+  auto meta = nlohmann::json::parse(std::ifstream(dir + "/meta.json"));
+  // formats.md lets a writer add keys: another logger's own are read past.
+  meta["logger"] = "vendor-x 2.1";
+  meta["imu"]["model"] = "FOG-3";
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  const std::string db_path = temp_path("extended.db");
+  EXPECT_NO_THROW(import_bundle(dir, db_path));
+
+  // A misspelt gravity would silently become normal gravity (1e-4 m/s^2 off, twenty times the
+  // accelerometer bias aimed at): refused, naming the key it resembles.
+  meta["site"].erase("gravity_mps2");
+  meta["site"]["gravity_mps"] = 9.81925;
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: site: unknown key \"gravity_mps\" (is it \"gravity_mps2\"?)"});
+  meta["site"].erase("gravity_mps");
+  meta["site"]["height_m"] = "10 m";
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: site.height_m must be a number, not a string"});
 }
 
 TEST_F(BundleTest, UnwrapsTableAngles) {
