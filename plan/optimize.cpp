@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <set>
 #include <stdexcept>
 
 #include "pipeline/pipeline.hpp"
@@ -18,12 +19,43 @@ Targets seed_targets() {
           {"accel.scale_ppm", 0.3},          {"accel.misalignment_arcsec", 0.3}};
 }
 
+namespace {
+
+// "gyro.bias_dph" of "gyro.bias_dph.x": what a target names.
+std::string group_of(const std::string& name) { return name.substr(0, name.rfind('.')); }
+
+// The groups a target may name: those of the keys a model's estimates carry
+// (pipeline::estimates_json), every optional one included.
+std::set<std::string> target_groups() {
+  ImuErrorSet every;
+  const Eigen::Vector3d one = Eigen::Vector3d::Ones();
+  every.gyro.delay_s = every.accel.delay_s = every.accel.lever_arm_y_m = every.accel.lever_arm_z_m = one;
+  every.accel.k2_per_g = every.accel.k3_per_g2 = one;
+  every.gyro.scale_nonlinear.setOnes();
+  every.gyro.g_sensitivity_radps_per_g.setOnes();
+  ImuModel model;
+  model.sigma = every;
+  std::set<std::string> groups;
+  const json estimates = pipeline::estimates_json(model);  // named: items() of a temporary dangles
+  for (const auto& [name, value] : estimates.items()) groups.insert(group_of(name));
+  return groups;
+}
+
+}  // namespace
+
 Targets targets_from_json(const json& j) {
   if (!j.is_object() || j.empty())
     throw std::invalid_argument("targets must be an object of coefficient groups and 1-sigma values, e.g. "
                                 "{\"gyro.bias_dph\": 0.001}");
+  // A misspelt group would match no coefficient and read as "no program meets it".
+  static const std::set<std::string> groups = target_groups();
   Targets t;
   for (const auto& [group, v] : j.items()) {
+    if (groups.count(group) == 0) {
+      std::string known;
+      for (const std::string& g : groups) known += (known.empty() ? "" : ", ") + g;
+      throw std::invalid_argument("target '" + group + "' is not a coefficient group (the groups: " + known + ")");
+    }
     if (!v.is_number() || !(v.get<double>() > 0))
       throw std::invalid_argument("target '" + group + "' must be a positive number (a 1-sigma in the key's unit)");
     t[group] = v.get<double>();
@@ -69,8 +101,6 @@ std::map<std::string, double> final_sigmas(const Prediction& p) {
     }
   return out;
 }
-
-std::string group_of(const std::string& name) { return name.substr(0, name.rfind('.')); }
 
 // Fills the candidate's duration and ratios; false when the table's limits refuse the program.
 bool judge(Candidate& c, const ImuModel& imu, const Targets& targets, const motion::TableLimits& limits,

@@ -76,7 +76,16 @@ TEST(Plan, TheOptimizerScalesSwingsAndOscillationsAndKeepsTheRest) {
 TEST(Plan, TargetsMustBePositiveNumbersByGroup) {
   EXPECT_EQ(plan::targets_from_json(json{{"gyro.bias_dph", 0.002}}).at("gyro.bias_dph"), 0.002);
   EXPECT_EQ(plan::seed_targets().at("gyro.misalignment_arcsec"), 0.1);
-  for (const json& bad : {json::array(), json::object(), json{{"gyro.bias_dph", -1}}, json{{"gyro.bias_dph", "x"}}}) {
+  for (const auto& [group, target] : plan::seed_targets()) EXPECT_NO_THROW(plan::targets_from_json(json{{group, target}})) << group;
+  EXPECT_NO_THROW(plan::targets_from_json(json{{"accel.lever_arm_mm.y", 0.1}, {"gyro.scale_nonlinear_ppm.x", 1.0}}));
+  try {
+    plan::targets_from_json(json{{"gyro.bias_dh", 0.001}});
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("target 'gyro.bias_dh' is not a coefficient group (the groups: accel.bias_mps2, "),
+              std::string::npos) << e.what();
+  }
+  for (const json& bad : {json::array(), json::object(), json{{"gyro.bias_dph", -1}}, json{{"gyro.bias_dph", "x"}},
+                         json{{"gyro.bias_dh", 0.001}}}) {
     try {
       plan::targets_from_json(bad);
       ADD_FAILURE() << "accepted " << bad.dump();
