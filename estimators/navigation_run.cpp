@@ -49,10 +49,10 @@ Compensator::Compensator(const ImuModel& model, double dt_nominal_s, double max_
 // L(-1) u[k+n-1] + L(0) u[k+n] + L(1) u[k+n+1] + L(2) u[k+n+2].
 // Linear interpolation (two increments, weights 1-f and f) is off by f(1-f) dt^2 / 2 times the
 // output's rate of change in the cumulative output: at 100 Hz with 2 ms of accelerometer delay
-// (f = 0.2) that is up to 8e-5 m/s of velocity on a 180 deg, 20 s oscillation, a systematic error the
-// filter's delay model does not have (it moved the y and z accelerometer delays by 2.4 and the
-// proof-mass offsets y.z, z.y by 2 and 4 sigma on noise-free data, issue 16); the cubic's error is
-// f(1-f)(1+f)(2-f) dt^4 / 24 times the third derivative, below 1e-8 m/s there.
+// (f = 0.2) up to 8e-5 m/s of velocity on a 180 deg, 20 s oscillation, a systematic error the
+// filter's delay model does not have (on noise-free data it left the y accelerometer's delay and
+// the proof-mass offsets y.z, z.y 2.4, 1.9 and 4.4 sigma from the truth, issue 16); the cubic's
+// error is f(1-f)(1+f)(2-f) dt^4 / 24 times the third derivative, below 1e-8 m/s there.
 Vector3d Compensator::shifted(const std::deque<ImuFrame>& window, bool gyro, int offset) const {
   const Vector3d& delay = gyro ? model_.gyro.delay_s : model_.accel.delay_s;
   Vector3d out;
