@@ -320,6 +320,24 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     throw UndeterminedError(msg);
   }
 
+  // ---------------- white noise from the statics: per-sample variance about each static's mean.
+  // It gives the ARW and VRW, and the variance per unit weight the fits' sigmas are scaled with
+  // while their residuals agree with it (least_squares::variance_factor): a static's mean specific
+  // force has variance VRW^2 / T (weight T), an interval's summed angle ARW^2 T (weight 1/T).
+  Vector3d var_g = Vector3d::Zero(), var_a = Vector3d::Zero();
+  double n_used = 0, T_used = 0;
+  for (const Interval* s : statics) {
+    const auto n = static_cast<double>(s->frames);
+    const Vector3d mg = s->sum_dtheta / n, ma = s->sum_dv / n;
+    var_g += (s->sumsq_dtheta / n - mg.cwiseAbs2()) * n;
+    var_a += (s->sumsq_dv / n - ma.cwiseAbs2()) * n;
+    n_used += n;
+    T_used += s->T_s;
+  }
+  const double dt = n_used > 0 ? T_used / n_used : 0.0;
+  const Vector3d arw_sq = dt > 0 ? Vector3d((var_g / n_used / dt).cwiseMax(0)) : Vector3d::Zero();
+  const Vector3d vrw_sq = dt > 0 ? Vector3d((var_a / n_used / dt).cwiseMax(0)) : Vector3d::Zero();
+
   AccelErrors& acc = res.model.accel;
   acc.bias_mps2.setZero();
   acc.scale.setZero();
@@ -335,10 +353,11 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                                 ": bias, scale and angles are not separable with these positions (add positions with "
                                 "each of the other axes vertical)");
       const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
+      const double s0sq = least_squares::variance_factor(fit, vrw_sq[j]);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.accel, d.columns[c], j) = std::sqrt(fit.covariance(i, i));
+        coefficient(sigma.accel, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
       }
       acc_rms_sq += fit.s0sq / 3.0;
     }
@@ -366,10 +385,11 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                                 ": bias, scale factors and angles are not separable (add statics and single-axis "
                                 "rotations of both signs about every axis)");
       const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
+      const double s0sq = least_squares::variance_factor(fit, arw_sq[j]);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.gyro, d.columns[c], j) = std::sqrt(fit.covariance(i, i));
+        coefficient(sigma.gyro, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
       }
       gyro_rms_sq += fit.s0sq / 3.0;
     }
@@ -380,21 +400,8 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   }
   res.gyro_residual_rms_rad = std::sqrt(gyro_rms_sq);
 
-  // ---------------- white noise from the statics: per-sample variance about each static's mean
-  Vector3d var_g = Vector3d::Zero(), var_a = Vector3d::Zero();
-  double n_used = 0, T_used = 0;
-  for (const Interval* s : statics) {
-    const auto n = static_cast<double>(s->frames);
-    const Vector3d mg = s->sum_dtheta / n, ma = s->sum_dv / n;
-    var_g += (s->sumsq_dtheta / n - mg.cwiseAbs2()) * n;
-    var_a += (s->sumsq_dv / n - ma.cwiseAbs2()) * n;
-    n_used += n;
-    T_used += s->T_s;
-  }
-  const double dt = T_used / n_used;
-  const Vector3d arw = (var_g / n_used / dt).cwiseMax(0).cwiseSqrt(), vrw = (var_a / n_used / dt).cwiseMax(0).cwiseSqrt();
-  gy.noise.arw_rad_rts = arw.mean();
-  acc.noise.vrw_mps_rts = vrw.mean();
+  gy.noise.arw_rad_rts = arw_sq.cwiseSqrt().mean();
+  acc.noise.vrw_mps_rts = vrw_sq.cwiseSqrt().mean();
 
   res.model.sigma = sigma;
   res.model.frame = "instrument";

@@ -1,5 +1,7 @@
 #include "estimators/least_squares.hpp"
 
+#include <cmath>
+
 #include <Eigen/Dense>
 
 namespace imucal::least_squares {
@@ -15,13 +17,30 @@ Fit solve(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::Vecto
   Fit f;
   f.x = scale.cwiseInverse().asDiagonal() * ldlt.solve(scale.cwiseInverse().asDiagonal() * rhs);
   const Eigen::VectorXd r = b - A * f.x;
-  const auto dof = static_cast<double>(A.rows() - A.cols());
-  f.s0sq = dof > 0 ? r.dot(w.asDiagonal() * r) / dof : 0.0;
-  const Eigen::MatrixXd Ninv = scale.cwiseInverse().asDiagonal() *
-                               ldlt.solve(Eigen::MatrixXd::Identity(N.rows(), N.cols())) *
-                               scale.cwiseInverse().asDiagonal();
-  f.covariance = Ninv * f.s0sq;
+  f.dof = static_cast<double>(A.rows() - A.cols());
+  f.s0sq = f.dof > 0 ? r.dot(w.asDiagonal() * r) / f.dof : 0.0;
+  f.normal_inverse = scale.cwiseInverse().asDiagonal() * ldlt.solve(Eigen::MatrixXd::Identity(N.rows(), N.cols())) *
+                     scale.cwiseInverse().asDiagonal();
+  f.covariance = f.normal_inverse * f.s0sq;
   return f;
+}
+
+double chi_square_quantile(double q, double k) {
+  // The normal quantile by bisection on erfc (q within (0, 1)); then Wilson-Hilferty's cube.
+  double lo = -10, hi = 10;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(-mid / std::sqrt(2.0)) < q ? lo : hi) = mid;
+  }
+  const double z = 0.5 * (lo + hi), c = 2.0 / (9.0 * k);
+  return k * std::pow(1.0 - c + z * std::sqrt(c), 3);
+}
+
+double variance_factor(const Fit& fit, double s0sq_noise) {
+  if (!(s0sq_noise > 0)) return fit.s0sq;
+  if (fit.dof < 1) return s0sq_noise;  // no redundancy to test: the noise is all there is
+  const double limit = chi_square_quantile(0.99, fit.dof) / fit.dof;
+  return fit.s0sq / s0sq_noise > limit ? fit.s0sq : s0sq_noise;
 }
 
 double min_scaled_eigenvalue(const Eigen::MatrixXd& A, const Eigen::VectorXd& w) {

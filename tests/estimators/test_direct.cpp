@@ -4,6 +4,7 @@
 #include "calib_fixture.hpp"
 #include "sim/simulator.hpp"
 #include "estimators/direct_calibration.hpp"
+#include "estimators/least_squares.hpp"
 #include "core/table.hpp"
 #include "storage/bundle.hpp"
 
@@ -177,4 +178,24 @@ TEST(Direct, AnErrorFreeImuLeavesOnlyADiscretisationFloor) {
     EXPECT_LT(std::abs(r.model.gyro.scale_pos[j]) * 1e6, 1e-3) << "scale_pos " << j;
     EXPECT_LT(std::abs(r.model.gyro.scale_neg[j]) * 1e6, 1e-3) << "scale_neg " << j;
   }
+}
+
+// The variance per unit weight stage 1's sigmas are scaled with (estimators/least_squares.hpp).
+TEST(LeastSquares, TheWhiteNoisesVarianceUnlessTheResidualsAreSignificantlyLarger) {
+  // Tabulated chi-square points: 99 % at 30 and 54 degrees of freedom, 95 % at 10.
+  EXPECT_NEAR(least_squares::chi_square_quantile(0.99, 30), 50.892, 0.15);
+  EXPECT_NEAR(least_squares::chi_square_quantile(0.99, 54), 81.069, 0.2);
+  EXPECT_NEAR(least_squares::chi_square_quantile(0.95, 10), 18.307, 0.1);
+  least_squares::Fit fit;
+  fit.dof = 30;
+  fit.s0sq = 1.2;  // residuals 20 % above the noise's variance: chance at 30 dof
+  EXPECT_EQ(least_squares::variance_factor(fit, 1.0), 1.0);
+  fit.s0sq = 1.8;  // above the 99 % point (1.70): something beyond white noise
+  EXPECT_EQ(least_squares::variance_factor(fit, 1.0), 1.8);
+  fit.s0sq = 0.5;  // below: the noise's, never the smaller residuals'
+  EXPECT_EQ(least_squares::variance_factor(fit, 1.0), 1.0);
+  EXPECT_EQ(least_squares::variance_factor(fit, 0.0), 0.5);  // no noise figure (noise-free data)
+  fit.dof = 0;  // no redundancy: nothing to test the noise against
+  fit.s0sq = 0.0;
+  EXPECT_EQ(least_squares::variance_factor(fit, 1.0), 1.0);
 }
