@@ -1,9 +1,10 @@
 #include "core/json_reader.hpp"
 
-#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+
+#include "core/nearest_word.hpp"
 
 namespace imucal {
 
@@ -145,37 +146,17 @@ void ObjectReader::finish() {
   }
 }
 
-namespace {
-
-// Levenshtein distance, capped: only "is it within 2 edits" matters here.
-std::size_t edit_distance(const std::string& a, const std::string& b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t above = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diagonal = above;
-    }
-  }
-  return row[b.size()];
-}
-
-}  // namespace
-
 void ObjectReader::finish_extensible() {
   if (finished_ || object_ == nullptr) return;
   finished_ = true;
   for (const auto& [key, value] : object_->items()) {
     if (known_.count(key) != 0 || key.empty() || key.front() == '_') continue;
-    for (const std::string& near : known_) {
-      if (edit_distance(key, near) <= 2 && !object_->contains(near)) {
-        problem((where_.empty() ? "" : where_ + ": ") + "unknown key \"" + key + "\" (is it \"" + near + "\"?)");
-        break;
-      }
-    }
+    // Only a key asked for and absent can be what a foreign key misspells.
+    std::vector<std::string> absent;
+    for (const std::string& k : known_)
+      if (!object_->contains(k)) absent.push_back(k);
+    if (const auto near = nearest_word(key, absent))
+      problem((where_.empty() ? "" : where_ + ": ") + "unknown key \"" + key + "\" (is it \"" + *near + "\"?)");
   }
 }
 

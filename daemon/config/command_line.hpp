@@ -4,7 +4,6 @@
 // error exits with status 2, as the docs say.
 #pragma once
 
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,10 +15,6 @@ namespace imucal::daemon {
 
 // The exit status of a command line imucal or imucald cannot run.
 inline constexpr int kCommandLineError = 2;
-
-// The known word nearest to `word` (edit distance at most a third of its length, at least 2), or
-// nothing: "calibrat" -> "calibrate", "--dbb" -> "--db".
-std::optional<std::string> nearest_word(const std::string& word, const std::vector<std::string>& known);
 
 // The first word of `args` (argv without the program name) that `app` does not know: a
 // subcommand where one is expected, or a flag of the subcommand it is given to. Empty when every

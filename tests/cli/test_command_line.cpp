@@ -6,9 +6,10 @@
 #include <CLI/CLI.hpp>
 #include <gtest/gtest.h>
 
+#include "core/nearest_word.hpp"
 #include "daemon/config/command_line.hpp"
 
-using imucal::daemon::nearest_word;
+using imucal::nearest_word;
 using imucal::daemon::unknown_word;
 
 namespace {
