@@ -149,12 +149,12 @@ void ObjectReader::finish() {
 void ObjectReader::finish_extensible() {
   if (finished_ || object_ == nullptr) return;
   finished_ = true;
+  // Only a key asked for and absent can be what a foreign key misspells.
+  std::vector<std::string> absent;
+  for (const std::string& k : known_)
+    if (!object_->contains(k)) absent.push_back(k);
   for (const auto& [key, value] : object_->items()) {
     if (known_.count(key) != 0 || key.empty() || key.front() == '_') continue;
-    // Only a key asked for and absent can be what a foreign key misspells.
-    std::vector<std::string> absent;
-    for (const std::string& k : known_)
-      if (!object_->contains(k)) absent.push_back(k);
     if (const auto near = nearest_word(key, absent))
       problem((where_.empty() ? "" : where_ + ": ") + "unknown key \"" + key + "\" (is it \"" + *near + "\"?)");
   }

@@ -25,21 +25,17 @@ Fit solve(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::Vecto
   return f;
 }
 
-double chi_square_quantile(double q, double k) {
-  // The normal quantile by bisection on erfc (q within (0, 1)); then Wilson-Hilferty's cube.
-  double lo = -10, hi = 10;
-  for (int i = 0; i < 100; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (0.5 * std::erfc(-mid / std::sqrt(2.0)) < q ? lo : hi) = mid;
-  }
-  const double z = 0.5 * (lo + hi), c = 2.0 / (9.0 * k);
-  return k * std::pow(1.0 - c + z * std::sqrt(c), 3);
+double chi_square_quantile(double k, double z) {
+  const double a = 2.0 / (9.0 * k);
+  const double c = 1.0 - a + z * std::sqrt(a);
+  return k * c * c * c;
 }
 
 double variance_factor(const Fit& fit, double s0sq_noise) {
   if (!(s0sq_noise > 0)) return fit.s0sq;
   if (fit.dof < 1) return s0sq_noise;  // no redundancy to test: the noise is all there is
-  const double limit = chi_square_quantile(0.99, fit.dof) / fit.dof;
+  constexpr double kNormal99 = 2.3263;  // the normal distribution's 99 % point
+  const double limit = chi_square_quantile(fit.dof, kNormal99) / fit.dof;
   return fit.s0sq / s0sq_noise > limit ? fit.s0sq : s0sq_noise;
 }
 

@@ -31,8 +31,10 @@ Fit solve(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::Vecto
 // scatters by 15 % run to run, and the sigma reported with it by up to 30 %.
 double variance_factor(const Fit& fit, double s0sq_noise);
 
-// The q-quantile of chi-square with k degrees of freedom (Wilson-Hilferty: within 1 % for k >= 3).
-double chi_square_quantile(double q, double k);
+// The quantile of chi-square with k degrees of freedom at the normal distribution's quantile z
+// (Wilson and Hilferty's cube: within 1 % of the exact value from k = 3); for the test above and
+// the repeatability intervals.
+double chi_square_quantile(double k, double z);
 
 // The smallest eigenvalue of the normal matrix with unit diagonal: 0 when a combination of the
 // columns is not in the data, 1 when the columns are orthogonal.

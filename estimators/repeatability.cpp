@@ -7,6 +7,7 @@
 
 #include "core/turn_on.hpp"
 #include "core/units.hpp"
+#include "estimators/least_squares.hpp"
 #include "estimators/table_reference.hpp"
 
 namespace imucal::repeatability {
@@ -15,14 +16,6 @@ namespace {
 
 // The mean of a static's noise from the scatter of this many equal blocks of it.
 constexpr int kBlocks = 10;
-
-// The p-quantile of chi-square with k degrees of freedom for the normal quantile z (Wilson and
-// Hilferty's cube: within 1 % of the exact value from k = 3 for the quantiles used here).
-double chi2_quantile(double k, double z) {
-  const double a = 2.0 / (9.0 * k);
-  const double c = 1.0 - a + z * std::sqrt(a);
-  return k * c * c * c;
-}
 
 struct Static {
   std::string name;
@@ -162,7 +155,7 @@ Result RepeatabilityEstimator::finish(const ImuModel& prior) const {
     // (N - 1) s^2 / sigma^2 is chi-square with N - 1 degrees of freedom: the spread's intervals,
     // then the noise taken out of each end.
     const double dof = N - 1.0;
-    const auto spread_at = [&](double z) { return ch.spread * std::sqrt(dof / chi2_quantile(dof, -z)); };
+    const auto spread_at = [&](double z) { return ch.spread * std::sqrt(dof / least_squares::chi_square_quantile(dof, -z)); };
     const auto less_noise = [&](double s) { return std::sqrt(std::max(0.0, s * s - noise2)); };
     ch.repeatability = less_noise(ch.spread);
     ch.lo68 = less_noise(spread_at(-1.0));

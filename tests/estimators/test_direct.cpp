@@ -182,10 +182,11 @@ TEST(Direct, AnErrorFreeImuLeavesOnlyADiscretisationFloor) {
 
 // The variance per unit weight stage 1's sigmas are scaled with (estimators/least_squares.hpp).
 TEST(LeastSquares, TheWhiteNoisesVarianceUnlessTheResidualsAreSignificantlyLarger) {
-  // Tabulated chi-square points: 99 % at 30 and 54 degrees of freedom, 95 % at 10.
-  EXPECT_NEAR(least_squares::chi_square_quantile(0.99, 30), 50.892, 0.15);
-  EXPECT_NEAR(least_squares::chi_square_quantile(0.99, 54), 81.069, 0.2);
-  EXPECT_NEAR(least_squares::chi_square_quantile(0.95, 10), 18.307, 0.1);
+  // Tabulated chi-square points: 99 % (normal z 2.3263) at 30 and 54 degrees of freedom, 95 %
+  // (z 1.6449) at 10.
+  EXPECT_NEAR(least_squares::chi_square_quantile(30, 2.3263), 50.892, 0.15);
+  EXPECT_NEAR(least_squares::chi_square_quantile(54, 2.3263), 81.069, 0.2);
+  EXPECT_NEAR(least_squares::chi_square_quantile(10, 1.6449), 18.307, 0.1);
   least_squares::Fit fit;
   fit.dof = 30;
   fit.s0sq = 1.2;  // residuals 20 % above the noise's variance: chance at 30 dof
