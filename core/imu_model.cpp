@@ -176,8 +176,8 @@ double num(const ObjectReader& r, const json& v, const std::string& path) {
   return x;
 }
 
-Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale) {
-  const json* a = r.get(key);
+Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale, bool required) {
+  const json* a = r.get(key, required);
   if (a == nullptr) return Eigen::Vector3d::Zero();
   const std::string w = r.at(key);
   if (!a->is_array() || a->size() != 3) r.fail(w, "expected an array of 3 numbers");

@@ -17,8 +17,8 @@ namespace imucal::model_json {
 // which imu_model_from_json_text() passes on as the model's std::runtime_error.
 ObjectReader section(const nlohmann::json& j, const std::string& where);
 double num(const ObjectReader& r, const nlohmann::json& v, const std::string& path);  // a finite number
-// r[key] (three numbers) times scale; zero when absent.
-Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale);
+// r[key] (three numbers) times scale; zero when absent (a problem when `required`).
+Eigen::Vector3d vec3(ObjectReader& r, const char* key, double scale, bool required = false);
 // r[key] times scale; zero when absent.
 double scalar(ObjectReader& r, const char* key, double scale);
 nlohmann::json arr(const Eigen::Vector3d& v, double scale);

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/json_reader.hpp"
+#include "core/model_json.hpp"
 
 namespace imucal::storage {
 
@@ -245,13 +246,6 @@ nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
 // string"). Keys another writer added are ignored (formats.md lets the format be extended); a
 // near miss of a key of ours ("gravity_mps") is refused, or a typo would silently become normal
 // gravity.
-Eigen::Vector3d read_vector3(ObjectReader& r, const char* key) {
-  const json& value = *r.get(key, true);
-  if (!value.is_array() || value.size() != 3 || !std::all_of(value.begin(), value.end(), [](const json& x) { return x.is_number(); }))
-    r.fail(r.at(key), "must be an array of 3 numbers");
-  return {value[0].get<double>(), value[1].get<double>(), value[2].get<double>()};
-}
-
 RecordingMeta read_meta(const json& root) {
   const ObjectReader::ThrowAtFirst mode{};
   ObjectReader r(root, "", mode);
@@ -280,20 +274,19 @@ RecordingMeta read_meta(const json& root) {
   {
     ObjectReader mount(*r.get("mount", true), "mount", mode);
     const json& c_o_p = *mount.get("C_o_p", true);
-    const auto is_row = [](const json& row) {
-      return row.is_array() && row.size() == 3 && std::all_of(row.begin(), row.end(), [](const json& x) { return x.is_number(); });
-    };
+    const auto is_row = [](const json& row) { return row.is_array() && row.size() == 3; };
     if (!c_o_p.is_array() || c_o_p.size() != 3 || !std::all_of(c_o_p.begin(), c_o_p.end(), is_row))
       mount.fail(mount.at("C_o_p"), "must be a 3x3 array of numbers");
-    for (Eigen::Index row = 0; row < 3; ++row)
-      for (Eigen::Index col = 0; col < 3; ++col)
-        meta.mount.C_o_p(row, col) = c_o_p[static_cast<std::size_t>(row)][static_cast<std::size_t>(col)].get<double>();
-    const Eigen::Vector3d r0_p_mm = read_vector3(mount, "r0_p_mm");
+    for (std::size_t row = 0; row < 3; ++row)
+      for (std::size_t col = 0; col < 3; ++col)
+        meta.mount.C_o_p(static_cast<Eigen::Index>(row), static_cast<Eigen::Index>(col)) = model_json::num(
+            mount, c_o_p[row][col], mount.at("C_o_p") + "[" + std::to_string(row) + "][" + std::to_string(col) + "]");
+    const Eigen::Vector3d r0_p_mm = model_json::vec3(mount, "r0_p_mm", 1.0, true);
     meta.mount.r0_p_m = r0_p_mm / 1000.0;
     if (mount.has("r0_p_m")) {
       // Exact metres written by our export; used only while they still agree with the millimetres
       // (someone may have edited r0_p_mm by hand).
-      const Eigen::Vector3d r0_p_m = read_vector3(mount, "r0_p_m");
+      const Eigen::Vector3d r0_p_m = model_json::vec3(mount, "r0_p_m", 1.0);
       if (((r0_p_m * 1000.0 - r0_p_mm).array().abs() <= 1e-9 * (1.0 + r0_p_mm.array().abs())).all()) {
         meta.mount.r0_p_m = r0_p_m;
       }

@@ -761,6 +761,14 @@ TEST_F(BundleTest, MetaKeysAnotherWriterAddedAreReadPastButANearMissIsRefused) {
   meta["site"]["height_m"] = "10 m";
   std::ofstream(dir + "/meta.json") << meta.dump();
   expect_rejected(dir, {"meta.json: site.height_m must be a number, not a string"});
+  meta["site"]["height_m"] = 10.0;
+  meta["mount"]["r0_p_mm"] = {1.0, 2.0};
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: mount.r0_p_mm: expected an array of 3 numbers"});
+  meta["mount"]["r0_p_mm"] = {1.0, 2.0, 3.0};
+  meta["mount"]["C_o_p"][1][2] = "0";
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: mount.C_o_p[1][2]: expected a number"});
 }
 
 TEST_F(BundleTest, UnwrapsTableAngles) {
