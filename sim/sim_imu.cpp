@@ -28,7 +28,7 @@ using ::imucal::sim::Simulator;
 namespace {
 // Truth kept for this long (a benchmark looks samples up shortly after receiving them).
 constexpr double kTruthHistory_s = 60.0;
-constexpr double kFarFuture_s = 1e6;
+constexpr double kOpenEnded_s = 1e6;  // a restarted simulator runs until the next restart
 }  // namespace
 
 struct SimImu::Impl {
@@ -106,7 +106,7 @@ struct SimImu::Impl {
       sc.rate_hz = cfg.rate_hz;
       // One noise stream per restart, derived from the seed (restarts are rare: motion changes).
       sc.seed = cfg.seed ^ (0x9E3779B97F4A7C15ULL * (restarts.load() + 1));
-      sc.duration_s = kFarFuture_s;
+      sc.duration_s = kOpenEnded_s;
       sc.temperature_C = temperature_C.load();
       simulator.reset();
       program = std::move(fresh);

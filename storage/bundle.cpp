@@ -22,6 +22,7 @@
 
 #include "core/json_reader.hpp"
 #include "core/model_json.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::storage {
 
@@ -655,11 +656,6 @@ json gaps_to_json(const std::vector<Gap>& gaps) {
   return list;
 }
 
-void remove_db_files(const std::string& path) noexcept {
-  std::error_code ignored;
-  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path + suffix, ignored);
-}
-
 }  // namespace
 
 // -----------------------------------------------------------------------------------------------
@@ -779,7 +775,7 @@ ImportReport import_bundle(const std::string& dir, const std::string& db_path) {
   // Import under a temporary name and rename at the end: a reader never sees a half-imported run,
   // and a failed import leaves nothing behind.
   const std::string partial = db_path + ".importing";
-  remove_db_files(partial);  // left over from a crashed import
+  sql::remove_database_files(partial);  // left over from a crashed import
   ImportReport report;
   try {
     {
@@ -794,10 +790,10 @@ ImportReport import_bundle(const std::string& dir, const std::string& db_path) {
     fs::rename(partial, db_path, ec);
     if (ec) fail_bundle(dir, "cannot rename '" + partial + "' to '" + db_path + "': " + ec.message());
   } catch (...) {
-    remove_db_files(partial);
+    sql::remove_database_files(partial);
     throw;
   }
-  remove_db_files(partial);  // only -shm can remain
+  sql::remove_database_files(partial);  // only -shm can remain
   return report;
 }
 

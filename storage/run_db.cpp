@@ -426,18 +426,6 @@ void decode_chunk(std::int64_t chunk_id, std::int64_t n_frames, int codec,
   }
 }
 
-void remove_db_files(const std::string& path) noexcept {
-  std::error_code ignored;
-  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
-    std::filesystem::remove(path + suffix, ignored);
-  }
-}
-
-std::int64_t unix_ms_now() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 std::string host_name() {
   char name[256] = {};
   if (::gethostname(name, sizeof(name) - 1) != 0) return "?";
@@ -807,7 +795,7 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
   // leaves a file at `path` that is not a run.
   const std::string making = path + ".creating";
   try {
-    remove_db_files(making);
+    sql::remove_database_files(making);
     {
       Connection db(making, Connection::Open::create, "run database");
       db.exec(("PRAGMA page_size = " + std::to_string(kPageSizeBytes)).c_str());
@@ -827,11 +815,11 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
     }  // closing the only connection checkpoints the WAL into the file and removes it
     std::filesystem::rename(making, path);
   } catch (const std::filesystem::filesystem_error& e) {
-    remove_db_files(making);
+    sql::remove_database_files(making);
     lease->release(true);
     fail(path, std::string("cannot create: ") + e.what());
   } catch (...) {
-    remove_db_files(making);
+    sql::remove_database_files(making);
     lease->release(true);
     throw;
   }
@@ -845,7 +833,7 @@ RunDb RunDb::create(const std::string& path, const RecordingMeta& meta) {
     run.set_segments(meta.segments);
     return run;
   } catch (...) {
-    remove_db_files(path);  // a half-made run file would block the next attempt
+    sql::remove_database_files(path);  // a half-made run file would block the next attempt
     if (lease) lease->release(true);
     throw;
   }

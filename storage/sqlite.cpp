@@ -2,6 +2,9 @@
 
 #include <sqlite3.h>
 
+#include <chrono>
+#include <filesystem>
+
 namespace imucal::storage::sql {
 
 namespace {
@@ -225,4 +228,18 @@ void rollback_quietly(Connection& connection) noexcept {
   sqlite3_exec(connection.db_, "ROLLBACK", nullptr, nullptr, nullptr);
 }
 
+void remove_database_files(const std::string& path) noexcept {
+  std::error_code ignored;
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::filesystem::remove(path + suffix, ignored);
+}
+
 }  // namespace imucal::storage::sql
+
+namespace imucal::storage {
+
+std::int64_t unix_ms_now() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace imucal::storage

@@ -144,5 +144,12 @@ class Transaction {
 // ROLLBACK, never throwing: for a transaction begun by hand whose failure is being reported.
 void rollback_quietly(Connection& connection) noexcept;
 
+// Deletes a database file and the -wal, -shm and -journal files SQLite keeps beside it; files
+// already absent are fine.
+void remove_database_files(const std::string& path) noexcept;
+
 }  // namespace sql
+
+// The wall-clock stamps the storage writes (sessions, writer leases): Unix time in ms.
+std::int64_t unix_ms_now();
 }  // namespace imucal::storage

@@ -12,6 +12,7 @@
 #include <ctime>
 
 #include "storage/run_db.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::storage {
 
@@ -79,11 +80,6 @@ std::string describe_holder(const std::optional<LeaseCounters>& counters) {
   std::tm tm{};
   if (::gmtime_r(&started, &tm) != nullptr) std::strftime(when, sizeof(when), "%Y-%m-%dT%H:%M:%SZ", &tm);
   return "process " + std::to_string(counters->pid) + " (recording since " + when + ")";
-}
-
-std::int64_t unix_ms_now() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
 }
 
 }  // namespace

@@ -63,7 +63,7 @@ Recording record(const std::string& name, const std::string& program_name, doubl
   return r;
 }
 
-ImuModel noisy_truth() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
+ImuModel nav_grade_truth() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
 
 // The worker's model: the file committed in uneven steps, then finished.
 ImuModel worker_model(const Recording& rec, const std::string& estimator, const ImuModel& start) {
@@ -106,12 +106,12 @@ void expect_same_model(const Recording& rec, const std::string& stage, const std
 }  // namespace
 
 TEST(PipelinePaths, DirectGivesTheSameModelOnlineAndOffline) {
-  const Recording rec = record("direct", "direct-short", 50, 0, noisy_truth());
+  const Recording rec = record("direct", "direct-short", 50, 0, nav_grade_truth());
   expect_same_model(rec, "direct", "direct");
 }
 
 TEST(PipelinePaths, RateStepsGivesTheSameModelOnlineAndOffline) {
-  ImuModel truth = noisy_truth();
+  ImuModel truth = nav_grade_truth();
   truth.gyro.scale_nonlinear.row(0) = Eigen::RowVector3d(2.0, 1.0, 0.0) * 1e-6;  // 15 ppm at 300 deg/s
   const Recording rec = record("rate-steps", "rate-steps-short", 50, 0, truth);
   ImuModel stage1 = truth;  // the misalignments a stage-1 model gives; nothing of the scales
@@ -130,7 +130,7 @@ TEST(PipelinePaths, RateStepsGivesTheSameModelOnlineAndOffline) {
 }
 
 TEST(PipelinePaths, TumbleGivesTheSameModelOnlineAndOffline) {
-  ImuModel truth = noisy_truth();
+  ImuModel truth = nav_grade_truth();
   truth.accel.k2_per_g = Eigen::Vector3d(30, -45, 22) * 1e-6;
   const Recording rec = record("tumble", "tumble-short", 50, 0, truth);
   ImuModel stage1 = truth;  // the gyro scale factors and angles a stage-1 model gives; no K2
@@ -143,14 +143,14 @@ TEST(PipelinePaths, TumbleGivesTheSameModelOnlineAndOffline) {
 }
 
 TEST(PipelinePaths, WarmUpGivesTheSameModelOnlineAndOffline) {
-  ImuModel truth = noisy_truth();
+  ImuModel truth = nav_grade_truth();
   TurnOnSection s;
   s.value.gyro_warm_up_radps = Eigen::Vector3d(0.05, -0.03, 0.06) * units::kDphToRadps;
   s.value.gyro_time_constant_s = Eigen::Vector3d(300, 400, 480);
   set_turn_on(truth, s);
   const Recording rec = record("warm-up", "warm-up-short", 20, 0, truth);
-  expect_same_model(rec, "warm-up", "warm-up", noisy_truth());
-  const auto found = turn_on_of(worker_model(rec, "warm-up", noisy_truth()));
+  expect_same_model(rec, "warm-up", "warm-up", nav_grade_truth());
+  const auto found = turn_on_of(worker_model(rec, "warm-up", nav_grade_truth()));
   ASSERT_TRUE(found.has_value() && found->sigma.has_value());
   for (int j = 0; j < 3; ++j)
     EXPECT_NEAR(found->value.gyro_time_constant_s[j], s.value.gyro_time_constant_s[j], 3.0 * found->sigma->gyro_time_constant_s[j])
@@ -158,8 +158,8 @@ TEST(PipelinePaths, WarmUpGivesTheSameModelOnlineAndOffline) {
 }
 
 TEST(PipelinePaths, LeverArmGivesTheSameModelOnlineAndOffline) {
-  const Recording rec = record("lever-arm", "lever-arm", 200, 0, noisy_truth());
-  ImuModel stage1 = noisy_truth();  // lever arms from a known stage-1 model: the truth's constants
+  const Recording rec = record("lever-arm", "lever-arm", 200, 0, nav_grade_truth());
+  ImuModel stage1 = nav_grade_truth();  // lever arms from a known stage-1 model: the truth's constants
   stage1.accel.lever_arm_y_m.setZero();
   stage1.accel.lever_arm_z_m.setZero();
   expect_same_model(rec, "lever-arm", "lever-arm", stage1);
@@ -167,8 +167,8 @@ TEST(PipelinePaths, LeverArmGivesTheSameModelOnlineAndOffline) {
 
 TEST(PipelinePaths, NavigationGivesTheSameModelOnlineAndOffline) {
   // The first 25 minutes: the start, the first slow swing and part of the second.
-  const Recording rec = record("navigation", "navigation", 50, 1500, noisy_truth());
-  expect_same_model(rec, "navigation", "stage3", noisy_truth());
+  const Recording rec = record("navigation", "navigation", 50, 1500, nav_grade_truth());
+  expect_same_model(rec, "navigation", "stage3", nav_grade_truth());
 }
 
 TEST(PipelinePaths, ThermalGivesTheSameModelOnlineAndOffline) {
@@ -183,10 +183,10 @@ TEST(PipelinePaths, ThermalGivesTheSameModelOnlineAndOffline) {
 // parts, and the last update's innovations each with its gate.
 TEST(PipelinePaths, StageThreeShowsItsFilterWhileItRuns) {
   // 70 minutes at 20 Hz: the slow swings and the restart at the settle before the second set.
-  const Recording rec = record("navigation-progress", "navigation", 20, 4200, noisy_truth());
+  const Recording rec = record("navigation-progress", "navigation", 20, 4200, nav_grade_truth());
   const storage::RunDb db = storage::RunDb::open(rec.path, storage::OpenMode::Read);
   const pipeline::RunDbSource source(db);
-  pipeline::Pipeline p(db.meta(), {pipeline::Stage::Navigation}, true, noisy_truth());
+  pipeline::Pipeline p(db.meta(), {pipeline::Stage::Navigation}, true, nav_grade_truth());
   const std::int64_t half_ns = rec.last_t_ns / 2;
   ASSERT_FALSE(p.advance(source, half_ns, false));
   const json mid = p.progress(pipeline::Stage::Navigation);
