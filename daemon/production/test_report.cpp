@@ -145,7 +145,8 @@ json repeatability_test(const json& r) {
 // Any other stage: the coefficients its model estimated.
 json calibration_test(const std::string& stage, const json& r) {
   json figures = json::array();
-  for (const auto& [key, pair] : r.value("estimates", json::object()).items())
+  const json estimates = r.value("estimates", json::object());  // named: items() of a temporary dangles
+  for (const auto& [key, pair] : estimates.items())
     if (pair.is_array() && pair.size() == 2 && pair.at(1).is_number() && pair.at(1).get<double>() > 0)
       figures.push_back(pair_figure(key, key, pair, ""));
   return {{"test", stage}, {"title", "Calibration stage " + stage}, {"standard", "the method's stage (docs/calibration.md)"},

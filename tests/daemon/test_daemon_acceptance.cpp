@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "daemon/production/acceptance.hpp"
+#include "daemon/production/test_report.hpp"
 
 using namespace imucal::daemon;
 using nlohmann::json;
@@ -121,4 +122,23 @@ TEST(Acceptance, RepeatabilityIsTheSampleStandardDeviationOverRuns) {
   EXPECT_NEAR(x.at("std").get<double>(), std::sqrt((9e-6 + 1e-6 + 16e-6) / 2.0), 1e-15);
   EXPECT_FALSE(r.contains("gyro.delay_us.x"));
   EXPECT_TRUE(repeatability_json({result_model(0.01, 0.001)}).empty());  // one run: no spread
+}
+
+// The test report of a run whose stages are calibrations (lever-arm, direct): each estimate a
+// figure. Its loop once ran over items() of a temporary (a crash of imucald on any lever-arm run's
+// report, issue 33); under the sanitizers this reads freed memory if it comes back.
+TEST(TestReport, ACalibrationStageListsEachEstimate) {
+  const json detail = {{"id", 7},
+                       {"results",
+                        {{"lever-arm",
+                          {{"status", "done"},
+                           {"source", "parts 'lever-arm'"},
+                           {"estimates", {{"accel.lever_arm_mm.y", {1.25, 0.02}}, {"accel.lever_arm_mm.z", {-0.5, 0.03}}}}}}}}};
+  const json report = test_report_json(detail, json::object(), TemperatureSummary{});
+  ASSERT_EQ(report.at("tests").size(), 1u);
+  const json& figures = report.at("tests").at(0).at("figures");
+  ASSERT_EQ(figures.size(), 2u);
+  EXPECT_EQ(figures.at(0).at("key"), "accel.lever_arm_mm.y");
+  EXPECT_DOUBLE_EQ(figures.at(0).at("value").get<double>(), 1.25);
+  EXPECT_DOUBLE_EQ(figures.at(1).at("u").get<double>(), 0.03);
 }
