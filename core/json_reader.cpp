@@ -137,6 +137,31 @@ std::optional<bool> ObjectReader::boolean(const char* key, bool required) {
   return v->get<bool>();
 }
 
+const json& ObjectReader::required(const char* key) {
+  if (const json* v = get(key, true)) return *v;
+  fail(at(key) + " is required");
+}
+
+double ObjectReader::required_number(const char* key) {
+  if (const auto v = number(key, true)) return *v;
+  fail(at(key) + " is required: a finite number");
+}
+
+double ObjectReader::required_number_in(const char* key, double min, std::optional<double> max) {
+  if (const auto v = number_in(key, min, max, true)) return *v;
+  fail(at(key) + " is required: a number in range");
+}
+
+std::int64_t ObjectReader::required_integer(const char* key, std::int64_t min, std::int64_t max) {
+  if (const auto v = integer(key, min, max, true)) return *v;
+  fail(at(key) + " is required: an integer in range");
+}
+
+std::string ObjectReader::required_string(const char* key) {
+  if (auto v = string(key, true)) return std::move(*v);
+  fail(at(key) + " is required: a string");
+}
+
 void ObjectReader::finish() {
   if (finished_ || object_ == nullptr) return;
   finished_ = true;

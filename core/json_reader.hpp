@@ -47,6 +47,15 @@ class ObjectReader {
   std::optional<std::string> string(const char* key, bool required = false);
   std::optional<bool> boolean(const char* key, bool required = false);
 
+  // Throwing readers: the value of a required key, never nothing (absent, of the wrong type or
+  // out of range: the problem is thrown). On a collecting reader a missing value is a logic_error,
+  // so that `*reader.number(key, true)`, which would read an empty optional there, is never needed.
+  const nlohmann::json& required(const char* key);
+  double required_number(const char* key);
+  double required_number_in(const char* key, double min, std::optional<double> max = std::nullopt);
+  std::int64_t required_integer(const char* key, std::int64_t min, std::int64_t max);
+  std::string required_string(const char* key);
+
   // Reports keys that no getter asked for (besides '_' comments). Called by the destructor too.
   void finish();
   // For an exchange format other writers may extend (formats.md: a recording's meta.json): an

@@ -316,7 +316,7 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
 Command read_command(const json& j, const std::string& where, const std::string& who, Transport t) {
   ObjectReader r = reader(j, where, who);
   Command c;
-  c.bytes = parse_hex_bytes(*r.string("bytes", true), r, r.at("bytes"));
+  c.bytes = parse_hex_bytes(r.required_string("bytes"), r, r.at("bytes"));
   if (const auto id = unsigned_int(r, "can_id", 0x7FF)) c.can_id = static_cast<std::uint32_t>(*id);
   if (t == Transport::socketcan) {
     if (!c.can_id) r.fail(r.at("can_id"), "is required on CAN");
@@ -332,7 +332,7 @@ Message read_message(const json& j, const std::string& where, const std::string&
                      ByteOrder default_order) {
   ObjectReader r = reader(j, where, who);
   Message m;
-  m.name = *r.string("name", true);
+  m.name = r.required_string("name");
   const auto kind = r.string("kind", true);
   if (*kind == "sample") {
     m.kind = MessageKind::sample;
@@ -508,12 +508,12 @@ ImuLink imu_link_from_json(const std::string& json_text) {
   ObjectReader r = reader(j, "", who);
   if (r.string("format", true) != std::string(kFormat)) r.fail("format", std::string("must be \"") + kFormat + "\"");
   ImuLink link;
-  link.name = *r.string("name", true);
+  link.name = r.required_string("name");
   if (link.name.empty()) r.fail("name", "must not be empty");
-  link.source = *r.string("source", true);
+  link.source = r.required_string("source");
   const ByteOrder order = read_byte_order(r, "byte_order", std::nullopt);
   {
-    ObjectReader t = reader(*r.get("transport", true), "transport", who);
+    ObjectReader t = reader(r.required("transport"), "transport", who);
     const auto type = t.string("type", true);
     if (*type == "socketcan") {
       link.transport = Transport::socketcan;

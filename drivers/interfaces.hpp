@@ -22,6 +22,7 @@
 #include <chrono>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <variant>
@@ -96,8 +97,12 @@ class [[nodiscard]] Result<void> {
 
   bool ok() const noexcept { return !e_.has_value(); }
   explicit operator bool() const noexcept { return ok(); }
-  const DriverError& error() const { return *e_; }
-  DriverErrc code() const { return ok() ? DriverErrc{} : e_->code; }
+  // Precondition !ok(), checked as Result<T>'s: std::logic_error otherwise (a programming error).
+  const DriverError& error() const {
+    if (!e_) throw std::logic_error("Result<void>::error() on a success");
+    return *e_;
+  }
+  DriverErrc code() const { return e_ ? e_->code : DriverErrc{}; }
 
  private:
   std::optional<DriverError> e_;

@@ -28,7 +28,7 @@ ModbusChamberConfig modbus_chamber_config_from_json(const std::string& json_text
   ObjectReader r(j, "", ObjectReader::ThrowAtFirst{"chamber config: "});
   if (const auto f = r.string("format"); f && *f != "imucal-chamber/1") r.fail(r.at("format") + " must be \"imucal-chamber/1\"");
   read_modbus_link(r, c);
-  const json& map = *r.get("map", true);
+  const json& map = r.required("map");
   if (map.is_string()) c.map = load_register_map(map.get<std::string>());
   else if (map.is_object()) c.map = register_map_from_json(map.dump());
   else r.fail(r.at("map") + " must be a built-in map's name, a file or an imucal-chamber-map/1 object");

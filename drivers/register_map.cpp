@@ -36,10 +36,16 @@ namespace {
 std::optional<int> address(ObjectReader& r, const char* key, bool required = false) {
   const json* v = r.get(key, required);
   if (v == nullptr || v->is_null()) return std::nullopt;
-  return static_cast<int>(*r.integer(key, 0, 65535));
+  return static_cast<int>(r.required_integer(key, 0, 65535));
 }
 
-std::uint16_t word(ObjectReader& r, const char* key) { return static_cast<std::uint16_t>(*r.integer(key, 0, 65535, true)); }
+// A register address the map must have: absent or null is refused.
+int required_address(ObjectReader& r, const char* key) {
+  if (const auto a = address(r, key, true)) return *a;
+  r.fail(r.at(key), "is required: a register address (0-65535), not null");
+}
+
+std::uint16_t word(ObjectReader& r, const char* key) { return static_cast<std::uint16_t>(r.required_integer(key, 0, 65535)); }
 
 // The object under `key` (absent or null: nullptr); anything else than an object is refused.
 const json* object_or_null(ObjectReader& r, const char* key) {
@@ -65,10 +71,10 @@ std::vector<std::string> used_keys(const json& j) {
 }
 
 void read_value(ObjectReader& r, RegisterMap& m) {
-  const std::string type = *r.string("type", true);
+  const std::string type = r.required_string("type");
   if (type == "float32") {
     m.encoding = ValueEncoding::float32;
-    const std::string order = *r.string("word_order", true);
+    const std::string order = r.required_string("word_order");
     try {
       m.word_order = words::word_order_from_string(order);
     } catch (const std::invalid_argument& e) {
@@ -76,7 +82,7 @@ void read_value(ObjectReader& r, RegisterMap& m) {
     }
   } else if (type == "int16") {
     m.encoding = ValueEncoding::scaled_i16;
-    m.scale = *r.number("scale", true);
+    m.scale = r.required_number("scale");
     if (!(m.scale > 0.0)) r.fail(r.at("scale"), "must be a positive number");
   } else {
     r.fail(r.at("type"), "is \"" + type + "\", must be \"float32\" or \"int16\"");
@@ -86,8 +92,8 @@ void read_value(ObjectReader& r, RegisterMap& m) {
 
 AlarmRegister read_alarm(ObjectReader& r) {
   AlarmRegister a;
-  a.name = *r.string("name", true);
-  a.address = *address(r, "address", true);
+  a.name = r.required_string("name");
+  a.address = required_address(r, "address");
   if (r.has("mask")) a.mask = word(r, "mask");
   if (r.has("normal")) {
     const json& normal = array_at(r, "normal");
@@ -118,7 +124,7 @@ MapSource read_source(const json* src, const std::vector<std::string>& used, con
     regs = object_or_null(*r, "registers");
     r->finish();
   }
-  if (regs != nullptr)
+  if (r && regs != nullptr)  // regs is read from r
     for (const auto& [key, entry] : regs->items())
       if (std::find(used.begin(), used.end(), key) == used.end())
         r->fail("'source.registers." + key + "' is not a key the map uses");
@@ -157,21 +163,21 @@ RegisterMap register_map_from_json(const std::string& json_text) {
   m.name = r.string("name").value_or("custom");
   m.slave_id = static_cast<int>(r.integer("slave_id", 0, 247).value_or(1));
   {
-    ObjectReader value(*r.get("value", true), "value", mode);
+    ObjectReader value(r.required("value"), "value", mode);
     read_value(value, m);
   }
-  m.process_value = *address(r, "process_value", true);
-  m.setpoint = *address(r, "setpoint", true);
+  m.process_value = required_address(r, "process_value");
+  m.setpoint = required_address(r, "setpoint");
   m.working_setpoint = address(r, "working_setpoint");
   m.ramp_rate_per_min = address(r, "ramp_rate_per_min");
   if (const json* c = object_or_null(r, "control_mode")) {
     ObjectReader cr(*c, "control_mode", mode);
-    m.control_mode = ControlModeRegister{*address(cr, "address", true), word(cr, "auto"), word(cr, "off")};
+    m.control_mode = ControlModeRegister{required_address(cr, "address"), word(cr, "auto"), word(cr, "off")};
     cr.finish();
   }
   if (const json* u = object_or_null(r, "units")) {
     ObjectReader ur(*u, "units", mode);
-    m.units = UnitsRegister{*address(ur, "address", true), word(ur, "C"), word(ur, "F")};
+    m.units = UnitsRegister{required_address(ur, "address"), word(ur, "C"), word(ur, "F")};
     ur.finish();
     if (m.units->celsius_value == m.units->fahrenheit_value) ur.fail("units.C and units.F must differ");
   }
@@ -188,7 +194,7 @@ RegisterMap register_map_from_json(const std::string& json_text) {
     }
   }
   if (r.has("plausible_range_C")) {
-    const json& range = *r.get("plausible_range_C");
+    const json& range = r.required("plausible_range_C");
     if (!range.is_array() || range.size() != 2 || !range[0].is_number() || !range[1].is_number() ||
         !(range[0].get<double>() < range[1].get<double>()))
       r.fail("plausible_range_C", "must be [min, max] in Celsius with min < max");

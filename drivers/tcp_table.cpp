@@ -51,8 +51,8 @@ TcpTableConfig tcp_table_config_from_json(const std::string& json_text) {
     if (!limits->is_array()) r.fail(r.at("limits") + " must be an array, not " + json_type_name(*limits));
     for (std::size_t i = 0; i < limits->size(); ++i) {
       ObjectReader l((*limits)[i], "limits[" + std::to_string(i) + "]", ObjectReader::ThrowAtFirst{"table config: "});
-      const std::string axis = *l.string("axis", true);
-      const std::string mode = *l.string("mode", true);
+      const std::string axis = l.required_string("axis");
+      const std::string mode = l.required_string("mode");
       const int a = axis == "outer" ? 0 : axis == "middle" ? 1 : axis == "inner" ? 2 : -1;
       const int m = mode == "off" ? 0 : mode == "position" ? 1 : mode == "rate" ? 2 : mode == "synthesis" ? 3 : -1;
       if (a < 0) l.fail(l.at("axis") + " must be outer, middle or inner, not \"" + axis + "\"");

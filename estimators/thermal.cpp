@@ -180,7 +180,7 @@ ThermalSection thermal_from(const json& j, const ObjectReader::ThrowAtFirst& thr
       for (const auto& [member, entry] : members->items()) {
         const int i = index_of(gyro, group, member);
         if (i < 0) g.fail(g.at(member.c_str()), "unknown axis (x, y, z; angles xy, xz, yx, yz, zx, zy)");
-        ObjectReader e(*g.get(member.c_str()), g.at(member.c_str()), throwing);
+        ObjectReader e(g.required(member.c_str()), g.at(member.c_str()), throwing);
         Poly& p = s.poly[static_cast<std::size_t>(i)];
         if (const json* v = e.get("T")) p.T = numbers(e, *v, e.at("T"));
         if (const json* v = e.get("dTdt")) p.dTdt = numbers(e, *v, e.at("dTdt"));

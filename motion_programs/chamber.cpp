@@ -43,7 +43,7 @@ ChamberProfile compile_chamber_profile(const std::string& json_text) {
   p.name = r.string("name").value_or("unnamed");
   r.get("comment");
   p.source_json = j.dump();
-  p.start_C = *r.number("start_C", true);
+  p.start_C = r.required_number("start_C");
   const json* steps = r.get("steps", true);
   if (!steps->is_array() || steps->empty()) r.fail("steps must be a non-empty list");
   r.finish();
@@ -52,12 +52,12 @@ ChamberProfile compile_chamber_profile(const std::string& json_text) {
   for (const json& st : *steps) {
     ObjectReader sr(st, "steps[" + std::to_string(index) + "]", throwing);
     ++index;
-    const std::string type = *sr.string("type", true);
+    const std::string type = sr.required_string("type");
     const std::string name = sr.string("name").value_or(type + "-" + std::to_string(index));
     const std::string where = "step " + std::to_string(index) + " '" + name + "'";
     const auto fail = [&](const std::string& what) { sr.fail(where + ": " + what); };
     const auto positive = [&](const char* key) {
-      const double v = *sr.number(key, true);
+      const double v = sr.required_number(key);
       if (v <= 0) fail(std::string(key) + " must be positive");
       return v;
     };
@@ -70,20 +70,20 @@ ChamberProfile compile_chamber_profile(const std::string& json_text) {
       s.t1_s = t + positive("duration_s");
     } else if (type == "ramp") {
       s.from_C = sp;
-      s.to_C = *sr.number("to_C", true);
+      s.to_C = sr.required_number("to_C");
       if (sr.has("rate_C_per_min") == sr.has("duration_s")) fail("give either \"rate_C_per_min\" or \"duration_s\"");
       double d;
       if (sr.has("rate_C_per_min")) {
-        const double rate = *sr.number("rate_C_per_min");
+        const double rate = sr.required_number("rate_C_per_min");
         if (rate <= 0) fail("rate_C_per_min must be positive (the direction follows from to_C)");
         d = std::abs(s.to_C - s.from_C) / rate * 60.0;
       } else {
-        d = *sr.number("duration_s");
+        d = sr.required_number("duration_s");
       }
       if (d <= 0) fail("the ramp has no length (to_C equals the set point before it?)");
       s.t1_s = t + d;
     } else if (type == "set") {
-      s.from_C = s.to_C = *sr.number("to_C", true);
+      s.from_C = s.to_C = sr.required_number("to_C");
       s.t1_s = t + positive("duration_s");
     } else {
       fail("unknown type \"" + type + "\" (soak, ramp, set)");

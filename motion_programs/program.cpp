@@ -254,7 +254,7 @@ struct Builder {
     const json* list = seg.get("positions_deg");
     if (list == nullptr || !list->is_array() || list->empty())
       fail(where, "\"positions_deg\" must be a non-empty list of [outer, middle, inner]");
-    const double dwell = *seg.number("dwell_s", true);
+    const double dwell = seg.required_number("dwell_s");
     const double move_s = seg.number("move_s").value_or(0.0);
     int k = 0;
     for (const json& pos : *list) {
@@ -269,7 +269,7 @@ struct Builder {
 
   void rate(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
-    const double w = *seg.number("rate_dps", true) * kDegToRad;
+    const double w = seg.required_number("rate_dps") * kDegToRad;
     if (w == 0) fail(where, "rate_dps must not be zero");
     const double acc = seg.number("accel_dps2").value_or(0.5 * limits.axis[static_cast<std::size_t>(a)].accel_dps2) * kDegToRad;
     if (acc <= 0) fail(where, "accel_dps2 must be positive");
@@ -280,13 +280,13 @@ struct Builder {
     const double t_ramp = std::abs(w) / acc;
     double t_cruise;
     if (seg.has("revolutions")) {
-      const double revs = *seg.number("revolutions", true);
+      const double revs = seg.required_number("revolutions");
       const double ramp_angle = w * w / acc;  // both ramps together
       t_cruise = (revs * 2.0 * kPi - ramp_angle) / std::abs(w);
       if (revs <= 0) fail(where, "revolutions must be positive");
       if (t_cruise < 0 && !beyond_limits) fail(where, "too few revolutions for the ramps at this rate and acceleration");
     } else {
-      t_cruise = *seg.number("duration_s", true) - 2.0 * t_ramp;
+      t_cruise = seg.required_number("duration_s") - 2.0 * t_ramp;
       if (t_cruise < 0 && !beyond_limits) fail(where, "duration_s shorter than the two ramps");
     }
     const double sign = w > 0 ? 1.0 : -1.0;
@@ -322,10 +322,10 @@ struct Builder {
 
   void sine(ObjectReader& seg, const std::string& name, const std::string& where) {
     const int a = axis_index(seg, "axis", where);
-    const double period = *seg.number("period_s", true), cycles = *seg.number("cycles", true);
+    const double period = seg.required_number("period_s"), cycles = seg.required_number("cycles");
     Piece p = make_piece(period * cycles, name, "sine");
     p.axis[static_cast<std::size_t>(a)] =
-        sine_func(a, *seg.number("amplitude_deg", true), period, cycles, seg.number("phase_deg").value_or(90.0),
+        sine_func(a, seg.required_number("amplitude_deg"), period, cycles, seg.number("phase_deg").value_or(90.0),
                   seg.number("ramp_s").value_or(0.0), where);
     push(std::move(p));
   }
@@ -337,14 +337,14 @@ struct Builder {
     if (ia == ib) fail(where, "coning needs two different axes");
     double amp_a, amp_b;
     if (seg.has("amplitude_deg") && seg.get("amplitude_deg")->is_array()) {
-      const json& am = *seg.get("amplitude_deg");
+      const json& am = seg.required("amplitude_deg");
       if (am.size() != 2 || !am[0].is_number() || !am[1].is_number()) fail(where, "amplitude_deg: one number or two");
       amp_a = am[0].get<double>();
       amp_b = am[1].get<double>();
     } else {
-      amp_a = amp_b = *seg.number("amplitude_deg", true);
+      amp_a = amp_b = seg.required_number("amplitude_deg");
     }
-    const double period = *seg.number("period_s", true), cycles = *seg.number("cycles", true);
+    const double period = seg.required_number("period_s"), cycles = seg.required_number("cycles");
     const double ramp = seg.number("ramp_s").value_or(period);
     Piece p = make_piece(period * cycles, name, "coning");
     p.axis[static_cast<std::size_t>(ia)] = sine_func(ia, amp_a, period, cycles, 0.0, ramp, where);
@@ -385,11 +385,11 @@ Program compile_program(const std::string& json_text, const TableLimits& limits)
     sr.get("type");
     sr.get("name");
     if (type == "hold") {
-      b.hold(*sr.number("duration_s", true), name, sr.string("kind").value_or("static"), where);
+      b.hold(sr.required_number("duration_s"), name, sr.string("kind").value_or("static"), where);
     } else if (type == "power-cycle") {
       // The IMU is switched off and on before it (imucald prompts the operator and waits); the
       // table rests for duration_s after the power-on.
-      b.hold(*sr.number("duration_s", true), name, "power-cycle", where);
+      b.hold(sr.required_number("duration_s"), name, "power-cycle", where);
     } else if (type == "move") {
       const json* to = sr.get("to_deg");
       if (to == nullptr) Builder::fail(where, "missing \"to_deg\"");

@@ -250,31 +250,31 @@ nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
 RecordingMeta read_meta(const json& root) {
   const ObjectReader::ThrowAtFirst mode{};
   ObjectReader r(root, "", mode);
-  const std::string format = *r.string("format", true);
+  const std::string format = r.required_string("format");
   if (format != kRecordingFormat) r.fail("unknown format '" + format + "' (this imucal reads " + kRecordingFormat + ")");
 
   RecordingMeta meta;
   {
-    ObjectReader site(*r.get("site", true), "site", mode);
-    meta.site.latitude_deg = *site.number_in("latitude_deg", -90.0, 90.0, true);
-    meta.site.longitude_deg = *site.number_in("longitude_deg", -180.0, 360.0, true);
-    meta.site.height_m = *site.number("height_m", true);
-    meta.site.middle_axis_azimuth_deg = *site.number("middle_axis_azimuth_deg", true);
+    ObjectReader site(r.required("site"), "site", mode);
+    meta.site.latitude_deg = site.required_number_in("latitude_deg", -90.0, 90.0);
+    meta.site.longitude_deg = site.required_number_in("longitude_deg", -180.0, 360.0);
+    meta.site.height_m = site.required_number("height_m");
+    meta.site.middle_axis_azimuth_deg = site.required_number("middle_axis_azimuth_deg");
     meta.site.gravity_mps2 = site.number_in("gravity_mps2", 9.7, 9.9);
     site.finish_extensible();
   }
   {
-    ObjectReader imu(*r.get("imu", true), "imu", mode);
-    meta.imu_serial = *imu.string("serial", true);
-    meta.rate_hz = *imu.number("rate_hz", true);
+    ObjectReader imu(r.required("imu"), "imu", mode);
+    meta.imu_serial = imu.required_string("serial");
+    meta.rate_hz = imu.required_number("rate_hz");
     if (!(meta.rate_hz > 0.0)) imu.fail(imu.at("rate_hz"), "must be positive");
     meta.gyro_lsb_rad = imu.number("gyro_lsb_rad");
     meta.accel_lsb_mps = imu.number("accel_lsb_mps");
     imu.finish_extensible();
   }
   {
-    ObjectReader mount(*r.get("mount", true), "mount", mode);
-    const json& c_o_p = *mount.get("C_o_p", true);
+    ObjectReader mount(r.required("mount"), "mount", mode);
+    const json& c_o_p = mount.required("C_o_p");
     const auto is_row = [](const json& row) { return row.is_array() && row.size() == 3; };
     if (!c_o_p.is_array() || c_o_p.size() != 3 || !std::all_of(c_o_p.begin(), c_o_p.end(), is_row))
       mount.fail(mount.at("C_o_p"), "must be a 3x3 array of numbers");
@@ -301,13 +301,13 @@ RecordingMeta read_meta(const json& root) {
     for (std::size_t i = 0; i < segments->size(); ++i) {
       ObjectReader sr((*segments)[i], "segments[" + std::to_string(i) + "]", mode);
       SegmentInfo segment;
-      segment.name = *sr.string("name", true);
-      segment.kind = *sr.string("kind", true);
+      segment.name = sr.required_string("name");
+      segment.kind = sr.required_string("kind");
       if (std::find(kKinds.begin(), kKinds.end(), segment.kind) == kKinds.end()) {
         sr.fail(sr.at("kind"), "is '" + segment.kind + "', not one of static, rate, sine, coning, tilt, move");
       }
-      segment.t0_s = *sr.number("t0_s", true);
-      segment.t1_s = *sr.number("t1_s", true);
+      segment.t0_s = sr.required_number("t0_s");
+      segment.t1_s = sr.required_number("t1_s");
       sr.finish_extensible();
       meta.segments.push_back(segment);
     }

@@ -123,6 +123,10 @@ TEST(RegisterMap, RejectsBadConfigurationNamingTheKey) {
   EXPECT_NE(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"float32","word_order":"ABCD"},"process_value":70000,"setpoint":1})")
                 .find("process_value"),
             std::string::npos);
+  // A required register given as null ("this controller has none") is refused by name: it once
+  // read an empty optional (found by the static check, issue 33).
+  EXPECT_EQ(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"int16","scale":10},"process_value":null,"setpoint":2})"),
+            "register map: process_value: is required: a register address (0-65535), not null");
   EXPECT_NE(msg(R"({"format":"imucal-chamber-map/1","value":{"type":"int16","scale":0},"process_value":1,"setpoint":2})")
                 .find("scale"),
             std::string::npos);

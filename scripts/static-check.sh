@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# The static check of CI (called by scripts/test.sh): clang-tidy 16 with the checks of .clang-tidy
+# (dangling handles, use after move, unchecked optional access, the compiler's lifetime warnings)
+# and clang-query 16 with scripts/static/lifetimes.query (ranges and references into a temporary),
+# over every C++ source of the project, tests included. Zero findings, or it fails and lists them.
+# The matches are first run on scripts/static/dangling_examples.cpp, whose lines marked BAD they
+# must all find and whose lines marked ok none, so that a query that stopped matching fails here.
+# Usage: scripts/static-check.sh [FILE...]   (default: every source in the compile database)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+jobs=$(nproc)
+out=build/static-check
+mkdir -p "$out"
+
+# A compile database of single sources (not the unity files the presets build): configure only.
+cmake -S . -B build/tidy -G Ninja -DCMAKE_BUILD_TYPE=Release -DIMUCAL_UNITY=OFF \
+      -DCMAKE_EXPORT_COMPILE_COMMANDS=ON >"$out/configure.log"
+
+# The check of the checker.
+query=scripts/static/lifetimes.query
+examples=scripts/static/dangling_examples.cpp
+clang-query-16 -f "$query" "$examples" -- -std=c++20 2>/dev/null |
+  sed -n "s|^.*/$examples:\([0-9]*\):[0-9]*: note: \"dangling.*|\1|p" | sort -n | uniq >"$out/examples.found"
+grep -n '// BAD' "$examples" | grep -v 'clang Wdangling' | cut -d: -f1 >"$out/examples.expected"
+if ! diff -u "$out/examples.expected" "$out/examples.found"; then
+  echo "static-check: $query no longer finds exactly the BAD lines of $examples (diff above: lines expected, found)"
+  exit 1
+fi
+
+if (($#)); then
+  printf '%s\n' "$@" >"$out/files"
+else
+  python3 - >"$out/files" <<'PY'
+import json, os
+root = os.getcwd()
+for e in json.load(open("build/tidy/compile_commands.json")):
+    f = os.path.relpath(e["file"], root)
+    if not f.startswith(("build/", "..")):
+        print(f)
+PY
+fi
+echo "static-check: $(wc -l <"$out/files") sources, clang-tidy and clang-query on $jobs cores"
+
+# Both tools on every file; each file's findings to a log of its own (parallel runs interleave).
+rm -rf "$out/logs" && mkdir -p "$out/logs"
+check_one() {
+  local f=$1 log=$2/logs/$(echo "$1" | tr / _)
+  clang-tidy-16 -p build/tidy --quiet "$f" >"$log.tidy" 2>&1 || true
+  clang-query-16 -p build/tidy -f scripts/static/lifetimes.query "$f" >"$log.query" 2>&1 || true
+}
+export -f check_one
+xargs -P "$jobs" -I{} bash -c 'check_one "$1" "$2"' _ {} "$out" <"$out/files"
+
+# A finding is a clang-tidy warning or error, or a clang-query match in the project's own files
+# (clang-tidy's HeaderFilterRegex does that for it); a header's finding is reported by each source
+# that includes it, so each is listed once.
+cat "$out"/logs/*.tidy | grep -E '^[^ ].*:[0-9]+:[0-9]+: (warning|error):' | sort -u >"$out/findings.txt" || true
+cat "$out"/logs/*.query | grep -E '^[^ ].*:[0-9]+:[0-9]+: note: "dangling' | grep -v '^/usr/' | sort -u >>"$out/findings.txt" || true
+n=$(wc -l <"$out/findings.txt")
+if ((n)); then
+  cat "$out/findings.txt"
+  echo "static-check: $n finding(s) (each file's full output: $out/logs/)"
+  exit 1
+fi
+echo "static-check: no findings"
