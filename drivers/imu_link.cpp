@@ -146,6 +146,17 @@ auto choice(ObjectReader& r, const char* key, const Table& table, bool required 
   r.fail(r.at(key), "\"" + *s + "\" is not one of " + names_of(table));
 }
 
+// The required forms, for the throwing reader these descriptions are read with: never nothing.
+template <class Table>
+auto required_choice(ObjectReader& r, const char* key, const Table& table) -> typename Table::value_type {
+  if (auto e = choice(r, key, table, true)) return *e;
+  r.fail(r.at(key), "is required: one of " + names_of(table));
+}
+std::uint64_t required_unsigned(ObjectReader& r, const char* key, std::uint64_t max) {
+  if (const auto v = unsigned_int(r, key, max, true)) return *v;
+  r.fail(r.at(key), "is required: a whole number up to " + std::to_string(max));
+}
+
 std::vector<std::uint8_t> parse_hex_bytes(const std::string& text, const ObjectReader& r, const std::string& path) {
   std::vector<std::uint8_t> out;
   std::string digits;
@@ -162,7 +173,10 @@ std::vector<std::uint8_t> parse_hex_bytes(const std::string& text, const ObjectR
 
 ByteOrder read_byte_order(ObjectReader& r, const char* key, std::optional<ByteOrder> fallback) {
   const auto s = r.string(key, !fallback.has_value());
-  if (!s) return *fallback;
+  if (!s) {
+    if (fallback) return *fallback;
+    r.fail(r.at(key), "is required: \"big\" or \"little\"");
+  }
   if (*s == "big") return ByteOrder::big;
   if (*s == "little") return ByteOrder::little;
   r.fail(r.at(key), "must be \"big\" or \"little\"");
@@ -183,7 +197,7 @@ Field read_field(const json& j, const std::string& where, const std::string& who
                  ByteOrder default_order) {
   ObjectReader r = reader(j, where, who);
   Field f;
-  f.role = choice(r, "role", kRoles, true)->role;
+  f.role = required_choice(r, "role", kRoles).role;
   if (kind == MessageKind::sample && (f.role == Role::coil_temperature || f.role == Role::accel_sensor_temperature))
     r.fail(r.at("role"), std::string(to_string(f.role)) + " belongs in a temperature message");
   if (kind == MessageKind::temperature && f.role != Role::sequence && f.role != Role::time &&
@@ -191,8 +205,8 @@ Field read_field(const json& j, const std::string& where, const std::string& who
     r.fail(r.at("role"), "a temperature message carries sequence, time, coil_temperature and accel_sensor_temperature");
   if ((kind == MessageKind::identity) != (f.role == Role::serial))
     r.fail(r.at("role"), "an identity message carries the serial field, and only it");
-  f.offset = static_cast<std::size_t>(*unsigned_int(r, "offset", 1 << 16, true));
-  f.type = choice(r, "type", kTypes, true)->type;
+  f.offset = static_cast<std::size_t>(required_unsigned(r, "offset", 1 << 16));
+  f.type = required_choice(r, "type", kTypes).type;
   if ((f.type == FieldType::ascii) != (f.role == Role::serial))
     r.fail(r.at("type"), "the serial field is ascii, and only it");
   f.byte_order = read_byte_order(r, "byte_order", default_order);
@@ -213,13 +227,13 @@ Field read_field(const json& j, const std::string& where, const std::string& who
   // The unit: SI factor, and for the inertial channels whether it is an increment or a rate.
   std::optional<Unit> unit;
   if (is_gyro(f.role)) {
-    unit = *choice(r, "unit", kGyroUnits, true);
+    unit = required_choice(r, "unit", kGyroUnits);
   } else if (is_accel(f.role)) {
-    unit = *choice(r, "unit", kAccelUnits, true);
+    unit = required_choice(r, "unit", kAccelUnits);
   } else if (f.role == Role::time || f.role == Role::latency) {
-    unit = *choice(r, "unit", kTimeUnits, true);
+    unit = required_choice(r, "unit", kTimeUnits);
   } else if (is_temperature(f.role)) {
-    unit = *choice(r, "unit", kTemperatureUnits, true);
+    unit = required_choice(r, "unit", kTemperatureUnits);
   }
   if (unit) f.measures = unit->measures;
 
@@ -270,8 +284,8 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
                        ByteOrder default_order) {
   ObjectReader r = reader(j, where, who);
   Checksum c;
-  const auto type = r.string("type", true);
-  if (*type == "crc") {
+  const std::string type = r.required_string("type");
+  if (type == "crc") {
     c.kind = ChecksumKind::crc;
     if (const auto preset = r.string("preset")) {
       const auto it = std::find_if(kCrcPresets.begin(), kCrcPresets.end(), [&](const CrcPreset& p) { return *preset == p.name; });
@@ -285,24 +299,24 @@ Checksum read_checksum(const json& j, const std::string& where, const std::strin
       for (const char* k : {"width", "poly", "init", "reflect_in", "reflect_out", "xor_out"})
         if (r.has(k)) r.fail(r.at(k), "give a preset or the parameters, not both");
     } else {
-      const auto width = unsigned_int(r, "width", 32, true);
-      if (*width != 8 && *width != 16 && *width != 32) r.fail(r.at("width"), "must be 8, 16 or 32");
-      c.width_bits = static_cast<int>(*width);
-      const std::uint64_t max = (std::uint64_t{1} << *width) - 1;
-      c.poly = static_cast<std::uint32_t>(*unsigned_int(r, "poly", max, true));
+      const std::uint64_t width = required_unsigned(r, "width", 32);
+      if (width != 8 && width != 16 && width != 32) r.fail(r.at("width"), "must be 8, 16 or 32");
+      c.width_bits = static_cast<int>(width);
+      const std::uint64_t max = (std::uint64_t{1} << width) - 1;
+      c.poly = static_cast<std::uint32_t>(required_unsigned(r, "poly", max));
       c.init = static_cast<std::uint32_t>(unsigned_int(r, "init", max).value_or(0));
       c.xor_out = static_cast<std::uint32_t>(unsigned_int(r, "xor_out", max).value_or(0));
       c.reflect_in = r.boolean("reflect_in").value_or(false);
       c.reflect_out = r.boolean("reflect_out").value_or(false);
     }
-  } else if (*type == "sum8") {
+  } else if (type == "sum8") {
     c.kind = ChecksumKind::sum8;
-  } else if (*type == "xor8") {
+  } else if (type == "xor8") {
     c.kind = ChecksumKind::xor8;
   } else {
-    r.fail(r.at("type"), "\"" + *type + "\" is not one of crc, sum8, xor8");
+    r.fail(r.at("type"), "\"" + type + "\" is not one of crc, sum8, xor8");
   }
-  c.offset = static_cast<std::size_t>(*unsigned_int(r, "offset", length, true));
+  c.offset = static_cast<std::size_t>(required_unsigned(r, "offset", length));
   c.from = static_cast<std::size_t>(unsigned_int(r, "from", length).value_or(0));
   c.to = static_cast<std::size_t>(unsigned_int(r, "to", length).value_or(c.offset));
   c.byte_order = read_byte_order(r, "byte_order", default_order);
@@ -346,7 +360,7 @@ Message read_message(const json& j, const std::string& where, const std::string&
   if (const auto h = r.string("header")) m.header = parse_hex_bytes(*h, r, r.at("header"));
   if (t != Transport::socketcan && m.header.size() < 2)
     r.fail(r.at("header"), "a serial or UDP frame needs a sync header of at least 2 bytes");
-  m.length = static_cast<std::size_t>(*unsigned_int(r, "length", 4096, true));
+  m.length = static_cast<std::size_t>(required_unsigned(r, "length", 4096));
   if (m.length <= m.header.size()) r.fail(r.at("length"), "must exceed the header");
   if (const json* c = r.get("checksum", t != Transport::socketcan))
     m.checksum = read_checksum(*c, r.at("checksum"), who, m.length, default_order);
@@ -514,12 +528,12 @@ ImuLink imu_link_from_json(const std::string& json_text) {
   const ByteOrder order = read_byte_order(r, "byte_order", std::nullopt);
   {
     ObjectReader t = reader(r.required("transport"), "transport", who);
-    const auto type = t.string("type", true);
-    if (*type == "socketcan") {
+    const std::string type = t.required_string("type");
+    if (type == "socketcan") {
       link.transport = Transport::socketcan;
-    } else if (*type == "serial") {
+    } else if (type == "serial") {
       link.transport = Transport::serial;
-      link.serial.baud = static_cast<unsigned>(*unsigned_int(t, "baud", 20'000'000, true));
+      link.serial.baud = static_cast<unsigned>(required_unsigned(t, "baud", 20'000'000));
       if (link.serial.baud < 50) t.fail(t.at("baud"), "must be at least 50");
       if (const auto p = t.string("parity")) {
         if (*p == "none") link.serial.parity = Parity::none;
@@ -535,10 +549,10 @@ ImuLink imu_link_from_json(const std::string& json_text) {
         if (*s < 1) t.fail(t.at("stop_bits"), "must be 1 or 2");
         link.serial.stop_bits = static_cast<unsigned>(*s);
       }
-    } else if (*type == "udp") {
+    } else if (type == "udp") {
       link.transport = Transport::udp;
     } else {
-      t.fail(t.at("type"), "\"" + *type + "\" is not one of socketcan, serial, udp");
+      t.fail(t.at("type"), "\"" + type + "\" is not one of socketcan, serial, udp");
     }
     t.finish();
   }

@@ -24,6 +24,16 @@ std::uint64_t modulus_of(const link::Field& f) {
   return bits >= 64 ? 0 : std::uint64_t{1} << bits;
 }
 
+// A temperature set in progress: its sequence, which of its messages arrived, the values. At
+// namespace scope: a nested type's member initialisers are not usable inside its enclosing class
+// (clang refuses the emplace() below there; the static check compiles with clang).
+struct PendingSet {
+  std::optional<std::uint64_t> sequence;
+  std::vector<bool> got;
+  ImuTemperatures t;
+  bool has_time = false;
+};
+
 }  // namespace
 
 struct LinkImu::Impl {
@@ -45,13 +55,6 @@ struct LinkImu::Impl {
   std::uint64_t time_ext = 0;                  // its time field, unwrapped, in field counts
   std::uint64_t transport_malformed = 0;       // the transport's count at activate()
 
-  // A temperature set in progress: its sequence, which of its messages arrived, the values.
-  struct PendingSet {
-    std::optional<std::uint64_t> sequence;
-    std::vector<bool> got;
-    ImuTemperatures t;
-    bool has_time = false;
-  };
   std::optional<PendingSet> pending;
 
   mutable std::mutex published_mutex;  // what other threads may read

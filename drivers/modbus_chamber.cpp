@@ -204,11 +204,11 @@ Result<void> ModbusChamber::configure() {
   if (!unit) return unit.error();
   if (auto r = impl_->read_temperature(impl_->cfg.map.process_value, *unit, "reading the process value"); !r) return r.error();
   if (auto r = impl_->read_regs(impl_->cfg.map.setpoint, impl_->cfg.map.registers_per_value(), "reading the set point"); !r) return r.error();
-  if (impl_->cfg.map.working_setpoint)
-    if (auto r = impl_->read_regs(*impl_->cfg.map.working_setpoint, impl_->cfg.map.registers_per_value(), "reading the working set point"); !r)
-      return r.error();
-  if (impl_->cfg.map.control_mode)
-    if (auto r = impl_->read_regs(impl_->cfg.map.control_mode->address, 1, "reading the control mode"); !r) return r.error();
+  const RegisterMap& map = impl_->cfg.map;
+  if (const auto& ws = map.working_setpoint)
+    if (auto r = impl_->read_regs(*ws, map.registers_per_value(), "reading the working set point"); !r) return r.error();
+  if (const auto& cm = map.control_mode)
+    if (auto r = impl_->read_regs(cm->address, 1, "reading the control mode"); !r) return r.error();
   if (auto r = impl_->read_alarms(); !r) return r.error();
   impl_->state = DeviceState::configured;
   return success();
@@ -232,11 +232,11 @@ Result<void> ModbusChamber::safe_stop() {
   impl_->device_ramp_target_C.reset();
   if (impl_->state == DeviceState::disconnected) return success();
   Result<void> r;
-  if (impl_->cfg.safe_setpoint_C) {
+  if (const auto safe_C = impl_->cfg.safe_setpoint_C) {
     auto unit = impl_->read_unit();
     if (!unit) return unit.error();
     if (auto w = impl_->write_device_ramp_rate(0.0, *unit); !w) return w;
-    r = impl_->write_temperature(impl_->cfg.map.setpoint, *impl_->cfg.safe_setpoint_C, *unit, "writing the safe set point");
+    r = impl_->write_temperature(impl_->cfg.map.setpoint, *safe_C, *unit, "writing the safe set point");
   } else {
     r = impl_->set_control(false);
   }

@@ -17,6 +17,9 @@ packages+=(chromium fonts-dejavu-core)
 # Modbus TCP and RTU server imucal did not write: Debian's pymodbus (3.0), with python3-serial-asyncio
 # for its RTU server (a Recommends of python3-pymodbus, which --no-install-recommends would skip).
 packages+=(python3-pymodbus python3-serial-asyncio)
+# The static check (scripts/static-check.sh): clang-tidy and clang-query of LLVM 16, Debian 12's
+# newest (14, the default, lacks the checks of optional access the check is growing into).
+packages+=(clang-tidy-16 clang-tools-16)
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the dependencies, builds the release and sanitizer presets, and runs every test:
 # the release build runs all of them (including those labelled slow), the asan build all but slow.
-# Exits non-zero when any test fails. Warnings are errors in both presets.
+# Exits non-zero when any test fails or the static check (scripts/static-check.sh) finds anything.
+# Warnings are errors in both presets.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
@@ -27,7 +28,19 @@ set -m  # the build in a process group of its own, so that a failure here stops 
 nice -n 19 cmake --build --preset asan -j "$jobs" >"$asan_log" 2>&1 &
 asan_build=$!
 trap 'kill -- -"$asan_build" 2>/dev/null || true' EXIT
+# The static check (scripts/static-check.sh: lifetimes, moves) beside them too, at the same
+# priority; it needs a configured tree only, no build.
+static_log=build/static-check.log
+nice -n 19 bash scripts/static-check.sh >"$static_log" 2>&1 &
+static_check=$!
+trap 'kill -- -"$asan_build" -"$static_check" 2>/dev/null || true' EXIT
 ctest --preset release
+if ! wait "$static_check"; then
+  tail -n 60 "$static_log"
+  echo "test.sh: the static check failed (whole log: $static_log)"
+  exit 1
+fi
+echo "test.sh: static check passed ($(tail -n 1 "$static_log"))"
 if ! wait "$asan_build"; then
   tail -n 60 "$asan_log"
   echo "test.sh: the sanitizer build failed (whole log: $asan_log)"

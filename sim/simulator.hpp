@@ -107,7 +107,6 @@ class Simulator {
   std::int64_t k_ = 0;  // frames produced
   std::vector<double> breakpoints_;
   mutable std::size_t cursor_ = 0;
-  mutable std::size_t bp_cursor_ = 0;
   Eigen::Matrix3d D_gyro_, D_accel_;
 
   // Channels grouped by equal delay so that each group needs one set of kinematic evaluations.

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 #include <optional>
+#include <span>
 using nlohmann::json;
 json make();
 std::vector<int> vec();
@@ -42,5 +43,7 @@ int g3() {
   const int& e = h().get()[0];     // BAD
   json c = make().at("a");         // ok
   auto n = make().at("a").size();  // ok
-  return (int)a.size() + (int)b.size() + (int)v.size() + e + (int)c.size() + (int)n + (p.begin() == p.end());
+  std::vector<int> w = vec();
+  auto s = std::span<const int>(w).subspan(1);  // ok
+  return (int)s.size() + (int)a.size() + (int)b.size() + (int)v.size() + e + (int)c.size() + (int)n + (p.begin() == p.end());
 }
