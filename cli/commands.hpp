@@ -28,6 +28,7 @@ struct SimulateArgs {
   bool stabilise = false;
   std::vector<std::string> temp_faults;      // channel:kind:t0:t1[:jump_C]
   std::vector<double> chamber_reach_C;       // lo hi: what the chamber can reach (a fault)
+  std::string table;                         // the table's certificate (formats.md `table`), a file
 };
 
 struct NavigateArgs {

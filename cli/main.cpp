@@ -43,6 +43,10 @@ int main(int argc, char** argv) {
                   "temperature the chamber can reach")->expected(2);
   sim->add_option("--r0-mm", sim_args.r0_mm, "IMU origin from the axis intersection, platform frame, mm")
       ->expected(3);
+  sim->add_option("--table", sim_args.table,
+                  "the table's own errors: a JSON file holding the `table` object of formats.md (geometry, sigma, "
+                  "certificate) or a recording's meta.json; the table moves with them and the run records them")
+      ->check(CLI::ExistingFile);
 
   cli::NavigateArgs nav_args;
   auto* navc = app.add_subcommand("navigate", "Free-inertial navigation of a run against the table reference");

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "core/table_json.hpp"
 #include "core/units.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
@@ -86,6 +87,7 @@ int run_simulate(const SimulateArgs& a) {
   cfg.duration_s = a.duration_s;
   cfg.site.middle_axis_azimuth_deg = a.azimuth_deg;
   cfg.mount.r0_p_m = Eigen::Vector3d(a.r0_mm[0], a.r0_mm[1], a.r0_mm[2]) * units::kMmToM;
+  if (!a.table.empty()) cfg.table = table::read_table_certificate_file(a.table);
   std::string chamber_json;
   const std::unique_ptr<sim::ThermalModel> thermal =
       a.chamber.empty() ? nullptr

@@ -11,6 +11,9 @@
 
 #include <Eigen/Core>
 
+#include "core/table.hpp"
+#include "core/units.hpp"
+
 namespace imucal {
 
 // One IMU sample: increments over (t_prev, t] in the sensor axes, already multiplied by the
@@ -68,6 +71,16 @@ struct RecordingMeta {
   std::optional<double> accel_lsb_mps;
   std::string program_json;  // the motion program that made the run, if known (JSON text)
   std::string truth_json;    // the truth imucal-imu-model/1 of a simulated run (JSON text)
+  // The table's own errors and their 1-sigma (formats.md `table`); absent: an ideal table.
+  std::optional<table::TableCertificate> table;
 };
+
+// The table a recording was made on, as every reference computes it: the site's middle-axis
+// azimuth and the certificate's geometry when it gives one (the ideal table otherwise).
+inline table::TableKinematics table_kinematics(const RecordingMeta& meta) {
+  const double azimuth_rad = meta.site.middle_axis_azimuth_deg * units::kDegToRad;
+  if (meta.table && meta.table->geometry) return table::TableKinematics(azimuth_rad, *meta.table->geometry);
+  return table::TableKinematics(azimuth_rad);
+}
 
 }  // namespace imucal

@@ -15,8 +15,7 @@ using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
 LeverArmFilter::LeverArmFilter(const RecordingMeta& meta, const ImuModel& model, const Options& options)
-    : meta_(meta), model_(model), options_(options) {
-  C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * units::kDegToRad);
+    : meta_(meta), model_(model), options_(options), table_(table_kinematics(meta)) {
   w_ie_n_ = earth::w_ie_n(meta.site.latitude_deg * units::kDegToRad);
   g_mps2_ = earth::site_gravity_mps2(meta.site);
   dt_nominal_s_ = 1.0 / meta.rate_hz;
@@ -48,12 +47,15 @@ void LeverArmFilter::process_middle() {
   const double dt = static_cast<double>(f2.t_ns - f1.t_ns) * 1e-9;
   const Vector3d a0 = f0.table_deg * units::kDegToRad, a1 = f1.table_deg * units::kDegToRad;
   const Vector3d a2 = f2.table_deg * units::kDegToRad, a3 = f3.table_deg * units::kDegToRad;
-  table::AxisState mid;
-  mid.angle_rad = 0.5 * (a1 + a2);
-  mid.rate_radps = (a2 - a1) / dt;
-  mid.accel_radps2 = ((a3 - a2) - (a1 - a0)) / (2.0 * dt * dt);
-  const table::PlatformRates pr = table::platform_rates(mid);
-  const Matrix3d C_p_n = table::C_p_n(mid.angle_rad, C_p0_n_);
+  table::AxisState encoder;
+  encoder.angle_rad = 0.5 * (a1 + a2);
+  encoder.rate_radps = (a2 - a1) / dt;
+  encoder.accel_radps2 = ((a3 - a2) - (a1 - a0)) / (2.0 * dt * dt);
+  // The recording's table geometry (core/table): true angles, rates and accelerations, each gimbal
+  // about its own axis.
+  const table::AxisState mid = table_.true_axes(encoder);
+  const table::PlatformRates pr = table_.platform_rates(mid);
+  const Matrix3d C_p_n = table_.C_p_n(mid.angle_rad);
   const Matrix3d& C_o_p = meta_.mount.C_o_p;
   const Vector3d w_ie_p = C_p_n.transpose() * w_ie_n_;
   const Vector3d w_o = C_o_p.transpose() * (pr.w_np_p + w_ie_p);

@@ -47,7 +47,7 @@ class LeverArmFilter {
   RecordingMeta meta_;
   ImuModel model_;
   Options options_;
-  Eigen::Matrix3d C_p0_n_;
+  table::TableKinematics table_;
   Eigen::Vector3d w_ie_n_;
   double g_mps2_, dt_nominal_s_;
   std::deque<ImuFrame> window_;  // four frames: k-2, k-1, k, k+1 around the interval (k-1, k]

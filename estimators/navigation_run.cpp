@@ -107,8 +107,7 @@ CompensatedSample Compensator::compensate(const std::deque<ImuFrame>& window) co
   return c;
 }
 
-TableReference::TableReference(const RecordingMeta& meta, const ImuModel& model) {
-  C_p0_n_ = table::C_p0_n(meta.site.middle_axis_azimuth_deg * units::kDegToRad);
+TableReference::TableReference(const RecordingMeta& meta, const ImuModel& model) : table_(table_kinematics(meta)) {
   C_o_p_ = meta.mount.C_o_p;
   C_b_o_ = Matrix3d::Identity();
   if (model.frame == "body" && model.body_to_instrument_rad) C_b_o_ = C_b_o_of(*model.body_to_instrument_rad);
@@ -128,16 +127,17 @@ TableReference::Sample TableReference::at(const std::deque<ImuFrame>& window, st
   // The stand moves the origin only by rotation about the axis intersection (eq. 14).
   const ImuFrame& f = window[i];
   const std::size_t lo = i > 0 ? i - 1 : i, hi = i + 1 < window.size() ? i + 1 : i;
-  table::AxisState axes;
-  axes.angle_rad = f.table_deg * units::kDegToRad;
+  table::AxisState encoder;
+  encoder.angle_rad = f.table_deg * units::kDegToRad;
   if (hi > lo)
-    axes.rate_radps = (window[hi].table_deg - window[lo].table_deg) * units::kDegToRad /
-                      (static_cast<double>(window[hi].t_ns - window[lo].t_ns) * 1e-9);
-  const Matrix3d C_p_n = table::C_p_n(axes.angle_rad, C_p0_n_);
+    encoder.rate_radps = (window[hi].table_deg - window[lo].table_deg) * units::kDegToRad /
+                         (static_cast<double>(window[hi].t_ns - window[lo].t_ns) * 1e-9);
+  const table::AxisState axes = table_.true_axes(encoder);
+  const Matrix3d C_p_n = table_.C_p_n(axes.angle_rad);
   Sample r;
   r.C_b_n = C_p_n * C_o_p_ * C_b_o_;
   r.r_n = C_p_n * r0_p_m_;
-  r.v_n = C_p_n * table::platform_rates(axes).w_np_p.cross(r0_p_m_);
+  r.v_n = C_p_n * table_.platform_rates(axes).w_np_p.cross(r0_p_m_);
   return r;
 }
 

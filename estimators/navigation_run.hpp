@@ -14,6 +14,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/recording.hpp"
+#include "core/table.hpp"
 #include "estimators/strapdown.hpp"
 
 namespace imucal::nav {
@@ -76,7 +77,8 @@ class TableReference {
     Eigen::Matrix3d C_b_n;
     Eigen::Vector3d v_n, r_n;  // origin velocity and position from the axis intersection, ENU
   };
-  // Reference at window[i]; the platform rate by central differences of the encoder angles.
+  // Reference at window[i]; the platform rate by central differences of the encoder angles, both
+  // through the recording's table geometry (core/table).
   Sample at(const std::deque<ImuFrame>& window, std::size_t i) const;
   NavState initial_state(const Sample& s) const;
   // How the body frame sits in the instrument frame (formats.md body_to_instrument_arcsec), for a
@@ -91,7 +93,8 @@ class TableReference {
   double latitude_rad() const { return lat0_; }
 
  private:
-  Eigen::Matrix3d C_p0_n_, C_o_p_, C_b_o_;
+  table::TableKinematics table_;
+  Eigen::Matrix3d C_o_p_, C_b_o_;
   Eigen::Vector3d r0_p_m_;
   double lat0_, lon0_, h0_, RM0_, RN0_;
 };

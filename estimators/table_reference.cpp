@@ -15,19 +15,20 @@ using Eigen::Vector3d;
 using units::kDegToRad;
 
 FrameReference::FrameReference(const RecordingMeta& meta)
-    : C_p0_n_(table::C_p0_n(meta.site.middle_axis_azimuth_deg * kDegToRad)),
+    : table_(table_kinematics(meta)),
       C_o_p_(meta.mount.C_o_p),
       w_ie_n_(earth::w_ie_n(meta.site.latitude_deg * kDegToRad)),
       g_mps2_(earth::site_gravity_mps2(meta.site)) {}
 
 Vector3d FrameReference::increment_o_rad(const Vector3d& angles0_deg, const Vector3d& angles1_deg, double dt_s,
                                          const Vector3d& accel_radps2) const {
-  const Vector3d a0 = angles0_deg * kDegToRad, a1 = angles1_deg * kDegToRad;
+  // The encoders' periodic errors taken out at the ends: the true increment is exact however the
+  // table moved in between. The acceleration comes from the encoder's increments: the error's
+  // slope (a k, 1e-5) changes it by that fraction of a term that is itself dt^2 small.
+  const Vector3d a0 = table_.true_angles_rad(angles0_deg * kDegToRad), a1 = table_.true_angles_rad(angles1_deg * kDegToRad);
   const Vector3d mid = 0.5 * (a0 + a1) - accel_radps2 * (dt_s * dt_s / 12.0), d = a1 - a0;
-  const Matrix3d A = table::Rz(-mid[2]);
-  const Vector3d wdt_p = A * table::Rx(-mid[1]) * Vector3d::UnitZ() * d[0] + A * Vector3d::UnitX() * d[1] +
-                         Vector3d::UnitZ() * d[2];
-  const Matrix3d C_p_n = table::C_p_n(mid, C_p0_n_);
+  const Vector3d wdt_p = table_.gimbal_axes_p(mid) * d;
+  const Matrix3d C_p_n = table_.C_p_n(mid);
   // The Earth rate along the path: resolved at the mid attitude, its part across the platform's
   // rotation over the frame averages to sinc(phi/2) of that (exact for a rotation about a fixed
   // axis). The plain midpoint rule left a systematic error of phi^2/24 of it: 0.0016" in a gyro
@@ -56,7 +57,7 @@ Vector3d FrameReference::next_increment_o_rad(const Vector3d& angles0_deg, const
 }
 
 Vector3d FrameReference::specific_force_at_rest_o_mps2(const Vector3d& angles_deg) const {
-  const Matrix3d C_o_n = table::C_p_n(angles_deg * kDegToRad, C_p0_n_) * C_o_p_;
+  const Matrix3d C_o_n = table_.C_p_n(table_.true_angles_rad(angles_deg * kDegToRad)) * C_o_p_;
   return C_o_n.transpose() * Vector3d(0, 0, g_mps2_);
 }
 

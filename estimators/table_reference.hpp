@@ -11,15 +11,17 @@
 #include <Eigen/Core>
 
 #include "core/recording.hpp"
+#include "core/table.hpp"
 
 namespace imucal::table_reference {
 
 class FrameReference {
  public:
   explicit FrameReference(const RecordingMeta& meta);
-  // Rotation of o relative to inertial space between two frames (table angles in degrees at their
-  // ends, dt_s apart), resolved in o, radians: the platform rate from the encoder increments at the
-  // mid angles (exact for single-axis motion), plus the Earth rate along the path, resolved at the
+  // Rotation of o relative to inertial space between two frames (the encoders' table angles in
+  // degrees at their ends, dt_s apart), resolved in o, radians: the true angles at the ends (the
+  // recording's table geometry, core/table), the platform rotation from their increments about
+  // the gimbal axes at the mid angles (exact for single-axis motion, about its erroneous axis), plus the Earth rate along the path, resolved at the
   // frame's mean angle. Under an angular acceleration (rad/s^2 per table axis) that is the mid angle
   // less accel dt^2 / 12: the table passes its mid angle late (by accel dt^2 / 8) and the mean of
   // the Earth vector turning with it lies accel dt^2 / 24 back from the time's middle.
@@ -36,7 +38,8 @@ class FrameReference {
   Eigen::Vector3d specific_force_at_rest_o_mps2(const Eigen::Vector3d& angles_deg) const;
 
  private:
-  Eigen::Matrix3d C_p0_n_, C_o_p_;
+  table::TableKinematics table_;
+  Eigen::Matrix3d C_o_p_;
   Eigen::Vector3d w_ie_n_;
   double g_mps2_;
   // next_increment_o_rad: the last frame's mean rates and end angles.

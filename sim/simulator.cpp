@@ -63,6 +63,8 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
     : program_(program),
       truth_(truth),
       config_(config),
+      table_(config.site.middle_axis_azimuth_deg * units::kDegToRad,
+             config.table && config.table->geometry ? *config.table->geometry : table::TableGeometry{}),
       white_(make_streams<6>(config.seed, 0)),
       bias_rw_(make_streams<6>(config.seed, 12)) {
   if (!(config.rate_hz > 0.0) || !std::isfinite(config.rate_hz))
@@ -70,7 +72,6 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
   if (truth.frame != "instrument")
     throw std::invalid_argument("simulate: the truth model must be in the instrument frame");
   const double lat = config.site.latitude_deg * units::kDegToRad;
-  C_p0_n_ = table::C_p0_n(config.site.middle_axis_azimuth_deg * units::kDegToRad);
   w_ie_n_ = earth::w_ie_n(lat);
   g_mps2_ = earth::site_gravity_mps2(config.site);
   dt_s_ = 1.0 / config.rate_hz;
@@ -135,9 +136,10 @@ Simulator::Simulator(const motion::Program& program, const ImuModel& truth, cons
 }
 
 TrueKinematics Simulator::kinematics(double t_s) const {
+  // The program's angles are the table's true angles (core/table: each gimbal about its own axis).
   const table::AxisState axes = program_.evaluate(t_s, cursor_);
-  const table::PlatformRates pr = table::platform_rates(axes);
-  const Matrix3d C_p_n = table::C_p_n(axes.angle_rad, C_p0_n_);
+  const table::PlatformRates pr = table_.platform_rates(axes);
+  const Matrix3d C_p_n = table_.C_p_n(axes.angle_rad);
   const Matrix3d& C_o_p = config_.mount.C_o_p;
   const Vector3d w_ie_p = C_p_n.transpose() * w_ie_n_;
   const Vector3d w_ip_p = pr.w_np_p + w_ie_p;
@@ -294,7 +296,8 @@ bool Simulator::next(ImuFrame& out) {
     accel_remainder_[j] = ta - out.dv_mps[j];
   }
   out.t_ns = std::llround(static_cast<double>(k_ + 1) * units::kNsPerS / config_.rate_hz);
-  out.table_deg = program_.evaluate(t1, cursor_).angle_rad * units::kRadToDeg;
+  // What the encoders read at the true angles.
+  out.table_deg = table_.encoder_angles_rad(program_.evaluate(t1, cursor_).angle_rad) * units::kRadToDeg;
   ++k_;
   return true;
 }
@@ -336,6 +339,7 @@ RecordingMeta Simulator::meta() const {
   m.accel_lsb_mps = accel_lsb_mps_;
   m.program_json = program_.source_json;
   m.truth_json = imu_model_to_json_text(truth_);
+  m.table = config_.table;
   return m;
 }
 

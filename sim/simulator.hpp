@@ -15,6 +15,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/recording.hpp"
+#include "core/table.hpp"
 #include "core/turn_on.hpp"
 #include "motion_programs/program.hpp"
 
@@ -41,6 +42,10 @@ struct SimConfig {
   double temperature_C = 25.0;
   double temp_rate_hz = 1.0;  // temperature samples per second
   const ThermalSource* thermal = nullptr;  // not owned; outlives the simulator
+  // The table's own errors (formats.md `table`): the table moves by the program's angles as true
+  // angles about its erroneous axes and the encoders read them with their periodic errors; the
+  // run's meta carries the certificate. Absent, or without a geometry: the ideal table.
+  std::optional<table::TableCertificate> table;
 };
 
 // Normal deviates from a 64-bit Mersenne Twister by Box-Muller, written out so the stream is the
@@ -99,7 +104,7 @@ class Simulator {
   const motion::Program& program_;
   ImuModel truth_;
   SimConfig config_;
-  Eigen::Matrix3d C_p0_n_;
+  table::TableKinematics table_;
   Eigen::Vector3d w_ie_n_;
   double g_mps2_;
   double dt_s_;

@@ -22,6 +22,7 @@
 
 #include "core/json_reader.hpp"
 #include "core/model_json.hpp"
+#include "core/table_json.hpp"
 #include "storage/sqlite.hpp"
 
 namespace imucal::storage {
@@ -240,6 +241,7 @@ nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
     }
     root["segments"] = segments;
   }
+  if (meta.table) root["table"] = table::table_certificate_to_json(*meta.table);
   return root;
 }
 
@@ -311,6 +313,13 @@ RecordingMeta read_meta(const json& root) {
       sr.finish_extensible();
       meta.segments.push_back(segment);
     }
+  }
+  if (const json* t = r.get("table")) {
+    // Another writer may add keys beside ours here too; inside geometry and sigma core refuses
+    // what it does not know (a term of the table's error dropped would be a wrong reference).
+    ObjectReader tr(*t, "table", mode);
+    meta.table = table::read_table_certificate(tr);
+    tr.finish_extensible();
   }
   r.finish_extensible();
   return meta;

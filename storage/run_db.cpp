@@ -48,6 +48,8 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include "core/json_reader.hpp"
+#include "core/table_json.hpp"
 #include "storage/sqlite.hpp"
 
 namespace imucal::storage {
@@ -191,6 +193,8 @@ std::string meta_to_json(const RecordingMeta& meta) {
                {"mount", mount},
                {"program_json", meta.program_json},
                {"truth_json", meta.truth_json}};
+  // The table's certificate as meta.json has it (arc seconds: its values round-trip to an ulp).
+  if (meta.table) root["table"] = json(table::table_certificate_to_json(*meta.table));
   return root.dump();
 }
 
@@ -219,7 +223,14 @@ RecordingMeta meta_from_json(const std::string& text, const std::string& path) {
     }
     meta.program_json = root.at("program_json").get<std::string>();
     meta.truth_json = root.at("truth_json").get<std::string>();
+    if (const auto t = root.find("table"); t != root.end()) {
+      ObjectReader r(*t, "table", ObjectReader::ThrowAtFirst{});
+      meta.table = table::read_table_certificate(r);
+      r.finish();
+    }
   } catch (const nlohmann::json::exception& e) {
+    fail(path, std::string("run_meta is damaged: ") + e.what());
+  } catch (const std::invalid_argument& e) {
     fail(path, std::string("run_meta is damaged: ") + e.what());
   }
   return meta;

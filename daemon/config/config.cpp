@@ -13,6 +13,7 @@
 #include "daemon/config/password_hash.hpp"
 
 #include "core/json_reader.hpp"
+#include "core/table_json.hpp"
 
 namespace imucal::daemon {
 
@@ -62,6 +63,12 @@ void read_table(const json& j, DaemonConfig& c, std::vector<std::string>& proble
       if (const json* ax = l.get(motion::kAxisNames[a]))
         read_axis(*ax, l.at(motion::kAxisNames[a]), c.table_limits.axis[a], problems);
     }
+  }
+  // The table's own errors beside its limits, in the form meta.json has them (core reads both).
+  try {
+    c.table_certificate = table::read_table_certificate(r);
+  } catch (const std::invalid_argument& e) {
+    problems.push_back(e.what());
   }
 }
 

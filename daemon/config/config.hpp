@@ -123,6 +123,9 @@ struct DaemonConfig {
   std::string devices = "sim";
   std::optional<DeviceAddresses> device_addresses;  // set when `devices` named real devices
   motion::TableLimits table_limits;
+  // The table's certificate (`table.geometry`, `table.sigma`, `table.certificate`; formats.md
+  // `table`): the simulated bench moves with the geometry, and every run's meta records it.
+  std::optional<table::TableCertificate> table_certificate;
   ChamberLimits chamber;
   SimDefaults sim;
   SuspenderSettings suspenders;

@@ -217,6 +217,7 @@ class WireBench::ImuFacade final : public Imu {
     m.accel_lsb_mps = b_.addresses_.imu.link.accel_increment_lsb_mps();
     m.program_json = b_.program_.source_json;
     m.truth_json = b_.truth_json_;  // only a simulated IMU has a truth
+    m.table = b_.settings_.table;
     return m;
   }
 

@@ -56,6 +56,9 @@ struct WireBenchSettings {
   motion::TableLimits limits;  // the program's limits; the table controller gets them where the
                                // device configuration names none
   double home_timeout_s = 120.0;  // homing and repositioning must end within this
+  // The real table's certificate, recorded in the run's meta (the simulated devices of sim-wire
+  // are an ideal table: none).
+  std::optional<table::TableCertificate> table;
 };
 
 // sim-wire: what the simulated devices started by the bench simulate.

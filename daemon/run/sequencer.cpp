@@ -494,6 +494,7 @@ void Sequencer::run_campaign(std::int64_t id) {
     if (config_.devices == "sim") {
       SimBenchSettings sb;
       sb.sim.site = config_.site;
+      sb.sim.table = config_.table_certificate;  // the simulated table moves with the certificate's errors
       sb.sim.rate_hz = run.spec.rate_hz;
       sb.sim.seed = run.spec.seed;
       sb.time_scale = run.spec.time_scale;
@@ -511,6 +512,7 @@ void Sequencer::run_campaign(std::int64_t id) {
       if (config_.devices == "real") {
         // check_campaign refuses them already; a campaign stored under another configuration
         // is checked again above, so this cannot be reached with faults.
+        wb.table = config_.table_certificate;  // the real table's certificate, into the run's meta
         run.bench = std::make_unique<WireBench>(run.program, wb, *config_.device_addresses);
       } else {
         SimWireSettings sw;

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "core/units.hpp"
 #include "storage/run_db.hpp"
 
 namespace fs = std::filesystem;
@@ -207,4 +208,37 @@ TEST(Cli, ThermalSectionIsAppliedByNavigateAndTheNavigationStage) {
               rejected_with, rejected_without, without.status);
   EXPECT_GE(rejected_with, 0) << with.output;
   EXPECT_GT(rejected_without, 10 * rejected_with + 100) << without.output;
+}
+
+// simulate --table: the table moves with the certificate's geometry and the run records it;
+// calibrate applies the recording's geometry (an error-free IMU then calibrates to zero: the
+// ideal table's reference leaves arc seconds in its angles); export writes it into meta.json.
+TEST(Cli, SimulateOnAnImperfectTable) {
+  const fs::path d = fresh_dir("cli-table");
+  const std::string db = (d / "run.db").string();
+  // A recording's meta.json names the table too: the independent example's.
+  CliRun r = run("simulate --program direct-short --imu ideal --db " + db + " --rate 20 --seed 3 --table " +
+                 IMUCAL_TEST_DATA "/example-table/meta.json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("calibrate --db " + db + " --stage direct --out " + (d / "model.json").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  const imucal::ImuModel m = imucal::read_imu_model_file((d / "model.json").string());
+  for (const auto& [name, k] : imucal::kMisalignmentKeys) {
+    EXPECT_LT(std::abs(m.gyro.misalignment_rad.*k) * imucal::units::kRadToArcsec, 0.02) << name;
+    EXPECT_LT(std::abs(m.accel.misalignment_rad.*k) * imucal::units::kRadToArcsec, 0.02) << name;
+  }
+  r = run("export --db " + db + " --out " + (d / "bundle").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto meta = nlohmann::json::parse(std::ifstream(d / "bundle" / "meta.json"));
+  const auto given = nlohmann::json::parse(std::ifstream(IMUCAL_TEST_DATA "/example-table/meta.json"));
+  EXPECT_NEAR(meta.at("table").at("geometry").at("middle_axis_arcsec").at(0).get<double>(),
+              given.at("table").at("geometry").at("middle_axis_arcsec").at(0).get<double>(), 1e-12);
+  EXPECT_EQ(meta.at("table").at("certificate"), given.at("table").at("certificate"));
+
+  // A table file with a wrong value is refused with its path.
+  std::ofstream(d / "bad-table.json") << R"({"geometry": {"outer_tilt_arcsec": [1, "2"]}})";
+  r = run("simulate --program direct-short --imu ideal --db " + (d / "bad.db").string() + " --table " +
+          (d / "bad-table.json").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("geometry.outer_tilt_arcsec[1]"), std::string::npos) << r.output;
 }

@@ -4,8 +4,13 @@
 // within 3 of its own sigma.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
+
+#include <nlohmann/json.hpp>
 
 #include "independent_cases.hpp"
 
@@ -85,3 +90,52 @@ TEST(IndependentBundle, NoiseFreeBundleCalibratesExactly) {
   run_case(cfg, "independent-direct-noisefree", 30, tight, false);
 }
 
+
+// ---- an imperfect table (CONVENTIONS.md, "The table's own errors")
+
+namespace {
+
+// The largest |error| / limit over every stage-1 coefficient.
+double worst_ratio(const ImuModel& truth, const ImuModel& est) {
+  double worst = 0;
+  for (const auto& [group, w] : worst_errors(truth, est))
+    worst = std::max(worst, w.first / limit_of(group, calibtest::kStage1Limits));
+  return worst;
+}
+
+}  // namespace
+
+// The independent simulator's run on a table with a 2" leaning outer axis, 3" non-perpendicular
+// axes and 1" + 0.5" encoder harmonics (tests/data/example-table/README.md): the recording's
+// table.geometry, applied by the reference, brings stage 1 within its limits and its sigma.
+TEST(IndependentBundle, ImperfectTableCalibratesWithItsGeometry) {
+  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  const Outcome out = import_and_calibrate(IMUCAL_TEST_DATA "/example-table", "example-table");
+  const auto run = storage::RunDb::open(std::string(IMUCAL_TEST_TMP) + "/example-table.db");
+  ASSERT_TRUE(run.meta().table && run.meta().table->geometry) << "the import keeps the table's certificate";
+  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
+  calibtest::expect_within(truth, out.result.model, calibtest::kStage1Limits);
+  print_worst(truth, out.result.model);
+  std::printf("  worst error / limit with the table's geometry: %.3f\n", worst_ratio(truth, out.result.model));
+}
+
+// The same recording with its geometry deleted: the ideal table's reference misses the limits
+// many times over (14.5x when this test was written), which is what the geometry must remove.
+TEST(IndependentBundle, ImperfectTableMissesTheLimitsWithoutItsGeometry) {
+  const std::filesystem::path dir = std::filesystem::path(IMUCAL_TEST_TMP) / "example-table-no-geometry";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::filesystem::create_symlink(std::filesystem::absolute(IMUCAL_TEST_DATA "/example-table/frames.csv"),
+                                  dir / "frames.csv");
+  {
+    std::ifstream in(IMUCAL_TEST_DATA "/example-table/meta.json");
+    nlohmann::json meta = nlohmann::json::parse(in);
+    meta["table"].erase("geometry");
+    std::ofstream(dir / "meta.json") << meta.dump(1);
+  }
+  const Outcome out = import_and_calibrate(dir.string(), "example-table-no-geometry");
+  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
+  const double worst = worst_ratio(truth, out.result.model);
+  std::printf("  worst error / limit on the ideal table's reference: %.2f\n", worst);
+  EXPECT_GT(worst, 5.0);
+}

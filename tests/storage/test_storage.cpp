@@ -23,6 +23,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "core/table.hpp"
+#include "core/units.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
 
@@ -154,6 +156,31 @@ void expect_meta_equal(const RecordingMeta& e, const RecordingMeta& a) {
   }
   EXPECT_EQ(e.program_json, a.program_json);
   EXPECT_EQ(e.truth_json, a.truth_json);
+  // The table's certificate: radians inside, arc seconds in meta.json and in the run database,
+  // so a value comes back to within an ulp of the conversion, not bit for bit.
+  ASSERT_EQ(e.table.has_value(), a.table.has_value());
+  if (e.table) {
+    EXPECT_EQ(e.table->certificate, a.table->certificate);
+    for (const auto& [eg, ag] : {std::pair{&e.table->geometry, &a.table->geometry}, std::pair{&e.table->sigma, &a.table->sigma}}) {
+      ASSERT_EQ(eg->has_value(), ag->has_value());
+      if (!eg->has_value()) continue;
+      const table::TableGeometry &x = **eg, &y = **ag;
+      const auto near = [](double u, double v) { EXPECT_NEAR(u, v, 1e-15 * std::abs(u) + 1e-300) << u << " vs " << v; };
+      for (std::size_t i = 0; i < 2; ++i) {
+        near(x.outer_tilt_rad[i], y.outer_tilt_rad[i]);
+        near(x.middle_axis_rad[i], y.middle_axis_rad[i]);
+        near(x.inner_axis_rad[i], y.inner_axis_rad[i]);
+      }
+      for (std::size_t axis = 0; axis < 3; ++axis) {
+        ASSERT_EQ(x.encoder_error[axis].size(), y.encoder_error[axis].size());
+        for (std::size_t k = 0; k < x.encoder_error[axis].size(); ++k) {
+          EXPECT_EQ(x.encoder_error[axis][k].k, y.encoder_error[axis][k].k);
+          near(x.encoder_error[axis][k].amplitude_rad, y.encoder_error[axis][k].amplitude_rad);
+          near(x.encoder_error[axis][k].phase_rad, y.encoder_error[axis][k].phase_rad);
+        }
+      }
+    }
+  }
 }
 
 constexpr double kGyroLsbRad = 1e-11;
@@ -173,6 +200,16 @@ RecordingMeta simulated_meta() {
   meta.segments = {{"pos-01", "static", 0.0, 2.5}, {"rate-x+", "rate", 3.0, 9.75}};
   meta.program_json = R"({"segments": [ {"kind": "hold", "duration_s": 2.5} ]})";
   meta.truth_json = "{\n \"format\": \"imucal-imu-model/1\"\n}\n";
+  // An imperfect table's certificate (formats.md `table`), values and 1-sigma.
+  table::TableGeometry g, sigma;
+  g.outer_tilt_rad = {2.0 * units::kArcsecToRad, -1.0 / 3.0 * units::kArcsecToRad};
+  g.middle_axis_rad = {3.0 * units::kArcsecToRad, 0.0};
+  g.inner_axis_rad = {0.0, -2.5 * units::kArcsecToRad};
+  g.encoder_error[0] = {{1, 1.0 * units::kArcsecToRad, 0.3}, {2, 0.5 * units::kArcsecToRad, 1.7}};
+  g.encoder_error[2] = {{4, 0.25 * units::kArcsecToRad, -0.4}};
+  sigma.outer_tilt_rad = {0.2 * units::kArcsecToRad, 0.2 * units::kArcsecToRad};
+  sigma.encoder_error[0] = {{1, 0.1 * units::kArcsecToRad, 0.0}};
+  meta.table = table::TableCertificate{g, sigma, "TBL-7, 2026-03-01"};
   return meta;
 }
 
@@ -628,6 +665,12 @@ TEST_F(BundleTest, SimulatedRunSurvivesExportAndImportExactly) {
   EXPECT_FALSE(meta_json.at("site").contains("gravity_mps2"));
   EXPECT_EQ(meta_json.at("mount").at("r0_p_mm").at(0), 12.5);
   EXPECT_TRUE(meta_json.at("mount").contains("r0_p_m"));  // for the awkward third component
+  // The table's certificate as formats.md writes it: arc seconds, harmonics [k, a, phi_deg].
+  EXPECT_NEAR(meta_json.at("table").at("geometry").at("outer_tilt_arcsec").at(0).get<double>(), 2.0, 1e-12);
+  EXPECT_NEAR(meta_json.at("table").at("geometry").at("encoder_error_arcsec").at("outer").at(1).at(2).get<double>(),
+              1.7 * units::kRadToDeg, 1e-12);
+  EXPECT_NEAR(meta_json.at("table").at("sigma").at("outer_tilt_arcsec").at(1).get<double>(), 0.2, 1e-12);
+  EXPECT_EQ(meta_json.at("table").at("certificate"), "TBL-7, 2026-03-01");
   ASSERT_EQ(report.gaps.size(), 2U);  // the two gaps simulated_frames makes
   EXPECT_EQ(report.gaps[0].line, 4500 + 2);
   EXPECT_EQ(report.gaps[0].t1_ns, frames[4500].t_ns);
@@ -769,6 +812,22 @@ TEST_F(BundleTest, MetaKeysAnotherWriterAddedAreReadPastButANearMissIsRefused) {
   meta["mount"]["C_o_p"][1][2] = "0";
   std::ofstream(dir + "/meta.json") << meta.dump();
   expect_rejected(dir, {"meta.json: mount.C_o_p[1][2]: expected a number"});
+
+  // The table's certificate: another writer's keys beside ours are read past, but inside the
+  // geometry nothing is (a term of the table's error silently dropped is a wrong reference).
+  meta["mount"]["C_o_p"][1][2] = 0;
+  meta["table"] = {{"certificate", "TBL-7"}, {"lab_note", "re-levelled"}, {"geometry", {{"outer_tilt_arcsec", {1.0, 2.0}}}}};
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  const std::string table_db = temp_path("extended-table.db");
+  EXPECT_NO_THROW(import_bundle(dir, table_db));
+  EXPECT_TRUE(RunDb::open(table_db).meta().table->geometry.has_value());
+  meta["table"]["geometry"]["outer_tilt_arcsec"][1] = "2";
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: table.geometry.outer_tilt_arcsec[1]: must be a number, not a string"});
+  meta["table"]["geometry"]["outer_tilt_arcsec"][1] = 2.0;
+  meta["table"]["geometry"]["wobble_arcsec"] = {1.0, 1.0};
+  std::ofstream(dir + "/meta.json") << meta.dump();
+  expect_rejected(dir, {"meta.json: table.geometry: unknown key", "wobble_arcsec"});
 }
 
 TEST_F(BundleTest, UnwrapsTableAngles) {

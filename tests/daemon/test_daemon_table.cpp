@@ -1,0 +1,62 @@
+// The table's certificate in the daemon's configuration (issue 34): read beside the table's limits,
+// its problems listed with the rest, and written into every run's meta; the simulated bench moves
+// with its geometry.
+#include <gtest/gtest.h>
+
+#include "core/units.hpp"
+#include "service_fixture.hpp"
+#include "storage/run_db.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+const char* kTableConfig = R"({"table": {
+  "limits": {"middle": {"rate_dps": 200}},
+  "geometry": {"outer_tilt_arcsec": [2.0, 1.2], "middle_axis_arcsec": [3.0, -1.5], "inner_axis_arcsec": [2.1, -3.0],
+               "encoder_error_arcsec": {"outer": [[1, 1.0, 17.2], [2, 0.5, 34.4]], "middle": [[1, 1.0, 63.0]]}},
+  "sigma": {"outer_tilt_arcsec": [0.2, 0.2]},
+  "certificate": "TBL-7 of 2026-03-01"}})";
+
+}  // namespace
+
+TEST(Config, TheTablesCertificateStandsBesideItsLimits) {
+  const daemon::DaemonConfig c = daemon::parse_config(kTableConfig, "test");
+  EXPECT_DOUBLE_EQ(c.table_limits.axis[1].rate_dps, 200.0);
+  ASSERT_TRUE(c.table_certificate && c.table_certificate->geometry && c.table_certificate->sigma);
+  EXPECT_DOUBLE_EQ(c.table_certificate->geometry->outer_tilt_rad[0], 2.0 * units::kArcsecToRad);
+  EXPECT_EQ(c.table_certificate->geometry->encoder_error[0].size(), 2u);
+  EXPECT_EQ(c.table_certificate->certificate, "TBL-7 of 2026-03-01");
+  EXPECT_FALSE(daemon::parse_config("{}", "test").table_certificate.has_value());
+  try {
+    daemon::parse_config(R"({"table": {"geometry": {"outer_tilt_arcsec": [2, "x"]}}, "typo": 1})", "cfg.json");
+    FAIL() << "accepted a bad table geometry";
+  } catch (const daemon::ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("config.table.geometry.outer_tilt_arcsec[1]: must be a number"), std::string::npos) << m;
+    EXPECT_NE(m.find("unknown key \"typo\""), std::string::npos) << m;  // listed with the rest
+  }
+}
+
+TEST(Sequencer, ARunRecordsTheTablesCertificate) {
+  const daemon::DaemonConfig from_file = daemon::parse_config(kTableConfig, "test");
+  LocalDaemon d("table", false, [&](daemon::DaemonConfig& c) { c.table_certificate = from_file.table_certificate; });
+  const json spec = {{"name", "table"}, {"program", "direct-short"}, {"rate_hz", 50}, {"seed", 3},
+                     {"time_scale", 0},  {"truth", noisy_truth()},   {"estimators", {"direct"}}};
+  const auto id = d.post_campaign(spec);
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  const auto run = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read);
+  const RecordingMeta meta = run.meta();
+  ASSERT_TRUE(meta.table && meta.table->geometry);
+  EXPECT_EQ(meta.table->certificate, "TBL-7 of 2026-03-01");
+  // The simulated bench moved with the geometry: its encoders read the true angles with their errors.
+  const std::vector<ImuFrame> frames = run.read_frames();
+  ASSERT_FALSE(frames.empty());
+  const table::TableKinematics k = table_kinematics(meta);
+  const Eigen::Vector3d enc_rad = frames.front().table_deg * units::kDegToRad;
+  EXPECT_GT((k.true_angles_rad(enc_rad) - enc_rad).cwiseAbs().maxCoeff(), 0.1 * units::kArcsecToRad);
+  EXPECT_EQ(c.at("results").at("direct").at("status"), "done");
+}
