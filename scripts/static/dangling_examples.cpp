@@ -45,5 +45,6 @@ int g3() {
   auto n = make().at("a").size();  // ok
   std::vector<int> w = vec();
   auto s = std::span<const int>(w).subspan(1);  // ok
-  return (int)s.size() + (int)a.size() + (int)b.size() + (int)v.size() + e + (int)c.size() + (int)n + (p.begin() == p.end());
+  const int& last = *(w.end() - 1);  // ok
+  return last + (int)s.size() + (int)a.size() + (int)b.size() + (int)v.size() + e + (int)c.size() + (int)n + (p.begin() == p.end());
 }
