@@ -264,7 +264,8 @@ try {
   // ---- the session ends; imucald closes the WebSocket; signing in again keeps the form ----
   await page.fill('#c-name', 'browser test: direct-short (after sign-in)');
   await waitText(page, '#verdict', /^Refused/);
-  await page.evaluate(() => fetch('/api/logout', { method: 'POST' }));
+  // As the page's own requests: a change the cookie signs says it is JSON (docs/api.md).
+  await page.evaluate(() => fetch('/api/logout', { method: 'POST', headers: { 'Content-Type': 'application/json' } }));
   // Nothing is sent by the page: the daemon closes the live socket (code 4001) and the page asks.
   await page.waitForSelector('#reauth-dialog[open]', { timeout: 5000 });
   await waitText(page, '#live-indicator', /sign in again/);
