@@ -5,7 +5,10 @@
 // percent-encodings, long paths, repeated query keys; every method, every role, a browser's cookie
 // with odd types and origins. Most go to the router in process (Api::handle, what the server
 // calls: fast under ASan), a share over the real socket. Every reply must be a 2xx, or a 4xx whose
-// JSON body has a non-empty "error"; the daemon answers /api/health at the end.
+// JSON body has a non-empty "error"; the daemon answers /api/health at the end. Measured on the
+// suite's loaded 2-core machine: 15000 in process in 3.4-4.4 s and ~975 over the socket, 5-7 s in
+// all in release; 5.2 s and 7 s under ASan+UBSan (which found the fuzzer's own over-read of a
+// literal, case 10 below).
 #include <cstdlib>
 #include <random>
 
@@ -128,7 +131,11 @@ class Fuzzer {
       case 7: return "NaN";
       case 8: return pick_of<std::string>({"Infinity", "-Infinity", "1e999", "0x10", ""});
       case 9: return std::string(chance(0.15) ? (1 << 20) : 5000, 'x');
-      case 10: return std::string("\x01\x02\x1f\x7f tab\t nl\n", 16);
+      case 10: {
+        // Control characters, a NUL among them (the length is the array's, not strlen's).
+        static constexpr char kControl[] = "\x01\x02\x1f\x7f tab\t nl\n\0after";
+        return std::string(kControl, sizeof kControl - 1);
+      }
       case 11: return json::array({1, "two", nullptr});
       case 12: return json::object({{"k", word()}});
       case 13: return 0.5;
