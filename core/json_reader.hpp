@@ -17,6 +17,13 @@
 
 namespace imucal {
 
+// JSON text that cannot throw: a string that is not valid UTF-8 (a client's bytes echoed in a
+// message) is written with U+FFFD in place of the bad bytes. Every reply the daemon sends is
+// written by it (nlohmann's dump() throws type_error.316 there instead).
+inline std::string json_text(const nlohmann::json& value) {
+  return value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 class ObjectReader {
  public:
   // Throw std::invalid_argument(prefix + problem) at the first problem.

@@ -35,6 +35,15 @@ CampaignRunResult run_campaign_file(const std::string& campaign_file, const Camp
   config.sim.time_scale = 0.0;  // a regression run goes as fast as it can unless the campaign says otherwise
   config.operator_token = "campaign-run-local-operator";  // no HTTP here: keeps Auth from generating a token file
   config.queue_autostart = true;
+  // The campaign file is its author's, run on their machine: it may name model files by path.
+  config.campaign_file_paths = true;
+  try {
+    resolve_named_models(config);
+  } catch (const std::exception& e) {
+    out.exit_code = 2;
+    out.error = e.what();
+    return out;
+  }
 
   std::string text;
   {

@@ -10,6 +10,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
 #include "daemon/run/alarms.hpp"
 
@@ -76,6 +77,8 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
     lock_fd_ = -1;
     throw ConfigError("another imucald is using the data directory '" + config_.data_dir + "'");
   }
+  // The truths a campaign may name, read now: no request reads a file the client names.
+  resolve_named_models(config_);
   db_ = std::make_unique<DaemonDb>((fs::path(config_.data_dir) / "imucald.db").string());
   for (const auto id : db_->recover_after_restart("found active at start-up: the daemon stopped without parking it "
                                                   "(crash or power loss)")) {

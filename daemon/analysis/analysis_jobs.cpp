@@ -6,6 +6,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/json_reader.hpp"
+
 namespace imucal::daemon {
 
 using nlohmann::json;
@@ -23,8 +25,10 @@ struct AnalysisJobs::Job {
   Clock::time_point published_at{};
 };
 
-AnalysisJobs::AnalysisJobs(int threads, std::size_t kept_answers, std::function<void(const json&)> publish)
-    : publish_(std::move(publish)), kept_answers_(std::max<std::size_t>(1, kept_answers)) {
+AnalysisJobs::AnalysisJobs(int threads, std::size_t kept_answers, std::function<void(const json&)> publish,
+                           std::size_t max_pending)
+    : publish_(std::move(publish)), kept_answers_(std::max<std::size_t>(1, kept_answers)),
+      max_pending_(std::max<std::size_t>(1, max_pending)) {
   for (int i = 0; i < std::max(1, threads); ++i) threads_.emplace_back([this] { worker(); });
 }
 
@@ -85,6 +89,15 @@ AnalysisJobs::Answer AnalysisJobs::request(const Key& key, Compute compute) {
       a.pending = describe(*job);
       return a;  // joined: the job already queued or running answers both
     }
+    const auto pending = std::count_if(jobs_.begin(), jobs_.end(),
+                                       [](const auto& entry) { return entry.second->state != Job::State::Done; });
+    if (static_cast<std::size_t>(pending) >= max_pending_) {
+      a.ready = true;
+      a.status = 429;
+      a.body = json_text({{"error", "too many analyses under way (" + std::to_string(pending) +
+                                        "); ask again when one has finished"}});
+      return a;
+    }
     job = std::make_shared<Job>();
     job->key = key;
     job->compute = std::move(compute);
@@ -142,7 +155,7 @@ void AnalysisJobs::worker() {
     {
       std::lock_guard lock(mutex_);
       job->status = status;
-      job->body = body.dump();
+      job->body = json_text(body);
       job->state = Job::State::Done;
       job->progress = 1.0;
       job->compute = nullptr;

@@ -45,7 +45,10 @@ class AnalysisJobs {
   };
 
   // `publish`: each job's state and progress as it changes (the live WebSocket), from a job thread.
-  AnalysisJobs(int threads, std::size_t kept_answers, std::function<void(const nlohmann::json&)> publish);
+  // `max_pending`: jobs queued or computing at once; a request that would start one more is
+  // answered 429 at once (a client cannot pile up work, each job holding a run's worth of memory).
+  AnalysisJobs(int threads, std::size_t kept_answers, std::function<void(const nlohmann::json&)> publish,
+               std::size_t max_pending = 16);
   ~AnalysisJobs();  // running jobs are cancelled at their next progress report; queued ones dropped
   AnalysisJobs(const AnalysisJobs&) = delete;
   AnalysisJobs& operator=(const AnalysisJobs&) = delete;
@@ -62,6 +65,7 @@ class AnalysisJobs {
 
   std::function<void(const nlohmann::json&)> publish_;
   std::size_t kept_answers_;
+  std::size_t max_pending_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;
   bool stopping_ = false;

@@ -1,5 +1,7 @@
 #include "daemon/analysis/run_series.hpp"
 
+#include "core/number_text.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -45,8 +47,9 @@ json run_series_json(const storage::RunDb& run, SeriesRange range) {
   if (range.columns < 1 || range.columns > kMaxSeriesColumns)
     throw std::invalid_argument("points must be 1.." + std::to_string(kMaxSeriesColumns) + ", not " +
                                 std::to_string(range.columns));
-  if (!std::isfinite(range.from_s) || !std::isfinite(range.to_s) || range.from_s < 0)
-    throw std::invalid_argument("from_s and to_s must be finite, from_s >= 0");
+  if (!std::isfinite(range.from_s) || !std::isfinite(range.to_s) || range.from_s < 0 || range.from_s > kMaxSeriesTime_s ||
+      range.to_s > kMaxSeriesTime_s)
+    throw std::invalid_argument("from_s and to_s must be program seconds from 0 to " + number_text(kMaxSeriesTime_s));
   const auto last_ns = run.last_frame_t_ns();
   const double rate_hz = run.meta().rate_hz;
   json out = {{"format", "imucal-series/1"}, {"rate_hz", rate_hz}, {"columns", range.columns}};

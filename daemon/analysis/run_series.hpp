@@ -22,6 +22,9 @@ struct SeriesRange {
   int columns = 800;
 };
 inline constexpr int kMaxSeriesColumns = 4000;
+// The latest program time a range may name (about 115 days; a run is at most days long): its
+// nanoseconds must fit the recording's 64-bit time base.
+inline constexpr double kMaxSeriesTime_s = 1e7;
 
 // {"format": "imucal-series/1", "from_s", "to_s", "columns", "rate_hz",
 //  "t_s": [column starts], "frames": [frames per column],

@@ -5,7 +5,10 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <filesystem>
 #include <stdexcept>
+
+#include <spdlog/spdlog.h>
 
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
@@ -79,16 +82,43 @@ bool CampaignSpec::has_estimator(const std::string& estimator) const {
 
 namespace {
 
-// An IMU model given as "ideal", a file path, or an inline object.
-std::optional<ImuModel> read_model(const json& v, const std::string& where, std::vector<std::string>& problems) {
+// A string that names a file rather than a model: a client of the API names models, never paths
+// on the daemon's machine (a path could name /dev/zero, a FIFO or a secret).
+bool looks_like_path(const std::string& text) {
+  return text.find('/') != std::string::npos || text.find('\\') != std::string::npos || text.starts_with('.') ||
+         text.starts_with('~');
+}
+
+std::string named_model_list(const DaemonConfig& config) {
+  std::string list = "ideal";
+  for (const auto& [name, text] : config.named_models) list += ", " + name;
+  return list;
+}
+
+// An IMU model given as "ideal", a name of the truths folder, an inline object, or (imucal
+// campaign run only) a file path. A path from a client is a problem of form: `malformed`.
+std::optional<ImuModel> read_model(const json& v, const std::string& where, const DaemonConfig& config,
+                                   std::vector<std::string>& problems, bool& malformed) {
   try {
     if (v.is_string()) {
       const auto text = v.get<std::string>();
       if (text == "ideal") return ImuModel{};
-      return read_imu_model_file(text);
+      if (const auto it = config.named_models.find(text); it != config.named_models.end())
+        return imu_model_from_json_text(it->second, where + " '" + text + "'");
+      if (config.campaign_file_paths) return read_imu_model_file(text);
+      if (looks_like_path(text)) {
+        malformed = true;
+        problems.push_back(where + ": a path is not accepted; name a model of the daemon's truths folder (" +
+                           named_model_list(config) + ") or give the model inline as an object");
+      } else {
+        problems.push_back(where + ": no model named \"" + text + "\" (known: " + named_model_list(config) +
+                           "; the truths folder is " + config.sim.truths_dir + ")");
+      }
+      return std::nullopt;
     }
     if (v.is_object()) return imu_model_from_json_text(v.dump(), where);
-    problems.push_back(where + " must be \"ideal\", a path to an imucal-imu-model/1 file or a model object");
+    malformed = true;
+    problems.push_back(where + " must be \"ideal\", a model's name (the truths folder) or a model object");
   } catch (const std::exception& e) {
     problems.push_back(where + ": " + e.what());
   }
@@ -196,10 +226,19 @@ constexpr double kProfileToleranceMin_C = 5.0;
 
 // A chamber profile in the format of motion_programs/chamber.hpp (soaks, ramps, sets; a built-in
 // name or an inline object) as the daemon's set-point steps.
-void profile_steps(const json& spec, const std::string& where, ChamberProfile& profile,
-                   std::vector<std::string>& problems) {
+void profile_steps(const json& spec, const std::string& where, const DaemonConfig& config, ChamberProfile& profile,
+                   std::vector<std::string>& problems, bool& malformed) {
   motion::ChamberProfile p;
   try {
+    if (spec.is_string() && !config.campaign_file_paths && !motion::is_builtin_chamber(spec.get<std::string>())) {
+      std::string names;
+      for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
+      const bool path = looks_like_path(spec.get<std::string>());
+      malformed = malformed || path;
+      problems.push_back(where + (path ? ": a path is not accepted" : ": no built-in profile \"" + spec.get<std::string>() + "\"") +
+                         "; name a built-in profile (" + names + ") or give the profile inline as an object (docs/thermal.md)");
+      return;
+    }
     if (spec.is_string()) {
       p = motion::load_chamber_profile(spec.get<std::string>());
     } else if (spec.is_object()) {
@@ -232,7 +271,7 @@ void profile_steps(const json& spec, const std::string& where, ChamberProfile& p
 // `chamber`: {"setpoint_C", "tolerance_C", "steps": [...]} or {"profile": NAME|OBJECT,
 // "tolerance_C"}, or just the profile's name.
 void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
-                   std::vector<std::string>& problems) {
+                   std::vector<std::string>& problems, bool& malformed) {
   const ChamberLimits& lim = config.chamber;
   auto in_limits = [&](double c, const std::string& where) {
     if (c < lim.min_C || c > lim.max_C)
@@ -241,7 +280,7 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
   };
   std::string where_steps = "campaign.chamber.steps";
   if (j.is_string()) {
-    profile_steps(j, "campaign.chamber", profile, problems);
+    profile_steps(j, "campaign.chamber", config, profile, problems, malformed);
     where_steps = "campaign.chamber (profile '" + j.get<std::string>() + "')";
   } else {
     ObjectReader r(j, "campaign.chamber", problems);
@@ -254,7 +293,7 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
     if (named != nullptr && r.has("setpoint_C"))
       problems.push_back("campaign.chamber.setpoint_C: a profile starts at its own start_C");
     if (named != nullptr) {
-      profile_steps(*named, "campaign.chamber.profile", profile, problems);
+      profile_steps(*named, "campaign.chamber.profile", config, profile, problems, malformed);
       where_steps = "campaign.chamber.profile";
     }
     if (auto v = r.number("setpoint_C")) {
@@ -512,15 +551,17 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       problems.push_back("campaign.rate_hz: " + number_text(spec.rate_hz) + " Hz exceeds the limit of " +
                          number_text(config.campaign.max_rate_hz) + " Hz");
     if (truth != nullptr) {
-      if (auto m = read_model(*truth, "campaign.truth", problems)) spec.truth = *m;
-    } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", problems)) {
+      if (auto m = read_model(*truth, "campaign.truth", config, problems, check.malformed)) spec.truth = *m;
+    } else if (!config.default_truth_json.empty()) {
+      spec.truth = imu_model_from_json_text(config.default_truth_json, "config.sim.truth");
+    } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", config, problems, check.malformed)) {
       spec.truth = *m;
     }
     if (spec.truth.frame != "instrument") problems.push_back("campaign.truth must be in the instrument frame");
     if (nav_model != nullptr) {
       if (!spec.has_estimator("navigation"))
         problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
-      if (auto m = read_model(*nav_model, "campaign.navigation_model", problems)) spec.navigation_model = *m;
+      if (auto m = read_model(*nav_model, "campaign.navigation_model", config, problems, check.malformed)) spec.navigation_model = *m;
     }
     if (start_model != nullptr) {
       if (std::none_of(spec.estimators.begin(), spec.estimators.end(),
@@ -528,7 +569,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
         problems.push_back("campaign.model is given but no calibration estimator (direct, lever-arm, stage3) runs");
       if (start_model->is_number_integer()) {
         spec.start_model_campaign = start_model->get<std::int64_t>();
-      } else if (auto m = read_model(*start_model, "campaign.model", problems)) {
+      } else if (auto m = read_model(*start_model, "campaign.model", config, problems, check.malformed)) {
         spec.start_model = *m;
         if (m->frame != "instrument" && (spec.has_estimator("direct") || spec.has_estimator("lever-arm")))
           problems.push_back("campaign.model is in the " + m->frame +
@@ -536,9 +577,9 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       }
     }
     if (chamber != nullptr) {
-      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems);
+      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems, check.malformed);
     } else if (builtin_thermal) {
-      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems);
+      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems, check.malformed);
     }
     if (suspenders != nullptr) {
       ObjectReader s(*suspenders, "campaign.suspenders", problems);
@@ -566,7 +607,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
                            "(config.devices names their addresses)");
     }
   }
-  check.malformed = form_problems > 0;
+  check.malformed = check.malformed || form_problems > 0;  // or a path where a name is asked (above)
   if (!problems.empty()) return check;
 
   normalized["name"] = spec.name;
@@ -594,6 +635,47 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   spec.normalized = std::move(normalized);
   check.spec = std::move(spec);
   return check;
+}
+
+void resolve_named_models(DaemonConfig& config) {
+  namespace fs = std::filesystem;
+  config.named_models.clear();
+  const fs::path dir = fs::path(config.sim.truths_dir).is_absolute() ? fs::path(config.sim.truths_dir)
+                                                                     : fs::path(config.data_dir) / config.sim.truths_dir;
+  config.sim.truths_dir = dir.string();
+  std::error_code ec;
+  if (fs::is_directory(dir, ec)) {
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      const fs::path& p = entry.path();
+      const std::string name = p.stem().string();
+      if (p.extension() != ".json" || name.empty() || looks_like_path(name) || name == "ideal") continue;
+      // Regular files of a sane size only: a FIFO or a device in the folder must not hang or
+      // flood the daemon's start.
+      std::error_code fec;
+      if (!fs::is_regular_file(p, fec) || fs::file_size(p, fec) > kNamedModelMaxBytes || fec) {
+        spdlog::warn("truths folder: {} skipped (not a regular file of at most {} bytes)", p.string(), kNamedModelMaxBytes);
+        continue;
+      }
+      try {
+        config.named_models[name] = imu_model_to_json_text(read_imu_model_file(p.string()));
+      } catch (const std::exception& e) {
+        spdlog::warn("truths folder: {} skipped: {}", p.string(), e.what());
+      }
+    }
+  }
+  config.default_truth_json.clear();
+  const std::string& truth = config.sim.truth;
+  if (truth == "ideal") return;
+  if (const auto it = config.named_models.find(truth); it != config.named_models.end()) {
+    config.default_truth_json = it->second;
+    return;
+  }
+  try {
+    config.default_truth_json = imu_model_to_json_text(read_imu_model_file(truth));
+  } catch (const std::exception& e) {
+    throw ConfigError("config.sim.truth '" + truth + "': neither a model of the truths folder " + dir.string() +
+                      " nor a readable imucal-imu-model/1 file: " + e.what());
+  }
 }
 
 CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config) {

@@ -90,9 +90,18 @@ struct CampaignCheck {
 const std::vector<std::string>& known_estimators();
 
 // Parses and validates a campaign against the configuration (limits, defaults). Never throws for
-// bad input; reads truth and model files named in it.
+// bad input. Models are named (config.named_models) or inline; a path is a problem of form
+// (malformed) unless config.campaign_file_paths.
 CampaignCheck check_campaign(const nlohmann::json& campaign, const DaemonConfig& config);
 CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config);
+
+// The largest model file of the truths folder read (larger ones are skipped with a warning).
+inline constexpr std::uintmax_t kNamedModelMaxBytes = 1 << 20;
+// Reads the truths folder (config.sim.truths_dir, made absolute) into config.named_models and
+// sim.truth's model into default_truth_json, once, before any campaign is checked: afterwards
+// checking a campaign reads no file (unless campaign_file_paths). Throws ConfigError when
+// sim.truth names neither a model of the folder nor a readable file.
+void resolve_named_models(DaemonConfig& config);
 
 class DaemonDb;
 // Stores a checked campaign in state `created` with its unit's identity (the one way the API and

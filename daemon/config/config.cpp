@@ -91,6 +91,7 @@ void read_sim(const json& j, DaemonConfig& c, std::vector<std::string>& problems
   if (auto v = r.number_in("time_scale", 0, 1e6)) c.sim.time_scale = *v;
   if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) c.sim.seed = static_cast<std::uint64_t>(*v);
   if (auto v = r.string("truth")) c.sim.truth = *v;
+  if (auto v = r.string("truths_dir")) c.sim.truths_dir = *v;
   if (auto v = r.number_in("chamber_tau_s", 0.1, 1e5)) c.sim.chamber_tau_s = *v;
   if (auto v = r.number_in("home_time_s", 0, 3600)) c.sim.home_time_s = *v;
 }
@@ -115,6 +116,8 @@ void read_http(const json& j, DaemonConfig& c, std::vector<std::string>& problem
   if (auto v = r.number_in("session_idle_s", 10, 30 * 86400.0)) c.http.session_idle_s = *v;
   if (auto v = r.number_in("live_rate_hz", 0.1, 100)) c.http.live_rate_hz = *v;
   if (auto v = r.integer("live_queue", 1, 100000)) c.http.live_queue = *v;
+  if (auto v = r.integer("max_connections_per_client", 1, 100000)) c.http.max_connections_per_client = *v;
+  if (auto v = r.integer("max_analysis_jobs", 1, 10000)) c.http.max_analysis_jobs = *v;
   if (auto v = r.integer("threads", 1, 64)) c.http.threads = static_cast<int>(*v);
   if (auto v = r.string("web_dir")) c.http.web_dir = *v;
 }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -45,7 +46,10 @@ struct SimDefaults {
   double rate_hz = 100.0;
   double time_scale = 10.0;    // program seconds per wall second; 0: as fast as possible
   std::uint64_t seed = 1;
-  std::string truth = "ideal"; // "ideal" or a path to an imucal-imu-model/1 file
+  std::string truth = "ideal"; // "ideal", a truth's name (truths_dir) or a path to an imucal-imu-model/1 file
+  // The folder of the simulated truths a campaign may name (docs/api.md, "Campaign JSON"): every
+  // NAME.json in it; relative to the data directory.
+  std::string truths_dir = "truths";
   double chamber_tau_s = 20.0; // first-order time constant of the simulated chamber
   double home_time_s = 5.0;    // simulated homing time
 };
@@ -71,6 +75,11 @@ struct HttpConfig {
   double session_idle_s = 12 * 3600.0;
   double live_rate_hz = 10.0;
   std::int64_t live_queue = 64;  // messages per WebSocket client before the oldest are dropped
+  // Open connections (HTTP and WebSocket) from one address; more are answered 429 and closed. A
+  // browser opens about six per site and a socket per tab.
+  std::int64_t max_connections_per_client = 64;
+  // Analyses and plans waiting or computing at once (two compute, the rest wait); more are 429.
+  std::int64_t max_analysis_jobs = 16;
   int threads = 1;
   std::string web_dir;  // empty: ./web if it exists, else the source tree's web/
 };
@@ -138,6 +147,14 @@ struct DaemonConfig {
   bool queue_autostart = true;  // run queued campaigns after a restart without an operator
   ReferenceEquipment reference_equipment;
   CertificateConfig certificates;
+  // Filled by resolve_named_models (daemon/campaign/campaign.hpp) before any campaign is checked:
+  // the models of truths_dir by name and the default truth, read once so that no request reads a
+  // file (a client names a model, never a path on the daemon's machine).
+  std::map<std::string, std::string> named_models;  // name -> imucal-imu-model/1 JSON text
+  std::string default_truth_json;                   // sim.truth's model (empty: ideal)
+  // `imucal campaign run FILE`: the file's author runs it on their own machine, so its models and
+  // chamber profiles may also be files named by path. Never set by imucald.
+  bool campaign_file_paths = false;
 };
 
 // Parses the configuration; throws ConfigError listing every problem. `source` names it in messages.

@@ -40,7 +40,7 @@ namespace {
 HttpReply json_reply(int status, const json& body) {
   HttpReply r;
   r.status = status;
-  r.body = body.dump();
+  r.body = json_text(body);
   r.content_type = "application/json";
   r.headers.emplace_back("Cache-Control", "no-store");
   return r;
@@ -90,6 +90,14 @@ constexpr std::size_t kAnalysisAnswersKept = 60;  // 20 campaigns' three results
 
 json limit_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
+// Whether a Content-Type names JSON (`application/json`, any case, parameters such as charset aside).
+bool is_json_type(std::string_view content_type) {
+  std::string media;
+  for (const char c : content_type.substr(0, content_type.find(';')))
+    if (c != ' ' && c != '\t') media += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return media == "application/json";
+}
+
 // A JSON body for a command or a login: empty means {}. Only JSON content types are accepted, so
 // that a plain HTML form on another site cannot post to the API with the browser's cookie.
 std::optional<HttpReply> parse_body(const ApiRequest& request, json& out) {
@@ -97,18 +105,99 @@ std::optional<HttpReply> parse_body(const ApiRequest& request, json& out) {
     out = json::object();
     return std::nullopt;
   }
-  const std::string& ct = request.content_type;
-  if (!ct.empty() && ct.rfind("application/json", 0) != 0)
+  if (!request.content_type.empty() && !is_json_type(request.content_type))
     return error_reply(415, "Content-Type must be application/json");
   try {
     out = json::parse(request.body);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // Syntax, and numbers JSON allows but a double cannot hold (1e999: out_of_range.406).
     return error_reply(400, std::string("malformed JSON: ") + e.what());
   }
   return std::nullopt;
 }
 
+// 400 for a campaign of the wrong form (validate, plan, create alike).
+HttpReply malformed_campaign(const CampaignCheck& check) {
+  return error_reply(400, "malformed campaign: " + (check.problems.empty() ? std::string("not a JSON object") : check.problems.front()),
+                     {{"problems", check.problems}});
+}
+
+// Whether decoded URL text is UTF-8 (every string in a JSON reply must be): a percent escape may
+// decode to any byte.
+bool valid_utf8(std::string_view text) {
+  std::size_t i = 0;
+  while (i < text.size()) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    std::size_t more = 0;
+    std::uint32_t code = 0;
+    if (c < 0x80) {
+      ++i;
+      continue;
+    } else if ((c & 0xE0) == 0xC0) {
+      more = 1;
+      code = c & 0x1F;
+    } else if ((c & 0xF0) == 0xE0) {
+      more = 2;
+      code = c & 0x0F;
+    } else if ((c & 0xF8) == 0xF0) {
+      more = 3;
+      code = c & 0x07;
+    } else {
+      return false;
+    }
+    if (i + more >= text.size()) return false;  // cut short
+    for (std::size_t k = 1; k <= more; ++k) {
+      const auto d = static_cast<unsigned char>(text[i + k]);
+      if ((d & 0xC0) != 0x80) return false;
+      code = (code << 6) | (d & 0x3F);
+    }
+    // Overlong forms, surrogates and code points past U+10FFFF are not UTF-8.
+    static constexpr std::uint32_t kMin[4] = {0, 0x80, 0x800, 0x10000};
+    if (code < kMin[more] || (code >= 0xD800 && code <= 0xDFFF) || code > 0x10FFFF) return false;
+    i += more + 1;
+  }
+  return true;
+}
+
+// The token of an `Authorization: Bearer` header, if the request has one.
+std::optional<std::string_view> bearer_token(const ApiRequest& request) {
+  const std::string& a = request.authorization;
+  if (a.size() > 7 && (a.compare(0, 7, "Bearer ") == 0 || a.compare(0, 7, "bearer ") == 0))
+    return std::string_view(a).substr(7);
+  return std::nullopt;
+}
+
+// A state-changing request that the browser's session cookie authenticates must come from this
+// service's own pages: a same-origin Origin when there is one, and a JSON body type (which no
+// plain HTML form can send, and which makes a cross-site script's request ask first, CORS). A
+// Bearer token is no ambient credential: a request carrying one is not a browser's on its own.
+std::optional<HttpReply> cross_site_refusal(const ApiRequest& request) {
+  if (request.method == "GET" || request.method == "HEAD") return std::nullopt;
+  if (bearer_token(request) || session_from_cookie(request.cookie).empty()) return std::nullopt;
+  if (!request.origin.empty() && !same_origin(request.origin, request.host))
+    return error_reply(403, "cross-origin request refused: Origin '" + request.origin + "' is not this service ('" +
+                                request.host + "'); a request with the session cookie must come from imucald's own pages");
+  if (!is_json_type(request.content_type))
+    return error_reply(415, "a " + request.method + " with the session cookie needs Content-Type: application/json" +
+                                (request.content_type.empty() ? std::string(" (none given)") : " (not '" + request.content_type + "')"));
+  return std::nullopt;
+}
+
 }  // namespace
+
+bool same_origin(std::string_view origin, std::string_view host) {
+  for (const std::string_view scheme : {"http://", "https://"}) {
+    if (!origin.starts_with(scheme)) continue;
+    std::string_view authority = origin.substr(scheme.size());
+    if (authority.ends_with('/')) authority.remove_suffix(1);
+    if (authority.empty() || authority.size() != host.size()) return false;
+    for (std::size_t i = 0; i < host.size(); ++i)
+      if (std::tolower(static_cast<unsigned char>(authority[i])) != std::tolower(static_cast<unsigned char>(host[i])))
+        return false;
+    return true;
+  }
+  return false;  // "null" (a sandboxed page, a file) or another scheme
+}
 
 std::string session_from_cookie(const std::string& cookie_header) {
   const std::string key = std::string(kSessionCookie) + "=";
@@ -130,6 +219,10 @@ std::optional<Target> parse_target(const std::string& target) {
   for (const std::string segment : url->segments()) t.segments.push_back(segment);
   if (!t.segments.empty() && t.segments.back().empty()) t.segments.pop_back();
   for (const auto& param : url->params(boost::urls::encoding_opts(true))) t.query[param.key] = param.value;
+  // Decoded text goes into replies (an id, a serial in a message): it must be UTF-8.
+  if (!std::all_of(t.segments.begin(), t.segments.end(), valid_utf8)) return std::nullopt;
+  for (const auto& [key, value] : t.query)
+    if (!valid_utf8(key) || !valid_utf8(value)) return std::nullopt;
   return t;
 }
 
@@ -179,7 +272,8 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
   // Two threads: one long analysis (a 12 h thermal run) does not hold up every other.
   // The listener is called under its mutex, so that once set_event_listener({}) has returned no
   // job is still inside it (the HTTP server it points to may then go).
-  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); });
+  jobs_ = std::make_unique<AnalysisJobs>(2, kAnalysisAnswersKept, [this](const json& e) { broadcast(e); },
+                                         static_cast<std::size_t>(config.http.max_analysis_jobs));
   chamber_map_ = chamber_map_json(config);
   table_dialect_ = table_dialect_json(config);
   // Without a configuration file the sequence can only live in the data directory.
@@ -218,10 +312,7 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
 }
 
 std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow_query_token) {
-  const std::string& a = request.authorization;
-  if (a.size() > 7 && (a.compare(0, 7, "Bearer ") == 0 || a.compare(0, 7, "bearer ") == 0)) {
-    return auth_.from_token(std::string_view(a).substr(7));
-  }
+  if (const auto token = bearer_token(request)) return auth_.from_token(*token);
   if (const std::string sid = session_from_cookie(request.cookie); !sid.empty()) {
     if (auto p = auth_.from_session(sid)) return p;
   }
@@ -426,7 +517,9 @@ const std::vector<Api::Route>& Api::routes() {
 
 HttpReply Api::handle(const ApiRequest& request) {
   const auto target = parse_target(request.target);
-  if (!target) return error_reply(400, "malformed URL");
+  if (!target)
+    return error_reply(400, "malformed URL: a bad percent escape, or text that is not UTF-8 once decoded");
+  if (auto refused = cross_site_refusal(request)) return *refused;
   const std::string& path = target->path;
   const std::string& method = request.method;
   try {
@@ -475,6 +568,14 @@ HttpReply Api::handle(const ApiRequest& request) {
       call.id = *id;
     }
     return route.handle(*this, call);
+  } catch (const json::exception& e) {
+    // A value of the wrong type or range where a handler read the client's JSON: the client's
+    // problem, whichever handler met it (one place, not a check in each).
+    spdlog::warn("{} {}: refused: {}", method, path, e.what());
+    return error_reply(400, std::string("malformed request: ") + e.what());
+  } catch (const std::invalid_argument& e) {
+    spdlog::warn("{} {}: refused: {}", method, path, e.what());
+    return error_reply(400, std::string("malformed request: ") + e.what());
   } catch (const std::exception& e) {
     spdlog::error("{} {}: {}", method, path, e.what());
     return error_reply(500, std::string("internal error: ") + e.what());
@@ -495,7 +596,8 @@ HttpReply Api::login(const ApiRequest& request) {
   if (problems.empty() && !token && !(user && password))
     problems.push_back("body must hold {\"user\", \"password\"} or {\"token\"}");
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
-  const Auth::Login l = token ? auth_.login_token(*token) : auth_.login_password(*user, *password);
+  const Auth::Login l = token ? auth_.login_token(*token, request.client)
+                                : auth_.login_password(*user, *password, request.client);
   if (l.status != 200) return error_reply(l.status, l.error);
   HttpReply r = json_reply(200, {{"user", l.principal.user}, {"role", to_string(l.principal.role)},
                                  {"idle_timeout_s", auth_.idle_timeout_s()}});
@@ -570,6 +672,8 @@ HttpReply Api::validate_campaign(const ApiRequest& request) {
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
   const CampaignCheck check = check_campaign(body, config_);
+  // Not a campaign at all, or one naming a path: refused as for creation, not judged.
+  if (check.malformed) return malformed_campaign(check);
   json segments = json::array();
   for (const auto& s : check.segments)
     segments.push_back({{"name", s.name}, {"kind", s.kind}, {"t0_s", s.t0_s}, {"t1_s", s.t1_s}});
@@ -583,9 +687,7 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
   const CampaignCheck check = check_campaign(body, config_);
-  if (check.malformed) {
-    return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
-  }
+  if (check.malformed) return malformed_campaign(check);
   if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
   const CampaignSpec& spec = *check.spec;
   const auto who = authenticate(request, false);
@@ -599,6 +701,7 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
 HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
+  if (!body.is_object()) return error_reply(400, "the limits must be a JSON object {\"format\": \"imucal-limits/1\", ...}");
   body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
   try {
     limits_.replace(body);
@@ -858,16 +961,28 @@ std::string Api::run_path(const CampaignRow& row) const {
   return (std::filesystem::path(config_.data_dir) / row.run_db).string();
 }
 
+std::optional<HttpReply> Api::no_recording(const CampaignRow& row, const std::string& prefix) const {
+  if (row.run_db.empty())
+    return error_reply(404, prefix + "campaign " + std::to_string(row.id) + " has no recording (it was never started)");
+  // Named when the run starts, written from its first frame: a run that failed before it (or
+  // one starting this instant) has none yet.
+  std::error_code ec;
+  if (!std::filesystem::exists(run_path(row), ec))
+    return error_reply(404, prefix + "campaign " + std::to_string(row.id) + " has no recording yet (state " +
+                                std::string(to_string(row.state)) + ")");
+  return std::nullopt;
+}
+
 HttpReply Api::campaign_recording(std::int64_t id, bool head) {
   namespace fs = std::filesystem;
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  if (row->run_db.empty())
-    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  // Queued or active first: a queued run has no run file yet, but it will (409, not 404).
   if (is_active(row->state) || row->state == RunState::Queued)
     return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) +
                                 ": its recording can be downloaded when the run has ended",
                        {{"state", to_string(row->state)}});
+  if (auto none = no_recording(*row)) return *none;
   const std::string name = "campaign-" + std::to_string(id) + "-recording";
   const fs::path dir = fs::path(config_.data_dir) / "exports";
   const fs::path tar = dir / (name + ".tar");
@@ -944,8 +1059,7 @@ void Api::broadcast(const json& message) {
 HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std::string>& query) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  if (row->run_db.empty())
-    return error_reply(404, "campaign " + std::to_string(id) + " has no recording (it was never started)");
+  if (auto none = no_recording(*row)) return *none;
   SeriesRange range;
   // A query value that is not a number is named, not read as 0.
   for (const auto& [key, target] : {std::pair<const char*, double*>{"from_s", &range.from_s}, {"to_s", &range.to_s}}) {
@@ -955,6 +1069,9 @@ HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std:
     if (!seconds) return error_reply(400, std::string(key) + " must be a number of seconds, not '" + it->second + "'");
     *target = *seconds;
   }
+  // An empty range asked for is the client's mistake (to_s <= from_s otherwise means "to the end").
+  if (query.contains("to_s") && range.to_s <= range.from_s)
+    return error_reply(400, "to_s (" + query.at("to_s") + ") must be after from_s (" + number_text(range.from_s) + ")");
   if (const auto it = query.find("points"); it != query.end()) {
     const auto v = parse_id(it->second);
     if (!v || *v < 1 || *v > kMaxSeriesColumns)
@@ -979,12 +1096,11 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   const std::string label = what == "allan" ? "Allan deviation" : what == "thermal" ? "thermal plots" : "Schuler test";
-  if (row->run_db.empty())
-    return error_reply(404, "not available for this run: campaign " + std::to_string(id) + " was never started");
   if (is_active(row->state) || row->state == RunState::Queued)
     return error_reply(409, "campaign " + std::to_string(id) + " is " + std::string(to_string(row->state)) + ": the " +
                                 label + " is computed when the run has ended",
                        {{"state", to_string(row->state)}});
+  if (auto none = no_recording(*row, "not available for this run: ")) return *none;
   // A job off the I/O thread (AnalysisJobs): the row is copied, the request answered at once.
   auto compute = [this, id, what, row = *row](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
     const std::string path = run_path(row);
@@ -1050,6 +1166,7 @@ HttpReply Api::job_reply(const AnalysisJobs::Answer& a) {
   if (a.ready) {
     HttpReply r = json_reply(a.status, json::object());
     r.body = a.body;
+    if (a.status == 429) r.headers.emplace_back("Retry-After", "5");
     return r;
   }
   // 202: computing (or queued); ask again. The live WebSocket carries the same progress.
@@ -1073,7 +1190,7 @@ HttpReply Api::plan_campaign(const ApiRequest& request) {
     if (!options.is_object()) return error_reply(400, "plan must be an object");
   }
   const CampaignCheck check = check_campaign(body, config_);
-  if (check.malformed) return error_reply(400, "malformed campaign: " + check.problems.front(), {{"problems", check.problems}});
+  if (check.malformed) return malformed_campaign(check);
   if (!check.spec) return error_reply(422, "campaign is invalid", {{"problems", check.problems}});
   ImuModel unit = check.spec->truth;
   double rate_hz = 20.0;
@@ -1098,8 +1215,8 @@ HttpReply Api::plan_campaign(const ApiRequest& request) {
   };
   AnalysisJobs::Key key;
   key.analysis = "plan";
-  key.state = json{{"campaign", check.spec->normalized}, {"plan", {{"rate_hz", rate_hz},
-              {"arw", unit.gyro.noise.arw_rad_rts}, {"vrw", unit.accel.noise.vrw_mps_rts}}}}.dump();
+  key.state = json_text(json{{"campaign", check.spec->normalized}, {"plan", {{"rate_hz", rate_hz},
+              {"arw", unit.gyro.noise.arw_rad_rts}, {"vrw", unit.accel.noise.vrw_mps_rts}}}});
   return job_reply(jobs_->request(key, std::move(compute)));
 }
 

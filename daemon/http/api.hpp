@@ -11,6 +11,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -33,7 +34,14 @@ struct ApiRequest {
   std::string cookie;
   std::string content_type;
   std::string body;
+  std::string origin;  // the Origin header (browsers send it on cross-site and on most non-GET requests)
+  std::string host;    // the Host header
+  std::string client;  // the peer's address (empty in-process): sign-in throttling is per client
 };
+
+// Whether an Origin header names the service the Host header names (scheme aside): a browser's
+// request from another site carries that site's origin.
+bool same_origin(std::string_view origin, std::string_view host);
 
 inline constexpr const char* kSessionCookie = "imucal_session";
 
@@ -75,6 +83,8 @@ class Api {
   // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
   HttpReply campaign_analysis(std::int64_t id, const std::string& what);
   std::string run_path(const CampaignRow& row) const;
+  // 404 naming why when the campaign has no run file (never started, or not written yet).
+  std::optional<HttpReply> no_recording(const CampaignRow& row, const std::string& prefix = "") const;
   HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);
   HttpReply campaign_report(std::int64_t id);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,

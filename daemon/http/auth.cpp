@@ -15,7 +15,11 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 constexpr std::size_t kMaxSessions = 1000;
-constexpr int kMaxFailuresPerMinute = 5;
+constexpr int kMaxFailuresPerClientPerMinute = 5;
+// Higher than a client's: guesses at one name spread over many addresses are throttled too, while
+// one client's five do not lock that user out for everyone else.
+constexpr int kMaxFailuresPerUserPerMinute = 20;
+constexpr std::size_t kMaxThrottleKeys = 10000;  // beyond: the stale keys are dropped
 }  // namespace
 
 std::string random_token_hex() {
@@ -98,13 +102,30 @@ std::optional<Principal> Auth::from_session(std::string_view session_id) {
   return p;
 }
 
-bool Auth::throttled() {
+bool Auth::throttled(const std::vector<std::pair<std::string, int>>& keys_and_limits) {
   const auto now = Clock::now();
-  while (!failures_.empty() && now - failures_.front() > std::chrono::minutes(1)) failures_.pop_front();
-  return static_cast<int>(failures_.size()) >= kMaxFailuresPerMinute;
+  for (const auto& [key, limit] : keys_and_limits) {
+    const auto it = failures_.find(key);
+    if (it == failures_.end()) continue;
+    auto& times = it->second;
+    while (!times.empty() && now - times.front() > std::chrono::minutes(1)) times.pop_front();
+    if (static_cast<int>(times.size()) >= limit) return true;
+  }
+  return false;
 }
 
-void Auth::failed() { failures_.push_back(Clock::now()); }
+void Auth::failed(const std::vector<std::pair<std::string, int>>& keys_and_limits) {
+  const auto now = Clock::now();
+  if (failures_.size() >= kMaxThrottleKeys)
+    std::erase_if(failures_, [&](const auto& entry) {
+      return entry.second.empty() || now - entry.second.back() > std::chrono::minutes(1);
+    });
+  for (const auto& [key, limit] : keys_and_limits) {
+    auto& times = failures_[key];
+    times.push_back(now);
+    while (static_cast<int>(times.size()) > limit) times.pop_front();  // the limit is all that is asked
+  }
+}
 
 Auth::Login Auth::start_session(const Principal& p) {
   const auto now = Clock::now();
@@ -138,11 +159,13 @@ const std::string& unknown_user_hash() {
 }
 }  // namespace
 
-Auth::Login Auth::login_password(const std::string& user, const std::string& password) {
+Auth::Login Auth::login_password(const std::string& user, const std::string& password, const std::string& client) {
+  const std::vector<std::pair<std::string, int>> keys = {{"client " + client, kMaxFailuresPerClientPerMinute},
+                                                         {"user " + user, kMaxFailuresPerUserPerMinute}};
   std::vector<UserEntry> candidates;
   {
     std::lock_guard lock(mutex_);
-    if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
+    if (throttled(keys)) return {429, "too many failed sign-ins; wait a minute", {}, {}};
     for (const UserEntry& u : users_)
       if (!u.password_hash.empty() && constant_time_equal(u.name, user)) candidates.push_back(u);
   }
@@ -154,18 +177,19 @@ Auth::Login Auth::login_password(const std::string& user, const std::string& pas
   if (candidates.empty()) (void)verify_password(unknown_user_hash(), password);
   std::lock_guard lock(mutex_);
   if (match == nullptr) {
-    failed();
+    failed(keys);
     return {401, "wrong user or password", {}, {}};
   }
   return start_session({match->name, match->role, "session", ""});
 }
 
-Auth::Login Auth::login_token(const std::string& token) {
+Auth::Login Auth::login_token(const std::string& token, const std::string& client) {
+  const std::vector<std::pair<std::string, int>> keys = {{"client " + client, kMaxFailuresPerClientPerMinute}};
   std::lock_guard lock(mutex_);
-  if (throttled()) return {429, "too many failed sign-ins; wait a minute", {}, {}};
+  if (throttled(keys)) return {429, "too many failed sign-ins; wait a minute", {}, {}};
   const auto p = from_token(token);
   if (!p) {
-    failed();
+    failed(keys);
     return {401, "unknown token", {}, {}};
   }
   return start_session(*p);

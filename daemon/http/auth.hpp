@@ -47,8 +47,11 @@ class Auth {
     std::string session_id;
     Principal principal;
   };
-  Login login_password(const std::string& user, const std::string& password);
-  Login login_token(const std::string& token);
+  // Failed sign-ins are throttled per client address (`client`, empty in-process) and per user
+  // name, never globally: one client guessing locks out only itself (and, past a larger count
+  // from any clients, the name it guesses at).
+  Login login_password(const std::string& user, const std::string& password, const std::string& client = "");
+  Login login_token(const std::string& token, const std::string& client = "");
   void logout(std::string_view session_id);
   // Whether the session still exists and has not expired; unlike from_session() this is not a
   // use (an open WebSocket does not keep its session alive).
@@ -61,8 +64,10 @@ class Auth {
     std::chrono::steady_clock::time_point last_use;
   };
   Login start_session(const Principal& p);
-  bool throttled();
-  void failed();
+  // Whether the failures counted under these keys (within the last minute) reach their limits;
+  // mutex_ held.
+  bool throttled(const std::vector<std::pair<std::string, int>>& keys_and_limits);
+  void failed(const std::vector<std::pair<std::string, int>>& keys_and_limits);
 
   struct TokenEntry {
     std::string token;
@@ -75,7 +80,8 @@ class Auth {
 
   std::mutex mutex_;
   std::map<std::string, Session, std::less<>> sessions_;
-  std::deque<std::chrono::steady_clock::time_point> failures_;
+  // Failed sign-ins of the last minute by "client ADDRESS" and "user NAME".
+  std::map<std::string, std::deque<std::chrono::steady_clock::time_point>, std::less<>> failures_;
 };
 
 }  // namespace imucal::daemon

@@ -3,6 +3,7 @@
 #include <atomic>
 #include <chrono>
 #include <deque>
+#include <map>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -16,6 +17,8 @@
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 #include <spdlog/spdlog.h>
+
+#include "core/json_reader.hpp"
 
 namespace imucal::daemon {
 
@@ -33,6 +36,7 @@ constexpr std::size_t kWsMessageLimitBytes = 4096;  // clients send nothing of i
 
 class LiveSession;
 class HttpSession;
+class ClientSlot;
 
 struct HttpServer::Impl {
   Impl(const HttpConfig& c, Api& a, Sequencer& s, const StaticFiles& f)
@@ -44,7 +48,12 @@ struct HttpServer::Impl {
   void register_live(const std::shared_ptr<LiveSession>& s);
   void register_http(const std::shared_ptr<HttpSession>& s);
   void close_ended_sessions();
+  // A slot for one more connection from `client`, or nothing when it has max_connections_per_client.
+  std::shared_ptr<ClientSlot> take_slot(const std::string& client);
 
+  // First, so that they outlive the io_context: a session its destruction drops gives back its slot.
+  std::mutex slots_mutex;
+  std::map<std::string, std::int64_t> connections_by_client;  // open connections per address
   HttpConfig config;
   Api& api;
   Sequencer& sequencer;
@@ -63,6 +72,37 @@ struct HttpServer::Impl {
   std::uint64_t ticks = 0;  // telemetry ticks (timer handler only)
 };
 
+// One open connection of a client, counted while it lives (the HTTP session holds it, then the
+// WebSocket it becomes).
+class ClientSlot {
+ public:
+  ClientSlot(HttpServer::Impl& server, std::string client) : server_(server), client_(std::move(client)) {}
+  ~ClientSlot() {
+    std::lock_guard lock(server_.slots_mutex);
+    if (const auto it = server_.connections_by_client.find(client_);
+        it != server_.connections_by_client.end() && --it->second <= 0)
+      server_.connections_by_client.erase(it);
+  }
+  ClientSlot(const ClientSlot&) = delete;
+  ClientSlot& operator=(const ClientSlot&) = delete;
+  const std::string& client() const { return client_; }
+
+ private:
+  HttpServer::Impl& server_;
+  std::string client_;
+};
+
+std::shared_ptr<ClientSlot> HttpServer::Impl::take_slot(const std::string& client) {
+  std::lock_guard lock(slots_mutex);
+  std::int64_t& n = connections_by_client[client];
+  if (n >= config.max_connections_per_client) {
+    if (n == 0) connections_by_client.erase(client);
+    return nullptr;
+  }
+  ++n;
+  return std::make_shared<ClientSlot>(*this, client);
+}
+
 // Close code of a live socket whose session has ended (4000-4999: for applications).
 constexpr std::uint16_t kCloseSessionEnded = 4001;
 
@@ -71,7 +111,8 @@ constexpr std::uint16_t kCloseSessionEnded = 4001;
 
 class LiveSession : public std::enable_shared_from_this<LiveSession> {
  public:
-  LiveSession(tcp::socket&& socket, HttpServer::Impl& server) : ws_(std::move(socket)), server_(server) {}
+  LiveSession(tcp::socket&& socket, HttpServer::Impl& server, std::shared_ptr<ClientSlot> slot)
+      : ws_(std::move(socket)), server_(server), slot_(std::move(slot)) {}
 
   void run(http::request<http::string_body> request, const Principal& who) {
     role_ = to_string(who.role);
@@ -121,7 +162,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
     if (ec) return;
     server_.register_live(shared_from_this());
     const json hello = {{"type", "hello"}, {"role", role_}, {"telemetry_hz", server_.config.live_rate_hz}};
-    queue_.push_back(std::make_shared<const std::string>(hello.dump()));
+    queue_.push_back(std::make_shared<const std::string>(json_text(hello)));
     write_next();
     do_read();
   }
@@ -177,6 +218,7 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
   std::uint64_t dropped_ = 0;
   std::string role_;
   std::string session_id_;
+  std::shared_ptr<ClientSlot> slot_;  // counted against its client's connections while open
 };
 
 // ------------------------------------------------------------------------------------------------
@@ -184,7 +226,8 @@ class LiveSession : public std::enable_shared_from_this<LiveSession> {
 
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(tcp::socket&& socket, HttpServer::Impl& server) : stream_(std::move(socket)), server_(server) {}
+  HttpSession(tcp::socket&& socket, HttpServer::Impl& server, std::shared_ptr<ClientSlot> slot)
+      : stream_(std::move(socket)), server_(server), slot_(std::move(slot)) {}
 
   void run() {
     server_.register_http(shared_from_this());
@@ -239,25 +282,35 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       }
       ApiRequest ar = to_api_request(req);
       const auto who = server_.api.authenticate(ar, true);
+      // A page of another site may open a WebSocket with this site's cookie (browsers do not
+      // apply CORS to it): a socket the cookie signs in must come from imucald's own pages.
+      if (who && who->via == "session" && !ar.origin.empty() && !same_origin(ar.origin, ar.host)) {
+        send(json_response(http::status::forbidden, req.version(), false,
+                           "cross-origin WebSocket refused: Origin '" + ar.origin + "' is not this service ('" + ar.host + "')"));
+        return;
+      }
       if (!who || server_.stopping) {
         send(json_response(who ? http::status::service_unavailable : http::status::unauthorized, req.version(), false,
                            who ? "the daemon is shutting down" : "authentication required"));
         return;
       }
       stream_.expires_never();  // the WebSocket has its own timeouts
-      std::make_shared<LiveSession>(stream_.release_socket(), server_)->run(std::move(req), *who);
+      std::make_shared<LiveSession>(stream_.release_socket(), server_, slot_)->run(std::move(req), *who);
       return;
     }
     respond(req);
   }
 
-  static ApiRequest to_api_request(const http::request<http::string_body>& req) {
+  ApiRequest to_api_request(const http::request<http::string_body>& req) const {
     ApiRequest ar;
     ar.method = std::string(req.method_string());
     ar.target = std::string(req.target());
     ar.authorization = std::string(req[http::field::authorization]);
     ar.cookie = std::string(req[http::field::cookie]);
     ar.content_type = std::string(req[http::field::content_type]);
+    ar.origin = std::string(req[http::field::origin]);
+    ar.host = std::string(req[http::field::host]);
+    ar.client = slot_ ? slot_->client() : std::string();
     ar.body = req.body();
     return ar;
   }
@@ -268,7 +321,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     res.set(http::field::server, "imucald");
     res.set(http::field::content_type, "application/json");
     res.set(http::field::cache_control, "no-store");
-    res.body() = json{{"error", message}}.dump();
+    res.body() = json_text({{"error", message}});
     res.keep_alive(keep_alive);
     res.prepare_payload();
     return res;
@@ -285,7 +338,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
                                 std::string(req[http::field::if_none_match]), false);
     } else {
       reply.status = 405;
-      reply.body = json{{"error", std::string(req.method_string()) + " is not allowed on " + target}}.dump();
+      reply.body = json_text({{"error", std::string(req.method_string()) + " is not allowed on " + target}});
       reply.headers.emplace_back("Allow", "GET, HEAD");
     }
     return reply;
@@ -361,6 +414,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   HttpServer::Impl& server_;
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
+  std::shared_ptr<ClientSlot> slot_;  // counted against its client's connections while open
 };
 
 // ------------------------------------------------------------------------------------------------
@@ -399,7 +453,24 @@ void HttpServer::Impl::accept() {
       if (ec == net::error::operation_aborted || stopping) return;
       spdlog::warn("http: accept: {}", ec.message());
     } else {
-      std::make_shared<HttpSession>(std::move(socket), *this)->run();
+      beast::error_code peer_ec;
+      const auto peer = socket.remote_endpoint(peer_ec);
+      const std::string client = peer_ec ? std::string("?") : peer.address().to_string();
+      if (auto slot = take_slot(client)) {
+        std::make_shared<HttpSession>(std::move(socket), *this, std::move(slot))->run();
+      } else {
+        // Over its bound: told so in a few bytes (which fit any socket buffer), then closed.
+        static const std::string refusal = [] {
+          const std::string body = json_text({{"error", "too many connections from this address; close some and retry"}});
+          return "HTTP/1.1 429 Too Many Requests\r\nContent-Type: application/json\r\nConnection: close\r\n"
+                 "Content-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body;
+        }();
+        beast::error_code ignored;
+        socket.non_blocking(true, ignored);
+        socket.write_some(net::buffer(refusal), ignored);
+        socket.shutdown(tcp::socket::shutdown_both, ignored);
+        socket.close(ignored);
+      }
     }
     if (!stopping) accept();
   });
@@ -435,7 +506,7 @@ void HttpServer::Impl::tick_telemetry() {
       t["type"] = "telemetry";
       t["seq"] = ++seq;
       t["t"] = iso8601_utc(now_unix_ms());
-      send_to_all(std::make_shared<const std::string>(t.dump()));
+      send_to_all(std::make_shared<const std::string>(json_text(t)));
     }
     tick_telemetry();
   });
@@ -484,7 +555,7 @@ void HttpServer::broadcast_event(const json& event) {
   json e = event;
   e["seq"] = ++s.seq;
   e["t"] = iso8601_utc(now_unix_ms());
-  s.send_to_all(std::make_shared<const std::string>(e.dump()));
+  s.send_to_all(std::make_shared<const std::string>(json_text(e)));
 }
 
 void HttpServer::stop() {

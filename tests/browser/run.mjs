@@ -77,6 +77,8 @@ fs.writeFileSync(path.join(tmp, 'imucald.json'), JSON.stringify({
   // Only hashes go into a configuration: made by `imucal passwd` (beside imucald), as a lab would.
   users: [{ name: VIEWER.user, role: 'viewer', password_hash: passwordHash(VIEWER.password) }],
   http: { web_dir: webDir },
+  // The truths a campaign may name: examples/truth-nav-grade.json is "truth-nav-grade".
+  sim: { truths_dir: path.join(repo, 'examples') },
 }, null, 1));
 
 // ---- the daemon ---------------------------------------------------------------------------------
@@ -262,7 +264,8 @@ try {
   // ---- the session ends; imucald closes the WebSocket; signing in again keeps the form ----
   await page.fill('#c-name', 'browser test: direct-short (after sign-in)');
   await waitText(page, '#verdict', /^Refused/);
-  await page.evaluate(() => fetch('/api/logout', { method: 'POST' }));
+  // As the page's own requests: a change the cookie signs says it is JSON (docs/api.md).
+  await page.evaluate(() => fetch('/api/logout', { method: 'POST', headers: { 'Content-Type': 'application/json' } }));
   // Nothing is sent by the page: the daemon closes the live socket (code 4001) and the page asks.
   await page.waitForSelector('#reauth-dialog[open]', { timeout: 5000 });
   await waitText(page, '#live-indicator', /sign in again/);
@@ -611,7 +614,7 @@ try {
   // when the checks below look at them on a loaded machine (at 1000x the run, 30 s, once ended first).
   await page.fill('#c-time-scale', '300');
   await page.selectOption('#c-truth-kind', 'path');
-  await page.fill('#c-truth-path', path.join(repo, 'examples', 'truth-nav-grade.json'));
+  await page.fill('#c-truth-path', 'truth-nav-grade');
   await waitText(page, '#verdict', /^Valid/, 30000);
   // The prediction beside the program (issue 16): every coefficient's 1-sigma against the seed's
   // targets, stage 3's where it refines stage 1.

@@ -47,7 +47,8 @@ json campaign(const std::string& name, double time_scale) {
           {"rate_hz", 50},
           {"seed", 11},
           {"time_scale", time_scale},
-          {"truth", IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"},
+          // Inline: a campaign names a truth of the daemon's truths folder or carries it, never a path.
+          {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"))},
           {"model", start_model()},
           {"estimators", {"stage3"}}};
 }

@@ -28,8 +28,9 @@ int run_imucal(const std::vector<std::string>& args, const fs::path& log) {
 }  // namespace
 
 TEST(DaemonFull, TheFullCampaignRunsEveryStageOnlineAndMatchesTheCommandLine) {
-  LocalDaemon d("full");
-  const std::string truth = IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json";
+  // The truth by name from a truths folder (a campaign names no path): examples/truth-nav-grade.json.
+  LocalDaemon d("full", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = IMUCAL_SOURCE_DIR "/examples"; });
+  const std::string truth = "truth-nav-grade";
   const auto id = d.post_campaign({{"name", "lab"}, {"program", "full"}, {"truth", truth}, {"rate_hz", 100},
                                    {"time_scale", 0}});
   const json stored = d.campaign(id);
@@ -49,7 +50,7 @@ TEST(DaemonFull, TheFullCampaignRunsEveryStageOnlineAndMatchesTheCommandLine) {
   EXPECT_EQ(results.at("stage3").at("model").at("frame"), "body");
   // Stage 3's model against the truth: every coefficient within stage 3's limits (three times the
   // seed's 1-sigma, docs/stage3.md).
-  const ImuModel truth_body = direct::to_body_frame(read_imu_model_file(truth));
+  const ImuModel truth_body = direct::to_body_frame(read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"));
   const ImuModel stage3 = imu_model_from_json_text(results.at("stage3").at("model").dump(), "stage 3's model");
   EXPECT_LE(navcaltest::expect_stage3_limits(truth_body, stage3), 1.0);
 

@@ -124,16 +124,41 @@ TEST(Http, AuthenticationAndRoles) {
   const auto me = http_request(port, "GET", "/api/me", "", {{"Cookie", cookie}});
   ASSERT_EQ(me.status, 200);
   EXPECT_EQ(me.json_body().at("via"), "session");
-  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/start", "", {{"Cookie", cookie}}).status,
+  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/start", "",
+                         {{"Cookie", cookie}, {"Content-Type", "application/json"}})
+                .status,
             403);
   // The generated or configured token signs an operator in.
   const auto op_login = http_request(port, "POST", "/api/login", json{{"token", kOperatorToken}}.dump());
   ASSERT_EQ(op_login.status, 200);
   EXPECT_EQ(op_login.json_body().at("role"), "operator");
   const std::string op_cookie = op_login.headers.at("set-cookie").substr(0, op_login.headers.at("set-cookie").find(';'));
-  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/abort", "", {{"Cookie", op_cookie}}).status,
+  // A change the cookie signs must come from imucald's own pages (issue 33): a form's type, or
+  // another site's Origin, is refused before anything happens; a token is no ambient credential.
+  const std::string start = "/api/campaigns/" + std::to_string(id) + "/start";
+  const auto form = http_request(port, "POST", start, "", {{"Cookie", op_cookie}, {"Content-Type", "application/x-www-form-urlencoded"}});
+  EXPECT_EQ(form.status, 415);
+  EXPECT_NE(error_of(form).find("Content-Type: application/json"), std::string::npos) << form.body;
+  EXPECT_EQ(http_request(port, "POST", start, "", {{"Cookie", op_cookie}}).status, 415) << "no type at all";
+  const auto foreign = http_request(port, "POST", start, "{}",
+                                    {{"Cookie", op_cookie}, {"Content-Type", "application/json"}, {"Origin", "http://evil.example"}});
+  EXPECT_EQ(foreign.status, 403);
+  EXPECT_NE(error_of(foreign).find("cross-origin"), std::string::npos) << foreign.body;
+  EXPECT_EQ(http_request(port, "POST", start, "{}",
+                         {{"Cookie", op_cookie}, {"Content-Type", "application/json"}, {"Origin", "null"}})
+                .status,
+            403);
+  EXPECT_EQ(op.get_json("/api/campaigns/" + std::to_string(id)).at("state"), "created") << "nothing started";
+  // The same-origin page (Origin is this Host) may; a bearer token from anywhere may.
+  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/" + std::to_string(id) + "/abort", "",
+                         {{"Cookie", op_cookie}, {"Content-Type", "application/json"}, {"Origin", "http://127.0.0.1"}})
+                .status,
             200);
-  EXPECT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", op_cookie}}).status, 200);
+  EXPECT_EQ(http_request(port, "POST", "/api/campaigns/validate", R"({"name": "x", "program": "direct-short"})",
+                         {{"Authorization", std::string("Bearer ") + kOperatorToken}, {"Origin", "http://evil.example"}})
+                .status,
+            200);
+  EXPECT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", op_cookie}, {"Content-Type", "application/json"}}).status, 200);
   EXPECT_EQ(http_request(port, "GET", "/api/me", "", {{"Cookie", op_cookie}}).status, 401);
 }
 
@@ -438,7 +463,7 @@ TEST(Http, LiveWebSocketClosesWhenItsSessionEnds) {
   ws.read(buffer);
   EXPECT_EQ(json::parse(beast::buffers_to_string(buffer.data())).at("type"), "hello");
 
-  ASSERT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", cookie}}).status, 200);
+  ASSERT_EQ(http_request(port, "POST", "/api/logout", "", {{"Cookie", cookie}, {"Content-Type", "application/json"}}).status, 200);
   beast::error_code ec;
   for (int i = 0; i < 100 && !ec; ++i) {
     buffer.consume(buffer.size());

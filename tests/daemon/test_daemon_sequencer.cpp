@@ -347,7 +347,7 @@ TEST(Sequencer, ShutdownParksTheRunAsInterruptedAndItResumes) {
     daemon::Service service(config);
     service.start(false);
     daemon::ApiRequest post{"POST", "/api/campaigns", std::string("Bearer ") + kOperatorToken, "", "application/json",
-                            short_campaign("parked", 100).dump()};
+                            short_campaign("parked", 100).dump(), "", "", ""};
     id = json::parse(service.api().handle(post).body).at("id").get<std::int64_t>();
     ASSERT_EQ(service.sequencer().command(id, daemon::Command::Start, "test", "").http_status, 200);
     for (int i = 0; i < 2000 && service.db().campaign(id)->program_time_s < 50.0; ++i)

@@ -13,8 +13,9 @@ using namespace imucal;
 using namespace imucal::daemontest;
 
 TEST(DaemonThermal, TheBuiltInThermalCampaignFollowsItsChamberProfileAndFeedsStageTwo) {
-  LocalDaemon d("thermal");
-  const std::string truth = IMUCAL_SOURCE_DIR "/examples/truth-thermal.json";
+  // The truth by name from a truths folder (a campaign names no path): examples/truth-thermal.json.
+  LocalDaemon d("thermal", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = IMUCAL_SOURCE_DIR "/examples"; });
+  const std::string truth = "truth-thermal";
   const auto id = d.post_campaign(
       {{"name", "overnight"}, {"program", "thermal-short"}, {"truth", truth}, {"rate_hz", 20}, {"time_scale", 0}});
   // The campaign as stored: the profile's set points as steps, with the ramp tolerance.

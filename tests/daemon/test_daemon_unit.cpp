@@ -497,6 +497,16 @@ TEST(Auth, SessionsAndThrottling) {
   EXPECT_FALSE(auth.from_session(ok.session_id));
   for (int i = 0; i < 5; ++i) EXPECT_EQ(auth.login_password("ops", "guess").status, 401);
   EXPECT_EQ(auth.login_password("ops", "operator-password").status, 429);
+  // Per client and per user, not global (issue 33): the guessing client is locked out, whoever
+  // it names; every other client signs in, as the user guessed at too.
+  EXPECT_EQ(auth.login_password("vic", "viewer-password").status, 429);
+  EXPECT_EQ(auth.login_token("anything").status, 429);
+  EXPECT_EQ(auth.login_password("ops", "operator-password", "10.0.0.2").status, 200);
+  EXPECT_EQ(auth.login_password("vic", "viewer-password", "10.0.0.3").status, 200);
+  // Guesses at one name from many addresses (20 within the minute) lock that name only.
+  for (int i = 0; i < 15; ++i) EXPECT_EQ(auth.login_password("ops", "guess", "10.1.0." + std::to_string(i)).status, 401);
+  EXPECT_EQ(auth.login_password("ops", "operator-password", "10.0.0.4").status, 429);
+  EXPECT_EQ(auth.login_password("vic", "viewer-password", "10.0.0.4").status, 200);
 }
 
 TEST(Api, TargetsAndCookies) {

@@ -32,10 +32,10 @@ export function setReauthenticate(fn) {
 export async function api(method, path, body, { auth = true, signal, onPending } = {}) {
   const headers = { Accept: 'application/json' };
   const init = { method, headers, credentials: 'same-origin', cache: 'no-store', signal };
-  if (body !== undefined) {
-    headers['Content-Type'] = 'application/json';
-    init.body = typeof body === 'string' ? body : JSON.stringify(body);
-  }
+  // Every change says it is JSON, body or not: imucald refuses a cookie-authenticated change of
+  // another type (a cross-site form could send one, docs/api.md).
+  if (body !== undefined || (method !== 'GET' && method !== 'HEAD')) headers['Content-Type'] = 'application/json';
+  if (body !== undefined) init.body = typeof body === 'string' ? body : JSON.stringify(body);
   let response;
   try {
     response = await fetch(path, init);

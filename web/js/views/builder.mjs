@@ -280,14 +280,14 @@ export function mount(root, ctx) {
     };
     const maxRate = limits?.campaign?.max_rate_hz;
     const truthSel = h('select', { id: 'c-truth-kind', dataset: { path: 'truth' } },
-      h('option', { value: 'ideal' }, 'ideal (an error-free IMU)'), h('option', { value: 'path' }, 'a model file on the daemon\'s machine'));
-    const truthPath = input('c-truth-path', 'truth', typeof c.truth === 'string' && c.truth !== 'ideal' ? c.truth : '', { type: 'text', placeholder: '/path/to/truth.json' });
+      h('option', { value: 'ideal' }, 'ideal (an error-free IMU)'), h('option', { value: 'path' }, 'a named truth of the daemon\'s truths folder'));
+    const truthPath = input('c-truth-path', 'truth', typeof c.truth === 'string' && c.truth !== 'ideal' ? c.truth : '', { type: 'text', placeholder: 'name, e.g. nav-grade' });
     truthSel.value = c.truth === 'ideal' || c.truth === undefined ? 'ideal' : 'path';
     truthPath.hidden = truthSel.value === 'ideal';
     const onTruth = () => {
       truthPath.hidden = truthSel.value === 'ideal';
       if (truthSel.value === 'ideal') setCampaign('truth', 'ideal', null, truthPath);
-      else setCampaign('truth', truthPath.value.trim(), truthPath.value.trim() ? null : 'Enter the path of an imucal-imu-model/1 file.', truthPath);
+      else setCampaign('truth', truthPath.value.trim(), truthPath.value.trim() ? (/[\/\\]/.test(truthPath.value) ? 'A name, not a path: the daemon reads its truths folder only (docs/api.md).' : null) : 'Enter the name of a truth (a model file NAME.json in the daemon\'s truths folder).', truthPath);
     };
     truthSel.addEventListener('change', onTruth);
     truthPath.addEventListener('input', onTruth);
