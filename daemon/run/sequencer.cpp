@@ -255,6 +255,13 @@ void Sequencer::shutdown() {
   }
   cv_.notify_all();
   if (thread_.joinable()) thread_.join();
+  // What a full disk kept back is stored now if it can be; what cannot is named in the log (the
+  // next start's crash recovery makes an unstored running state interrupted).
+  if (!retry_db_writes()) {
+    std::lock_guard lock(db_writes_mutex_);
+    for (const auto& write : deferred_writes_) spdlog::error("daemon database: not stored at shutdown: {}", write.first);
+    deferred_writes_.clear();  // their listeners may be gone after this
+  }
 }
 
 json Sequencer::telemetry() const {
