@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <memory>
 #include <string>
 #include <thread>
 
@@ -43,7 +44,9 @@ struct DiskFullRun {
 inline DiskFullRun run_with_a_full_disk(LocalDaemon& d, const json& campaign, double full_for_s,
                                         double timeout_s) {
   DiskFullRun out;
-  DiskFullSwitch disk;
+  // Shared with the hook, which the run's last recorder may still call after the run is seen done
+  // (its final commit at close).
+  const auto disk = std::make_shared<DiskFullSwitch>();
   // The program's frames straight through, simulated before the run: its third is where the disk fills.
   std::vector<ImuFrame> want;
   {
@@ -52,9 +55,9 @@ inline DiskFullRun run_with_a_full_disk(LocalDaemon& d, const json& campaign, do
     out.reference_frames = want.size();
     const std::int64_t fill_at = static_cast<std::int64_t>(want.size() / 3);
     daemon::Sequencer::RecorderHooks hooks;
-    hooks.after_commit = [&disk, fill_at](const storage::RecorderStats& s) {
-      if (!disk.filled.load() && s.stored_frames >= fill_at) {
-        disk.filled = true;
+    hooks.after_commit = [disk, fill_at](const storage::RecorderStats& s) {
+      if (!disk->filled.load() && s.stored_frames >= fill_at) {
+        disk->filled = true;
         storage::disk_fault::set_full(true);
       }
     };
@@ -68,7 +71,7 @@ inline DiskFullRun run_with_a_full_disk(LocalDaemon& d, const json& campaign, do
     while (telemetry_state(d) != "suspended" && std::chrono::steady_clock::now() < deadline)
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     out.suspended_after_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-    EXPECT_TRUE(disk.filled.load()) << "the disk was never filled";
+    EXPECT_TRUE(disk->filled.load()) << "the disk was never filled";
     EXPECT_EQ(telemetry_state(d), "suspended") << "the run did not suspend on the full disk";
 
     // The service answers while the disk is full: reads as usual, changes with 503 and the reason.
