@@ -314,6 +314,9 @@ TEST_F(RecorderTest, ADiskThatStaysFullEndsWithTheHeldFramesCountedAsLost) {
   EXPECT_THAT(*recorder.write_problem(), HasSubstr("MB free needed"));
   EXPECT_FALSE(recorder.commit_and_wait());
   EXPECT_GT(recorder.stats().held_frames, 0);
+  // The alarm is raised on the writer thread just after the problem is visible to push().
+  for (int i = 0; i < 500 && alarms.count(RecorderAlarmKind::WriteHeld) == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteHeld), 1);
 
   EXPECT_FALSE(recorder.close());
