@@ -59,7 +59,7 @@ struct RecorderOptions {
 };
 
 struct RecorderStats {
-  std::int64_t queued_frames = 0;  // accepted, not yet written to the RunDb
+  std::int64_t queued_frames = 0;  // accepted, not yet committed (waiting, in the open batch or held)
   std::int64_t queue_capacity_frames = 0;
   std::int64_t high_water_frames = 0;
   std::int64_t accepted_frames = 0;   // entered the queue in this session
