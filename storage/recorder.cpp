@@ -1,9 +1,12 @@
 #include "storage/recorder.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <utility>
 
 #include <spdlog/spdlog.h>
+
+#include "core/number_text.hpp"
 
 namespace imucal::storage {
 
@@ -13,6 +16,8 @@ const char* to_string(RecorderAlarmKind kind) {
       return "queue_high_water";
     case RecorderAlarmKind::FramesDropped:
       return "frames_dropped";
+    case RecorderAlarmKind::WriteHeld:
+      return "write_held";
     case RecorderAlarmKind::WriteFailed:
       return "write_failed";
   }
@@ -26,6 +31,7 @@ Recorder::Recorder(RunDb db, RecorderOptions options, AlarmHandler on_alarm, Com
       on_alarm_(std::move(on_alarm)),
       on_commit_(std::move(on_commit)) {
   if (!(options_.commit_interval_s > 0.0)) throw StorageError("recorder: commit_interval_s must be positive");
+  if (!(options_.retry_interval_s > 0.0)) throw StorageError("recorder: retry_interval_s must be positive");
   if (options_.queue_capacity_frames < static_cast<std::int64_t>(kBlockFrames)) {
     throw StorageError("recorder: queue_capacity_frames must be at least " + std::to_string(kBlockFrames));
   }
@@ -73,6 +79,7 @@ Recorder::Push Recorder::push(std::span<const ImuFrame> frames, bool wait_when_f
   {
     std::unique_lock lock(mutex_);
     if (error_ || closing_) return Push::Failed;
+    if (write_problem_) return Push::Refused;
     // Checked here, on the producer's thread, so that a bad batch is refused at once instead of
     // failing the writer later.
     std::optional<std::int64_t> previous = last_pushed_t_ns_;
@@ -108,9 +115,12 @@ Recorder::Push Recorder::push(std::span<const ImuFrame> frames, bool wait_when_f
         // eventually whatever the capacity.
         const std::size_t slice = std::min(frames.size() - done, kBlockFrames);
         cv_space_.wait(lock, [&] {
-          return error_ || closing_ || stats_.queued_frames + static_cast<std::int64_t>(slice) <= capacity;
+          return error_ || closing_ || write_problem_ ||
+                 stats_.queued_frames + static_cast<std::int64_t>(slice) <= capacity;
         });
         if (error_ || closing_) return Push::Failed;
+        // The slices before this one are held; the producer takes up after last_accepted_t_ns().
+        if (write_problem_) return Push::Refused;
         std::size_t copied = 0;
         while (copied < slice) {
           if (queue_.empty() || queue_.back().kind != Item::Kind::Frames ||
@@ -189,6 +199,7 @@ bool Recorder::set_extra(std::string key, std::string json_text) {
 bool Recorder::commit_and_wait() {
   std::unique_lock lock(mutex_);
   if (error_ || closing_) return !error_;
+  if (write_problem_) return false;
   Item item;
   item.kind = Item::Kind::Barrier;
   item.barrier = next_barrier_++;
@@ -196,7 +207,7 @@ bool Recorder::commit_and_wait() {
   queue_.push_back(std::move(item));
   cv_work_.notify_one();
   cv_barrier_.wait(lock, [&] { return error_ || done_barrier_ >= mine; });
-  return !error_;
+  return !error_ && mine > failed_barrier_;
 }
 
 bool Recorder::close() {
@@ -221,6 +232,93 @@ std::optional<std::string> Recorder::error() const {
   return error_;
 }
 
+std::optional<std::string> Recorder::write_problem() const {
+  std::lock_guard lock(mutex_);
+  return write_problem_;
+}
+
+std::optional<std::int64_t> Recorder::last_accepted_t_ns() const {
+  std::lock_guard lock(mutex_);
+  return last_pushed_t_ns_;
+}
+
+namespace {
+
+// A failure the disk may get over (space freed, a transient I/O error): the writer holds what
+// failed and tries again. Anything else (a damaged file) ends the recording.
+bool worth_retrying(const sql::SqliteError& e) {
+  return e.kind() == sql::SqliteError::Kind::full || e.kind() == sql::SqliteError::Kind::io;
+}
+
+// What the held frames need on the disk to be committed and checkpointed: each frame once in the
+// WAL and once in the database file (52.6 bytes a frame with its chunk's share, docs/storage.md),
+// and one WAL's worth between checkpoints (SQLite's 1000 pages of 16 KiB).
+std::int64_t megabytes_needed(std::int64_t held_frames) {
+  constexpr std::int64_t kBytesPerFrame = 53, kWalBytes = 1000 * 16384, kMB = 1'000'000;
+  return (2 * held_frames * kBytesPerFrame + kWalBytes + kMB - 1) / kMB;
+}
+
+}  // namespace
+
+// Writer thread, lock held: the committed batch's frames leave the recorder's memory.
+void Recorder::release_batch_locked() {
+  for (Item& item : batch_items_) {
+    if (item.kind != Item::Kind::Frames) continue;
+    // Counted out only now that the frames are committed: the bound holds for everything the
+    // recorder keeps in memory, the frames of a batch that may yet fail included.
+    stats_.queued_frames -= static_cast<std::int64_t>(item.frames.size());
+    item.frames.clear();
+    // Keep as many blocks as the queue can ever hold; more would be garbage.
+    if (free_blocks_.size() * kBlockFrames < static_cast<std::size_t>(options_.queue_capacity_frames)) {
+      free_blocks_.push_back(std::move(item.frames));
+    }
+  }
+  batch_items_.clear();
+  batch_drops_.clear();
+  batch_frames_ = 0;
+  stats_.held_frames = 0;
+  const auto rearm_level = static_cast<std::int64_t>(0.5 * options_.high_water_alarm_fraction *
+                                                     static_cast<double>(options_.queue_capacity_frames));
+  if (stats_.queued_frames < rearm_level) high_water_alarmed_ = false;
+  cv_space_.notify_all();
+}
+
+// Writer thread, lock held, after a batch failed for want of space or by an I/O error (the RunDb
+// has rolled it back to the last commit): what it wrote goes back to the head of the queue, to be
+// written again at the next attempt; commits waited for are answered "not committed".
+void Recorder::hold_failed_batch_locked(const std::string& why, bool disk_full, std::optional<std::uint64_t> barrier) {
+  for (auto it = batch_items_.rbegin(); it != batch_items_.rend(); ++it) queue_.push_front(std::move(*it));
+  batch_items_.clear();
+  batch_frames_ = 0;
+  pending_drops_.insert(pending_drops_.begin(), batch_drops_.begin(), batch_drops_.end());
+  batch_drops_.clear();
+  batch_dirty_ = false;
+  std::int64_t held = 0;
+  for (const Item& item : queue_)
+    if (item.kind == Item::Kind::Frames) held += static_cast<std::int64_t>(item.frames.size());
+  stats_.held_frames = held;
+  if (closing_) {
+    // No later attempt: the run's next open counts these frames as lost (recovery).
+    throw StorageError(why + "; the recorder was closed while it held " + std::to_string(held) +
+                       " frames it could not write");
+  }
+  char text[200];
+  std::snprintf(text, sizeof text, "; %lld frames held in memory, written again every %s s",
+                static_cast<long long>(held), number_text(options_.retry_interval_s).c_str());
+  write_problem_ = (disk_full ? "disk full: at least " + std::to_string(megabytes_needed(held)) +
+                                    " MB free needed for run '" + path_ + "'"
+                              : "I/O error writing run '" + path_ + "'") +
+                   text + " (" + why + ")";
+  retry_at_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                 std::chrono::duration<double>(options_.retry_interval_s));
+  // Every commit asked for so far is not done; the queue's later barriers are answered now too.
+  if (barrier) done_barrier_ = std::max(done_barrier_, *barrier);
+  failed_barrier_ = next_barrier_ - 1;
+  done_barrier_ = std::max(done_barrier_, failed_barrier_);
+  cv_barrier_.notify_all();
+  cv_space_.notify_all();  // a producer waiting for room gets Push::Refused
+}
+
 // Writer thread: the batch so far, with the counters, in one COMMIT.
 void Recorder::commit_batch() {
   const auto t0 = Clock::now();
@@ -232,7 +330,13 @@ void Recorder::commit_batch() {
   batch_dirty_ = false;
   if (Clock::now() - last_checkpoint_ >=
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.checkpoint_interval_s))) {
-    db_.checkpoint();
+    try {
+      db_.checkpoint();
+    } catch (const sql::SqliteError& e) {
+      // The commit is in the WAL; copying it into the database file waits for space.
+      if (!worth_retrying(e)) throw;
+      spdlog::warn("recorder: checkpoint postponed: {}", e.what());
+    }
     last_checkpoint_ = Clock::now();
   }
   const double took_s = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -244,6 +348,11 @@ void Recorder::commit_batch() {
     stats_.stored_frames = published.frames_at_open + published.committed_frames;
     if (published.committed_frames > 0 || stats_.committed_t_ns) stats_.committed_t_ns = published.committed_t_ns;
     ++stats_.commits;
+    release_batch_locked();
+    if (write_problem_) {
+      spdlog::info("recorder '{}': the run file can be written again; recording goes on", path_);
+      write_problem_.reset();
+    }
     stats_.last_commit_s = took_s;
     stats_.max_commit_s = std::max(stats_.max_commit_s, took_s);
     snapshot = stats_;
@@ -258,6 +367,11 @@ void Recorder::run() {
   std::unique_lock lock(mutex_);
   try {
     for (;;) {
+      if (write_problem_) {
+        // Holding a failed batch: the next attempt when its time comes, or at once when closing
+        // (the last chance to write what is held).
+        cv_work_.wait_until(lock, retry_at_, [&] { return closing_; });
+      }
       const auto deadline = batch_dirty_ ? batch_started_ + interval : Clock::time_point::max();
       cv_work_.wait_until(lock, deadline, [&] {
         return !queue_.empty() || !pending_drops_.empty() || closing_ ||
@@ -274,71 +388,100 @@ void Recorder::run() {
       drops.swap(pending_drops_);
       lock.unlock();
 
-      if ((item || !drops.empty()) && !batch_dirty_) {
-        db_.begin_batch();
-        batch_dirty_ = true;
-        batch_started_ = Clock::now();
+      // Kept until the batch commits, from before anything is written (a write that fails has
+      // them), so that a batch that fails can be written again.
+      const bool barrier = item && item->kind == Item::Kind::Barrier;
+      const Item* kept = nullptr;
+      if (item && !barrier) {
+        batch_items_.push_back(std::move(*item));
+        kept = &batch_items_.back();
+        if (kept->kind == Item::Kind::Frames) batch_frames_ += static_cast<std::int64_t>(kept->frames.size());
       }
-      for (const auto& span : drops) db_.record_dropped(span.t0_ns, span.t1_ns, span.frames);
-      bool barrier = false;
-      if (item) {
-        switch (item->kind) {
-          case Item::Kind::Frames:
-            db_.append(item->frames);
-            break;
-          case Item::Kind::Temps:
-            db_.append_temps(item->temps);
-            break;
-          case Item::Kind::Segments:
-            db_.set_segments(item->segments);
-            break;
-          case Item::Kind::Extra:
-            db_.set_extra(item->key, item->text);
-            break;
-          case Item::Kind::Barrier:
-            barrier = true;
-            break;
+      batch_drops_.insert(batch_drops_.end(), drops.begin(), drops.end());
+      std::optional<std::string> failed;
+      bool failed_full = false;
+      try {
+        if ((item || !drops.empty()) && !batch_dirty_) {
+          db_.begin_batch();
+          batch_dirty_ = true;
+          batch_started_ = Clock::now();
         }
+        for (const auto& span : drops) db_.record_dropped(span.t0_ns, span.t1_ns, span.frames);
+        if (kept != nullptr) {
+          switch (kept->kind) {
+            case Item::Kind::Frames:
+              db_.append(kept->frames);
+              break;
+            case Item::Kind::Temps:
+              db_.append_temps(kept->temps);
+              break;
+            case Item::Kind::Segments:
+              db_.set_segments(kept->segments);
+              break;
+            case Item::Kind::Extra:
+              db_.set_extra(kept->key, kept->text);
+              break;
+            case Item::Kind::Barrier:
+              break;
+          }
+        }
+        // A batch also commits once it holds half the queue's capacity: its frames stay in memory
+        // (and in the bound) until they are committed, so a producer faster than one commit
+        // interval must not wait for the interval to end.
+        if (batch_dirty_ && (barrier || Clock::now() >= batch_started_ + interval ||
+                             2 * batch_frames_ >= options_.queue_capacity_frames))
+          commit_batch();
+      } catch (const sql::SqliteError& e) {
+        // Only a batch the RunDb has rolled back can be written again.
+        if (!worth_retrying(e) || db_.in_batch()) throw;
+        failed = e.what();
+        failed_full = e.kind() == sql::SqliteError::Kind::full;
       }
-      if (batch_dirty_ && (barrier || Clock::now() >= batch_started_ + interval)) commit_batch();
 
       lock.lock();
-      if (item && item->kind == Item::Kind::Frames) {
-        // Counted out only now that the frames are in the RunDb: the bound holds for everything
-        // the recorder keeps in memory, not only for what still waits.
-        stats_.queued_frames -= static_cast<std::int64_t>(item->frames.size());
-        item->frames.clear();
-        // Keep as many blocks as the queue can ever hold; more would be garbage.
-        if (free_blocks_.size() * kBlockFrames < static_cast<std::size_t>(options_.queue_capacity_frames)) {
-          free_blocks_.push_back(std::move(item->frames));
+      if (failed) {
+        const bool first = !write_problem_;
+        hold_failed_batch_locked(*failed, failed_full, barrier ? std::optional(item->barrier) : std::nullopt);
+        if (first) {
+          const std::string message = *write_problem_;
+          lock.unlock();
+          spdlog::warn("recorder: {}", message);
+          raise(RecorderAlarmKind::WriteHeld, message);
+          lock.lock();
         }
-        const auto rearm_level = static_cast<std::int64_t>(0.5 * options_.high_water_alarm_fraction *
-                                                           static_cast<double>(options_.queue_capacity_frames));
-        if (stats_.queued_frames < rearm_level) high_water_alarmed_ = false;
-        cv_space_.notify_all();
+        continue;
       }
       if (barrier) {
-        done_barrier_ = item->barrier;
+        done_barrier_ = std::max(done_barrier_, item->barrier);
         cv_barrier_.notify_all();
       }
     }
     lock.unlock();
-    if (batch_dirty_) commit_batch();
+    if (batch_dirty_) {
+      try {
+        commit_batch();
+      } catch (const sql::SqliteError& e) {
+        if (!worth_retrying(e)) throw;
+        lock.lock();
+        hold_failed_batch_locked(e.what(), e.kind() == sql::SqliteError::Kind::full, std::nullopt);  // throws: closing
+      }
+    }
     db_.close();  // the clean end of the writer session: the next open needs no recovery
     lock.lock();
   } catch (const std::exception& e) {
     if (!lock.owns_lock()) lock.lock();
     error_ = e.what();
+    write_problem_.reset();
     queue_.clear();
+    batch_items_.clear();
     stats_.queued_frames = 0;
+    stats_.held_frames = 0;
     lock.unlock();
     spdlog::error("recorder: {}", e.what());
     raise(RecorderAlarmKind::WriteFailed, std::string("recording stopped: ") + e.what());
-    try {
-      db_.close();  // fails after a failed batch and leaves the lease for the next open's recovery
-    } catch (const std::exception& close_error) {
-      spdlog::warn("recorder: {}", close_error.what());
-    }
+    // Not closed as a clean end: the next open recovers the run and counts the accepted frames
+    // that were never committed.
+    db_.abandon(e.what());
     lock.lock();
   }
   // Wake every waiter: barriers are satisfied (or failed), producers must not wait for space.

@@ -494,7 +494,19 @@ struct RunDb::Impl {
   std::int64_t high_water_frames = 0, dropped_frames = 0;
   bool accepted_counted_by_caller = false;
   bool batch_open = false;
-  std::optional<std::string> poisoned;  // why writes are refused after a failed batch
+  // What this handle knew at begin_batch(), when it matched the committed file: a batch that is
+  // rolled back puts it back, so that the writer may write the same data again (a full disk that
+  // gets space back) without reopening the run.
+  struct Committed {
+    std::vector<ImuFrame> buffer;
+    std::optional<std::int64_t> open_chunk_id;
+    std::size_t persisted_in_open = 0;
+    std::optional<std::int64_t> last_frame_t_ns, last_temp_t_ns;
+    std::int64_t frames_in_db = 0;
+    std::optional<std::int64_t> db_last_t_ns;
+    std::vector<SegmentInfo> segments;
+  } at_begin;
+  std::optional<std::string> poisoned;  // why writes are refused after a batch that could not be undone
   std::vector<DroppedSpan> pending_drops;
   std::optional<RecoveryReport> recovery;
 
@@ -585,8 +597,21 @@ struct RunDb::Impl {
     bool committed_ = false;
   };
 
-  // Rolls the open batch back; what this handle buffered no longer matches the file, so it
-  // refuses writes from now on. Idempotent, never throws.
+  void remember_committed() {
+    at_begin.buffer.assign(buffer.begin(), buffer.end());
+    at_begin.open_chunk_id = open_chunk_id;
+    at_begin.persisted_in_open = persisted_in_open;
+    at_begin.last_frame_t_ns = last_frame_t_ns;
+    at_begin.last_temp_t_ns = last_temp_t_ns;
+    at_begin.frames_in_db = frames_in_db;
+    at_begin.db_last_t_ns = db_last_t_ns;
+    at_begin.segments = meta.segments;
+  }
+
+  // Rolls the open batch back and puts this handle back where the file is, at the last commit:
+  // everything written since begin_batch() is gone from both, and the caller may write it again.
+  // Only when SQLite cannot roll back (the transaction still open) does the handle refuse writes
+  // from then on. Idempotent, never throws.
   void abort_batch() noexcept {
     if (!batch_open) return;
     batch_open = false;
@@ -595,11 +620,22 @@ struct RunDb::Impl {
     } catch (const StorageError&) {
       // SQLite may have rolled back by itself (a full disk at COMMIT does).
     }
-    poisoned = "a write of the batch failed and the batch was rolled back";
-    buffer.clear();
-    persisted_in_open = 0;
-    open_chunk_id.reset();
     pending_drops.clear();
+    if (db.in_transaction()) {
+      poisoned = "a write of the batch failed and the batch could not be rolled back";
+      buffer.clear();
+      persisted_in_open = 0;
+      open_chunk_id.reset();
+      return;
+    }
+    buffer.swap(at_begin.buffer);
+    open_chunk_id = at_begin.open_chunk_id;
+    persisted_in_open = at_begin.persisted_in_open;
+    last_frame_t_ns = at_begin.last_frame_t_ns;
+    last_temp_t_ns = at_begin.last_temp_t_ns;
+    frames_in_db = at_begin.frames_in_db;
+    db_last_t_ns = at_begin.db_last_t_ns;
+    meta.segments.swap(at_begin.segments);
   }
 
   // Writes `frames` as one chunk: into the row `id` if given, else a new row. Returns the row id.
@@ -916,6 +952,7 @@ void RunDb::append(std::span<const ImuFrame> frames) {
   Impl& d = impl();
   if (frames.empty()) return;
   d.ensure_writable();
+  const bool in_batch = d.batch_open;
   // Check the whole batch before buffering any of it, so that a rejected call changes nothing.
   std::optional<std::int64_t> previous = d.last_frame_t_ns;
   for (const auto& frame : frames) {
@@ -952,8 +989,8 @@ void RunDb::append(std::span<const ImuFrame> frames) {
     txn.commit();
   } catch (...) {
     // Outside a batch the frames stay buffered and the next append or flush writes them again;
-    // inside one the batch is aborted and nothing is kept.
-    if (!d.poisoned) {
+    // inside one the batch is rolled back with the handle (abort_batch) and the caller has them.
+    if (!in_batch && !d.poisoned) {
       d.buffer.insert(d.buffer.end(), frames.begin() + static_cast<std::ptrdiff_t>(head_buffered ? head : 0),
                       frames.end());
     }
@@ -1049,6 +1086,7 @@ void RunDb::begin_batch() {
   d.ensure_writable();
   if (d.batch_open) fail(d.path, "begin_batch() inside a batch");
   d.begin.run();
+  d.remember_committed();
   d.batch_open = true;
 }
 
@@ -1095,6 +1133,21 @@ void RunDb::close() {
       d.lease.reset();
     }
     throw;
+  }
+}
+
+void RunDb::abandon(const std::string& why) noexcept {
+  if (!impl_) return;
+  Impl& d = *impl_;
+  d.abort_batch();
+  d.poisoned = why;
+  d.buffer.clear();
+  d.persisted_in_open = 0;
+  d.open_chunk_id.reset();
+  d.pending_drops.clear();
+  if (d.lease) {
+    d.lease->release(false);  // the page stays: the next open counts what was accepted and lost
+    d.lease.reset();
   }
 }
 

@@ -152,8 +152,10 @@ class RunDb {
 
   // A batch groups every write until commit_batch() into one transaction (the recorder's unit of
   // durability). commit_batch() writes the open chunk too, so that everything appended so far is
-  // committed. When a write inside a batch fails, the batch is rolled back and this RunDb refuses
-  // further writes (what it buffered is gone); reopen the run to continue.
+  // committed. When a write inside a batch fails (a full disk), the batch is rolled back and this
+  // RunDb is put back where it was at begin_batch(): the same data may be written again in a new
+  // batch (the recorder holds it). Only if SQLite could not roll back does it refuse further
+  // writes; then reopen the run to continue.
   void begin_batch();
   void commit_batch();
   bool in_batch() const;
@@ -166,6 +168,12 @@ class RunDb {
   // Flushes, closes the writer session and gives up the lease; throws on failure. Reads keep
   // working; a later write takes the lease again (a new session).
   void close();
+
+  // Ends the writer session as a crash would, for a writer that gives up holding frames it
+  // accepted but could not commit: nothing more is written through this handle, the session stays
+  // open in the file, and the next open recovers the run and counts those frames as lost. Never
+  // throws.
+  void abandon(const std::string& why) noexcept;
 
   // ---- the writer's bookkeeping (the recorder uses these) ----
   void claim_writer();  // takes the lease now (no-op when held); throws when another writer has it

@@ -2,8 +2,11 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <limits>
 
 namespace imucal::storage::sql {
 
@@ -49,11 +52,195 @@ SqliteError::Kind SqliteError::kind() const noexcept {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The "imucal-disk" VFS (disk_fault in sqlite.hpp): forwards everything to the default VFS, and
+// fails writes while the disk is made full. A file of this VFS is the default VFS's file with a
+// header in front, whose methods forward to it.
+
+namespace {
+
+constexpr const char* kVfsName = "imucal-disk";
+// Bytes that may still be written: kUnlimited while the switch is off (the only value the
+// forwarding path looks at), <= 0 while the disk is full, a budget in between.
+constexpr std::int64_t kUnlimited = std::numeric_limits<std::int64_t>::max();
+std::atomic<std::int64_t> g_room_bytes{kUnlimited};
+
+struct DiskFile {
+  sqlite3_file base;   // what SQLite sees; pMethods are ours
+  sqlite3_file* real;  // the default VFS's file, in the same allocation just after this header
+};
+
+sqlite3_file* real_of(sqlite3_file* f) { return reinterpret_cast<DiskFile*>(f)->real; }
+sqlite3_vfs* base_vfs(sqlite3_vfs* vfs) { return static_cast<sqlite3_vfs*>(vfs->pAppData); }
+
+// Whether a write of `bytes` finds room; the cheap case (switch off) is one relaxed load.
+bool room_for(int bytes) noexcept {
+  std::int64_t room = g_room_bytes.load(std::memory_order_relaxed);
+  if (room == kUnlimited) return true;
+  for (;;) {
+    if (room <= 0) return false;
+    const std::int64_t left = room - bytes;
+    // A write that does not fit fails and leaves the disk full, as the file system would.
+    if (g_room_bytes.compare_exchange_weak(room, left < 0 ? 0 : left, std::memory_order_relaxed))
+      return left >= 0;
+    if (room == kUnlimited) return true;
+  }
+}
+
+int disk_close(sqlite3_file* f) {
+  sqlite3_file* real = real_of(f);
+  const int rc = real->pMethods != nullptr ? real->pMethods->xClose(real) : SQLITE_OK;
+  f->pMethods = nullptr;
+  return rc;
+}
+int disk_read(sqlite3_file* f, void* out, int bytes, sqlite3_int64 offset) {
+  return real_of(f)->pMethods->xRead(real_of(f), out, bytes, offset);
+}
+int disk_write(sqlite3_file* f, const void* data, int bytes, sqlite3_int64 offset) {
+  if (!room_for(bytes)) return SQLITE_FULL;
+  return real_of(f)->pMethods->xWrite(real_of(f), data, bytes, offset);
+}
+int disk_truncate(sqlite3_file* f, sqlite3_int64 size) { return real_of(f)->pMethods->xTruncate(real_of(f), size); }
+int disk_sync(sqlite3_file* f, int flags) { return real_of(f)->pMethods->xSync(real_of(f), flags); }
+int disk_file_size(sqlite3_file* f, sqlite3_int64* size) { return real_of(f)->pMethods->xFileSize(real_of(f), size); }
+int disk_lock(sqlite3_file* f, int level) { return real_of(f)->pMethods->xLock(real_of(f), level); }
+int disk_unlock(sqlite3_file* f, int level) { return real_of(f)->pMethods->xUnlock(real_of(f), level); }
+int disk_check_reserved(sqlite3_file* f, int* out) {
+  return real_of(f)->pMethods->xCheckReservedLock(real_of(f), out);
+}
+int disk_file_control(sqlite3_file* f, int op, void* arg) {
+  return real_of(f)->pMethods->xFileControl(real_of(f), op, arg);
+}
+int disk_sector_size(sqlite3_file* f) { return real_of(f)->pMethods->xSectorSize(real_of(f)); }
+int disk_device_characteristics(sqlite3_file* f) {
+  return real_of(f)->pMethods->xDeviceCharacteristics(real_of(f));
+}
+int disk_shm_map(sqlite3_file* f, int page, int page_size, int extend, void volatile** out) {
+  return real_of(f)->pMethods->xShmMap(real_of(f), page, page_size, extend, out);
+}
+int disk_shm_lock(sqlite3_file* f, int offset, int n, int flags) {
+  return real_of(f)->pMethods->xShmLock(real_of(f), offset, n, flags);
+}
+void disk_shm_barrier(sqlite3_file* f) { real_of(f)->pMethods->xShmBarrier(real_of(f)); }
+int disk_shm_unmap(sqlite3_file* f, int delete_flag) { return real_of(f)->pMethods->xShmUnmap(real_of(f), delete_flag); }
+int disk_fetch(sqlite3_file* f, sqlite3_int64 offset, int bytes, void** out) {
+  return real_of(f)->pMethods->xFetch(real_of(f), offset, bytes, out);
+}
+int disk_unfetch(sqlite3_file* f, sqlite3_int64 offset, void* page) {
+  return real_of(f)->pMethods->xUnfetch(real_of(f), offset, page);
+}
+
+// One method table per version of the default VFS's files: SQLite calls the methods of a version
+// only when iVersion says they exist, so ours must not claim more than the real file has.
+sqlite3_io_methods disk_methods(int version) {
+  sqlite3_io_methods m{};
+  m.iVersion = version;
+  m.xClose = disk_close;
+  m.xRead = disk_read;
+  m.xWrite = disk_write;
+  m.xTruncate = disk_truncate;
+  m.xSync = disk_sync;
+  m.xFileSize = disk_file_size;
+  m.xLock = disk_lock;
+  m.xUnlock = disk_unlock;
+  m.xCheckReservedLock = disk_check_reserved;
+  m.xFileControl = disk_file_control;
+  m.xSectorSize = disk_sector_size;
+  m.xDeviceCharacteristics = disk_device_characteristics;
+  if (version >= 2) {
+    m.xShmMap = disk_shm_map;
+    m.xShmLock = disk_shm_lock;
+    m.xShmBarrier = disk_shm_barrier;
+    m.xShmUnmap = disk_shm_unmap;
+  }
+  if (version >= 3) {
+    m.xFetch = disk_fetch;
+    m.xUnfetch = disk_unfetch;
+  }
+  return m;
+}
+const sqlite3_io_methods kDiskMethods[3] = {disk_methods(1), disk_methods(2), disk_methods(3)};
+
+int disk_open(sqlite3_vfs* vfs, sqlite3_filename name, sqlite3_file* f, int flags, int* out_flags) {
+  auto* file = reinterpret_cast<DiskFile*>(f);
+  file->base.pMethods = nullptr;
+  file->real = reinterpret_cast<sqlite3_file*>(file + 1);
+  file->real->pMethods = nullptr;
+  sqlite3_vfs* base = base_vfs(vfs);
+  const int rc = base->xOpen(base, name, file->real, flags, out_flags);
+  // SQLite closes a file whose pMethods are set even when the open failed: forward that too.
+  if (file->real->pMethods != nullptr) {
+    const int version = std::clamp(file->real->pMethods->iVersion, 1, 3);
+    file->base.pMethods = &kDiskMethods[version - 1];
+  }
+  return rc;
+}
+int disk_delete(sqlite3_vfs* vfs, const char* name, int sync_dir) {
+  return base_vfs(vfs)->xDelete(base_vfs(vfs), name, sync_dir);
+}
+int disk_access(sqlite3_vfs* vfs, const char* name, int flags, int* out) {
+  return base_vfs(vfs)->xAccess(base_vfs(vfs), name, flags, out);
+}
+int disk_full_pathname(sqlite3_vfs* vfs, const char* name, int size, char* out) {
+  return base_vfs(vfs)->xFullPathname(base_vfs(vfs), name, size, out);
+}
+void* disk_dl_open(sqlite3_vfs* vfs, const char* name) { return base_vfs(vfs)->xDlOpen(base_vfs(vfs), name); }
+void disk_dl_error(sqlite3_vfs* vfs, int size, char* out) { base_vfs(vfs)->xDlError(base_vfs(vfs), size, out); }
+void (*disk_dl_sym(sqlite3_vfs* vfs, void* handle, const char* symbol))(void) {
+  return base_vfs(vfs)->xDlSym(base_vfs(vfs), handle, symbol);
+}
+void disk_dl_close(sqlite3_vfs* vfs, void* handle) { base_vfs(vfs)->xDlClose(base_vfs(vfs), handle); }
+int disk_randomness(sqlite3_vfs* vfs, int size, char* out) {
+  return base_vfs(vfs)->xRandomness(base_vfs(vfs), size, out);
+}
+int disk_sleep(sqlite3_vfs* vfs, int us) { return base_vfs(vfs)->xSleep(base_vfs(vfs), us); }
+int disk_current_time(sqlite3_vfs* vfs, double* out) { return base_vfs(vfs)->xCurrentTime(base_vfs(vfs), out); }
+int disk_get_last_error(sqlite3_vfs* vfs, int size, char* out) {
+  return base_vfs(vfs)->xGetLastError != nullptr ? base_vfs(vfs)->xGetLastError(base_vfs(vfs), size, out) : 0;
+}
+int disk_current_time_int64(sqlite3_vfs* vfs, sqlite3_int64* out) {
+  return base_vfs(vfs)->xCurrentTimeInt64(base_vfs(vfs), out);
+}
+
+// Registers the VFS once (not as the default: only this layer's connections name it) and returns
+// its name.
+const char* disk_vfs_name() {
+  static const bool registered = [] {
+    sqlite3_vfs* base = sqlite3_vfs_find(nullptr);
+    if (base == nullptr) return false;
+    static sqlite3_vfs vfs{};
+    // Version 2 at most: xCurrentTimeInt64 is the newest method this shim forwards.
+    vfs.iVersion = std::min(base->iVersion, 2);
+    vfs.szOsFile = static_cast<int>(sizeof(DiskFile)) + base->szOsFile;
+    vfs.mxPathname = base->mxPathname;
+    vfs.zName = kVfsName;
+    vfs.pAppData = base;
+    vfs.xOpen = disk_open;
+    vfs.xDelete = disk_delete;
+    vfs.xAccess = disk_access;
+    vfs.xFullPathname = disk_full_pathname;
+    vfs.xDlOpen = disk_dl_open;
+    vfs.xDlError = disk_dl_error;
+    vfs.xDlSym = disk_dl_sym;
+    vfs.xDlClose = disk_dl_close;
+    vfs.xRandomness = disk_randomness;
+    vfs.xSleep = disk_sleep;
+    vfs.xCurrentTime = disk_current_time;
+    vfs.xGetLastError = disk_get_last_error;
+    if (vfs.iVersion >= 2) vfs.xCurrentTimeInt64 = disk_current_time_int64;
+    return sqlite3_vfs_register(&vfs, 0) == SQLITE_OK;
+  }();
+  return registered ? kVfsName : nullptr;  // nullptr: SQLite's default, should registering fail
+}
+
+}  // namespace
+
+
+// ---------------------------------------------------------------------------------------------
 // Connection
 
 Connection::Connection(const std::string& path, Open mode, std::string label) : path_(path), label_(std::move(label)) {
   const int flags = mode == Open::create ? SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE : SQLITE_OPEN_READWRITE;
-  const int rc = sqlite3_open_v2(path.c_str(), &db_, flags, nullptr);
+  const int rc = sqlite3_open_v2(path.c_str(), &db_, flags, disk_vfs_name());
   if (rc != SQLITE_OK) {
     // sqlite3_open_v2 may hand out a handle even when it fails.
     const std::string message = db_ != nullptr ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
@@ -107,6 +294,8 @@ std::int64_t Connection::query_int(const std::string& sql) {
 std::int64_t Connection::last_insert_rowid() const noexcept { return sqlite3_last_insert_rowid(db_); }
 
 bool Connection::read_only() const noexcept { return sqlite3_db_readonly(db_, "main") == 1; }
+
+bool Connection::in_transaction() const noexcept { return sqlite3_get_autocommit(db_) == 0; }
 
 void Connection::checkpoint() {
   const int rc = sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
@@ -236,6 +425,14 @@ void remove_database_files(const std::string& path) noexcept {
 }  // namespace imucal::storage::sql
 
 namespace imucal::storage {
+
+namespace disk_fault {
+void set_full(bool full) noexcept { sql::g_room_bytes.store(full ? 0 : sql::kUnlimited, std::memory_order_relaxed); }
+void fill_after_bytes(std::int64_t bytes) noexcept {
+  sql::g_room_bytes.store(std::clamp<std::int64_t>(bytes, 1, sql::kUnlimited - 1), std::memory_order_relaxed);
+}
+bool full() noexcept { return sql::g_room_bytes.load(std::memory_order_relaxed) <= 0; }
+}  // namespace disk_fault
 
 std::int64_t unix_ms_now() {
   return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())

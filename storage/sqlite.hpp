@@ -56,6 +56,8 @@ class Connection {
   std::int64_t query_int(const std::string& sql);  // the first column of the first row (a PRAGMA)
   std::int64_t last_insert_rowid() const noexcept;
   bool read_only() const noexcept;
+  // Inside a transaction (BEGIN without its COMMIT or ROLLBACK yet).
+  bool in_transaction() const noexcept;
   // A passive WAL checkpoint; another connection checkpointing at the same time is no failure.
   void checkpoint();
 
@@ -149,6 +151,21 @@ void rollback_quietly(Connection& connection) noexcept;
 void remove_database_files(const std::string& path) noexcept;
 
 }  // namespace sql
+
+// A full disk on demand, for tests and fault drills, without root or mounts: every connection of
+// this layer (run files and the daemon's database alike) opens through a thin SQLite VFS,
+// "imucal-disk", over the platform's default one. While the disk is "full", every write to a
+// database, journal or WAL file fails as a full file system fails it (SQLITE_FULL, what ENOSPC
+// gives); reads go on. Off (the default) the VFS only forwards: one relaxed atomic load per write.
+// Process-wide, as a real disk is shared by every database on it.
+namespace disk_fault {
+// On: every write fails from now on; off: writes go through again (space came back).
+void set_full(bool full) noexcept;
+// The disk fills once `bytes` more bytes have been written (the write that crosses fails, and
+// every one after it until set_full(false)).
+void fill_after_bytes(std::int64_t bytes) noexcept;
+bool full() noexcept;
+}  // namespace disk_fault
 
 // The wall-clock stamps the storage writes (sessions, writer leases): Unix time in ms.
 std::int64_t unix_ms_now();

@@ -568,6 +568,12 @@ HttpReply Api::handle(const ApiRequest& request) {
       call.id = *id;
     }
     return route.handle(*this, call);
+  } catch (const storage::sql::SqliteError& e) {
+    // The daemon's database on a full disk (or failing, or locked too long): the request may be
+    // repeated once it is writable again; the service goes on.
+    spdlog::error("{} {}: {}", method, path, e.what());
+    if (e.kind() == storage::sql::SqliteError::Kind::damaged) return error_reply(500, std::string("internal error: ") + e.what());
+    return error_reply(503, std::string("the daemon's storage cannot take this now, try again later: ") + e.what());
   } catch (const json::exception& e) {
     // A value of the wrong type or range where a handler read the client's JSON: the client's
     // problem, whichever handler met it (one place, not a check in each).

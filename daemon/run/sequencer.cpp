@@ -224,13 +224,23 @@ std::optional<std::string> Sequencer::recorder_problem(RunContext& run) {
       case storage::RecorderAlarmKind::FramesDropped:
         raise_reason(2, "the recorder fell behind and dropped frames");
         break;
+      case storage::RecorderAlarmKind::WriteHeld:
+        // The recorder holds what it could not write and tries again; the run waits for it.
+        raise_reason(3, alarm.message);
+        break;
       case storage::RecorderAlarmKind::WriteFailed:
         run.recorder_failed = true;
-        raise_reason(3, "recording failed: " + alarm.message);
+        raise_reason(4, "recording failed: " + alarm.message);
         break;
     }
   }
   return reason;
+}
+
+bool Sequencer::commit_recording(RunContext& run) {
+  if (run.recorder->commit_and_wait()) return true;
+  if (run.recorder->error()) run.recorder_failed = true;  // reopened before the run goes on
+  return false;
 }
 
 void Sequencer::start() {
@@ -245,6 +255,13 @@ void Sequencer::shutdown() {
   }
   cv_.notify_all();
   if (thread_.joinable()) thread_.join();
+  // What a full disk kept back is stored now if it can be; what cannot is named in the log (the
+  // next start's crash recovery makes an unstored running state interrupted).
+  if (!retry_db_writes()) {
+    std::lock_guard lock(db_writes_mutex_);
+    for (const auto& write : deferred_writes_) spdlog::error("daemon database: not stored at shutdown: {}", write.first);
+    deferred_writes_.clear();  // their listeners may be gone after this
+  }
 }
 
 json Sequencer::telemetry() const {
@@ -279,13 +296,13 @@ bool Sequencer::transition(std::int64_t id, RunState to, const std::string& reas
     if (active) {
       if (expected && active_state_ != *expected) return false;
       from = active_state_;
-      if (!db_.set_state(id, to, reason)) return false;
+      if (!store_state(id, to, reason, std::nullopt)) return false;
       active_state_ = to;
     } else {
       auto row = db_.campaign(id);
       if (!row) return false;
       from = row->state;
-      if (!db_.set_state(id, to, reason, expected)) return false;
+      if (!store_state(id, to, reason, expected)) return false;
     }
   }
   cv_.notify_all();
@@ -299,7 +316,11 @@ bool Sequencer::transition(std::int64_t id, RunState to, const std::string& reas
 void Sequencer::transition_alarms(std::int64_t id, RunState from, RunState to, const std::string& reason) {
   // An alarm that cannot be stored must not stop the run that raised it: it is in the log.
   try {
-    for (const json& message : apply_transition_alarms(db_, id, from, to, reason)) emit(message);
+    write_db("the alarms of campaign " + std::to_string(id) + "'s " + std::string(to_string(from)) + " -> " +
+                 std::string(to_string(to)),
+             [this, id, from, to, reason] {
+               for (const json& message : apply_transition_alarms(db_, id, from, to, reason)) emit(message);
+             });
   } catch (const std::exception& e) {
     spdlog::error("campaign {}: alarms of {} -> {} not stored: {}", id, to_string(from), to_string(to), e.what());
   }
@@ -307,14 +328,80 @@ void Sequencer::transition_alarms(std::int64_t id, RunState from, RunState to, c
 
 void Sequencer::record_event(std::int64_t id, const std::string& kind, std::optional<std::int64_t> segment,
                              std::optional<double> program_time_s, const std::string& reason) {
-  db_.add_event(id, kind, segment, program_time_s, reason);
-  const auto severity = alarm_severity_of_event(kind);
-  if (!severity) return;
   try {
-    emit(alarm_message("raised", db_.raise_alarm(id, *severity, kind, reason, segment, program_time_s)));
+    write_db("campaign " + std::to_string(id) + "'s event '" + kind + "'",
+             [this, id, kind, segment, program_time_s, reason] { db_.add_event(id, kind, segment, program_time_s, reason); });
+    const auto severity = alarm_severity_of_event(kind);
+    if (!severity) return;
+    // Shown to the operators once stored (with a full disk: when the disk takes it again); the
+    // event and the run's state say it meanwhile.
+    write_db("campaign " + std::to_string(id) + "'s alarm '" + reason + "'",
+             [this, id, severity = *severity, kind, segment, program_time_s, reason] {
+               emit(alarm_message("raised", db_.raise_alarm(id, severity, kind, reason, segment, program_time_s)));
+             });
   } catch (const std::exception& e) {
-    spdlog::error("campaign {}: alarm '{}' not stored: {}", id, reason, e.what());
+    spdlog::error("campaign {}: event or alarm '{}' not stored: {}", id, reason, e.what());
   }
+}
+
+bool Sequencer::write_db(const std::string& what, std::function<void()> write) {
+  std::lock_guard lock(db_writes_mutex_);
+  if (deferred_writes_.empty()) {
+    try {
+      write();
+      return true;
+    } catch (const storage::sql::SqliteError& e) {
+      spdlog::error("daemon database: {} kept in memory, to be stored when the database can be written: {}", what,
+                    e.what());
+    }
+  }
+  // A bound on what a disk that stays full can make the daemon keep: beyond it the oldest
+  // deferred writes are given up, each in the log (events and counters; never more than a
+  // handful of state changes are among them).
+  constexpr std::size_t kMaxDeferred = 100'000;
+  if (deferred_writes_.size() >= kMaxDeferred) {
+    spdlog::error("daemon database: {} given up: {} writes wait already", deferred_writes_.front().first, kMaxDeferred);
+    deferred_writes_.pop_front();
+  }
+  deferred_writes_.emplace_back(what, std::move(write));
+  return false;
+}
+
+bool Sequencer::store_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
+  {
+    std::lock_guard lock(db_writes_mutex_);
+    if (deferred_writes_.empty()) {
+      try {
+        return db_.set_state(id, to, reason, expected);
+      } catch (const storage::sql::SqliteError& e) {
+        spdlog::error("daemon database: campaign {} -> {} kept in memory, to be stored when the database can be "
+                      "written: {}", id, to_string(to), e.what());
+      }
+    }
+  }
+  // The sequencer's state is the truth meanwhile; the database follows in order. A transition
+  // the database refuses when it is stored at last is in the log.
+  write_db("campaign " + std::to_string(id) + " -> " + std::string(to_string(to)), [this, id, to, reason] {
+    if (!db_.set_state(id, to, reason))
+      spdlog::error("daemon database: campaign {} -> {} refused when stored late", id, to_string(to));
+  });
+  return true;
+}
+
+bool Sequencer::retry_db_writes() {
+  std::lock_guard lock(db_writes_mutex_);
+  while (!deferred_writes_.empty()) {
+    try {
+      deferred_writes_.front().second();
+    } catch (const storage::sql::SqliteError& e) {
+      return false;  // still full: the next call tries again
+    } catch (const std::exception& e) {
+      spdlog::error("daemon database: {} given up: {}", deferred_writes_.front().first, e.what());
+    }
+    deferred_writes_.pop_front();
+    if (deferred_writes_.empty()) spdlog::info("daemon database: every deferred write is stored");
+  }
+  return true;
 }
 
 namespace {
@@ -363,9 +450,14 @@ Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, c
   {
     std::lock_guard lock(mutex_);
     if (shutdown_) return {503, "the daemon is shutting down", std::nullopt};
+    const bool active = active_id_ == id;
+    // The active run's state is the sequencer's, and its change is stored in order with the ones
+    // a full disk kept back (an operator can stop or abort a run suspended on a full disk);
+    // another campaign's state is the database's, which must first hold every change kept back.
+    if (!active && !retry_db_writes())
+      return {503, "the daemon database cannot be written now (is the disk full?); try again later", std::nullopt};
     auto row = db_.campaign(id);
     if (!row) return {404, "no campaign " + std::to_string(id), std::nullopt};
-    const bool active = active_id_ == id;
     const RunState state = active ? active_state_ : row->state;
     const auto target = command_target(state, command);
     if (!target || (is_active(state) && !active)) {
@@ -378,7 +470,8 @@ Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, c
         message += "; a suspended run resumes by itself when the condition has cleared";
       return {409, message, state};
     }
-    if (!db_.set_state(id, *target, why)) return {409, "campaign " + std::to_string(id) + " changed meanwhile", state};
+    const bool stored = active ? store_state(id, *target, why, std::nullopt) : db_.set_state(id, *target, why);
+    if (!stored) return {409, "campaign " + std::to_string(id) + " changed meanwhile", state};
     if (active) active_state_ = *target;
     if (*target == RunState::Queued) {
       if (state == RunState::Interrupted) {
@@ -388,7 +481,7 @@ Sequencer::CommandOutcome Sequencer::command(std::int64_t id, Command command, c
       }
       queue_enabled_ = true;
     }
-    if (*target == RunState::Aborted) db_.queue_remove(id);
+    if (*target == RunState::Aborted && !active) db_.queue_remove(id);  // an active run is in no queue
     event = json{{"type", "event"}, {"campaign", id}, {"kind", "transition"}, {"from", to_string(state)},
                  {"to", to_string(*target)}, {"reason", why}};
     out.state = *target;
@@ -418,21 +511,36 @@ std::optional<Sequencer::Outcome> Sequencer::pending_command() {
 void Sequencer::runner() {
   std::unique_lock lock(mutex_);
   while (!shutdown_) {
+    lock.unlock();
+    const bool stored = retry_db_writes();
+    lock.lock();
     std::vector<std::int64_t> queue;
-    cv_.wait_for(lock, std::chrono::milliseconds(500), [&] {
-      if (shutdown_) return true;
-      if (!queue_enabled_) return false;
-      queue = db_.queue();
-      return !queue.empty();
-    });
-    if (shutdown_) break;
-    if (!queue_enabled_ || queue.empty()) continue;
-    const std::int64_t id = queue.front();
-    db_.queue_remove(id);
-    const auto row = db_.campaign(id);
-    if (!row || row->state != RunState::Queued) continue;
-    const std::string reason = row->run_db.empty() ? "devices free: starting" : "resuming from the last checkpoint";
-    if (!db_.set_state(id, RunState::Running, reason, RunState::Queued)) continue;
+    std::int64_t id = 0;
+    std::string reason;
+    // A database that cannot be read or written (disk full) starts nothing: the queue waits.
+    try {
+      cv_.wait_for(lock, std::chrono::milliseconds(500), [&] {
+        if (shutdown_) return true;
+        if (!queue_enabled_ || !stored) return false;
+        queue = db_.queue();
+        return !queue.empty();
+      });
+      if (shutdown_) break;
+      if (!queue_enabled_ || queue.empty()) continue;
+      id = queue.front();
+      const auto row = db_.campaign(id);
+      if (!row || row->state != RunState::Queued) {
+        db_.queue_remove(id);
+        continue;
+      }
+      reason = row->run_db.empty() ? "devices free: starting" : "resuming from the last checkpoint";
+      if (!db_.set_state(id, RunState::Running, reason, RunState::Queued)) continue;
+      db_.queue_remove(id);
+    } catch (const std::exception& e) {
+      spdlog::error("the queue waits: {}", e.what());
+      cv_.wait_for(lock, std::chrono::seconds(1), [&] { return shutdown_; });
+      continue;
+    }
     active_id_ = id;
     active_state_ = RunState::Running;
     lock.unlock();
@@ -443,11 +551,18 @@ void Sequencer::runner() {
     try {
       run_campaign(id);
     } catch (const std::exception& e) {
-      // run_campaign handles its own failures; this is the last line of defence.
-      spdlog::critical("campaign {}: unexpected error: {}", id, e.what());
-      db_.set_error(id, e.what());
-      record_event(id, "error", std::nullopt, std::nullopt, std::string("internal error: ") + e.what());
-      transition(id, RunState::Failed, std::string("internal error: ") + e.what(), std::nullopt);
+      // run_campaign handles its own failures; this is the last line of defence, and must not
+      // throw itself: the database it writes to may be on the disk that failed (each write is
+      // kept in memory and stored later, see write_db).
+      const std::string why = e.what();
+      spdlog::critical("campaign {}: unexpected error: {}", id, why);
+      try {
+        write_db("campaign " + std::to_string(id) + "'s error", [this, id, why] { db_.set_error(id, why); });
+        record_event(id, "error", std::nullopt, std::nullopt, "internal error: " + why);
+        transition(id, RunState::Failed, "internal error: " + why, std::nullopt);
+      } catch (const std::exception& again) {
+        spdlog::critical("campaign {}: its failure not stored: {}", id, again.what());
+      }
     }
     lock.lock();
     active_id_.reset();
@@ -467,7 +582,7 @@ void Sequencer::run_campaign(std::int64_t id) {
   RunContext run;
   run.id = id;
   auto fail_early = [&](const std::string& why) {
-    db_.set_error(id, why);
+    write_db("campaign " + std::to_string(id) + "'s error", [this, id, why] { db_.set_error(id, why); });
     record_event(id, "error", std::nullopt, std::nullopt, why);
     transition(id, RunState::Failed, why, std::nullopt);
   };
@@ -536,7 +651,8 @@ void Sequencer::run_campaign(std::int64_t id) {
     run.run_db_path = (fs::path(config_.data_dir) / relative).string();
     fs::create_directories(fs::path(run.run_db_path).parent_path());
     const bool resuming = fs::exists(run.run_db_path);
-    if (!resuming) db_.set_run_db(id, relative);
+    if (!resuming)
+      write_db("campaign " + std::to_string(id) + "'s run file", [this, id, relative] { db_.set_run_db(id, relative); });
     open_recorder(run);
     const auto committed_t = run.last_t_ns;
     EstimatorWorker::Spec estimators{run.spec.estimators, run.spec.navigation_model, run.spec.start_model.value_or(ImuModel{})};
@@ -590,15 +706,18 @@ void Sequencer::run_campaign(std::int64_t id) {
         // The last frames are in the file before the run is done: a write that fails at the end
         // (a full disk found only by the final commit on a loaded machine) suspends the run and
         // redoes what was lost, as anywhere else in the program.
-        if (run.recorder && !run.recorder->commit_and_wait()) {
-          run.recorder_failed = true;
-          outcome = hold(run, "recording failed: " + run.recorder->error().value_or("write failed"));
+        if (run.recorder && !commit_recording(run)) {
+          outcome = hold(run, run.recorder->write_problem().value_or(
+                                  "recording failed: " + run.recorder->error().value_or("write failed")));
           continue;
         }
         outcome = Outcome::Completed;
         break;
       }
-      db_.set_checkpoint(id, static_cast<std::int64_t>(run.segment), run.checkpoint_s());
+      write_db("campaign " + std::to_string(id) + "'s checkpoint",
+               [this, id, segment = static_cast<std::int64_t>(run.segment), t_s = run.checkpoint_s()] {
+                 db_.set_checkpoint(id, segment, t_s);
+               });
       if (run.segments[run.segment].kind == "power-cycle" && run.power_cycled_segment != run.segment) {
         outcome = await_power_cycle(run);
         if (outcome != Outcome::Completed) continue;
@@ -610,7 +729,7 @@ void Sequencer::run_campaign(std::int64_t id) {
   } catch (const std::exception& e) {
     const std::string why = e.what();
     spdlog::error("campaign {}: {}", id, why);
-    db_.set_error(id, why);
+    write_db("campaign " + std::to_string(id) + "'s error", [this, id, why] { db_.set_error(id, why); });
     if (run.bench) {
       note_event(run, "error", why);
       finish_run(run, Outcome::Fail, why);
@@ -647,6 +766,8 @@ DeviceReadings Sequencer::readings(RunContext& run, double setpoint_C, double to
   r.tolerance_C = tolerance_C;
   r.imu_connected = run.bench->imu().state().connected;
   r.last_frame_s = run.last_frame_world_s;
+  // A recorder that holds frames it cannot write keeps the run held until it has written them.
+  if (run.recorder) r.recorder_problem = run.recorder->write_problem().value_or("");
   return r;
 }
 
@@ -762,6 +883,18 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
       const auto pushed = run.recorder->push(accepted);
       if (pushed == storage::Recorder::Push::Rejected)
         throw std::runtime_error("internal error: the recorder refused frames that do not follow the recorded ones");
+      if (pushed == storage::Recorder::Push::Refused) {
+        // The run file cannot be written now: the recorder holds what it took and took nothing
+        // after it. The frames it refused are not recorded yet; the redo of the segment after
+        // the suspension records them (it records only frames after the last one taken).
+        const std::optional<std::int64_t> taken = run.recorder->last_accepted_t_ns();
+        std::int64_t refused = 0;
+        for (const ImuFrame& f : accepted)
+          if (!taken || f.t_ns > *taken) ++refused;
+        run.frames -= refused;
+        run.last_t_ns = taken;
+        problem = run.recorder->write_problem().value_or("the recorder refused frames");
+      }
       if (pushed == storage::Recorder::Push::Dropped) {
         // Counted in the run file too (recorder_session, dropped_span); those instants stay a gap.
         run.lost += static_cast<std::int64_t>(accepted.size());
@@ -774,6 +907,8 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
     DeviceReadings r = readings(run, run.spec.chamber.setpoint_at(run.program_time_s), run.spec.chamber.tolerance_C);
     if (auto why = recorder_problem(run)) {
       r.recorder_problem = *why;
+    } else if (auto held = run.recorder->write_problem()) {
+      r.recorder_problem = *held;
     } else if (auto error = run.recorder->error()) {  // before its alarm has arrived
       run.recorder_failed = true;
       r.recorder_problem = "recording failed: " + *error;
@@ -802,7 +937,7 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
   }
   note_event(run, "suspended", reason);
   safe_hold(run);
-  if (!run.recorder->commit_and_wait()) run.recorder_failed = true;
+  (void)commit_recording(run);
   (void)recorder_problem(run);  // alarms raised meanwhile become events
   sync_run_record(db_, run);
   publish(run, true);
@@ -826,7 +961,8 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
                     "run file reopened after the write failure: %lld frames committed up to %.3f s",
                     static_cast<long long>(run.frames), run.program_time_s);
       note_event(run, "info", text);
-      if (!run.recorder->commit_and_wait()) throw std::runtime_error(run.recorder->error().value_or("write failed"));
+      if (!run.recorder->commit_and_wait())
+        throw std::runtime_error(run.recorder->error().value_or(run.recorder->write_problem().value_or("write failed")));
     } catch (const std::exception& e) {
       run.recorder_failed = true;
       note_event(run, "alarm", std::string("the run file still cannot be written: ") + e.what() +
@@ -856,7 +992,7 @@ Sequencer::Outcome Sequencer::hold(RunContext& run, const std::string& reason) {
 // Operator pause: table stopped, recorder committed, then wait for resume, stop or abort.
 Sequencer::Outcome Sequencer::paused(RunContext& run) {
   safe_hold(run);
-  if (run.recorder && !run.recorder->commit_and_wait()) run.recorder_failed = true;  // reopened on resume
+  if (run.recorder) (void)commit_recording(run);  // a failed file is reopened on resume
   // The counters first: whoever sees "paused" must see where the run holds.
   publish(run, true);
   if (!transition(run.id, RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
@@ -884,7 +1020,7 @@ Sequencer::Outcome Sequencer::paused(RunContext& run) {
 Sequencer::Outcome Sequencer::await_power_cycle(RunContext& run) {
   // The table at rest with its interlock open: the operator may reach the IMU and its cable.
   safe_hold(run);
-  if (run.recorder && !run.recorder->commit_and_wait()) run.recorder_failed = true;
+  if (run.recorder) (void)commit_recording(run);
   const SegmentInfo& seg = run.segments[run.segment];
   std::string text = "Power-cycle the IMU: switch it off, wait at least 10 s, switch it on, then answer Done. "
                      "Segment " + std::to_string(run.segment + 1) + " '" + seg.name + "' starts after the answer.";
@@ -1033,10 +1169,13 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
       results = true;  // what was recorded before the failure still calibrates (partial)
       break;
   }
-  if (run.recorder && !run.recorder->commit_and_wait() && final_state != RunState::Failed) {
+  // A shutdown while the recorder holds frames for want of space leaves the run interrupted: those
+  // frames are lost with the process, and the resume takes up after the last commit.
+  if (run.recorder && !run.recorder->commit_and_wait() && final_state != RunState::Failed &&
+      !(final_state == RunState::Interrupted && !run.recorder->error())) {
     final_state = RunState::Failed;
-    why = "recording failed: " + run.recorder->error().value_or("unknown error");
-    db_.set_error(run.id, why);
+    why = "recording failed: " + run.recorder->error().value_or(run.recorder->write_problem().value_or("unknown error"));
+    write_db("campaign " + std::to_string(run.id) + "'s error", [this, id = run.id, why] { db_.set_error(id, why); });
     // Its alarm; the run record is written again below (the recorder refuses nothing more now).
     record_event(run.id, "error", static_cast<std::int64_t>(run.segment), run.program_time_s, why);
   }
@@ -1044,8 +1183,11 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     if (results && is_final(final_state)) {
       try {
         const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns);
-        if (r.model) db_.set_model(run.id, imu_model_to_json_text(*r.model));
-        db_.set_results(run.id, r.results.dump());
+        if (r.model)
+          write_db("campaign " + std::to_string(run.id) + "'s model",
+                   [this, id = run.id, text = imu_model_to_json_text(*r.model)] { db_.set_model(id, text); });
+        write_db("campaign " + std::to_string(run.id) + "'s results",
+                 [this, id = run.id, text = r.results.dump()] { db_.set_results(id, text); });
         // A recorder that failed refuses these (the model stays in the daemon's database).
         if (run.recorder) {
           run.recorder->set_extra("imucald_results", r.results.dump());
@@ -1054,14 +1196,26 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
       } catch (const std::exception& e) {
         // A run ending on an error must still end: the error is kept with the run.
         spdlog::error("campaign {}: the estimators could not finish: {}", run.id, e.what());
-        db_.set_results(run.id, json{{"error", std::string("the estimators could not finish: ") + e.what()}}.dump());
+        write_db("campaign " + std::to_string(run.id) + "'s results",
+                 [this, id = run.id,
+                  text = json{{"error", std::string("the estimators could not finish: ") + e.what()}}.dump()] {
+                   db_.set_results(id, text);
+                 });
       }
     } else {
       run.estimators->cancel();
     }
   }
-  db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
-  if (is_final(final_state)) db_.set_complete(run.id, outcome == Outcome::Completed && final_state == RunState::Done);
+  write_db("campaign " + std::to_string(run.id) + "'s counters",
+           [this, id = run.id, t_s = run.program_time_s, frames = run.frames, lost = run.lost, bad = run.bad] {
+             db_.update_run(id, t_s, frames, lost, bad);
+           });
+  if (is_final(final_state)) {
+    write_db("campaign " + std::to_string(run.id) + "'s completeness",
+             [this, id = run.id, complete = outcome == Outcome::Completed && final_state == RunState::Done] {
+               db_.set_complete(id, complete);
+             });
+  }
   transition(run.id, final_state, why, std::nullopt);
   sync_run_record(db_, run);
   publish(run, true);
@@ -1133,7 +1287,14 @@ void Sequencer::publish(RunContext& run, bool force) {
   }
   if (force || now - run.last_db_update >= std::chrono::seconds(1)) {
     run.last_db_update = now;
-    db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
+    // With a full disk the counters wait for the next second; what was deferred is tried again.
+    if (retry_db_writes()) {
+      try {
+        db_.update_run(run.id, run.program_time_s, run.frames, run.lost, run.bad);
+      } catch (const storage::sql::SqliteError& e) {
+        spdlog::warn("campaign {}: counters not stored: {}", run.id, e.what());
+      }
+    }
   }
 }
 

@@ -14,6 +14,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -98,10 +99,24 @@ class Sequencer {
                     std::optional<double> program_time_s, const std::string& reason);
   // Clears and raises the alarms a state change implies (alarms.hpp), broadcast.
   void transition_alarms(std::int64_t id, RunState from, RunState to, const std::string& reason);
+  // A write to the daemon database that a full disk (or an I/O error) must not turn into a failed
+  // run or a dead daemon: done now when the database takes it, else kept in memory in order and
+  // tried again (retry_db_writes, from publish and the queue runner) -- the run goes on with its
+  // state in memory meanwhile. Later writes queue behind a deferred one, so the database sees
+  // them in their order. Returns whether it was stored now. Other errors propagate.
+  bool write_db(const std::string& what, std::function<void()> write);
+  // The run's state: stored now, or deferred as write_db does (then taken as done).
+  bool store_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected);
+  // Tries the deferred writes again, oldest first, up to the first that still fails. True when
+  // none is left.
+  bool retry_db_writes();
   std::optional<Outcome> pending_command();
   RunState active_state() const;
 
   void check_unit(RunContext& run);
+  // Commits what the recorder holds; false when it cannot (marks the run file failed when the
+  // recorder has stopped, not when it holds its frames for want of space).
+  bool commit_recording(RunContext& run);
   void open_recorder(RunContext& run);
   std::optional<std::string> recorder_problem(RunContext& run);
   Outcome prepare_devices(RunContext& run);
@@ -139,6 +154,8 @@ class Sequencer {
   };
   std::optional<Prompt> prompt_;
   RecorderHooks recorder_hooks_;
+  std::mutex db_writes_mutex_;  // guards deferred_writes_ and orders the writes through it
+  std::deque<std::pair<std::string, std::function<void()>>> deferred_writes_;
   std::thread thread_;
 
   mutable std::mutex telemetry_mutex_;

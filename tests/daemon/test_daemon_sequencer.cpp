@@ -247,32 +247,7 @@ TEST(Sequencer, RecorderFallingBehindSuspendsTheRunBeforeAFrameIsLost) {
   EXPECT_NE(record->find("queue_high_water"), std::string::npos);
 }
 
-// A disk that fills up (SQLite max_page_count on the first recorder's connection): the batch in
-// flight is rolled back, the alarm is recorded, the run suspends; the file is reopened (integrity
-// checked) once the settle time has passed, the run continues from the first frame lost with the
-// failed batch, and the file ends up with every frame exactly once.
-TEST(Sequencer, AFullDiskSuspendsTheRunWhichContinuesOnceTheFileCanBeWritten) {
-  LocalDaemon d("disk-full", false, [](daemon::DaemonConfig& c) { c.recorder.commit_interval_s = 0.02; });
-  daemon::Sequencer::RecorderHooks hooks;
-  hooks.on_open = [](storage::RunDb& db, int attempt) {
-    if (attempt == 0) db.set_size_limit_bytes(1'000'000);  // room for about a third of the run
-  };
-  d.service->sequencer().set_recorder_hooks(hooks);
-  const auto id = d.post_campaign(short_campaign("disk-full", 0));
-  ASSERT_EQ(d.command(id, "start"), 200);
-  const json c = d.wait_final(id);
-  ASSERT_EQ(c.at("state"), "done") << c.dump();
-  EXPECT_TRUE(has_event(c, "alarm", "write_failed"));
-  EXPECT_TRUE(has_event(c, "suspended", "recording failed"));
-  EXPECT_TRUE(has_event(c, "info", "run file reopened"));
-  EXPECT_TRUE(has_transition(c, "suspended", "running"));
-  expect_same_frames(run_frames(d.run_path(c)), reference_frames(c.at("spec"), d.config));
-  const auto db = storage::RunDb::open(d.run_path(c), storage::OpenMode::Read);
-  const auto sessions = db.sessions();
-  ASSERT_GE(sessions.size(), 2u);
-  EXPECT_TRUE(sessions.front().unclean);  // closed by the reopen's recovery
-  EXPECT_EQ(sessions.front().integrity, "ok");
-}
+// A full disk under a run: test_daemon_disk_full.cpp.
 
 TEST(Sequencer, StopAndAbortEndEarlyWithPartialResults) {
   LocalDaemon d("stop");

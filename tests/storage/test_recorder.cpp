@@ -289,26 +289,42 @@ TEST_F(RecorderTest, ContinuesARunAndCountsStoredFramesAcrossSessions) {
   expect_frames_identical(frames_from(0, 1000), RunDb::open(path()).read_frames());
 }
 
-TEST_F(RecorderTest, AFullDiskStopsRecordingClearlyAndKeepsEveryCommittedFrame) {
+// A file that reaches its size limit for good (SQLite's max_page_count): the recorder holds what
+// it could not commit and refuses more; closed meanwhile, it gives up with a clear error and the
+// next open counts exactly the frames it had accepted and never committed.
+TEST_F(RecorderTest, ADiskThatStaysFullEndsWithTheHeldFramesCountedAsLost) {
   Alarms alarms;
   RunDb db = RunDb::create(path(), test::crash_meta());
-  db.set_size_limit_bytes(3'000'000);  // ~55 k frames: SQLite's max_page_count stands in for the disk
+  db.set_size_limit_bytes(3'000'000);  // ~55 k frames
   RecorderOptions options;
   options.commit_interval_s = 0.01;
   options.wait_when_full = true;
   Recorder recorder(std::move(db), options, alarms.handler());
   std::int64_t pushed = 0;
+  Recorder::Push last = Recorder::Push::Queued;
   for (; pushed < 2'000'000; pushed += 1000) {
-    if (recorder.push(frames_from(pushed, 1000)) != Recorder::Push::Queued) break;
+    last = recorder.push(frames_from(pushed, 1000));
+    if (last != Recorder::Push::Queued) break;
     if (pushed % 20'000 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(15));  // several commits
   }
-  EXPECT_LT(pushed, 2'000'000) << "the size limit never hit";
+  ASSERT_LT(pushed, 2'000'000) << "the size limit never hit";
+  EXPECT_EQ(last, Recorder::Push::Refused);
+  ASSERT_TRUE(recorder.write_problem().has_value());
+  EXPECT_THAT(*recorder.write_problem(), HasSubstr("disk full: at least"));
+  EXPECT_THAT(*recorder.write_problem(), HasSubstr("MB free needed"));
+  EXPECT_FALSE(recorder.commit_and_wait());
+  EXPECT_GT(recorder.stats().held_frames, 0);
+  // The alarm is raised on the writer thread just after the problem is visible to push().
+  for (int i = 0; i < 500 && alarms.count(RecorderAlarmKind::WriteHeld) == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteHeld), 1);
+
   EXPECT_FALSE(recorder.close());
   ASSERT_TRUE(recorder.error().has_value());
   EXPECT_THAT(*recorder.error(), HasSubstr("disk is full"));
   EXPECT_THAT(*recorder.error(), HasSubstr(path()));
+  EXPECT_THAT(*recorder.error(), HasSubstr("closed while it held"));
   EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteFailed), 1);
-  EXPECT_THAT(alarms.message(RecorderAlarmKind::WriteFailed), HasSubstr("disk is full"));
   const std::int64_t committed = recorder.stats().committed_frames;
   EXPECT_GT(committed, 0);
 
@@ -321,6 +337,74 @@ TEST_F(RecorderTest, AFullDiskStopsRecordingClearlyAndKeepsEveryCommittedFrame) 
   expect_frames_identical(frames_from(0, committed), stored);
   ASSERT_TRUE(reopened.recovery()->lost_uncommitted_frames.has_value());
   EXPECT_EQ(*reopened.recovery()->lost_uncommitted_frames, recorder.stats().accepted_frames - committed);
+  EXPECT_GT(*reopened.recovery()->lost_uncommitted_frames, 0);
+}
+
+// The disk made full (storage::disk_fault, the VFS every connection goes through) while frames
+// stream in, then given space again: the recorder holds the failed batch and what was queued,
+// refuses the rest (the producer supplies it again from last_accepted_t_ns(), as the daemon's redo
+// does), and once space is back the run holds every frame exactly once, in one writer session.
+TEST_F(RecorderTest, AFullDiskHoldsTheUncommittedFramesAndWritesThemOnceSpaceReturns) {
+  struct Restore {
+    ~Restore() { disk_fault::set_full(false); }
+  } restore;
+  Alarms alarms;
+  RecorderOptions options;
+  options.commit_interval_s = 0.01;
+  options.retry_interval_s = 0.05;
+  options.wait_when_full = true;
+  options.queue_capacity_frames = 65'536;
+  std::atomic<int> commits{0};
+  Recorder recorder(RunDb::create(path(), test::crash_meta()), options, alarms.handler(),
+                    [&](const RecorderStats&) { ++commits; });
+  constexpr std::int64_t kFrames = 400'000, kBatch = 1000;
+  std::int64_t next = 0;  // the first frame not yet taken by the recorder
+  int refusals = 0;
+  bool filled = false, emptied = false;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (next < kFrames) {
+    ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "no progress; next frame " << next;
+    if (!filled && next >= 100'000) {
+      filled = true;
+      disk_fault::set_full(true);
+    }
+    const auto pushed = recorder.push(frames_from(next, std::min(kBatch, kFrames - next)));
+    if (pushed == Recorder::Push::Queued) {
+      next += std::min(kBatch, kFrames - next);
+      continue;
+    }
+    ASSERT_EQ(pushed, Recorder::Push::Refused);
+    ++refusals;
+    // The producer takes up after the last frame the recorder holds.
+    const auto taken = recorder.last_accepted_t_ns();
+    ASSERT_TRUE(taken.has_value());
+    next = 0;
+    while (next < kFrames && expected_frame(next).t_ns <= *taken) ++next;
+    if (!emptied && refusals >= 3) {
+      // Still held after several failed attempts: nothing lost, nothing committed meanwhile.
+      EXPECT_GT(recorder.stats().held_frames, 0);
+      EXPECT_LE(recorder.stats().queued_frames, options.queue_capacity_frames);
+      EXPECT_FALSE(recorder.commit_and_wait());
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));  // a few failed retries
+      emptied = true;
+      disk_fault::set_full(false);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(filled && emptied) << "the disk was never made full while recording";
+  EXPECT_TRUE(recorder.commit_and_wait());
+  EXPECT_FALSE(recorder.write_problem().has_value());
+  EXPECT_TRUE(recorder.close());
+  EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteHeld), 1);
+  EXPECT_THAT(alarms.message(RecorderAlarmKind::WriteHeld), HasSubstr("disk full: at least"));
+  EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteFailed), 0);
+  EXPECT_EQ(recorder.stats().dropped_frames, 0);
+
+  const RunDb db = RunDb::open(path(), OpenMode::Read);
+  EXPECT_FALSE(db.recovery().has_value());
+  ASSERT_EQ(db.sessions().size(), 1u);
+  EXPECT_FALSE(db.sessions().front().unclean);
+  expect_frames_identical(frames_from(0, kFrames), db.read_frames());
 }
 
 TEST_F(RecorderTest, UncleanEndIsRecoveredWithIntegrityCheckAndLossReport) {

@@ -295,6 +295,56 @@ TEST_F(RunDbTest, Codec1RoundTripIsBitExactAndCompact) {
   expect_frames_identical(frames, reopened.read_frames());
 }
 
+// The full disk on demand (storage::disk_fault): every write of every connection fails as a
+// full file system fails it, reads go on, and writes work again once it is switched off; a batch
+// that failed for it is rolled back to the last commit and can be written again through the same
+// handle (what the recorder does when space returns).
+TEST_F(RunDbTest, TheDiskFullSwitchFailsWritesOnlyAndABatchCanBeWrittenAgainAfterIt) {
+  struct Restore {
+    ~Restore() { disk_fault::set_full(false); }
+  } restore;
+  const std::string path = temp_path("run.db");
+  const auto frames = simulated_frames(30'000, 3);
+  const std::span<const ImuFrame> all(frames);
+  RunDb run = RunDb::create(path, simulated_meta());
+  run.begin_batch();
+  run.append(all.first(10'000));
+  run.commit_batch();
+
+  disk_fault::set_full(true);
+  EXPECT_TRUE(disk_fault::full());
+  run.begin_batch();
+  run.append(all.subspan(10'000, 10'000));  // chunks go to SQLite's cache; the WAL write fails
+  try {
+    run.commit_batch();
+    ADD_FAILURE() << "a commit on a full disk succeeded";
+  } catch (const sql::SqliteError& e) {
+    EXPECT_EQ(e.kind(), sql::SqliteError::Kind::full);
+    EXPECT_THAT(e.what(), HasSubstr("disk is full"));
+  }
+  // Rolled back to the last commit, for this handle and for a reader alike.
+  EXPECT_EQ(run.frame_count(), 10'000);
+  EXPECT_EQ(run.last_frame_t_ns(), frames[9'999].t_ns);
+  EXPECT_EQ(RunDb::open(path, OpenMode::Read).frame_count(), 10'000);
+
+  disk_fault::set_full(false);
+  run.begin_batch();
+  run.append(all.subspan(10'000, 10'000));  // the same frames again
+  run.commit_batch();
+  // A budget: the disk fills after that many bytes, in the middle of the next batch.
+  disk_fault::fill_after_bytes(100'000);
+  run.begin_batch();
+  run.append(all.subspan(20'000));
+  EXPECT_THROW(run.commit_batch(), sql::SqliteError);
+  EXPECT_TRUE(disk_fault::full());
+  disk_fault::set_full(false);
+  run.begin_batch();
+  run.append(all.subspan(20'000));
+  run.commit_batch();
+  run.close();
+  expect_frames_identical(frames, RunDb::open(path, OpenMode::Read).read_frames());
+}
+
 TEST_F(RunDbTest, Codec2RoundTripIsBitExactForAnyDouble) {
   const std::string path = temp_path("run.db");
   RecordingMeta meta = simulated_meta();
