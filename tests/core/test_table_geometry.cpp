@@ -12,6 +12,7 @@
 #include "core/table.hpp"
 #include "core/table_json.hpp"
 #include "core/units.hpp"
+#include "tests/core/imperfect_table.hpp"
 
 using namespace imucal;
 using Eigen::Matrix3d;
@@ -21,17 +22,7 @@ namespace {
 
 constexpr double kAs = units::kArcsecToRad;
 
-// A table of the size the issue names: 2" tilt, 3" non-perpendicularity, 1" + 0.5" encoder errors.
-table::TableGeometry imperfect() {
-  table::TableGeometry g;
-  g.outer_tilt_rad = {2.0 * kAs, 1.2 * kAs};
-  g.middle_axis_rad = {3.0 * kAs, -1.5 * kAs};
-  g.inner_axis_rad = {2.1 * kAs, -3.0 * kAs};
-  for (std::size_t axis = 0; axis < 3; ++axis)
-    g.encoder_error[axis] = {{1, 1.0 * kAs, 0.3 + 0.8 * static_cast<double>(axis)},
-                             {2, 0.5 * kAs, 0.6 + 1.6 * static_cast<double>(axis)}};
-  return g;
-}
+using tabletest::imperfect;
 
 // Today's formulas of the ideal table, written out as CONVENTIONS.md states them (the code that
 // was in core/table.cpp before the geometry), for the comparison with the geometry zero.

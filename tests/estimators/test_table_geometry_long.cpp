@@ -5,20 +5,14 @@
 #include <gtest/gtest.h>
 
 #include "core/units.hpp"
+#include "tests/core/imperfect_table.hpp"
 #include "nav_calib_fixture.hpp"
 
 using namespace imucal;
 
 TEST(TableGeometryLong, StageThreeOnAnImperfectTable) {
-  constexpr double kAs = units::kArcsecToRad;
   navcaltest::Scenario s = navcaltest::make_scenario(3, 100);
-  table::TableGeometry g;
-  g.outer_tilt_rad = {2.0 * kAs, 1.2 * kAs};
-  g.middle_axis_rad = {3.0 * kAs, -1.5 * kAs};
-  g.inner_axis_rad = {2.1 * kAs, -3.0 * kAs};
-  for (std::size_t axis = 0; axis < 3; ++axis)
-    g.encoder_error[axis] = {{1, 1.0 * kAs, 0.3 + 0.8 * static_cast<double>(axis)},
-                             {2, 0.5 * kAs, 0.6 + 1.6 * static_cast<double>(axis)}};
+  const table::TableGeometry g = tabletest::imperfect();
   s.cfg.table = table::TableCertificate{g, std::nullopt, "test table"};
   const navfilter::Result r = navcaltest::run_filter(s, "navigation", 1);
   std::printf("status: %s; updates %lld, rejected %lld, restarts %lld\n", r.status.c_str(),
