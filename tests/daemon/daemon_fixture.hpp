@@ -47,6 +47,12 @@ struct HttpResult {
       return json();
     }
   }
+  // A sign-in's session cookie as a browser sends it back ("imucal_session=..."), without the
+  // attributes of its Set-Cookie.
+  std::string session_cookie() const {
+    const std::string& set_cookie = headers.at("set-cookie");
+    return set_cookie.substr(0, set_cookie.find(';'));
+  }
 };
 
 // One request, `Connection: close`, reads until the server closes.

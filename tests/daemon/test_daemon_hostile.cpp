@@ -152,7 +152,7 @@ TEST(Hostile, CrossOriginWebSocketWithACookieIsRefused) {
   const std::uint16_t port = d.service->port();
   const auto login = http_request(port, "POST", "/api/login", json{{"token", kViewerToken}}.dump());
   ASSERT_EQ(login.status, 200);
-  const std::string cookie = login.headers.at("set-cookie").substr(0, login.headers.at("set-cookie").find(';'));
+  const std::string cookie = login.session_cookie();
   const auto open = [&](const std::string& origin, const std::string& target, bool with_cookie) {
     net::io_context ioc;
     websocket::stream<tcp::socket> ws(ioc);
