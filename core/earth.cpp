@@ -22,6 +22,10 @@ double site_gravity_mps2(const Site& site) {
   return normal_gravity_mps2(site.latitude_deg * std::numbers::pi / 180.0, site.height_m);
 }
 
+double site_gravity_sigma_mps2(const Site& site) {
+  return site.gravity_mps2 ? kMeasuredGravitySigma_mps2 : kNormalGravitySigma_mps2;
+}
+
 Eigen::Vector3d w_ie_n(double latitude_rad) {
   return {0.0, kOmega_radps * std::cos(latitude_rad), kOmega_radps * std::sin(latitude_rad)};
 }

@@ -370,6 +370,20 @@ json accel_to(const AccelErrors& a, bool with_noise) {
   return j;
 }
 
+// `sigma` and each source of `budget`: {"gyro": {...}, "accel": {...}}, the coefficients' keys.
+ImuErrorSet error_set_from(const json& j, const std::string& w) {
+  ObjectReader s = section(j, w);
+  ImuErrorSet set;
+  if (const json* g = s.get("gyro")) set.gyro = gyro_from(*g, s.at("gyro"));
+  if (const json* a = s.get("accel")) set.accel = accel_from(*a, s.at("accel"));
+  s.finish();
+  return set;
+}
+
+json error_set_to(const ImuErrorSet& set) {
+  return {{"gyro", gyro_to(set.gyro, false)}, {"accel", accel_to(set.accel, false)}};
+}
+
 }  // namespace
 
 namespace {
@@ -386,13 +400,16 @@ ImuModel model_from(const json& j, const std::string& source) {
   }
   if (const json* g = r.get("gyro")) m.gyro = gyro_from(*g, r.at("gyro"));
   if (const json* a = r.get("accel")) m.accel = accel_from(*a, r.at("accel"));
-  if (const json* sj = r.get("sigma")) {
-    ObjectReader s = section(*sj, r.at("sigma"));
-    ImuErrorSet set;
-    if (const json* g = s.get("gyro")) set.gyro = gyro_from(*g, s.at("gyro"));
-    if (const json* a = s.get("accel")) set.accel = accel_from(*a, s.at("accel"));
-    s.finish();
-    m.sigma = set;
+  if (const json* sj = r.get("sigma")) m.sigma = error_set_from(*sj, r.at("sigma"));
+  // An older model has no budget: it reads as none stated.
+  if (const json* bj = r.get("budget")) {
+    ObjectReader b = section(*bj, r.at("budget"));
+    for (const auto& [name, entry] : bj->items()) {
+      if (name.empty()) b.fail(r.at("budget"), "a source's name cannot be empty");
+      (void)b.get(name.c_str());  // marks it known: every source name is allowed
+      m.budget[name] = error_set_from(entry, b.at(name.c_str()));
+    }
+    b.finish();
   }
   if (r.has("body_to_instrument_arcsec")) m.body_to_instrument_rad = vec3(r, "body_to_instrument_arcsec", kArcsecToRad);
   if (const json* mj = r.get("mount")) {
@@ -431,7 +448,12 @@ std::string imu_model_to_json_text(const ImuModel& m) {
   j["frame"] = m.frame;
   j["gyro"] = gyro_to(m.gyro, true);
   j["accel"] = accel_to(m.accel, true);
-  if (m.sigma) j["sigma"] = {{"gyro", gyro_to(m.sigma->gyro, false)}, {"accel", accel_to(m.sigma->accel, false)}};
+  if (m.sigma) j["sigma"] = error_set_to(*m.sigma);
+  if (!m.budget.empty()) {
+    json b = json::object();
+    for (const auto& [source, set] : m.budget) b[source] = error_set_to(set);
+    j["budget"] = b;
+  }
   if (m.body_to_instrument_rad) j["body_to_instrument_arcsec"] = arr(*m.body_to_instrument_rad, kRadToArcsec);
   if (m.mount_r0_p_m) j["mount"] = {{"r0_p_mm", arr(*m.mount_r0_p_m, 1.0 / kMmToM)}};
   if (!m.thermal_json.empty()) j["thermal"] = json::parse(m.thermal_json);

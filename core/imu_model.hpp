@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -109,6 +110,12 @@ struct ImuModel {
   GyroErrors gyro;
   AccelErrors accel;
   std::optional<ImuErrorSet> sigma;                  // 1-sigma of a calibration result
+  // The uncertainty budget behind `sigma` (formats: `budget`): source -> that source's standard
+  // uncertainty contribution to each coefficient, in the fields of `sigma` ("type_a": the
+  // estimator's own; "table.outer_tilt_arcsec", "site.gravity_mps2", "start_model.accel.k2_ug_per_g2"
+  // ...: type B, each from its sensitivity). A coefficient's sigma is the root-sum-square of its
+  // entries over the sources; a coefficient no source lists has no budget. Empty: none stated.
+  std::map<std::string, ImuErrorSet> budget;
   std::optional<Eigen::Vector3d> body_to_instrument_rad;  // frame "body" only
   std::optional<Eigen::Vector3d> mount_r0_p_m;       // from the lever-arm stage
   std::string thermal_json;                          // the thermal section, kept verbatim for now

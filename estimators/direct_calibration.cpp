@@ -1,9 +1,13 @@
 #include "estimators/direct_calibration.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <numbers>
 #include <sstream>
+#include <utility>
 
 #include <Eigen/Geometry>
 #include <Eigen/Dense>
@@ -57,8 +61,63 @@ std::vector<SegmentInfo> SegmentDetector::finish() {
 }
 
 // ---------------------------------------------------------------------------------------------
+std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& meta, double gravity_sigma_mps2) {
+  std::vector<ReferencePerturbation> out;
+  if (gravity_sigma_mps2 > 0) {
+    RecordingMeta m = meta;
+    m.site.gravity_mps2 = earth::site_gravity_mps2(meta.site) + gravity_sigma_mps2;
+    out.push_back({"site.gravity_mps2", std::move(m)});
+  }
+  if (!meta.table || !meta.table->sigma) return out;
+  const table::TableGeometry& sigma = *meta.table->sigma;
+  // Moved about the values the certificate gives: the reference applies them, the budget covers
+  // what is left, their uncertainty.
+  const table::TableGeometry base = meta.table->geometry.value_or(table::TableGeometry{});
+  auto moved = [&](const std::string& source, const auto& move) {
+    RecordingMeta m = meta;
+    table::TableGeometry g = base;
+    move(g);
+    m.table->geometry = g;
+    out.push_back({source, std::move(m)});
+  };
+  using Pair = std::array<double, 2> table::TableGeometry::*;
+  const std::pair<const char*, Pair> pairs[] = {{"table.outer_tilt_arcsec", &table::TableGeometry::outer_tilt_rad},
+                                                {"table.middle_axis_arcsec", &table::TableGeometry::middle_axis_rad},
+                                                {"table.inner_axis_arcsec", &table::TableGeometry::inner_axis_rad}};
+  for (const auto& [source, member] : pairs)
+    for (std::size_t i = 0; i < 2; ++i)
+      if ((sigma.*member)[i] > 0) moved(source, [&](table::TableGeometry& g) { (g.*member)[i] += (sigma.*member)[i]; });
+  const char* kEncoder[3] = {"table.encoder_error_arcsec.outer", "table.encoder_error_arcsec.middle",
+                             "table.encoder_error_arcsec.inner"};
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    for (const table::EncoderHarmonic& s : sigma.encoder_error[axis]) {
+      // The certified harmonic of this order, if the geometry gives it: its phase is then known.
+      const table::EncoderHarmonic* known = nullptr;
+      for (const table::EncoderHarmonic& h : base.encoder_error[axis])
+        if (h.k == s.k) known = &h;
+      const double phase_rad = known ? known->phase_rad : 0.0;
+      const double quadrature_sigma_rad = known ? known->amplitude_rad * s.phase_rad : s.amplitude_rad;
+      // An added term of the same order: a sin(k th + phi) + d sin(k th + psi) is the sum, so the
+      // reference moves exactly as the harmonic does in that quadrature.
+      const std::pair<double, double> quadratures[2] = {{s.amplitude_rad, phase_rad},
+                                                        {quadrature_sigma_rad, phase_rad + 0.5 * std::numbers::pi}};
+      for (const auto& [amplitude_rad, phase] : quadratures)
+        if (amplitude_rad > 0)
+          moved(kEncoder[axis], [&](table::TableGeometry& g) {
+            g.encoder_error[axis].push_back({s.k, amplitude_rad, phase});
+          });
+    }
+  }
+  return out;
+}
+
 DirectCalibrator::DirectCalibrator(const RecordingMeta& meta, const Options& options)
     : meta_(meta), options_(options), reference_(meta) {
+  const double gravity_sigma_mps2 = options.gravity_sigma_mps2.value_or(earth::site_gravity_sigma_mps2(meta.site));
+  for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2)) {
+    perturbation_sources_.push_back(p.source);
+    perturbed_references_.emplace_back(p.meta);
+  }
   for (const SegmentInfo& s : meta.segments)
     if (s.kind == "static" || s.kind == "tilt") statics_.push_back(s);
   std::sort(statics_.begin(), statics_.end(), [](const SegmentInfo& a, const SegmentInfo& b) { return a.t0_s < b.t0_s; });
@@ -73,9 +132,23 @@ void DirectCalibrator::open_interval(const std::string& name, bool is_static, do
   iv.is_static = is_static;
   iv.t0_s = t0_s;
   iv.t1_s = t0_s;
+  iv.perturbed.resize(perturbed_references_.size());
   intervals_.push_back(iv);
   current_ = &intervals_.back();
 }
+
+namespace {
+
+// One frame's reference into an interval's sums: the one rule for the recording's reference and
+// for each perturbed one.
+void add_frame(ReferenceSums& r, const Vector3d& wdt_o, const Vector3d& f_rest_o, double dt_s, bool first_of_static) {
+  for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? r.ref_pos_rad[k] : r.ref_neg_rad[k]) += wdt_o[k];
+  if (first_of_static) r.f_o_mps2 = f_rest_o;
+  r.f_dt_o += f_rest_o * dt_s;
+  r.nonlinear_moments_rad += rate_moments::of(wdt_o, dt_s);
+}
+
+}  // namespace
 
 void DirectCalibrator::push(const ImuFrame& f) {
   if (!have_prev_) {
@@ -105,13 +178,17 @@ void DirectCalibrator::push(const ImuFrame& f) {
   Interval& iv = *current_;
   if (dt > options_.gap_factor * dt_nominal_s_ || dt <= 0) iv.gap = true;
 
-  for (int k = 0; k < 3; ++k) (wdt_o[k] >= 0 ? iv.ref_pos_rad[k] : iv.ref_neg_rad[k]) += wdt_o[k];
   iv.moved_axes_rad += (f.table_deg - prev_.table_deg).cwiseAbs() * kDegToRad;
+  const bool first_of_static = iv.frames == 0 && iv.is_static;
   // Specific force at rest: gravity reaction resolved in o.
-  const Vector3d f_rest_o = reference_.specific_force_at_rest_o_mps2(f.table_deg);
-  if (iv.frames == 0 && iv.is_static) iv.f_o_mps2 = f_rest_o;
-  iv.f_dt_o += f_rest_o * dt;
-  iv.nonlinear_moments_rad += rate_moments::of(wdt_o, dt);
+  add_frame(iv, wdt_o, reference_.specific_force_at_rest_o_mps2(f.table_deg), dt, first_of_static);
+  // The perturbed references only inside intervals: the statics and the moves between them are
+  // one unbroken run of frames, so each one's acceleration from the frame before holds there.
+  for (std::size_t p = 0; p < perturbed_references_.size(); ++p) {
+    table_reference::FrameReference& ref = perturbed_references_[p];
+    add_frame(iv.perturbed[p], ref.next_increment_o_rad(prev_.table_deg, f.table_deg, dt),
+              ref.specific_force_at_rest_o_mps2(f.table_deg), dt, first_of_static);
+  }
   iv.sum_dtheta += f.dtheta_rad;
   iv.sum_dv += f.dv_mps;
   iv.sumsq_dtheta += f.dtheta_rad.cwiseAbs2();
@@ -268,6 +345,104 @@ double& coefficient(AccelErrors& a, const Column& c, int axis) {
   throw std::logic_error("stage direct: an accelerometer has one scale factor, not one per sign");
 }
 
+namespace {
+
+// The entry of column c of a sensor's design in a set of errors (a sigma or a budget source).
+double& entry(ImuErrorSet& set, const SensorDesign& d, std::size_t c) {
+  return d.gyro ? coefficient(set.gyro, d.columns[c], d.axis) : coefficient(set.accel, d.columns[c], d.axis);
+}
+
+// The six designs of stage 1 (accelerometers x y z, gyros x y z) over `intervals` at the errors
+// the fit converged to, each with its solution.
+struct SensorFit {
+  SensorDesign design;
+  Eigen::VectorXd x;
+};
+std::vector<SensorFit> sensor_fits(const std::vector<Interval>& intervals, const Options& options,
+                                   const GyroErrors& gyro_at, const AccelErrors& accel_at) {
+  const Selection sel = select_intervals(intervals, options);
+  std::vector<SensorFit> fits;
+  for (int j = 0; j < 3; ++j) fits.push_back({accel_design(j, sel, accel_at), {}});
+  for (int j = 0; j < 3; ++j) fits.push_back({gyro_design(j, sel, gyro_at), {}});
+  for (SensorFit& f : fits) f.x = least_squares::solve(f.design.A, f.design.b, f.design.w).x;
+  return fits;
+}
+
+}  // namespace
+
+std::map<std::string, ImuErrorSet> uncertainty_budget(const std::vector<Interval>& intervals, const Options& options,
+                                                      const std::vector<std::string>& perturbation_sources,
+                                                      const GyroErrors& gyro, const AccelErrors& accel,
+                                                      const ImuErrorSet& start_sigma, ImuErrorSet& sigma,
+                                                      const std::map<std::string, ImuErrorSet>& carried) {
+  // Every shift is measured from the solution at the converged errors with the recording's own
+  // reference, so that it is the source's effect alone (the fit's iteration is not in it).
+  const std::vector<SensorFit> nominal = sensor_fits(intervals, options, gyro, accel);
+  // Variances per source; several parameters of one source (a tilt's two components, a harmonic's
+  // two quadratures, the three K2) are independent and add as variances.
+  std::map<std::string, ImuErrorSet> variance;
+  auto add_shifts = [&](const std::string& source, const std::vector<SensorFit>& moved) {
+    ImuErrorSet& v = variance[source];
+    for (std::size_t s = 0; s < nominal.size(); ++s)
+      for (std::size_t c = 0; c < nominal[s].design.columns.size(); ++c) {
+        const double shift = moved[s].x[static_cast<Eigen::Index>(c)] - nominal[s].x[static_cast<Eigen::Index>(c)];
+        entry(v, nominal[s].design, c) += shift * shift;
+      }
+  };
+
+  // The table's geometry and the site's g: the intervals with their perturbed reference sums.
+  for (std::size_t p = 0; p < perturbation_sources.size(); ++p) {
+    std::vector<Interval> moved = intervals;
+    for (Interval& iv : moved) static_cast<ReferenceSums&>(iv) = iv.perturbed.at(p);
+    add_shifts(perturbation_sources[p], sensor_fits(moved, options, gyro, accel));
+  }
+
+  // The start model's terms stage 1 removes without estimating them (CONVENTIONS.md, "Nonlinear
+  // terms"), each moved by the start model's sigma of it: the designs take them as known.
+  auto start_term = [&](const std::string& source, double sigma_of_term, const auto& move) {
+    if (!(sigma_of_term > 0)) return;
+    GyroErrors g = gyro;
+    AccelErrors a = accel;
+    move(g, a, sigma_of_term);
+    add_shifts(source, sensor_fits(intervals, options, g, a));
+  };
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k) {
+      start_term("start_model.gyro.scale_nonlinear_ppm", start_sigma.gyro.scale_nonlinear(j, k),
+                 [&](GyroErrors& g, AccelErrors&, double d) { g.scale_nonlinear(j, k) += d; });
+      start_term("start_model.gyro.g_sensitivity_dph_per_g", start_sigma.gyro.g_sensitivity_radps_per_g(j, k),
+                 [&](GyroErrors& g, AccelErrors&, double d) { g.g_sensitivity_radps_per_g(j, k) += d; });
+    }
+  for (int j = 0; j < 3; ++j) {
+    start_term("start_model.accel.k2_ug_per_g2", start_sigma.accel.k2_per_g[j],
+               [&](GyroErrors&, AccelErrors& a, double d) { a.k2_per_g[j] += d; });
+    start_term("start_model.accel.k3_ug_per_g3", start_sigma.accel.k3_per_g2[j],
+               [&](GyroErrors&, AccelErrors& a, double d) { a.k3_per_g2[j] += d; });
+  }
+
+  // This stage's coefficients leave the budget it was given (their sources are this run's now);
+  // the rest of it (another stage's coefficients) is carried over.
+  std::map<std::string, ImuErrorSet> budget = carried;
+  for (auto& [source, set] : budget)
+    for (const SensorFit& f : nominal)
+      for (std::size_t c = 0; c < f.design.columns.size(); ++c) entry(set, f.design, c) = 0.0;
+  // Type A, each type B, and their root-sum-square as the coefficient's sigma (the sources are
+  // independent of each other and of the noise).
+  for (const SensorFit& f : nominal)
+    for (std::size_t c = 0; c < f.design.columns.size(); ++c) {
+      double& s = entry(sigma, f.design, c);
+      entry(budget["type_a"], f.design, c) = s;
+      double combined_sq = s * s;
+      for (auto& [source, v] : variance) {
+        const double contribution = std::sqrt(entry(v, f.design, c));
+        entry(budget[source], f.design, c) = contribution;
+        combined_sq += contribution * contribution;
+      }
+      s = std::sqrt(combined_sq);
+    }
+  return budget;
+}
+
 Result DirectCalibrator::finish(const ImuModel& seed) const {
   if (seed.frame != "instrument")
     throw std::invalid_argument("stage direct: give the seed model in the instrument frame");
@@ -403,6 +578,10 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   gy.noise.arw_rad_rts = arw_sq.cwiseSqrt().mean();
   acc.noise.vrw_mps_rts = vrw_sq.cwiseSqrt().mean();
 
+  // ---------------- the uncertainty budget: sigma so far is the fit's own (type A)
+  const ImuErrorSet start_sigma = seed.sigma.value_or(ImuErrorSet{});
+  res.model.budget = uncertainty_budget(intervals_, options_, perturbation_sources_, gy, acc, start_sigma, sigma,
+                                        seed.budget);
   res.model.sigma = sigma;
   res.model.frame = "instrument";
   // The terms stage 1 takes from the start model (a rate-steps or tumble model), not estimating

@@ -1,10 +1,13 @@
 // Stage 1 of the method (seed ch. 2): calibration by direct measurements. Accelerometers from the
 // static positions in the gravity field; gyros from the statics against the Earth rate and from
 // rest-to-rest rotations against the table's angle increments (Earth rate along the path included);
-// sigmas from the residuals and the design; white-noise densities from the statics; the body frame.
+// sigmas from the residuals and the design, combined with the type B sources (the table's
+// certificate, the site's g, the start model's nonlinear terms) into an uncertainty budget;
+// white-noise densities from the statics; the body frame.
 // Pure: frames are pushed in, the result comes out; the same code runs online and offline.
 #pragma once
 
+#include <map>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -40,10 +43,45 @@ class SegmentDetector {
 struct Options {
   double gap_factor = 1.5;       // a frame interval above this many nominal periods is a gap
   double min_rotation_rad = 0.5; // a rest-to-rest interval must turn at least this much to be used
+  // The site's g's standard uncertainty for the budget, m/s^2; absent: earth::site_gravity_sigma_mps2
+  // (measured or normal gravity).
+  std::optional<double> gravity_sigma_mps2;
 };
 
+// The sums of an interval that come from the table's reference, not from the IMU: they move when
+// the table's geometry or the site's g does, so the budget accumulates them once more for each
+// type B perturbation of the reference (ReferencePerturbation).
+struct ReferenceSums {
+  Eigen::Vector3d ref_pos_rad = Eigen::Vector3d::Zero();  // integral of the positive parts of w_io_o
+  Eigen::Vector3d ref_neg_rad = Eigen::Vector3d::Zero();  // integral of the negative parts
+  Eigen::Vector3d f_o_mps2 = Eigen::Vector3d::Zero();     // statics: specific force in o
+  // For the nonlinear terms a start model fixes (CONVENTIONS.md, "Nonlinear terms"): the integral
+  // of the specific force at rest in o (the gyros' g-sensitivity), and per axis k the sums of
+  // q_k^m times the reference increment, q_k = |w_k| / kGyroNonlinearityRate_radps, m = 1, 2, 3
+  // (the gyro scale nonlinearity's angle is row k of scale_nonlinear times row k of these).
+  Eigen::Vector3d f_dt_o = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d nonlinear_moments_rad = Eigen::Matrix3d::Zero();
+};
+
+// One type B source of the reference moved by its standard uncertainty (issue 34): the
+// recording's description with one table-geometry parameter (or one quadrature of an encoder
+// harmonic) or the site's g moved by its 1-sigma, and the budget source it counts under. The
+// shift of stage 1's solution when its intervals are accumulated with this reference is that
+// parameter's contribution to each coefficient (stage 1's least squares is linear in the
+// references, so the shift is its sensitivity times the sigma, to first order).
+struct ReferencePerturbation {
+  std::string source;  // "table.outer_tilt_arcsec", "table.encoder_error_arcsec.inner", "site.gravity_mps2"
+  RecordingMeta meta;
+};
+// Every parameter the table's certificate gives a 1-sigma for (table.sigma), about the geometry it
+// gives (the ideal table when it gives none); an encoder harmonic as its two quadratures, the one
+// in phase with the certified harmonic with the amplitude's sigma, the other with the amplitude
+// times the phase's sigma when the geometry gives the harmonic, else (phase unknown) with the
+// amplitude's sigma too. And the site's g moved by gravity_sigma_mps2 (none when 0).
+std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& meta, double gravity_sigma_mps2);
+
 // One accumulated interval: a static or a rest-to-rest rotation between two statics.
-struct Interval {
+struct Interval : ReferenceSums {
   std::string name;
   bool is_static = false;
   double t0_s = 0, t1_s = 0;
@@ -51,17 +89,10 @@ struct Interval {
   long long frames = 0;
   Eigen::Vector3d sum_dtheta = Eigen::Vector3d::Zero(), sum_dv = Eigen::Vector3d::Zero();
   Eigen::Vector3d sumsq_dtheta = Eigen::Vector3d::Zero(), sumsq_dv = Eigen::Vector3d::Zero();
-  Eigen::Vector3d ref_pos_rad = Eigen::Vector3d::Zero();  // integral of the positive parts of w_io_o
-  Eigen::Vector3d ref_neg_rad = Eigen::Vector3d::Zero();  // integral of the negative parts
-  Eigen::Vector3d f_o_mps2 = Eigen::Vector3d::Zero();     // statics: specific force in o
   Eigen::Vector3d moved_axes_rad = Eigen::Vector3d::Zero();  // |total angle change| per table axis
-  // For the nonlinear terms a start model fixes (CONVENTIONS.md, "Nonlinear terms"): the integral
-  // of the specific force at rest in o (the gyros' g-sensitivity), and per axis k the sums of
-  // q_k^m times the reference increment, q_k = |w_k| / kGyroNonlinearityRate_radps, m = 1, 2, 3
-  // (the gyro scale nonlinearity's angle is row k of scale_nonlinear times row k of these).
-  Eigen::Vector3d f_dt_o = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d nonlinear_moments_rad = Eigen::Matrix3d::Zero();
   bool gap = false;
+  // The reference sums again under each of the calibrator's ReferencePerturbations, in order.
+  std::vector<ReferenceSums> perturbed;
 };
 
 // The intervals stage 1 solves with: the statics and the usable rest-to-rest rotations, and a
@@ -104,7 +135,11 @@ double& coefficient(GyroErrors& g, const Column& c, int axis);
 double& coefficient(AccelErrors& a, const Column& c, int axis);
 
 struct Result {
-  ImuModel model;                    // instrument frame, with sigma
+  // Instrument frame, with sigma, the combined standard uncertainty of each coefficient stage 1
+  // estimates, and the budget behind it (ImuModel::budget): "type_a" (the fit's own, from its
+  // residuals and design), each table source, "site.gravity_mps2", and "start_model.<key>" for
+  // each nonlinear term taken from the start model with a sigma.
+  ImuModel model;
   std::vector<std::string> notes;    // what was used, what was left out and why
   int statics = 0, rotations = 0;
   double static_time_s = 0;
@@ -133,6 +168,9 @@ class DirectCalibrator {
   std::vector<SegmentInfo> statics_;
   std::size_t next_static_ = 0;
   table_reference::FrameReference reference_;
+  // The budget's type B references: perturbation_sources_[p] names perturbed_references_[p].
+  std::vector<std::string> perturbation_sources_;
+  std::vector<table_reference::FrameReference> perturbed_references_;
   double g_mps2_;
   double dt_nominal_s_;
   std::vector<Interval> intervals_;
@@ -140,6 +178,20 @@ class DirectCalibrator {
   bool have_prev_ = false;
   ImuFrame prev_;
 };
+
+// Stage 1's uncertainty budget (issue 34; ImuModel::budget), for the fit that converged to `gyro`
+// and `accel` on `intervals`: the shift of each coefficient when each type B source moves by its
+// standard uncertainty (the perturbed references the intervals carry, named by
+// perturbation_sources; each nonlinear term of the start model with a sigma in start_sigma, which
+// the designs take as known), re-solved at the same errors. `sigma` holds the fit's own (type A)
+// sigma of each coefficient stage 1 estimates and is replaced by the combined standard
+// uncertainty, the root-sum-square over the sources. Returns the budget: `carried` (a start
+// model's) without this stage's coefficients, then "type_a" and each source for them.
+std::map<std::string, ImuErrorSet> uncertainty_budget(const std::vector<Interval>& intervals, const Options& options,
+                                                      const std::vector<std::string>& perturbation_sources,
+                                                      const GyroErrors& gyro, const AccelErrors& accel,
+                                                      const ImuErrorSet& start_sigma, ImuErrorSet& sigma,
+                                                      const std::map<std::string, ImuErrorSet>& carried);
 
 // The same model in the body frame built on the accelerometer axes (X = accel x, Y in the accel
 // x-y plane): misalignments relative to b and body_to_instrument_arcsec.
