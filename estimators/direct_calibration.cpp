@@ -114,10 +114,11 @@ std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& 
 DirectCalibrator::DirectCalibrator(const RecordingMeta& meta, const Options& options)
     : meta_(meta), options_(options), reference_(meta) {
   const double gravity_sigma_mps2 = options.gravity_sigma_mps2.value_or(earth::site_gravity_sigma_mps2(meta.site));
-  for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2)) {
-    perturbation_sources_.push_back(p.source);
-    perturbed_references_.emplace_back(p.meta);
-  }
+  if (options.type_b)
+    for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2)) {
+      perturbation_sources_.push_back(p.source);
+      perturbed_references_.emplace_back(p.meta);
+    }
   for (const SegmentInfo& s : meta.segments)
     if (s.kind == "static" || s.kind == "tilt") statics_.push_back(s);
   std::sort(statics_.begin(), statics_.end(), [](const SegmentInfo& a, const SegmentInfo& b) { return a.t0_s < b.t0_s; });
@@ -579,7 +580,7 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   acc.noise.vrw_mps_rts = vrw_sq.cwiseSqrt().mean();
 
   // ---------------- the uncertainty budget: sigma so far is the fit's own (type A)
-  const ImuErrorSet start_sigma = seed.sigma.value_or(ImuErrorSet{});
+  const ImuErrorSet start_sigma = options_.type_b ? seed.sigma.value_or(ImuErrorSet{}) : ImuErrorSet{};
   res.model.budget = uncertainty_budget(intervals_, options_, perturbation_sources_, gy, acc, start_sigma, sigma,
                                         seed.budget);
   res.model.sigma = sigma;

@@ -46,6 +46,11 @@ struct Options {
   // The site's g's standard uncertainty for the budget, m/s^2; absent: earth::site_gravity_sigma_mps2
   // (measured or normal gravity).
   std::optional<double> gravity_sigma_mps2;
+  // The type B sources (the table's certificate, the site's g, the start model's terms) in sigma
+  // and the budget; false: the fit's own sigma alone, for a caller comparing runs on one bench
+  // (stage 2's cycles: the table's and the g's errors are the same in every cycle, so they move
+  // no slope and must not flatten the cycles' weights).
+  bool type_b = true;
 };
 
 // The sums of an interval that come from the table's reference, not from the IMU: they move when

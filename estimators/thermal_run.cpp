@@ -162,7 +162,10 @@ void CycleEstimator::push(const ImuFrame& f) {
   while (next_open_ < cycles_.size() && cycles_[next_open_].t0_s - kLead_s <= t) {
     RecordingMeta m = meta_;
     m.segments = cycles_[next_open_].statics;
-    active_.push_back({next_open_, std::make_unique<direct::DirectCalibrator>(m)});
+    // Each cycle's own sigma weighs it in the fits: the type B sources are common to every cycle.
+    direct::Options cycle_options;
+    cycle_options.type_b = false;
+    active_.push_back({next_open_, std::make_unique<direct::DirectCalibrator>(m, cycle_options)});
     ++next_open_;
   }
   for (Active& a : active_) {

@@ -309,10 +309,11 @@ RecordingMeta with_segments(const RecordingMeta& meta, std::vector<SegmentInfo> 
 
 class DirectRun final : public Pipeline::Run {
  public:
-  DirectRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start) : meta_(meta), start_(start) {
+  DirectRun(const RecordingMeta& meta, const Feed& f, const ImuModel& start, const direct::Options& options)
+      : meta_(meta), start_(start), options_(options) {
     const bool has_statics = std::any_of(f.segments.begin(), f.segments.end(), is_static);
     if (has_statics) {
-      calibrator_ = std::make_unique<direct::DirectCalibrator>(with_segments(meta, f.segments));
+      calibrator_ = std::make_unique<direct::DirectCalibrator>(with_segments(meta, f.segments), options_);
     } else {
       // A recording without a segment list (an imported CSV): the statics are found from the
       // table angles in a first pass.
@@ -330,7 +331,7 @@ class DirectRun final : public Pipeline::Run {
     if (!detector_) return false;
     detected_ = detector_->finish();
     detector_.reset();
-    calibrator_ = std::make_unique<direct::DirectCalibrator>(with_segments(meta_, detected_));
+    calibrator_ = std::make_unique<direct::DirectCalibrator>(with_segments(meta_, detected_), options_);
     return true;
   }
   void finish(const FrameSource&, const Feed&, Outcome& out) override {
@@ -363,6 +364,7 @@ class DirectRun final : public Pipeline::Run {
  private:
   RecordingMeta meta_;
   ImuModel start_;
+  direct::Options options_;
   std::optional<direct::SegmentDetector> detector_;
   std::vector<SegmentInfo> detected_;
   std::unique_ptr<direct::DirectCalibrator> calibrator_;
@@ -875,7 +877,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
     try {
       if (!run_) {
         switch (out.stage) {
-          case Stage::Direct: run_ = std::make_unique<DirectRun>(meta_, f, model_); break;
+          case Stage::Direct: run_ = std::make_unique<DirectRun>(meta_, f, model_, settings_.direct); break;
           case Stage::RateSteps: run_ = std::make_unique<RateStepsRun>(meta_, f, model_); break;
           case Stage::Tumble: run_ = std::make_unique<TumbleRun>(meta_, f, model_); break;
           case Stage::LeverArm: run_ = std::make_unique<LeverArmRun>(meta_, model_); break;

@@ -72,6 +72,7 @@ struct Part {
 std::vector<Part> parts(const RecordingMeta& meta);
 
 struct Settings {
+  direct::Options direct;                // stage direct (its budget's site-g sigma, ...)
   int passes = 1;                        // stage navigation: passes, each starting from the last model
   navfilter::Options navigation;
   int statics_per_cycle = 0;             // stage thermal: for statics without "cycle-NNN/" names

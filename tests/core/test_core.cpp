@@ -359,6 +359,37 @@ TEST(ModelJson, AModelWithoutTheTermsWritesNoneOfTheirKeys) {
   EXPECT_EQ(keys(j.at("sigma").at("accel")), accel);
 }
 
+// Issue 34's budget: each source with the keys of `sigma`, read back as written; a model without
+// one (every model before it) reads with none and writes no key; a malformed source is named.
+TEST(ModelJson, TheBudgetRoundTripsAndAnOlderModelStillReads) {
+  ImuModel m = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  EXPECT_TRUE(m.budget.empty());
+  EXPECT_FALSE(nlohmann::json::parse(imu_model_to_json_text(m)).contains("budget"));
+  m.sigma = ImuErrorSet{};
+  m.sigma->gyro.misalignment_rad.yx = 5e-7;
+  m.budget["type_a"].gyro.misalignment_rad.yx = 3e-7;
+  m.budget["table.middle_axis_arcsec"].gyro.misalignment_rad.yx = 4e-7;
+  m.budget["start_model.accel.k3_ug_per_g3"].accel.scale[2] = 1.25e-6;
+  const std::string text = imu_model_to_json_text(m);
+  const auto j = nlohmann::json::parse(text);
+  EXPECT_NEAR(j.at("budget").at("table.middle_axis_arcsec").at("gyro").at("misalignment_arcsec").at("yx").get<double>(),
+              4e-7 * units::kRadToArcsec, 1e-12);
+  const ImuModel r = imu_model_from_json_text(text, "test");
+  ASSERT_EQ(r.budget.size(), 3u);
+  EXPECT_NEAR(r.budget.at("type_a").gyro.misalignment_rad.yx, 3e-7, 1e-20);
+  EXPECT_NEAR(r.budget.at("table.middle_axis_arcsec").gyro.misalignment_rad.yx, 4e-7, 1e-20);
+  EXPECT_NEAR(r.budget.at("start_model.accel.k3_ug_per_g3").accel.scale[2], 1.25e-6, 1e-18);
+  EXPECT_EQ(nlohmann::json::parse(imu_model_to_json_text(r)).at("budget"), j.at("budget"));
+  try {
+    imu_model_from_json_text(R"({"format":"imucal-imu-model/1","budget":{"type_a":{"gyro":{"bias_dhp":[0,0,0]}}}})",
+                             "m.json");
+    FAIL() << "a misspelt key in a budget source must be refused";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("budget.type_a.gyro"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(imu_model_from_json_text(R"({"format":"imucal-imu-model/1","budget":[1]})", "m"), std::runtime_error);
+}
+
 TEST(ModelJson, MalformedNonlinearTermsAreNamed) {
   const auto refused = [](const std::string& section, const std::string& expected) {
     try {
