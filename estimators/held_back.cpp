@@ -40,7 +40,9 @@ std::size_t choose(const std::vector<Score>& candidates, const Rule& rule) {
       sq /= n;
     }
     const double se = n > 0 ? std::sqrt(std::max(0.0, sq - mean * mean) / n) : 0.0;
-    if (mean <= std::max(rule.standard_errors * se, floor)) return c;
+    const bool decisive = rule.decisive_ratio > 0.0 && candidates[c].mean_e2() > rule.decisive_ratio * best_ms;
+    if (!decisive && mean <= std::max(rule.standard_errors * se, floor)) return c;
+    if (decisive && mean <= floor) return c;
   }
   return best;  // not reached: the best candidate always passes against itself
 }

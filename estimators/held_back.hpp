@@ -24,6 +24,13 @@ struct Rule {
   double standard_errors = 2.0;
   double min_improvement = 0.0;
   double resolution = 0.0;
+  // When not 0: a simpler model whose held-back mean square is more than this many times the best
+  // one's is beaten whatever the paired test says (the floor above still applies). With few samples
+  // and a misfit far above the noise the paired differences are all of one sign but unequal, and
+  // their t stays small however large the misfit: a pure cubic over the six interior rates of the
+  // short rate ladder gives 1.92 at most, noise-free. Between two models that both hold the data,
+  // held-back mean squares differ by the noise's scatter, nowhere near such a ratio.
+  double decisive_ratio = 0.0;
 };
 
 // The index of the chosen candidate: the one with the fewest parameters (among equals, the better

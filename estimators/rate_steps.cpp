@@ -279,7 +279,11 @@ Result RateStepsEstimator::finish(const ImuModel& prior) const {
       out.notes.push_back(std::string("gyro ") + kAxis[j] + ": the steps do not determine the scale factors");
       continue;
     }
-    ax.degree = static_cast<int>(held_back::choose(scores, held_back::Rule{}));
+    // The paired test alone cannot find a cubic on a short ladder, however large (held_back.hpp);
+    // a lower degree predicting held-back rates ten times worse in mean square is beaten outright.
+    held_back::Rule rule;
+    rule.decisive_ratio = 10.0;
+    ax.degree = static_cast<int>(held_back::choose(scores, rule));
 
     const Solved solved = solve(rows, y, j, ax.degree);
     if (!solved.ok) {

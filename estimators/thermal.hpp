@@ -231,8 +231,9 @@ struct TempProblem {
 };
 
 struct CheckOptions {
-  double stuck_s = 600.0;               // unchanged this long while the median of the other
-  double stuck_others_change_C = 0.05;  // sensors moved by this much: stuck
+  double stuck_s = 600.0;               // unchanged this long while the median of the sensors of
+  double stuck_others_change_C = 0.05;  // like time constant moved by this much: stuck, unless
+  double air_still_C = 0.5;             // the chamber air moved less than this (a soak: settled)
   double jump_C = 0.3;                 // a step larger than this plus the physical rate: a jump
   double max_rate_C_per_min = 5.0;
   double gap_s = 30.0;                 // no samples this long while the values moved: missing

@@ -294,38 +294,50 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
   auto mask = [](int ch) { return ch < kChannels ? 1u << ch : 0u; };
   const double t_end = t_of(n - 1);
 
-  // Stuck: a sensor channel frozen while the other sensors moved (the chamber alone is no witness:
-  // a stabilised IMU holds still while it moves). Found first, so that the step when it comes
-  // unstuck is not taken for a jump.
+  // Stuck: a reading unchanged for stuck_s while its witnesses moved. The witnesses are sensors of
+  // like time constant (a channel's own triad: the FOG coils are slow, the accelerometers fast; a
+  // coil sensor's the coil's other seven), never the chamber alone (a stabilised IMU holds still
+  // while the air moves). And never while the air held still: a sensor that has settled in a soak
+  // reads a constant exactly as a stuck one does and cannot be told from it, while slower sensors
+  // are still moving (the accelerometers settle long before the coils). Found first, so that the
+  // step when a sensor comes unstuck is not taken for a jump.
+  auto range_over = [](std::size_t i, std::size_t e, const auto& value) {
+    double lo = value(i), hi = lo;
+    for (std::size_t m = i; m <= e; ++m) {
+      lo = std::min(lo, value(m));
+      hi = std::max(hi, value(m));
+    }
+    return hi - lo;
+  };
+  auto air_range = [&](std::size_t i, std::size_t e) {
+    return range_over(i, e, [&](std::size_t m) { return val(m, kChamber); });
+  };
+  // The median of the witnesses' ranges over samples i..e (the upper one of two).
+  auto witnesses_moved = [&](std::size_t i, std::size_t e, std::size_t witnesses, const auto& witness_value) {
+    std::vector<double> change;
+    for (std::size_t w = 0; w < witnesses; ++w)
+      change.push_back(range_over(i, e, [&](std::size_t m) { return witness_value(w, m); }));
+    std::sort(change.begin(), change.end());
+    return change[change.size() / 2];
+  };
   std::vector<std::vector<std::size_t>> stuck_end(kChannels + 1);
   for (int ch = 0; ch < kChannels; ++ch) {
+    const int triad = ch / 3 * 3;  // the channel's triad: gyros 0..2, accelerometers 3..5
     for (std::size_t i = 0; i < n;) {
       std::size_t k = i;
       while (k + 1 < n && val(k + 1, ch) == val(i, ch)) ++k;
       const double t0 = t_of(i), t1 = t_of(k);
       if (t1 - t0 >= o.stuck_s) {
-        double cmin = val(i, kChamber), cmax = cmin;
-        std::vector<double> others_change;
-        for (int other = 0; other < kChannels; ++other) {
-          if (other == ch) continue;
-          double lo = val(i, other), hi = lo;
-          for (std::size_t m = i; m <= k; ++m) {
-            lo = std::min(lo, val(m, other));
-            hi = std::max(hi, val(m, other));
-          }
-          others_change.push_back(hi - lo);
-        }
-        for (std::size_t m = i; m <= k; ++m) {
-          cmin = std::min(cmin, val(m, kChamber));
-          cmax = std::max(cmax, val(m, kChamber));
-        }
-        std::sort(others_change.begin(), others_change.end());
-        const double others = others_change[others_change.size() / 2];
-        if (others >= o.stuck_others_change_C) {
+        const double air = air_range(i, k);
+        const double others = witnesses_moved(i, k, 2, [&](std::size_t w, std::size_t m) {
+          const int other = triad + (ch - triad + 1 + static_cast<int>(w)) % 3;
+          return val(m, other);
+        });
+        if (others >= o.stuck_others_change_C && air >= o.air_still_C) {
           out.push_back({name(ch),
                          "stuck at " + fmt("%.3f", val(i, ch)) + " C for " + fmt("%.0f", t1 - t0) +
-                             " s while the chamber moved by " + fmt("%.2f", cmax - cmin) +
-                             " C and the other sensors by " + fmt("%.2f", others) + " C",
+                             " s while the chamber moved by " + fmt("%.2f", air) + " C and the other " +
+                             (ch < 3 ? "coils" : "accelerometers") + " by " + fmt("%.2f", others) + " C",
                          t0, k + 1 < n ? t_of(k + 1) : t1, mask(ch)});
           stuck_end[static_cast<std::size_t>(ch)].push_back(k);
         }
@@ -350,19 +362,10 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
         while (e + 1 < n && sensor(e + 1, k) == sensor(i, k)) ++e;
         if (t_of(e) - t_of(i) >= o.stuck_s) {
           unstuck.push_back(e);
-          std::vector<double> others_change;
-          for (std::size_t other = 0; other < 8; ++other) {
-            if (other == k) continue;
-            double lo = sensor(i, other), hi = lo;
-            for (std::size_t m = i; m <= e; ++m) {
-              lo = std::min(lo, sensor(m, other));
-              hi = std::max(hi, sensor(m, other));
-            }
-            others_change.push_back(hi - lo);
-          }
-          std::sort(others_change.begin(), others_change.end());
-          const double others = others_change[others_change.size() / 2];
-          if (others >= o.stuck_others_change_C) {
+          const double others = witnesses_moved(i, e, 7, [&](std::size_t w, std::size_t m) {
+            return sensor(m, w < k ? w : w + 1);  // the coil's other seven
+          });
+          if (others >= o.stuck_others_change_C && air_range(i, e) >= o.air_still_C) {
             out.push_back({nm,
                            "stuck at " + fmt("%.3f", sensor(i, k)) + " C for " + fmt("%.0f", t_of(e) - t_of(i)) +
                                " s while the coil's other sensors moved by " + fmt("%.2f", others) + " C",

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/earth.hpp"
 #include "core/units.hpp"
 #include "estimators/least_squares.hpp"
 #include "estimators/table_reference.hpp"
@@ -47,6 +48,16 @@ std::vector<AngleColumn> angles_of_row(int j) {
   return out;
 }
 
+// The 1-sigma of each element of the prior's gyro D S - I (misalignment angles off the diagonal,
+// scale factors on it, the larger of + and -): zero when the prior states none.
+Eigen::Matrix3d gyro_prior_sigma(const ImuModel& prior) {
+  if (!prior.sigma) return Eigen::Matrix3d::Zero();
+  const GyroErrors& s = prior.sigma->gyro;
+  Eigen::Matrix3d out = (misalignment_matrix(s.misalignment_rad) - Eigen::Matrix3d::Identity()).cwiseAbs();
+  for (int j = 0; j < 3; ++j) out(j, j) = std::max(std::abs(s.scale_pos[j]), std::abs(s.scale_neg[j]));
+  return out;
+}
+
 }  // namespace
 
 struct TumbleEstimator::Impl {
@@ -54,9 +65,13 @@ struct TumbleEstimator::Impl {
   std::vector<Static> statics;
   table_reference::SegmentFrames frames{{}};
   double dt_nominal_s;
+  double earth_vertical_radps;  // the Earth rate's component along the local vertical
   table_reference::FrameIntervals intervals;
 
-  explicit Impl(const RecordingMeta& m) : reference(m), dt_nominal_s(1.0 / m.rate_hz) {
+  explicit Impl(const RecordingMeta& m)
+      : reference(m),
+        dt_nominal_s(1.0 / m.rate_hz),
+        earth_vertical_radps(earth::kOmega_radps * std::sin(m.site.latitude_deg * units::kDegToRad)) {
     for (const SegmentInfo& s : m.segments)
       if (s.kind == "static" || s.kind == "tilt") statics.push_back({s.name, s.t0_s, s.t1_s});
     std::sort(statics.begin(), statics.end(), [](const Static& a, const Static& b) { return a.t0_s < b.t0_s; });
@@ -168,6 +183,24 @@ Result TumbleEstimator::finish(const ImuModel& prior) const {
   GyroErrors earth_model = prior.gyro;
   earth_model.bias_radps.setZero();
   earth_model.g_sensitivity_radps_per_g.setZero();
+  // The Earth rate's vertical part turns with the specific force through the whole tumble (both are
+  // fixed in the local level frame), so an error in the prior's D S (the gyros' misalignments and
+  // scale factors that take the Earth rate out) is exactly a g-sensitivity: element (j, k) of D S
+  // off by e puts e times the vertical Earth rate into g-sensitivity (j, k), per g. Its sigma
+  // carries the prior's uncertainty so; a prior without gyro terms or sigma is said to confound
+  // them.
+  const Eigen::Matrix3d prior_DS_sigma = gyro_prior_sigma(prior);
+  if (!prior.sigma && prior.gyro.scale_pos.isZero(0.0) && prior.gyro.scale_neg.isZero(0.0) &&
+      (misalignment_matrix(prior.gyro.misalignment_rad) - Eigen::Matrix3d::Identity()).isZero(0.0)) {
+    char confounded[400];
+    std::snprintf(confounded, sizeof confounded,
+                  "tumble: no stage-1 model given: the gyro g-sensitivity holds the gyros' misalignments and scale "
+                  "errors times the vertical Earth rate (%.2f deg/h here: every 10 arcsec of misalignment is %.5f "
+                  "deg/h/g), which its sigma does not include; give the tumble a stage-1 start model",
+                  impl_->earth_vertical_radps * units::kRadpsToDph,
+                  10.0 * units::kArcsecToRad * impl_->earth_vertical_radps * units::kRadpsToDph);
+    out.notes.push_back(confounded);
+  }
   for (int j = 0; j < 3; ++j) {
     MatrixXd A(n, 4);
     VectorXd b(n);
@@ -190,7 +223,10 @@ Result TumbleEstimator::finish(const ImuModel& prior) const {
     sigma.gyro.bias_radps[j] = std::sqrt(fit.covariance(0, 0));
     for (int k = 0; k < 3; ++k) {
       out.model.gyro.g_sensitivity_radps_per_g(j, k) = fit.x[1 + k];
-      sigma.gyro.g_sensitivity_radps_per_g(j, k) = std::sqrt(fit.covariance(1 + k, 1 + k));
+      // Type B: the prior's uncertainty in element (j, k) of D S moves this term by as much times
+      // the Earth rate's vertical component (see gyro_prior_sigma below).
+      const double prior_part = prior_DS_sigma(j, k) * impl_->earth_vertical_radps;
+      sigma.gyro.g_sensitivity_radps_per_g(j, k) = std::sqrt(fit.covariance(1 + k, 1 + k) + prior_part * prior_part);
     }
     const VectorXd r = b - A * fit.x;
     for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].gyro_residual_radps[j] = r[i];

@@ -183,13 +183,14 @@ json rate_steps_program(const std::string& name, const std::vector<double>& ladd
 
 // IEEE Std 1293's multipoint tumble: the platform turned about the horizontal middle axis through
 // a whole turn in equal steps, a static at each, twice: with the inner axis at 0 (y and z sweep the
-// vertical plane) and at 90 deg (x and y). Every accelerometer meets +1 g and -1 g and the angles
+// vertical plane) and at 90 deg (x and z: the inner axis turns x into the plane the middle axis
+// sweeps; x is up at middle 90 / inner 90). Every accelerometer meets +1 g and -1 g and the angles
 // between; the specific force sweeps every direction of o, which the gyros' g-sensitivity needs.
 // estimators/tumble.hpp reads it.
 json tumble_program(const std::string& name, int steps, double dwell_s) {
   json segs = json::array();
   for (double inner : {0.0, 90.0}) {
-    const std::string plane = inner == 0.0 ? "yz" : "xy";
+    const std::string plane = inner == 0.0 ? "yz" : "xz";
     json positions = json::array();
     for (int k = 0; k < steps; ++k) positions.push_back(pose(0, 360.0 * k / steps, inner));
     segs.push_back({{"type", "positions"}, {"name", "tumble-" + plane}, {"positions_deg", positions}, {"dwell_s", dwell_s}});

@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <set>
 #include <stdexcept>
 
+#include "core/coefficients.hpp"
 #include "core/units.hpp"
 #include "storage/run_db.hpp"
 
@@ -373,50 +375,15 @@ class DirectRun final : public Pipeline::Run {
 }  // namespace
 
 json estimates_json(const ImuModel& model) {
+  const std::vector<Coefficient> all = model_coefficients(model);
+  // An optional term (nonlinear, delay, proof mass) only where a stage estimated it, i.e. the model
+  // carries its uncertainty: elsewhere a row of zeros would say it was estimated.
+  std::set<std::string> estimated_groups;
+  for (const Coefficient& c : all)
+    if (c.sigma > 0.0) estimated_groups.insert(c.group);
   json out = json::object();
-  const ImuErrorSet zero{};
-  const ImuErrorSet& sigma = model.sigma ? *model.sigma : zero;
-  const char* axes[3] = {"x", "y", "z"};
-  auto vec = [&](const std::string& prefix, const Eigen::Vector3d& est, const Eigen::Vector3d& sig, double scale) {
-    for (int j = 0; j < 3; ++j) out[prefix + "." + axes[j]] = json::array({est[j] * scale, sig[j] * scale});
-  };
-  auto mis = [&](const std::string& prefix, const Misalignment& est, const Misalignment& sig) {
-    for (const auto& [name, k] : kMisalignmentKeys)
-      out[prefix + "." + name] = json::array({est.*k * units::kRadToArcsec, sig.*k * units::kRadToArcsec});
-  };
-  vec("gyro.bias_dph", model.gyro.bias_radps, sigma.gyro.bias_radps, units::kRadpsToDph);
-  vec("gyro.scale_pos_ppm", model.gyro.scale_pos, sigma.gyro.scale_pos, 1e6);
-  vec("gyro.scale_neg_ppm", model.gyro.scale_neg, sigma.gyro.scale_neg, 1e6);
-  mis("gyro.misalignment_arcsec", model.gyro.misalignment_rad, sigma.gyro.misalignment_rad);
-  vec("accel.bias_mps2", model.accel.bias_mps2, sigma.accel.bias_mps2, 1.0);
-  vec("accel.scale_ppm", model.accel.scale, sigma.accel.scale, 1e6);
-  mis("accel.misalignment_arcsec", model.accel.misalignment_rad, sigma.accel.misalignment_rad);
-  // The gyro scale nonlinearity where a stage estimated it (rate-steps): "gyro.scale_nonlinear_ppm.x.c2".
-  for (int j = 0; j < 3; ++j)
-    for (int k = 0; k < 3; ++k)
-      if (sigma.gyro.scale_nonlinear(j, k) > 0.0)
-        out[std::string("gyro.scale_nonlinear_ppm.") + axes[j] + ".c" + std::to_string(k + 1)] =
-            json::array({model.gyro.scale_nonlinear(j, k) * 1e6, sigma.gyro.scale_nonlinear(j, k) * 1e6});
-  // K2, K3 and the g-sensitivity where a stage estimated them (the tumble).
-  if (sigma.accel.k2_per_g.cwiseAbs().maxCoeff() > 0.0) {
-    vec("accel.k2_ug_per_g2", model.accel.k2_per_g, sigma.accel.k2_per_g, 1e6);
-    vec("accel.k3_ug_per_g3", model.accel.k3_per_g2, sigma.accel.k3_per_g2, 1e6);
-  }
-  for (int j = 0; j < 3; ++j)
-    for (int k = 0; k < 3; ++k)
-      if (sigma.gyro.g_sensitivity_radps_per_g(j, k) > 0.0)
-        out[std::string("gyro.g_sensitivity_dph_per_g.") + axes[j] + "." + axes[k]] =
-            json::array({model.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph,
-                         sigma.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph});
-  // Delays and proof masses only where the model carries their uncertainty (the lever-arm stage,
-  // stage 3): elsewhere they are not estimated, and a row of zeros would say they were.
-  auto estimated = [](const Eigen::Vector3d& sig) { return sig.cwiseAbs().maxCoeff() > 0.0; };
-  if (estimated(sigma.gyro.delay_s)) vec("gyro.delay_us", model.gyro.delay_s, sigma.gyro.delay_s, 1e6);
-  if (estimated(sigma.accel.delay_s)) vec("accel.delay_us", model.accel.delay_s, sigma.accel.delay_s, 1e6);
-  if (estimated(sigma.accel.lever_arm_y_m))
-    vec("accel.lever_arm_mm.y", model.accel.lever_arm_y_m, sigma.accel.lever_arm_y_m, 1e3);
-  if (estimated(sigma.accel.lever_arm_z_m))
-    vec("accel.lever_arm_mm.z", model.accel.lever_arm_z_m, sigma.accel.lever_arm_z_m, 1e3);
+  for (const Coefficient& c : all)
+    if (!c.optional || estimated_groups.count(c.group)) out[c.key] = json::array({c.value, c.sigma});
   return out;
 }
 

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 
@@ -100,6 +101,33 @@ TEST(Cli, ProgramOutsideTheLimitsIsRefusedWithTheSegment) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("segment 'spin'"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "x.db")) << "nothing is recorded for a refused program";
+}
+
+// compare shows every key of the model: the nonlinear terms too, where the estimate or the truth
+// has them, and no row for a term neither has.
+TEST(Cli, CompareShowsTheNonlinearTerms) {
+  const fs::path d = fresh_dir("cli-compare");
+  std::ofstream(d / "truth.json") << R"({"format":"imucal-imu-model/1",
+    "gyro":{"scale_nonlinear_ppm":{"x":[0,0,0.2]},"g_sensitivity_dph_per_g":[[0,0,0.004],[0,0,0],[0,0,0]]},
+    "accel":{"k2_ug_per_g2":[20,0,0],"k3_ug_per_g3":[0,1.5,0]}})";
+  std::ofstream(d / "model.json") << R"({"format":"imucal-imu-model/1",
+    "gyro":{"scale_nonlinear_ppm":{"x":[0,0,0.25]}},"accel":{"k2_ug_per_g2":[19,0,0]},
+    "sigma":{"gyro":{"scale_nonlinear_ppm":{"x":[0,0,0.05]}},"accel":{"k2_ug_per_g2":[2,2,2],"k3_ug_per_g3":[1,1,1]}}})";
+  const CliRun r = run("compare " + (d / "model.json").string() + " " + (d / "truth.json").string() + " --json " +
+                       (d / "cmp.json").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto rows = nlohmann::json::parse(std::ifstream(d / "cmp.json")).at("rows");
+  std::map<std::string, nlohmann::json> by_name;
+  for (const auto& row : rows) by_name[row.at("name").get<std::string>()] = row;
+  EXPECT_NEAR(by_name.at("gyro.scale_nonlinear_ppm.x.c3").at("error").get<double>(), 0.05, 1e-9);
+  EXPECT_NEAR(by_name.at("gyro.scale_nonlinear_ppm.x.c3").at("sigma").get<double>(), 0.05, 1e-9);
+  EXPECT_NEAR(by_name.at("gyro.g_sensitivity_dph_per_g.x.z").at("truth").get<double>(), 0.004, 1e-12);
+  EXPECT_NEAR(by_name.at("accel.k2_ug_per_g2.x").at("error").get<double>(), -1.0, 1e-9);
+  EXPECT_NEAR(by_name.at("accel.k3_ug_per_g3.y").at("truth").get<double>(), 1.5, 1e-9);
+  EXPECT_TRUE(by_name.count("accel.k3_ug_per_g3.z")) << "its uncertainty is stated";
+  EXPECT_FALSE(by_name.count("gyro.scale_nonlinear_ppm.y.c1")) << "neither model has it";
+  EXPECT_TRUE(by_name.count("gyro.bias_dph.y")) << "the linear terms always";
+  EXPECT_NE(r.output.find("gyro.g_sensitivity_dph_per_g.x.z"), std::string::npos) << r.output;
 }
 
 TEST(Cli, SimulateCalibrateNavigateExportImport) {

@@ -1,6 +1,7 @@
 // Conventions in code: Earth, table kinematics, the sensor model and its JSON form.
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -8,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "core/coefficients.hpp"
 #include "core/earth.hpp"
 #include "core/imu_model.hpp"
 #include "core/json_reader.hpp"
@@ -290,6 +292,36 @@ TEST(SensorModel, CompensationInvertsTheNonlinearTerms) {
   const Vector3d dv = accel_forward(a, f, e) * dt;
   EXPECT_GT((compensate_gyro_increment(g_linear, dtheta, dt) - w * dt).norm(), 5e-6 * (w * dt).norm());
   EXPECT_GT((compensate_accel_increment(a_linear, dv, dt, e) - f * dt).norm(), 2e-5 * (f * dt).norm());
+}
+
+// The one list of coefficients (core/coefficients.hpp): every key of the model JSON, each with the
+// value and sigma of the model in the key's unit, the same keys for every model.
+TEST(ModelCoefficients, ListEveryKeyOfTheModelInItsUnit) {
+  ImuModel m;
+  m.gyro = gyro_with_every_term();
+  m.accel = accel_with_every_term();
+  m.accel.lever_arm_y_m = {0.001, 0.0125, -0.002};
+  m.gyro.delay_s = {1e-6, 2e-6, 3e-6};
+  m.sigma = ImuErrorSet{};
+  m.sigma->accel.k3_per_g2.setConstant(0.5e-6);
+  const std::vector<Coefficient> all = model_coefficients(m);
+  // 15 gyro + 12 accelerometer linear terms; 9 + 3 + 3 + 9 nonlinear; 6 delays; 6 proof-mass offsets.
+  ASSERT_EQ(all.size(), 63u);
+  EXPECT_EQ(model_coefficients(ImuModel{}).size(), all.size());
+  std::map<std::string, Coefficient> by_key;
+  for (const Coefficient& c : all) EXPECT_TRUE(by_key.emplace(c.key, c).second) << "twice: " << c.key;
+  EXPECT_NEAR(by_key.at("gyro.scale_nonlinear_ppm.x.c1").value, m.gyro.scale_nonlinear(0, 0) * 1e6, 1e-9);
+  EXPECT_NEAR(by_key.at("gyro.g_sensitivity_dph_per_g.z.z").value,
+              m.gyro.g_sensitivity_radps_per_g(2, 2) * units::kRadpsToDph, 1e-12);
+  EXPECT_NEAR(by_key.at("accel.k2_ug_per_g2.y").value, m.accel.k2_per_g[1] * 1e6, 1e-9);
+  EXPECT_NEAR(by_key.at("accel.k3_ug_per_g3.x").sigma, 0.5, 1e-12);
+  EXPECT_NEAR(by_key.at("accel.lever_arm_mm.y.y").value, 12.5, 1e-12);
+  EXPECT_NEAR(by_key.at("gyro.delay_us.z").value, 3.0, 1e-12);
+  EXPECT_FALSE(by_key.at("gyro.bias_dph.x").optional);
+  EXPECT_TRUE(by_key.at("accel.k3_ug_per_g3.x").optional);
+  // A triad's vector is estimated together; a matrix term alone.
+  EXPECT_EQ(by_key.at("accel.k3_ug_per_g3.y").group, "accel.k3_ug_per_g3");
+  EXPECT_EQ(by_key.at("gyro.scale_nonlinear_ppm.y.c2").group, "gyro.scale_nonlinear_ppm.y.c2");
 }
 
 TEST(ModelJson, RoundTripKeepsTheNonlinearTermsAndTheirSigmas) {

@@ -330,6 +330,44 @@ thermaltest::Outcome short_run_with(const std::function<void(thermaltest::Run&)>
 }
 }  // namespace
 
+// The stuck rule's witnesses (issue 34): in a soak at 35 C the accelerometers (tau 300 s, read to
+// 0.01 C) settle and read a constant for half an hour while the slow FOG coils (tau 4000 s) still
+// move by a degree. That is a settled sensor, not a stuck one: the air held still, and the other
+// accelerometers (like time constant) moved no more. The same accelerometer frozen during the ramp
+// before it is stuck.
+namespace {
+std::vector<TempSample> ramp_then_soak(bool freeze_az_in_ramp) {
+  std::vector<TempSample> temps;
+  double air = 25.0;
+  Eigen::Vector3d coil = Eigen::Vector3d::Constant(25.0), acc = Eigen::Vector3d::Constant(25.0);
+  const Eigen::Vector3d acc_tau_s(280.0, 300.0, 320.0);
+  const double dt_s = 10.0;
+  for (double t = 0.0; t <= 6600.0; t += dt_s) {
+    air = t < 600.0 ? 25.0 + t / 60.0 : 35.0;  // 1 C/min for 10 min, then a soak
+    coil += (Eigen::Vector3d::Constant(air) - coil) * (dt_s / 4000.0);
+    for (int j = 0; j < 3; ++j) acc[j] += (air - acc[j]) * (dt_s / acc_tau_s[j]);
+    TempSample s;
+    s.t_ns = static_cast<std::int64_t>(t * 1e9);
+    s.chamber_C = air;
+    s.gyro_C = (coil * 100.0).array().round() / 100.0;
+    s.accel_C = (acc * 100.0).array().round() / 100.0;
+    if (freeze_az_in_ramp && t <= 700.0) s.accel_C[2] = 25.0;
+    temps.push_back(s);
+  }
+  return temps;
+}
+}  // namespace
+
+TEST(ThermalBadInput, ASensorSettledInASoakIsNotStuck) {
+  const auto settled = thermal::check_temperatures(ramp_then_soak(false), thermal::CheckOptions{});
+  for (const auto& p : settled) ADD_FAILURE() << p.channel << ": " << p.what;
+  const auto frozen = thermal::check_temperatures(ramp_then_soak(true), thermal::CheckOptions{});
+  ASSERT_EQ(frozen.size(), 1u);
+  EXPECT_EQ(frozen[0].channel, "temp_az_C");
+  EXPECT_NE(frozen[0].what.find("stuck"), std::string::npos) << frozen[0].what;
+  EXPECT_NE(frozen[0].what.find("other accelerometers"), std::string::npos) << frozen[0].what;
+}
+
 TEST(ThermalBadInput, StuckChannelIsNamedAndItsCyclesLeftOut) {
   const auto o = short_run_with([](auto& r) { r.thermal.faults.push_back({"gx", "stuck", 2000, 3200, 0}); });
   const auto* p = problem_on(o.result, "temp_gx_C");
