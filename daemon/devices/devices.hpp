@@ -122,6 +122,10 @@ class Bench {
   // Program seconds per wall second when known (telemetry), 0 when as fast as possible.
   virtual double time_scale() const = 0;
   virtual std::string describe() const = 0;
+  // A resumed run (after a restart): its first pass reached program time t_s in an earlier
+  // process, so a campaign's sim_faults at or before it have fired already and are not injected
+  // again. Simulated benches only.
+  virtual void faults_passed(double t_s) { (void)t_s; }
 };
 
 }  // namespace imucal::daemon

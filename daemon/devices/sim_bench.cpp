@@ -8,6 +8,7 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "sim/thermal_model.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -156,7 +157,38 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
   imu_ = std::make_unique<SimImu>(*this);
 }
 
-SimBench::~SimBench() = default;
+SimBench::~SimBench() {
+  // A disk_full fault still in force when the run ends (or the bench is dropped) gives the space back.
+  for (const auto& f : faults_)
+    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
+}
+
+void SimBench::faults_passed(double t_s) {
+  for (auto& f : faults_)
+    if (!f.fired && f.fault.at_s <= t_s) {
+      f.fired = true;
+      f.fired_world_s = -std::numeric_limits<double>::infinity();  // long over
+      f.over = true;
+    }
+}
+
+void SimBench::fire_fault(ActiveFault& af) {
+  af.fired = true;
+  af.fired_world_s = world_s_;
+  af.corrupt_left = af.fault.kind == SimFault::Kind::ImuCorrupt ? af.fault.frames : 0;
+  af.drop_left = af.fault.kind == SimFault::Kind::ImuDrop ? af.fault.frames : 0;
+  // The daemon's disk (every SQLite write of the process, storage::disk_fault) until the fault's
+  // duration of device time has passed: a full disk at a program time, for drills and the chaos soak.
+  if (af.fault.kind == SimFault::Kind::DiskFull) storage::disk_fault::set_full(true);
+}
+
+void SimBench::expire_faults() {
+  for (auto& f : faults_) {
+    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over || f.active(world_s_)) continue;
+    f.over = true;
+    storage::disk_fault::set_full(false);
+  }
+}
 
 Table& SimBench::table() { return *table_; }
 Chamber& SimBench::chamber() { return *chamber_; }
@@ -248,6 +280,7 @@ void SimBench::advance_world(double seconds) {
     world_s_ += seconds;
     chamber_C_ += (setpoint_C_ - chamber_C_) * (1.0 - std::exp(-seconds / settings_.chamber_tau_s));
   }
+  expire_faults();
   pace();
 }
 
@@ -285,11 +318,7 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
     world_s_ += dt_s_;
     const double t_s = static_cast<double>(f.t_ns) / units::kNsPerS;
     for (auto& af : faults_) {
-      if (!af.fired && t_s >= af.fault.at_s) {
-        af.fired = true;
-        af.fired_world_s = world_s_;
-        af.corrupt_left = af.fault.kind == SimFault::Kind::ImuCorrupt ? af.fault.frames : 0;
-      }
+      if (!af.fired && t_s >= af.fault.at_s) fire_fault(af);
     }
     while (next_temp_t_s_ <= t_s) {
       TempSample ts;
@@ -315,6 +344,14 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
       break;
     }
     if (fault_active(SimFault::Kind::ImuDropout)) continue;
+    bool dropped = false;
+    for (auto& af : faults_) {
+      if (af.drop_left > 0) {
+        --af.drop_left;
+        dropped = true;
+      }
+    }
+    if (dropped) continue;  // lost on the way: a gap
     bool corrupt = false;
     for (auto& af : faults_) {
       if (af.corrupt_left > 0) {

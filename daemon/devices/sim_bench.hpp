@@ -60,6 +60,7 @@ class SimBench final : public Bench {
   bool paced_by_consumer() const override { return true; }
   double time_scale() const override { return settings_.time_scale; }
   std::string describe() const override;
+  void faults_passed(double t_s) override;
 
   // Program time of the last frame produced.
   double program_time_s() const;
@@ -73,6 +74,8 @@ class SimBench final : public Bench {
     bool fired = false;
     double fired_world_s = 0.0;
     std::int64_t corrupt_left = 0;
+    std::int64_t drop_left = 0;
+    bool over = false;  // its effect taken back (disk_full)
     bool active(double world_s) const { return fired && world_s < fired_world_s + fault.duration_s; }
   };
 
@@ -104,6 +107,9 @@ class SimBench final : public Bench {
   double chamber_C_, setpoint_C_;
   double next_temp_t_s_ = 0.0;
   std::vector<ActiveFault> faults_;
+
+  void fire_fault(ActiveFault& af);
+  void expire_faults();
 
   std::unique_ptr<SimTable> table_;
   std::unique_ptr<SimChamber> chamber_;
