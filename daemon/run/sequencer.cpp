@@ -589,6 +589,10 @@ void Sequencer::run_campaign(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return;
   run.row = *row;
+  // A resumed run counts on from what it had counted (lost and bad frames as last stored; the
+  // frames from the run file): before issue 33 a restart set both back to zero.
+  run.lost = row->lost_frames;
+  run.bad = row->bad_frames;
   {
     const CampaignCheck check = check_campaign_text(row->spec_json, config_);
     if (!check.spec) {
