@@ -150,7 +150,11 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
   batch_frames_ = static_cast<std::int64_t>(std::clamp(frames, 1.0, 4096.0));
   if (settings_.thermal) settings_.sim.thermal = settings_.thermal.get();
   sim_ = std::make_unique<sim::Simulator>(program_, truth_, settings_.sim);
-  for (const SimFault& f : settings.faults) faults_.push_back({f, false, 0.0, 0});
+  for (const SimFault& f : settings.faults) {
+    ActiveFault af;
+    af.fault = f;
+    faults_.push_back(af);
+  }
   pace_wall0_ = std::chrono::steady_clock::now();
   table_ = std::make_unique<SimTable>(*this);
   chamber_ = std::make_unique<SimChamber>(*this);
@@ -179,12 +183,23 @@ void SimBench::fire_fault(ActiveFault& af) {
   af.drop_left = af.fault.kind == SimFault::Kind::ImuDrop ? af.fault.frames : 0;
   // The daemon's disk (every SQLite write of the process, storage::disk_fault) until the fault's
   // duration of device time has passed: a full disk at a program time, for drills and the chaos soak.
-  if (af.fault.kind == SimFault::Kind::DiskFull) storage::disk_fault::set_full(true);
+  if (af.fault.kind == SimFault::Kind::DiskFull) {
+    af.refused_at_fire = storage::disk_fault::refused_writes();
+    storage::disk_fault::set_full(true);
+  }
 }
 
+// A full disk is met by the next write, which comes up to a commit interval of wall time later:
+// in accelerated time the fault's duration would be over before anything wrote. It lasts
+// duration_s of device time from the first write it refused.
 void SimBench::expire_faults() {
   for (auto& f : faults_) {
-    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over || f.active(world_s_)) continue;
+    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over) continue;
+    if (!f.met_world_s) {
+      if (storage::disk_fault::refused_writes() == f.refused_at_fire) continue;
+      f.met_world_s = world_s_;
+    }
+    if (world_s_ < *f.met_world_s + f.fault.duration_s) continue;
     f.over = true;
     storage::disk_fault::set_full(false);
   }

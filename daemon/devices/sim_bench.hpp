@@ -15,6 +15,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/imu_model.hpp"
@@ -76,6 +77,9 @@ class SimBench final : public Bench {
     std::int64_t corrupt_left = 0;
     std::int64_t drop_left = 0;
     bool over = false;  // its effect taken back (disk_full)
+    // disk_full: the refused writes when it fired, and the device time the first one was seen.
+    std::int64_t refused_at_fire = 0;
+    std::optional<double> met_world_s;
     bool active(double world_s) const { return fired && world_s < fired_world_s + fault.duration_s; }
   };
 

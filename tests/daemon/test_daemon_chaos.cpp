@@ -182,7 +182,7 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   const std::uint64_t seed = chaos_seed(33);
   SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
   const char* rate_env = std::getenv("IMUCAL_CHAOS_RATE_HZ");
-  const double rate_hz = rate_env != nullptr && *rate_env != '\0' ? std::atof(rate_env) : 50.0;
+  const double rate_hz = rate_env != nullptr && *rate_env != '\0' ? std::atof(rate_env) : 100.0;
   std::mt19937_64 rng(seed);
 
   // thermal-short with its profile, then the programs of the built-in campaign `full`; the
