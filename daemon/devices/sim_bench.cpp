@@ -111,7 +111,7 @@ class SimBench::SimChamber final : public Chamber {
   }
   ChamberState state() const override {
     ChamberState s;
-    s.temperature_C = (b_.settings_.thermal ? b_.settings_.thermal->state(b_.program_time_s()).air_C : b_.chamber_C_) +
+    s.temperature_C = (b_.settings_.thermal ? b_.settings_.thermal->state(b_.thermal_time_s()).air_C : b_.chamber_C_) +
                       b_.chamber_offset_C();
     s.setpoint_C = b_.setpoint_C_;
     s.connected = !b_.fault_active(SimFault::Kind::Disconnect, "chamber");
@@ -167,7 +167,8 @@ SimBench::~SimBench() {
     if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
 }
 
-void SimBench::faults_passed(double t_s) {
+void SimBench::resuming_after(double t_s) {
+  resumed_after_s_ = t_s;
   for (auto& f : faults_)
     if (!f.fired && f.fault.at_s <= t_s) {
       f.fired = true;
@@ -218,6 +219,10 @@ std::string SimBench::describe() const {
 }
 
 double SimBench::program_time_s() const { return static_cast<double>(sim_pos_) * dt_s_; }
+
+double SimBench::thermal_time_s() const {
+  return sim_pos_ == 0 && resumed_after_s_ ? *resumed_after_s_ : program_time_s();
+}
 
 bool SimBench::fault_active(SimFault::Kind kind, const char* device) const {
   for (const auto& f : faults_) {

@@ -61,10 +61,13 @@ class SimBench final : public Bench {
   bool paced_by_consumer() const override { return true; }
   double time_scale() const override { return settings_.time_scale; }
   std::string describe() const override;
-  void faults_passed(double t_s) override;
+  void resuming_after(double t_s) override;
 
   // Program time of the last frame produced.
   double program_time_s() const;
+  // The program time the thermal model's chamber stands at: the last frame's, or before the first
+  // frame of a resumed run the time it was resumed after.
+  double thermal_time_s() const;
 
  private:
   class SimTable;
@@ -103,6 +106,7 @@ class SimBench final : public Bench {
   std::int64_t sim_pos_ = 0, snapshot_pos_ = -1;  // frames produced
 
   double world_s_ = 0.0;
+  std::optional<double> resumed_after_s_;
   std::chrono::steady_clock::time_point pace_wall0_;
   double pace_world0_ = 0.0;
 

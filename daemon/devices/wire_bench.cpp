@@ -398,7 +398,7 @@ void WireBench::park_after_failed_start(std::string& message) {
   }
 }
 
-void WireBench::faults_passed(double t_s) {
+void WireBench::resuming_after(double t_s) {
   for (InjectedFault& f : faults_)
     if (!f.fired && f.fault.at_s <= t_s) f.fired = f.over = true;
 }

@@ -660,7 +660,7 @@ void Sequencer::run_campaign(std::int64_t id) {
     open_recorder(run);
     const auto committed_t = run.last_t_ns;
     // A resumed run's faults up to what is committed fired in the process that recorded it.
-    if (committed_t) run.bench->faults_passed(static_cast<double>(*committed_t) / units::kNsPerS);
+    if (committed_t) run.bench->resuming_after(static_cast<double>(*committed_t) / units::kNsPerS);
     EstimatorWorker::Spec estimators{run.spec.estimators, run.spec.navigation_model, run.spec.start_model.value_or(ImuModel{})};
     if (run.spec.start_model_campaign) {
       // A previous campaign's model: the one it has now (a campaign id is resolved when the run starts).

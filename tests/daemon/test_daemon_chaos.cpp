@@ -169,6 +169,14 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
     EXPECT_EQ(found.value("state", ""), "interrupted") << found.dump().substr(0, 1000);
     const auto resumed = op.post("/api/campaigns/" + std::to_string(id) + "/resume");
     EXPECT_EQ(resumed.status, 200) << resumed.body;
+    // The next kill after this one's resumption is under way (the stored progress is still the
+    // killed process's, which may be past the next instant already).
+    const std::size_t kills = killed_at_s.size();
+    op.wait_for(id, [&](const json& c) {
+      std::size_t redos = 0;
+      for (const auto& e : c.at("events")) redos += e.at("kind") == "redo";
+      return final_state(c) || redos >= kills;
+    }, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
   }
   return d.client().wait_for(id, final_state, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
 }
@@ -438,7 +446,9 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
     const json before = d.client().wait_for(id, [&](const json& c) {
       return final_state(c) || c.at("program_time_s").get<double>() >= kill_at;
     }, 600.0);
-    ASSERT_EQ(before.value("state", ""), "running") << before.dump().substr(0, 3000);
+    // Running, or suspended by a fault or by the machine's load (a stall of the real-time link).
+    ASSERT_TRUE(before.value("state", "") == "running" || before.value("state", "") == "suspended")
+        << before.dump().substr(0, 3000);
     d.kill9();
     killed_at.push_back(before.at("program_time_s").get<double>());
     run_path = dir + "/data/" + before.at("run_db").get<std::string>();
