@@ -683,7 +683,9 @@ struct RunDb::Impl {
   void claim() {
     if (lease) return;
     if (mode == OpenMode::Read) fail(path, "opened for reading only");
-    auto new_lease = WriterLease::acquire(path);
+    // A reader recovering a dead writer's run holds the lease for a moment: wait that out (the
+    // daemon resuming a run after a crash while a viewer opens it failed the run, issue 33).
+    auto new_lease = WriterLease::acquire(path, std::chrono::seconds(3));
     recover(*new_lease);
     start_session(std::move(new_lease));
   }

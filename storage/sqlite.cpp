@@ -63,6 +63,7 @@ constexpr const char* kVfsName = "imucal-disk";
 // forwarding path looks at), <= 0 while the disk is full, a budget in between.
 constexpr std::int64_t kUnlimited = std::numeric_limits<std::int64_t>::max();
 std::atomic<std::int64_t> g_room_bytes{kUnlimited};
+std::atomic<std::int64_t> g_refused_writes{0};
 
 struct DiskFile {
   sqlite3_file base;   // what SQLite sees; pMethods are ours
@@ -96,7 +97,10 @@ int disk_read(sqlite3_file* f, void* out, int bytes, sqlite3_int64 offset) {
   return real_of(f)->pMethods->xRead(real_of(f), out, bytes, offset);
 }
 int disk_write(sqlite3_file* f, const void* data, int bytes, sqlite3_int64 offset) {
-  if (!room_for(bytes)) return SQLITE_FULL;
+  if (!room_for(bytes)) {
+    g_refused_writes.fetch_add(1, std::memory_order_relaxed);
+    return SQLITE_FULL;
+  }
   return real_of(f)->pMethods->xWrite(real_of(f), data, bytes, offset);
 }
 int disk_truncate(sqlite3_file* f, sqlite3_int64 size) { return real_of(f)->pMethods->xTruncate(real_of(f), size); }
@@ -432,6 +436,7 @@ void fill_after_bytes(std::int64_t bytes) noexcept {
   sql::g_room_bytes.store(std::clamp<std::int64_t>(bytes, 1, sql::kUnlimited - 1), std::memory_order_relaxed);
 }
 bool full() noexcept { return sql::g_room_bytes.load(std::memory_order_relaxed) <= 0; }
+std::int64_t refused_writes() noexcept { return sql::g_refused_writes.load(std::memory_order_relaxed); }
 }  // namespace disk_fault
 
 std::int64_t unix_ms_now() {

@@ -165,6 +165,9 @@ void set_full(bool full) noexcept;
 // every one after it until set_full(false)).
 void fill_after_bytes(std::int64_t bytes) noexcept;
 bool full() noexcept;
+// Writes refused as on a full disk since the process started (a drill can tell that the full disk
+// was met, not only switched on).
+std::int64_t refused_writes() noexcept;
 }  // namespace disk_fault
 
 // The wall-clock stamps the storage writes (sessions, writer leases): Unix time in ms.

@@ -88,10 +88,14 @@ WriterLease::WriterLease(std::string path, int fd, Page* page) : path_(std::move
 
 WriterLease::~WriterLease() { release(false); }
 
-std::unique_ptr<WriterLease> WriterLease::acquire(const std::string& db_path) {
+std::unique_ptr<WriterLease> WriterLease::acquire(const std::string& db_path, std::chrono::milliseconds patience) {
   const std::string path = lease_path(db_path);
   // A releasing writer unlinks the file while holding the lock; whoever locked the unlinked
   // inode meanwhile must start over on the new file, or two writers would each hold "the" lease.
+  // A reader that finds a dead writer's run recovers it under the lease, for milliseconds: a
+  // writer opening the run meanwhile (imucald resuming a run after a crash while a viewer looks at
+  // it) waits for that instead of failing the run. A live writer holds the lease for good.
+  const auto wait_until = std::chrono::steady_clock::now() + patience;
   for (int attempt = 0; attempt < 100; ++attempt) {
     const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0) fail_errno(db_path, "cannot open the writer lease '" + path + "'");
@@ -100,6 +104,11 @@ std::unique_ptr<WriterLease> WriterLease::acquire(const std::string& db_path) {
       const int err = errno;
       const auto holder = read_page(fd);
       ::close(fd);
+      if ((err == EAGAIN || err == EACCES) && std::chrono::steady_clock::now() < wait_until) {
+        ::usleep(10'000);
+        --attempt;
+        continue;
+      }
       if (err == EAGAIN || err == EACCES) {
         throw StorageError("run database '" + db_path + "': the run is being recorded by " + describe_holder(holder) +
                            "; only one writer may hold a run (stop it, or open the run for reading only)");

@@ -8,6 +8,8 @@
 // The file exists while a writer holds it and after a writer died; a clean close removes it.
 #pragma once
 
+#include <chrono>
+
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -31,8 +33,11 @@ struct LeaseCounters {
 
 class WriterLease {
  public:
-  // Takes the lease of `db_path`; throws StorageError naming the holder when another writer has it.
-  static std::unique_ptr<WriterLease> acquire(const std::string& db_path);
+  // Takes the lease of `db_path`; throws StorageError naming the holder when another writer has it
+  // (still, after waiting up to `patience` for it: a reader recovering a dead writer's run holds
+  // it for milliseconds).
+  static std::unique_ptr<WriterLease> acquire(const std::string& db_path,
+                                              std::chrono::milliseconds patience = std::chrono::milliseconds(0));
 
   struct Probe {
     bool held = false;                      // a live writer holds the lease now

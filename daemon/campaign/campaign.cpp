@@ -360,6 +360,17 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
     } else if (*kind == "imu_corrupt") {
       fault.kind = SimFault::Kind::ImuCorrupt;
       if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "imu_drop") {
+      fault.kind = SimFault::Kind::ImuDrop;
+      if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "drop_connection") {
+      fault.kind = SimFault::Kind::DropConnection;
+      if (auto v = r.string("device", true)) {
+        if (*v != "table" && *v != "chamber") problems.push_back(where + ".device must be table or chamber");
+        fault.device = *v;
+      }
+    } else if (*kind == "disk_full") {
+      fault.kind = SimFault::Kind::DiskFull;
     } else if (*kind == "disconnect") {
       fault.kind = SimFault::Kind::Disconnect;
       if (auto v = r.string("device", true)) {
@@ -373,7 +384,8 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
       fault.kind = SimFault::Kind::RelayStuck;
     } else {
       problems.push_back(where + ".kind \"" + *kind +
-                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, disconnect, table_fault, relay_stuck");
+                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, imu_drop, disconnect, drop_connection, "
+                         "table_fault, relay_stuck, disk_full");
     }
     faults.push_back(fault);
   }
@@ -592,6 +604,10 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
       if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
         problems.push_back("campaign.sim_faults[" + std::to_string(i) +
                            "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
+      else if (spec.faults[i].kind == SimFault::Kind::DropConnection && config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: drop_connection needs the sim-wire devices (the in-process simulation has no "
+                           "connections; use disconnect)");
     if (imu != nullptr) check_imu(*imu, spec.imu, problems);
     if (config.device_addresses) {
       if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {

@@ -38,12 +38,22 @@ struct ChamberProfile {
 };
 
 struct SimFault {
-  enum class Kind { ChamberOffset, ImuDropout, ImuCorrupt, Disconnect, TableFault, RelayStuck } kind = Kind::ChamberOffset;
-  std::string device;       // Disconnect: table, chamber or imu
+  enum class Kind {
+    ChamberOffset,
+    ImuDropout,
+    ImuCorrupt,
+    ImuDrop,         // `frames` samples lost on the link (never sent)
+    Disconnect,
+    DropConnection,  // sim-wire: the table or chamber controller closes its connections
+    TableFault,
+    RelayStuck,
+    DiskFull,        // the daemon's disk full (storage::disk_fault) for duration_s of device time
+  } kind = Kind::ChamberOffset;
+  std::string device;       // Disconnect: table, chamber or imu; DropConnection: table or chamber
   double at_s = 0.0;        // program time of the first pass
   double duration_s = 0.0;  // simulated (device) seconds
   double offset_C = 0.0;    // ChamberOffset
-  std::int64_t frames = 1;  // ImuCorrupt
+  std::int64_t frames = 1;  // ImuCorrupt, ImuDrop
 };
 
 // The unit a campaign calibrates (docs/api.md, "Campaign JSON", `imu`). Empty serial: the campaign

@@ -122,6 +122,11 @@ class Bench {
   // Program seconds per wall second when known (telemetry), 0 when as fast as possible.
   virtual double time_scale() const = 0;
   virtual std::string describe() const = 0;
+  // A resumed run (after a restart): its first pass reached program time t_s (the last committed
+  // frame) in an earlier process. Simulated benches only: a campaign's sim_faults at or before it
+  // have fired already and are not injected again, and a simulated chamber that follows the
+  // program's thermal model stands where it stood then (it starts there, not at the profile's start).
+  virtual void resuming_after(double t_s) { (void)t_s; }
 };
 
 }  // namespace imucal::daemon

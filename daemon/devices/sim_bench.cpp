@@ -8,6 +8,7 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "sim/thermal_model.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -110,7 +111,7 @@ class SimBench::SimChamber final : public Chamber {
   }
   ChamberState state() const override {
     ChamberState s;
-    s.temperature_C = (b_.settings_.thermal ? b_.settings_.thermal->state(b_.program_time_s()).air_C : b_.chamber_C_) +
+    s.temperature_C = (b_.settings_.thermal ? b_.settings_.thermal->state(b_.thermal_time_s()).air_C : b_.chamber_C_) +
                       b_.chamber_offset_C();
     s.setpoint_C = b_.setpoint_C_;
     s.connected = !b_.fault_active(SimFault::Kind::Disconnect, "chamber");
@@ -149,14 +150,61 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
   batch_frames_ = static_cast<std::int64_t>(std::clamp(frames, 1.0, 4096.0));
   if (settings_.thermal) settings_.sim.thermal = settings_.thermal.get();
   sim_ = std::make_unique<sim::Simulator>(program_, truth_, settings_.sim);
-  for (const SimFault& f : settings.faults) faults_.push_back({f, false, 0.0, 0});
+  for (const SimFault& f : settings.faults) {
+    ActiveFault af;
+    af.fault = f;
+    faults_.push_back(af);
+  }
   pace_wall0_ = std::chrono::steady_clock::now();
   table_ = std::make_unique<SimTable>(*this);
   chamber_ = std::make_unique<SimChamber>(*this);
   imu_ = std::make_unique<SimImu>(*this);
 }
 
-SimBench::~SimBench() = default;
+SimBench::~SimBench() {
+  // A disk_full fault still in force when the run ends (or the bench is dropped) gives the space back.
+  for (const auto& f : faults_)
+    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
+}
+
+void SimBench::resuming_after(double t_s) {
+  resumed_after_s_ = t_s;
+  for (auto& f : faults_)
+    if (!f.fired && f.fault.at_s <= t_s) {
+      f.fired = true;
+      f.fired_world_s = -std::numeric_limits<double>::infinity();  // long over
+      f.over = true;
+    }
+}
+
+void SimBench::fire_fault(ActiveFault& af) {
+  af.fired = true;
+  af.fired_world_s = world_s_;
+  af.corrupt_left = af.fault.kind == SimFault::Kind::ImuCorrupt ? af.fault.frames : 0;
+  af.drop_left = af.fault.kind == SimFault::Kind::ImuDrop ? af.fault.frames : 0;
+  // The daemon's disk (every SQLite write of the process, storage::disk_fault) until the fault's
+  // duration of device time has passed: a full disk at a program time, for drills and the chaos soak.
+  if (af.fault.kind == SimFault::Kind::DiskFull) {
+    af.refused_at_fire = storage::disk_fault::refused_writes();
+    storage::disk_fault::set_full(true);
+  }
+}
+
+// A full disk is met by the next write, which comes up to a commit interval of wall time later:
+// in accelerated time the fault's duration would be over before anything wrote. It lasts
+// duration_s of device time from the first write it refused.
+void SimBench::expire_faults() {
+  for (auto& f : faults_) {
+    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over) continue;
+    if (!f.met_world_s) {
+      if (storage::disk_fault::refused_writes() == f.refused_at_fire) continue;
+      f.met_world_s = world_s_;
+    }
+    if (world_s_ < *f.met_world_s + f.fault.duration_s) continue;
+    f.over = true;
+    storage::disk_fault::set_full(false);
+  }
+}
 
 Table& SimBench::table() { return *table_; }
 Chamber& SimBench::chamber() { return *chamber_; }
@@ -171,6 +219,10 @@ std::string SimBench::describe() const {
 }
 
 double SimBench::program_time_s() const { return static_cast<double>(sim_pos_) * dt_s_; }
+
+double SimBench::thermal_time_s() const {
+  return sim_pos_ == 0 && resumed_after_s_ ? *resumed_after_s_ : program_time_s();
+}
 
 bool SimBench::fault_active(SimFault::Kind kind, const char* device) const {
   for (const auto& f : faults_) {
@@ -248,6 +300,7 @@ void SimBench::advance_world(double seconds) {
     world_s_ += seconds;
     chamber_C_ += (setpoint_C_ - chamber_C_) * (1.0 - std::exp(-seconds / settings_.chamber_tau_s));
   }
+  expire_faults();
   pace();
 }
 
@@ -285,11 +338,7 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
     world_s_ += dt_s_;
     const double t_s = static_cast<double>(f.t_ns) / units::kNsPerS;
     for (auto& af : faults_) {
-      if (!af.fired && t_s >= af.fault.at_s) {
-        af.fired = true;
-        af.fired_world_s = world_s_;
-        af.corrupt_left = af.fault.kind == SimFault::Kind::ImuCorrupt ? af.fault.frames : 0;
-      }
+      if (!af.fired && t_s >= af.fault.at_s) fire_fault(af);
     }
     while (next_temp_t_s_ <= t_s) {
       TempSample ts;
@@ -315,6 +364,14 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
       break;
     }
     if (fault_active(SimFault::Kind::ImuDropout)) continue;
+    bool dropped = false;
+    for (auto& af : faults_) {
+      if (af.drop_left > 0) {
+        --af.drop_left;
+        dropped = true;
+      }
+    }
+    if (dropped) continue;  // lost on the way: a gap
     bool corrupt = false;
     for (auto& af : faults_) {
       if (af.corrupt_left > 0) {

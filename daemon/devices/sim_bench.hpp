@@ -15,6 +15,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/imu_model.hpp"
@@ -60,9 +61,13 @@ class SimBench final : public Bench {
   bool paced_by_consumer() const override { return true; }
   double time_scale() const override { return settings_.time_scale; }
   std::string describe() const override;
+  void resuming_after(double t_s) override;
 
   // Program time of the last frame produced.
   double program_time_s() const;
+  // The program time the thermal model's chamber stands at: the last frame's, or before the first
+  // frame of a resumed run the time it was resumed after.
+  double thermal_time_s() const;
 
  private:
   class SimTable;
@@ -73,6 +78,11 @@ class SimBench final : public Bench {
     bool fired = false;
     double fired_world_s = 0.0;
     std::int64_t corrupt_left = 0;
+    std::int64_t drop_left = 0;
+    bool over = false;  // its effect taken back (disk_full)
+    // disk_full: the refused writes when it fired, and the device time the first one was seen.
+    std::int64_t refused_at_fire = 0;
+    std::optional<double> met_world_s;
     bool active(double world_s) const { return fired && world_s < fired_world_s + fault.duration_s; }
   };
 
@@ -96,6 +106,7 @@ class SimBench final : public Bench {
   std::int64_t sim_pos_ = 0, snapshot_pos_ = -1;  // frames produced
 
   double world_s_ = 0.0;
+  std::optional<double> resumed_after_s_;
   std::chrono::steady_clock::time_point pace_wall0_;
   double pace_world0_ = 0.0;
 
@@ -104,6 +115,9 @@ class SimBench final : public Bench {
   double chamber_C_, setpoint_C_;
   double next_temp_t_s_ = 0.0;
   std::vector<ActiveFault> faults_;
+
+  void fire_fault(ActiveFault& af);
+  void expire_faults();
 
   std::unique_ptr<SimTable> table_;
   std::unique_ptr<SimChamber> chamber_;

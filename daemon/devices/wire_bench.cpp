@@ -18,6 +18,7 @@
 #include "drivers/register_map.hpp"
 #include "drivers/tcp_table.hpp"
 #include "sim/sim_devices.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -397,7 +398,14 @@ void WireBench::park_after_failed_start(std::string& message) {
   }
 }
 
+void WireBench::resuming_after(double t_s) {
+  for (InjectedFault& f : faults_)
+    if (!f.fired && f.fault.at_s <= t_s) f.fired = f.over = true;
+}
+
 WireBench::~WireBench() {
+  for (const InjectedFault& f : faults_)
+    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
   // The sequencer parked the table and the chamber; stop the stream and close the links.
   (void)dev_->imu->safe_stop();
   dev_->imu->disconnect();
@@ -502,6 +510,21 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
         // Damaged frames on the link: the driver's CRC check drops them, the sequencer sees a gap.
         sim_->with_imu([&](sim::SimImu& imu) { imu.corrupt_next_samples(static_cast<int>(f.fault.frames)); });
         break;
+      case SimFault::Kind::ImuDrop:
+        // Samples lost on the link (never sent): the driver sees the sequence counter jump, a gap.
+        sim_->with_imu([&](sim::SimImu& imu) { imu.drop_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::DropConnection:
+        // The controller closes its connections; the driver's next request reconnects.
+        if (f.fault.device == "table") {
+          sim_->table().drop_connections();
+        } else {
+          sim_->chamber().drop_connections();
+        }
+        break;
+      case SimFault::Kind::DiskFull:
+        storage::disk_fault::set_full(true);
+        break;
       case SimFault::Kind::Disconnect:
         // A device that stops answering; the IMU's link cannot be reopened within a run, so the
         // IMU goes silent rather than closing it.
@@ -530,6 +553,7 @@ void WireBench::expire_faults() {
     f.over = true;
     if (f.fault.kind == SimFault::Kind::ChamberOffset) sim_->chamber().set_reading_offset(0.0);
     if (f.fault.kind == SimFault::Kind::RelayStuck) sim_->chamber().set_outputs_forced(false);
+    if (f.fault.kind == SimFault::Kind::DiskFull) storage::disk_fault::set_full(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "table") sim_->table().set_silent(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "chamber") sim_->chamber().set_silent(false);
   }

@@ -98,6 +98,7 @@ class WireBench final : public Bench {
   bool paced_by_consumer() const override { return false; }  // real time: a device never waits
   double time_scale() const override { return 1.0; }
   std::string describe() const override;
+  void resuming_after(double t_s) override;
 
   // sim-wire: the simulated devices; nullptr with real devices.
   sim::SimDevices* simulated_devices() { return sim_.get(); }

@@ -589,6 +589,10 @@ void Sequencer::run_campaign(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return;
   run.row = *row;
+  // A resumed run counts on from what it had counted (lost and bad frames as last stored; the
+  // frames from the run file): before issue 33 a restart set both back to zero.
+  run.lost = row->lost_frames;
+  run.bad = row->bad_frames;
   {
     const CampaignCheck check = check_campaign_text(row->spec_json, config_);
     if (!check.spec) {
@@ -655,6 +659,8 @@ void Sequencer::run_campaign(std::int64_t id) {
       write_db("campaign " + std::to_string(id) + "'s run file", [this, id, relative] { db_.set_run_db(id, relative); });
     open_recorder(run);
     const auto committed_t = run.last_t_ns;
+    // A resumed run's faults up to what is committed fired in the process that recorded it.
+    if (committed_t) run.bench->resuming_after(static_cast<double>(*committed_t) / units::kNsPerS);
     EstimatorWorker::Spec estimators{run.spec.estimators, run.spec.navigation_model, run.spec.start_model.value_or(ImuModel{})};
     if (run.spec.start_model_campaign) {
       // A previous campaign's model: the one it has now (a campaign id is resolved when the run starts).

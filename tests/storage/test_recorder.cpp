@@ -26,6 +26,7 @@
 
 #include "storage/recorder.hpp"
 #include "storage/run_db.hpp"
+#include "storage/writer_lease.hpp"
 #include "tests/storage/crash_frames.hpp"
 
 namespace imucal::storage {
@@ -242,6 +243,28 @@ TEST_F(RecorderTest, RejectsTimesThatDoNotIncrease) {
   EXPECT_TRUE(recorder.close());
   EXPECT_EQ(recorder.push(frames_from(30, 1)), Recorder::Push::Failed);  // closed
   EXPECT_EQ(RunDb::open(path()).frame_count(), 12);
+}
+
+// A reader that finds a dead writer's run recovers it under the writer lease for a moment; a
+// writer opening the run meanwhile (imucald resuming the run after a crash while a viewer's
+// request opens it) waits for it instead of failing: the chaos soak of issue 33 saw the resumed
+// run fail with "the run is being recorded by process ..." (the dead one).
+TEST_F(RecorderTest, AWriterWaitsForAReaderThatHoldsTheLeaseForAMoment) {
+  { RunDb::create(path(), test::crash_meta()); }
+  auto held = WriterLease::acquire(path());  // what a recovering reader holds
+  std::thread reader([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    held->release(true);
+  });
+  std::string failure;
+  try {
+    RunDb writer = RunDb::open(path(), OpenMode::Write);
+    EXPECT_TRUE(writer.is_writer());
+  } catch (const std::exception& e) {
+    failure = e.what();
+  }
+  reader.join();
+  EXPECT_EQ(failure, "");
 }
 
 TEST_F(RecorderTest, OneWriterAtATimeAndReadersAlongside) {

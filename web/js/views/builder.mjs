@@ -15,8 +15,8 @@ const DRAFT_KEY = 'imucal.builder.draft';
 // The prediction's unit noise and targets outlive a draft: they describe the lab's units.
 const PLAN_KEY = 'imucal.builder.plan';
 const PLAN_DEFAULTS = { arw_deg_rth: 0.0005, vrw_mps_rth: 0.002, targets: { ...SEED_TARGETS } };
-const FAULT_KINDS = ['chamber_offset', 'imu_dropout', 'imu_corrupt', 'disconnect', 'table_fault'];
-const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10 }, disconnect: { device: 'imu' } };
+const FAULT_KINDS = ['chamber_offset', 'imu_dropout', 'imu_corrupt', 'imu_drop', 'disconnect', 'table_fault', 'disk_full'];
+const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10 }, imu_drop: { frames: 10 }, disconnect: { device: 'imu' } };
 
 // ---- the view ---------------------------------------------------------------------------------
 
@@ -389,7 +389,7 @@ export function mount(root, ctx) {
       });
       const extra = [];
       if (fault.kind === 'chamber_offset') extra.push(numField('offset_C', 'offset °C', true));
-      if (fault.kind === 'imu_corrupt') extra.push(numField('frames', 'frames', true));
+      if (fault.kind === 'imu_corrupt' || fault.kind === 'imu_drop') extra.push(numField('frames', 'frames', true));
       if (fault.kind === 'disconnect') {
         const dev = h('select', { id: `fault-${i}-device`, 'aria-label': `fault ${i + 1} device` },
           ...['table', 'chamber', 'imu'].map((d) => h('option', { value: d, selected: fault.device === d }, d)));

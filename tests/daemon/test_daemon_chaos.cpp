@@ -1,0 +1,519 @@
+// The chaos soak (issue 33, deliverable 5): faults at random seeded instants while the real imucald
+// runs a campaign, kill -9 of the process on the way, and the run must end `done` with nothing
+// committed lost or doubled.
+//
+// Part A, the overnight-style campaign: `thermal-short` with its chamber profile followed by the
+// programs of `full` (direct, lever-arm, navigation, evaluate) as one campaign, on the accelerated
+// in-process simulated bench (`--devices sim`, 500x real time), with every fault kind of that
+// bench (IMU frames corrupted and lost, the IMU silent and disconnected, the chamber silent and
+// reading off, the table's link lost and a drive fault, the disk full once) and kill -9 three
+// times, each followed by a restart and `resume`. The same campaign undisturbed is the reference:
+// the recording must equal it frame for frame (the simulated bench redoes a segment bit for bit),
+// the temperature records too except inside the marked chamber faults, and every model
+// coefficient within 0.1 of its sigma.
+//
+// Part B, the wire level: a short program in real time on `--devices sim-wire` (the simulated
+// table, chamber and IMU reached through the real drivers), with the wire's faults (IMU samples
+// corrupted on the link and lost, the IMU silent for seconds, Modbus timeouts, a chamber that
+// stops answering, the table's connection dropped) and one kill -9. Real time is not reproducible
+// frame for frame, so the check is the grid: every instant once, none lost, none doubled, and
+// every frame committed before the kill unchanged.
+//
+// IMUCAL_CHAOS_SEED overrides the seed (printed with every failure); IMUCAL_CHAOS_RATE_HZ part A's
+// rate. bench/README.md has the command that prints the soak's figures.
+#include <signal.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/number_text.hpp"
+#include "service_fixture.hpp"
+#include "subprocess.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::uint64_t chaos_seed(std::uint64_t fallback) {
+  const char* s = std::getenv("IMUCAL_CHAOS_SEED");
+  return s != nullptr && *s != '\0' ? std::strtoull(s, nullptr, 10) : fallback;
+}
+
+// A fault of the campaign's sim_faults, with the words of the suspension it must cause.
+struct PlannedFault {
+  json spec;
+  std::vector<std::string> reasons;  // any of them in the suspension's reason
+  std::string label;
+};
+
+// `n` instants in [lo, hi], sorted, at least `gap` apart, drawn from `rng`.
+std::vector<double> instants(std::mt19937_64& rng, std::size_t n, double lo, double hi, double gap) {
+  std::uniform_real_distribution<double> u(lo, hi);
+  for (int attempt = 0; attempt < 100000; ++attempt) {
+    std::vector<double> t(n);
+    for (auto& x : t) x = std::round(u(rng) * 10.0) / 10.0;
+    std::sort(t.begin(), t.end());
+    bool ok = true;
+    for (std::size_t i = 1; i < n; ++i) ok = ok && t[i] - t[i - 1] >= gap;
+    if (ok) return t;
+  }
+  ADD_FAILURE() << "no " << n << " instants " << gap << " s apart in [" << lo << ", " << hi << "]";
+  return {};
+}
+
+std::vector<json> events_of(const json& c, const std::string& kind) {
+  std::vector<json> out;
+  for (const auto& e : c.at("events"))
+    if (e.at("kind") == kind) out.push_back(e);
+  return out;
+}
+
+// Each fault matched, in the order of its instant, to the first suspension not yet taken at or
+// after it whose reason names it. Returns the suspensions matched (index into `suspensions`, or
+// -1 when none: the fault left no mark).
+std::vector<int> match_faults(const std::vector<PlannedFault>& faults, const std::vector<json>& suspensions) {
+  std::vector<int> matched(faults.size(), -1);
+  std::vector<bool> taken(suspensions.size(), false);
+  std::vector<std::size_t> order(faults.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return faults[a].spec.at("at_s").get<double>() < faults[b].spec.at("at_s").get<double>();
+  });
+  for (const std::size_t f : order) {
+    const double at_s = faults[f].spec.at("at_s").get<double>();
+    for (std::size_t s = 0; s < suspensions.size(); ++s) {
+      if (taken[s]) continue;
+      const json& t = suspensions[s].at("program_time_s");
+      if (!t.is_number() || t.get<double>() < at_s - 1.0) continue;
+      const std::string reason = suspensions[s].at("reason").get<std::string>();
+      if (std::none_of(faults[f].reasons.begin(), faults[f].reasons.end(),
+                       [&](const std::string& r) { return reason.find(r) != std::string::npos; }))
+        continue;
+      taken[s] = true;
+      matched[f] = static_cast<int>(s);
+      break;
+    }
+  }
+  return matched;
+}
+
+bool same_temp(const TempSample& a, const TempSample& b) {
+  return a.t_ns == b.t_ns && a.gyro_C == b.gyro_C && a.accel_C == b.accel_C && a.chamber_C == b.chamber_C &&
+         a.chamber_setpoint_C == b.chamber_setpoint_C;
+}
+
+// The daemon as a subprocess that the test may kill; SIGTERM at the end of the test.
+struct Imucald {
+  std::string data_dir, log;
+  const char* devices;
+  DaemonProcess p;
+  void start() {
+    p = spawn_imucald(IMUCAL_IMUCALD, data_dir, log, kOperatorToken, devices);
+    ASSERT_GT(p.port, 0) << "imucald did not start; see " << log;
+  }
+  Client client() const { return Client{p.port, kOperatorToken}; }
+  void kill9() {
+    ::kill(p.pid, SIGKILL);
+    EXPECT_EQ(wait_exit(p.pid, 30), 128 + SIGKILL);
+    p = {};
+  }
+  ~Imucald() {
+    if (p.pid > 0) {
+      ::kill(p.pid, SIGTERM);
+      wait_exit(p.pid, 60);
+    }
+  }
+};
+
+std::int64_t post_and_start(const Client& op, const json& campaign) {
+  const auto posted = op.post("/api/campaigns", campaign.dump());
+  EXPECT_EQ(posted.status, 201) << posted.body.substr(0, 2000);
+  const auto id = posted.json_body().value("id", std::int64_t{0});
+  EXPECT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  return id;
+}
+
+bool final_state(const json& c) {
+  const auto s = c.value("state", "");
+  return s == "done" || s == "failed" || s == "aborted";
+}
+
+// Kills the daemon when the run's stored program time passes each of `kill_at_s`, restarts it and
+// resumes the run; returns the program time (stored) at each kill. Then waits for the run's end.
+json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill_at_s, double timeout_s,
+                    std::vector<double>& killed_at_s) {
+  const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
+  for (const double at_s : kill_at_s) {
+    const json before = d.client().wait_for(id, [&](const json& c) {
+      return final_state(c) || c.at("program_time_s").get<double>() >= at_s;
+    }, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
+    if (final_state(before) || !before.contains("program_time_s")) {
+      ADD_FAILURE() << "the run ended before the kill at " << at_s << " s: " << before.dump().substr(0, 2000);
+      return before;
+    }
+    d.kill9();
+    killed_at_s.push_back(before.at("program_time_s").get<double>());
+    d.start();
+    if (d.p.port == 0) return json();
+    const Client op = d.client();
+    const json found = op.get_json("/api/campaigns/" + std::to_string(id));
+    EXPECT_EQ(found.value("state", ""), "interrupted") << found.dump().substr(0, 1000);
+    const auto resumed = op.post("/api/campaigns/" + std::to_string(id) + "/resume");
+    EXPECT_EQ(resumed.status, 200) << resumed.body;
+    // The next kill after this one's resumption is under way (the stored progress is still the
+    // killed process's, which may be past the next instant already).
+    const std::size_t kills = killed_at_s.size();
+    op.wait_for(id, [&](const json& c) {
+      std::size_t redos = 0;
+      for (const auto& e : c.at("events")) redos += e.at("kind") == "redo";
+      return final_state(c) || redos >= kills;
+    }, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
+  }
+  return d.client().wait_for(id, final_state, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// Part A
+
+TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
+  const std::uint64_t seed = chaos_seed(33);
+  SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
+  const char* rate_env = std::getenv("IMUCAL_CHAOS_RATE_HZ");
+  const double rate_hz = rate_env != nullptr && *rate_env != '\0' ? std::atof(rate_env) : 100.0;
+  std::mt19937_64 rng(seed);
+
+  // thermal-short with its profile, then the programs of the built-in campaign `full`; the
+  // thermal truth makes the temperatures and the coefficients follow the profile.
+  json campaign = {{"name", "chaos overnight"},
+                   {"program", {"thermal-short", "direct", "lever-arm", "navigation", "evaluate"}},
+                   {"chamber", {{"profile", "thermal-short"}}},
+                   {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))},
+                   {"rate_hz", rate_hz},
+                   {"seed", seed % 1000 + 1},
+                   {"time_scale", 0},
+                   {"suspenders", {{"settle_s", 5}, {"frame_timeout_s", 1.0}, {"chamber_persist_s", 2.0}}}};
+  const auto check = daemon::check_campaign(campaign, daemon::DaemonConfig{});
+  ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
+  const double duration_s = check.duration_s;
+  const double tolerance_C = check.spec->chamber.tolerance_C;
+
+  // Every fault kind of the simulated bench once, and three kills, at seeded instants in random
+  // order, far enough apart that each is its own suspension.
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto between = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * 10.0) / 10.0; };
+  std::vector<PlannedFault> faults = {
+      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"corrupt IMU frame"},
+       "IMU bytes corrupted"},
+      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 50)}}, {"frame(s) missing"},
+       "IMU bytes dropped"},
+      {{{"kind", "imu_dropout"}, {"duration_s", between(2, 8)}}, {"frame(s) missing", "IMU frames missing"},
+       "IMU silent for seconds"},
+      {{{"kind", "disconnect"}, {"device", "imu"}, {"duration_s", between(2, 10)}}, {"IMU does not answer"},
+       "IMU disconnected"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(5, 30)}}, {"chamber disconnected"},
+       "chamber stops answering"},
+      {{{"kind", "chamber_offset"}, {"duration_s", between(10, 40)}, {"offset_C", tolerance_C + 10.0}},
+       {"chamber out of band"}, "chamber reading off"},
+      {{{"kind", "disconnect"}, {"device", "table"}, {"duration_s", between(2, 10)}},
+       {"table disconnected", "table does not answer"}, "table connection lost"},
+      {{{"kind", "table_fault"}, {"duration_s", between(1, 5)}}, {"table fault", "table drive fault"},
+       "table drive fault"},
+      {{{"kind", "disk_full"}, {"duration_s", between(5, 20)}}, {"disk full"}, "disk full"},
+  };
+  constexpr std::size_t kKills = 3;
+  std::vector<double> at = instants(rng, faults.size(), 300.0, duration_s - 300.0, duration_s / 40.0);
+  ASSERT_EQ(at.size(), faults.size());
+  std::shuffle(at.begin(), at.end(), rng);
+  // The kills where the run's stored progress passes them (stored once a second of wall time:
+  // kTimeScale program seconds), so not in the last stretch, which may pass between two updates.
+  constexpr double kTimeScale = 500.0;
+  const std::vector<double> kill_at = instants(rng, kKills, 600.0, duration_s - 5.0 * kTimeScale, duration_s / 10.0);
+  ASSERT_EQ(kill_at.size(), kKills);
+  json sim_faults = json::array();
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    faults[i].spec["at_s"] = at[i];
+    sim_faults.push_back(faults[i].spec);
+  }
+  std::printf("chaos A: seed %llu, %.0f s of program at %g Hz; faults %s; kill -9 at %.0f, %.0f, %.0f s\n",
+              static_cast<unsigned long long>(seed), duration_s, rate_hz, sim_faults.dump().c_str(), kill_at[0],
+              kill_at[1], kill_at[2]);
+
+  const std::string dir = scratch_dir("chaos");
+  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim", {}};
+  d.start();
+  ASSERT_GT(d.p.port, 0);
+
+  // Paced, so that the kills land near their instants; the frames do not depend on the pace.
+  json disturbed_spec = campaign;
+  disturbed_spec["name"] = "chaos overnight, faults and kills";
+  disturbed_spec["time_scale"] = kTimeScale;
+  disturbed_spec["sim_faults"] = sim_faults;
+  const auto t0 = Clock::now();
+  const auto id = post_and_start(d.client(), disturbed_spec);
+  std::vector<double> killed_at;
+  const json disturbed = run_with_kills(d, id, kill_at, 1800.0, killed_at);
+  const double disturbed_s = since(t0);
+  ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
+  ASSERT_EQ(killed_at.size(), kKills);
+
+  const auto t1 = Clock::now();
+  const auto id2 = post_and_start(d.client(), campaign);
+  const json undisturbed = d.client().wait_for(id2, final_state, 1800.0);
+  const double undisturbed_s = since(t1);
+  ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
+
+  // Marked: each fault a suspension of the run naming it (an event of the run in the daemon's
+  // database and in the run file's imucald_run record), each kill a redo from the last commit.
+  const std::vector<json> suspensions = events_of(disturbed, "suspended");
+  const std::vector<int> matched = match_faults(faults, suspensions);
+  std::size_t survived = 0;
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    EXPECT_GE(matched[i], 0) << faults[i].label << " (" << faults[i].spec.dump() << ") left no suspension; "
+                             << json(suspensions).dump().substr(0, 4000);
+    survived += matched[i] >= 0;
+  }
+  // A kill may land while the run is suspended: that suspension ends with the process.
+  EXPECT_GE(events_of(disturbed, "resumed").size() + kKills, suspensions.size());
+  EXPECT_EQ(events_of(disturbed, "redo").size(), kKills);
+  const std::string run_path = dir + "/data/" + disturbed.at("run_db").get<std::string>();
+  const auto run_db = storage::RunDb::open(run_path, storage::OpenMode::Read);
+  const json record = json::parse(run_db.extra("imucald_run").value_or("{}"));
+  std::size_t recorded_suspensions = 0;
+  for (const auto& e : record.value("events", json::array())) recorded_suspensions += e.at("kind") == "suspended";
+  EXPECT_EQ(recorded_suspensions, suspensions.size()) << "the run file's record of the faulted intervals";
+
+  // The recording: every frame of the undisturbed run once, bit for bit, nothing else.
+  const auto got = run_db.read_frames();
+  const auto want = run_frames(dir + "/data/" + undisturbed.at("run_db").get<std::string>());
+  std::size_t duplicated = 0, lost = 0, differing = 0;
+  for (std::size_t i = 1; i < got.size(); ++i) duplicated += got[i].t_ns <= got[i - 1].t_ns;
+  {
+    std::size_t i = 0, j = 0;
+    while (j < want.size()) {
+      while (i < got.size() && got[i].t_ns < want[j].t_ns) ++i;
+      if (i < got.size() && got[i].t_ns == want[j].t_ns) {
+        differing += !same_frame(got[i], want[j]);
+      } else {
+        ++lost;
+      }
+      ++j;
+    }
+  }
+  EXPECT_EQ(duplicated, 0u);
+  EXPECT_EQ(lost, 0u);
+  EXPECT_EQ(differing, 0u);
+  EXPECT_EQ(got.size(), want.size());
+  EXPECT_EQ(static_cast<double>(want.size()), std::round(duration_s * rate_hz));
+  EXPECT_TRUE(run_db.dropped_spans().empty());
+
+  // The temperature records: the same instants; values the same except the chamber's reading in
+  // a chamber fault's interval (what it read before the run suspended on it: marked).
+  const auto temps = run_db.temps();
+  const auto want_temps = storage::RunDb::open(dir + "/data/" + undisturbed.at("run_db").get<std::string>(),
+                                               storage::OpenMode::Read)
+                              .temps();
+  EXPECT_EQ(temps.size(), want_temps.size());
+  std::size_t temps_differing = 0, temps_unmarked = 0;
+  for (std::size_t i = 0; i < std::min(temps.size(), want_temps.size()); ++i) {
+    if (same_temp(temps[i], want_temps[i])) continue;
+    ++temps_differing;
+    const double t_s = static_cast<double>(temps[i].t_ns) * 1e-9;
+    bool marked = false;
+    for (const auto& s : suspensions) {
+      const double ts = s.at("program_time_s").get<double>();
+      if (s.at("reason").get<std::string>().find("chamber") != std::string::npos && t_s >= ts - 60.0 && t_s <= ts + 1.0)
+        marked = true;
+    }
+    if (!marked && temps_unmarked++ < 3)
+      ADD_FAILURE() << "temperature record at " << t_s << " s differs outside a marked fault: chamber "
+                    << temps[i].chamber_C << " vs " << want_temps[i].chamber_C;
+  }
+  EXPECT_EQ(temps_unmarked, 0u);
+
+  // The models: every stage's estimates within 0.1 of the undisturbed run's sigma.
+  double worst_sigma = 0.0;
+  std::string worst_name;
+  int compared = 0;
+  for (const auto& [stage, result] : undisturbed.at("results").items()) {
+    if (!result.is_object() || !result.contains("estimates")) continue;
+    ASSERT_TRUE(disturbed.at("results").contains(stage)) << stage;
+    const json& mine = disturbed.at("results").at(stage).at("estimates");
+    for (const auto& [name, pair] : result.at("estimates").items()) {
+      const double sigma = pair.at(1).get<double>();
+      if (!(sigma > 0)) continue;
+      const double diff = std::abs(mine.at(name).at(0).get<double>() - pair.at(0).get<double>()) / sigma;
+      if (diff >= worst_sigma) {
+        worst_sigma = diff;
+        worst_name = stage + " " + name;
+      }
+      ++compared;
+      EXPECT_LE(diff, 0.1) << stage << " " << name << ": disturbed " << mine.at(name).dump() << ", undisturbed "
+                           << pair.dump();
+    }
+  }
+  EXPECT_GE(compared, 36);
+  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
+
+  std::printf(
+      "chaos soak A (sim, %.0f s of program at %g Hz, %zu frames): faults injected %zu + kill -9 %zu (at %.0f, %.0f, "
+      "%.0f s), survived %zu + %zu; suspensions %zu; frames lost %zu, duplicated %zu, differing %zu; temperature "
+      "records differing %zu (all in marked chamber faults); delivery gaps counted %lld frames, bad frames %lld; "
+      "worst model difference %.3g sigma (%s) over %d coefficients; wall %.0f s disturbed (500x), %.0f s undisturbed "
+      "(as fast as possible)\n",
+      duration_s, rate_hz, want.size(), faults.size(), kKills, killed_at[0], killed_at[1], killed_at[2], survived,
+      killed_at.size(), suspensions.size(), lost, duplicated, differing, temps_differing,
+      static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
+      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), worst_sigma, worst_name.c_str(), compared,
+      disturbed_s, undisturbed_s);
+  for (std::size_t i = 0; i < faults.size(); ++i)
+    if (matched[i] >= 0)
+      std::printf("  %-24s at %8.1f s -> suspended at %8.1f s: %s\n", faults[i].label.c_str(),
+                  faults[i].spec.at("at_s").get<double>(),
+                  suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>(),
+                  suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 100).c_str());
+}
+
+// ------------------------------------------------------------------------------------------------
+// Part B
+
+TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
+  const std::uint64_t seed = chaos_seed(33);
+  SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
+  std::mt19937_64 rng(seed);
+  const json program = json::parse(R"({"name": "chaos-wire", "segments": [
+    {"type": "hold", "name": "start", "duration_s": 4},
+    {"type": "move", "name": "tilt", "to_deg": [0, 90, 0], "duration_s": 3},
+    {"type": "hold", "name": "level", "duration_s": 5},
+    {"type": "rate", "name": "spin", "axis": "outer", "rate_dps": 20, "duration_s": 6, "accel_dps2": 40},
+    {"type": "hold", "name": "rest", "duration_s": 5},
+    {"type": "move", "name": "back", "to_deg": [0, 0, 0], "duration_s": 3},
+    {"type": "hold", "name": "flat", "duration_s": 5},
+    {"type": "rate", "name": "turn", "axis": "inner", "rate_dps": 15, "duration_s": 5, "accel_dps2": 30},
+    {"type": "hold", "name": "end", "duration_s": 4}]})");
+  json campaign = {{"name", "chaos wire"},       {"program", program},  {"rate_hz", 100},
+                   {"seed", seed % 1000 + 1},    {"truth", noisy_truth()}, {"estimators", json::array()},
+                   {"suspenders", {{"settle_s", 2}, {"frame_timeout_s", 1.0}, {"chamber_persist_s", 2.0}}}};
+  daemon::DaemonConfig sim_wire;
+  sim_wire.devices = "sim-wire";
+  const auto check = daemon::check_campaign(campaign, sim_wire);
+  ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
+  const double duration_s = check.duration_s;
+
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto between = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * 10.0) / 10.0; };
+  std::vector<PlannedFault> faults = {
+      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 5)}}, {"frame(s) missing", "corrupt IMU"},
+       "IMU samples corrupted (CRC)"},
+      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing"},
+       "IMU samples dropped"},
+      {{{"kind", "imu_dropout"}, {"duration_s", between(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
+       "IMU silent for seconds"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(1, 2)}}, {"chamber disconnected"},
+       "Modbus timeouts"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(6, 10)}}, {"chamber disconnected"},
+       "chamber stops answering"},
+      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
+  };
+  std::vector<double> at = instants(rng, faults.size() + 1, 2.0, duration_s - 2.0, 4.0);
+  ASSERT_EQ(at.size(), faults.size() + 1);
+  std::shuffle(at.begin(), at.end(), rng);
+  const double kill_at = at.back();
+  json sim_faults = json::array();
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    faults[i].spec["at_s"] = at[i];
+    sim_faults.push_back(faults[i].spec);
+  }
+  campaign["sim_faults"] = sim_faults;
+  std::printf("chaos B: seed %llu, %.0f s of program at 100 Hz; faults %s; kill -9 at %.1f s\n",
+              static_cast<unsigned long long>(seed), duration_s, sim_faults.dump().c_str(), kill_at);
+
+  const std::string dir = scratch_dir("chaos-wire");
+  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim-wire", {}};
+  d.start();
+  ASSERT_GT(d.p.port, 0);
+  const auto t0 = Clock::now();
+  const auto id = post_and_start(d.client(), campaign);
+  std::vector<double> killed_at;
+  // What was committed at the kill, read between the kill and the restart.
+  std::vector<ImuFrame> committed;
+  std::string run_path;
+  {
+    const json before = d.client().wait_for(id, [&](const json& c) {
+      return final_state(c) || c.at("program_time_s").get<double>() >= kill_at;
+    }, 600.0);
+    // Running, or suspended by a fault or by the machine's load (a stall of the real-time link).
+    ASSERT_TRUE(before.value("state", "") == "running" || before.value("state", "") == "suspended")
+        << before.dump().substr(0, 3000);
+    d.kill9();
+    killed_at.push_back(before.at("program_time_s").get<double>());
+    run_path = dir + "/data/" + before.at("run_db").get<std::string>();
+    committed = run_frames(run_path);
+    d.start();
+    ASSERT_GT(d.p.port, 0);
+    EXPECT_EQ(d.client().get_json("/api/campaigns/" + std::to_string(id)).value("state", ""), "interrupted");
+    ASSERT_EQ(d.client().post("/api/campaigns/" + std::to_string(id) + "/resume").status, 200);
+  }
+  const json c = d.client().wait_for(id, final_state, 900.0);
+  const double wall_s = since(t0);
+  ASSERT_EQ(c.value("state", ""), "done") << c.dump().substr(0, 4000) << "\nsee " << d.log;
+  EXPECT_TRUE(has_event(c, "redo", "resuming after an interruption"));
+
+  // The grid: every instant of the program once, none lost, none doubled; what was committed
+  // before the kill unchanged.
+  const auto frames = run_frames(run_path);
+  const std::int64_t dt_ns = 10'000'000;
+  const auto grid = static_cast<std::size_t>(std::llround(duration_s * 100.0));
+  std::size_t duplicated = 0, off_grid = frames.empty() || frames.front().t_ns != dt_ns;
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    duplicated += frames[i].t_ns <= frames[i - 1].t_ns;
+    off_grid += frames[i].t_ns - frames[i - 1].t_ns != dt_ns;
+  }
+  const std::size_t lost = grid > frames.size() ? grid - frames.size() : 0;
+  EXPECT_EQ(frames.size(), grid);
+  EXPECT_EQ(duplicated, 0u);
+  EXPECT_EQ(off_grid, 0u);
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < std::min(committed.size(), frames.size()); ++i) changed += !same_frame(frames[i], committed[i]);
+  EXPECT_EQ(changed, 0u) << "frames committed before the kill changed";
+  EXPECT_GT(committed.size(), 0u);
+  EXPECT_EQ(c.at("frames").get<std::int64_t>(), static_cast<std::int64_t>(frames.size()));
+
+  // Marked: each fault a suspension naming it. The table's dropped connection may be absorbed by
+  // the driver's reconnect without a suspension; the others cannot be.
+  const std::vector<json> suspensions = events_of(c, "suspended");
+  const std::vector<int> matched = match_faults(faults, suspensions);
+  std::size_t marked = 0;
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    marked += matched[i] >= 0;
+    if (faults[i].spec.at("kind") == "drop_connection") continue;
+    EXPECT_GE(matched[i], 0) << faults[i].label << " (" << faults[i].spec.dump() << ") left no suspension; "
+                             << json(suspensions).dump().substr(0, 4000);
+  }
+  std::printf(
+      "chaos soak B (sim-wire, real time, %.0f s of program at 100 Hz, %zu grid frames): faults injected %zu + kill "
+      "-9 1 (at %.1f s), survived %zu + 1 (%zu marked by a suspension); suspensions %zu; frames lost %zu, "
+      "duplicated %zu, off the grid %zu, committed before the kill and changed %zu of %zu; delivery gaps counted "
+      "%lld frames, bad frames %lld; wall %.0f s\n",
+      duration_s, grid, faults.size(), killed_at[0], faults.size(), marked, suspensions.size(), lost, duplicated,
+      off_grid, changed, committed.size(), static_cast<long long>(c.at("lost_frames").get<std::int64_t>()),
+      static_cast<long long>(c.at("bad_frames").get<std::int64_t>()), wall_s);
+  for (std::size_t i = 0; i < faults.size(); ++i)
+    std::printf("  %-28s at %6.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
+                matched[i] >= 0
+                    ? ("suspended at " +
+                       number_text(suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>()) +
+                       " s: " + suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 90))
+                          .c_str()
+                    : "no suspension (absorbed by the driver)");
+}
