@@ -482,6 +482,70 @@ bool same_temperatures(const TempSample& a, const TempSample& b) {
 }
 
 // Parses frames.csv into `run`. Throws StorageError naming the line.
+// The columns of frames.csv past the required ones that are kept: the set point's, and the coil
+// sensors' when all 24 are there (a coil's mean needs its eight).
+struct ExtraColumns {
+  std::optional<std::size_t> setpoint;
+  std::vector<std::pair<std::size_t, std::size_t>> coil_of_column;  // {coil, sensor}; coil 3: none
+  bool with_coils = false;
+
+  bool is_coil(std::size_t column) const { return with_coils && coil_of_column[column].first < 3; }
+};
+
+// The kept columns of `header`; the others are listed in the report as ignored.
+ExtraColumns extra_columns(const std::vector<std::string>& header, ImportReport& report) {
+  ExtraColumns x;
+  x.coil_of_column.assign(header.size(), {3, 0});
+  int coil_columns = 0;
+  for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t k = 0; k < 8; ++k) {
+      const auto found = std::find(header.begin() + static_cast<std::ptrdiff_t>(kRequiredColumns.size()),
+                                   header.end(), coil_column(c, k));
+      if (found == header.end()) continue;
+      x.coil_of_column[static_cast<std::size_t>(found - header.begin())] = {c, k};
+      ++coil_columns;
+    }
+  x.with_coils = coil_columns == 24;
+  for (std::size_t i = kRequiredColumns.size(); i < header.size(); ++i) {
+    if (header[i] == kSetpointColumn && !x.setpoint) {
+      x.setpoint = i;
+    } else if (!x.is_coil(i)) {
+      report.ignored_columns.push_back(header[i]);
+    }
+  }
+  return x;
+}
+
+// A line's fields past the required ones: the set point and the coil sensors into `temp` (empty:
+// none at this line; `coil_fields` counts those given), the rest skipped. Returns what is wrong
+// with them ("" when nothing is). Apart from read_frames_csv, whose loop with it made clang-tidy's
+// optional-access analysis take minutes.
+std::string read_extra_columns(FieldCursor& cursor, const ExtraColumns& extra, const std::vector<std::string>& header,
+                               TempSample& temp, int& coil_fields) {
+  while (!cursor.exhausted()) {
+    const std::size_t column = cursor.consumed();
+    if (column >= header.size()) return "too many fields";
+    const bool is_coil = extra.is_coil(column);
+    if (column != extra.setpoint && !is_coil) {
+      cursor.text();
+      continue;
+    }
+    const std::string_view field = cursor.text();
+    if (trim(field).empty()) continue;
+    double value_C = 0.0;
+    if (auto error = parse_double(field, value_C)) return "column '" + header[column] + "': " + *error;
+    if (is_coil) {
+      const std::pair<std::size_t, std::size_t>& coil_sensor = extra.coil_of_column[column];
+      if (!temp.coil_sensors_C) temp.coil_sensors_C.emplace();
+      (*temp.coil_sensors_C)[coil_sensor.first][coil_sensor.second] = value_C;
+      ++coil_fields;
+    } else {
+      temp.chamber_setpoint_C = value_C;
+    }
+  }
+  return {};
+}
+
 ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run) {
   ImportReport report;
   LineReader reader(fs::path(dir) / "frames.csv", dir);
@@ -506,26 +570,7 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
     fail_line(std::string("column '") + kRequiredColumns[i] + "' is column " +
               std::to_string(found - header.begin() + 1) + ", expected as column " + std::to_string(i + 1));
   }
-  std::optional<std::size_t> setpoint_column;
-  // The coil sensors are kept only when all 24 columns are there (a coil's mean needs its eight).
-  std::vector<std::pair<std::size_t, std::size_t>> coil_of_column(header.size(), {3, 0});  // {coil, sensor}
-  int coil_columns = 0;
-  for (std::size_t c = 0; c < 3; ++c)
-    for (std::size_t k = 0; k < 8; ++k) {
-      const auto found = std::find(header.begin() + static_cast<std::ptrdiff_t>(kRequiredColumns.size()),
-                                   header.end(), coil_column(c, k));
-      if (found == header.end()) continue;
-      coil_of_column[static_cast<std::size_t>(found - header.begin())] = {c, k};
-      ++coil_columns;
-    }
-  const bool with_coils = coil_columns == 24;
-  for (std::size_t i = kRequiredColumns.size(); i < header.size(); ++i) {
-    if (header[i] == kSetpointColumn && !setpoint_column) {
-      setpoint_column = i;
-    } else if (!(with_coils && coil_of_column[i].first < 3)) {
-      report.ignored_columns.push_back(header[i]);
-    }
-  }
+  const ExtraColumns extra = extra_columns(header, report);
 
   const double gap_threshold_ns = 1.5e9 / rate_hz;
   std::vector<ImuFrame> frames;
@@ -603,31 +648,9 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       temp.accel_C(static_cast<Eigen::Index>(axis)) = value[13 + axis];
     }
     temp.chamber_C = value[16];
-    // The optional columns: the set point and the coil sensors are kept (empty: none at this
-    // line), the rest skipped.
     int coil_fields = 0;
-    while (!cursor.exhausted()) {
-      const std::size_t column = cursor.consumed();
-      if (column >= header.size()) fail_field("too many fields");
-      const bool is_coil = with_coils && coil_of_column[column].first < 3;
-      if (column == setpoint_column || is_coil) {
-        const std::string_view field = cursor.text();
-        if (!trim(field).empty()) {
-          double value_C = 0.0;
-          if (auto error = parse_double(field, value_C)) fail_field("column '" + header[column] + "': " + *error);
-          if (is_coil) {
-            const auto [coil, sensor] = coil_of_column[column];
-            if (!temp.coil_sensors_C) temp.coil_sensors_C.emplace();
-            (*temp.coil_sensors_C)[coil][sensor] = value_C;
-            ++coil_fields;
-          } else {
-            temp.chamber_setpoint_C = value_C;
-          }
-        }
-      } else {
-        cursor.text();
-      }
-    }
+    if (const std::string problem = read_extra_columns(cursor, extra, header, temp, coil_fields); !problem.empty())
+      fail_field(problem);
     if (cursor.consumed() != header.size()) fail_field("too few fields");
     if (coil_fields != 0 && coil_fields != 24)
       fail_line(std::to_string(coil_fields) + " of the 24 coil sensors (temp_gx_1_C .. temp_gz_8_C) given: all or none");
