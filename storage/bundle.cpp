@@ -546,6 +546,24 @@ std::string read_extra_columns(FieldCursor& cursor, const ExtraColumns& extra, c
   return {};
 }
 
+// Why a field is not a number, and why a time field is not a time ("" when it is): the optionals
+// of parse_double and parse_time_ns are read here, so that read_frames_csv has none of its own
+// (clang-tidy's optional analysis of that function, loops and all, took over 40 s).
+std::string number_problem(std::string_view field) {
+  double ignored = 0.0;
+  return parse_double(field, ignored).value_or("not a number");
+}
+
+std::string time_problem(std::string_view field, std::int64_t& t_ns) { return parse_time_ns(field, t_ns).value_or(""); }
+
+// Whether a line's temperatures differ from the last ones kept (none yet: they do); then they are
+// the last ones kept.
+bool temperatures_changed(std::optional<TempSample>& last, const TempSample& temp) {
+  if (last && same_temperatures(temp, *last)) return false;
+  last = temp;
+  return true;
+}
+
 ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run) {
   ImportReport report;
   LineReader reader(fs::path(dir) / "frames.csv", dir);
@@ -577,7 +595,10 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
   frames.reserve(kImportBatchFrames);
   std::vector<TempSample> temps;
   std::optional<TempSample> last_temp;
-  std::optional<std::int64_t> previous_t_ns;
+  // The previous frame's time (none before the first): a flag and a value, not an optional, in
+  // this loop (its optionals made clang-tidy's optional analysis of the function take minutes).
+  bool have_previous = false;
+  std::int64_t previous_t_ns = 0;
   std::int64_t previous_line = 0;
   std::array<double, 3> previous_raw_deg{};
   std::array<double, 3> unwrap_offset_deg{};
@@ -602,23 +623,22 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       double value = 0.0;
       std::string_view field;
       if (!cursor.number(value, field)) {
-        double ignored = 0.0;
-        fail_field("column '" + header[column] + "': " + parse_double(field, ignored).value_or("not a number"));
+        fail_field("column '" + header[column] + "': " + number_problem(field));
       }
       return value;
     };
 
     ImuFrame frame;
     const std::string_view t_s_field = cursor.text();
-    if (auto error = parse_time_ns(t_s_field, frame.t_ns)) fail_field("column 't_s': " + *error);
-    if (previous_t_ns) {
-      if (frame.t_ns <= *previous_t_ns) {
+    if (const std::string error = time_problem(t_s_field, frame.t_ns); !error.empty()) fail_field("column 't_s': " + error);
+    if (have_previous) {
+      if (frame.t_ns <= previous_t_ns) {
         fail_line("time does not increase (t_s " + std::string(trim(t_s_field)) + " after line " +
                   std::to_string(previous_line) + ")");
       }
-      if (static_cast<double>(frame.t_ns - *previous_t_ns) > gap_threshold_ns) {
-        report.gaps.push_back({static_cast<double>(*previous_t_ns) / 1e9, static_cast<double>(frame.t_ns) / 1e9,
-                               line_number, *previous_t_ns, frame.t_ns});
+      if (static_cast<double>(frame.t_ns - previous_t_ns) > gap_threshold_ns) {
+        report.gaps.push_back({static_cast<double>(previous_t_ns) / 1e9, static_cast<double>(frame.t_ns) / 1e9,
+                               line_number, previous_t_ns, frame.t_ns});
       }
     }
     // The cursor reads in column order.
@@ -632,7 +652,7 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       const double raw_deg = value[7 + axis];
       // A jump of more than half a turn between two samples is a wrap of the encoder reading,
       // not motion (it would take > 3600 deg/s at 20 Hz).
-      if (previous_t_ns) {
+      if (have_previous) {
         const double jump_deg = raw_deg - previous_raw_deg[axis];
         if (std::fabs(jump_deg) > 180.0) unwrap_offset_deg[axis] -= 360.0 * std::round(jump_deg / 360.0);
       }
@@ -655,13 +675,11 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
     if (coil_fields != 0 && coil_fields != 24)
       fail_line(std::to_string(coil_fields) + " of the 24 coil sensors (temp_gx_1_C .. temp_gz_8_C) given: all or none");
     // Run-length: the export's sample-and-hold gives every frame its values back.
-    if (!last_temp || !same_temperatures(temp, *last_temp)) {
-      temps.push_back(temp);
-      last_temp = temp;
-    }
+    if (temperatures_changed(last_temp, temp)) temps.push_back(temp);
 
     frames.push_back(frame);
     previous_t_ns = frame.t_ns;
+    have_previous = true;
     previous_line = line_number;
     if (frames.size() == kImportBatchFrames) {
       run.append(frames);
