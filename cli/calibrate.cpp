@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/expect_value.hpp"
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -131,7 +132,8 @@ int run_calibrate(const CalibrateArgs& a) {
   if (all) {
     for (const pipeline::StageName& n : pipeline::stage_names()) stages.push_back(n.stage);
   } else {
-    stages.push_back(pipeline::stage_named(a.stage).value());
+    // The command line admits only the stages' names and "all" (main.cpp: CLI::IsMember).
+    stages.push_back(expect_value(pipeline::stage_named(a.stage), "the stage the command line named"));
   }
   pipeline::Settings settings;
   settings.passes = a.passes;

@@ -86,8 +86,9 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
     // The alarms the change implies (an interruption raises one), as for the sequencer's changes;
     // nobody is connected yet to be told, GET /api/alarms lists them.
     const auto transitions = db_->transitions(id);
-    if (!transitions.empty() && transitions.back().from)
-      (void)apply_transition_alarms(*db_, id, *transitions.back().from, transitions.back().to, transitions.back().reason);
+    if (transitions.empty()) continue;
+    const auto& last = transitions.back();
+    if (last.from) (void)apply_transition_alarms(*db_, id, *last.from, last.to, last.reason);
   }
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);

@@ -9,6 +9,7 @@
 
 #include <poll.h>
 
+#include "core/expect_value.hpp"
 #include "drivers/imu_codec.hpp"
 
 namespace imucal::drivers {
@@ -23,6 +24,9 @@ std::uint64_t modulus_of(const link::Field& f) {
   const std::size_t bits = 8 * link::type_size(f.type);
   return bits >= 64 ? 0 : std::uint64_t{1} << bits;
 }
+
+// The codec gives every frame of a message with a time field its time tag.
+constexpr const char* kTimeTag = "the time tag of a frame whose message has a time field";
 
 // A temperature set in progress: its sequence, which of its messages arrived, the values. At
 // namespace scope: a nested type's member initialisers are not usable inside its enclosing class
@@ -118,7 +122,7 @@ struct LinkImu::Impl {
         std::max(0.0, static_cast<double>(rx_ns - last_rx_ns) / period_ns - static_cast<double>(read_after));
     std::uint64_t time_delta = 0;
     if (time_field && last_time_raw) {
-      const std::uint64_t raw = *v.time_raw, last = *last_time_raw;
+      const std::uint64_t raw = expect_value(v.time_raw, kTimeTag), last = *last_time_raw;
       time_delta = time_modulus ? (raw % time_modulus + time_modulus - last % time_modulus) % time_modulus : raw - last;
       const std::uint64_t half = time_modulus ? time_modulus / 2 : std::uint64_t{1} << 63;
       if (time_delta >= half) {
@@ -141,7 +145,7 @@ struct LinkImu::Impl {
     last_sample = Clock::now();
     std::int64_t dev = 0;
     if (time_field) {
-      time_ext = last_time_raw ? time_ext + time_delta : *v.time_raw;
+      time_ext = last_time_raw ? time_ext + time_delta : expect_value(v.time_raw, kTimeTag);
       last_time_raw = v.time_raw;
       dev = std::llround(static_cast<double>(time_ext) * time_field->scale.value_or(1.0));
     } else {
@@ -193,7 +197,7 @@ struct LinkImu::Impl {
       }
     }
     if (const link::Field* tf = m.find(link::Role::time); tf && !p.has_time) {
-      p.t.device_time_ns = std::llround(static_cast<double>(*v.time_raw) * tf->scale.value_or(1.0));
+      p.t.device_time_ns = std::llround(static_cast<double>(expect_value(v.time_raw, kTimeTag)) * tf->scale.value_or(1.0));
       p.has_time = true;
     }
     if (!p.has_time) p.t.device_time_ns = 0;
@@ -222,7 +226,13 @@ struct LinkImu::Impl {
       if (cfg.link.stream()) {
         const std::uint64_t resyncs = stream.resyncs(), discarded = stream.bytes_discarded();
         stream.feed(c.bytes);
-        while (auto d = stream.next()) on_line.emplace_back(std::move(*d), c.rx_ns);
+        // Not `while (auto d = stream.next())`: clang-tidy 16's optional-access check does not see
+        // the test of a while loop's condition variable (nor of a for loop's condition).
+        for (;;) {
+          auto d = stream.next();
+          if (!d) break;
+          on_line.emplace_back(std::move(*d), c.rx_ns);
+        }
         counts.resyncs += stream.resyncs() - resyncs;
         counts.bytes_discarded += stream.bytes_discarded() - discarded;
       } else {

@@ -229,6 +229,13 @@ std::optional<std::string_view> capture(const Template& t, const std::vector<std
   return std::nullopt;
 }
 
+// The text of placeholder `name` in a matched line. The parsers below ask only for placeholders
+// the dialect's template must have (parse_dialect refuses a template that lacks one); were one
+// missing all the same, its text is empty, which every value parser refuses.
+std::string_view placeholder_text(const Template& t, const std::vector<std::string_view>& caps, std::string_view name) {
+  return capture(t, caps, name).value_or(std::string_view());
+}
+
 template <class Value>
 std::string fill(const Template& t, Value value_of) {
   std::string out;
@@ -323,11 +330,12 @@ void read_tokens(ObjectReader& parent, const char* key, const std::array<const c
   }
 }
 
-Dialect parse_dialect(const json& j, std::vector<std::string>& problems) {
-  Dialect d;
-  DialectReader dr(problems);
-  ObjectReader r(j, "dialect", problems);
-  if (!r.is_object()) return d;
+// The pieces of parse_dialect, a few keys each (small functions also keep clang-tidy's
+// optional-access analysis fast: it runs per function, and its cost grows steeply with the
+// branches on optionals in one function).
+
+// `format`, `name`, `source`, `line_end`, `commands_case_insensitive`.
+void read_identity(ObjectReader& r, Dialect& d) {
   if (const auto f = r.string("format", true); f && *f != kFormat) r.problem(r.at("format") + " must be \"" + kFormat + "\"");
   d.name = r.string("name", true).value_or("");
   d.source = r.string("source", true).value_or("");
@@ -336,10 +344,10 @@ Dialect parse_dialect(const json& j, std::vector<std::string>& problems) {
     d.line_end = *e;
   }
   d.commands_case_insensitive = r.boolean("commands_case_insensitive").value_or(true);
-  read_tokens(r, "axes", kAxisKeys, d.axes, 0, problems);
-  read_tokens(r, "modes", kModeKeys, d.modes, 0, problems);
-  read_tokens(r, "interlock", kInterlockKeys, d.interlock, 0, problems);
-  read_tokens(r, "errors", kRefusalKeys, d.error_codes, 1, problems);
+}
+
+// `decimals` and `time_unit`: how numbers and time tags are written.
+void read_number_format(ObjectReader& r, Dialect& d) {
   if (const auto n = r.integer("decimals", 0, 12)) d.decimals = static_cast<int>(*n);
   if (const auto u = r.string("time_unit", true)) {
     if (*u == "us") d.time_unit = TimeUnit::us;
@@ -347,58 +355,84 @@ Dialect parse_dialect(const json& j, std::vector<std::string>& problems) {
     else if (*u == "s") d.time_unit = TimeUnit::s;
     else r.problem(r.at("time_unit") + " is \"" + *u + "\", must be \"us\", \"ms\" or \"s\"");
   }
-  if (const json* c = r.get("commands", true)) {
-    ObjectReader cr(*c, r.at("commands"), problems);
-    for (const OpSpec& s : op_specs()) {
-      if (s.op == Op::checksum) continue;
-      if (const auto text = cr.string(s.key, true))
-        d.commands[static_cast<std::size_t>(s.op)] = dr.parse_template(*text, cr.at(s.key), placeholders_of(s));
-    }
+}
+
+// `commands`: a template per operation (the checksum's is under reply_checksum).
+void read_commands(const json& c, const std::string& where, DialectReader& dr, Dialect& d, std::vector<std::string>& problems) {
+  ObjectReader cr(c, where, problems);
+  for (const OpSpec& s : op_specs()) {
+    if (s.op == Op::checksum) continue;
+    if (const auto text = cr.string(s.key, true))
+      d.commands[static_cast<std::size_t>(s.op)] = dr.parse_template(*text, cr.at(s.key), placeholders_of(s));
   }
-  if (const json* c = r.get("replies", true)) {
-    ObjectReader rr(*c, r.at("replies"), problems);
-    auto reply = [&](const char* key, const std::vector<std::string>& required, const std::vector<std::string>& optional) {
-      const auto text = rr.string(key, true);
-      return text ? dr.parse_template(*text, rr.at(key), required, optional) : Template{};
-    };
-    auto joined = [](std::vector<std::string> a, const std::vector<std::string>& b) {
-      a.insert(a.end(), b.begin(), b.end());
-      return a;
-    };
-    d.reply_ok = reply("ok", {}, {});
-    d.reply_error = reply("error", {"code"}, {"text"});
-    d.reply_identity = reply("identity", {}, {"text"});
-    d.reply_positions = reply("positions", joined(joined({"time"}, per_axis("angle_deg")), per_axis("rate_dps")), {});
-    d.reply_status = reply("status", joined(joined({"interlock"}, per_axis("mode")), per_axis("flags")), {"time"});
+}
+
+// `replies`: a template per kind of reply.
+void read_replies(const json& c, const std::string& where, DialectReader& dr, Dialect& d, std::vector<std::string>& problems) {
+  ObjectReader rr(c, where, problems);
+  auto reply = [&](const char* key, const std::vector<std::string>& required, const std::vector<std::string>& optional) {
+    const auto text = rr.string(key, true);
+    return text ? dr.parse_template(*text, rr.at(key), required, optional) : Template{};
+  };
+  auto joined = [](std::vector<std::string> a, const std::vector<std::string>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+  };
+  d.reply_ok = reply("ok", {}, {});
+  d.reply_error = reply("error", {"code"}, {"text"});
+  d.reply_identity = reply("identity", {}, {"text"});
+  d.reply_positions = reply("positions", joined(joined({"time"}, per_axis("angle_deg")), per_axis("rate_dps")), {});
+  d.reply_status = reply("status", joined(joined({"interlock"}, per_axis("mode")), per_axis("flags")), {"time"});
+}
+
+// `status_flags`: the radix of the flags and each flag's bits (no two sharing one).
+void read_status_flags(const json& f, const std::string& where, Dialect& d, std::vector<std::string>& problems) {
+  ObjectReader fr(f, where, problems);
+  if (const auto radix = fr.integer("radix", 2, 16, true)) {
+    if (*radix != 2 && *radix != 10 && *radix != 16) fr.problem(fr.at("radix") + " must be 2, 10 or 16");
+    d.flag_radix = static_cast<int>(*radix);
   }
-  if (const json* f = r.get("status_flags", true)) {
-    ObjectReader fr(*f, r.at("status_flags"), problems);
-    if (const auto radix = fr.integer("radix", 2, 16, true)) {
-      if (*radix != 2 && *radix != 10 && *radix != 16) fr.problem(fr.at("radix") + " must be 2, 10 or 16");
-      d.flag_radix = static_cast<int>(*radix);
-    }
-    unsigned all = 0;
-    for (auto [key, bit] : {std::pair{"at_limit", &d.flag_at_limit}, std::pair{"fault", &d.flag_fault},
-                            std::pair{"watchdog_expired", &d.flag_watchdog}, std::pair{"moving", &d.flag_moving}}) {
-      const auto v = fr.integer(key, 1, 0xFFFF, true);
-      if (!v) continue;
-      *bit = static_cast<unsigned>(*v);
-      if (all & *bit) fr.problem(fr.at(key) + " shares bits with another flag");
-      all |= *bit;
-    }
+  unsigned all = 0;
+  for (auto [key, bit] : {std::pair{"at_limit", &d.flag_at_limit}, std::pair{"fault", &d.flag_fault},
+                          std::pair{"watchdog_expired", &d.flag_watchdog}, std::pair{"moving", &d.flag_moving}}) {
+    const auto v = fr.integer(key, 1, 0xFFFF, true);
+    if (!v) continue;
+    *bit = static_cast<unsigned>(*v);
+    if (all & *bit) fr.problem(fr.at(key) + " shares bits with another flag");
+    all |= *bit;
   }
-  if (const json* c = r.get("reply_checksum")) {
-    ObjectReader cr(*c, r.at("reply_checksum"), problems);
-    d.has_reply_checksum = true;
-    if (const auto on = cr.string("on", true)) d.commands[static_cast<std::size_t>(Op::checksum)] = dr.parse_template(*on, cr.at("on"), {});
-    if (const auto off = cr.string("off")) d.checksum_off = dr.parse_template(*off, cr.at("off"), {});
-    if (const auto k = cr.string("kind", true); k && *k != "xor8-hex")
-      cr.problem(cr.at("kind") + " is \"" + *k + "\"; the one kind known is \"xor8-hex\"");
-    if (const auto sep = cr.string("separator", true)) {
-      if (sep->size() != 1 || !good_token(*sep)) cr.problem(cr.at("separator") + " must be one printable character");
-      else d.checksum_separator = sep->front();
-    }
+}
+
+// `reply_checksum`: the commands that switch it on and off, its kind and its separator.
+void read_reply_checksum(const json& c, const std::string& where, DialectReader& dr, Dialect& d,
+                         std::vector<std::string>& problems) {
+  ObjectReader cr(c, where, problems);
+  d.has_reply_checksum = true;
+  if (const auto on = cr.string("on", true)) d.commands[static_cast<std::size_t>(Op::checksum)] = dr.parse_template(*on, cr.at("on"), {});
+  if (const auto off = cr.string("off")) d.checksum_off = dr.parse_template(*off, cr.at("off"), {});
+  if (const auto k = cr.string("kind", true); k && *k != "xor8-hex")
+    cr.problem(cr.at("kind") + " is \"" + *k + "\"; the one kind known is \"xor8-hex\"");
+  if (const auto sep = cr.string("separator", true)) {
+    if (sep->size() != 1 || !good_token(*sep)) cr.problem(cr.at("separator") + " must be one printable character");
+    else d.checksum_separator = sep->front();
   }
+}
+
+Dialect parse_dialect(const json& j, std::vector<std::string>& problems) {
+  Dialect d;
+  DialectReader dr(problems);
+  ObjectReader r(j, "dialect", problems);
+  if (!r.is_object()) return d;
+  read_identity(r, d);
+  read_tokens(r, "axes", kAxisKeys, d.axes, 0, problems);
+  read_tokens(r, "modes", kModeKeys, d.modes, 0, problems);
+  read_tokens(r, "interlock", kInterlockKeys, d.interlock, 0, problems);
+  read_tokens(r, "errors", kRefusalKeys, d.error_codes, 1, problems);
+  read_number_format(r, d);
+  if (const json* c = r.get("commands", true)) read_commands(*c, r.at("commands"), dr, d, problems);
+  if (const json* c = r.get("replies", true)) read_replies(*c, r.at("replies"), dr, d, problems);
+  if (const json* f = r.get("status_flags", true)) read_status_flags(*f, r.at("status_flags"), d, problems);
+  if (const json* c = r.get("reply_checksum")) read_reply_checksum(*c, r.at("reply_checksum"), dr, d, problems);
   return d;
 }
 
@@ -491,17 +525,17 @@ std::variant<Command, ParseError> parse_command(const Dialect& d, std::string_vi
       return std::nullopt;
     };
     if (s.has_axis) {
-      const int a = token_index(d.axes, *capture(t, *caps, "axis"));
+      const int a = token_index(d.axes, placeholder_text(t, *caps, "axis"));
       if (a < 0) return fail("axis must be " + tokens_text(d.axes));
       c.axis = a;
     }
     if (s.has_mode) {
-      const int m = token_index(d.modes, *capture(t, *caps, "mode"));
+      const int m = token_index(d.modes, placeholder_text(t, *caps, "mode"));
       if (m < 0) return fail("mode must be " + tokens_text(d.modes));
       c.mode = static_cast<TableMode>(m);
     }
     for (std::size_t k = 0; k < s.numbers.size(); ++k)
-      if (!parse_double(*capture(t, *caps, s.numbers[k]), c.args[k]))
+      if (!parse_double(placeholder_text(t, *caps, s.numbers[k]), c.args[k]))
         return fail(std::string("bad number for ") + s.numbers[k]);
     return c;
   };
@@ -566,6 +600,66 @@ std::string format_reply(const Dialect& d, const Reply& r) {
   return d.reply_error.text;
 }
 
+namespace {
+
+// The replies of parse_reply, one function each: the values into `r`, or why the body is not that
+// reply ("" when it is). Apart from parse_reply, whose switch over them with every capture made
+// clang-tidy's optional-access analysis of it take minutes.
+
+// The error reply of any command (true when `body` is one).
+bool read_error_reply(const Dialect& d, std::string_view body, Reply& r) {
+  const auto caps = match(d.reply_error, body, false);
+  if (!caps) return false;
+  r.kind = Reply::Kind::error;
+  r.code = std::string(placeholder_text(d.reply_error, *caps, "code"));
+  r.text = std::string(capture(d.reply_error, *caps, "text").value_or(""));
+  for (std::size_t k = 1; k < kRefusals; ++k)
+    if (same(d.error_codes[k], r.code, true)) r.refusal = static_cast<Refusal>(k);
+  return true;
+}
+
+std::string read_identity_reply(const Dialect& d, std::string_view body, Reply& r) {
+  const auto caps = match(d.reply_identity, body, false);
+  if (!caps) return "unrecognised reply (expected '" + d.reply_identity.text + "')";
+  r.text = std::string(capture(d.reply_identity, *caps, "text").value_or(""));
+  return {};
+}
+
+std::string read_positions_reply(const Dialect& d, std::string_view body, Reply& r) {
+  const Template& t = d.reply_positions;
+  const auto caps = match(t, body, false);
+  if (!caps) return "unrecognised reply (expected '" + t.text + "')";
+  if (!parse_time(d, placeholder_text(t, *caps, "time"), r.time_us)) return "bad time tag";
+  for (std::size_t k = 0; k < 3; ++k)
+    if (!parse_double(placeholder_text(t, *caps, "angle_deg." + std::string(kAxisKeys[k])), r.angle_deg[k]) ||
+        !parse_double(placeholder_text(t, *caps, "rate_dps." + std::string(kAxisKeys[k])), r.rate_dps[k]))
+      return "bad number";
+  return {};
+}
+
+std::string read_status_reply(const Dialect& d, std::string_view body, Reply& r) {
+  const Template& t = d.reply_status;
+  const auto caps = match(t, body, false);
+  if (!caps) return "unrecognised reply (expected '" + t.text + "')";
+  if (const auto time = capture(t, *caps, "time"); time && !parse_time(d, *time, r.time_us)) return "bad time tag";
+  const int lock = token_index(d.interlock, placeholder_text(t, *caps, "interlock"));
+  if (lock < 0) return "bad interlock state";
+  r.interlock = static_cast<InterlockState>(lock);
+  for (std::size_t k = 0; k < 3; ++k) {
+    const int m = token_index(d.modes, placeholder_text(t, *caps, "mode." + std::string(kAxisKeys[k])));
+    if (m < 0) return "bad mode";
+    r.modes[k] = static_cast<TableMode>(m);
+    const std::string_view f = placeholder_text(t, *caps, "flags." + std::string(kAxisKeys[k]));
+    unsigned v = 0;
+    if (f.empty() || f.size() > 16 || std::from_chars(f.data(), f.data() + f.size(), v, d.flag_radix).ptr != f.data() + f.size())
+      return "bad flags";
+    r.flags[k] = {(v & d.flag_at_limit) != 0, (v & d.flag_fault) != 0, (v & d.flag_watchdog) != 0, (v & d.flag_moving) != 0};
+  }
+  return {};
+}
+
+}  // namespace
+
 Result<Reply> parse_reply(const Dialect& d, std::string_view line, Reply::Kind expected, bool checksum) {
   if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
   if (line.size() > kMaxLineBytes) return {DriverErrc::protocol_error, "reply longer than " + std::to_string(kMaxLineBytes) + " bytes"};
@@ -588,59 +682,21 @@ Result<Reply> parse_reply(const Dialect& d, std::string_view line, Reply::Kind e
     return Result<Reply>(DriverErrc::protocol_error, why + ": '" + std::string(line) + "'");
   };
   Reply r;
-  if (const auto caps = match(d.reply_error, body, false)) {
-    r.kind = Reply::Kind::error;
-    r.code = std::string(*capture(d.reply_error, *caps, "code"));
-    r.text = std::string(capture(d.reply_error, *caps, "text").value_or(""));
-    for (std::size_t k = 1; k < kRefusals; ++k)
-      if (same(d.error_codes[k], r.code, true)) r.refusal = static_cast<Refusal>(k);
-    return r;
-  }
+  if (read_error_reply(d, body, r)) return r;
   r.kind = expected;
+  std::string why;
   switch (expected) {
     case Reply::Kind::ok:
       if (!match(d.reply_ok, body, false)) return bad("unrecognised reply (expected '" + d.reply_ok.text + "')");
       return r;
     case Reply::Kind::error: return bad("unrecognised reply");
-    case Reply::Kind::identity: {
-      const auto caps = match(d.reply_identity, body, false);
-      if (!caps) return bad("unrecognised reply (expected '" + d.reply_identity.text + "')");
-      r.text = std::string(capture(d.reply_identity, *caps, "text").value_or(""));
-      return r;
-    }
-    case Reply::Kind::positions: {
-      const Template& t = d.reply_positions;
-      const auto caps = match(t, body, false);
-      if (!caps) return bad("unrecognised reply (expected '" + t.text + "')");
-      if (!parse_time(d, *capture(t, *caps, "time"), r.time_us)) return bad("bad time tag");
-      for (std::size_t k = 0; k < 3; ++k)
-        if (!parse_double(*capture(t, *caps, "angle_deg." + std::string(kAxisKeys[k])), r.angle_deg[k]) ||
-            !parse_double(*capture(t, *caps, "rate_dps." + std::string(kAxisKeys[k])), r.rate_dps[k]))
-          return bad("bad number");
-      return r;
-    }
-    case Reply::Kind::status: {
-      const Template& t = d.reply_status;
-      const auto caps = match(t, body, false);
-      if (!caps) return bad("unrecognised reply (expected '" + t.text + "')");
-      if (const auto time = capture(t, *caps, "time"); time && !parse_time(d, *time, r.time_us)) return bad("bad time tag");
-      const int lock = token_index(d.interlock, *capture(t, *caps, "interlock"));
-      if (lock < 0) return bad("bad interlock state");
-      r.interlock = static_cast<InterlockState>(lock);
-      for (std::size_t k = 0; k < 3; ++k) {
-        const int m = token_index(d.modes, *capture(t, *caps, "mode." + std::string(kAxisKeys[k])));
-        if (m < 0) return bad("bad mode");
-        r.modes[k] = static_cast<TableMode>(m);
-        const std::string_view f = *capture(t, *caps, "flags." + std::string(kAxisKeys[k]));
-        unsigned v = 0;
-        if (f.empty() || f.size() > 16 || std::from_chars(f.data(), f.data() + f.size(), v, d.flag_radix).ptr != f.data() + f.size())
-          return bad("bad flags");
-        r.flags[k] = {(v & d.flag_at_limit) != 0, (v & d.flag_fault) != 0, (v & d.flag_watchdog) != 0, (v & d.flag_moving) != 0};
-      }
-      return r;
-    }
+    case Reply::Kind::identity: why = read_identity_reply(d, body, r); break;
+    case Reply::Kind::positions: why = read_positions_reply(d, body, r); break;
+    case Reply::Kind::status: why = read_status_reply(d, body, r); break;
+    default: return bad("unrecognised reply");
   }
-  return bad("unrecognised reply");
+  if (!why.empty()) return bad(why);
+  return r;
 }
 
 }  // namespace imucal::drivers::dialect

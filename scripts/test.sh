@@ -28,7 +28,7 @@ set -m  # the build in a process group of its own, so that a failure here stops 
 nice -n 19 cmake --build --preset asan -j "$jobs" >"$asan_log" 2>&1 &
 asan_build=$!
 trap 'kill -- -"$asan_build" 2>/dev/null || true' EXIT
-# The static check (scripts/static-check.sh: lifetimes, moves) beside them too, at the same
+# The static check (scripts/static-check.sh: lifetimes, moves, optionals) beside them too, at the same
 # priority; it needs a configured tree only, no build.
 static_log=build/static-check.log
 nice -n 19 bash scripts/static-check.sh >"$static_log" 2>&1 &

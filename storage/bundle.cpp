@@ -482,6 +482,88 @@ bool same_temperatures(const TempSample& a, const TempSample& b) {
 }
 
 // Parses frames.csv into `run`. Throws StorageError naming the line.
+// The columns of frames.csv past the required ones that are kept: the set point's, and the coil
+// sensors' when all 24 are there (a coil's mean needs its eight).
+struct ExtraColumns {
+  std::optional<std::size_t> setpoint;
+  std::vector<std::pair<std::size_t, std::size_t>> coil_of_column;  // {coil, sensor}; coil 3: none
+  bool with_coils = false;
+
+  bool is_coil(std::size_t column) const { return with_coils && coil_of_column[column].first < 3; }
+};
+
+// The kept columns of `header`; the others are listed in the report as ignored.
+ExtraColumns extra_columns(const std::vector<std::string>& header, ImportReport& report) {
+  ExtraColumns x;
+  x.coil_of_column.assign(header.size(), {3, 0});
+  int coil_columns = 0;
+  for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t k = 0; k < 8; ++k) {
+      const auto found = std::find(header.begin() + static_cast<std::ptrdiff_t>(kRequiredColumns.size()),
+                                   header.end(), coil_column(c, k));
+      if (found == header.end()) continue;
+      x.coil_of_column[static_cast<std::size_t>(found - header.begin())] = {c, k};
+      ++coil_columns;
+    }
+  x.with_coils = coil_columns == 24;
+  for (std::size_t i = kRequiredColumns.size(); i < header.size(); ++i) {
+    if (header[i] == kSetpointColumn && !x.setpoint) {
+      x.setpoint = i;
+    } else if (!x.is_coil(i)) {
+      report.ignored_columns.push_back(header[i]);
+    }
+  }
+  return x;
+}
+
+// A line's fields past the required ones: the set point and the coil sensors into `temp` (empty:
+// none at this line; `coil_fields` counts those given), the rest skipped. Returns what is wrong
+// with them ("" when nothing is). Apart from read_frames_csv, whose loop with it made clang-tidy's
+// optional-access analysis take minutes.
+std::string read_extra_columns(FieldCursor& cursor, const ExtraColumns& extra, const std::vector<std::string>& header,
+                               TempSample& temp, int& coil_fields) {
+  while (!cursor.exhausted()) {
+    const std::size_t column = cursor.consumed();
+    if (column >= header.size()) return "too many fields";
+    const bool is_coil = extra.is_coil(column);
+    if (column != extra.setpoint && !is_coil) {
+      cursor.text();
+      continue;
+    }
+    const std::string_view field = cursor.text();
+    if (trim(field).empty()) continue;
+    double value_C = 0.0;
+    if (auto error = parse_double(field, value_C)) return "column '" + header[column] + "': " + *error;
+    if (is_coil) {
+      const std::pair<std::size_t, std::size_t>& coil_sensor = extra.coil_of_column[column];
+      if (!temp.coil_sensors_C) temp.coil_sensors_C.emplace();
+      (*temp.coil_sensors_C)[coil_sensor.first][coil_sensor.second] = value_C;
+      ++coil_fields;
+    } else {
+      temp.chamber_setpoint_C = value_C;
+    }
+  }
+  return {};
+}
+
+// Why a field is not a number, and why a time field is not a time ("" when it is): the optionals
+// of parse_double and parse_time_ns are read here, so that read_frames_csv has none of its own
+// (clang-tidy's optional analysis of that function, loops and all, took over 40 s).
+std::string number_problem(std::string_view field) {
+  double ignored = 0.0;
+  return parse_double(field, ignored).value_or("not a number");
+}
+
+std::string time_problem(std::string_view field, std::int64_t& t_ns) { return parse_time_ns(field, t_ns).value_or(""); }
+
+// Whether a line's temperatures differ from the last ones kept (none yet: they do); then they are
+// the last ones kept.
+bool temperatures_changed(std::optional<TempSample>& last, const TempSample& temp) {
+  if (last && same_temperatures(temp, *last)) return false;
+  last = temp;
+  return true;
+}
+
 ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run) {
   ImportReport report;
   LineReader reader(fs::path(dir) / "frames.csv", dir);
@@ -506,33 +588,17 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
     fail_line(std::string("column '") + kRequiredColumns[i] + "' is column " +
               std::to_string(found - header.begin() + 1) + ", expected as column " + std::to_string(i + 1));
   }
-  std::optional<std::size_t> setpoint_column;
-  // The coil sensors are kept only when all 24 columns are there (a coil's mean needs its eight).
-  std::vector<std::pair<std::size_t, std::size_t>> coil_of_column(header.size(), {3, 0});  // {coil, sensor}
-  int coil_columns = 0;
-  for (std::size_t c = 0; c < 3; ++c)
-    for (std::size_t k = 0; k < 8; ++k) {
-      const auto found = std::find(header.begin() + static_cast<std::ptrdiff_t>(kRequiredColumns.size()),
-                                   header.end(), coil_column(c, k));
-      if (found == header.end()) continue;
-      coil_of_column[static_cast<std::size_t>(found - header.begin())] = {c, k};
-      ++coil_columns;
-    }
-  const bool with_coils = coil_columns == 24;
-  for (std::size_t i = kRequiredColumns.size(); i < header.size(); ++i) {
-    if (header[i] == kSetpointColumn && !setpoint_column) {
-      setpoint_column = i;
-    } else if (!(with_coils && coil_of_column[i].first < 3)) {
-      report.ignored_columns.push_back(header[i]);
-    }
-  }
+  const ExtraColumns extra = extra_columns(header, report);
 
   const double gap_threshold_ns = 1.5e9 / rate_hz;
   std::vector<ImuFrame> frames;
   frames.reserve(kImportBatchFrames);
   std::vector<TempSample> temps;
   std::optional<TempSample> last_temp;
-  std::optional<std::int64_t> previous_t_ns;
+  // The previous frame's time (none before the first): a flag and a value, not an optional, in
+  // this loop (its optionals made clang-tidy's optional analysis of the function take minutes).
+  bool have_previous = false;
+  std::int64_t previous_t_ns = 0;
   std::int64_t previous_line = 0;
   std::array<double, 3> previous_raw_deg{};
   std::array<double, 3> unwrap_offset_deg{};
@@ -557,23 +623,22 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       double value = 0.0;
       std::string_view field;
       if (!cursor.number(value, field)) {
-        double ignored = 0.0;
-        fail_field("column '" + header[column] + "': " + parse_double(field, ignored).value_or("not a number"));
+        fail_field("column '" + header[column] + "': " + number_problem(field));
       }
       return value;
     };
 
     ImuFrame frame;
     const std::string_view t_s_field = cursor.text();
-    if (auto error = parse_time_ns(t_s_field, frame.t_ns)) fail_field("column 't_s': " + *error);
-    if (previous_t_ns) {
-      if (frame.t_ns <= *previous_t_ns) {
+    if (const std::string error = time_problem(t_s_field, frame.t_ns); !error.empty()) fail_field("column 't_s': " + error);
+    if (have_previous) {
+      if (frame.t_ns <= previous_t_ns) {
         fail_line("time does not increase (t_s " + std::string(trim(t_s_field)) + " after line " +
                   std::to_string(previous_line) + ")");
       }
-      if (static_cast<double>(frame.t_ns - *previous_t_ns) > gap_threshold_ns) {
-        report.gaps.push_back({static_cast<double>(*previous_t_ns) / 1e9, static_cast<double>(frame.t_ns) / 1e9,
-                               line_number, *previous_t_ns, frame.t_ns});
+      if (static_cast<double>(frame.t_ns - previous_t_ns) > gap_threshold_ns) {
+        report.gaps.push_back({static_cast<double>(previous_t_ns) / 1e9, static_cast<double>(frame.t_ns) / 1e9,
+                               line_number, previous_t_ns, frame.t_ns});
       }
     }
     // The cursor reads in column order.
@@ -587,7 +652,7 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       const double raw_deg = value[7 + axis];
       // A jump of more than half a turn between two samples is a wrap of the encoder reading,
       // not motion (it would take > 3600 deg/s at 20 Hz).
-      if (previous_t_ns) {
+      if (have_previous) {
         const double jump_deg = raw_deg - previous_raw_deg[axis];
         if (std::fabs(jump_deg) > 180.0) unwrap_offset_deg[axis] -= 360.0 * std::round(jump_deg / 360.0);
       }
@@ -603,42 +668,18 @@ ImportReport read_frames_csv(const std::string& dir, double rate_hz, RunDb& run)
       temp.accel_C(static_cast<Eigen::Index>(axis)) = value[13 + axis];
     }
     temp.chamber_C = value[16];
-    // The optional columns: the set point and the coil sensors are kept (empty: none at this
-    // line), the rest skipped.
     int coil_fields = 0;
-    while (!cursor.exhausted()) {
-      const std::size_t column = cursor.consumed();
-      if (column >= header.size()) fail_field("too many fields");
-      const bool is_coil = with_coils && coil_of_column[column].first < 3;
-      if (column == setpoint_column || is_coil) {
-        const std::string_view field = cursor.text();
-        if (!trim(field).empty()) {
-          double value_C = 0.0;
-          if (auto error = parse_double(field, value_C)) fail_field("column '" + header[column] + "': " + *error);
-          if (is_coil) {
-            const auto [coil, sensor] = coil_of_column[column];
-            if (!temp.coil_sensors_C) temp.coil_sensors_C.emplace();
-            (*temp.coil_sensors_C)[coil][sensor] = value_C;
-            ++coil_fields;
-          } else {
-            temp.chamber_setpoint_C = value_C;
-          }
-        }
-      } else {
-        cursor.text();
-      }
-    }
+    if (const std::string problem = read_extra_columns(cursor, extra, header, temp, coil_fields); !problem.empty())
+      fail_field(problem);
     if (cursor.consumed() != header.size()) fail_field("too few fields");
     if (coil_fields != 0 && coil_fields != 24)
       fail_line(std::to_string(coil_fields) + " of the 24 coil sensors (temp_gx_1_C .. temp_gz_8_C) given: all or none");
     // Run-length: the export's sample-and-hold gives every frame its values back.
-    if (!last_temp || !same_temperatures(temp, *last_temp)) {
-      temps.push_back(temp);
-      last_temp = temp;
-    }
+    if (temperatures_changed(last_temp, temp)) temps.push_back(temp);
 
     frames.push_back(frame);
     previous_t_ns = frame.t_ns;
+    have_previous = true;
     previous_line = line_number;
     if (frames.size() == kImportBatchFrames) {
       run.append(frames);

@@ -285,8 +285,9 @@ void Recorder::release_batch_locked() {
 
 // Writer thread, lock held, after a batch failed for want of space or by an I/O error (the RunDb
 // has rolled it back to the last commit): what it wrote goes back to the head of the queue, to be
-// written again at the next attempt; commits waited for are answered "not committed".
-void Recorder::hold_failed_batch_locked(const std::string& why, bool disk_full, std::optional<std::uint64_t> barrier) {
+// written again at the next attempt; commits waited for are answered "not committed". Returns the
+// write problem it records.
+std::string Recorder::hold_failed_batch_locked(const std::string& why, bool disk_full, std::optional<std::uint64_t> barrier) {
   for (auto it = batch_items_.rbegin(); it != batch_items_.rend(); ++it) queue_.push_front(std::move(*it));
   batch_items_.clear();
   batch_frames_ = 0;
@@ -305,10 +306,11 @@ void Recorder::hold_failed_batch_locked(const std::string& why, bool disk_full, 
   char text[200];
   std::snprintf(text, sizeof text, "; %lld frames held in memory, written again every %s s",
                 static_cast<long long>(held), number_text(options_.retry_interval_s).c_str());
-  write_problem_ = (disk_full ? "disk full: at least " + std::to_string(megabytes_needed(held)) +
-                                    " MB free needed for run '" + path_ + "'"
-                              : "I/O error writing run '" + path_ + "'") +
-                   text + " (" + why + ")";
+  const std::string problem = (disk_full ? "disk full: at least " + std::to_string(megabytes_needed(held)) +
+                                               " MB free needed for run '" + path_ + "'"
+                                         : "I/O error writing run '" + path_ + "'") +
+                              text + " (" + why + ")";
+  write_problem_ = problem;
   retry_at_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                  std::chrono::duration<double>(options_.retry_interval_s));
   // Every commit asked for so far is not done; the queue's later barriers are answered now too.
@@ -317,6 +319,7 @@ void Recorder::hold_failed_batch_locked(const std::string& why, bool disk_full, 
   done_barrier_ = std::max(done_barrier_, failed_barrier_);
   cv_barrier_.notify_all();
   cv_space_.notify_all();  // a producer waiting for room gets Push::Refused
+  return problem;
 }
 
 // Writer thread: the batch so far, with the counters, in one COMMIT.
@@ -441,9 +444,9 @@ void Recorder::run() {
       lock.lock();
       if (failed) {
         const bool first = !write_problem_;
-        hold_failed_batch_locked(*failed, failed_full, barrier ? std::optional(item->barrier) : std::nullopt);
+        const std::string message =
+            hold_failed_batch_locked(*failed, failed_full, barrier ? std::optional(item->barrier) : std::nullopt);
         if (first) {
-          const std::string message = *write_problem_;
           lock.unlock();
           spdlog::warn("recorder: {}", message);
           raise(RecorderAlarmKind::WriteHeld, message);
@@ -463,7 +466,7 @@ void Recorder::run() {
       } catch (const sql::SqliteError& e) {
         if (!worth_retrying(e)) throw;
         lock.lock();
-        hold_failed_batch_locked(e.what(), e.kind() == sql::SqliteError::Kind::full, std::nullopt);  // throws: closing
+        (void)hold_failed_batch_locked(e.what(), e.kind() == sql::SqliteError::Kind::full, std::nullopt);  // throws: closing
       }
     }
     db_.close();  // the clean end of the writer session: the next open needs no recovery

@@ -156,7 +156,8 @@ class Recorder {
   void run();
   void commit_batch();
   void release_batch_locked();
-  void hold_failed_batch_locked(const std::string& why, bool disk_full, std::optional<std::uint64_t> barrier);
+  // Returns the write problem it records (write_problem_).
+  std::string hold_failed_batch_locked(const std::string& why, bool disk_full, std::optional<std::uint64_t> barrier);
   bool enqueue_small(Item item);
   std::vector<ImuFrame> take_block_locked();
   void raise(RecorderAlarmKind kind, std::string message);

@@ -13,6 +13,7 @@
 #include <archive.h>
 #include <archive_entry.h>
 
+#include "core/expect_value.hpp"
 #include "core/units.hpp"
 #include "estimators/evaluate.hpp"
 #include "estimators/noise.hpp"
@@ -95,7 +96,9 @@ pipeline::Outcome stage_on_run(const storage::RunDb& db, pipeline::Stage stage, 
 
 json allan_from_run(const std::string& run_path, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
-  const noise::Result r = *stage_on_run(db, pipeline::Stage::Noise, ImuModel{}, "the Allan deviation: ", progress).noise;
+  // A stage that is done has its result.
+  const noise::Result r = expect_value(
+      stage_on_run(db, pipeline::Stage::Noise, ImuModel{}, "the Allan deviation: ", progress).noise, "the noise stage's result");
   json out = json::parse(r.curves_json());
   for (const char* c : {"gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"}) {
     out[c].erase("psd");  // the PSD is not plotted; keep the answer small
@@ -122,7 +125,8 @@ json allan_from_run(const std::string& run_path, const AnalysisProgress& progres
 json thermal_from_run(const std::string& run_path, const ImuModel& input, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
   const thermal::Result r =
-      *stage_on_run(db, pipeline::Stage::Thermal, input, "the thermal plots: ", progress).thermal;
+      expect_value(stage_on_run(db, pipeline::Stage::Thermal, input, "the thermal plots: ", progress).thermal,
+                   "the thermal stage's result");
   const json report = json::parse(r.report_json);
   // report.plots: {"columns": [...], "series": {coefficient: [[row], ...]}} (docs/thermal.md).
   const json& plots = report.at("plots");

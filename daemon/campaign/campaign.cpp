@@ -10,6 +10,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/expect_value.hpp"
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
 #include "core/units.hpp"
@@ -391,11 +392,12 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
   }
 }
 
-}  // namespace
+// The pieces of check_campaign, in the order it reads a campaign. Each reads a few keys: small
+// functions also keep clang-tidy's optional-access analysis fast (it runs per function, and its
+// cost grows steeply with the branches on optionals in one function).
 
-CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
-  CampaignCheck check;
-  auto& problems = check.problems;
+// What a campaign does not say: the daemon's settings.
+CampaignSpec default_spec(const DaemonConfig& config) {
   CampaignSpec spec;
   // Real devices: the IMU samples at its own configured rate, which the frame grid must follow.
   spec.rate_hz = config.device_addresses ? config.device_addresses->imu.rate_hz : config.sim.rate_hz;
@@ -404,228 +406,218 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
   spec.chamber.tolerance_C = config.chamber.tolerance_C;
   spec.suspenders = config.suspenders;
+  return spec;
+}
 
-  // Form first: a problem here is the client's JSON (400), not the campaign's content (422).
-  std::size_t form_problems = 0;
-  json normalized = json::object();
-  motion::Program program;
-  bool have_program = false;
-  {
-    ObjectReader r(campaign, "campaign", problems);
-    if (!r.is_object()) {
-      check.malformed = true;
-      return check;
-    }
-    if (auto v = r.string("name", true)) {
-      if (v->empty() || v->size() > 200) problems.push_back("campaign.name must have 1 to 200 characters");
-      spec.name = *v;
-    }
-    const json* program_spec = r.get("program", true);
-    // The built-in campaign `full`: the whole method in one run, each program made for its stage
-    // (stage 1, lever arms, stage 3 from their models, then the Schuler test of every stage's model).
-    const json full_programs = json::array({"direct", "lever-arm", "navigation", "evaluate"});
-    const bool builtin_full = program_spec != nullptr && *program_spec == "full";
-    if (builtin_full) program_spec = &full_programs;
-    // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
-    // built-in thermal campaign: it brings its profile, and its table cycle has no rate segments
-    // for stage 1, so no estimator runs online unless asked; stage 2 runs on the whole run (GET
-    // .../thermal, `imucal calibrate --stage thermal`).
-    const bool builtin_thermal =
-        program_spec != nullptr && program_spec->is_string() && motion::is_builtin_chamber(program_spec->get<std::string>());
-    if (auto v = r.number_in("rate_hz", 1e-3)) spec.rate_hz = *v;
-    if (auto v = r.number_in("time_scale", 0, 1e6)) spec.time_scale = *v;
-    if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) spec.seed = static_cast<std::uint64_t>(*v);
-    const json* estimators = r.get("estimators");
-    const json* truth = r.get("truth");
-    const json* nav_model = r.get("navigation_model");
-    const json* start_model = r.get("model");
-    const json* chamber = r.get("chamber");
-    const json* suspenders = r.get("suspenders");
-    const json* faults = r.get("sim_faults");
-    const json* imu = r.get("imu");
-    r.finish();
-    form_problems = problems.size();
+// `rate_hz`, `time_scale`, `seed`: each the daemon's unless given.
+void read_run_settings(ObjectReader& r, CampaignSpec& spec) {
+  if (auto v = r.number_in("rate_hz", 1e-3)) spec.rate_hz = *v;
+  if (auto v = r.number_in("time_scale", 0, 1e6)) spec.time_scale = *v;
+  if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) spec.seed = static_cast<std::uint64_t>(*v);
+}
 
-    if (estimators != nullptr) {
-      spec.estimators.clear();
-      if (!estimators->is_array()) {
-        problems.push_back("campaign.estimators must be an array of names");
-      } else {
-        for (const json& e : *estimators) {
-          if (!e.is_string()) {
-            problems.push_back("campaign.estimators must hold names (strings)");
-            continue;
-          }
-          const auto name = e.get<std::string>();
-          const auto& known = known_estimators();
-          if (std::find(known.begin(), known.end(), name) == known.end()) {
-            std::string list;
-            for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
-            problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: " + list + ")");
-          } else if (spec.has_estimator(name)) {
-            problems.push_back("campaign.estimators: \"" + name + "\" is listed twice");
-          } else {
-            spec.estimators.push_back(name);
-          }
-        }
-      }
-      form_problems = problems.size();
+// `estimators`: known names, each once (in place of those the program's parts would choose).
+void read_estimator_list(const json& estimators, CampaignSpec& spec, std::vector<std::string>& problems) {
+  spec.estimators.clear();
+  if (!estimators.is_array()) {
+    problems.push_back("campaign.estimators must be an array of names");
+    return;
+  }
+  for (const json& e : estimators) {
+    if (!e.is_string()) {
+      problems.push_back("campaign.estimators must hold names (strings)");
+      continue;
     }
-
-    // The program.
-    if (program_spec != nullptr) {
-      std::vector<json> parts;
-      bool malformed_program = false;
-      if (program_spec->is_array()) {
-        if (program_spec->empty()) {
-          problems.push_back("campaign.program must not be an empty list");
-          malformed_program = true;
-        }
-        for (std::size_t i = 0; i < program_spec->size(); ++i) {
-          if (auto p = program_item((*program_spec)[i], "campaign.program[" + std::to_string(i) + "]", problems,
-                                    malformed_program))
-            parts.push_back(std::move(*p));
-        }
-      } else if (auto p = program_item(*program_spec, "campaign.program", problems, malformed_program)) {
-        parts.push_back(std::move(*p));
-      }
-      if (malformed_program) form_problems = problems.size();
-      std::optional<json> program_json;
-      if (!parts.empty() && parts.size() == (program_spec->is_array() ? program_spec->size() : 1)) {
-        if (parts.size() == 1) {
-          program_json = parts.front();
-        } else {
-          program_json = join_programs(parts, config.table_limits, problems);
-        }
-      }
-      if (program_json) {
-        try {
-          program = motion::compile_program(program_json->dump(), config.table_limits);
-          have_program = true;
-          spec.program_json = program_json->dump();
-          if (builtin_full) {
-            spec.program_label = "full";
-          } else if (program_spec->is_string()) {
-            spec.program_label = program_spec->get<std::string>();
-          } else if (program_spec->is_array()) {
-            spec.program_label = program.name;
-          } else {
-            spec.program_label = "inline:" + program.name;
-          }
-        } catch (const std::exception& e) {
-          problems.push_back(std::string("campaign.program: ") + e.what());
-        }
-      }
-      normalized["program"] = builtin_full ? json("full") : *program_spec;
-    }
-    if (have_program) {
-      // The motion library reports a limit at every instant it is exceeded; one line per
-      // segment, axis and limit is what a person needs, with the count of the others.
-      std::vector<std::pair<std::string, int>> grouped;
-      for (const auto& p : motion::validate_program(program, config.table_limits)) {
-        std::string key = p;
-        const auto t0 = key.find(" (t=");
-        const auto t1 = t0 == std::string::npos ? t0 : key.find(" s)", t0);
-        if (t1 != std::string::npos) key.erase(t0, t1 + 3 - t0);
-        auto it = std::find_if(grouped.begin(), grouped.end(), [&](const auto& g) { return g.first == key; });
-        if (it == grouped.end()) {
-          grouped.emplace_back(key, 0);
-          problems.push_back("campaign.program: " + p);
-        } else {
-          ++it->second;
-        }
-      }
-      for (std::size_t i = 0, k = problems.size() - grouped.size(); i < grouped.size(); ++i, ++k)
-        if (grouped[i].second > 0) problems[k] += " (and " + std::to_string(grouped[i].second) + " more times)";
-      check.duration_s = program.duration_s();
-      check.segments = program.segments();
-      if (check.duration_s > config.campaign.max_duration_s)
-        problems.push_back("campaign.program lasts " + number_text(check.duration_s) + " s, more than the limit of " +
-                           number_text(config.campaign.max_duration_s) + " s");
-      // What the program's parts were made for decides the estimators unless the campaign lists
-      // them ({"program": "navigation"} runs stage 3); a listed one needs what its stage needs.
-      RecordingMeta meta;
-      meta.segments = check.segments;
-      meta.program_json = spec.program_json;
-      if (estimators == nullptr) {
-        for (const pipeline::Stage stage : pipeline::stages_for_parts(meta))
-          if (std::find(kOnlineStages.begin(), kOnlineStages.end(), stage) != kOnlineStages.end())
-            spec.estimators.emplace_back(pipeline::names_of(stage).estimator);
-      }
-      for (const std::string& name : spec.estimators) {
-        const auto stage = pipeline::stage_of_estimator(name);
-        if (!stage) continue;
-        if (const auto why = pipeline::requirement_unmet(*stage, pipeline::feed(*stage, meta, true).segments))
-          problems.push_back("estimator \"" + name + "\": " + *why);
-      }
-    }
-    if (spec.rate_hz > config.campaign.max_rate_hz)
-      problems.push_back("campaign.rate_hz: " + number_text(spec.rate_hz) + " Hz exceeds the limit of " +
-                         number_text(config.campaign.max_rate_hz) + " Hz");
-    if (truth != nullptr) {
-      if (auto m = read_model(*truth, "campaign.truth", config, problems, check.malformed)) spec.truth = *m;
-    } else if (!config.default_truth_json.empty()) {
-      spec.truth = imu_model_from_json_text(config.default_truth_json, "config.sim.truth");
-    } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", config, problems, check.malformed)) {
-      spec.truth = *m;
-    }
-    if (spec.truth.frame != "instrument") problems.push_back("campaign.truth must be in the instrument frame");
-    if (nav_model != nullptr) {
-      if (!spec.has_estimator("navigation"))
-        problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
-      if (auto m = read_model(*nav_model, "campaign.navigation_model", config, problems, check.malformed)) spec.navigation_model = *m;
-    }
-    if (start_model != nullptr) {
-      if (std::none_of(spec.estimators.begin(), spec.estimators.end(),
-                       [](const std::string& e) { return pipeline::stage_of_estimator(e).has_value(); }))
-        problems.push_back("campaign.model is given but no calibration estimator (direct, lever-arm, stage3) runs");
-      if (start_model->is_number_integer()) {
-        spec.start_model_campaign = start_model->get<std::int64_t>();
-      } else if (auto m = read_model(*start_model, "campaign.model", config, problems, check.malformed)) {
-        spec.start_model = *m;
-        if (m->frame != "instrument" && (spec.has_estimator("direct") || spec.has_estimator("lever-arm")))
-          problems.push_back("campaign.model is in the " + m->frame +
-                             " frame: stages direct and lever-arm start from an instrument-frame model");
-      }
-    }
-    if (chamber != nullptr) {
-      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems, check.malformed);
-    } else if (builtin_thermal) {
-      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems, check.malformed);
-    }
-    if (suspenders != nullptr) {
-      ObjectReader s(*suspenders, "campaign.suspenders", problems);
-      if (auto v = s.number_in("settle_s", 0, 86400)) spec.suspenders.settle_s = *v;
-      if (auto v = s.number_in("frame_timeout_s", 0.01, 3600)) spec.suspenders.frame_timeout_s = *v;
-      if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
-    }
-    if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
-    for (std::size_t i = 0; i < spec.faults.size(); ++i)
-      if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
-        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
-                           "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
-      else if (spec.faults[i].kind == SimFault::Kind::DropConnection && config.devices == "sim")
-        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
-                           "]: drop_connection needs the sim-wire devices (the in-process simulation has no "
-                           "connections; use disconnect)");
-    if (imu != nullptr) check_imu(*imu, spec.imu, problems);
-    if (config.device_addresses) {
-      if (std::abs(spec.rate_hz - config.device_addresses->imu.rate_hz) > 1e-9 * spec.rate_hz) {
-        char text[200];
-        std::snprintf(text, sizeof text,
-                      "campaign.rate_hz is %g Hz but the IMU runs at %g Hz (config.devices.imu.rate_hz): leave "
-                      "rate_hz out or set it to the IMU's rate",
-                      spec.rate_hz, config.device_addresses->imu.rate_hz);
-        problems.push_back(text);
-      }
-      if (faults != nullptr)
-        problems.push_back("campaign.sim_faults need simulated devices; the configured devices are real "
-                           "(config.devices names their addresses)");
+    const auto name = e.get<std::string>();
+    const auto& known = known_estimators();
+    if (std::find(known.begin(), known.end(), name) == known.end()) {
+      std::string list;
+      for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+      problems.push_back("campaign.estimators: unknown estimator \"" + name + "\" (known: " + list + ")");
+    } else if (spec.has_estimator(name)) {
+      problems.push_back("campaign.estimators: \"" + name + "\" is listed twice");
+    } else {
+      spec.estimators.push_back(name);
     }
   }
-  check.malformed = check.malformed || form_problems > 0;  // or a path where a name is asked (above)
-  if (!problems.empty()) return check;
+}
 
+// The program's parts (one, or a list), each a built-in name or an inline program; `malformed`
+// when one is not of either form. Empty when any part is missing.
+std::vector<json> program_parts(const json& program_spec, std::vector<std::string>& problems, bool& malformed) {
+  std::vector<json> parts;
+  if (program_spec.is_array()) {
+    if (program_spec.empty()) {
+      problems.push_back("campaign.program must not be an empty list");
+      malformed = true;
+    }
+    for (std::size_t i = 0; i < program_spec.size(); ++i) {
+      if (auto p = program_item(program_spec[i], "campaign.program[" + std::to_string(i) + "]", problems, malformed))
+        parts.push_back(std::move(*p));
+    }
+  } else if (auto p = program_item(program_spec, "campaign.program", problems, malformed)) {
+    parts.push_back(std::move(*p));
+  }
+  if (parts.size() != (program_spec.is_array() ? program_spec.size() : 1)) parts.clear();
+  return parts;
+}
+
+// The program compiled against the table's limits: its JSON and label in `spec`. False when it
+// does not compile (a problem says why).
+bool compile_program_spec(const json& program_json, const json& program_spec, bool builtin_full,
+                          const DaemonConfig& config, CampaignSpec& spec, motion::Program& program,
+                          std::vector<std::string>& problems) {
+  try {
+    program = motion::compile_program(program_json.dump(), config.table_limits);
+    spec.program_json = program_json.dump();
+    if (builtin_full) {
+      spec.program_label = "full";
+    } else if (program_spec.is_string()) {
+      spec.program_label = program_spec.get<std::string>();
+    } else if (program_spec.is_array()) {
+      spec.program_label = program.name;
+    } else {
+      spec.program_label = "inline:" + program.name;
+    }
+    return true;
+  } catch (const std::exception& e) {
+    problems.push_back(std::string("campaign.program: ") + e.what());
+    return false;
+  }
+}
+
+// `program`: its parts, joined when several, compiled. True when `program` holds it. A part of
+// the wrong form makes every problem so far one of form (`form_problems`).
+bool read_program(const json& program_spec, bool builtin_full, const DaemonConfig& config, CampaignSpec& spec,
+                  motion::Program& program, std::size_t& form_problems, std::vector<std::string>& problems) {
+  bool malformed_program = false;
+  const std::vector<json> parts = program_parts(program_spec, problems, malformed_program);
+  if (malformed_program) form_problems = problems.size();
+  if (parts.empty()) return false;
+  if (parts.size() == 1) return compile_program_spec(parts.front(), program_spec, builtin_full, config, spec, program, problems);
+  const std::optional<json> joined = join_programs(parts, config.table_limits, problems);
+  return joined && compile_program_spec(*joined, program_spec, builtin_full, config, spec, program, problems);
+}
+
+// The program against the table's limits, once per segment, axis and limit: the motion library
+// reports a limit at every instant it is exceeded; one line per segment, axis and limit is what
+// a person needs, with the count of the others.
+void check_program_limits(const motion::Program& program, const DaemonConfig& config, std::vector<std::string>& problems) {
+  std::vector<std::pair<std::string, int>> grouped;
+  for (const auto& p : motion::validate_program(program, config.table_limits)) {
+    std::string key = p;
+    const auto t0 = key.find(" (t=");
+    const auto t1 = t0 == std::string::npos ? t0 : key.find(" s)", t0);
+    if (t1 != std::string::npos) key.erase(t0, t1 + 3 - t0);
+    auto it = std::find_if(grouped.begin(), grouped.end(), [&](const auto& g) { return g.first == key; });
+    if (it == grouped.end()) {
+      grouped.emplace_back(key, 0);
+      problems.push_back("campaign.program: " + p);
+    } else {
+      ++it->second;
+    }
+  }
+  for (std::size_t i = 0, k = problems.size() - grouped.size(); i < grouped.size(); ++i, ++k)
+    if (grouped[i].second > 0) problems[k] += " (and " + std::to_string(grouped[i].second) + " more times)";
+}
+
+// The estimators: what the program's parts were made for decides them unless the campaign lists
+// them ({"program": "navigation"} runs stage 3); a listed one needs what its stage needs.
+void check_program_estimators(const CampaignCheck& check, bool listed, CampaignSpec& spec,
+                              std::vector<std::string>& problems) {
+  RecordingMeta meta;
+  meta.segments = check.segments;
+  meta.program_json = spec.program_json;
+  if (!listed) {
+    for (const pipeline::Stage stage : pipeline::stages_for_parts(meta))
+      if (std::find(kOnlineStages.begin(), kOnlineStages.end(), stage) != kOnlineStages.end())
+        spec.estimators.emplace_back(pipeline::names_of(stage).estimator);
+  }
+  for (const std::string& name : spec.estimators) {
+    const auto stage = pipeline::stage_of_estimator(name);
+    if (!stage) continue;
+    if (const auto why = pipeline::requirement_unmet(*stage, pipeline::feed(*stage, meta, true).segments))
+      problems.push_back("estimator \"" + name + "\": " + *why);
+  }
+}
+
+// A compiled program: its limits, duration and segments, and the estimators that run on it.
+void check_compiled_program(const motion::Program& program, const DaemonConfig& config, bool estimators_listed,
+                            CampaignCheck& check, CampaignSpec& spec) {
+  check_program_limits(program, config, check.problems);
+  check.duration_s = program.duration_s();
+  check.segments = program.segments();
+  if (check.duration_s > config.campaign.max_duration_s)
+    check.problems.push_back("campaign.program lasts " + number_text(check.duration_s) + " s, more than the limit of " +
+                             number_text(config.campaign.max_duration_s) + " s");
+  check_program_estimators(check, estimators_listed, spec, check.problems);
+}
+
+// `truth`: the simulated IMU's errors; the daemon's when not given.
+void read_truth(const json* truth, const DaemonConfig& config, CampaignSpec& spec, CampaignCheck& check) {
+  if (truth != nullptr) {
+    if (auto m = read_model(*truth, "campaign.truth", config, check.problems, check.malformed)) spec.truth = *m;
+  } else if (!config.default_truth_json.empty()) {
+    spec.truth = imu_model_from_json_text(config.default_truth_json, "config.sim.truth");
+  } else if (auto m = read_model(json(config.sim.truth), "config.sim.truth", config, check.problems, check.malformed)) {
+    spec.truth = *m;
+  }
+  if (spec.truth.frame != "instrument") check.problems.push_back("campaign.truth must be in the instrument frame");
+}
+
+// `navigation_model`: stage 3's model, with the navigation estimator only.
+void read_navigation_model(const json& nav_model, const DaemonConfig& config, CampaignSpec& spec, CampaignCheck& check) {
+  if (!spec.has_estimator("navigation"))
+    check.problems.push_back("campaign.navigation_model is given but the \"navigation\" estimator is not listed");
+  if (auto m = read_model(nav_model, "campaign.navigation_model", config, check.problems, check.malformed))
+    spec.navigation_model = *m;
+}
+
+// `model`: the model the calibration stages start from, or the campaign whose model it is.
+void read_start_model(const json& start_model, const DaemonConfig& config, CampaignSpec& spec, CampaignCheck& check) {
+  if (std::none_of(spec.estimators.begin(), spec.estimators.end(),
+                   [](const std::string& e) { return pipeline::stage_of_estimator(e).has_value(); }))
+    check.problems.push_back("campaign.model is given but no calibration estimator (direct, lever-arm, stage3) runs");
+  if (start_model.is_number_integer()) {
+    spec.start_model_campaign = start_model.get<std::int64_t>();
+  } else if (auto m = read_model(start_model, "campaign.model", config, check.problems, check.malformed)) {
+    spec.start_model = *m;
+    if (m->frame != "instrument" && (spec.has_estimator("direct") || spec.has_estimator("lever-arm")))
+      check.problems.push_back("campaign.model is in the " + m->frame +
+                               " frame: stages direct and lever-arm start from an instrument-frame model");
+  }
+}
+
+// `suspenders`: the campaign's own settings of the conditions that hold a run.
+void read_campaign_suspenders(const json& suspenders, CampaignSpec& spec, std::vector<std::string>& problems) {
+  ObjectReader s(suspenders, "campaign.suspenders", problems);
+  if (auto v = s.number_in("settle_s", 0, 86400)) spec.suspenders.settle_s = *v;
+  if (auto v = s.number_in("frame_timeout_s", 0.01, 3600)) spec.suspenders.frame_timeout_s = *v;
+  if (auto v = s.number_in("chamber_persist_s", 0, 3600)) spec.suspenders.chamber_persist_s = *v;
+}
+
+// Real devices (the configuration names their addresses) run at the IMU's rate and take no
+// simulated faults.
+void check_real_devices(const DaemonConfig& config, const CampaignSpec& spec, bool faults_given,
+                        std::vector<std::string>& problems) {
+  if (!config.device_addresses) return;
+  const double imu_rate_hz = config.device_addresses->imu.rate_hz;
+  if (std::abs(spec.rate_hz - imu_rate_hz) > 1e-9 * spec.rate_hz) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "campaign.rate_hz is %g Hz but the IMU runs at %g Hz (config.devices.imu.rate_hz): leave "
+                  "rate_hz out or set it to the IMU's rate",
+                  spec.rate_hz, imu_rate_hz);
+    problems.push_back(text);
+  }
+  if (faults_given)
+    problems.push_back("campaign.sim_faults need simulated devices; the configured devices are real "
+                       "(config.devices names their addresses)");
+}
+
+// The campaign as stored: every setting explicit, so that a change of the daemon's defaults does
+// not change a stored campaign.
+json normalized_campaign(const json& campaign, const CampaignSpec& spec, json normalized) {
   normalized["name"] = spec.name;
   normalized["estimators"] = spec.estimators;
   normalized["rate_hz"] = spec.rate_hz;
@@ -648,7 +640,91 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
     normalized["imu"] = {{"serial", spec.imu.serial},     {"part_number", spec.imu.part_number},
                          {"firmware", spec.imu.firmware}, {"customer", spec.imu.customer},
                          {"notes", spec.imu.notes}};
-  spec.normalized = std::move(normalized);
+  return normalized;
+}
+
+}  // namespace
+
+CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
+  CampaignCheck check;
+  auto& problems = check.problems;
+  CampaignSpec spec = default_spec(config);
+
+  // Form first: a problem here is the client's JSON (400), not the campaign's content (422).
+  std::size_t form_problems = 0;
+  json normalized = json::object();
+  {
+    ObjectReader r(campaign, "campaign", problems);
+    if (!r.is_object()) {
+      check.malformed = true;
+      return check;
+    }
+    if (auto v = r.string("name", true)) {
+      if (v->empty() || v->size() > 200) problems.push_back("campaign.name must have 1 to 200 characters");
+      spec.name = *v;
+    }
+    const json* program_spec = r.get("program", true);
+    // The built-in campaign `full`: the whole method in one run, each program made for its stage
+    // (stage 1, lever arms, stage 3 from their models, then the Schuler test of every stage's model).
+    const json full_programs = json::array({"direct", "lever-arm", "navigation", "evaluate"});
+    const bool builtin_full = program_spec != nullptr && *program_spec == "full";
+    if (builtin_full) program_spec = &full_programs;
+    // A built-in program with a chamber profile of the same name (thermal, thermal-short) is the
+    // built-in thermal campaign: it brings its profile, and its table cycle has no rate segments
+    // for stage 1, so no estimator runs online unless asked; stage 2 runs on the whole run (GET
+    // .../thermal, `imucal calibrate --stage thermal`).
+    const bool builtin_thermal =
+        program_spec != nullptr && program_spec->is_string() && motion::is_builtin_chamber(program_spec->get<std::string>());
+    read_run_settings(r, spec);
+    const json* estimators = r.get("estimators");
+    const json* truth = r.get("truth");
+    const json* nav_model = r.get("navigation_model");
+    const json* start_model = r.get("model");
+    const json* chamber = r.get("chamber");
+    const json* suspenders = r.get("suspenders");
+    const json* faults = r.get("sim_faults");
+    const json* imu = r.get("imu");
+    r.finish();
+    form_problems = problems.size();
+
+    if (estimators != nullptr) {
+      read_estimator_list(*estimators, spec, problems);
+      form_problems = problems.size();
+    }
+    if (program_spec != nullptr) {
+      motion::Program program;
+      if (read_program(*program_spec, builtin_full, config, spec, program, form_problems, problems))
+        check_compiled_program(program, config, estimators != nullptr, check, spec);
+      normalized["program"] = builtin_full ? json("full") : *program_spec;
+    }
+    if (spec.rate_hz > config.campaign.max_rate_hz)
+      problems.push_back("campaign.rate_hz: " + number_text(spec.rate_hz) + " Hz exceeds the limit of " +
+                         number_text(config.campaign.max_rate_hz) + " Hz");
+    read_truth(truth, config, spec, check);
+    if (nav_model != nullptr) read_navigation_model(*nav_model, config, spec, check);
+    if (start_model != nullptr) read_start_model(*start_model, config, spec, check);
+    if (chamber != nullptr) {
+      check_chamber(*chamber, config, check.duration_s, spec.chamber, problems, check.malformed);
+    } else if (builtin_thermal) {
+      check_chamber(*program_spec, config, check.duration_s, spec.chamber, problems, check.malformed);
+    }
+    if (suspenders != nullptr) read_campaign_suspenders(*suspenders, spec, problems);
+    if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
+    for (std::size_t i = 0; i < spec.faults.size(); ++i)
+      if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
+      else if (spec.faults[i].kind == SimFault::Kind::DropConnection && config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: drop_connection needs the sim-wire devices (the in-process simulation has no "
+                           "connections; use disconnect)");
+    if (imu != nullptr) check_imu(*imu, spec.imu, problems);
+    check_real_devices(config, spec, faults != nullptr, problems);
+  }
+  check.malformed = check.malformed || form_problems > 0;  // or a path where a name is asked (above)
+  if (!problems.empty()) return check;
+
+  spec.normalized = normalized_campaign(campaign, spec, std::move(normalized));
   check.spec = std::move(spec);
   return check;
 }
@@ -708,7 +784,7 @@ CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConf
 }
 
 std::int64_t store_campaign(DaemonDb& db, const CampaignCheck& check, const std::string& reason) {
-  const CampaignSpec& spec = check.spec.value();
+  const CampaignSpec& spec = expect_value(check.spec, "the spec of the campaign to store (only a valid one is stored)");
   std::optional<CampaignUnit> unit;
   if (!spec.imu.serial.empty()) unit = CampaignUnit{spec.imu.serial, spec.imu.part_number};
   return db.insert_campaign(spec.name, spec.normalized.dump(), spec.program_label, check.duration_s, reason, unit);

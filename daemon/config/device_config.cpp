@@ -123,12 +123,12 @@ bool split_host_port(const std::string& text, std::string& host, int& port) {
   }
 }
 
-ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<std::string>& problems) {
-  ImuDeviceConfig c;
-  ObjectReader r(j, where, problems);
-  if (!r.is_object()) return c;
-  // The link description first: it decides which address keys apply.
-  bool have_link = false;
+// The pieces of read_imu, each a few keys (small functions also keep clang-tidy's optional-access
+// analysis fast: it is run per function, and its cost grows steeply with a function's branches).
+
+// The link description (`link`): a built-in name, a file path or an inline object; absent: the
+// default. False when it cannot be loaded (a problem then says why).
+bool read_imu_link(ObjectReader& r, ImuDeviceConfig& c, std::vector<std::string>& problems) {
   try {
     if (const json* v = r.get("link")) {
       if (v->is_string()) {
@@ -143,23 +143,23 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
     } else {
       c.link = dr::link::load_imu_link(c.link_name);
     }
-    have_link = true;
+    return true;
   } catch (const std::exception& e) {
     problems.push_back(r.at("link") + ": " + e.what());
+    return false;
   }
-  const dr::link::Transport transport = c.link.transport;
-  if (have_link) {
-    for (const char* key : {"interface", "socket", "framing", "serial_device", "udp_port", "udp_bind", "udp_peer"})
-      if (r.has(key) && !key_belongs_to(key, transport))
-        problems.push_back(r.at(key) + " does not apply: the link '" + c.link.name + "' is " + dr::link::to_string(transport));
-  }
+}
+
+// A SocketCAN link's address: `interface` or `socket` (one of them when the link is SocketCAN),
+// and `framing`.
+void read_can_address(ObjectReader& r, ImuDeviceConfig& c, bool socketcan, std::vector<std::string>& problems) {
   const auto interface = r.string("interface");
   const auto socket = r.string("socket");
-  if (have_link && transport == dr::link::Transport::socketcan) {
+  if (socketcan) {
     if (interface && socket) {
-      problems.push_back(where + ": give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both");
+      problems.push_back(r.where() + ": give \"interface\" (a CAN interface) or \"socket\" (a Unix socket path), not both");
     } else if (!interface && !socket && !r.has("interface") && !r.has("socket")) {
-      problems.push_back(where + ".interface (a CAN interface such as \"can0\") or " + where +
+      problems.push_back(r.where() + ".interface (a CAN interface such as \"can0\") or " + r.where() +
                          ".socket (a Unix SOCK_SEQPACKET socket path) is required");
     }
   }
@@ -184,20 +184,28 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
       problems.push_back(r.at("framing") + " must be \"fd\" or \"classic\"");
     }
   }
-  if (auto v = r.string("serial_device", have_link && transport == dr::link::Transport::serial)) {
+}
+
+// A serial link's `serial_device` (required on one), a UDP link's `udp_port` (required on one),
+// `udp_bind` and `udp_peer` (required when the link sends the IMU a start command).
+void read_serial_udp_address(ObjectReader& r, ImuDeviceConfig& c, bool serial, bool udp,
+                             std::vector<std::string>& problems) {
+  if (auto v = r.string("serial_device", serial)) {
     if (v->empty()) problems.push_back(r.at("serial_device") + " must name a device such as /dev/ttyUSB0");
     c.serial_device = *v;
   }
-  if (auto v = r.integer("udp_port", 1, 65535, have_link && transport == dr::link::Transport::udp)) c.udp_port = static_cast<int>(*v);
+  if (auto v = r.integer("udp_port", 1, 65535, udp)) c.udp_port = static_cast<int>(*v);
   if (auto v = r.string("udp_bind")) c.udp_bind = *v;
   if (auto v = r.string("udp_peer")) {
     if (!split_host_port(*v, c.udp_peer_host, c.udp_peer_port))
       problems.push_back(r.at("udp_peer") + " must be \"host:port\" (the IMU's address), not \"" + *v + "\"");
   }
-  if (have_link && transport == dr::link::Transport::udp && c.link.start && c.udp_peer_host.empty())
+  if (udp && c.link.start && c.udp_peer_host.empty())
     problems.push_back(r.at("udp_peer") + " is required: the link '" + c.link.name + "' sends the IMU a start command");
-  if (auto v = r.number_in("rate_hz", 1, 100000, true)) c.rate_hz = *v;
-  // The LSBs of a description that leaves them to the unit (imucal-can): one place decides.
+}
+
+// The LSBs of a description that leaves them to the unit (imucal-can): one place decides.
+void read_per_unit_lsb(ObjectReader& r, ImuDeviceConfig& c, bool have_link, std::vector<std::string>& problems) {
   std::optional<double> gyro_lsb, accel_lsb;
   bool lsb_ok = true;
   for (const auto& [key, target] : {std::pair<const char*, std::optional<double>*>{"gyro_lsb_rad", &gyro_lsb},
@@ -214,15 +222,40 @@ ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<st
     try {
       dr::link::resolve_per_unit_lsb(c.link, gyro_lsb, accel_lsb);
     } catch (const std::exception& e) {
-      problems.push_back(where + ": " + e.what());
+      problems.push_back(r.where() + ": " + e.what());
     }
   }
+}
+
+// The unit's own settings besides its rate: `serial` (required), `transport_delay_ns`,
+// `stall_timeout_ms`.
+void read_imu_unit(ObjectReader& r, ImuDeviceConfig& c, std::vector<std::string>& problems) {
   if (auto v = r.string("serial", true)) {
     if (v->empty()) problems.push_back(r.at("serial") + " must not be empty (it names the IMU in every run)");
     c.serial = *v;
   }
   if (auto v = r.integer("transport_delay_ns", 0, 1'000'000'000)) c.transport_delay_ns = *v;
   if (auto v = r.integer("stall_timeout_ms", 1, 60'000)) c.stall_timeout_ms = *v;
+}
+
+ImuDeviceConfig read_imu(const json& j, const std::string& where, std::vector<std::string>& problems) {
+  ImuDeviceConfig c;
+  ObjectReader r(j, where, problems);
+  if (!r.is_object()) return c;
+  // The link description first: it decides which address keys apply.
+  const bool have_link = read_imu_link(r, c, problems);
+  const dr::link::Transport transport = c.link.transport;
+  if (have_link) {
+    for (const char* key : {"interface", "socket", "framing", "serial_device", "udp_port", "udp_bind", "udp_peer"})
+      if (r.has(key) && !key_belongs_to(key, transport))
+        problems.push_back(r.at(key) + " does not apply: the link '" + c.link.name + "' is " + dr::link::to_string(transport));
+  }
+  read_can_address(r, c, have_link && transport == dr::link::Transport::socketcan, problems);
+  read_serial_udp_address(r, c, have_link && transport == dr::link::Transport::serial,
+                          have_link && transport == dr::link::Transport::udp, problems);
+  if (auto v = r.number_in("rate_hz", 1, 100000, true)) c.rate_hz = *v;
+  read_per_unit_lsb(r, c, have_link, problems);
+  read_imu_unit(r, c, problems);
   if (have_link && transport == dr::link::Transport::socketcan && c.framing == dr::can::Framing::classic &&
       c.rate_hz > dr::can::kClassicMaxRate_hz)
     problems.push_back(where + ": classic CAN framing carries at most " + json(dr::can::kClassicMaxRate_hz).dump() +

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
+#include <stdexcept>
 
 namespace imucal::daemon {
 
@@ -524,6 +525,14 @@ std::optional<AlarmRow> select_alarm(storage::sql::Connection& db, std::int64_t 
   return read_alarm_row(s);
 }
 
+// An alarm this connection has just written, under the lock and in the same transaction: it is
+// there, or the database is not what this code believes (a logic error, not a missing row).
+AlarmRow written_alarm(storage::sql::Connection& db, std::int64_t id) {
+  auto row = select_alarm(db, id);
+  if (!row) throw std::logic_error("alarm " + std::to_string(id) + " is not in the database right after it was written");
+  return std::move(*row);
+}
+
 }  // namespace
 
 AlarmRow DaemonDb::raise_alarm(std::int64_t campaign_id, const std::string& severity, const std::string& source,
@@ -536,7 +545,7 @@ AlarmRow DaemonDb::raise_alarm(std::int64_t campaign_id, const std::string& seve
   s.bind(1, campaign_id).bind(2, severity).bind(3, source).bind(4, message).bind(5, segment).bind(6, program_time_s);
   s.bind(7, now_unix_ms());
   s.run();
-  return *select_alarm(db_, db_.last_insert_rowid());
+  return written_alarm(db_, db_.last_insert_rowid());
 }
 
 std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std::optional<std::string>& source,
@@ -557,7 +566,7 @@ std::vector<AlarmRow> DaemonDb::clear_alarms(std::int64_t campaign_id, const std
     Statement u(db_, "UPDATE alarm SET cleared_ms = ?2, cleared_reason = ?3 WHERE id = ?1");
     u.bind(1, id).bind(2, now).bind(3, reason);
     u.run();
-    cleared.push_back(*select_alarm(db_, id));
+    cleared.push_back(written_alarm(db_, id));
   }
   txn.commit();
   return cleared;
@@ -572,9 +581,9 @@ std::pair<DaemonDb::Ack, std::optional<AlarmRow>> DaemonDb::acknowledge_alarm(st
   Statement u(db_, "UPDATE alarm SET acknowledged_by = ?2, acknowledged_ms = ?3 WHERE id = ?1");
   u.bind(1, id).bind(2, who).bind(3, now_unix_ms());
   u.run();
-  auto after = select_alarm(db_, id);
+  auto after = written_alarm(db_, id);
   txn.commit();
-  return {Ack::Acknowledged, after};
+  return {Ack::Acknowledged, std::move(after)};
 }
 
 std::optional<AlarmRow> DaemonDb::alarm(std::int64_t id) {

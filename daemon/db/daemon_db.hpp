@@ -178,7 +178,7 @@ class DaemonDb {
                                      const std::string& reason);
   enum class Ack { Acknowledged, NoSuchAlarm, AlreadyAcknowledged };
   // Records who acknowledged the alarm and when, once: a second acknowledgement changes nothing
-  // (AlreadyAcknowledged, with the row as the first one left it).
+  // (AlreadyAcknowledged, with the row as the first one left it). The row is there unless NoSuchAlarm.
   std::pair<Ack, std::optional<AlarmRow>> acknowledge_alarm(std::int64_t id, const std::string& who);
   std::optional<AlarmRow> alarm(std::int64_t id);
   // Oldest first. `campaign`: that campaign's only. `all` false: only those that still need

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "core/expect_value.hpp"
 #include "core/units.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
@@ -641,7 +642,8 @@ std::optional<double> WireBench::program_time_s(std::int64_t host_ns) const {
 
 // The demands of every piece that has begun, then the rate of the sine pieces under way.
 void WireBench::follow_program() {
-  const double t_s = *program_time_s(dr::host_time_ns());
+  // Called only while the program is followed (it has a time then).
+  const double t_s = expect_value(program_time_s(dr::host_time_ns()), "the program's time while it is followed");
   while (next_piece_ < program_.pieces.size() && program_.pieces[next_piece_].t0_s <= t_s + 1e-9) {
     if (!demand_piece(next_piece_)) return;
     ++next_piece_;
@@ -697,7 +699,7 @@ void WireBench::track_sines() {
   if (next_piece_ == 0 || reads_.empty()) return;
   const motion::Piece& piece = program_.pieces[next_piece_ - 1];
   const TableRead& read = reads_.back();
-  const double t_s = *program_time_s(read.t_ns);
+  const double t_s = expect_value(program_time_s(read.t_ns), "the program's time while it is followed");
   if (t_s >= piece.t1_s) return;
   const table::AxisState now = program_.evaluate(t_s);
   const table::AxisState ahead = program_.evaluate(t_s + kTrackLookahead_s);

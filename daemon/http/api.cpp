@@ -10,6 +10,7 @@
 #include <boost/url/url_view.hpp>
 #include <spdlog/spdlog.h>
 
+#include "core/expect_value.hpp"
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
 #include "core/units.hpp"
@@ -552,7 +553,7 @@ HttpReply Api::handle(const ApiRequest& request) {
     }
     // Every other method changes something: an operator's, and not while shutting down.
     const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->route->access != Route::Access::operator_);
-    if (!open && !reads && who->role != Role::Operator) return error_reply(403, "operator role required");
+    if (!open && !reads && (!who || who->role != Role::Operator)) return error_reply(403, "operator role required");
     if (!open && !reads && shutting_down_) return error_reply(503, "the daemon is shutting down");
     if (!chosen) {
       HttpReply r = error_reply(405, method + " is not allowed on " + path);
@@ -599,11 +600,16 @@ HttpReply Api::login(const ApiRequest& request) {
     password = r.string("password");
     token = r.string("token");
   }
-  if (problems.empty() && !token && !(user && password))
-    problems.push_back("body must hold {\"user\", \"password\"} or {\"token\"}");
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
-  const Auth::Login l = token ? auth_.login_token(*token, request.client)
-                                : auth_.login_password(*user, *password, request.client);
+  Auth::Login l;
+  if (token) {
+    l = auth_.login_token(*token, request.client);
+  } else if (user && password) {
+    l = auth_.login_password(*user, *password, request.client);
+  } else {
+    const std::string why = "body must hold {\"user\", \"password\"} or {\"token\"}";
+    return error_reply(400, why, {{"problems", json::array({why})}});
+  }
   if (l.status != 200) return error_reply(l.status, l.error);
   HttpReply r = json_reply(200, {{"user", l.principal.user}, {"role", to_string(l.principal.role)},
                                  {"idle_timeout_s", auth_.idle_timeout_s()}});
@@ -650,16 +656,19 @@ HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const
     ObjectReader r(body, "body", problems);
     reason = r.string("reason", true);
   }
-  if (problems.empty() && reason->find_first_not_of(" \t\r\n") == std::string::npos)
-    problems.push_back("body.reason must say why the partial run is accepted");
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  // (A missing reason is a problem above already.)
+  if (!reason || reason->find_first_not_of(" \t\r\n") == std::string::npos) {
+    const std::string why = "body.reason must say why the partial run is accepted";
+    return error_reply(400, why, {{"problems", json::array({why})}});
+  }
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   if (const std::string why = cannot_accept(*row); !why.empty())
     return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
   db_.accept(id, *reason, who.user);
   spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, *reason);
-  return json_reply(200, summary(*db_.campaign(id)));
+  return json_reply(200, summary(expect_value(db_.campaign(id), "the campaign just accepted")));
 }
 
 HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
@@ -722,30 +731,44 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   return json_reply(200, doc);
 }
 
+namespace {
+
+// One campaign of a comparison, named by the query's `key` ("a" or "b"): its row and its model,
+// or the reply that refuses it.
+std::optional<HttpReply> comparison_side(DaemonDb& db, const std::map<std::string, std::string>& query, const char* key,
+                                         CampaignRow& row, json& model) {
+  const auto it = query.find(key);
+  const auto id = it == query.end() ? std::nullopt : parse_id(it->second);
+  if (!id) return error_reply(400, std::string("query ") + key + " must be a campaign id (/api/compare?a=ID&b=ID)");
+  auto found = db.campaign(*id);
+  if (!found) return error_reply(404, "no campaign " + std::to_string(*id));
+  if (!found->model_json) return error_reply(409, "campaign " + std::to_string(*id) + " has no model to compare");
+  model = parse_or_null(*found->model_json);
+  row = std::move(*found);
+  return std::nullopt;
+}
+
+}  // namespace
+
 HttpReply Api::compare_campaigns(const std::map<std::string, std::string>& query) {
-  std::optional<CampaignRow> rows[2];
+  CampaignRow rows[2];
   json models[2];
   const char* names[2] = {"a", "b"};
-  for (int i = 0; i < 2; ++i) {
-    const auto it = query.find(names[i]);
-    const auto id = it == query.end() ? std::nullopt : parse_id(it->second);
-    if (!id) return error_reply(400, std::string("query ") + names[i] + " must be a campaign id (/api/compare?a=ID&b=ID)");
-    rows[i] = db_.campaign(*id);
-    if (!rows[i]) return error_reply(404, "no campaign " + std::to_string(*id));
-    if (!rows[i]->model_json) return error_reply(409, "campaign " + std::to_string(*id) + " has no model to compare");
-    models[i] = parse_or_null(*rows[i]->model_json);
-  }
+  for (int i = 0; i < 2; ++i)
+    if (auto refused = comparison_side(db_, query, names[i], rows[i], models[i])) return *refused;
   // Misalignments of an instrument-frame model and a body-frame one are different angles.
   if (models[0].value("frame", std::string("instrument")) != models[1].value("frame", std::string("instrument")))
     return error_reply(409, "the two models are in different frames (" + models[0].value("frame", std::string("instrument")) +
                                 ", " + models[1].value("frame", std::string("instrument")) + ")");
   json out = compare_json(models[0], models[1]);
-  for (int i = 0; i < 2; ++i)
-    out[names[i]] = {{"campaign_id", rows[i]->id},
-                     {"name", rows[i]->name},
-                     {"serial", rows[i]->imu_serial ? json(*rows[i]->imu_serial) : json(nullptr)},
-                     {"date", iso8601_utc(rows[i]->ended_ms.value_or(rows[i]->created_ms))},
+  for (int i = 0; i < 2; ++i) {
+    const CampaignRow& row = rows[i];
+    out[names[i]] = {{"campaign_id", row.id},
+                     {"name", row.name},
+                     {"serial", row.imu_serial ? json(*row.imu_serial) : json(nullptr)},
+                     {"date", iso8601_utc(row.ended_ms.value_or(row.created_ms))},
                      {"frame", models[i].value("frame", std::string("instrument"))}};
+  }
   return json_reply(200, out);
 }
 
@@ -937,13 +960,16 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
     if (auto v = r.string("reason")) reason = v->substr(0, 500);
   }
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
-  const auto outcome = sequencer_.command(id, *parse_command(command), who.user, reason);
+  // The route matches only a command's name ({command}).
+  const auto outcome = sequencer_.command(id, expect_value(parse_command(command), "the command the route matched"),
+                                          who.user, reason);
   if (outcome.http_status != 200) {
     json extra = json::object();
     if (outcome.state) extra["state"] = to_string(*outcome.state);
     return error_reply(outcome.http_status, outcome.error, extra);
   }
-  return json_reply(200, {{"id", id}, {"state", to_string(*outcome.state)}});
+  // A command that succeeded has moved the campaign to its new state.
+  return json_reply(200, {{"id", id}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});
 }
 
 // The operator's answer to what the run asks (a power cycle of the IMU): {"answer": "done"}.
@@ -1034,17 +1060,19 @@ HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {
 HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& who) {
   const auto id = parse_id(id_text);
   if (!id) return error_reply(404, "no alarm '" + id_text + "': an alarm id is a number (GET /api/alarms lists them)");
-  const auto [outcome, row] = db_.acknowledge_alarm(*id, who.user);
-  if (outcome == DaemonDb::Ack::NoSuchAlarm) return error_reply(404, "no alarm " + std::to_string(*id));
-  if (outcome == DaemonDb::Ack::AlreadyAcknowledged)
+  const auto ack = db_.acknowledge_alarm(*id, who.user);
+  // Every outcome but NoSuchAlarm comes with the row.
+  if (ack.first == DaemonDb::Ack::NoSuchAlarm || !ack.second) return error_reply(404, "no alarm " + std::to_string(*id));
+  const AlarmRow& row = *ack.second;
+  if (ack.first == DaemonDb::Ack::AlreadyAcknowledged)
     return error_reply(409,
-                       "alarm " + std::to_string(*id) + " was already acknowledged by " + row->acknowledged_by.value_or("?") +
-                           " at " + iso8601_utc(row->acknowledged_ms.value_or(0)),
-                       {{"alarm", alarm_json(*row)}});
-  spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row->campaign_id, row->id, row->severity,
-               row->message, who.user);
-  broadcast(alarm_message("acknowledged", *row));
-  return json_reply(200, alarm_json(*row));
+                       "alarm " + std::to_string(*id) + " was already acknowledged by " + row.acknowledged_by.value_or("?") +
+                           " at " + iso8601_utc(row.acknowledged_ms.value_or(0)),
+                       {{"alarm", alarm_json(row)}});
+  spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row.campaign_id, row.id, row.severity,
+               row.message, who.user);
+  broadcast(alarm_message("acknowledged", row));
+  return json_reply(200, alarm_json(row));
 }
 
 HttpReply Api::campaign_events_csv(std::int64_t id) {

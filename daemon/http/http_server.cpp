@@ -18,6 +18,7 @@
 #include <boost/beast/websocket.hpp>
 #include <spdlog/spdlog.h>
 
+#include "core/expect_value.hpp"
 #include "core/json_reader.hpp"
 
 namespace imucal::daemon {
@@ -272,7 +273,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return;
     }
     if (ec) return;  // timeout, reset, malformed request: drop the connection
-    http::request<http::string_body> req = parser_->release();
+    // The read that ends here was started on the parser do_read emplaced.
+    http::request<http::string_body> req = expect_value(parser_, "the parser of the read that ended").release();
 
     if (websocket::is_upgrade(req)) {
       std::string path(req.target().substr(0, req.target().find('?')));

@@ -53,15 +53,41 @@ json run_verdict(const CampaignRow& row, const AcceptanceLimits& limits) {
   return verdict_or_null(model_or_null(row), row.imu_part_number.value_or(""), limits);
 }
 
+namespace {
+
+// What the list says of one unit: its campaigns, its calibrations and the last of them.
+struct UnitTally {
+  std::string part_number;
+  std::int64_t campaigns = 0, calibrations = 0;
+  const CampaignRow* last = nullptr;
+};
+
+json unit_entry_json(const std::string& serial, const UnitTally& u, const AcceptanceLimits& limits) {
+  json last = nullptr, pass = nullptr;
+  if (u.last) {
+    const json verdict = run_verdict(*u.last, limits);
+    if (!verdict.is_null()) pass = verdict.at("pass");
+    last = {{"campaign_id", u.last->id},
+            {"program", u.last->program_label},
+            {"date", iso8601_utc(u.last->ended_ms.value_or(u.last->created_ms))},
+            {"verdict", verdict}};
+  }
+  // The unit passes or fails by its last calibration (null: no limits for it, or none yet).
+  return {{"serial", serial},
+          {"part_number", u.part_number},
+          {"campaigns", u.campaigns},
+          {"calibrations", u.calibrations},
+          {"last_calibration", last},
+          {"pass", pass}};
+}
+
+}  // namespace
+
 json unit_list_json(const std::vector<CampaignRow>& rows, const AcceptanceLimits& limits) {
-  struct Unit {
-    std::string part_number;
-    std::int64_t campaigns = 0, calibrations = 0;
-    const CampaignRow* last = nullptr;
-  };
-  std::map<std::string, Unit> units;
+  std::map<std::string, UnitTally> units;
   for (const CampaignRow& row : rows) {
-    Unit& u = units[*row.imu_serial];
+    if (!row.imu_serial) continue;  // a campaign that names no unit (DaemonDb::unit_campaigns gives none)
+    UnitTally& u = units[*row.imu_serial];
     ++u.campaigns;
     // The part number the unit was last named with (a unit keeps its part number; a typo fixed
     // in a later campaign wins).
@@ -72,24 +98,7 @@ json unit_list_json(const std::vector<CampaignRow>& rows, const AcceptanceLimits
     }
   }
   json list = json::array();
-  for (const auto& [serial, u] : units) {
-    json last = nullptr, pass = nullptr;
-    if (u.last) {
-      const json verdict = run_verdict(*u.last, limits);
-      if (!verdict.is_null()) pass = verdict.at("pass");
-      last = {{"campaign_id", u.last->id},
-              {"program", u.last->program_label},
-              {"date", iso8601_utc(u.last->ended_ms.value_or(u.last->created_ms))},
-              {"verdict", verdict}};
-    }
-    // The unit passes or fails by its last calibration (null: no limits for it, or none yet).
-    list.push_back({{"serial", serial},
-                    {"part_number", u.part_number},
-                    {"campaigns", u.campaigns},
-                    {"calibrations", u.calibrations},
-                    {"last_calibration", last},
-                    {"pass", pass}});
-  }
+  for (const auto& [serial, u] : units) list.push_back(unit_entry_json(serial, u, limits));
   return {{"imus", list}};
 }
 

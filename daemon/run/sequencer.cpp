@@ -628,7 +628,7 @@ void Sequencer::run_campaign(std::int64_t id) {
       wb.site = config_.site;
       wb.rate_hz = run.spec.rate_hz;
       wb.limits = config_.table_limits;
-      if (config_.devices == "real") {
+      if (config_.devices == "real" && config_.device_addresses) {
         // check_campaign refuses them already; a campaign stored under another configuration
         // is checked again above, so this cannot be reached with faults.
         wb.table = config_.table_certificate;  // the real table's certificate, into the run's meta
@@ -814,6 +814,98 @@ Sequencer::Outcome Sequencer::wait_until_ready(RunContext& run, bool suspended) 
   return Outcome::Completed;
 }
 
+namespace {
+
+// The pieces of Sequencer::run_segment's loop, one step each (small functions also keep
+// clang-tidy's optional-access analysis fast: it runs per function, and its cost grows steeply
+// with the branches on optionals in one function; run_segment whole took minutes).
+
+// The chamber's setpoint for the program's time, sent when it changed.
+void command_setpoint(RunContext& run) {
+  const double setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
+  if (!run.commanded_setpoint_C || std::abs(*run.commanded_setpoint_C - setpoint_C) > 1e-3) {
+    if (run.bench->chamber().set_setpoint(setpoint_C).ok) run.commanded_setpoint_C = setpoint_C;
+  }
+}
+
+// Whether an instant follows the last one handed to the recorder (`last`, none yet: it does);
+// when it does, it becomes the last. The optionals of take_frames and take_temperatures are
+// touched here only: the optional analysis of a function over the whole RunContext, in a loop,
+// took minutes.
+bool follows_last(std::optional<std::int64_t>& last, std::int64_t t_ns) {
+  if (last && t_ns <= *last) return false;
+  last = t_ns;
+  return true;
+}
+
+// The frames of `batch` as delivered, checked (finite values, time increasing on the frame grid):
+// those to record into `accepted`; what was wrong with the first bad one ("" when none was).
+std::string take_frames(RunContext& run, const FrameBatch& batch, bool last, std::int64_t end_ns,
+                        std::vector<ImuFrame>& accepted) {
+  accepted.clear();
+  for (const ImuFrame& f : batch.frames) {
+    const bool finite = f.dtheta_rad.allFinite() && f.dv_mps.allFinite() && f.table_deg.allFinite();
+    if (!finite || f.t_ns <= run.prev_delivered_t_ns) {
+      ++run.bad;
+      return "corrupt IMU frame at " + number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+    }
+    const std::int64_t step_ns = f.t_ns - run.prev_delivered_t_ns;
+    if (2 * step_ns > 3 * run.dt_ns) {
+      const std::int64_t missing = (step_ns + run.dt_ns / 2) / run.dt_ns - 1;
+      run.lost += missing;
+      return std::to_string(missing) + " IMU frame(s) missing before " +
+             number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
+    }
+    run.prev_delivered_t_ns = f.t_ns;
+    ++run.delivered;
+    // The program's grid ends at its last instant: in the last segment the IMU goes on
+    // delivering (the sequencer waits for the table to come to rest, and a loaded machine may
+    // hand over frames past the end in one batch); those are not part of the run.
+    if (last && f.t_ns > end_ns) continue;
+    if (follows_last(run.last_t_ns, f.t_ns)) accepted.push_back(f);
+  }
+  return {};
+}
+
+// The temperatures of `batch` up to the frames accepted so far, each once, into `temps`.
+void take_temperatures(RunContext& run, const FrameBatch& batch, std::vector<TempSample>& temps) {
+  temps.clear();
+  for (const TempSample& t : batch.temps) {
+    if (t.t_ns > run.prev_delivered_t_ns + run.dt_ns) break;  // beyond the frames accepted so far
+    if (follows_last(run.last_temp_t_ns, t.t_ns)) temps.push_back(t);
+  }
+}
+
+// The accepted frames to the recorder; why they are not all recorded ("" when they are). The run's
+// counters and last frame are passed alone, not the RunContext (see follows_last).
+std::string record_frames(storage::Recorder& recorder, const std::vector<ImuFrame>& accepted, std::int64_t& frames,
+                          std::int64_t& lost, std::optional<std::int64_t>& last_t_ns) {
+  frames += static_cast<std::int64_t>(accepted.size());
+  const auto pushed = recorder.push(accepted);
+  if (pushed == storage::Recorder::Push::Rejected)
+    throw std::runtime_error("internal error: the recorder refused frames that do not follow the recorded ones");
+  if (pushed == storage::Recorder::Push::Refused) {
+    // The run file cannot be written now: the recorder holds what it took and took nothing
+    // after it. The frames it refused are not recorded yet; the redo of the segment after
+    // the suspension records them (it records only frames after the last one taken).
+    const std::optional<std::int64_t> taken = recorder.last_accepted_t_ns();
+    std::int64_t refused = 0;
+    for (const ImuFrame& f : accepted)
+      if (!taken || f.t_ns > *taken) ++refused;
+    frames -= refused;
+    last_t_ns = taken;
+    return recorder.write_problem().value_or("the recorder refused frames");
+  }
+  if (pushed == storage::Recorder::Push::Dropped) {
+    // Counted in the run file too (recorder_session, dropped_span); those instants stay a gap.
+    lost += static_cast<std::int64_t>(accepted.size());
+    return "the recorder fell behind and dropped frames";
+  }
+  return {};
+}
+
+}  // namespace
+
 Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
   const std::size_t k = run.segment;
   const bool last = k + 1 == run.segments.size();
@@ -837,75 +929,18 @@ Sequencer::Outcome Sequencer::run_segment(RunContext& run) {
   std::vector<TempSample> temps;
   for (;;) {
     if (auto c = pending_command()) return *c;
-    const double setpoint_C = run.spec.chamber.setpoint_at(run.program_time_s);
-    if (!run.commanded_setpoint_C || std::abs(*run.commanded_setpoint_C - setpoint_C) > 1e-3) {
-      if (run.bench->chamber().set_setpoint(setpoint_C).ok) run.commanded_setpoint_C = setpoint_C;
-    }
+    command_setpoint(run);
     if (auto r = run.bench->imu().read(batch, until_ns); !r.ok) return hold(run, "IMU: " + r.message);
 
-    // Check the frames as delivered: finite values, time increasing on the frame grid.
-    std::string problem;
-    accepted.clear();
-    for (const ImuFrame& f : batch.frames) {
-      const bool finite = f.dtheta_rad.allFinite() && f.dv_mps.allFinite() && f.table_deg.allFinite();
-      if (!finite || f.t_ns <= run.prev_delivered_t_ns) {
-        ++run.bad;
-        problem = "corrupt IMU frame at " + number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
-        break;
-      }
-      const std::int64_t step_ns = f.t_ns - run.prev_delivered_t_ns;
-      if (2 * step_ns > 3 * run.dt_ns) {
-        const std::int64_t missing = (step_ns + run.dt_ns / 2) / run.dt_ns - 1;
-        run.lost += missing;
-        problem = std::to_string(missing) + " IMU frame(s) missing before " +
-                  number_text(static_cast<double>(f.t_ns) / units::kNsPerS) + " s";
-        break;
-      }
-      run.prev_delivered_t_ns = f.t_ns;
-      ++run.delivered;
-      // The program's grid ends at its last instant: in the last segment the IMU goes on
-      // delivering (the sequencer waits for the table to come to rest, and a loaded machine may
-      // hand over frames past the end in one batch); those are not part of the run.
-      if (last && f.t_ns > end_ns) continue;
-      if (!run.last_t_ns || f.t_ns > *run.last_t_ns) {
-        accepted.push_back(f);
-        run.last_t_ns = f.t_ns;
-      }
-    }
+    std::string problem = take_frames(run, batch, last, end_ns, accepted);
     if (!batch.frames.empty()) {
       run.last_frame_world_s = run.bench->now_s();
       run.program_time_s = static_cast<double>(run.prev_delivered_t_ns) / units::kNsPerS;
     }
-    temps.clear();
-    for (const TempSample& t : batch.temps) {
-      if (t.t_ns > run.prev_delivered_t_ns + run.dt_ns) break;  // beyond the frames accepted so far
-      if (!run.last_temp_t_ns || t.t_ns > *run.last_temp_t_ns) {
-        temps.push_back(t);
-        run.last_temp_t_ns = t.t_ns;
-      }
-    }
+    take_temperatures(run, batch, temps);
     if (!accepted.empty()) {
-      run.frames += static_cast<std::int64_t>(accepted.size());
-      const auto pushed = run.recorder->push(accepted);
-      if (pushed == storage::Recorder::Push::Rejected)
-        throw std::runtime_error("internal error: the recorder refused frames that do not follow the recorded ones");
-      if (pushed == storage::Recorder::Push::Refused) {
-        // The run file cannot be written now: the recorder holds what it took and took nothing
-        // after it. The frames it refused are not recorded yet; the redo of the segment after
-        // the suspension records them (it records only frames after the last one taken).
-        const std::optional<std::int64_t> taken = run.recorder->last_accepted_t_ns();
-        std::int64_t refused = 0;
-        for (const ImuFrame& f : accepted)
-          if (!taken || f.t_ns > *taken) ++refused;
-        run.frames -= refused;
-        run.last_t_ns = taken;
-        problem = run.recorder->write_problem().value_or("the recorder refused frames");
-      }
-      if (pushed == storage::Recorder::Push::Dropped) {
-        // Counted in the run file too (recorder_session, dropped_span); those instants stay a gap.
-        run.lost += static_cast<std::int64_t>(accepted.size());
-        problem = "the recorder fell behind and dropped frames";
-      }
+      if (std::string why = record_frames(*run.recorder, accepted, run.frames, run.lost, run.last_t_ns); !why.empty())
+        problem = std::move(why);
     }
     if (!temps.empty()) (void)run.recorder->push_temps(temps);  // a failure shows as an alarm below
 

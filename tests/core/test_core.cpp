@@ -2,6 +2,8 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -11,6 +13,7 @@
 
 #include "core/coefficients.hpp"
 #include "core/earth.hpp"
+#include "core/expect_value.hpp"
 #include "core/imu_model.hpp"
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
@@ -520,4 +523,22 @@ TEST(ObjectReader, AnExtensibleObjectRefusesOnlyNearMisses) {
             std::vector<std::string>{"site: unknown key \"heigth_m\" (is it \"height_m\"?)"});
   // Both present: the second is something else, not a typo of the first.
   EXPECT_EQ(finish(R"({"t0_s": 0, "t1_s": 1, "t2_s": 2})", {"t0_s", "t1_s"}), std::vector<std::string>{});
+}
+
+// A value the code itself guarantees: taken as it is, or a logic_error naming it (never the
+// undefined behaviour of `*opt` on an empty optional).
+TEST(ExpectValue, GivesTheValueOrALogicErrorNamingIt) {
+  std::optional<int> three = 3;
+  const std::optional<int> four = 4;
+  EXPECT_EQ(expect_value(three, "three"), 3);
+  EXPECT_EQ(expect_value(four, "four"), 4);
+  EXPECT_EQ(expect_value(std::optional<std::string>("moved"), "a temporary"), "moved");
+  expect_value(three, "three") = 5;  // a reference into the optional
+  EXPECT_EQ(three, 5);
+  try {
+    (void)expect_value(std::optional<double>(), "the state after a command that succeeded");
+    ADD_FAILURE() << "no exception";
+  } catch (const std::logic_error& e) {
+    EXPECT_STREQ(e.what(), "internal error: the state after a command that succeeded is missing");
+  }
 }

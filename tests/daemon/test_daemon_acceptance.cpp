@@ -142,3 +142,17 @@ TEST(TestReport, ACalibrationStageListsEachEstimate) {
   EXPECT_DOUBLE_EQ(figures.at(0).at("value").get<double>(), 1.25);
   EXPECT_DOUBLE_EQ(figures.at(1).at("u").get<double>(), 0.03);
 }
+
+// A group's limit reaches the noise terms too, which carry no sigma: they are judged on max_abs
+// alone (reading their absent sigma against max_sigma was undefined behaviour before).
+TEST(Acceptance, AGroupSigmaLimitDoesNotApplyToANoiseTerm) {
+  const auto parts = limits_from_json(limits_file({{"gyro", {{"max_abs", 1000}, {"max_sigma", 0.002}}}}));
+  const json v = verdict_json(result_model(0.0, 0.001), parts.at("PN-1"), "f");
+  const json& arw = *row(v.at("coefficients"), "gyro.noise.arw_deg_rth");
+  EXPECT_TRUE(arw.at("pass").get<bool>()) << arw;
+  EXPECT_EQ(arw.at("reason"), "") << arw;
+  EXPECT_TRUE(arw.at("sigma").is_null());
+  // The others under the group: judged on both limits as before.
+  EXPECT_TRUE(row(v.at("coefficients"), "gyro.bias_dph.x")->at("pass").get<bool>());
+  EXPECT_EQ(row(v.at("coefficients"), "gyro.noise.bias_instability_dph")->at("reason"), "not determined by this run");
+}

@@ -171,6 +171,7 @@ TEST(Alarms, TheDatabaseKeepsRaiseClearAndOneAcknowledgement) {
     // A second acknowledgement changes nothing and says who was first.
     auto [again, kept] = db.acknowledge_alarm(first, "bob");
     EXPECT_EQ(again, DaemonDb::Ack::AlreadyAcknowledged);
+    ASSERT_TRUE(kept.has_value());
     EXPECT_EQ(kept->acknowledged_by, "alice");
     EXPECT_EQ(kept->acknowledged_ms, row->acknowledged_ms);
     EXPECT_EQ(db.acknowledge_alarm(9999, "alice").first, DaemonDb::Ack::NoSuchAlarm);

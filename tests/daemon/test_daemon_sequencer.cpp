@@ -325,10 +325,14 @@ TEST(Sequencer, ShutdownParksTheRunAsInterruptedAndItResumes) {
                             short_campaign("parked", 100).dump(), "", "", ""};
     id = json::parse(service.api().handle(post).body).at("id").get<std::int64_t>();
     ASSERT_EQ(service.sequencer().command(id, daemon::Command::Start, "test", "").http_status, 200);
-    for (int i = 0; i < 2000 && service.db().campaign(id)->program_time_s < 50.0; ++i)
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const auto program_time_s = [&] {
+      const auto r = service.db().campaign(id);
+      return r ? r->program_time_s : 0.0;
+    };
+    for (int i = 0; i < 2000 && program_time_s() < 50.0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     service.stop();  // what SIGTERM does
     const auto row = service.db().campaign(id);
+    ASSERT_TRUE(row);
     EXPECT_EQ(row->state, daemon::RunState::Interrupted);
     spec_json = json::parse(row->spec_json);
     frames_before = run_frames(dir + "/" + row->run_db).size();
@@ -337,9 +341,13 @@ TEST(Sequencer, ShutdownParksTheRunAsInterruptedAndItResumes) {
   daemon::Service again(config);
   again.start(false);
   ASSERT_EQ(again.sequencer().command(id, daemon::Command::Resume, "test", "").http_status, 200);
-  for (int i = 0; i < 30000 && !daemon::is_final(again.db().campaign(id)->state); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const auto ended = [&] {
+    const auto r = again.db().campaign(id);
+    return r && daemon::is_final(r->state);
+  };
+  for (int i = 0; i < 30000 && !ended(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const auto row = again.db().campaign(id);
+  ASSERT_TRUE(row);
   ASSERT_EQ(row->state, daemon::RunState::Done);
   again.stop();
   expect_same_frames(run_frames(dir + "/" + row->run_db), reference_frames(spec_json, config));

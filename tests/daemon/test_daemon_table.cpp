@@ -24,9 +24,12 @@ const char* kTableConfig = R"({"table": {
 TEST(Config, TheTablesCertificateStandsBesideItsLimits) {
   const daemon::DaemonConfig c = daemon::parse_config(kTableConfig, "test");
   EXPECT_DOUBLE_EQ(c.table_limits.axis[1].rate_dps, 200.0);
-  ASSERT_TRUE(c.table_certificate && c.table_certificate->geometry && c.table_certificate->sigma);
-  EXPECT_DOUBLE_EQ(c.table_certificate->geometry->outer_tilt_rad[0], 2.0 * units::kArcsecToRad);
-  EXPECT_EQ(c.table_certificate->geometry->encoder_error[0].size(), 2u);
+  const auto& certificate = c.table_certificate;
+  ASSERT_TRUE(certificate);
+  const auto& geometry = certificate->geometry;
+  ASSERT_TRUE(geometry && certificate->sigma);
+  EXPECT_DOUBLE_EQ(geometry->outer_tilt_rad[0], 2.0 * units::kArcsecToRad);
+  EXPECT_EQ(geometry->encoder_error[0].size(), 2u);
   EXPECT_EQ(c.table_certificate->certificate, "TBL-7 of 2026-03-01");
   EXPECT_FALSE(daemon::parse_config("{}", "test").table_certificate.has_value());
   try {

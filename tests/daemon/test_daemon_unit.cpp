@@ -192,8 +192,9 @@ TEST(Config, ADevicesObjectNamesRealDevices) {
   EXPECT_EQ(d.table.port, 5001);
   EXPECT_DOUBLE_EQ(d.table.watchdog_s, 2.0);
   EXPECT_FALSE(d.table.reply_checksum);
-  ASSERT_TRUE(d.table.limits[0][2]);
-  EXPECT_DOUBLE_EQ(d.table.limits[0][2]->rate_dps, 100.0);
+  const auto& outer_limits = d.table.limits[0][2];
+  ASSERT_TRUE(outer_limits);
+  EXPECT_DOUBLE_EQ(outer_limits->rate_dps, 100.0);
   EXPECT_EQ(d.chamber.host, "10.0.0.6");
   EXPECT_EQ(d.chamber.port, 1502);
   EXPECT_EQ(d.chamber.map.name, "csz-ezt570i");
@@ -580,9 +581,13 @@ TEST(Suspenders, TripOnTheirConditionAndClearOnTheSameRule) {
   // The recorder comes first, whatever else is wrong.
   r.table_connected = false;
   r.recorder_problem = "recording failed: disk full";
-  EXPECT_EQ(s.trip(r)->suspender, "recorder");
+  const auto recorder_trip = s.trip(r);
+  ASSERT_TRUE(recorder_trip);
+  EXPECT_EQ(recorder_trip->suspender, "recorder");
   r.recorder_problem.clear();
-  EXPECT_EQ(s.trip(r)->reason, "table disconnected");
+  const auto table_trip = s.trip(r);
+  ASSERT_TRUE(table_trip);
+  EXPECT_EQ(table_trip->reason, "table disconnected");
   const nlohmann::json list = s.describe();
   ASSERT_EQ(list.size(), 7u);
   for (const auto& e : list) {

@@ -151,9 +151,11 @@ TEST(PipelinePaths, WarmUpGivesTheSameModelOnlineAndOffline) {
   const Recording rec = record("warm-up", "warm-up-short", 20, 0, truth);
   expect_same_model(rec, "warm-up", "warm-up", nav_grade_truth());
   const auto found = turn_on_of(worker_model(rec, "warm-up", nav_grade_truth()));
-  ASSERT_TRUE(found.has_value() && found->sigma.has_value());
+  ASSERT_TRUE(found.has_value());
+  const auto& found_sigma = found->sigma;
+  ASSERT_TRUE(found_sigma.has_value());
   for (int j = 0; j < 3; ++j)
-    EXPECT_NEAR(found->value.gyro_time_constant_s[j], s.value.gyro_time_constant_s[j], 3.0 * found->sigma->gyro_time_constant_s[j])
+    EXPECT_NEAR(found->value.gyro_time_constant_s[j], s.value.gyro_time_constant_s[j], 3.0 * found_sigma->gyro_time_constant_s[j])
         << "the time constant of gyro " << j;
 }
 

@@ -71,8 +71,9 @@ TEST(ModbusChamber, F4tSetPointAndProcessValueInCelsius) {
   const auto r = d.read();
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_NEAR(r->setpoint_C, 40.0, 1e-4);
-  ASSERT_TRUE(r->working_setpoint_C);
-  EXPECT_NEAR(*r->working_setpoint_C, 40.0, 1e-4);
+  const auto& working = r->working_setpoint_C;
+  ASSERT_TRUE(working);
+  EXPECT_NEAR(*working, 40.0, 1e-4);
   EXPECT_NEAR(r->process_C, sim.process_C(), 1.0);  // the air keeps moving between the two reads
   EXPECT_EQ(r->device_unit, TemperatureUnit::celsius);
   EXPECT_TRUE(r->alarms.empty());
@@ -121,11 +122,13 @@ TEST(ModbusChamber, Int16MapWithControllerRamp) {
   EXPECT_NEAR(sim.setpoint_C(), 30.0, 0.05);
   auto r = d.read();
   ASSERT_TRUE(r);
-  ASSERT_TRUE(r->ramp_target_C);
-  EXPECT_NEAR(*r->ramp_target_C, 30.0, 1e-9);
-  ASSERT_TRUE(r->working_setpoint_C);
+  const auto& ramp_target = r->ramp_target_C;
+  ASSERT_TRUE(ramp_target);
+  EXPECT_NEAR(*ramp_target, 30.0, 1e-9);
+  const auto& working = r->working_setpoint_C;
+  ASSERT_TRUE(working);
   // Working set point on the ramp (0.1 C resolution of the int16 x10 registers).
-  EXPECT_LE(*r->working_setpoint_C, 22.0 + 4.0 * sw.seconds() + 0.2);
+  EXPECT_LE(*working, 22.0 + 4.0 * sw.seconds() + 0.2);
   ASSERT_TRUE(eventually([&] {
     auto x = d.read();
     return x && x->working_setpoint_C && std::fabs(*x->working_setpoint_C - 30.0) < 0.05 && !x->ramp_target_C;

@@ -218,7 +218,9 @@ TEST(CanImu, SampleTimesComeFromTheClockModelNotTheReceiveJitter) {
   std::size_t n = 0;
   for (std::size_t i = b.samples.size() / 2; i < b.samples.size(); ++i) {
     const ImuSample& s = b.samples[i];
-    const double err_us = static_cast<double>(s.t_ns - rig.device->truth(s.sequence)->host_ns) / 1e3;
+    const auto truth = rig.device->truth(s.sequence);
+    ASSERT_TRUE(truth.has_value()) << "no truth for sample " << s.sequence;
+    const double err_us = static_cast<double>(s.t_ns - truth->host_ns) / 1e3;
     worst_us = std::max(worst_us, std::fabs(err_us));
     sum2 += err_us * err_us;
     const ImuSample& p = b.samples[i - 1];

@@ -478,6 +478,7 @@ TEST_F(Pymodbus, ConnectionDroppedMidRequestIsLostThenReconnected) {
     if (x) fresh = *x;
     return x.ok();
   }));
+  ASSERT_TRUE(fresh.has_value());
   EXPECT_NEAR(fresh->process_C, 25.5, 1e-4);
   EXPECT_EQ(d.state(), DeviceState::active);
   EXPECT_EQ(d.reconnects(), 1u);

@@ -480,8 +480,9 @@ TEST(TcpTable, ConfigurationFromJson) {
   EXPECT_EQ(c.host, "10.0.0.5");
   EXPECT_EQ(c.port, 5001);
   EXPECT_FALSE(c.reply_checksum);
-  ASSERT_TRUE(c.limits[1][2]);
-  EXPECT_DOUBLE_EQ(c.limits[1][2]->max_deg, 90.0);
+  const auto& middle_limits = c.limits[1][2];
+  ASSERT_TRUE(middle_limits);
+  EXPECT_DOUBLE_EQ(middle_limits->max_deg, 90.0);
   auto message = [](const char* text) {
     try {
       (void)tcp_table_config_from_json(text);

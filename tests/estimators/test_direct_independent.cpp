@@ -112,7 +112,8 @@ TEST(IndependentBundle, ImperfectTableCalibratesWithItsGeometry) {
   std::filesystem::create_directories(IMUCAL_TEST_TMP);
   const Outcome out = import_and_calibrate(IMUCAL_TEST_DATA "/example-table", "example-table");
   const auto run = storage::RunDb::open(std::string(IMUCAL_TEST_TMP) + "/example-table.db");
-  ASSERT_TRUE(run.meta().table && run.meta().table->geometry) << "the import keeps the table's certificate";
+  const auto table = run.meta().table;
+  ASSERT_TRUE(table && table->geometry) << "the import keeps the table's certificate";
   const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
   calibtest::expect_within(truth, out.result.model, calibtest::kStage1Limits);
   print_worst(truth, out.result.model);

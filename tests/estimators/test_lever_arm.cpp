@@ -20,6 +20,7 @@ TEST(LeverArm, FindsTheProofMassesAndTheOriginWithinAFractionOfAMillimetre) {
   for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
   const Eigen::Vector3d ey = (r.model.accel.lever_arm_y_m - truth.accel.lever_arm_y_m) * 1e3;
   const Eigen::Vector3d ez = (r.model.accel.lever_arm_z_m - truth.accel.lever_arm_z_m) * 1e3;
+  ASSERT_TRUE(r.model.mount_r0_p_m.has_value());
   const Eigen::Vector3d e0 = (*r.model.mount_r0_p_m - cfg.mount.r0_p_m) * 1e3;
   std::printf("errors, mm: r_y %+.4f %+.4f %+.4f  r_z %+.4f %+.4f %+.4f  r0 %+.4f %+.4f %+.4f\n", ey.x(), ey.y(), ey.z(),
               ez.x(), ez.y(), ez.z(), e0.x(), e0.y(), e0.z());
@@ -36,12 +37,13 @@ TEST(LeverArm, SigmaIsConsistentWhenStageOneIsExact) {
   const lever::Result r = levertest::run(run);
   const ImuModel& truth = run.truth;
   const sim::SimConfig& cfg = run.cfg;
+  ASSERT_TRUE(r.model.sigma.has_value() && r.model.mount_r0_p_m.has_value());
+  const ImuErrorSet& sigma = *r.model.sigma;
+  const Eigen::Vector3d& r0_p_m = *r.model.mount_r0_p_m;
   for (int i = 0; i < 3; ++i) {
-    EXPECT_LE(std::abs(r.model.accel.lever_arm_y_m[i] - truth.accel.lever_arm_y_m[i]),
-              3 * r.model.sigma->accel.lever_arm_y_m[i]) << i;
-    EXPECT_LE(std::abs(r.model.accel.lever_arm_z_m[i] - truth.accel.lever_arm_z_m[i]),
-              3 * r.model.sigma->accel.lever_arm_z_m[i]) << i;
-    EXPECT_LE(std::abs((*r.model.mount_r0_p_m)[i] - cfg.mount.r0_p_m[i]), 3 * r.sigma_m[i]) << i;
+    EXPECT_LE(std::abs(r.model.accel.lever_arm_y_m[i] - truth.accel.lever_arm_y_m[i]), 3 * sigma.accel.lever_arm_y_m[i]) << i;
+    EXPECT_LE(std::abs(r.model.accel.lever_arm_z_m[i] - truth.accel.lever_arm_z_m[i]), 3 * sigma.accel.lever_arm_z_m[i]) << i;
+    EXPECT_LE(std::abs(r0_p_m[i] - cfg.mount.r0_p_m[i]), 3 * r.sigma_m[i]) << i;
   }
 }
 
@@ -76,6 +78,7 @@ TEST(LeverArm, UnknownAccelerometerDelaysDoNotMoveTheProofMasses) {
   const sim::SimConfig& cfg = run.cfg;
   const Eigen::Vector3d ey = (r.model.accel.lever_arm_y_m - truth.accel.lever_arm_y_m) * 1e3;
   const Eigen::Vector3d ez = (r.model.accel.lever_arm_z_m - truth.accel.lever_arm_z_m) * 1e3;
+  ASSERT_TRUE(r.model.mount_r0_p_m.has_value());
   const Eigen::Vector3d e0 = (*r.model.mount_r0_p_m - cfg.mount.r0_p_m) * 1e3;
   std::printf("errors, mm: r_y %+.4f %+.4f %+.4f  r_z %+.4f %+.4f %+.4f  r0 %+.4f %+.4f %+.4f\n", ey.x(), ey.y(), ey.z(),
               ez.x(), ez.y(), ez.z(), e0.x(), e0.y(), e0.z());

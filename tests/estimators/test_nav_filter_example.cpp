@@ -40,9 +40,11 @@ TEST(NavFilterExample, IndependentRecordingWithinTheSeedsLimits) {
   EXPECT_LE(std::abs(r.tau_zx_s - tau_zx) * 1e6, 0.6);
   // The proof-mass offsets the filter refined from the start model's 0.1 mm.
   const Eigen::Matrix3d est = proof_mass_offsets_m(r.model), truth = proof_mass_offsets_m(truth_body);
+  ASSERT_TRUE(r.model.sigma.has_value());  // the filter's model carries its sigma
+  const ImuErrorSet& model_sigma = *r.model.sigma;
   for (int c = 1; c < 3; ++c)
     for (int i = 0; i < 3; ++i) {
-      const double sigma = (c == 1 ? r.model.sigma->accel.lever_arm_y_m : r.model.sigma->accel.lever_arm_z_m)[i];
+      const double sigma = (c == 1 ? model_sigma.accel.lever_arm_y_m : model_sigma.accel.lever_arm_z_m)[i];
       std::printf("  proof mass %c [%d]: err %+.4f mm, sigma %.4f mm\n", "xyz"[c], i, (est(i, c) - truth(i, c)) * 1e3,
                   sigma * 1e3);
       EXPECT_LE(std::abs(est(i, c) - truth(i, c)), 3 * sigma) << c << " " << i;

@@ -93,7 +93,10 @@ TEST(TableGeometry, StageOneOnAnImperfectTable) {
   ASSERT_TRUE(meta.table && meta.table->geometry) << "the run records the table it was made on";
   // The encoders read the true angles with their errors: a frame at rest is off by arc seconds.
   const ImuFrame& f = frames[100];
-  const table::TableKinematics k(cfg.site.middle_axis_azimuth_deg * units::kDegToRad, *cfg.table->geometry);
+  ASSERT_TRUE(cfg.table);
+  const auto& geometry = cfg.table->geometry;
+  ASSERT_TRUE(geometry);
+  const table::TableKinematics k(cfg.site.middle_axis_azimuth_deg * units::kDegToRad, *geometry);
   const Eigen::Vector3d true_rad = k.true_angles_rad(f.table_deg * units::kDegToRad);
   EXPECT_GT((true_rad - f.table_deg * units::kDegToRad).cwiseAbs().maxCoeff(), 0.3 * kAs);
   EXPECT_LT((p.evaluate(static_cast<double>(f.t_ns) * 1e-9).angle_rad - true_rad).cwiseAbs().maxCoeff(), 1e-14);

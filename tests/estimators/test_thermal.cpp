@@ -210,7 +210,9 @@ TEST(ThermalSim, AnInertSourceChangesNoBitOfTheFrames) {
 // ------------------------------------------------------------------------------------------------
 TEST(ThermalSection, ParsesWritesAndCompensates) {
   const ImuModel m = thermaltest::truth_thermal();
-  const thermal::ThermalSection s = *thermal::thermal_of(m);
+  const auto section = thermal::thermal_of(m);
+  ASSERT_TRUE(section.has_value());
+  const thermal::ThermalSection s = *section;
   EXPECT_TRUE(s.has_models());
   ASSERT_TRUE(s.sim_oscillation.has_value());
   EXPECT_DOUBLE_EQ(s.sim_oscillation->amplitude_dph, 0.005);
@@ -221,7 +223,9 @@ TEST(ThermalSection, ParsesWritesAndCompensates) {
   }
   // The model file keeps the section through a write and a read.
   const ImuModel again = imu_model_from_json_text(imu_model_to_json_text(m), "again");
-  EXPECT_EQ(thermal::thermal_of(again)->poly[0].T, s.poly[0].T);
+  const auto section_again = thermal::thermal_of(again);
+  ASSERT_TRUE(section_again.has_value());
+  EXPECT_EQ(section_again->poly[0].T, s.poly[0].T);
   // Compensation: gyro x bias at 30 C heating at 0.2 C/min.
   thermal::ChannelTemps t;
   t.T_C[0] = 30.0;

@@ -54,9 +54,11 @@ TEST(WarmUp, RecoversEveryChannelsTransientWithinItsSigma) {
   check_channels(truth, r, scores, true);
   // The model carries what was found, with its sigma, for the unit's record.
   const auto s = turn_on_of(r.model);
-  ASSERT_TRUE(s.has_value() && s->sigma.has_value());
+  ASSERT_TRUE(s.has_value());
+  const auto& s_sigma = s->sigma;
+  ASSERT_TRUE(s_sigma.has_value());
   EXPECT_EQ(s->value.gyro_warm_up_radps[0], r.channels[0].amplitude);
-  EXPECT_EQ(s->sigma->accel_time_constant_s[2], r.channels[5].time_constant_sigma_s);
+  EXPECT_EQ(s_sigma->accel_time_constant_s[2], r.channels[5].time_constant_sigma_s);
 }
 
 TEST(WarmUp, AnImuThatDoesNotWarmUpShowsNoTransient) {

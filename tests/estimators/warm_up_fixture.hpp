@@ -43,7 +43,9 @@ struct Scores {
 };
 
 inline void check_channels(const ImuModel& truth, const warm_up::Result& r, Scores& scores, bool verbose) {
-  const TurnOnTerms t = turn_on_of(truth)->value;
+  const auto turn_on = turn_on_of(truth);
+  ASSERT_TRUE(turn_on.has_value()) << "the truth has no turn-on section";
+  const TurnOnTerms t = turn_on->value;
   for (std::size_t c = 0; c < 6; ++c) {
     const warm_up::Channel& ch = r.channels[c];
     const int j = ch.axis;

@@ -135,7 +135,13 @@ TEST(Plan, TheNonlinearTermsTheProgramDoesNotDetermineAreNamed) {
   // Stage 1 started from the unit's K2 (as a campaign gives it a tumble's model): its predicted
   // accelerometer bias sigma is that of an IMU without K2, not inflated by it.
   const plan::Prediction plain = plan::predict(motion::load_program("direct-short", motion::TableLimits{}), nav_grade());
-  const double with_k2 = p.stages.front().model->sigma->accel.bias_mps2.maxCoeff();
-  const double without = plain.stages.front().model->sigma->accel.bias_mps2.maxCoeff();
+  const std::optional<ImuModel>& k2_model = p.stages.front().model;
+  const std::optional<ImuModel>& plain_model = plain.stages.front().model;
+  ASSERT_TRUE(k2_model && plain_model);
+  const std::optional<ImuErrorSet>& k2_sigma = k2_model->sigma;
+  const std::optional<ImuErrorSet>& plain_sigma = plain_model->sigma;
+  ASSERT_TRUE(k2_sigma && plain_sigma);
+  const double with_k2 = k2_sigma->accel.bias_mps2.maxCoeff();
+  const double without = plain_sigma->accel.bias_mps2.maxCoeff();
   EXPECT_LT(with_k2, 1.5 * without) << with_k2 << " against " << without;
 }

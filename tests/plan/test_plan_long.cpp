@@ -93,10 +93,11 @@ void expect_prediction_holds(const std::string& program_name, pipeline::Stage st
   opt.settings = settings;
   const plan::Prediction prediction = plan::predict(program, truth, opt);
   ASSERT_EQ(prediction.stages.size(), 1u);
-  ASSERT_TRUE(prediction.stages[0].model) << prediction.stages[0].message;
-  const json predicted = pipeline::estimates_json(*prediction.stages[0].model);
+  const std::optional<ImuModel>& predicted_model = prediction.stages[0].model;
+  ASSERT_TRUE(predicted_model) << prediction.stages[0].message;
+  const json predicted = pipeline::estimates_json(*predicted_model);
   ImuModel reference_named = reference;  // every coefficient the prediction names (estimates_json
-  reference_named.sigma = prediction.stages[0].model->sigma;  // lists those with a sigma)
+  reference_named.sigma = predicted_model->sigma;  // lists those with a sigma)
   const json truth_values = pipeline::estimates_json(reference_named);
   std::map<std::string, double> sum_sq, sigma_ratio_worst, reported_sq;
   std::mt19937_64 rng(77);

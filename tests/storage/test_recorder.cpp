@@ -332,9 +332,10 @@ TEST_F(RecorderTest, ADiskThatStaysFullEndsWithTheHeldFramesCountedAsLost) {
   }
   ASSERT_LT(pushed, 2'000'000) << "the size limit never hit";
   EXPECT_EQ(last, Recorder::Push::Refused);
-  ASSERT_TRUE(recorder.write_problem().has_value());
-  EXPECT_THAT(*recorder.write_problem(), HasSubstr("disk full: at least"));
-  EXPECT_THAT(*recorder.write_problem(), HasSubstr("MB free needed"));
+  const auto problem = recorder.write_problem();  // one reading: the writer thread may change it
+  ASSERT_TRUE(problem.has_value());
+  EXPECT_THAT(*problem, HasSubstr("disk full: at least"));
+  EXPECT_THAT(*problem, HasSubstr("MB free needed"));
   EXPECT_FALSE(recorder.commit_and_wait());
   EXPECT_GT(recorder.stats().held_frames, 0);
   // The alarm is raised on the writer thread just after the problem is visible to push().
@@ -343,24 +344,27 @@ TEST_F(RecorderTest, ADiskThatStaysFullEndsWithTheHeldFramesCountedAsLost) {
   EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteHeld), 1);
 
   EXPECT_FALSE(recorder.close());
-  ASSERT_TRUE(recorder.error().has_value());
-  EXPECT_THAT(*recorder.error(), HasSubstr("disk is full"));
-  EXPECT_THAT(*recorder.error(), HasSubstr(path()));
-  EXPECT_THAT(*recorder.error(), HasSubstr("closed while it held"));
+  const auto error = recorder.error();
+  ASSERT_TRUE(error.has_value());
+  EXPECT_THAT(*error, HasSubstr("disk is full"));
+  EXPECT_THAT(*error, HasSubstr(path()));
+  EXPECT_THAT(*error, HasSubstr("closed while it held"));
   EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteFailed), 1);
   const std::int64_t committed = recorder.stats().committed_frames;
   EXPECT_GT(committed, 0);
 
   // The next open finds the session unclosed, checks the file and accounts for the loss.
   const RunDb reopened = RunDb::open(path());
-  ASSERT_TRUE(reopened.recovery().has_value());
-  EXPECT_EQ(reopened.recovery()->integrity, "ok");
+  const auto& recovery = reopened.recovery();
+  ASSERT_TRUE(recovery.has_value());
+  EXPECT_EQ(recovery->integrity, "ok");
   const auto stored = reopened.read_frames();
   EXPECT_EQ(static_cast<std::int64_t>(stored.size()), committed);
   expect_frames_identical(frames_from(0, committed), stored);
-  ASSERT_TRUE(reopened.recovery()->lost_uncommitted_frames.has_value());
-  EXPECT_EQ(*reopened.recovery()->lost_uncommitted_frames, recorder.stats().accepted_frames - committed);
-  EXPECT_GT(*reopened.recovery()->lost_uncommitted_frames, 0);
+  const auto lost = recovery->lost_uncommitted_frames;
+  ASSERT_TRUE(lost.has_value());
+  EXPECT_EQ(*lost, recorder.stats().accepted_frames - committed);
+  EXPECT_GT(*lost, 0);
 }
 
 // The disk made full (storage::disk_fault, the VFS every connection goes through) while frames
@@ -401,8 +405,9 @@ TEST_F(RecorderTest, AFullDiskHoldsTheUncommittedFramesAndWritesThemOnceSpaceRet
     // The producer takes up after the last frame the recorder holds.
     const auto taken = recorder.last_accepted_t_ns();
     ASSERT_TRUE(taken.has_value());
+    const std::int64_t taken_t_ns = *taken;
     next = 0;
-    while (next < kFrames && expected_frame(next).t_ns <= *taken) ++next;
+    while (next < kFrames && expected_frame(next).t_ns <= taken_t_ns) ++next;
     if (!emptied && refusals >= 3) {
       // Still held after several failed attempts: nothing lost, nothing committed meanwhile.
       EXPECT_GT(recorder.stats().held_frames, 0);
@@ -443,11 +448,12 @@ TEST_F(RecorderTest, UncleanEndIsRecoveredWithIntegrityCheckAndLossReport) {
     new (crashed) RunDb(std::move(db));
   }
   const RunDb db = RunDb::open(path(), OpenMode::Read);
-  ASSERT_TRUE(db.recovery().has_value());
-  EXPECT_EQ(db.recovery()->pid, ::getpid());
-  EXPECT_EQ(db.recovery()->committed_frames, 8192);
-  EXPECT_EQ(db.recovery()->lost_uncommitted_frames, std::optional<std::int64_t>(10'000 - 8192));
-  EXPECT_EQ(db.recovery()->accepted_t_ns, std::optional<std::int64_t>(expected_frame(9999).t_ns));
+  const auto& recovery = db.recovery();
+  ASSERT_TRUE(recovery.has_value());
+  EXPECT_EQ(recovery->pid, ::getpid());
+  EXPECT_EQ(recovery->committed_frames, 8192);
+  EXPECT_EQ(recovery->lost_uncommitted_frames, std::optional<std::int64_t>(10'000 - 8192));
+  EXPECT_EQ(recovery->accepted_t_ns, std::optional<std::int64_t>(expected_frame(9999).t_ns));
   EXPECT_EQ(db.frame_count(), 8192);
   const auto sessions = db.sessions();
   ASSERT_EQ(sessions.size(), 1U);
