@@ -149,6 +149,16 @@ struct Client {
   json wait_state(std::int64_t id, const std::string& state, double timeout_s = 60.0) const {
     return wait_for(id, [&](const json& c) { return c.value("state", "") == state; }, timeout_s);
   }
+  // POST /api/campaigns, then its start: the campaign's id, or 0 with the refusal recorded.
+  std::int64_t post_and_start(const json& campaign) const {
+    const HttpResult posted = post("/api/campaigns", campaign.dump());
+    EXPECT_EQ(posted.status, 201) << posted.body;
+    if (posted.status != 201) return 0;
+    const auto id = posted.json_body().at("id").get<std::int64_t>();
+    const HttpResult started = post("/api/campaigns/" + std::to_string(id) + "/start");
+    EXPECT_EQ(started.status, 200) << started.body;
+    return started.status == 200 ? id : 0;
+  }
 };
 
 inline std::vector<ImuFrame> run_frames(const std::string& path) {

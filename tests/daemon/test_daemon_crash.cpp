@@ -31,17 +31,14 @@ TEST(Crash, KillDashNineLosesNothingCommittedAndTheRunResumes) {
   Daemon first = spawn(dir + "/data", log);
   ASSERT_GT(first.port, 0) << "imucald did not start; see " << log;
   const Client op{first.port, kOperatorToken};
-  const auto posted = op.post("/api/campaigns", json{{"name", "crash"},
-                                                     {"program", "direct-short"},
-                                                     {"rate_hz", 100},
-                                                     {"seed", 3},
-                                                     {"time_scale", 50},
-                                                     {"truth", noisy_truth()},
-                                                     {"estimators", {"direct"}}}
-                                                    .dump());
-  ASSERT_EQ(posted.status, 201) << posted.body;
-  const auto id = posted.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const auto id = op.post_and_start(json{{"name", "crash"},
+                                         {"program", "direct-short"},
+                                         {"rate_hz", 100},
+                                         {"seed", 3},
+                                         {"time_scale", 50},
+                                         {"truth", noisy_truth()},
+                                         {"estimators", {"direct"}}});
+  ASSERT_GT(id, 0);
   const json before = op.wait_for(id, [](const json& c) { return c.at("program_time_s").get<double>() > 150.0; });
   ASSERT_EQ(before.at("state"), "running");
   const std::string run_db = dir + "/data/" + before.at("run_db").get<std::string>();
@@ -116,12 +113,9 @@ TEST(Crash, SimWireKillDashNineLosesNothingCommittedAndTheRunResumes) {
     {"type": "move", "name": "tilt", "to_deg": [0, 90, 0], "duration_s": 2},
     {"type": "rate", "name": "spin", "axis": "outer", "rate_dps": 20, "duration_s": 4, "accel_dps2": 40},
     {"type": "hold", "name": "end", "duration_s": 2}]})");
-  const auto posted = op.post("/api/campaigns", json{{"name", "crash-wire"}, {"program", program}, {"rate_hz", 100},
-                                                     {"estimators", json::array()}}
-                                                    .dump());
-  ASSERT_EQ(posted.status, 201) << posted.body;
-  const auto id = posted.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const auto id = op.post_and_start(json{{"name", "crash-wire"}, {"program", program}, {"rate_hz", 100},
+                                         {"estimators", json::array()}});
+  ASSERT_GT(id, 0);
   // In the spin, more than a commit interval after the last segment boundary.
   const json before = op.wait_for(id, [](const json& c) { return c.at("program_time_s").get<double>() > 6.5; }, 60);
   ASSERT_EQ(before.at("state"), "running") << before.dump();
@@ -176,10 +170,8 @@ TEST(Crash, AResumedRunDoesNotFireAgainTheFaultsItPassedAndKeepsItsCounts) {
                    {"time_scale", 50},           {"estimators", json::array()},
                    {"suspenders", {{"settle_s", 2}}}};
   campaign["sim_faults"] = {{{"kind", "imu_drop"}, {"at_s", 100}, {"frames", 7}}};
-  const auto posted = op.post("/api/campaigns", campaign.dump());
-  ASSERT_EQ(posted.status, 201) << posted.body;
-  const auto id = posted.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const auto id = op.post_and_start(campaign);
+  ASSERT_GT(id, 0);
   const json before = op.wait_for(id, [](const json& c) {
     return has_event(c, "resumed") && c.at("program_time_s").get<double>() > 250.0;
   }, 120);
@@ -217,10 +209,8 @@ TEST(Crash, AThermalRunResumedInItsColdSoakFindsTheChamberWhereItWas) {
   const json campaign = {{"name", "cold soak, kill"}, {"program", "thermal-short"}, {"rate_hz", 20},
                          {"time_scale", 400},
                          {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))}};
-  const auto posted = op.post("/api/campaigns", campaign.dump());
-  ASSERT_EQ(posted.status, 201) << posted.body;
-  const auto id = posted.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const auto id = op.post_and_start(campaign);
+  ASSERT_GT(id, 0);
   // The soak at 15 C is 1200..3000 s of program.
   const json before = op.wait_for(id, [](const json& c) { return c.at("program_time_s").get<double>() > 1500.0; }, 120);
   ASSERT_EQ(before.at("state"), "running") << before.dump().substr(0, 2000);

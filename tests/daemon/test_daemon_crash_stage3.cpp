@@ -61,10 +61,8 @@ TEST(CrashStage3, KillDashNineDuringStageThreeResumesToTheUninterruptedModel) {
   Daemon first = spawn(dir + "/data", log);
   ASSERT_GT(first.port, 0) << "imucald did not start; see " << log;
   const Client op{first.port, kOperatorToken};
-  const auto posted = op.post("/api/campaigns", campaign("killed during stage 3", 500).dump());
-  ASSERT_EQ(posted.status, 201) << posted.body;
-  const auto id = posted.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op.post("/api/campaigns/" + std::to_string(id) + "/start").status, 200);
+  const auto id = op.post_and_start(campaign("killed during stage 3", 500));
+  ASSERT_GT(id, 0);
   // Well into the program (8609 s): stage 3 has run for a while, and has a while to go.
   // (500x: the recorder commits every second of wall time, and the filter follows the commits.)
   const auto stage3_status = [](const json& c) {
@@ -88,10 +86,8 @@ TEST(CrashStage3, KillDashNineDuringStageThreeResumesToTheUninterruptedModel) {
   EXPECT_TRUE(has_event(resumed, "redo", "resuming after an interruption"));
 
   // The same campaign, never interrupted.
-  const auto again = op2.post("/api/campaigns", campaign("uninterrupted", 0).dump());
-  ASSERT_EQ(again.status, 201) << again.body;
-  const auto id2 = again.json_body().at("id").get<std::int64_t>();
-  ASSERT_EQ(op2.post("/api/campaigns/" + std::to_string(id2) + "/start").status, 200);
+  const auto id2 = op2.post_and_start(campaign("uninterrupted", 0));
+  ASSERT_GT(id2, 0);
   const json whole = op2.wait_state(id2, "done", 900);
   ASSERT_EQ(whole.at("state"), "done");
 

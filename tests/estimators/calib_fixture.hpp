@@ -79,4 +79,23 @@ inline void expect_within(const ImuModel& truth, const ImuModel& est, const Limi
 
 inline const Limits kStage1Limits{0.002, 0.5, 0.3, 1e-5, 1.5, 0.5};
 
+// |error| / sigma of the 27 linear coefficients stage 1 estimates: per axis gyro bias, scale +,
+// scale -, accelerometer bias, scale; then per angle gyro, accelerometer.
+inline std::vector<double> stage1_abs_z(const ImuModel& truth, const ImuModel& est, const ImuErrorSet& s) {
+  std::vector<double> z;
+  auto add = [&](double t, double e, double sigma) { z.push_back(std::abs(e - t) / sigma); };
+  for (int j = 0; j < 3; ++j) {
+    add(truth.gyro.bias_radps[j], est.gyro.bias_radps[j], s.gyro.bias_radps[j]);
+    add(truth.gyro.scale_pos[j], est.gyro.scale_pos[j], s.gyro.scale_pos[j]);
+    add(truth.gyro.scale_neg[j], est.gyro.scale_neg[j], s.gyro.scale_neg[j]);
+    add(truth.accel.bias_mps2[j], est.accel.bias_mps2[j], s.accel.bias_mps2[j]);
+    add(truth.accel.scale[j], est.accel.scale[j], s.accel.scale[j]);
+  }
+  for (const auto& [name, k] : kMisalignmentKeys) {
+    add(truth.gyro.misalignment_rad.*k, est.gyro.misalignment_rad.*k, s.gyro.misalignment_rad.*k);
+    add(truth.accel.misalignment_rad.*k, est.accel.misalignment_rad.*k, s.accel.misalignment_rad.*k);
+  }
+  return z;
+}
+
 }  // namespace imucal::calibtest

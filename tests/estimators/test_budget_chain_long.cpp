@@ -39,25 +39,9 @@ ImuModel nonlinear_imu(unsigned seed) {
   return m;
 }
 
-// |error| / sigma of the 27 linear coefficients stage 1 estimates.
+// |error| / sigma of the 27 linear coefficients stage 1 estimates, against the model's own sigma.
 std::vector<double> z_of(const ImuModel& truth, const ImuModel& est) {
-  const ImuErrorSet& s = *est.sigma;
-  std::vector<double> z;
-  auto add = [&](double t, double e, double sigma) { z.push_back(std::abs(e - t) / sigma); };
-  // (the order below: per axis gyro bias, scale +, scale -, accel bias, scale; then per angle
-  // gyro, accel)
-  for (int j = 0; j < 3; ++j) {
-    add(truth.gyro.bias_radps[j], est.gyro.bias_radps[j], s.gyro.bias_radps[j]);
-    add(truth.gyro.scale_pos[j], est.gyro.scale_pos[j], s.gyro.scale_pos[j]);
-    add(truth.gyro.scale_neg[j], est.gyro.scale_neg[j], s.gyro.scale_neg[j]);
-    add(truth.accel.bias_mps2[j], est.accel.bias_mps2[j], s.accel.bias_mps2[j]);
-    add(truth.accel.scale[j], est.accel.scale[j], s.accel.scale[j]);
-  }
-  for (const auto& [name, k] : kMisalignmentKeys) {
-    add(truth.gyro.misalignment_rad.*k, est.gyro.misalignment_rad.*k, s.gyro.misalignment_rad.*k);
-    add(truth.accel.misalignment_rad.*k, est.accel.misalignment_rad.*k, s.accel.misalignment_rad.*k);
-  }
-  return z;
+  return calibtest::stage1_abs_z(truth, est, *est.sigma);
 }
 
 ImuModel direct_stage(const ImuModel& truth, std::uint64_t seed, const ImuModel& start) {
