@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -53,6 +54,16 @@ struct FrameBatch {
     frames.clear();
     temps.clear();
   }
+};
+
+// The daemon's disk as a simulated `disk_full` fault (docs/api.md, sim_faults) reaches it: the
+// process's full-disk switch of storage (storage::disk_fault), handed to the simulated benches by
+// the sequencer, since the devices do not reach storage (docs/ARCHITECTURE.md). Empty: the fault
+// does nothing.
+struct DiskFaultSwitch {
+  std::function<void(bool full)> set_full;
+  std::function<std::int64_t()> refused_writes;  // writes refused so far (the fault is met)
+  explicit operator bool() const { return set_full && refused_writes; }
 };
 
 class Table {

@@ -8,7 +8,6 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "sim/thermal_model.hpp"
-#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -164,7 +163,7 @@ SimBench::SimBench(const motion::Program& program, const ImuModel& truth, const 
 SimBench::~SimBench() {
   // A disk_full fault still in force when the run ends (or the bench is dropped) gives the space back.
   for (const auto& f : faults_)
-    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
+    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over && settings_.disk) settings_.disk.set_full(false);
 }
 
 void SimBench::resuming_after(double t_s) {
@@ -182,11 +181,11 @@ void SimBench::fire_fault(ActiveFault& af) {
   af.fired_world_s = world_s_;
   af.corrupt_left = af.fault.kind == SimFault::Kind::ImuCorrupt ? af.fault.frames : 0;
   af.drop_left = af.fault.kind == SimFault::Kind::ImuDrop ? af.fault.frames : 0;
-  // The daemon's disk (every SQLite write of the process, storage::disk_fault) until the fault's
+  // The daemon's disk (every SQLite write of the process: settings_.disk, storage's switch) until the fault's
   // duration of device time has passed: a full disk at a program time, for drills and the chaos soak.
-  if (af.fault.kind == SimFault::Kind::DiskFull) {
-    af.refused_at_fire = storage::disk_fault::refused_writes();
-    storage::disk_fault::set_full(true);
+  if (af.fault.kind == SimFault::Kind::DiskFull && settings_.disk) {
+    af.refused_at_fire = settings_.disk.refused_writes();
+    settings_.disk.set_full(true);
   }
 }
 
@@ -195,14 +194,14 @@ void SimBench::fire_fault(ActiveFault& af) {
 // duration_s of device time from the first write it refused.
 void SimBench::expire_faults() {
   for (auto& f : faults_) {
-    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over) continue;
+    if (f.fault.kind != SimFault::Kind::DiskFull || !f.fired || f.over || !settings_.disk) continue;
     if (!f.met_world_s) {
-      if (storage::disk_fault::refused_writes() == f.refused_at_fire) continue;
+      if (settings_.disk.refused_writes() == f.refused_at_fire) continue;
       f.met_world_s = world_s_;
     }
     if (world_s_ < *f.met_world_s + f.fault.duration_s) continue;
     f.over = true;
-    storage::disk_fault::set_full(false);
+    settings_.disk.set_full(false);
   }
 }
 

@@ -41,6 +41,7 @@ struct SimBenchSettings {
   // Set: temperatures and thermal truth from this model (built along the campaign's chamber
   // profile over the program's duration); chamber_tau_s and chamber_start_C then do not apply.
   std::shared_ptr<const sim::ThermalModel> thermal;
+  DiskFaultSwitch disk;  // what a disk_full fault fills
 };
 
 // The thermal model of a campaign on the simulated bench: along its chamber profile over

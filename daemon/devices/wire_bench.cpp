@@ -19,7 +19,6 @@
 #include "drivers/register_map.hpp"
 #include "drivers/tcp_table.hpp"
 #include "sim/sim_devices.hpp"
-#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -281,6 +280,7 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   addresses_.power_relay = relay;
   truth_json_ = imu_model_to_json_text(simulated.truth);
   for (const SimFault& f : simulated.faults) faults_.push_back({f});
+  disk_ = simulated.disk;
   imu_link_ = "a socket pair";
 
   // The IMU's CAN link: a socket pair carrying struct canfd_frame images (no AF_CAN here).
@@ -406,7 +406,7 @@ void WireBench::resuming_after(double t_s) {
 
 WireBench::~WireBench() {
   for (const InjectedFault& f : faults_)
-    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over) storage::disk_fault::set_full(false);
+    if (f.fault.kind == SimFault::Kind::DiskFull && f.fired && !f.over && disk_) disk_.set_full(false);
   // The sequencer parked the table and the chamber; stop the stream and close the links.
   (void)dev_->imu->safe_stop();
   dev_->imu->disconnect();
@@ -524,7 +524,7 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
         }
         break;
       case SimFault::Kind::DiskFull:
-        storage::disk_fault::set_full(true);
+        if (disk_) disk_.set_full(true);
         break;
       case SimFault::Kind::Disconnect:
         // A device that stops answering; the IMU's link cannot be reopened within a run, so the
@@ -554,7 +554,7 @@ void WireBench::expire_faults() {
     f.over = true;
     if (f.fault.kind == SimFault::Kind::ChamberOffset) sim_->chamber().set_reading_offset(0.0);
     if (f.fault.kind == SimFault::Kind::RelayStuck) sim_->chamber().set_outputs_forced(false);
-    if (f.fault.kind == SimFault::Kind::DiskFull) storage::disk_fault::set_full(false);
+    if (f.fault.kind == SimFault::Kind::DiskFull && disk_) disk_.set_full(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "table") sim_->table().set_silent(false);
     if (f.fault.kind == SimFault::Kind::Disconnect && f.fault.device == "chamber") sim_->chamber().set_silent(false);
   }

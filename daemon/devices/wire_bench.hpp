@@ -71,6 +71,7 @@ struct SimWireSettings {
   // A campaign's sim_faults, injected on the simulated devices themselves when the program first
   // reaches them (docs/daemon.md): the daemon sees them only through the drivers.
   std::vector<SimFault> faults;
+  DiskFaultSwitch disk;  // what a disk_full fault fills
   // The serial the simulated IMU reports over its link: the campaign's unit when it names one
   // (the simulated IMU is that unit), else SIM-WIRE-<seed>.
   std::string imu_serial;
@@ -192,6 +193,7 @@ class WireBench final : public Bench {
   std::array<drivers::TableMode, 3> modes_{};  // as last read or set
   std::array<AxisDemand, 3> demands_{};
   std::vector<InjectedFault> faults_;  // sim-wire only
+  DiskFaultSwitch disk_;                // sim-wire only
   std::string table_error_;                    // a refused demand while following: a table fault
   bool homed_ = false;
 };

@@ -16,6 +16,7 @@
 #include "daemon/run/estimator_worker.hpp"
 #include "storage/recorder.hpp"
 #include "storage/run_db.hpp"
+#include "storage/sqlite.hpp"
 
 namespace imucal::daemon {
 
@@ -30,6 +31,12 @@ constexpr std::int64_t kNoTime = std::numeric_limits<std::int64_t>::min();
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
 json vec3(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+// A simulated bench's disk_full fault fills storage's full-disk switch (the devices do not reach
+// storage; the sequencer, which records, does).
+DiskFaultSwitch storage_disk_switch() {
+  return {[](bool full) { storage::disk_fault::set_full(full); }, [] { return storage::disk_fault::refused_writes(); }};
+}
 
 }  // namespace
 
@@ -622,6 +629,7 @@ void Sequencer::run_campaign(std::int64_t id) {
       sb.home_time_s = config_.sim.home_time_s;
       sb.faults = run.spec.faults;
       sb.thermal = campaign_thermal_model(run.spec, run.program.duration_s());
+      sb.disk = storage_disk_switch();
       run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
     } else if (config_.devices == "sim-wire" || (config_.devices == "real" && config_.device_addresses)) {
       WireBenchSettings wb;
@@ -642,6 +650,7 @@ void Sequencer::run_campaign(std::int64_t id) {
         sw.chamber_start_C = config_.chamber.safe_setpoint_C;
         sw.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
         sw.imu_serial = run.spec.imu.serial;
+        sw.disk = storage_disk_switch();
         run.bench = std::make_unique<WireBench>(run.program, wb, sw);
       }
     } else {
