@@ -12,6 +12,7 @@
 #include "daemon/campaign_runner.hpp"
 #include "daemon/config/command_line.hpp"
 #include "pipeline/pipeline.hpp"
+#include "core/table_json.hpp"
 #include "plan/optimize.hpp"
 #include "plan/plan.hpp"
 
@@ -195,6 +196,20 @@ int main(int argc, char** argv) {
                     "1-sigma of the table's reference position, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  // The table's certificate and the site's g: the bench sources of stage 1's budget.
+  std::string plan_table;
+  double plan_table_sigma_arcsec = 0.0, plan_gravity_sigma_mps2 = 0.0;
+  planc->add_option("--table", plan_table,
+                    "the table's certificate: a JSON file holding the `table` object of formats.md or a recording's "
+                    "meta.json; its sigma enters stage 1's budget and the table requirements")
+      ->check(CLI::ExistingFile);
+  planc->add_option("--table-sigma-arcsec", plan_table_sigma_arcsec,
+                    "instead of --table: a certificate of this 1-sigma for every tilt, axis and encoder harmonic (1, 2)")
+      ->check(CLI::PositiveNumber)
+      ->excludes("--table");
+  planc->add_option("--gravity-sigma-mps2", plan_gravity_sigma_mps2,
+                    "1-sigma of the site's g (default: 3e-4, normal gravity; 1e-6 for a measured g)")
+      ->check(CLI::NonNegativeNumber);
   planc->add_option("--json", plan_json, "write the prediction (imucal-plan/1), or with --optimize the search, here");
   bool plan_optimize = false;
   std::string plan_target = "seed", plan_program_out;
@@ -233,6 +248,9 @@ int main(int argc, char** argv) {
     if (passwd->parsed()) return cli::run_passwd();
     if (planc->parsed()) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
+      if (!plan_table.empty()) plan_opt.table = table::read_table_certificate_file(plan_table);
+      if (plan_table_sigma_arcsec > 0) plan_opt.table = plan::uniform_table_certificate(plan_table_sigma_arcsec);
+      if (planc->count("--gravity-sigma-mps2") > 0) plan_opt.settings.direct.gravity_sigma_mps2 = plan_gravity_sigma_mps2;
       if (plan_optimize) {
         plan_search.predict = plan_opt;
         // Many programs are predicted: 20 Hz unless a rate is given.

@@ -66,19 +66,19 @@ std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& 
   if (gravity_sigma_mps2 > 0) {
     RecordingMeta m = meta;
     m.site.gravity_mps2 = earth::site_gravity_mps2(meta.site) + gravity_sigma_mps2;
-    out.push_back({"site.gravity_mps2", std::move(m)});
+    out.push_back({"site.gravity_mps2", std::move(m), gravity_sigma_mps2});
   }
   if (!meta.table || !meta.table->sigma) return out;
   const table::TableGeometry& sigma = *meta.table->sigma;
   // Moved about the values the certificate gives: the reference applies them, the budget covers
   // what is left, their uncertainty.
   const table::TableGeometry base = meta.table->geometry.value_or(table::TableGeometry{});
-  auto moved = [&](const std::string& source, const auto& move) {
+  auto moved = [&](const std::string& source, double sigma_rad, const auto& move) {
     RecordingMeta m = meta;
     table::TableGeometry g = base;
     move(g);
     m.table->geometry = g;
-    out.push_back({source, std::move(m)});
+    out.push_back({source, std::move(m), sigma_rad * units::kRadToArcsec});
   };
   using Pair = std::array<double, 2> table::TableGeometry::*;
   const std::pair<const char*, Pair> pairs[] = {{"table.outer_tilt_arcsec", &table::TableGeometry::outer_tilt_rad},
@@ -86,7 +86,8 @@ std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& 
                                                 {"table.inner_axis_arcsec", &table::TableGeometry::inner_axis_rad}};
   for (const auto& [source, member] : pairs)
     for (std::size_t i = 0; i < 2; ++i)
-      if ((sigma.*member)[i] > 0) moved(source, [&](table::TableGeometry& g) { (g.*member)[i] += (sigma.*member)[i]; });
+      if ((sigma.*member)[i] > 0)
+        moved(source, (sigma.*member)[i], [&](table::TableGeometry& g) { (g.*member)[i] += (sigma.*member)[i]; });
   const char* kEncoder[3] = {"table.encoder_error_arcsec.outer", "table.encoder_error_arcsec.middle",
                              "table.encoder_error_arcsec.inner"};
   for (std::size_t axis = 0; axis < 3; ++axis) {
@@ -103,7 +104,7 @@ std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& 
                                                         {quadrature_sigma_rad, phase_rad + 0.5 * std::numbers::pi}};
       for (const auto& [amplitude_rad, phase] : quadratures)
         if (amplitude_rad > 0)
-          moved(kEncoder[axis], [&](table::TableGeometry& g) {
+          moved(kEncoder[axis], amplitude_rad, [&](table::TableGeometry& g) {
             g.encoder_error[axis].push_back({s.k, amplitude_rad, phase});
           });
     }
@@ -111,11 +112,22 @@ std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& 
   return out;
 }
 
+double gravity_sigma_mps2(const RecordingMeta& meta, const Options& options) {
+  return options.gravity_sigma_mps2.value_or(earth::site_gravity_sigma_mps2(meta.site));
+}
+
+std::map<std::string, double> bench_source_sigmas(const RecordingMeta& meta, const Options& options) {
+  std::map<std::string, double> out;
+  if (options.type_b)
+    for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2(meta, options)))
+      out[p.source] = std::max(out[p.source], p.sigma);
+  return out;
+}
+
 DirectCalibrator::DirectCalibrator(const RecordingMeta& meta, const Options& options)
     : meta_(meta), options_(options), reference_(meta) {
-  const double gravity_sigma_mps2 = options.gravity_sigma_mps2.value_or(earth::site_gravity_sigma_mps2(meta.site));
   if (options.type_b)
-    for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2)) {
+    for (const ReferencePerturbation& p : reference_perturbations(meta, gravity_sigma_mps2(meta, options))) {
       perturbation_sources_.push_back(p.source);
       perturbed_references_.emplace_back(p.meta);
     }

@@ -40,6 +40,18 @@ class SegmentDetector {
   std::vector<SegmentInfo> statics_;
 };
 
+// Stage 1's accuracy limits (docs/calibration.md, "Stage 1's uncertainty budget"): the largest
+// error of each coefficient group a stage-1 calibration is accepted with; the tests judge stage 1
+// by them and `imucal plan` derives the table accuracy a program needs from them.
+struct Limits {
+  double gyro_bias_dph = 0.002;
+  double gyro_scale_ppm = 0.5;        // scale_pos_ppm and scale_neg_ppm
+  double gyro_angle_arcsec = 0.3;     // misalignment_arcsec
+  double accel_bias_mps2 = 1e-5;
+  double accel_scale_ppm = 1.5;
+  double accel_angle_arcsec = 0.5;
+};
+
 struct Options {
   double gap_factor = 1.5;       // a frame interval above this many nominal periods is a gap
   double min_rotation_rad = 0.5; // a rest-to-rest interval must turn at least this much to be used
@@ -77,6 +89,7 @@ struct ReferenceSums {
 struct ReferencePerturbation {
   std::string source;  // "table.outer_tilt_arcsec", "table.encoder_error_arcsec.inner", "site.gravity_mps2"
   RecordingMeta meta;
+  double sigma = 0.0;  // the 1-sigma it is moved by, in the source's unit (arcsec; m/s^2 for the g)
 };
 // Every parameter the table's certificate gives a 1-sigma for (table.sigma), about the geometry it
 // gives (the ideal table when it gives none); an encoder harmonic as its two quadratures, the one
@@ -84,6 +97,13 @@ struct ReferencePerturbation {
 // times the phase's sigma when the geometry gives the harmonic, else (phase unknown) with the
 // amplitude's sigma too. And the site's g moved by gravity_sigma_mps2 (none when 0).
 std::vector<ReferencePerturbation> reference_perturbations(const RecordingMeta& meta, double gravity_sigma_mps2);
+// The site's g's standard uncertainty stage 1 uses: options.gravity_sigma_mps2, else
+// earth::site_gravity_sigma_mps2 (measured or normal gravity).
+double gravity_sigma_mps2(const RecordingMeta& meta, const Options& options);
+// The bench's type B sources of stage 1's budget (the table's and the g's), each with the largest
+// 1-sigma of its parameters (ReferencePerturbation::sigma): what a bench requirement scales
+// (plan::source_requirements). Empty with options.type_b false.
+std::map<std::string, double> bench_source_sigmas(const RecordingMeta& meta, const Options& options);
 
 // One accumulated interval: a static or a rest-to-rest rotation between two statics.
 struct Interval : ReferenceSums {

@@ -23,9 +23,7 @@
 
 namespace imucal::plan {
 
-// 1-sigma targets by coefficient group, the model's key without the axis ("gyro.bias_dph").
-using Targets = std::map<std::string, double>;
-
+// 1-sigma targets by coefficient group (plan::Targets, budget.hpp).
 // The seed's stage-3 figures (method.md): gyro bias 0.001 deg/h, scale 0.5 ppm, angles 0.1",
 // delays 1 us; accelerometer bias 5e-6 m/s^2, scale 0.3 ppm, angles 0.3".
 Targets seed_targets();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "core/units.hpp"
@@ -100,11 +101,13 @@ void rms_sigma(json& acc, const json& add, int n_added) {
   }
 }
 
-std::vector<ImuFrame> simulate(const motion::Program& program, const ImuModel& imu, double rate_hz, std::uint64_t seed,
-                               RecordingMeta& meta, std::vector<TempSample>& temps) {
+std::vector<ImuFrame> simulate(const motion::Program& program, const ImuModel& imu, const Options& options,
+                               std::uint64_t seed, RecordingMeta& meta, std::vector<TempSample>& temps) {
   sim::SimConfig cfg;
-  cfg.rate_hz = rate_hz;
+  cfg.rate_hz = options.rate_hz;
   cfg.seed = seed;
+  cfg.site = options.site;
+  cfg.table = options.table;
   sim::Simulator sim(program, imu, cfg);
   meta = sim.meta();
   std::vector<ImuFrame> frames;
@@ -121,6 +124,16 @@ bool has_noise(const ImuModel& m) {
 
 }  // namespace
 
+table::TableCertificate uniform_table_certificate(double sigma_arcsec) {
+  const double s = sigma_arcsec * units::kArcsecToRad;
+  table::TableGeometry sigma;
+  sigma.outer_tilt_rad = sigma.middle_axis_rad = sigma.inner_axis_rad = {s, s};
+  for (auto& axis : sigma.encoder_error) axis = {{1, s, 0.0}, {2, s, 0.0}};
+  char name[96];
+  std::snprintf(name, sizeof name, "every parameter %g arcsec (1-sigma), encoder harmonics 1 and 2", sigma_arcsec);
+  return {std::nullopt, sigma, name};
+}
+
 Prediction predict(const motion::Program& program, const ImuModel& imu, const Options& options) {
   if (!has_noise(imu))
     throw std::invalid_argument(
@@ -128,7 +141,7 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
         "scales with them)");
   RecordingMeta meta;
   std::vector<TempSample> temps;
-  std::vector<ImuFrame> frames = simulate(program, imu, options.rate_hz, options.seed, meta, temps);
+  std::vector<ImuFrame> frames = simulate(program, imu, options, options.seed, meta, temps);
   const MemorySource source(std::move(frames), std::move(temps));
 
   std::vector<pipeline::Stage> stages;
@@ -166,28 +179,34 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
   const double end_s = pipeline::end_of_program_s(meta);
   std::vector<pipeline::Outcome> outcomes = pipeline::run_to_end(
       meta, pipeline::ProgressSource(source, end_s, report, 0.0, share), stages, false, start, options.settings);
-  // The stages whose sigma comes from residuals, again on other seeds: their RMS sigma.
+  // The stages whose sigma comes from residuals, again on other seeds: their RMS sigma, and the
+  // RMS of each entry of the budget behind it.
   std::vector<pipeline::Stage> residual_stages;
   for (const pipeline::Stage s : stages)
     if (s != pipeline::Stage::Navigation) residual_stages.push_back(s);
+  const auto uncertainty = [](const ImuModel& m) {
+    const json j = json::parse(imu_model_to_json_text(m));
+    return j.contains("sigma") ? json{{"sigma", j.at("sigma")}, {"budget", j.value("budget", json::object())}} : json();
+  };
   std::vector<json> sigma_rms(outcomes.size());
   for (std::size_t i = 0; i < outcomes.size(); ++i)
-    if (outcomes[i].model) sigma_rms[i] = json::parse(imu_model_to_json_text(*outcomes[i].model)).value("sigma", json());
+    if (outcomes[i].model) sigma_rms[i] = uncertainty(*outcomes[i].model);
   for (int run = 1; run < options.residual_stage_runs && !residual_stages.empty(); ++run) {
     RecordingMeta m;
     std::vector<TempSample> t;
-    std::vector<ImuFrame> f = simulate(program, imu, options.rate_hz, options.seed + static_cast<std::uint64_t>(run), m, t);
+    std::vector<ImuFrame> f = simulate(program, imu, options, options.seed + static_cast<std::uint64_t>(run), m, t);
     const MemorySource again(std::move(f), std::move(t));
     const pipeline::ProgressSource reported(again, end_s, report, share * run, share);
     for (const pipeline::Outcome& o : pipeline::run_to_end(m, reported, residual_stages, false, start, options.settings))
       for (std::size_t i = 0; i < outcomes.size(); ++i)
         if (outcomes[i].stage == o.stage && o.model && !sigma_rms[i].is_null())
-          rms_sigma(sigma_rms[i], json::parse(imu_model_to_json_text(*o.model)).value("sigma", json()), run + 1);
+          rms_sigma(sigma_rms[i], uncertainty(*o.model), run + 1);
   }
   for (std::size_t i = 0; i < outcomes.size(); ++i)
     if (outcomes[i].model && outcomes[i].stage != pipeline::Stage::Navigation && !sigma_rms[i].is_null()) {
       json m = json::parse(imu_model_to_json_text(*outcomes[i].model));
-      m["sigma"] = sigma_rms[i];
+      m["sigma"] = sigma_rms[i].at("sigma");
+      if (!sigma_rms[i].at("budget").empty()) m["budget"] = sigma_rms[i].at("budget");
       outcomes[i].model = imu_model_from_json_text(m.dump(), "the predicted model");
     }
   for (const pipeline::Outcome& o : outcomes) {
@@ -196,6 +215,23 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     sp.status = pipeline::to_string(o.status);
     sp.message = o.message;
     sp.model = o.model;
+    if (o.stage == pipeline::Stage::Direct && o.model) {
+      sp.budget = coefficient_budgets(*o.model);
+      const std::map<std::string, double> bench = direct::bench_source_sigmas(meta, options.settings.direct);
+      std::vector<std::string> sources, table_sources, site_sources;
+      for (const auto& entry : bench) {
+        sources.push_back(entry.first);
+        (entry.first.rfind("table.", 0) == 0 ? table_sources : site_sources).push_back(entry.first);
+      }
+      for (const std::string& s : sources) {
+        std::vector<std::string> others = sources;
+        std::erase(others, s);
+        sp.requirements.push_back({s, bench.at(s), source_requirement(sp.budget, stage1_limits(), {s}, others),
+                                   source_requirement(sp.budget, stage1_limits(), {s})});
+      }
+      if (!table_sources.empty())
+        sp.whole_table = source_requirement(sp.budget, stage1_limits(), table_sources, site_sources);
+    }
     if (o.status == pipeline::Status::Undetermined || o.status == pipeline::Status::Failed) {
       // The stage's message lists what it cannot determine, one "  - what: why (fix)" per line.
       bool listed = false;
@@ -286,6 +322,29 @@ json Prediction::to_json() const {
       e["estimates"] = pipeline::estimates_json(*s.model);
     }
     if (!s.history.is_null()) e["history"] = s.history;
+    if (!s.budget.empty()) {
+      json b = json::object();
+      for (const CoefficientBudget& c : s.budget)
+        b[c.key] = {{"combined", c.combined}, {"dominant", c.dominant}, {"contributions", c.contributions}};
+      e["budget"] = b;
+    }
+    if (s.stage == "direct" && s.model) {
+      // What the bench must give for stage 1's limits (combined standard uncertainty <= limit).
+      // A factor on a 1-sigma; with the sigma, the largest 1-sigma itself (null: unbounded).
+      const auto bound = [](const SourceRequirement& r, double sigma) {
+        const bool bounded = std::isfinite(r.max_factor);
+        json out = {{"max_factor", bounded ? json(r.max_factor) : json(nullptr)},
+                    {"limiting", bounded ? json(r.limiting) : json(nullptr)}};
+        if (sigma > 0) out["max_sigma"] = bounded ? json(sigma * r.max_factor) : json(nullptr);
+        return out;
+      };
+      json sources = json::array();
+      for (const StagePrediction::Requirement& r : s.requirements)
+        sources.push_back({{"source", r.source}, {"sigma", r.sigma}, {"alone", bound(r.alone, r.sigma)},
+                           {"with_others", bound(r.with_others, r.sigma)}});
+      e["requirements"] = {{"limits", stage1_limits()}, {"sources", sources},
+                           {"whole_table", s.whole_table ? bound(*s.whole_table, 0.0) : json(nullptr)}};
+    }
     st[s.stage] = e;
   }
   const auto list = [](const std::vector<Weak>& v) {

@@ -15,8 +15,11 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "core/recording.hpp"
+#include "core/table.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
+#include "plan/budget.hpp"
 
 namespace imucal::plan {
 
@@ -33,6 +36,12 @@ struct Options {
   // (settings.navigation: attitude, velocity and position noise), which bounds what stage 3 can
   // see of the delays and proof masses. The defaults are a real table's (docs/stage3.md).
   pipeline::Settings settings;
+  // The bench the program runs on, as its runs record it: the table's certificate (its 1-sigma
+  // puts the table's errors in stage 1's budget; its geometry, when given, moves the simulated
+  // table and the reference removes it) and the site (a measured g: gravity_mps2). The defaults:
+  // an ideal table of unknown uncertainty (no table sources) at the simulator's site, normal gravity.
+  std::optional<table::TableCertificate> table;
+  Site site;
   // Called with the fraction done (0..1) as the simulated runs are read; may throw to cancel.
   std::function<void(double fraction)> progress;
 };
@@ -50,6 +59,20 @@ struct StagePrediction {
   std::string message;
   std::optional<ImuModel> model;  // its sigma section is the prediction (instrument frame for direct)
   nlohmann::json history;         // navigation: {"t_s": [...], "sigma": {coefficient: [...]}}
+  // Stage 1 (issue 34): the model's budget per coefficient with its dominant source, and the
+  // bench's requirements for stage 1's limits (direct::Limits): per bench source of the budget,
+  // its 1-sigma here and the largest at which every coefficient still meets its limit. Stage 3's
+  // requirements (the table-attitude sigma it is told) are not predicted yet: empty there.
+  std::vector<CoefficientBudget> budget;
+  struct Requirement {
+    std::string source;             // "table.outer_tilt_arcsec", "site.gravity_mps2"
+    double sigma = 0.0;             // its 1-sigma in this prediction, its unit (arcsec; m/s^2)
+    SourceRequirement alone;        // scaled, the other bench sources taken out (its own limit)
+    SourceRequirement with_others;  // scaled, the other bench sources as they are
+  };
+  std::vector<Requirement> requirements;
+  // Every table source scaled by one factor (the certificate as a whole), the site's g taken out.
+  std::optional<SourceRequirement> whole_table;
 };
 
 struct Prediction {
@@ -63,6 +86,11 @@ struct Prediction {
   std::vector<Weak> from_model;
   nlohmann::json to_json() const;
 };
+
+// A certificate stating `sigma_arcsec` for every parameter of the table's geometry and a first and
+// a second encoder harmonic of that amplitude on each axis, no values (`imucal plan
+// --table-sigma-arcsec`): the question "what if my table were certified to this?".
+table::TableCertificate uniform_table_certificate(double sigma_arcsec);
 
 // `imu`: the unit's model, its `noise` section required (the prediction scales with it); for a
 // program without stage 1 (navigation alone) it is also the model stage 3 starts from.

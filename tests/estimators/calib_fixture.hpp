@@ -11,6 +11,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
+#include "estimators/direct_calibration.hpp"
 
 namespace imucal::calibtest {
 
@@ -37,9 +38,9 @@ inline ImuModel random_stage1_imu(unsigned seed) {
   return m;
 }
 
-struct Limits {
-  double gyro_bias_dph, gyro_scale_ppm, gyro_angle_arcsec, accel_bias_mps2, accel_scale_ppm, accel_angle_arcsec;
-};
+// Limits by group: gyro bias deg/h, scale ppm, angles arcsec; accelerometer bias m/s^2, scale ppm,
+// angles arcsec.
+using Limits = direct::Limits;
 
 // Every coefficient within its limit and within 3 of its own sigma; prints a table of errors.
 inline void expect_within(const ImuModel& truth, const ImuModel& est, const Limits& lim, bool check_sigma = true) {
@@ -77,7 +78,7 @@ inline void expect_within(const ImuModel& truth, const ImuModel& est, const Limi
   }
 }
 
-inline const Limits kStage1Limits{0.002, 0.5, 0.3, 1e-5, 1.5, 0.5};
+inline const Limits kStage1Limits{};  // stage 1's own (direct::Limits)
 
 // |error| / sigma of the 27 linear coefficients stage 1 estimates: per axis gyro bias, scale +,
 // scale -, accelerometer bias, scale; then per angle gyro, accelerometer.

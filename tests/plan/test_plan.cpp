@@ -12,6 +12,7 @@
 #include "motion_programs/program.hpp"
 #include "plan/optimize.hpp"
 #include "plan/plan.hpp"
+#include "core/units.hpp"
 
 using namespace imucal;
 using nlohmann::json;
@@ -144,4 +145,76 @@ TEST(Plan, TheNonlinearTermsTheProgramDoesNotDetermineAreNamed) {
   const double with_k2 = k2_sigma->accel.bias_mps2.maxCoeff();
   const double without = plain_sigma->accel.bias_mps2.maxCoeff();
   EXPECT_LT(with_k2, 1.5 * without) << with_k2 << " against " << without;
+}
+
+// Issue 34: the budget's arithmetic. One coefficient, gyro bias x, with 0.001 deg/h of its own
+// (type A), 0.002 from the middle axis and 0.001 from the site's g: combined sqrt(6) 1e-3 deg/h,
+// dominated by the middle axis; against stage 1's 0.002 deg/h, the middle axis alone (the g taken
+// out) may grow to sqrt(0.002^2 - 0.001^2) / 0.002 = 0.866 of its sigma, with the g as it is to
+// sqrt(0.002^2 - 0.001^2 - 0.001^2) / 0.002 = 0.707; the g with the table as it is: none suffices
+// (0.001^2 + 0.002^2 > 0.002^2 already); a source the budget does not list: unbounded.
+TEST(PlanBudget, DominantSourceAndRequirementsFollowFromTheContributions) {
+  ImuModel m;
+  ImuErrorSet sigma, type_a, middle, g;
+  type_a.gyro.bias_radps.x() = 0.001 * units::kDphToRadps;
+  middle.gyro.bias_radps.x() = 0.002 * units::kDphToRadps;
+  g.gyro.bias_radps.x() = 0.001 * units::kDphToRadps;
+  sigma.gyro.bias_radps.x() = std::sqrt(6.0) * 1e-3 * units::kDphToRadps;
+  m.sigma = sigma;
+  m.budget = {{"type_a", type_a}, {"table.middle_axis_arcsec", middle}, {"site.gravity_mps2", g}};
+  const std::vector<plan::CoefficientBudget> b = plan::coefficient_budgets(m);
+  ASSERT_EQ(b.size(), 1u);
+  EXPECT_EQ(b[0].key, "gyro.bias_dph.x");
+  EXPECT_EQ(b[0].group, "gyro.bias_dph");
+  EXPECT_EQ(b[0].dominant, "table.middle_axis_arcsec");
+  EXPECT_NEAR(b[0].contributions.at("type_a"), 0.001, 1e-12);
+  const plan::Targets limits = plan::stage1_limits();
+  EXPECT_EQ(limits.at("gyro.bias_dph"), 0.002);
+  const plan::SourceRequirement alone = plan::source_requirement(b, limits, {"table.middle_axis_arcsec"}, {"site.gravity_mps2"});
+  EXPECT_NEAR(alone.max_factor, std::sqrt(3.0) / 2.0, 1e-9);
+  EXPECT_EQ(alone.limiting, "gyro.bias_dph.x");
+  EXPECT_NEAR(plan::source_requirement(b, limits, {"table.middle_axis_arcsec"}).max_factor, std::sqrt(2.0) / 2.0, 1e-9);
+  EXPECT_EQ(plan::source_requirement(b, limits, {"site.gravity_mps2"}).max_factor, 0.0);  // the table exceeds alone
+  EXPECT_TRUE(std::isinf(plan::source_requirement(b, limits, {"table.outer_tilt_arcsec"}).max_factor));
+}
+
+// Issue 34: plan predicts stage 1 with the table's certificate in its budget, names each
+// coefficient's dominant source, and states the certificate the bench needs. Computed, not
+// guessed: predicted again with the certificate scaled by the factor it states, the worst
+// coefficient lands on its limit.
+TEST(PlanBudget, TheTableItNeedsMeetsTheLimitsExactly) {
+  const motion::Program program = motion::load_program("direct-short", motion::TableLimits{});
+  plan::Options opt;
+  opt.rate_hz = 20.0;
+  opt.table = plan::uniform_table_certificate(1.0);
+  const plan::Prediction p = plan::predict(program, nav_grade(), opt);
+  const json j = p.to_json();
+  const json& direct = j.at("stages").at("direct");
+  ASSERT_TRUE(direct.contains("budget")) << direct.dump().substr(0, 400);
+  const json& bias = direct.at("budget").at("gyro.bias_dph.x");
+  EXPECT_EQ(bias.at("dominant"), "table.middle_axis_arcsec");
+  EXPECT_NEAR(bias.at("combined").get<double>(), direct.at("estimates").at("gyro.bias_dph.x").at(1).get<double>(), 1e-9);
+  // Normal gravity (3e-4 m/s^2, 30 ppm) dominates the accelerometers' scale factors.
+  EXPECT_EQ(direct.at("budget").at("accel.scale_ppm.x").at("dominant"), "site.gravity_mps2");
+  const json& req = direct.at("requirements");
+  EXPECT_EQ(req.at("sources").size(), 7u);  // six table classes and the g
+  for (const json& r : req.at("sources")) {
+    EXPECT_GT(r.at("sigma").get<double>(), 0.0) << r.dump();
+    EXPECT_GT(r.at("alone").at("max_factor").get<double>(), 0.0) << r.dump();
+  }
+  const double factor = req.at("whole_table").at("max_factor").get<double>();
+  ASSERT_GT(factor, 0.0);
+  ASSERT_LT(factor, 1.0);  // a 1" table is not good enough for stage 1's limits on this program
+
+  // The g taken out (the whole-table figure's premise), the certificate scaled by the factor.
+  opt.table = plan::uniform_table_certificate(factor);
+  opt.settings.direct.gravity_sigma_mps2 = 0.0;
+  const plan::Prediction at = plan::predict(program, nav_grade(), opt);
+  double worst = 0.0;
+  const plan::Targets limits = plan::stage1_limits();
+  ASSERT_FALSE(at.stages.front().budget.empty());
+  for (const plan::CoefficientBudget& c : at.stages.front().budget)
+    worst = std::max(worst, c.combined / limits.at(c.group));
+  EXPECT_NEAR(worst, 1.0, 0.01);
+  EXPECT_EQ(at.stages.front().requirements.size(), 6u);  // the table's six classes, no g
 }
