@@ -1237,10 +1237,15 @@ HttpReply Api::plan_campaign(const ApiRequest& request) {
   }
   if (!problems.empty()) return error_reply(422, problems.front(), {{"problems", problems}});
   const motion::Program program = compile_campaign_program(*check.spec, config_);
-  auto compute = [program, unit, rate_hz](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+  // The bench as its runs record it: the table's certificate (stage 1's budget and the table it
+  // needs) and the site (a configured g is a measured one).
+  auto compute = [program, unit, rate_hz, table = config_.table_certificate,
+                  site = config_.site](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
     plan::Options o;
     o.rate_hz = rate_hz;
     o.progress = progress;
+    o.table = table;
+    o.site = site;
     try {
       return {200, plan::predict(program, unit, o).to_json()};
     } catch (const std::invalid_argument& e) {

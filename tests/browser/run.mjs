@@ -515,7 +515,10 @@ try {
   const pdfFile = path.join(outDir, `certificate-campaign-${id}.pdf`);
   await cert.pdf({ path: pdfFile, format: 'A4', printBackground: true, preferCSSPageSize: true });
   const pdfPages = (fs.readFileSync(pdfFile, 'latin1').match(/\/Type\s*\/Page\b/g) || []).length;
-  assert.equal(pdfPages, 1, 'the certificate of a direct run prints on one A4 page');
+  // The coefficients on one A4 page, the uncertainty budget (issue 34) on a second.
+  assert.equal(pdfPages, 2, 'the certificate of a direct run prints on one A4 page, its budget on a second');
+  const budgetCells = await cert.$$eval('#certificate-budget tr[data-key="gyro.bias_dph.x"] td.num', (tds) => tds.length);
+  assert.ok(budgetCells >= 3, 'the budget shows gyro bias x: type A, the site\'s g, u and U');
   await cert.close();
   log(`certificate ${certNumber} rendered, printed to one A4 page and saved as self-contained HTML`);
 

@@ -391,3 +391,49 @@ test('positions are edited one per line and read back either way', async () => {
   assert.equal(text.split('\n').length, 12, 'one line per position');
   assert.deepEqual(parseField(field, text).value, twelve);
 });
+
+test('the builder\'s prediction with stage 1\'s budget: the dominant source and the bench it needs (issue 34)', async () => {
+  const { dominantSources, benchRequirements } = await import('../../web/js/plan.mjs');
+  const { sourceName } = await import('../../web/js/budget.mjs');
+  const prediction = { stages: { direct: {
+    budget: { 'gyro.bias_dph.x': { combined: 0.005, dominant: 'table.middle_axis_arcsec',
+      contributions: { type_a: 0.003, 'table.middle_axis_arcsec': 0.004 } } },
+    requirements: { limits: { 'gyro.bias_dph': 0.002 }, sources: [
+      { source: 'table.middle_axis_arcsec', sigma: 1, alone: { max_factor: 0.0296, max_sigma: 0.0296, limiting: 'gyro.bias_dph.x' },
+        with_others: { max_factor: 0, max_sigma: 0, limiting: 'gyro.bias_dph.x' } }],
+    whole_table: { max_factor: 0.5, limiting: 'gyro.bias_dph.x' } } } } };
+  const d = dominantSources(prediction).get('gyro.bias_dph.x');
+  assert.equal(d.source, 'table.middle_axis_arcsec');
+  assert.ok(Math.abs(d.share - 0.64) < 1e-12);
+  assert.equal(sourceName(d.source), 'Table: middle axis');
+  assert.equal(sourceName('type_a'), 'Measurement (type A)');
+  assert.equal(sourceName('start_model.accel.k2_ug_per_g2'), 'Start model: accel.k2_ug_per_g2');
+  const r = benchRequirements(prediction);
+  assert.equal(r.sources[0].alone.maxSigma, 0.0296);
+  assert.equal(r.sources[0].withOthers.maxFactor, 0);
+  assert.equal(r.wholeTable.maxFactor, 0.5);
+  assert.equal(benchRequirements({ stages: { navigation: {} } }), null);
+  assert.equal(dominantSources({}).size, 0);
+});
+
+test('certificate budget: one column per source, type A first, each coefficient\'s contributions and its dominant source', async () => {
+  const { budgetTable } = await import('../../web/js/budget.mjs');
+  const model = {
+    gyro: { bias_dph: [0.01, 0, 0] },
+    sigma: { gyro: { bias_dph: [0.005, 0.001, 0] }, accel: { scale_ppm: [30, 0, 0] } },
+    budget: {
+      'site.gravity_mps2': { gyro: { bias_dph: [0, 0, 0] }, accel: { scale_ppm: [30, 0, 0] } },
+      'table.middle_axis_arcsec': { gyro: { bias_dph: [0.004, 0, 0] } },
+      type_a: { gyro: { bias_dph: [0.003, 0.001, 0] }, accel: { scale_ppm: [0.2, 0, 0] } },
+      'table.inner_axis_arcsec': { gyro: { bias_dph: [0, 0, 0] } },
+    },
+  };
+  const t = budgetTable(model);
+  assert.deepEqual(t.sources, ['type_a', 'table.middle_axis_arcsec', 'site.gravity_mps2'], 'a source of zeros only is left out');
+  assert.deepEqual(t.rows.map((r) => r.key), ['gyro.bias_dph.x', 'gyro.bias_dph.y', 'accel.scale_ppm.x']);
+  assert.equal(t.rows[0].dominant, 'table.middle_axis_arcsec');
+  assert.equal(t.rows[0].u, 0.005);
+  assert.deepEqual(t.rows[1].contributions, { type_a: 0.001 });
+  assert.equal(t.rows[2].dominant, 'site.gravity_mps2');
+  assert.deepEqual(budgetTable({ sigma: {} }), { sources: [], rows: [] });
+});

@@ -11,6 +11,8 @@ import {
   certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText,
   roundedNumbers, UNCERTAINTY_TEXT, COVERAGE_K, NOT_DETERMINED,
 } from './certificate_rows.mjs';
+import { budgetTable, sourceName } from './budget.mjs';
+import { coefficientName, unitOf } from './coefficients.mjs';
 
 const sheet = document.getElementById('certificate');
 const message = document.getElementById('toolbar-message');
@@ -66,6 +68,25 @@ function coefficientTable(rows, judged) {
   }
   return h('table', { class: judged ? 'coefficients judged' : 'coefficients', id: 'certificate-coefficients' },
     h('thead', {}, h('tr', {}, ...head.map((t, i) => h('th', { class: i >= 1 && i <= 3 ? 'num' : null }, t)))), body);
+}
+
+// The uncertainty budget (the model's `budget`): per coefficient each source's standard
+// uncertainty, their root-sum-square u and U = k u; null when the model states none.
+function budgetSection(model) {
+  const t = budgetTable(model);
+  if (!t.rows.length) return null;
+  const two = (v) => (typeof v === 'number' ? Number(v.toPrecision(2)).toString() : '—');
+  const head = ['Coefficient', 'Unit', ...t.sources.map(sourceName), 'u (k = 1)', `U (k = ${COVERAGE_K})`];
+  const body = h('tbody', {}, ...t.rows.map((r) => h('tr', { dataset: { key: r.key } },
+    h('td', { class: 'name' }, coefficientName(r.key)), h('td', {}, unitOf(r.key)),
+    ...t.sources.map((s) => h('td', { class: `num${s === r.dominant ? ' dominant' : ''}`, dataset: { source: s } },
+      s in r.contributions ? two(r.contributions[s]) : '')),
+    h('td', { class: 'num' }, two(r.u)), h('td', { class: 'num' }, r.u === null ? '—' : two(COVERAGE_K * r.u)))));
+  return [h('h2', { class: 'budget-head' }, 'Uncertainty budget'),
+    h('p', { class: 'small' }, 'Each source\'s standard uncertainty (k = 1) per coefficient, in the coefficient\'s unit, ' +
+      'computed from its sensitivity; u is their root-sum-square. The largest of each row is marked.'),
+    h('table', { class: 'coefficients budget', id: 'certificate-budget' },
+      h('thead', {}, h('tr', {}, ...head.map((x, i) => h('th', { class: i >= 2 ? 'num' : null }, x)))), body)];
 }
 
 function factsTable(facts) {
@@ -130,6 +151,8 @@ function render(d, model, status, cert) {
     h('div', { class: 'conventions', id: 'certificate-conventions' }, ...conventionsText(model.frame).map((t) => h('p', {}, t))),
     h('div', { class: 'signatures' },
       h('div', {}, h('span', { class: 'line' }), 'Operator'), h('div', {}, h('span', { class: 'line' }), 'Checked by'), h('div', {}, h('span', { class: 'line' }), 'Date')),
+    // The budget behind u, an annex on a page of its own.
+    ...(budgetSection(model) || []),
     h('footer', {}, `Certificate ${number}, issued ${dateTime(cert.issued)} by imucal for campaign ${d.id}; printed ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.`));
   sheet.dataset.ready = 'true';
 }

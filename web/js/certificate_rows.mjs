@@ -162,9 +162,10 @@ export function gravityStatement(g) {
 
 /** The uncertainty statement beside the coefficient table. */
 export const UNCERTAINTY_TEXT =
-  `u (k = 1): standard uncertainty, the estimator's 1 σ from its covariance; U = k · u: expanded uncertainty with ` +
-  `coverage factor k = ${COVERAGE_K} (about 95 % for a normal distribution). Both state this calibration's random error ` +
-  'only, not the reference equipment\'s. "Not determined": this run did not estimate the coefficient.';
+  `u (k = 1): combined standard uncertainty, the estimator's own 1 σ (type A) combined with the type B sources its ` +
+  `stage computes (the rate table's certificate, the site's gravity, the start model's terms; the budget below, ` +
+  `where the model states one); U = k · u: expanded uncertainty with coverage factor k = ${COVERAGE_K} (about 95 % for ` +
+  'a normal distribution). "Not determined": this run did not estimate the coefficient.';
 
 /** The conventions, stated on the certificate itself (the model's frame: "instrument" or "body"). */
 export function conventionsText(frame) {

@@ -56,3 +56,32 @@ export function summary(rows) {
   const worst = judged.reduce((w, r) => (w === null || r.ratio > w.ratio ? r : w), null);
   return { met: judged.filter((r) => r.meets).length, judged: judged.length, worst };
 }
+
+/**
+ * Stage 1's dominant source per coefficient from the prediction's budget (issue 34):
+ * name -> {source, share} (share: its part of u², 0..1); empty without a budget.
+ */
+export function dominantSources(prediction) {
+  const out = new Map();
+  for (const [name, b] of Object.entries(prediction?.stages?.direct?.budget || {})) {
+    const x = b.contributions?.[b.dominant];
+    if (typeof x === 'number' && b.combined > 0) out.set(name, { source: b.dominant, share: (x * x) / (b.combined * b.combined) });
+  }
+  return out;
+}
+
+/**
+ * What the bench must give for stage 1's limits (the prediction's stages.direct.requirements):
+ * {sources: [{source, sigma, alone, withOthers}], wholeTable} with each bound
+ * {maxSigma, maxFactor, limiting} (maxSigma null: no limit; maxFactor 0: none suffices, the
+ * coefficient `limiting` exceeds its limit without the source); null without requirements.
+ */
+export function benchRequirements(prediction) {
+  const req = prediction?.stages?.direct?.requirements;
+  if (!req) return null;
+  const bound = (b) => ({ maxSigma: b?.max_sigma ?? null, maxFactor: b?.max_factor ?? null, limiting: b?.limiting ?? null });
+  return {
+    sources: (req.sources || []).map((r) => ({ source: r.source, sigma: r.sigma, alone: bound(r.alone), withOthers: bound(r.with_others) })),
+    wholeTable: req.whole_table ? bound(req.whole_table) : null,
+  };
+}

@@ -9,7 +9,8 @@ import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog } from '../dialogs.mjs';
 import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical, campaignFieldLabel, problemForPeople } from '../program_edit.mjs';
-import { SEED_TARGETS, predictionRows, summary } from '../plan.mjs';
+import { SEED_TARGETS, predictionRows, summary, dominantSources, benchRequirements } from '../plan.mjs';
+import { sourceName } from '../budget.mjs';
 
 const DRAFT_KEY = 'imucal.builder.draft';
 // The prediction's unit noise and targets outlive a draft: they describe the lab's units.
@@ -56,6 +57,8 @@ export function mount(root, ctx) {
   const planStatus = h('p', { class: 'plan-status', id: 'plan-status', 'aria-live': 'polite' }, 'Predicted once the campaign is valid.');
   const planBody = h('tbody', { id: 'plan-rows' });
   const planWeak = h('ul', { class: 'problems', id: 'plan-weak' });
+  // Stage 1's budget (issue 34): the table accuracy the program needs for stage 1's limits.
+  const planBench = h('div', { id: 'plan-bench' });
   const planNoise = h('div', { class: 'grid-form', id: 'plan-noise' },
     h('label', { for: 'plan-arw' }, 'Gyro ARW, deg/√h'),
     h('input', { id: 'plan-arw', inputmode: 'decimal', value: String(planSettings.arw_deg_rth), onchange: planInputChanged }),
@@ -97,8 +100,9 @@ export function mount(root, ctx) {
           planNoise, planTargets),
         h('table', { class: 'plan-table', id: 'plan-table' },
           h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
-            h('th', {}, 'Stage'))),
+            h('th', {}, 'Stage'), h('th', {}, 'Limited by'))),
           planBody),
+        planBench,
         planWeak)));
 
   createButton.addEventListener('click', () => submit(false));
@@ -710,6 +714,7 @@ export function mount(root, ctx) {
       lastPrediction = null;
       clear(planBody);
       clear(planWeak);
+      clear(planBench);
       planStatus.dataset.state = 'error';
       planStatus.textContent = `No prediction: ${e.message}`;
     }
@@ -722,16 +727,40 @@ export function mount(root, ctx) {
     planStatus.textContent = `${duration(p.duration_s)} of program at ${num(p.rate_hz, 3)} Hz: ${s.met} of ${s.judged} targets met` +
       (s.worst && !s.worst.meets ? `; worst ${s.worst.name} at ${num(s.worst.ratio, 2)}× its target.` : '.');
     clear(planBody);
-    for (const row of rows)
+    const dominant = dominantSources(p);
+    for (const row of rows) {
+      // Stage 1's dominant source (stage 3's budget is not predicted yet).
+      const d = row.stage === 'direct' ? dominant.get(row.name) : null;
       planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name } },
         h('td', {}, row.name), h('td', { class: 'num' }, num(row.sigma, 3)),
-        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage)));
+        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage),
+        h('td', { class: 'dominant' }, d ? `${sourceName(d.source)} (${Math.round(100 * d.share)} %)` : '')));
+    }
+    renderBench(benchRequirements(p));
     clear(planWeak);
     for (const w of p.weak || [])
       planWeak.append(h('li', { class: 'problem' }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
     // The nonlinear terms the program does not determine: taken from the model, said as such.
     for (const w of p.from_model || [])
       planWeak.append(h('li', { class: 'from-model', dataset: { coefficient: w.coefficient } }, `${w.coefficient}: ${w.why}; to determine it, ${w.fix}`));
+  }
+
+  // The bench for stage 1's limits: per source its 1-sigma and the largest that still meets them.
+  function renderBench(req) {
+    clear(planBench);
+    if (!req) return;
+    const text = (b) => (b.maxSigma === null && b.maxFactor === null ? 'no limit'
+      : b.maxFactor === 0 ? `none suffices (${b.limiting})` : `≤ ${num(b.maxSigma ?? b.maxFactor, 3)} (${b.limiting})`);
+    planBench.append(h('h3', {}, 'Bench for stage 1\'s limits'),
+      req.sources.length === 0
+        ? h('p', { class: 'hint' }, 'No table certificate in imucald\'s configuration (table): the table\'s errors are not in the budget.')
+        : h('table', { class: 'plan-table', id: 'plan-bench-table' },
+          h('thead', {}, h('tr', {}, h('th', {}, 'Source'), h('th', { class: 'num' }, '1σ'), h('th', {}, 'Alone'), h('th', {}, 'With the others'))),
+          h('tbody', {}, ...req.sources.map((r) => h('tr', { dataset: { source: r.source } },
+            h('td', {}, sourceName(r.source)), h('td', { class: 'num' }, num(r.sigma, 3)), h('td', {}, text(r.alone)), h('td', {}, text(r.withOthers)))))),
+      req.wholeTable ? h('p', { class: 'hint', id: 'plan-whole-table' },
+        `The whole table certificate scaled together (no g error): ${req.wholeTable.maxFactor === null ? 'no limit' : `at most ${num(req.wholeTable.maxFactor, 3)}× (${req.wholeTable.limiting})`}.`) : null,
+      h('p', { class: 'hint' }, 'Stage 3\'s requirements: not predicted yet.'));
   }
 
   function renderVerdict() {
