@@ -3,6 +3,11 @@
 // with its geometry.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
 #include "core/units.hpp"
 #include "service_fixture.hpp"
 #include "storage/run_db.hpp"
@@ -62,4 +67,45 @@ TEST(Sequencer, ARunRecordsTheTablesCertificate) {
   const Eigen::Vector3d enc_rad = frames.front().table_deg * units::kDegToRad;
   EXPECT_GT((k.true_angles_rad(enc_rad) - enc_rad).cwiseAbs().maxCoeff(), 0.1 * units::kArcsecToRad);
   EXPECT_EQ(c.at("results").at("direct").at("status"), "done");
+  // The model the certificate is printed from (GET .../model) carries stage 1's budget: the
+  // certified tilt's contribution beside the fit's own, the site's g (normal gravity here), and
+  // its sigma the root-sum-square of them (the certificate's u; U = 2u).
+  const json model = d.get("/api/campaigns/" + std::to_string(id) + "/model");
+  ASSERT_TRUE(model.contains("budget")) << model.dump().substr(0, 300);
+  const json& budget = model.at("budget");
+  for (const char* source : {"type_a", "table.outer_tilt_arcsec", "site.gravity_mps2"})
+    EXPECT_TRUE(budget.contains(source)) << source << " missing from " << budget.dump().substr(0, 300);
+  double sum_sq = 0.0;
+  for (const auto& [source, set] : budget.items()) {
+    const double x = set.at("gyro").at("bias_dph").at(0).get<double>();
+    sum_sq += x * x;
+  }
+  EXPECT_NEAR(std::sqrt(sum_sq), model.at("sigma").at("gyro").at("bias_dph").at(0).get<double>(), 1e-9);
+  EXPECT_GT(budget.at("table.outer_tilt_arcsec").at("accel").at("bias_mps2").at(0).get<double>(), 0.0);
+}
+
+// The builder's prediction on this bench (issue 34): POST /api/campaigns/plan simulates the runs
+// with the configured table certificate, so stage 1's budget has the table's sources, each
+// coefficient its dominant one, and the requirements the certified tilt.
+TEST(Plan, TheBuildersPredictionCarriesTheTablesCertificate) {
+  const daemon::DaemonConfig from_file = daemon::parse_config(kTableConfig, "test");
+  LocalDaemon d("table-plan", false, [&](daemon::DaemonConfig& c) { c.table_certificate = from_file.table_certificate; });
+  const std::string body =
+      R"({"name": "p", "program": "direct-short", "rate_hz": 20, "plan": {"arw_deg_rth": 0.0005, "vrw_mps_rth": 0.002}})";
+  daemon::HttpReply r = d.call("POST", "/api/campaigns/plan", body);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (r.status == 202 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    r = d.call("POST", "/api/campaigns/plan", body);
+  }
+  ASSERT_EQ(r.status, 200) << r.body;
+  const json direct = json::parse(r.body).at("stages").at("direct");
+  ASSERT_TRUE(direct.contains("budget")) << direct.dump().substr(0, 300);
+  EXPECT_TRUE(direct.at("budget").at("accel.bias_mps2.x").at("contributions").contains("table.outer_tilt_arcsec"));
+  const json& sources = direct.at("requirements").at("sources");
+  const auto tilt = std::find_if(sources.begin(), sources.end(),
+                                 [](const json& s) { return s.at("source") == "table.outer_tilt_arcsec"; });
+  ASSERT_NE(tilt, sources.end()) << sources.dump();
+  EXPECT_NEAR(tilt->at("sigma").get<double>(), 0.2, 1e-9);  // the certificate's
+  EXPECT_GT(tilt->at("alone").at("max_sigma").get<double>(), 0.0);
 }
