@@ -97,6 +97,9 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
   if (!p.from_model.empty()) std::printf("taken from the model (nonlinear terms this program does not determine):\n");
   for (const plan::Weak& w : p.from_model)
     std::printf("  %s: %s; to determine it, %s\n", w.coefficient.c_str(), w.why.c_str(), w.fix.c_str());
+  if (!p.short_of_needs.empty()) std::printf("short of the unit's needs:\n");
+  for (const plan::Weak& w : p.short_of_needs)
+    std::printf("  %s %s: %s; needs %s\n", w.stage.c_str(), w.coefficient.c_str(), w.why.c_str(), w.fix.c_str());
   if (!json_out.empty()) {
     std::ofstream out(json_out);
     out << j.dump(1) << "\n";

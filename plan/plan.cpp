@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/coefficients.hpp"
 #include "core/units.hpp"
+#include "plan/optimize.hpp"
 #include "sim/simulator.hpp"
 #include "estimators/nav_filter.hpp"
 #include "pipeline/pipeline.hpp"
@@ -83,6 +85,7 @@ const char* stage_key(pipeline::Stage s) {
   switch (s) {
     case pipeline::Stage::Direct: return "direct";
     case pipeline::Stage::LeverArm: return "lever-arm";
+    case pipeline::Stage::Tumble: return "tumble";
     case pipeline::Stage::Navigation: return "navigation";
     default: return "other";
   }
@@ -118,11 +121,54 @@ std::vector<ImuFrame> simulate(const motion::Program& program, const ImuModel& i
   return frames;
 }
 
+// The seed's bias figures (method.md, stage 3; optimize.hpp seed_targets): what a nonlinear
+// term's uncertainty at 1 g is measured against.
+Targets seed_bias_targets() {
+  const Targets seed = seed_targets();
+  return {{"gyro.bias_dph", seed.at("gyro.bias_dph")}, {"accel.bias_mps2", seed.at("accel.bias_mps2")}};
+}
+
 bool has_noise(const ImuModel& m) {
   return m.gyro.noise.arw_rad_rts > 0 || m.accel.noise.vrw_mps_rts > 0;
 }
 
 }  // namespace
+
+std::vector<Weak> nonlinear_shortfall(const ImuModel& tumble_model, const Targets& bias) {
+  // A term's sigma at 1 g is a bias error of that size wherever the unit meets 1 g (CONVENTIONS.md,
+  // "Nonlinear terms": K2 f^2/g, K3 f^3/g^2, G f/g): ug -> m/s^2, deg/h/g -> deg/h.
+  struct Term {
+    const char* prefix;
+    const char* bias_group;
+    double to_bias;  // the term's sigma times this is the bias error at 1 g, in the bias's unit
+    const char* unit;
+    const char* bias_unit;
+  };
+  const Term terms[] = {
+      {"accel.k2_ug_per_g2.", "accel.bias_mps2", 1e-6 * units::kStandardGravity_mps2, "ug/g^2", "m/s^2"},
+      {"accel.k3_ug_per_g3.", "accel.bias_mps2", 1e-6 * units::kStandardGravity_mps2, "ug/g^3", "m/s^2"},
+      {"gyro.g_sensitivity_dph_per_g.", "gyro.bias_dph", 1.0, "deg/h/g", "deg/h"}};
+  std::vector<Weak> out;
+  for (const Coefficient& c : model_coefficients(tumble_model))
+    for (const Term& t : terms) {
+      const auto target = bias.find(t.bias_group);
+      if (c.key.rfind(t.prefix, 0) != 0 || target == bias.end() || !(c.sigma > 0)) continue;
+      const double at_1g = c.sigma * t.to_bias;
+      if (at_1g <= target->second) continue;
+      char why[200];
+      std::snprintf(why, sizeof why, "sigma %.3g %s: at 1 g a bias error of %.3g %s, %.1fx the seed's %.3g", c.sigma,
+                    t.unit, at_1g, t.bias_unit, at_1g / target->second, target->second);
+      // White noise over the statics: the sigma falls as one over the root of their total time.
+      const double ratio = at_1g / target->second;
+      char fix[200];
+      std::snprintf(fix, sizeof fix,
+                    "%.1fx the static time (the sigma falls as its root; 'tumble' has 24 statics of 36 s, "
+                    "'tumble-short' 12 of 20 s)",
+                    ratio * ratio);
+      out.push_back({"tumble", c.key, why, fix});
+    }
+  return out;
+}
 
 table::TableCertificate uniform_table_certificate(double sigma_arcsec) {
   const double s = sigma_arcsec * units::kArcsecToRad;
@@ -146,11 +192,12 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
 
   std::vector<pipeline::Stage> stages;
   for (const pipeline::Stage s : pipeline::stages_for_parts(meta))
-    if (s == pipeline::Stage::Direct || s == pipeline::Stage::LeverArm || s == pipeline::Stage::Navigation)
+    if (s == pipeline::Stage::Direct || s == pipeline::Stage::Tumble || s == pipeline::Stage::LeverArm ||
+        s == pipeline::Stage::Navigation)
       stages.push_back(s);
   if (stages.empty())
     throw std::invalid_argument("program '" + program.name +
-                                "' feeds no calibration stage (direct, lever-arm or navigation): nothing to predict");
+                                "' feeds no calibration stage (direct, tumble, lever-arm or navigation): nothing to predict");
   // Without stage 1 the later stages start from the unit's model (what stage 1 would have given).
   const bool with_direct = std::find(stages.begin(), stages.end(), pipeline::Stage::Direct) != stages.end();
   // Stage 1 from the unit's nonlinear terms, as a campaign gives it a tumble's and a rate-steps
@@ -249,6 +296,10 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
         listed = true;
       }
       if (!listed) p.weak.push_back({sp.stage, "(the stage)", o.message, "see why: it names the motion that is missing"});
+    }
+    if (o.stage == pipeline::Stage::Tumble && o.model) {
+      const std::vector<Weak> shortfall = nonlinear_shortfall(*o.model, seed_bias_targets());
+      p.short_of_needs.insert(p.short_of_needs.end(), shortfall.begin(), shortfall.end());
     }
     if (o.navigation) {
       const navfilter::Result& r = *o.navigation;
@@ -353,7 +404,8 @@ json Prediction::to_json() const {
     return w;
   };
   return {{"format", "imucal-plan/1"}, {"program", program}, {"duration_s", duration_s}, {"rate_hz", rate_hz},
-          {"stages", st}, {"weak", list(weak)}, {"from_model", list(from_model)}};
+          {"stages", st}, {"weak", list(weak)}, {"from_model", list(from_model)},
+          {"short_of_needs", list(short_of_needs)}};
 }
 
 }  // namespace imucal::plan

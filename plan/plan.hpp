@@ -84,8 +84,17 @@ struct Prediction {
   // The nonlinear terms no stage of the program determines (stage 1 and stage 3 take them from
   // the model), each with the program that would: why says whether the model given has it.
   std::vector<Weak> from_model;
+  // The nonlinear terms the program's tumble determines less well than the unit needs
+  // (nonlinear_shortfall against the seed's bias figures), each with the longer program.
+  std::vector<Weak> short_of_needs;
   nlohmann::json to_json() const;
 };
+
+// The tumble's terms whose uncertainty falls short of the unit's needs (issue 34): K2, K3 and the
+// g-sensitivity act as a bias of their size at 1 g, so a term whose sigma at 1 g exceeds the
+// bias figure of `bias` ("accel.bias_mps2", "gyro.bias_dph"; the seed's) leaves the unit a bias
+// error larger than it is calibrated to. One entry per such coefficient, stage "tumble".
+std::vector<Weak> nonlinear_shortfall(const ImuModel& tumble_model, const Targets& bias);
 
 // A certificate stating `sigma_arcsec` for every parameter of the table's geometry and a first and
 // a second encoder harmonic of that amplitude on each axis, no values (`imucal plan

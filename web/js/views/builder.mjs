@@ -743,6 +743,9 @@ export function mount(root, ctx) {
     // The nonlinear terms the program does not determine: taken from the model, said as such.
     for (const w of p.from_model || [])
       planWeak.append(h('li', { class: 'from-model', dataset: { coefficient: w.coefficient } }, `${w.coefficient}: ${w.why}; to determine it, ${w.fix}`));
+    // The tumble's terms determined less well than the unit needs (issue 34).
+    for (const w of p.short_of_needs || [])
+      planWeak.append(h('li', { class: 'problem short-of-needs', dataset: { coefficient: w.coefficient } }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
   }
 
   // The bench for stage 1's limits: per source its 1-sigma and the largest that still meets them.
