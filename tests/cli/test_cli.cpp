@@ -270,3 +270,32 @@ TEST(Cli, SimulateOnAnImperfectTable) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("geometry.outer_tilt_arcsec[1]"), std::string::npos) << r.output;
 }
+
+// `imucal plan` on a bench (issue 34): the table's certificate from a recording's meta.json and a
+// measured g; each coefficient's dominant source beside its sigma, the bench's requirements for
+// stage 1's limits, the place of stage 3's, and the JSON with the same; the two table options
+// exclude each other.
+TEST(Cli, PlanNamesTheDominantSourceAndTheTableItNeeds) {
+  const fs::path dir = fresh_dir("cli-plan-bench");
+  const std::string out = (dir / "plan.json").string();
+  const CliRun r = run("plan --program direct-short --rate 20 --imu " IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json "
+                       "--table " IMUCAL_SOURCE_DIR "/tests/data/example-table/meta.json --gravity-sigma-mps2 1e-6 --json " +
+                       out);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("direct: dominant source (its share of u^2)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("table.middle_axis_arcsec ("), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("the bench for stage 1's limits"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("table.outer_tilt_arcsec            0.2"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("the whole table certificate scaled together"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("stage 3's requirements: not predicted yet"), std::string::npos) << r.output;
+  std::ifstream in(out);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  const nlohmann::json& direct = j.at("stages").at("direct");
+  EXPECT_EQ(direct.at("requirements").at("sources").size(), 7u);
+  EXPECT_EQ(direct.at("requirements").at("limits").at("gyro.bias_dph"), 0.002);
+  EXPECT_TRUE(direct.at("budget").at("gyro.bias_dph.x").contains("dominant"));
+  const CliRun both = run("plan --program direct-short --imu " IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json "
+                          "--table " IMUCAL_SOURCE_DIR "/tests/data/example-table/meta.json --table-sigma-arcsec 1");
+  EXPECT_NE(both.status, 0);
+  EXPECT_NE(both.output.find("excludes"), std::string::npos) << both.output;
+}
