@@ -421,15 +421,15 @@ std::map<std::string, ImuErrorSet> uncertainty_budget(const std::vector<Interval
   };
   for (int j = 0; j < 3; ++j)
     for (int k = 0; k < 3; ++k) {
-      start_term("start_model.gyro.scale_nonlinear_ppm", start_sigma.gyro.scale_nonlinear(j, k),
+      start_term(start_model_source::kGyroScaleNonlinear, start_sigma.gyro.scale_nonlinear(j, k),
                  [&](GyroErrors& g, AccelErrors&, double d) { g.scale_nonlinear(j, k) += d; });
-      start_term("start_model.gyro.g_sensitivity_dph_per_g", start_sigma.gyro.g_sensitivity_radps_per_g(j, k),
+      start_term(start_model_source::kGyroGSensitivity, start_sigma.gyro.g_sensitivity_radps_per_g(j, k),
                  [&](GyroErrors& g, AccelErrors&, double d) { g.g_sensitivity_radps_per_g(j, k) += d; });
     }
   for (int j = 0; j < 3; ++j) {
-    start_term("start_model.accel.k2_ug_per_g2", start_sigma.accel.k2_per_g[j],
+    start_term(start_model_source::kAccelK2, start_sigma.accel.k2_per_g[j],
                [&](GyroErrors&, AccelErrors& a, double d) { a.k2_per_g[j] += d; });
-    start_term("start_model.accel.k3_ug_per_g3", start_sigma.accel.k3_per_g2[j],
+    start_term(start_model_source::kAccelK3, start_sigma.accel.k3_per_g2[j],
                [&](GyroErrors&, AccelErrors& a, double d) { a.k3_per_g2[j] += d; });
   }
 

@@ -80,6 +80,15 @@ struct ReferenceSums {
   Eigen::Matrix3d nonlinear_moments_rad = Eigen::Matrix3d::Zero();
 };
 
+// The budget's names of the start model's terms a stage takes as known without estimating them
+// (CONVENTIONS.md, "Nonlinear terms"): stage 1's and stage 3's.
+namespace start_model_source {
+inline constexpr const char* kGyroScaleNonlinear = "start_model.gyro.scale_nonlinear_ppm";
+inline constexpr const char* kGyroGSensitivity = "start_model.gyro.g_sensitivity_dph_per_g";
+inline constexpr const char* kAccelK2 = "start_model.accel.k2_ug_per_g2";
+inline constexpr const char* kAccelK3 = "start_model.accel.k3_ug_per_g3";
+}  // namespace start_model_source
+
 // One type B source of the reference moved by its standard uncertainty (issue 34): the
 // recording's description with one table-geometry parameter (or one quadrature of an encoder
 // harmonic) or the site's g moved by its 1-sigma, and the budget source it counts under. The

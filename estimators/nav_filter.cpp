@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -58,6 +62,8 @@ auto seg(V& v, const Block& b) {
   return v.segment(b.index, b.size);
 }
 
+using ConsiderMatrix = Eigen::Matrix<double, kSize, Eigen::Dynamic>;
+
 }  // namespace
 
 StateVector model_to_state(const ImuModel& m) {
@@ -98,6 +104,38 @@ struct NavCalibrationFilter::Impl {
   std::deque<ImuFrame> window;
   std::unique_ptr<nav::Strapdown> nav;
 
+  // The type B sources as consider parameters (Options::type_b), each in units of its 1-sigma (their
+  // covariance is the identity): the budget source each counts under, the table's kinematics with
+  // it moved by its sigma (none for the site's g), and Pxp, the state's covariance with them. Their
+  // values never change (a Schmidt filter), so what the state learns of them stays in Pxp.
+  struct Consider {
+    std::vector<std::string> source;
+    std::vector<std::optional<table::TableKinematics>> moved_table;
+    table::TableKinematics table;  // the recording's, as the reference applies it
+    int gravity = -1;              // the column of the site's g, if considered
+    double gravity_sigma_mps2 = 0;
+    ConsiderMatrix Pxp;
+    // The start model's terms the filter compensates with and does not estimate (their sigma from
+    // the start model): they drive the attitude (gyro) or the velocity (accelerometers).
+    struct StartTerm {
+      enum Kind { kGyroScaleNonlinear, kGyroGSensitivity, kAccelK2, kAccelK3 } kind;
+      int column, j, k;  // channel j; k: the power's index (c1 c2 c3) or the force's axis
+      double sigma;
+    };
+    std::vector<StartTerm> start_terms;
+    int size() const { return static_cast<int>(source.size()); }
+    void add(const std::string& name) {
+      source.push_back(name);
+      moved_table.emplace_back(std::nullopt);
+    }
+  } consider;
+  // Over the propagation interval, for the start terms: column 3 (m-1) + j the integral of
+  // C_b_n[:, j] q_j^m w_j (gyro j's nonlinearity of power m); column 3 j + k that of C_b_n[:, j]
+  // f_k / g_std (g-sensitivity); column j that of C_b_n[:, j] a_j f_j and 3 + j of C_b_n[:, j] a_j^2
+  // f_j, a_j = f_j / g_std (K2, K3).
+  Mat<3, 9> S_Cq = Mat<3, 9>::Zero(), S_Cfg = Mat<3, 9>::Zero();
+  Mat<3, 6> S_Ca = Mat<3, 6>::Zero();
+
   StateVector x = StateVector::Zero();
   StateMatrix P = StateMatrix::Zero();
   StateVector sigma0;
@@ -128,7 +166,24 @@ struct NavCalibrationFilter::Impl {
         comp(compensated, 1.0 / m.rate_hz, o.max_delay_s),
         ref(m, model),
         dt_nominal_s(1.0 / m.rate_hz),
-        g_mps2(earth::site_gravity_mps2(m.site)) {
+        g_mps2(earth::site_gravity_mps2(m.site)),
+        consider{{}, {}, table_kinematics(m), -1, 0.0, ConsiderMatrix(kSize, 0), {}} {
+    if (o.type_b) {
+      // Stage 1's list of the reference's type B sources, read here for the table's attitude and g.
+      const double gravity_sigma_mps2 = o.gravity_sigma_mps2.value_or(earth::site_gravity_sigma_mps2(m.site));
+      for (const direct::ReferencePerturbation& p : direct::reference_perturbations(m, gravity_sigma_mps2)) {
+        if (p.source == "site.gravity_mps2") {
+          consider.add(p.source);
+          consider.gravity = consider.size() - 1;
+          consider.gravity_sigma_mps2 = gravity_sigma_mps2;
+        } else {
+          consider.source.push_back(p.source);
+          consider.moved_table.emplace_back(table_kinematics(p.meta));
+        }
+      }
+      add_start_terms(model.sigma.value_or(ImuErrorSet{}));
+      consider.Pxp = ConsiderMatrix::Zero(kSize, consider.size());
+    }
     model_at_start = model;
     if (auto section = thermal::thermal_of(model); section && section->has_models()) thermal_section = *section;
     for (const SegmentInfo& s : m.segments)
@@ -165,9 +220,47 @@ struct NavCalibrationFilter::Impl {
     result.sigma0 = s0;
   }
 
+  void add_start_terms(const ImuErrorSet& start_sigma) {
+    using Term = Consider::StartTerm;
+    namespace src = direct::start_model_source;
+    auto add = [&](const char* source, Term::Kind kind, int j, int k, double sigma) {
+      if (!(sigma > 0)) return;
+      consider.add(source);
+      consider.start_terms.push_back({kind, consider.size() - 1, j, k, sigma});
+    };
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) {
+        add(src::kGyroScaleNonlinear, Term::kGyroScaleNonlinear, j, k, start_sigma.gyro.scale_nonlinear(j, k));
+        add(src::kGyroGSensitivity, Term::kGyroGSensitivity, j, k, start_sigma.gyro.g_sensitivity_radps_per_g(j, k));
+      }
+    for (int j = 0; j < 3; ++j) {
+      add(src::kAccelK2, Term::kAccelK2, j, 0, start_sigma.accel.k2_per_g[j]);
+      add(src::kAccelK3, Term::kAccelK3, j, 0, start_sigma.accel.k3_per_g2[j]);
+    }
+  }
+
+  // How the table's attitude at these encoder angles moves (a rotation vector in n, rad) when each
+  // consider parameter moves by its sigma: column j. The rotation from the platform to the body
+  // frame is the same on both sides and cancels. Zero for the site's g. The velocity and position
+  // the table implies move too (the origin's offset turned by the error), by well under a micron
+  // for a few arc seconds: left out.
+  Eigen::Matrix<double, 3, Eigen::Dynamic> table_attitude_sensitivity(const ImuFrame& f) const {
+    Eigen::Matrix<double, 3, Eigen::Dynamic> G = Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, consider.size());
+    const Vector3d encoder_rad = f.table_deg * units::kDegToRad;
+    const Matrix3d C0 = consider.table.C_p_n(consider.table.true_angles_rad(encoder_rad));
+    for (int j = 0; j < consider.size(); ++j) {
+      const auto& moved = consider.moved_table[static_cast<std::size_t>(j)];
+      if (!moved) continue;
+      const Eigen::AngleAxisd aa(moved->C_p_n(moved->true_angles_rad(encoder_rad)) * C0.transpose());
+      G.col(j) = aa.angle() * aa.axis();
+    }
+    return G;
+  }
+
   // A restart takes the attitude from the table: its error is then the body alignment's error
-  // turned into n, plus the table's reading (C_hat = (I - [phi x]) C, phi = C_b_n delta + e).
-  void reset_navigation_covariance(const Matrix3d& C_b_n) {
+  // turned into n, plus the table's reading (C_hat = (I - [phi x]) C, phi = C_b_n delta + G0 p + e,
+  // G0 the table's sensitivity to the consider parameters p at the start, e its white error).
+  void reset_navigation_covariance(const Matrix3d& C_b_n, const Eigen::Matrix<double, 3, Eigen::Dynamic>& G0) {
     P.topRows(9).setZero();
     P.leftCols(9).setZero();
     const Mat<3, kSize> P_align = P.middleRows(kBodyAlignment.index, kBodyAlignment.size);
@@ -175,6 +268,17 @@ struct NavCalibrationFilter::Impl {
     P.middleCols(kAttitude.index, 3) = P.middleRows(kAttitude.index, 3).transpose();
     P.block<3, 3>(kAttitude.index, kAttitude.index) =
         C_b_n * P_align.middleCols(kBodyAlignment.index, 3) * C_b_n.transpose();
+    if (consider.size() > 0) {
+      consider.Pxp.topRows(9).setZero();
+      const Eigen::Matrix<double, 3, Eigen::Dynamic> Pap = consider.Pxp.middleRows(kBodyAlignment.index, 3);
+      // cov(G0 p, x): the navigation rows of Pxp are zero now, so this leaves the attitude block.
+      const Mat<3, kSize> from_p = G0 * consider.Pxp.transpose();
+      P.middleRows(kAttitude.index, 3) += from_p;
+      P.middleCols(kAttitude.index, 3) += from_p.transpose();
+      const Matrix3d cross = C_b_n * Pap * G0.transpose();
+      P.block<3, 3>(kAttitude.index, kAttitude.index) += cross + cross.transpose() + G0 * G0.transpose();
+      consider.Pxp.middleRows(kAttitude.index, 3) = C_b_n * Pap + G0;
+    }
     for (int i = 0; i < 9; ++i) P(i, i) += sigma0[i] * sigma0[i];
   }
 
@@ -229,7 +333,7 @@ struct NavCalibrationFilter::Impl {
       // makes a scale error common to the three accelerometers (seen only along g) observable.
       const nav::TableReference::Sample start = ref.at(window, k - 1);
       nav = std::make_unique<nav::Strapdown>(ref.initial_state(start), g_mps2, false);
-      reset_navigation_covariance(start.C_b_n);
+      reset_navigation_covariance(start.C_b_n, table_attitude_sensitivity(window[k - 1]));
       x.head(9).setZero();
       have_prev_rates = false;
     }
@@ -261,6 +365,16 @@ struct NavCalibrationFilter::Impl {
     const Matrix3d K = table::skew(w) * table::skew(w) + table::skew(c.dw_radps2);
     S_CKy += C.col(1) * K.row(1) * dt;
     S_CKz += C.col(2) * K.row(2) * dt;
+    if (!consider.start_terms.empty()) {
+      const Vector3d f_o = c.dv_mps / dt, a = fb / units::kStandardGravity_mps2;
+      for (int j = 0; j < 3; ++j) {
+        const double q = std::abs(w[j]) / kGyroNonlinearityRate_radps;
+        for (int m = 0; m < 3; ++m) S_Cq.col(3 * m + j) += C.col(j) * std::pow(q, m + 1) * w[j] * dt;
+        for (int i = 0; i < 3; ++i) S_Cfg.col(3 * j + i) += C.col(j) * f_o[i] / units::kStandardGravity_mps2 * dt;
+        S_Ca.col(j) += C.col(j) * a[j] * fb[j] * dt;
+        S_Ca.col(3 + j) += C.col(j) * a[j] * a[j] * fb[j] * dt;
+      }
+    }
     S_dt += dt;
     if (S_dt >= opt.propagate_interval_s - 1e-9) {
       propagate();
@@ -268,7 +382,7 @@ struct NavCalibrationFilter::Impl {
       S_dt = 0;
       if (since_update_s >= opt.update_interval_s - 1e-9) {
         since_update_s = 0;
-        update(r);
+        update(r, window[k]);
       }
     }
   }
@@ -303,6 +417,28 @@ struct NavCalibrationFilter::Impl {
     blk(kPosition, kVelocity) = Matrix3d::Identity() * T;
     const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
     P = Phi * P * Phi.transpose();
+    if (consider.size() > 0) {
+      // x' = Phi x + Gamma p: the site's g, if wrong by its sigma, accelerates the vertical channel.
+      ConsiderMatrix Gamma = ConsiderMatrix::Zero(kSize, consider.size());
+      if (consider.gravity >= 0) Gamma(kVelocity.index + 2, consider.gravity) = consider.gravity_sigma_mps2 * T;
+      // A start term wrong by its sigma: the gyro's rate error turns the attitude (-C dw, as a
+      // bias does), the accelerometer's force error the velocity (C df).
+      using Term = Consider::StartTerm;
+      for (const Term& t : consider.start_terms) {
+        auto att = Gamma.block<3, 1>(kAttitude.index, t.column);
+        auto vel = Gamma.block<3, 1>(kVelocity.index, t.column);
+        switch (t.kind) {
+          case Term::kGyroScaleNonlinear: att = -S_Cq.col(3 * t.k + t.j) * t.sigma; break;
+          case Term::kGyroGSensitivity: att = -S_Cfg.col(3 * t.j + t.k) * t.sigma; break;
+          case Term::kAccelK2: vel = S_Ca.col(t.j) * t.sigma; break;
+          case Term::kAccelK3: vel = S_Ca.col(3 + t.j) * t.sigma; break;
+        }
+      }
+      const ConsiderMatrix PhiPxp = Phi * consider.Pxp;
+      const StateMatrix cross = PhiPxp * Gamma.transpose();
+      P += cross + cross.transpose() + Gamma * Gamma.transpose();
+      consider.Pxp = PhiPxp + Gamma;
+    }
     StateVector q = StateVector::Zero();
     const double arw = model.gyro.noise.arw_rad_rts, vrw = model.accel.noise.vrw_mps_rts;
     const double qbg = opt.gyro_bias_rw_radps_rts > 0 ? opt.gyro_bias_rw_radps_rts
@@ -328,12 +464,21 @@ struct NavCalibrationFilter::Impl {
     S_CMg.setZero();
     S_CKy.setZero();
     S_CKz.setZero();
+    S_Cq.setZero();
+    S_Cfg.setZero();
+    S_Ca.setZero();
   }
 
-  // One scalar measurement z = H x + noise (variance R), gated; Joseph form.
-  bool scalar_update(const StateVector& H, double z, double R, MeasurementRecord& rec, std::size_t m) {
-    const StateVector PH = P * H;
-    const double innovation = z - H.dot(x), S = H.dot(PH) + R;
+  // One scalar measurement z = H x + G p + noise (variance R), p the consider parameters (G empty:
+  // none), gated. The covariance in the Joseph form (I - K H) P (I - K H)^T + K R K^T (with the
+  // Schmidt filter's terms of p), written out as rank-one corrections: the same algebra, O(n^2)
+  // instead of three n^3 products per scalar (which were most of stage 3's time).
+  bool scalar_update(const StateVector& H, const Eigen::VectorXd& G, double z, double R, MeasurementRecord& rec,
+                     std::size_t m) {
+    const StateVector PxpG = consider.size() > 0 && G.size() > 0 ? StateVector(consider.Pxp * G) : StateVector::Zero();
+    const double GG = G.size() > 0 ? G.squaredNorm() : 0.0;
+    const StateVector PH = P * H + PxpG;  // cov(x, z)
+    const double innovation = z - H.dot(x), S = H.dot(PH) + H.dot(PxpG) + GG + R;
     const double ratio = innovation * innovation / (opt.gate_sigma * opt.gate_sigma * S);
     rec.innovation[m] = innovation;
     rec.variance[m] = S;
@@ -345,12 +490,21 @@ struct NavCalibrationFilter::Impl {
     }
     const StateVector K = PH / S;
     x += K * innovation;
-    const StateMatrix IKH = StateMatrix::Identity() - K * H.transpose();
-    P = IKH * P * IKH.transpose() + K * R * K.transpose();
+    // x+ - x_true = (I - K H) e + K (G p + noise): P - K PH^T - PH K^T + S K K^T, for any gain K.
+    P.noalias() -= K * PH.transpose();
+    P.noalias() -= PH * K.transpose();
+    P.noalias() += (S * K) * K.transpose();
+    P = 0.5 * (P + P.transpose());
+    if (consider.size() > 0) {
+      // cov(x+ - x_true, p) = (I - K H) Pxp - K G^T.
+      Eigen::RowVectorXd HPxp = H.transpose() * consider.Pxp;
+      if (G.size() > 0) HPxp += G.transpose();
+      consider.Pxp.noalias() -= K * HPxp;
+    }
     return true;
   }
 
-  void update(const nav::TableReference::Sample& r) {
+  void update(const nav::TableReference::Sample& r, const ImuFrame& frame) {
     const nav::NavState& s = nav->state();
     const Vector3d dv = s.v_n - r.v_n, dp = ref.position_error_m(s, r);
     const std::array<double, 6> z = {dv.x(), dv.y(), dv.z(), dp.x(), dp.y(), dp.z()};
@@ -360,19 +514,21 @@ struct NavCalibrationFilter::Impl {
       StateVector H = StateVector::Zero();
       H[kVelocity.index + static_cast<int>(m)] = 1.0;  // velocity and position blocks are adjacent
       const double R = m < 3 ? opt.velocity_noise_mps * opt.velocity_noise_mps : opt.position_noise_m * opt.position_noise_m;
-      accepted += scalar_update(H, z[m], R, rec, m);
+      accepted += scalar_update(H, Eigen::VectorXd(), z[m], R, rec, m);
     }
     if (opt.attitude_noise_rad > 0) {
       // The table's attitude: C_ref C_hat^T = I + [(phi - C_b_n delta) x], delta the error of the
       // body frame's alignment on the platform (at a restart the navigation takes it over).
+      // The table's own errors p turn its reading by G p (consider): z = phi - C_b_n delta - G p.
       const Eigen::AngleAxisd aa(r.C_b_n * s.q_b_n.toRotationMatrix().transpose());
       const Vector3d z_att = aa.angle() * aa.axis();
+      const Eigen::Matrix<double, 3, Eigen::Dynamic> G = table_attitude_sensitivity(frame);
       for (int m = 0; m < 3; ++m) {
         StateVector H = StateVector::Zero();
         H[kAttitude.index + m] = 1.0;
         seg(H, kBodyAlignment) = -r.C_b_n.row(m).transpose();
-        accepted += scalar_update(H, z_att[m], opt.attitude_noise_rad * opt.attitude_noise_rad, rec,
-                                  static_cast<std::size_t>(6 + m));
+        accepted += scalar_update(H, -G.row(m).transpose(), z_att[m], opt.attitude_noise_rad * opt.attitude_noise_rad,
+                                  rec, static_cast<std::size_t>(6 + m));
       }
     }
     result.measurements.push_back(rec);
@@ -454,7 +610,12 @@ struct NavCalibrationFilter::Impl {
   // The model with the sigma of the calibration states (the others as the input model had them).
   ImuModel model_with_sigma(const StateVector& sd) const {
     ImuModel m = model;
-    ImuErrorSet sg = model.sigma.value_or(ImuErrorSet{});
+    m.sigma = with_calibration_states(sd, model.sigma.value_or(ImuErrorSet{}));
+    return m;
+  }
+
+  // `set` with the fields of the calibration states replaced by `sd`'s (model units, SI).
+  static ImuErrorSet with_calibration_states(const StateVector& sd, ImuErrorSet sg) {
     sg.gyro.bias_radps = seg(sd, kGyroBias);
     sg.accel.bias_mps2 = seg(sd, kAccelBias);
     sg.gyro.scale_pos = seg(sd, kGyroScalePos);
@@ -467,8 +628,26 @@ struct NavCalibrationFilter::Impl {
     sg.accel.delay_s = seg(sd, kAccelDelay);
     sg.accel.lever_arm_y_m = seg(sd, kLeverArmY);
     sg.accel.lever_arm_z_m = seg(sd, kLeverArmZ);
-    m.sigma = sg;
-    return m;
+    return sg;
+  }
+
+  // The budget of the calibration states (ImuModel::budget): the filter's own (type_a: the noise
+  // and the start's uncertainty) and each consider source's share, Pxp's row squared over the
+  // source's parameters; the start model's budget carried for the coefficients this stage leaves.
+  std::map<std::string, ImuErrorSet> budget() const {
+    std::map<std::string, ImuErrorSet> out;
+    for (const auto& [source, set] : model.budget) out[source] = with_calibration_states(StateVector::Zero(), set);
+    std::map<std::string, StateVector> variance;
+    StateVector type_b = StateVector::Zero();
+    for (int j = 0; j < consider.size(); ++j) {
+      const StateVector v = consider.Pxp.col(j).cwiseAbs2();
+      variance.try_emplace(consider.source[static_cast<std::size_t>(j)], StateVector::Zero()).first->second += v;
+      type_b += v;
+    }
+    out["type_a"] = with_calibration_states((P.diagonal() - type_b).cwiseMax(0.0).cwiseSqrt(), out["type_a"]);
+    for (const auto& [source, v] : variance)
+      out[source] = with_calibration_states(v.cwiseSqrt(), out[source]);
+    return out;
   }
 
   Progress progress() const {
@@ -513,6 +692,7 @@ struct NavCalibrationFilter::Impl {
     r.sigma_tau_yx_s = std::sqrt(std::max(0.0, P(gx + 1, gx + 1) + P(gx, gx) - 2 * P(gx, gx + 1)));
     r.sigma_tau_zx_s = std::sqrt(std::max(0.0, P(gx + 2, gx + 2) + P(gx, gx) - 2 * P(gx, gx + 2)));
     r.model = model_with_sigma(r.sigma_final);
+    r.model.budget = budget();
     nlohmann::json extra = r.model.extra_json.empty() ? nlohmann::json::object() : nlohmann::json::parse(r.model.extra_json);
     extra["status"] = r.status;
     r.model.extra_json = extra.dump();

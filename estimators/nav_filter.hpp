@@ -89,6 +89,16 @@ struct Options {
   // The body frame on the platform: the model's sigma of the accelerometer angles xy xz yx when it
   // carries one (stage 1), never below this; this alone when it does not.
   double sigma_body_alignment_rad = 3.0 * 4.84813681109536e-6;
+  // The type B sources (issue 34), as Schmidt "consider" parameters: each error of the table the
+  // recording's certificate gives a 1-sigma for (table.sigma: direct::reference_perturbations,
+  // stage 1's list) and the site's g. The filter does not estimate them; it carries their
+  // correlation with the state, so that their share of the attitude measurement's error and of
+  // the vertical channel is weighed (its gain and gate know that a table's error is the same
+  // each time the table stands at the same angles) and is part of the stated sigma, by source in
+  // the model's budget. false: the noise alone (an ideal table and a known g assumed).
+  bool type_b = true;
+  // The site's g's standard uncertainty, m/s^2; absent: earth::site_gravity_sigma_mps2 of the site.
+  std::optional<double> gravity_sigma_mps2;
   double gyro_bias_rw_radps_rts = 0.0;   // 0: from the model's noise, else this
   double accel_bias_rw_mps2_rts = 0.0;
   double scale_rw_rts = 1e-9;

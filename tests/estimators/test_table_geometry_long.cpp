@@ -159,3 +159,67 @@ TEST(TableGeometryLong, StageOneBudgetCoversAnUnknownTable) {
               100.0 * static_cast<double>(within_type_a) / static_cast<double>(n), worst_type_a);
   EXPECT_GE(static_cast<double>(within), 0.9 * static_cast<double>(n));
 }
+
+// Stage 3's uncertainty on an imperfect table (issue 34): ten random IMUs from the seed's stage-1
+// residuals, each on a random table of the issue's size, the `navigation` program with the IMU's
+// noise. With the geometry (its certificate's sigma a tenth of it) and without it (the sigma the
+// errors' full size: the filter considers the table's errors, weighs its attitude by them and
+// states their share), stage 3 lands within its limits, at least 95 % of the coefficients within 3
+// sigma, at least 90 % within the expanded uncertainty (k = 2) and none beyond 4 sigma.
+TEST(TableGeometryLong, StageThreeBudgetCoversAnUnknownTable) {
+  const auto p = motion::load_program("navigation", motion::TableLimits{});
+  struct Tally {
+    std::vector<double> z;
+    double worst_limit_ratio = 0;
+  };
+  Tally with_geometry, without_geometry;
+  for (unsigned seed = 0; seed < 10; ++seed) {
+    navcaltest::Scenario s = navcaltest::make_scenario(800 + seed, 100);
+    const TablePair t = random_table_of_the_issues_size(900 + seed);
+    s.cfg.table = table::TableCertificate{t.geometry, std::nullopt, "random table"};
+    ImuModel truth_sim = s.truth;
+    truth_sim.mount_r0_p_m.reset();
+    sim::Simulator sim(p, truth_sim, s.cfg);
+    RecordingMeta meta = sim.meta();
+    meta.table->sigma = scaled(t.sigma, 0.1);
+    ImuModel start = s.start;
+    start.mount_r0_p_m = s.cfg.mount.r0_p_m;
+    navfilter::NavCalibrationFilter with(meta, start);
+    meta.table->geometry.reset();
+    meta.table->sigma = t.sigma;
+    navfilter::NavCalibrationFilter without(meta, start);
+    ImuFrame f;
+    while (sim.next(f)) {
+      with.push(f);
+      without.push(f);
+    }
+    const navfilter::Result rw = with.finish(), ro = without.finish();
+    // The truth the filter should end at: the constant coefficients plus the biases' drift.
+    ImuModel truth = s.truth_body;
+    truth.gyro.bias_radps += sim.stochastic_bias().head<3>();
+    truth.accel.bias_mps2 += sim.stochastic_bias().tail<3>();
+    ASSERT_TRUE(rw.converged) << "IMU " << seed << ": " << rw.status;
+    ASSERT_TRUE(ro.converged) << "IMU " << seed << ": " << ro.status;
+    std::printf("IMU %u with the geometry (updates %lld, rejected %lld):\n", seed, static_cast<long long>(rw.updates),
+                static_cast<long long>(rw.rejected));
+    with_geometry.worst_limit_ratio =
+        std::max(with_geometry.worst_limit_ratio, navcaltest::expect_stage3_limits(truth, rw.model, &with_geometry.z));
+    std::printf("IMU %u without it, the certificate's sigma only (updates %lld, rejected %lld):\n", seed,
+                static_cast<long long>(ro.updates), static_cast<long long>(ro.rejected));
+    without_geometry.worst_limit_ratio = std::max(
+        without_geometry.worst_limit_ratio, navcaltest::expect_stage3_limits(truth, ro.model, &without_geometry.z));
+  }
+  for (const auto& [name, tally] : {std::pair{"with the geometry", &with_geometry}, {"certificate only", &without_geometry}}) {
+    const auto within = [&](double k) {
+      return static_cast<double>(std::count_if(tally->z.begin(), tally->z.end(), [&](double z) { return z <= k; }));
+    };
+    const double n = static_cast<double>(tally->z.size()), worst = *std::max_element(tally->z.begin(), tally->z.end());
+    std::printf("%s: worst ratio to the limits %.2f; within 3 sigma %.0f of %.0f (%.1f %%), within k=2 %.0f (%.1f %%), "
+                "worst %.2f sigma\n",
+                name, tally->worst_limit_ratio, within(3.0), n, 100.0 * within(3.0) / n, within(2.0),
+                100.0 * within(2.0) / n, worst);
+    EXPECT_GE(within(3.0), 0.95 * n) << name;
+    EXPECT_GE(within(2.0), 0.90 * n) << name;
+    EXPECT_LE(worst, 4.0) << name;
+  }
+}
