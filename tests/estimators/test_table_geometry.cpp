@@ -6,6 +6,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <optional>
+#include <string>
 
 #include "calib_fixture.hpp"
 #include "core/earth.hpp"
@@ -13,6 +16,7 @@
 #include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/lever_arm.hpp"
+#include "estimators/nav_filter.hpp"
 #include "estimators/navigation_run.hpp"
 #include "lever_fixture.hpp"
 #include "tumble_fixture.hpp"
@@ -250,4 +254,75 @@ TEST(TableGeometry, TumbleOnAnImperfectTable) {
   const double rms_z_with = std::sqrt(with.sum_z2 / with.n), rms_z_without = std::sqrt(without.sum_z2 / without.n);
   std::printf("tumble: rms error/sigma %.2f with the table's geometry, %.2f without\n", rms_z_with, rms_z_without);
   EXPECT_GT(rms_z_without, 3.0);  // 3.55 when this test was written (0.69 with the geometry)
+}
+
+// Stage 3's budget (issue 34, docs/stage3.md): a short run of a motion of the navigation program's
+// kind with the table's certificate sigma only, a measured g and a start model stating the sigma of
+// its K2: every consider source has its entry, the entries' root-sum-square is the sigma, the
+// table's share of a gyro angle is not zero, and without the type B sources (Options::type_b =
+// false) only the noise's entry is left and no sigma is larger.
+TEST(TableGeometry, StageThreeBudgetAddsUpToItsSigma) {
+  const auto p = motion::compile_program(R"({"name":"s","segments":[{"type":"hold","duration_s":30},
+    {"type":"sine","axis":"middle","amplitude_deg":90,"period_s":20,"cycles":15,"phase_deg":90},
+    {"type":"sine","axis":"outer","amplitude_deg":180,"period_s":20,"cycles":15,"phase_deg":90},
+    {"type":"sine","axis":"inner","amplitude_deg":180,"period_s":20,"cycles":15,"phase_deg":90},
+    {"type":"hold","duration_s":30}]})",
+                                         motion::TableLimits{});
+  ImuModel truth = calibtest::random_stage1_imu(5);
+  truth.accel.k2_per_g << 5e-6, -4e-6, 3e-6;
+  sim::SimConfig cfg;
+  cfg.rate_hz = 100;
+  cfg.site.gravity_mps2 = earth::normal_gravity_mps2(cfg.site.latitude_deg * units::kDegToRad, cfg.site.height_m);
+  cfg.table = imperfect_table();
+  RecordingMeta meta;
+  const std::vector<ImuFrame> frames = simulate(p, truth, cfg, meta);
+  meta.table->sigma = meta.table->geometry;  // the certificate's sigma the errors' full size
+  meta.table->geometry.reset();
+  ImuModel start = direct::to_body_frame(truth);
+  start.sigma = ImuErrorSet{};
+  start.sigma->accel.k2_per_g << 1e-6, 1e-6, 1e-6;
+  const auto run = [&](bool type_b) {
+    navfilter::Options o;
+    o.type_b = type_b;
+    navfilter::NavCalibrationFilter filter(meta, start, o);
+    for (const ImuFrame& f : frames) filter.push(f);
+    return filter.finish();
+  };
+  const navfilter::Result with = run(true), without = run(false);
+  ASSERT_TRUE(with.converged) << with.status;
+  ASSERT_TRUE(without.converged) << without.status;
+  const std::map<std::string, ImuErrorSet>& b = with.model.budget;
+  for (const char* source : {"type_a", "table.outer_tilt_arcsec", "table.middle_axis_arcsec", "table.inner_axis_arcsec",
+                             "table.encoder_error_arcsec.outer", "site.gravity_mps2", "start_model.accel.k2_ug_per_g2"})
+    EXPECT_TRUE(b.contains(source)) << source;
+  const std::optional<ImuErrorSet>& with_sigma = with.model.sigma;
+  const std::optional<ImuErrorSet>& without_sigma = without.model.sigma;
+  ASSERT_TRUE(with_sigma.has_value() && without_sigma.has_value());
+  const ImuErrorSet& sigma = *with_sigma;
+  const ImuErrorSet& noise_only = *without_sigma;
+  for (const MisalignmentKey& key : kMisalignmentKeys) {
+    double sum_sq = 0;
+    for (const auto& entry : b) sum_sq += std::pow(entry.second.gyro.misalignment_rad.*key.member, 2);
+    const double s = sigma.gyro.misalignment_rad.*key.member;
+    EXPECT_NEAR(std::sqrt(sum_sq), s, 1e-9 * s) << key.name;
+    EXPECT_GT(s, noise_only.gyro.misalignment_rad.*key.member) << key.name;
+  }
+  for (int j = 0; j < 3; ++j) {
+    double sum_sq = 0;
+    for (const auto& entry : b) sum_sq += std::pow(entry.second.accel.scale[j], 2);
+    EXPECT_NEAR(std::sqrt(sum_sq), sigma.accel.scale[j], 1e-9 * sigma.accel.scale[j]) << j;
+    EXPECT_GT(b.at("start_model.accel.k2_ug_per_g2").accel.bias_mps2.norm() +
+                  b.at("start_model.accel.k2_ug_per_g2").accel.scale.norm(), 0.0);
+  }
+  // The table's errors have their share in a gyro angle this motion determines (zy: rotations about
+  // body x; it leaves the angles about y at their prior). How large a share, and that it holds the
+  // errors, is TableGeometryLong.StageThreeBudgetCoversAnUnknownTable's (the navigation program).
+  double table_sq = 0;
+  for (const auto& entry : b)
+    if (entry.first.rfind("table.", 0) == 0) table_sq += std::pow(entry.second.gyro.misalignment_rad.zy, 2);
+  std::printf("gyro angle zy: sigma %.3g\", of it the table's %.3g\", the rest (type A) %.3g\"\n",
+              sigma.gyro.misalignment_rad.zy / kAs, std::sqrt(table_sq) / kAs, b.at("type_a").gyro.misalignment_rad.zy / kAs);
+  EXPECT_GT(std::sqrt(table_sq), 1e-4 * kAs);
+  EXPECT_EQ(without.model.budget.size(), 1u);
+  EXPECT_TRUE(without.model.budget.contains("type_a"));
 }
