@@ -249,7 +249,7 @@ struct SimImu::Impl {
   }
 
   std::uint64_t device_time_ns(double world_s) const {
-    const double ns = world_s * 1e9 * (1.0 + cfg.clock_drift_ppm * 1e-6);
+    const double ns = world.clock_s(world_s) * 1e9 * (1.0 + cfg.clock_drift_ppm * 1e-6);  // host seconds' ticks
     return static_cast<std::uint64_t>(std::llround(ns) + cfg.clock_offset_ns);
   }
 
