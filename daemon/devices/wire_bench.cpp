@@ -536,6 +536,15 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
         // Samples lost on the link (never sent): the driver sees the sequence counter jump, a gap.
         sim_->with_imu([&](sim::SimImu& imu) { imu.drop_next_samples(static_cast<int>(f.fault.frames)); });
         break;
+      case SimFault::Kind::ImuBytesDrop:
+        // Bytes lost on the link: each damaged frame is too short for its description, the
+        // driver refuses it, the sequencer sees a gap.
+        sim_->with_imu([&](sim::SimImu& imu) { imu.drop_byte_of_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::ChamberCorrupt:
+        // Replies the Modbus client must reject (libmodbus: invalid data); the driver retries.
+        sim_->chamber().corrupt_next_replies(static_cast<int>(f.fault.frames));
+        break;
       case SimFault::Kind::DropConnection:
         // The controller closes its connections; the driver's next request reconnects.
         if (f.fault.device == "table") {
