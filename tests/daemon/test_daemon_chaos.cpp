@@ -12,6 +12,10 @@
 // the temperature records too except inside the marked chamber faults, and every model
 // coefficient within 0.1 of its sigma.
 //
+// Part C, the same campaign through the wire (`--devices sim-wire`, accelerated 200x), with the
+// wire's faults, three kills and the disk full: checked on the grid and on what was committed
+// before each kill, the model compared but not held to 0.1 sigma (see its comment: why).
+//
 // Part B, the wire level: a short program in real time on `--devices sim-wire` (the simulated
 // table, chamber and IMU reached through the real drivers), with the wire's faults (IMU samples
 // corrupted on the link and lost, the IMU silent for seconds, Modbus timeouts, a chamber that
@@ -20,7 +24,8 @@
 // every frame committed before the kill unchanged.
 //
 // IMUCAL_CHAOS_SEED overrides the seed (printed with every failure); IMUCAL_CHAOS_RATE_HZ part A's
-// rate. bench/README.md has the command that prints the soak's figures.
+// rate; IMUCAL_CHAOS_WIRE_SCALE part C's time scale. bench/README.md has the command that prints
+// the soak's figures.
 #include <signal.h>
 
 #include <algorithm>
@@ -48,6 +53,11 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 std::uint64_t chaos_seed(std::uint64_t fallback) {
   const char* s = std::getenv("IMUCAL_CHAOS_SEED");
   return s != nullptr && *s != '\0' ? std::strtoull(s, nullptr, 10) : fallback;
+}
+
+double env_number(const char* name, double fallback) {
+  const char* s = std::getenv(name);
+  return s != nullptr && *s != '\0' ? std::atof(s) : fallback;
 }
 
 // A fault of the campaign's sim_faults, with the words of the suspension it must cause.
@@ -157,7 +167,7 @@ json overnight_campaign(double rate_hz, std::uint64_t seed) {
 }
 
 // Every stage's estimates of `disturbed` against `undisturbed`'s, in the latter's sigma; each
-// must be within `max_sigma` of it (and a number).
+// must be within `max_sigma` of it (and a number), and there must be a model of all stages.
 struct ModelDifference {
   double worst_sigma = 0.0;
   std::string worst_name;
@@ -185,6 +195,8 @@ ModelDifference compare_models(const json& disturbed, const json& undisturbed, d
                            << pair.dump();
     }
   }
+  EXPECT_GE(d.compared, 36);
+  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
   return d;
 }
 
@@ -249,6 +261,64 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
   return d.client().wait_for(id, final_state, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
 }
 
+// The faults of the wire (sim-wire), drawn from `rng`: durations drawn in seconds of host time
+// (what the drivers' timeouts count) and given in program seconds, `scale` of them a host second.
+std::vector<PlannedFault> wire_faults(std::mt19937_64& rng, double scale) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto host_seconds = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * scale * 10.0) / 10.0; };
+  return {
+      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 5)}}, {"frame(s) missing", "corrupt IMU"},
+       "IMU samples corrupted (CRC)"},
+      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing"},
+       "IMU samples dropped"},
+      {{{"kind", "imu_dropout"}, {"duration_s", host_seconds(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
+       "IMU silent for seconds"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(1, 2)}}, {"chamber disconnected"},
+       "Modbus timeouts"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(6, 10)}}, {"chamber disconnected"},
+       "chamber stops answering"},
+      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
+  };
+}
+
+// A soak's two runs on one daemon: the disturbed campaign with its kills, then the reference
+// undisturbed. The caller checks that both ended `done`.
+struct SoakRuns {
+  json disturbed, undisturbed;
+  std::vector<double> killed_at_s;
+  double disturbed_wall_s = 0.0, undisturbed_wall_s = 0.0;
+};
+SoakRuns run_soak(Imucald& d, const json& disturbed_spec, const json& reference_spec, const std::vector<double>& kill_at_s,
+                  const std::function<void(const json&)>& after_kill = {}) {
+  SoakRuns r;
+  const auto t0 = Clock::now();
+  const auto id = post_and_start(d.client(), disturbed_spec);
+  r.disturbed = run_with_kills(d, id, kill_at_s, 1800.0, r.killed_at_s, after_kill);
+  r.disturbed_wall_s = since(t0);
+  if (r.disturbed.value("state", "") != "done" || d.p.port == 0) return r;
+  const auto t1 = Clock::now();
+  const auto id2 = post_and_start(d.client(), reference_spec);
+  r.undisturbed = d.client().wait_for(id2, final_state, 1800.0);
+  r.undisturbed_wall_s = since(t1);
+  return r;
+}
+
+// One line per fault: where it was injected and the suspension that marked it.
+void print_faults(const std::vector<PlannedFault>& faults, const std::vector<int>& matched,
+                  const std::vector<json>& suspensions) {
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    std::string mark = "no suspension (absorbed by the driver)";
+    if (matched[i] >= 0) {
+      const json& s = suspensions[static_cast<std::size_t>(matched[i])];
+      mark = "suspended at " + number_text(s.at("program_time_s").get<double>()) +
+             " s: " + s.at("reason").get<std::string>().substr(0, 90);
+    }
+    std::printf("  %-28s at %8.1f s -> %s
+", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
+                mark.c_str());
+  }
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
@@ -257,8 +327,7 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
 TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   const std::uint64_t seed = chaos_seed(33);
   SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
-  const char* rate_env = std::getenv("IMUCAL_CHAOS_RATE_HZ");
-  const double rate_hz = rate_env != nullptr && *rate_env != '\0' ? std::atof(rate_env) : 100.0;
+  const double rate_hz = env_number("IMUCAL_CHAOS_RATE_HZ", 100.0);
   std::mt19937_64 rng(seed);
 
   json campaign = overnight_campaign(rate_hz, seed);
@@ -320,18 +389,12 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   disturbed_spec["name"] = "chaos overnight, faults and kills";
   disturbed_spec["time_scale"] = kTimeScale;
   disturbed_spec["sim_faults"] = sim_faults;
-  const auto t0 = Clock::now();
-  const auto id = post_and_start(d.client(), disturbed_spec);
-  std::vector<double> killed_at;
-  const json disturbed = run_with_kills(d, id, kill_at, 1800.0, killed_at);
-  const double disturbed_s = since(t0);
+  const SoakRuns runs = run_soak(d, disturbed_spec, campaign, kill_at);
+  const json& disturbed = runs.disturbed;
+  const json& undisturbed = runs.undisturbed;
+  const std::vector<double>& killed_at = runs.killed_at_s;
   ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
   ASSERT_EQ(killed_at.size(), kKills);
-
-  const auto t1 = Clock::now();
-  const auto id2 = post_and_start(d.client(), campaign);
-  const json undisturbed = d.client().wait_for(id2, final_state, 1800.0);
-  const double undisturbed_s = since(t1);
   ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
 
   // Marked: each fault a suspension of the run naming it (an event of the run in the daemon's
@@ -404,8 +467,6 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
 
   // The models: every stage's estimates within 0.1 of the undisturbed run's sigma.
   const ModelDifference model = compare_models(disturbed, undisturbed, 0.1);
-  EXPECT_GE(model.compared, 36);
-  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
 
   std::printf(
       "chaos soak A (sim, %.0f s of program at %g Hz, %zu frames): faults injected %zu + kill -9 %zu (at %.0f, %.0f, "
@@ -417,13 +478,8 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
       killed_at.size(), suspensions.size(), lost, duplicated, differing, temps_differing,
       static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
       static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), model.worst_sigma, model.worst_name.c_str(),
-      model.compared, disturbed_s, undisturbed_s);
-  for (std::size_t i = 0; i < faults.size(); ++i)
-    if (matched[i] >= 0)
-      std::printf("  %-24s at %8.1f s -> suspended at %8.1f s: %s\n", faults[i].label.c_str(),
-                  faults[i].spec.at("at_s").get<double>(),
-                  suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>(),
-                  suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 100).c_str());
+      model.compared, runs.disturbed_wall_s, runs.undisturbed_wall_s);
+  print_faults(faults, matched, suspensions);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -452,21 +508,7 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
   ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
   const double duration_s = check.duration_s;
 
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  auto between = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * 10.0) / 10.0; };
-  std::vector<PlannedFault> faults = {
-      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 5)}}, {"frame(s) missing", "corrupt IMU"},
-       "IMU samples corrupted (CRC)"},
-      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing"},
-       "IMU samples dropped"},
-      {{{"kind", "imu_dropout"}, {"duration_s", between(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
-       "IMU silent for seconds"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(1, 2)}}, {"chamber disconnected"},
-       "Modbus timeouts"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(6, 10)}}, {"chamber disconnected"},
-       "chamber stops answering"},
-      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
-  };
+  std::vector<PlannedFault> faults = wire_faults(rng, 1.0);
   std::vector<double> at = instants(rng, faults.size() + 1, 2.0, duration_s - 2.0, 4.0);
   ASSERT_EQ(at.size(), faults.size() + 1);
   std::shuffle(at.begin(), at.end(), rng);
@@ -540,14 +582,7 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
       duration_s, g.grid, faults.size(), killed_at[0], faults.size(), marked, suspensions.size(), g.lost, g.duplicated,
       g.off_grid, changed, committed.size(), static_cast<long long>(c.at("lost_frames").get<std::int64_t>()),
       static_cast<long long>(c.at("bad_frames").get<std::int64_t>()), wall_s);
-  for (std::size_t i = 0; i < faults.size(); ++i)
-    std::printf("  %-28s at %6.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
-                matched[i] >= 0
-                    ? ("suspended at " +
-                       number_text(suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>()) +
-                       " s: " + suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 90))
-                          .c_str()
-                    : "no suspension (absorbed by the driver)");
+  print_faults(faults, matched, suspensions);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -593,8 +628,7 @@ std::vector<std::uint64_t> digests(const std::vector<ImuFrame>& frames) {
 TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFullDisk) {
   const std::uint64_t seed = chaos_seed(33);
   SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
-  const char* scale_env = std::getenv("IMUCAL_CHAOS_WIRE_SCALE");
-  const double scale = scale_env != nullptr && *scale_env != '\0' ? std::atof(scale_env) : 200.0;
+  const double scale = env_number("IMUCAL_CHAOS_WIRE_SCALE", 200.0);
   constexpr double kRateHz = 100.0;
   std::mt19937_64 rng(seed);
 
@@ -610,28 +644,17 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
   const double duration_s = check.duration_s;
 
+  // Part B's faults, then those a short real-time run does not have room for.
+  std::vector<PlannedFault> faults = wire_faults(rng, scale);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   auto host_seconds = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * scale); };
-  std::vector<PlannedFault> faults = {
-      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing", "corrupt IMU"},
-       "IMU bytes corrupted (CRC)"},
-      {{{"kind", "imu_bytes_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}},
-       {"frame(s) missing", "corrupt IMU"}, "IMU bytes dropped"},
-      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 50)}}, {"frame(s) missing"},
-       "IMU samples lost"},
-      {{{"kind", "imu_dropout"}, {"duration_s", host_seconds(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
-       "IMU silent for seconds"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(1, 2)}}, {"chamber disconnected"},
-       "Modbus timeouts"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(6, 10)}}, {"chamber disconnected"},
-       "chamber stops answering"},
-      {{{"kind", "chamber_corrupt"}, {"replies", 1 + static_cast<int>(u(rng) * 5)}}, {"chamber"},
-       "Modbus replies corrupt"},
-      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
-      {{{"kind", "disconnect"}, {"device", "table"}, {"duration_s", host_seconds(1, 3)}}, {"table"},
-       "table stops answering"},
-      {{{"kind", "disk_full"}, {"duration_s", host_seconds(2, 5)}}, {"disk full"}, "disk full"},
-  };
+  faults.push_back({{{"kind", "imu_bytes_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}},
+                    {"frame(s) missing", "corrupt IMU"}, "IMU bytes dropped"});
+  faults.push_back({{{"kind", "chamber_corrupt"}, {"replies", 1 + static_cast<int>(u(rng) * 5)}}, {"chamber"},
+                    "Modbus replies corrupt"});
+  faults.push_back({{{"kind", "disconnect"}, {"device", "table"}, {"duration_s", host_seconds(1, 3)}}, {"table"},
+                    "table stops answering"});
+  faults.push_back({{{"kind", "disk_full"}, {"duration_s", host_seconds(2, 5)}}, {"disk full"}, "disk full"});
   // A driver's retry or reconnect may absorb these before anything shows: counted, not required.
   auto may_be_absorbed = [](const PlannedFault& f) {
     return f.spec.at("kind") == "drop_connection" || f.spec.at("kind") == "chamber_corrupt";
@@ -662,8 +685,6 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   json disturbed_spec = campaign;
   disturbed_spec["name"] = "chaos overnight through the wire, faults and kills";
   disturbed_spec["sim_faults"] = sim_faults;
-  const auto t0 = Clock::now();
-  const auto id = post_and_start(d.client(), disturbed_spec);
   // What was committed at each kill, read while the daemon is down: still there, unchanged, at
   // the end (each kill's frames checked against the previous kill's, the last kill's against the end).
   std::vector<std::uint64_t> committed;
@@ -672,23 +693,19 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   auto compare_committed = [&](const std::vector<std::uint64_t>& now) {
     for (std::size_t i = 0; i < committed.size(); ++i) committed_changed += i >= now.size() || now[i] != committed[i];
   };
-  std::vector<double> killed_at;
-  const json disturbed = run_with_kills(d, id, kill_at, 1800.0, killed_at, [&](const json& before) {
+  const SoakRuns runs = run_soak(d, disturbed_spec, campaign, kill_at, [&](const json& before) {
     run_path = dir + "/data/" + before.at("run_db").get<std::string>();
     const auto now = digests(run_frames(run_path));
     compare_committed(now);
     committed = now;
   });
-  const double disturbed_s = since(t0);
+  const json& disturbed = runs.disturbed;
+  const json& undisturbed = runs.undisturbed;
+  const std::vector<double>& killed_at = runs.killed_at_s;
   ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
   ASSERT_EQ(killed_at.size(), kKills);
-  EXPECT_GT(committed.size(), 0u);
-
-  const auto t1 = Clock::now();
-  const auto id2 = post_and_start(d.client(), campaign);
-  const json undisturbed = d.client().wait_for(id2, final_state, 1800.0);
-  const double undisturbed_s = since(t1);
   ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
+  EXPECT_GT(committed.size(), 0u);
 
   // Marked: each fault a suspension naming it, each kill a redo from the last commit.
   const std::vector<json> suspensions = events_of(disturbed, "suspended");
@@ -716,8 +733,6 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
 
   // Not within 0.1 sigma: measured and reported only (see the comment above Part C).
   const ModelDifference model = compare_models(disturbed, undisturbed, std::numeric_limits<double>::infinity());
-  EXPECT_GE(model.compared, 36);
-  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
 
   std::printf(
       "chaos soak C (sim-wire at %gx, %.0f s of program at %g Hz, %zu grid frames): faults injected %zu + kill -9 %zu "
@@ -731,13 +746,6 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
       reference_grid.lost, reference_grid.duplicated, reference_grid.off_grid, committed_changed, committed.size(),
       bit_identical, static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
       static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), model.worst_sigma,
-      model.worst_name.c_str(), model.compared, disturbed_s, undisturbed_s);
-  for (std::size_t i = 0; i < faults.size(); ++i)
-    std::printf("  %-26s at %8.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
-                matched[i] >= 0
-                    ? ("suspended at " +
-                       number_text(suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>()) +
-                       " s: " + suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 90))
-                          .c_str()
-                    : "no suspension (absorbed by the driver)");
+      model.worst_name.c_str(), model.compared, runs.disturbed_wall_s, runs.undisturbed_wall_s);
+  print_faults(faults, matched, suspensions);
 }
