@@ -313,8 +313,7 @@ void print_faults(const std::vector<PlannedFault>& faults, const std::vector<int
       mark = "suspended at " + number_text(s.at("program_time_s").get<double>()) +
              " s: " + s.at("reason").get<std::string>().substr(0, 90);
     }
-    std::printf("  %-28s at %8.1f s -> %s
-", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
+    std::printf("  %-28s at %8.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
                 mark.c_str());
   }
 }
