@@ -86,7 +86,7 @@ struct SimChamber::Impl {
   // First-order air temperature towards the working set point; the working set point follows
   // the set point at the ramp rate (when the map has a ramp register and the rate is non-zero).
   void update(Clock::time_point now) {
-    const double dt = std::chrono::duration<double>(now - last_update).count();
+    const double dt = std::chrono::duration<double>(now - last_update).count() * cfg.time_scale;  // world s
     last_update = now;
     if (dt <= 0.0) return;
     if (cfg.map.ramp_rate_per_min && ramp_rate_C_per_min > 0.0) {

@@ -24,6 +24,8 @@ struct SimChamberConfig {
   // Digital outputs served as coils 0.. (a controller's relay outputs; one may switch the IMU's
   // supply, drivers/power_relay.hpp). They start clear.
   int digital_outputs = 8;
+  // World seconds per host second: the air (and a set point ramp) moves this much faster.
+  double time_scale = 1.0;
 };
 
 // A write that changed a digital output, in seconds since the server started.

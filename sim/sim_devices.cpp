@@ -34,6 +34,7 @@ SimChamberConfig chamber_config(const SimDevicesConfig& c) {
   s.initial_C = c.chamber_start_C;
   s.ambient_C = c.chamber_start_C;
   s.time_constant_s = c.chamber_tau_s;
+  s.time_scale = c.time_scale;
   s.port = c.chamber_port;
   return s;
 }
@@ -90,7 +91,7 @@ struct SimDevices::Impl {
   std::string pty_path;
 
   explicit Impl(SimDevicesConfig c)
-      : cfg(std::move(c)), world(cfg.servo), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {
+      : cfg(std::move(c)), world(cfg.servo, drivers::host_time_ns(), cfg.time_scale), table(world, table_config(cfg)), chamber(chamber_config(cfg)) {
     cfg.imu.link = link::load_imu_link(cfg.imu_link);
     if (cfg.imu.serial.empty()) cfg.imu.serial = cfg.imu_serial;  // what it reports, if its link can
     chamber.set_coil(kImuPowerCoil, true);

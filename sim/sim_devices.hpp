@@ -32,6 +32,9 @@ struct SimDevicesConfig {
   std::string imu_link = "imucal-can";  // the IMU's link description: built-in name or file
   SimImuConfig imu;                   // rate, seed, truth, site, framing (its link: imu_link)
   std::string imu_serial = "SIM-IMU"; // what the printed configuration names the IMU
+  // World seconds per host second (sim_world.hpp): the table's motion, the IMU's samples and the
+  // chamber's air run this much faster; the devices' clocks and the wire's timing do not.
+  double time_scale = 1.0;
 };
 
 class SimDevices {

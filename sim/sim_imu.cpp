@@ -43,8 +43,8 @@ struct SimImu::Impl {
   std::atomic<bool> streaming{false};
   std::atomic<bool> link_closed{false};
   std::atomic<std::uint64_t> sent{0}, not_sent{0}, restarts{0};
-  std::atomic<int> drop{0}, corrupt{0}, sequence_skip{0};
-  std::atomic<bool> drop_byte{false}, close_requested{false};
+  std::atomic<int> drop{0}, corrupt{0}, sequence_skip{0}, drop_byte{0};
+  std::atomic<bool> close_requested{false};
   std::atomic<std::uint64_t> status_bits{0};
   std::mutex garbage_mutex;
   std::vector<std::uint8_t> garbage;
@@ -249,7 +249,7 @@ struct SimImu::Impl {
   }
 
   std::uint64_t device_time_ns(double world_s) const {
-    const double ns = world_s * 1e9 * (1.0 + cfg.clock_drift_ppm * 1e-6);
+    const double ns = world.clock_s(world_s) * 1e9 * (1.0 + cfg.clock_drift_ppm * 1e-6);  // host seconds' ticks
     return static_cast<std::uint64_t>(std::llround(ns) + cfg.clock_offset_ns);
   }
 
@@ -343,7 +343,10 @@ struct SimImu::Impl {
           --corrupt;
           bytes[gyro_x->offset + 1] = static_cast<std::uint8_t>(bytes[gyro_x->offset + 1] ^ 0x10);  // after the checksum
         }
-        if (drop_byte.exchange(false) && gyro_x) bytes.erase(bytes.begin() + static_cast<std::ptrdiff_t>(gyro_x->offset));
+        if (drop_byte.load() > 0 && gyro_x) {
+          --drop_byte;
+          bytes.erase(bytes.begin() + static_cast<std::ptrdiff_t>(gyro_x->offset));
+        }
         if (send_message(sample, bytes, static_cast<std::uint8_t>(seq)))
           ++sent;
         else
@@ -406,7 +409,8 @@ void SimImu::drop_next_samples(int count) { impl_->drop = count; }
 void SimImu::corrupt_next_samples(int count) { impl_->corrupt = count; }
 void SimImu::set_status_bits(std::uint64_t bits) { impl_->status_bits = bits; }
 void SimImu::skip_sequence(int count) { impl_->sequence_skip = count; }
-void SimImu::drop_byte_of_next_sample() { impl_->drop_byte = true; }
+void SimImu::drop_byte_of_next_sample() { impl_->drop_byte = 1; }
+void SimImu::drop_byte_of_next_samples(int count) { impl_->drop_byte = count; }
 void SimImu::send_garbage(std::vector<std::uint8_t> bytes) {
   std::lock_guard lock(impl_->garbage_mutex);
   impl_->garbage.insert(impl_->garbage.end(), bytes.begin(), bytes.end());

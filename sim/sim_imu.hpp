@@ -92,6 +92,7 @@ class SimImu {
   void set_status_bits(std::uint64_t bits);
   void skip_sequence(int count);          // the counter jumps; no sample is missing
   void drop_byte_of_next_sample();        // one byte of the next frame never leaves (streams)
+  void drop_byte_of_next_samples(int count);  // the same for each of the next `count` frames
   void send_garbage(std::vector<std::uint8_t> bytes);  // written before the next frame
   void pause(std::chrono::milliseconds duration);  // nothing sent; samples due meanwhile are lost
   void close_link();

@@ -125,7 +125,8 @@ struct SimTable::Impl {
   Impl(SimWorld& w, SimTableConfig c) : world(w), cfg(std::move(c)) {}
 
   std::int64_t device_time_us(double world_s) const noexcept {
-    return static_cast<std::int64_t>(std::llround(world_s * 1e6 * (1.0 + cfg.clock_drift_ppm * 1e-6))) + cfg.clock_offset_us;
+    const double clock_s = world.clock_s(world_s);  // the controller's clock ticks in host seconds
+    return static_cast<std::int64_t>(std::llround(clock_s * 1e6 * (1.0 + cfg.clock_drift_ppm * 1e-6))) + cfg.clock_offset_us;
   }
 
   void accept() {

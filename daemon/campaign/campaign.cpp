@@ -364,6 +364,12 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
     } else if (*kind == "imu_drop") {
       fault.kind = SimFault::Kind::ImuDrop;
       if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "imu_bytes_drop") {
+      fault.kind = SimFault::Kind::ImuBytesDrop;
+      if (auto v = r.integer("frames", 1, 1000000)) fault.frames = *v;
+    } else if (*kind == "chamber_corrupt") {
+      fault.kind = SimFault::Kind::ChamberCorrupt;
+      if (auto v = r.integer("replies", 1, 1000000)) fault.frames = *v;
     } else if (*kind == "drop_connection") {
       fault.kind = SimFault::Kind::DropConnection;
       if (auto v = r.string("device", true)) {
@@ -385,8 +391,8 @@ void check_faults(const json& j, double duration_s, std::vector<SimFault>& fault
       fault.kind = SimFault::Kind::RelayStuck;
     } else {
       problems.push_back(where + ".kind \"" + *kind +
-                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, imu_drop, disconnect, drop_connection, "
-                         "table_fault, relay_stuck, disk_full");
+                         "\" is not one of chamber_offset, imu_dropout, imu_corrupt, imu_drop, imu_bytes_drop, disconnect, "
+                         "drop_connection, chamber_corrupt, table_fault, relay_stuck, disk_full");
     }
     faults.push_back(fault);
   }
@@ -718,6 +724,11 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
         problems.push_back("campaign.sim_faults[" + std::to_string(i) +
                            "]: drop_connection needs the sim-wire devices (the in-process simulation has no "
                            "connections; use disconnect)");
+      else if ((spec.faults[i].kind == SimFault::Kind::ImuBytesDrop || spec.faults[i].kind == SimFault::Kind::ChamberCorrupt) &&
+               config.devices == "sim")
+        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
+                           "]: imu_bytes_drop and chamber_corrupt need the sim-wire devices (the in-process simulation "
+                           "has no link bytes; use imu_corrupt)");
     if (imu != nullptr) check_imu(*imu, spec.imu, problems);
     check_real_devices(config, spec, faults != nullptr, problems);
   }

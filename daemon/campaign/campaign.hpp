@@ -48,12 +48,14 @@ struct SimFault {
     TableFault,
     RelayStuck,
     DiskFull,        // the daemon's disk full (storage::disk_fault) for duration_s of device time
+    ImuBytesDrop,    // sim-wire: one byte cut out of each of `frames` samples on the link
+    ChamberCorrupt,  // sim-wire: `frames` Modbus replies of the chamber garbled (wrong transaction id)
   } kind = Kind::ChamberOffset;
   std::string device;       // Disconnect: table, chamber or imu; DropConnection: table or chamber
   double at_s = 0.0;        // program time of the first pass
   double duration_s = 0.0;  // simulated (device) seconds
   double offset_C = 0.0;    // ChamberOffset
-  std::int64_t frames = 1;  // ImuCorrupt, ImuDrop
+  std::int64_t frames = 1;  // ImuCorrupt, ImuDrop, ImuBytesDrop; ChamberCorrupt: replies
 };
 
 // The unit a campaign calibrates (docs/api.md, "Campaign JSON", `imu`). Empty serial: the campaign

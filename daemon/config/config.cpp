@@ -89,6 +89,7 @@ void read_sim(const json& j, DaemonConfig& c, std::vector<std::string>& problems
   ObjectReader r(j, "config.sim", problems);
   if (auto v = r.number_in("rate_hz", 1, 100000)) c.sim.rate_hz = *v;
   if (auto v = r.number_in("time_scale", 0, 1e6)) c.sim.time_scale = *v;
+  if (auto v = r.number_in("wire_time_scale", 1, 1000)) c.sim.wire_time_scale = *v;
   if (auto v = r.integer("seed", 0, std::numeric_limits<std::int64_t>::max())) c.sim.seed = static_cast<std::uint64_t>(*v);
   if (auto v = r.string("truth")) c.sim.truth = *v;
   if (auto v = r.string("truths_dir")) c.sim.truths_dir = *v;

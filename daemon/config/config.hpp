@@ -45,6 +45,9 @@ struct ChamberLimits {
 struct SimDefaults {
   double rate_hz = 100.0;
   double time_scale = 10.0;    // program seconds per wall second; 0: as fast as possible
+  // sim-wire's program seconds per wall second (1: real time). Not the campaign's time_scale: the
+  // wire cannot go as fast as possible, and a fault must outlast the drivers' timeouts in wall time.
+  double wire_time_scale = 1.0;
   std::uint64_t seed = 1;
   std::string truth = "ideal"; // "ideal", a truth's name (truths_dir) or a path to an imucal-imu-model/1 file
   // The folder of the simulated truths a campaign may name (docs/api.md, "Campaign JSON"): every

@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "core/expect_value.hpp"
+#include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
@@ -26,7 +27,10 @@ namespace dr = imucal::drivers;
 
 namespace {
 
-constexpr std::int64_t kChamberReadPeriod_ns = 250'000'000;
+constexpr std::int64_t kChamberReadPeriod_ns = 250'000'000;  // device time
+// Accelerated, the chamber is read no more often than this in host time (a Modbus round trip
+// each): at 500x every 20 ms is every 10 s of program, still many times the air's lag.
+constexpr std::int64_t kChamberReadMinPeriod_host_ns = 20'000'000;
 constexpr std::int64_t kReadHistory_ns = 10'000'000'000;  // table reads kept for interpolation
 // Rate tracking of sine pieces: the program's rate a little ahead (the controller ramps towards a
 // new demand at its acceleration limit) plus this gain times the angle error.
@@ -242,8 +246,11 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
     : program_(program),
       settings_(settings),
       dt_ns_(std::llround(units::kNsPerS / settings.rate_hz)),
+      time_scale_(simulated.time_scale),
       epoch_ns_(dr::host_time_ns()) {
+  if (!(time_scale_ > 0.0)) throw std::runtime_error("sim-wire: the time scale must be positive");
   sim::SimDevicesConfig sim;
+  sim.time_scale = time_scale_;
   for (std::size_t a = 0; a < 3; ++a)
     for (auto& mode : sim.servo.limits[a]) mode = table_limit_setting(settings.limits.axis[a]);
   sim.chamber_map = kSimWireChamberMap;
@@ -255,6 +262,9 @@ WireBench::WireBench(const motion::Program& program, const WireBenchSettings& se
   sim.imu.truth = simulated.truth;
   sim.imu.site = settings.site;
   sim.imu.temperature_C = simulated.chamber_start_C;
+  // Temperature messages at 10 per host second whatever the scale (one per 50 s of program at
+  // 500x, plenty for air that moves over minutes): the link's bandwidth goes to the samples.
+  sim.imu.temp_rate_hz = sim.imu.temp_rate_hz / time_scale_;
   sim.imu_serial = simulated.imu_serial.empty() ? "SIM-WIRE-" + std::to_string(simulated.seed) : simulated.imu_serial;
   sim_ = std::make_unique<sim::SimDevices>(sim);
 
@@ -320,7 +330,9 @@ void WireBench::start(int imu_fd) {
   dr::LinkImuConfig imu_config;
   imu_config.name = imu.serial;
   imu_config.link = imu.link;
-  imu_config.rate_hz = imu.rate_hz;
+  // The driver sees the samples arrive at the IMU's rate times the time scale (their time tags
+  // tick in host time, sim_world.hpp).
+  imu_config.rate_hz = imu.rate_hz * time_scale_;
   imu_config.stall_timeout = std::chrono::milliseconds(imu.stall_timeout_ms);
   imu_config.transport_delay_ns = imu.transport_delay_ns;
   // The IMU link first: opening it moves nothing, and without it no run can record.
@@ -353,7 +365,7 @@ void WireBench::start(int imu_fd) {
     chamber_state_.temperature_C = reading->process_C;
     chamber_state_.setpoint_C = reading->setpoint_C;
     chamber_state_.connected = true;
-    next_chamber_read_ns_ = dr::host_time_ns() + kChamberReadPeriod_ns;
+    next_chamber_read_ns_ = dr::host_time_ns() + std::max(kChamberReadMinPeriod_host_ns, host_ns(kChamberReadPeriod_ns * 1e-9));
     require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
     require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
     if (addresses_.power_relay) {
@@ -418,10 +430,16 @@ Table& WireBench::table() { return *table_; }
 Chamber& WireBench::chamber() { return *chamber_; }
 Imu& WireBench::imu() { return *imu_; }
 PowerSwitch* WireBench::power_switch() { return power_.get(); }
-double WireBench::now_s() const { return static_cast<double>(dr::host_time_ns() - epoch_ns_) / units::kNsPerS; }
+double WireBench::now_s() const { return static_cast<double>(device_ns(dr::host_time_ns() - epoch_ns_)) / units::kNsPerS; }
+
+std::int64_t WireBench::device_ns(std::int64_t host_span_ns) const {
+  return time_scale_ == 1.0 ? host_span_ns : std::llround(static_cast<double>(host_span_ns) * time_scale_);
+}
+
+std::int64_t WireBench::host_ns(double device_s) const { return std::llround(device_s / time_scale_ * units::kNsPerS); }
 
 void WireBench::wait(double seconds) {
-  const auto deadline = dr::host_time_ns() + std::llround(seconds * units::kNsPerS);
+  const auto deadline = dr::host_time_ns() + host_ns(seconds);
   for (;;) {
     const std::int64_t left_ns = deadline - dr::host_time_ns();
     if (left_ns <= 0) break;
@@ -434,7 +452,9 @@ std::string WireBench::describe() const {
   std::snprintf(rate, sizeof rate, "%g Hz", settings_.rate_hz);
   const std::string devices = dev_->table->describe() + "; " + dev_->chamber->describe() + "; " +
                               dev_->imu->describe() + " on " + imu_link_ + " at " + rate;
-  if (sim_) return "simulated devices on loopback through the real drivers, in real time: " + devices;
+  if (sim_)
+    return "simulated devices on loopback through the real drivers, " +
+           (time_scale_ == 1.0 ? std::string("in real time") : number_text(time_scale_) + "x real time") + ": " + devices;
   return "devices at the configured addresses through the real drivers: " + devices;  // the IMU named by its serial
 }
 
@@ -468,7 +488,7 @@ void WireBench::service(int max_wait_ms) {
     for (const dr::ImuTemperatures& t : batch.temperatures) {
       if (t.t_ns <= anchor_host_ns_) continue;
       TempSample sample = t.to_temp_sample();
-      sample.t_ns = anchor_ns() + (t.t_ns - anchor_host_ns_);
+      sample.t_ns = anchor_ns() + device_ns(t.t_ns - anchor_host_ns_);
       sample.chamber_C = chamber_state_.temperature_C;
       sample.chamber_setpoint_C = chamber_state_.setpoint_C;
       if (pending_temps_.empty() || sample.t_ns > pending_temps_.back().t_ns) pending_temps_.push_back(sample);
@@ -477,7 +497,7 @@ void WireBench::service(int max_wait_ms) {
   read_table();
   const std::int64_t now_ns = dr::host_time_ns();
   if (now_ns >= next_chamber_read_ns_) {
-    next_chamber_read_ns_ = now_ns + kChamberReadPeriod_ns;
+    next_chamber_read_ns_ = now_ns + std::max(kChamberReadMinPeriod_host_ns, host_ns(kChamberReadPeriod_ns * 1e-9));
     if (auto r = dev_->chamber->read(); r) {
       chamber_state_.temperature_C = r->process_C;
       chamber_state_.setpoint_C = r->setpoint_C;
@@ -498,8 +518,9 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
   for (InjectedFault& f : faults_) {
     if (f.fired || program_t_ns < std::llround(f.fault.at_s * units::kNsPerS)) continue;
     f.fired = true;
-    f.until_ns = now_ns + std::llround(f.fault.duration_s * units::kNsPerS);
-    const auto pause = std::chrono::milliseconds(std::llround(f.fault.duration_s * 1000.0));
+    // Its duration is program time: host time divided by the scale.
+    f.until_ns = now_ns + host_ns(f.fault.duration_s);
+    const auto pause = std::chrono::milliseconds(host_ns(f.fault.duration_s) / 1'000'000);
     switch (f.fault.kind) {
       case SimFault::Kind::ChamberOffset:
         sim_->chamber().set_reading_offset(f.fault.offset_C);
@@ -514,6 +535,15 @@ void WireBench::fire_faults(std::int64_t program_t_ns) {
       case SimFault::Kind::ImuDrop:
         // Samples lost on the link (never sent): the driver sees the sequence counter jump, a gap.
         sim_->with_imu([&](sim::SimImu& imu) { imu.drop_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::ImuBytesDrop:
+        // Bytes lost on the link: each damaged frame is too short for its description, the
+        // driver refuses it, the sequencer sees a gap.
+        sim_->with_imu([&](sim::SimImu& imu) { imu.drop_byte_of_next_samples(static_cast<int>(f.fault.frames)); });
+        break;
+      case SimFault::Kind::ChamberCorrupt:
+        // Replies the Modbus client must reject (libmodbus: invalid data); the driver retries.
+        sim_->chamber().corrupt_next_replies(static_cast<int>(f.fault.frames));
         break;
       case SimFault::Kind::DropConnection:
         // The controller closes its connections; the driver's next request reconnects.
@@ -623,7 +653,7 @@ bool WireBench::interpolate(std::int64_t host_ns, Eigen::Vector3d& angle_deg) co
   if (hi == reads_.begin()) ++hi;
   const TableRead& r0 = *(hi - 1);
   const TableRead& r1 = *hi;
-  const double h_s = static_cast<double>(r1.t_ns - r0.t_ns) / units::kNsPerS;
+  const double h_s = static_cast<double>(device_ns(r1.t_ns - r0.t_ns)) / units::kNsPerS;  // rates are per device second
   const double u = static_cast<double>(host_ns - r0.t_ns) / static_cast<double>(r1.t_ns - r0.t_ns);
   // Cubic Hermite on angles and rates: exact for the controller's constant-acceleration pieces
   // up to the rate kinks between reads.
@@ -637,7 +667,7 @@ bool WireBench::interpolate(std::int64_t host_ns, Eigen::Vector3d& angle_deg) co
 
 std::optional<double> WireBench::program_time_s(std::int64_t host_ns) const {
   if (!following_) return std::nullopt;
-  return anchor_t_s_ + static_cast<double>(host_ns - anchor_host_ns_) / units::kNsPerS;
+  return anchor_t_s_ + static_cast<double>(device_ns(host_ns - anchor_host_ns_)) / units::kNsPerS;
 }
 
 // The demands of every piece that has begun, then the rate of the sine pieces under way.

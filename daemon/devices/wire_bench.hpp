@@ -5,7 +5,9 @@
 // - `--devices sim-wire`: the simulated table controller, chamber controller and IMU of
 //   drivers/sim (sim::SimDevices), started in-process and owned by the bench, on 127.0.0.1 with
 //   ephemeral ports and the IMU on a socket pair.
-// It runs in real time, on the host time base.
+// It runs in real time, on the host time base; sim-wire may run accelerated (SimWireSettings::
+// time_scale): the simulated physics run k program seconds per host second, the wire and the
+// drivers' timeouts in host time.
 //
 // It adapts the drivers to the sequencer's Bench:
 // - Table: the program is followed piece by piece with the controller's own primitives, so that
@@ -75,6 +77,10 @@ struct SimWireSettings {
   // The serial the simulated IMU reports over its link: the campaign's unit when it names one
   // (the simulated IMU is that unit), else SIM-WIRE-<seed>.
   std::string imu_serial;
+  // Program seconds per host second (imucald's sim.wire_time_scale): the simulated table's
+  // motion, the IMU's samples and the chamber's air run this much faster, on the same wire and
+  // drivers, whose timeouts stay in host time (a fault must outlast them in host time to show).
+  double time_scale = 1.0;
 };
 
 class WireBench final : public Bench {
@@ -97,7 +103,7 @@ class WireBench final : public Bench {
   double now_s() const override;  // host time base, from the bench's start
   void wait(double seconds) override;
   bool paced_by_consumer() const override { return false; }  // real time: a device never waits
-  double time_scale() const override { return 1.0; }
+  double time_scale() const override { return time_scale_; }
   std::string describe() const override;
   void resuming_after(double t_s) override;
 
@@ -155,6 +161,9 @@ class WireBench final : public Bench {
   std::optional<double> program_time_s(std::int64_t host_ns) const;
   std::int64_t anchor_ns() const;  // the checkpoint the program is followed from, in ns
   bool interpolate(std::int64_t host_ns, Eigen::Vector3d& angle_deg) const;
+  // Program (device) nanoseconds in a span of host nanoseconds, and back.
+  std::int64_t device_ns(std::int64_t host_span_ns) const;
+  std::int64_t host_ns(double device_s) const;
 
   const motion::Program& program_;
   WireBenchSettings settings_;
@@ -162,6 +171,7 @@ class WireBench final : public Bench {
   std::string truth_json_;        // sim-wire: the simulated IMU's truth; real devices: none
   std::string imu_link_;          // where the IMU's frames come from, for describe()
   std::int64_t dt_ns_;
+  double time_scale_ = 1.0;       // program (device) seconds per host second; 1 with real devices
   std::int64_t epoch_ns_;         // host time of the bench's start (now_s() counts from it)
   std::int64_t keep_alive_ns_ = 0;  // demand repeat period; 0: the table's watchdog is off
   // Declared before the drivers: the drivers close their links before the devices stop.

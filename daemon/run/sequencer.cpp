@@ -651,6 +651,7 @@ void Sequencer::run_campaign(std::int64_t id) {
         sw.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
         sw.imu_serial = run.spec.imu.serial;
         sw.disk = storage_disk_switch();
+        sw.time_scale = config_.sim.wire_time_scale;
         run.bench = std::make_unique<WireBench>(run.program, wb, sw);
       }
     } else {

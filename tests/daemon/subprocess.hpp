@@ -88,10 +88,13 @@ struct DaemonProcess {
   std::uint16_t port = 0;
 };
 inline DaemonProcess spawn_imucald(const std::string& imucald, const std::string& data_dir, const std::string& log_path,
-                                   const std::string& operator_token, const char* devices = "sim") {
-  Child child = spawn_child({imucald, "--listen", "127.0.0.1:0", "--data-dir", data_dir, "--operator-token",
-                             operator_token, "--log-level", "info", "--devices", devices},
-                            log_path);
+                                   const std::string& operator_token, const char* devices = "sim",
+                                   const std::vector<std::string>& more_args = {}) {
+  std::vector<std::string> args = {imucald,         "--listen",    "127.0.0.1:0", "--data-dir", data_dir,
+                                   "--operator-token", operator_token, "--log-level", "info",       "--devices",
+                                   devices};
+  args.insert(args.end(), more_args.begin(), more_args.end());
+  Child child = spawn_child(args, log_path);
   constexpr const char* kListening = "listening on http://127.0.0.1:";
   const std::string text = read_stdout_until(
       child,

@@ -12,6 +12,10 @@
 // the temperature records too except inside the marked chamber faults, and every model
 // coefficient within 0.1 of its sigma.
 //
+// Part C, the same campaign through the wire (`--devices sim-wire`, accelerated 200x), with the
+// wire's faults, three kills and the disk full: checked on the grid and on what was committed
+// before each kill, the model compared but not held to 0.1 sigma (see its comment: why).
+//
 // Part B, the wire level: a short program in real time on `--devices sim-wire` (the simulated
 // table, chamber and IMU reached through the real drivers), with the wire's faults (IMU samples
 // corrupted on the link and lost, the IMU silent for seconds, Modbus timeouts, a chamber that
@@ -20,12 +24,16 @@
 // every frame committed before the kill unchanged.
 //
 // IMUCAL_CHAOS_SEED overrides the seed (printed with every failure); IMUCAL_CHAOS_RATE_HZ part A's
-// rate. bench/README.md has the command that prints the soak's figures.
+// rate; IMUCAL_CHAOS_WIRE_SCALE part C's time scale. bench/README.md has the command that prints
+// the soak's figures.
 #include <signal.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -46,6 +54,11 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 std::uint64_t chaos_seed(std::uint64_t fallback) {
   const char* s = std::getenv("IMUCAL_CHAOS_SEED");
   return s != nullptr && *s != '\0' ? std::strtoull(s, nullptr, 10) : fallback;
+}
+
+double env_number(const char* name, double fallback) {
+  const char* s = std::getenv(name);
+  return s != nullptr && *s != '\0' ? std::atof(s) : fallback;
 }
 
 // A fault of the campaign's sim_faults, with the words of the suspension it must cause.
@@ -116,8 +129,9 @@ struct Imucald {
   std::string data_dir, log;
   const char* devices;
   DaemonProcess p;
+  std::vector<std::string> more_args;  // e.g. --config FILE
   void start() {
-    p = spawn_imucald(IMUCAL_IMUCALD, data_dir, log, kOperatorToken, devices);
+    p = spawn_imucald(IMUCAL_IMUCALD, data_dir, log, kOperatorToken, devices, more_args);
     ASSERT_GT(p.port, 0) << "imucald did not start; see " << log;
   }
   Client client() const { return Client{p.port, kOperatorToken}; }
@@ -142,6 +156,80 @@ std::int64_t post_and_start(const Client& op, const json& campaign) {
   return id;
 }
 
+// thermal-short with its profile, then the programs of the built-in campaign `full`; the thermal
+// truth makes the temperatures and the coefficients follow the profile.
+json overnight_campaign(double rate_hz, std::uint64_t seed) {
+  return {{"name", "chaos overnight"},
+          {"program", {"thermal-short", "direct", "lever-arm", "navigation", "evaluate"}},
+          {"chamber", {{"profile", "thermal-short"}}},
+          {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))},
+          {"rate_hz", rate_hz},
+          {"seed", seed % 1000 + 1}};
+}
+
+// Every stage's estimates of `disturbed` against `undisturbed`'s, in the latter's sigma; each
+// must be within `max_sigma` of it (and a number), and there must be a model of all stages (a
+// stage without estimates fails unless `max_sigma` is infinite: then it is only counted).
+struct ModelDifference {
+  double worst_sigma = 0.0;
+  std::string worst_name;
+  int compared = 0;
+  std::vector<std::string> without_model;  // stages the disturbed run has no estimates of
+};
+ModelDifference compare_models(const json& disturbed, const json& undisturbed, double max_sigma) {
+  ModelDifference d;
+  for (const auto& [stage, result] : undisturbed.at("results").items()) {
+    if (!result.is_object() || !result.contains("estimates")) continue;
+    const json& results = disturbed.at("results");
+    if (!results.contains(stage) || !results.at(stage).contains("estimates")) {
+      d.without_model.push_back(stage);
+      if (std::isfinite(max_sigma)) {
+        ADD_FAILURE() << "the disturbed run has no estimates of " << stage << ": "
+                      << results.value(stage, json()).dump().substr(0, 1000);
+      }
+      continue;
+    }
+    const json& mine = results.at(stage).at("estimates");
+    for (const auto& [name, pair] : result.at("estimates").items()) {
+      const double sigma = pair.at(1).get<double>();
+      if (!(sigma > 0)) continue;
+      const double diff = std::abs(mine.at(name).at(0).get<double>() - pair.at(0).get<double>()) / sigma;
+      if (diff >= d.worst_sigma) {
+        d.worst_sigma = diff;
+        d.worst_name = stage + " " + name;
+      }
+      ++d.compared;
+      EXPECT_LE(diff, max_sigma) << stage << " " << name << ": disturbed " << mine.at(name).dump() << ", undisturbed "
+                           << pair.dump();
+    }
+  }
+  if (std::isfinite(max_sigma)) {
+    EXPECT_GE(d.compared, 36);
+  }
+  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
+  return d;
+}
+
+// A recording against the program's frame grid (dt_ns apart from dt_ns on).
+struct GridCheck {
+  std::size_t grid = 0, lost = 0, duplicated = 0, off_grid = 0;
+};
+GridCheck check_grid(const std::vector<ImuFrame>& frames, double duration_s, double rate_hz) {
+  const auto dt_ns = std::llround(1e9 / rate_hz);
+  GridCheck g;
+  g.grid = static_cast<std::size_t>(std::llround(duration_s * rate_hz));
+  g.off_grid = frames.empty() || frames.front().t_ns != dt_ns;
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    g.duplicated += frames[i].t_ns <= frames[i - 1].t_ns;
+    g.off_grid += frames[i].t_ns - frames[i - 1].t_ns != dt_ns;
+  }
+  g.lost = g.grid > frames.size() ? g.grid - frames.size() : 0;
+  EXPECT_EQ(frames.size(), g.grid);
+  EXPECT_EQ(g.duplicated, 0u);
+  EXPECT_EQ(g.off_grid, 0u);
+  return g;
+}
+
 bool final_state(const json& c) {
   const auto s = c.value("state", "");
   return s == "done" || s == "failed" || s == "aborted";
@@ -149,8 +237,9 @@ bool final_state(const json& c) {
 
 // Kills the daemon when the run's stored program time passes each of `kill_at_s`, restarts it and
 // resumes the run; returns the program time (stored) at each kill. Then waits for the run's end.
+// `after_kill(run)` looks at the campaign as it stood before each kill while the daemon is down.
 json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill_at_s, double timeout_s,
-                    std::vector<double>& killed_at_s) {
+                    std::vector<double>& killed_at_s, const std::function<void(const json&)>& after_kill = {}) {
   const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
   for (const double at_s : kill_at_s) {
     const json before = d.client().wait_for(id, [&](const json& c) {
@@ -162,6 +251,7 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
     }
     d.kill9();
     killed_at_s.push_back(before.at("program_time_s").get<double>());
+    if (after_kill) after_kill(before);
     d.start();
     if (d.p.port == 0) return json();
     const Client op = d.client();
@@ -181,6 +271,63 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
   return d.client().wait_for(id, final_state, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
 }
 
+// The faults of the wire (sim-wire), drawn from `rng`: durations drawn in seconds of host time
+// (what the drivers' timeouts count) and given in program seconds, `scale` of them a host second.
+std::vector<PlannedFault> wire_faults(std::mt19937_64& rng, double scale) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto host_seconds = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * scale * 10.0) / 10.0; };
+  return {
+      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 5)}}, {"frame(s) missing", "corrupt IMU"},
+       "IMU samples corrupted (CRC)"},
+      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing"},
+       "IMU samples dropped"},
+      {{{"kind", "imu_dropout"}, {"duration_s", host_seconds(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
+       "IMU silent for seconds"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(1, 2)}}, {"chamber disconnected"},
+       "Modbus timeouts"},
+      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", host_seconds(6, 10)}}, {"chamber disconnected"},
+       "chamber stops answering"},
+      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
+  };
+}
+
+// A soak's two runs on one daemon: the disturbed campaign with its kills, then the reference
+// undisturbed. The caller checks that both ended `done`.
+struct SoakRuns {
+  json disturbed, undisturbed;
+  std::vector<double> killed_at_s;
+  double disturbed_wall_s = 0.0, undisturbed_wall_s = 0.0;
+};
+SoakRuns run_soak(Imucald& d, const json& disturbed_spec, const json& reference_spec, const std::vector<double>& kill_at_s,
+                  const std::function<void(const json&)>& after_kill = {}) {
+  SoakRuns r;
+  const auto t0 = Clock::now();
+  const auto id = post_and_start(d.client(), disturbed_spec);
+  r.disturbed = run_with_kills(d, id, kill_at_s, 1800.0, r.killed_at_s, after_kill);
+  r.disturbed_wall_s = since(t0);
+  if (r.disturbed.value("state", "") != "done" || d.p.port == 0) return r;
+  const auto t1 = Clock::now();
+  const auto id2 = post_and_start(d.client(), reference_spec);
+  r.undisturbed = d.client().wait_for(id2, final_state, 1800.0);
+  r.undisturbed_wall_s = since(t1);
+  return r;
+}
+
+// One line per fault: where it was injected and the suspension that marked it.
+void print_faults(const std::vector<PlannedFault>& faults, const std::vector<int>& matched,
+                  const std::vector<json>& suspensions) {
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    std::string mark = "no suspension (absorbed by the driver)";
+    if (matched[i] >= 0) {
+      const json& s = suspensions[static_cast<std::size_t>(matched[i])];
+      mark = "suspended at " + number_text(s.at("program_time_s").get<double>()) +
+             " s: " + s.at("reason").get<std::string>().substr(0, 90);
+    }
+    std::printf("  %-28s at %8.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
+                mark.c_str());
+  }
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
@@ -189,20 +336,12 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
 TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   const std::uint64_t seed = chaos_seed(33);
   SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
-  const char* rate_env = std::getenv("IMUCAL_CHAOS_RATE_HZ");
-  const double rate_hz = rate_env != nullptr && *rate_env != '\0' ? std::atof(rate_env) : 100.0;
+  const double rate_hz = env_number("IMUCAL_CHAOS_RATE_HZ", 100.0);
   std::mt19937_64 rng(seed);
 
-  // thermal-short with its profile, then the programs of the built-in campaign `full`; the
-  // thermal truth makes the temperatures and the coefficients follow the profile.
-  json campaign = {{"name", "chaos overnight"},
-                   {"program", {"thermal-short", "direct", "lever-arm", "navigation", "evaluate"}},
-                   {"chamber", {{"profile", "thermal-short"}}},
-                   {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))},
-                   {"rate_hz", rate_hz},
-                   {"seed", seed % 1000 + 1},
-                   {"time_scale", 0},
-                   {"suspenders", {{"settle_s", 5}, {"frame_timeout_s", 1.0}, {"chamber_persist_s", 2.0}}}};
+  json campaign = overnight_campaign(rate_hz, seed);
+  campaign["time_scale"] = 0;
+  campaign["suspenders"] = {{"settle_s", 5}, {"frame_timeout_s", 1.0}, {"chamber_persist_s", 2.0}};
   const auto check = daemon::check_campaign(campaign, daemon::DaemonConfig{});
   ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
   const double duration_s = check.duration_s;
@@ -250,7 +389,7 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
               kill_at[1], kill_at[2]);
 
   const std::string dir = scratch_dir("chaos");
-  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim", {}};
+  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim", {}, {}};
   d.start();
   ASSERT_GT(d.p.port, 0);
 
@@ -259,18 +398,12 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   disturbed_spec["name"] = "chaos overnight, faults and kills";
   disturbed_spec["time_scale"] = kTimeScale;
   disturbed_spec["sim_faults"] = sim_faults;
-  const auto t0 = Clock::now();
-  const auto id = post_and_start(d.client(), disturbed_spec);
-  std::vector<double> killed_at;
-  const json disturbed = run_with_kills(d, id, kill_at, 1800.0, killed_at);
-  const double disturbed_s = since(t0);
+  const SoakRuns runs = run_soak(d, disturbed_spec, campaign, kill_at);
+  const json& disturbed = runs.disturbed;
+  const json& undisturbed = runs.undisturbed;
+  const std::vector<double>& killed_at = runs.killed_at_s;
   ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
   ASSERT_EQ(killed_at.size(), kKills);
-
-  const auto t1 = Clock::now();
-  const auto id2 = post_and_start(d.client(), campaign);
-  const json undisturbed = d.client().wait_for(id2, final_state, 1800.0);
-  const double undisturbed_s = since(t1);
   ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
 
   // Marked: each fault a suspension of the run naming it (an event of the run in the daemon's
@@ -342,28 +475,7 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
   EXPECT_EQ(temps_unmarked, 0u);
 
   // The models: every stage's estimates within 0.1 of the undisturbed run's sigma.
-  double worst_sigma = 0.0;
-  std::string worst_name;
-  int compared = 0;
-  for (const auto& [stage, result] : undisturbed.at("results").items()) {
-    if (!result.is_object() || !result.contains("estimates")) continue;
-    ASSERT_TRUE(disturbed.at("results").contains(stage)) << stage;
-    const json& mine = disturbed.at("results").at(stage).at("estimates");
-    for (const auto& [name, pair] : result.at("estimates").items()) {
-      const double sigma = pair.at(1).get<double>();
-      if (!(sigma > 0)) continue;
-      const double diff = std::abs(mine.at(name).at(0).get<double>() - pair.at(0).get<double>()) / sigma;
-      if (diff >= worst_sigma) {
-        worst_sigma = diff;
-        worst_name = stage + " " + name;
-      }
-      ++compared;
-      EXPECT_LE(diff, 0.1) << stage << " " << name << ": disturbed " << mine.at(name).dump() << ", undisturbed "
-                           << pair.dump();
-    }
-  }
-  EXPECT_GE(compared, 36);
-  EXPECT_TRUE(disturbed.at("has_model").get<bool>());
+  const ModelDifference model = compare_models(disturbed, undisturbed, 0.1);
 
   std::printf(
       "chaos soak A (sim, %.0f s of program at %g Hz, %zu frames): faults injected %zu + kill -9 %zu (at %.0f, %.0f, "
@@ -374,14 +486,9 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
       duration_s, rate_hz, want.size(), faults.size(), kKills, killed_at[0], killed_at[1], killed_at[2], survived,
       killed_at.size(), suspensions.size(), lost, duplicated, differing, temps_differing,
       static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
-      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), worst_sigma, worst_name.c_str(), compared,
-      disturbed_s, undisturbed_s);
-  for (std::size_t i = 0; i < faults.size(); ++i)
-    if (matched[i] >= 0)
-      std::printf("  %-24s at %8.1f s -> suspended at %8.1f s: %s\n", faults[i].label.c_str(),
-                  faults[i].spec.at("at_s").get<double>(),
-                  suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>(),
-                  suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 100).c_str());
+      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), model.worst_sigma, model.worst_name.c_str(),
+      model.compared, runs.disturbed_wall_s, runs.undisturbed_wall_s);
+  print_faults(faults, matched, suspensions);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -410,21 +517,7 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
   ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
   const double duration_s = check.duration_s;
 
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  auto between = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * 10.0) / 10.0; };
-  std::vector<PlannedFault> faults = {
-      {{{"kind", "imu_corrupt"}, {"frames", 1 + static_cast<int>(u(rng) * 5)}}, {"frame(s) missing", "corrupt IMU"},
-       "IMU samples corrupted (CRC)"},
-      {{{"kind", "imu_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}}, {"frame(s) missing"},
-       "IMU samples dropped"},
-      {{{"kind", "imu_dropout"}, {"duration_s", between(2, 4)}}, {"frame(s) missing", "IMU frames missing", "IMU:"},
-       "IMU silent for seconds"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(1, 2)}}, {"chamber disconnected"},
-       "Modbus timeouts"},
-      {{{"kind", "disconnect"}, {"device", "chamber"}, {"duration_s", between(6, 10)}}, {"chamber disconnected"},
-       "chamber stops answering"},
-      {{{"kind", "drop_connection"}, {"device", "table"}}, {"table"}, "table connection dropped"},
-  };
+  std::vector<PlannedFault> faults = wire_faults(rng, 1.0);
   std::vector<double> at = instants(rng, faults.size() + 1, 2.0, duration_s - 2.0, 4.0);
   ASSERT_EQ(at.size(), faults.size() + 1);
   std::shuffle(at.begin(), at.end(), rng);
@@ -439,7 +532,7 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
               static_cast<unsigned long long>(seed), duration_s, sim_faults.dump().c_str(), kill_at);
 
   const std::string dir = scratch_dir("chaos-wire");
-  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim-wire", {}};
+  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim-wire", {}, {}};
   d.start();
   ASSERT_GT(d.p.port, 0);
   const auto t0 = Clock::now();
@@ -472,17 +565,7 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
   // The grid: every instant of the program once, none lost, none doubled; what was committed
   // before the kill unchanged.
   const auto frames = run_frames(run_path);
-  const std::int64_t dt_ns = 10'000'000;
-  const auto grid = static_cast<std::size_t>(std::llround(duration_s * 100.0));
-  std::size_t duplicated = 0, off_grid = frames.empty() || frames.front().t_ns != dt_ns;
-  for (std::size_t i = 1; i < frames.size(); ++i) {
-    duplicated += frames[i].t_ns <= frames[i - 1].t_ns;
-    off_grid += frames[i].t_ns - frames[i - 1].t_ns != dt_ns;
-  }
-  const std::size_t lost = grid > frames.size() ? grid - frames.size() : 0;
-  EXPECT_EQ(frames.size(), grid);
-  EXPECT_EQ(duplicated, 0u);
-  EXPECT_EQ(off_grid, 0u);
+  const GridCheck g = check_grid(frames, duration_s, 100.0);
   std::size_t changed = 0;
   for (std::size_t i = 0; i < std::min(committed.size(), frames.size()); ++i) changed += !same_frame(frames[i], committed[i]);
   EXPECT_EQ(changed, 0u) << "frames committed before the kill changed";
@@ -505,15 +588,181 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
       "-9 1 (at %.1f s), survived %zu + 1 (%zu marked by a suspension); suspensions %zu; frames lost %zu, "
       "duplicated %zu, off the grid %zu, committed before the kill and changed %zu of %zu; delivery gaps counted "
       "%lld frames, bad frames %lld; wall %.0f s\n",
-      duration_s, grid, faults.size(), killed_at[0], faults.size(), marked, suspensions.size(), lost, duplicated,
-      off_grid, changed, committed.size(), static_cast<long long>(c.at("lost_frames").get<std::int64_t>()),
+      duration_s, g.grid, faults.size(), killed_at[0], faults.size(), marked, suspensions.size(), g.lost, g.duplicated,
+      g.off_grid, changed, committed.size(), static_cast<long long>(c.at("lost_frames").get<std::int64_t>()),
       static_cast<long long>(c.at("bad_frames").get<std::int64_t>()), wall_s);
-  for (std::size_t i = 0; i < faults.size(); ++i)
-    std::printf("  %-28s at %6.1f s -> %s\n", faults[i].label.c_str(), faults[i].spec.at("at_s").get<double>(),
-                matched[i] >= 0
-                    ? ("suspended at " +
-                       number_text(suspensions[static_cast<std::size_t>(matched[i])].at("program_time_s").get<double>()) +
-                       " s: " + suspensions[static_cast<std::size_t>(matched[i])].at("reason").get<std::string>().substr(0, 90))
-                          .c_str()
-                    : "no suspension (absorbed by the driver)");
+  print_faults(faults, matched, suspensions);
+}
+
+// ------------------------------------------------------------------------------------------------
+// Part C, the overnight campaign through the wire: Part A's campaign on `--devices sim-wire`,
+// accelerated (imucald's sim.wire_time_scale, IMUCAL_CHAOS_WIRE_SCALE, 200x unless given), with
+// the wire's faults, kill -9 three times and the disk full once.
+//
+// What cannot be checked, and why: through real sockets a run is not reproducible frame for
+// frame. The instants the controller receives its demands, the table reads the bench interpolates
+// between and the samples the host stamps all depend on the scheduler; at 200x a millisecond of
+// host time is 0.2 s of program. So the recording is checked against the program's grid (every
+// instant once: none lost, none doubled) and the frames committed before each kill against the
+// recording at the end (unchanged). The model is compared with the undisturbed run's and the
+// difference reported, not held to 0.1 sigma: two undisturbed runs at 200x already differ by
+// thousands of sigma in the lever arms (the lever-arm program's 2 s oscillations last 10 ms of
+// host time, a few table reads apart, so the frames' interpolated angles differ run to run) and by
+// tens in stage 1's gyro scale; at 50x direct-short's two runs differ by up to 2 sigma. Stage 1
+// is sometimes far off in either run (accelerometer residuals 0.03 m/s^2 against 4e-5): the
+// estimators take a static from the program's segment times, and a demand that reaches the table
+// 5 ms of host time late moves it a second of program into the static. Stage 3 then refuses to
+// converge ("stage-1 errors too large"), which is counted and printed, not failed. The model's
+// 0.1 sigma is Part A's check, on the bench that is reproducible.
+
+namespace {
+
+// A frame's identity, cheap to keep for millions of frames (FNV-1a over its fields' bytes).
+std::uint64_t frame_digest(const ImuFrame& f) {
+  std::uint64_t h = 1469598103934665603ull;
+  auto mix = [&](const void* p, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+  };
+  mix(&f.t_ns, sizeof f.t_ns);
+  mix(f.dtheta_rad.data(), 3 * sizeof(double));
+  mix(f.dv_mps.data(), 3 * sizeof(double));
+  mix(f.table_deg.data(), 3 * sizeof(double));
+  return h;
+}
+
+std::vector<std::uint64_t> digests(const std::vector<ImuFrame>& frames) {
+  std::vector<std::uint64_t> d(frames.size());
+  std::transform(frames.begin(), frames.end(), d.begin(), frame_digest);
+  return d;
+}
+
+}  // namespace
+
+TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFullDisk) {
+  const std::uint64_t seed = chaos_seed(33);
+  SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
+  const double scale = env_number("IMUCAL_CHAOS_WIRE_SCALE", 200.0);
+  constexpr double kRateHz = 100.0;
+  std::mt19937_64 rng(seed);
+
+  // Device time is program time: a suspender's persistence, a fault's duration. The wire's
+  // timeouts are host time, so what must outlast them is drawn in host seconds times the scale:
+  // a frame is late only after half a second of host time, a fault lasts seconds of host time.
+  json campaign = overnight_campaign(kRateHz, seed);
+  campaign["name"] = "chaos overnight through the wire";
+  campaign["suspenders"] = {{"settle_s", 5}, {"frame_timeout_s", 0.5 * scale}, {"chamber_persist_s", 0.25 * scale}};
+  daemon::DaemonConfig sim_wire;
+  sim_wire.devices = "sim-wire";
+  const auto check = daemon::check_campaign(campaign, sim_wire);
+  ASSERT_TRUE(check.spec.has_value()) << (check.problems.empty() ? "" : check.problems.front());
+  const double duration_s = check.duration_s;
+
+  // Part B's faults, then those a short real-time run does not have room for.
+  std::vector<PlannedFault> faults = wire_faults(rng, scale);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto host_seconds = [&](double lo, double hi) { return std::round((lo + (hi - lo) * u(rng)) * scale); };
+  faults.push_back({{{"kind", "imu_bytes_drop"}, {"frames", 1 + static_cast<int>(u(rng) * 20)}},
+                    {"frame(s) missing", "corrupt IMU"}, "IMU bytes dropped"});
+  faults.push_back({{{"kind", "chamber_corrupt"}, {"replies", 1 + static_cast<int>(u(rng) * 5)}}, {"chamber"},
+                    "Modbus replies corrupt"});
+  faults.push_back({{{"kind", "disconnect"}, {"device", "table"}, {"duration_s", host_seconds(1, 3)}}, {"table"},
+                    "table stops answering"});
+  faults.push_back({{{"kind", "disk_full"}, {"duration_s", host_seconds(2, 5)}}, {"disk full"}, "disk full"});
+  // A driver's retry or reconnect may absorb these before anything shows: counted, not required.
+  auto may_be_absorbed = [](const PlannedFault& f) {
+    return f.spec.at("kind") == "drop_connection" || f.spec.at("kind") == "chamber_corrupt";
+  };
+  std::vector<double> at = instants(rng, faults.size(), 300.0, duration_s - 300.0, duration_s / 40.0);
+  ASSERT_EQ(at.size(), faults.size());
+  std::shuffle(at.begin(), at.end(), rng);
+  // The kills where the stored progress (once a host second: `scale` program seconds) passes them.
+  constexpr std::size_t kKills = 3;
+  const std::vector<double> kill_at = instants(rng, kKills, 600.0, duration_s - 5.0 * scale, duration_s / 10.0);
+  ASSERT_EQ(kill_at.size(), kKills);
+  json sim_faults = json::array();
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    faults[i].spec["at_s"] = at[i];
+    sim_faults.push_back(faults[i].spec);
+  }
+  std::printf("chaos C: seed %llu, %.0f s of program at %g Hz through the wire at %gx; faults %s; kill -9 at %.0f, "
+              "%.0f, %.0f s\n",
+              static_cast<unsigned long long>(seed), duration_s, kRateHz, scale, sim_faults.dump().c_str(), kill_at[0],
+              kill_at[1], kill_at[2]);
+
+  const std::string dir = scratch_dir("chaos-wire-overnight");
+  std::ofstream(dir + "/imucald.json") << json{{"sim", {{"wire_time_scale", scale}}}}.dump();
+  Imucald d{dir + "/data", dir + "/imucald.stderr", "sim-wire", {}, {"--config", dir + "/imucald.json"}};
+  d.start();
+  ASSERT_GT(d.p.port, 0);
+
+  json disturbed_spec = campaign;
+  disturbed_spec["name"] = "chaos overnight through the wire, faults and kills";
+  disturbed_spec["sim_faults"] = sim_faults;
+  // What was committed at each kill, read while the daemon is down: still there, unchanged, at
+  // the end (each kill's frames checked against the previous kill's, the last kill's against the end).
+  std::vector<std::uint64_t> committed;
+  std::size_t committed_changed = 0;
+  std::string run_path;
+  auto compare_committed = [&](const std::vector<std::uint64_t>& now) {
+    for (std::size_t i = 0; i < committed.size(); ++i) committed_changed += i >= now.size() || now[i] != committed[i];
+  };
+  const SoakRuns runs = run_soak(d, disturbed_spec, campaign, kill_at, [&](const json& before) {
+    run_path = dir + "/data/" + before.at("run_db").get<std::string>();
+    const auto now = digests(run_frames(run_path));
+    compare_committed(now);
+    committed = now;
+  });
+  const json& disturbed = runs.disturbed;
+  const json& undisturbed = runs.undisturbed;
+  const std::vector<double>& killed_at = runs.killed_at_s;
+  ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
+  ASSERT_EQ(killed_at.size(), kKills);
+  ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
+  EXPECT_GT(committed.size(), 0u);
+
+  // Marked: each fault a suspension naming it, each kill a redo from the last commit.
+  const std::vector<json> suspensions = events_of(disturbed, "suspended");
+  const std::vector<int> matched = match_faults(faults, suspensions);
+  std::size_t marked = 0;
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    marked += matched[i] >= 0;
+    if (may_be_absorbed(faults[i])) continue;
+    EXPECT_GE(matched[i], 0) << faults[i].label << " (" << faults[i].spec.dump() << ") left no suspension; "
+                             << json(suspensions).dump().substr(0, 4000);
+  }
+  EXPECT_EQ(events_of(disturbed, "redo").size(), kKills);
+
+  // The recording: every instant of the program once, as the undisturbed run's; what was
+  // committed before the kills unchanged.
+  const auto frames = run_frames(run_path);
+  const GridCheck g = check_grid(frames, duration_s, kRateHz);
+  const auto reference = run_frames(dir + "/data/" + undisturbed.at("run_db").get<std::string>());
+  const GridCheck reference_grid = check_grid(reference, duration_s, kRateHz);
+  compare_committed(digests(frames));
+  EXPECT_EQ(committed_changed, 0u) << "frames committed before a kill changed or went missing";
+  std::size_t bit_identical = 0;
+  for (std::size_t i = 0; i < std::min(frames.size(), reference.size()); ++i)
+    bit_identical += same_frame(frames[i], reference[i]);
+
+  // Not within 0.1 sigma: measured and reported only (see the comment above Part C).
+  const ModelDifference model = compare_models(disturbed, undisturbed, std::numeric_limits<double>::infinity());
+
+  std::printf(
+      "chaos soak C (sim-wire at %gx, %.0f s of program at %g Hz, %zu grid frames): faults injected %zu + kill -9 %zu "
+      "(at %.0f, %.0f, %.0f s), survived %zu + %zu (%zu marked by a suspension); suspensions %zu; frames lost %zu, "
+      "duplicated %zu, off the grid %zu (reference: %zu, %zu, %zu); committed before the kills and changed %zu of %zu; "
+      "bit-identical to the reference %zu (not expected through sockets); delivery gaps counted %lld frames, bad "
+      "frames %lld; worst model difference %.3g sigma (%s) over %d coefficients, stages without a model %zu; wall "
+      "%.0f s disturbed, %.0f s undisturbed\n",
+      scale, duration_s, kRateHz, g.grid, faults.size(), kKills, killed_at[0], killed_at[1], killed_at[2],
+      faults.size(), killed_at.size(), marked, suspensions.size(), g.lost, g.duplicated, g.off_grid,
+      reference_grid.lost, reference_grid.duplicated, reference_grid.off_grid, committed_changed, committed.size(),
+      bit_identical, static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
+      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), model.worst_sigma,
+      model.worst_name.c_str(), model.compared, model.without_model.size(), runs.disturbed_wall_s,
+      runs.undisturbed_wall_s);
+  for (const std::string& stage : model.without_model)
+    std::printf("  no estimates of %s: %s\n", stage.c_str(),
+                disturbed.at("results").value(stage, json()).value("message", "").substr(0, 200).c_str());
+  print_faults(faults, matched, suspensions);
 }

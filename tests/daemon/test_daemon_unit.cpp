@@ -541,6 +541,28 @@ TEST(Config, TheCommentedExampleParses) {
   EXPECT_EQ(real.device_addresses->power_relay->host, "192.168.10.21");
 }
 
+// The wire's own faults (bytes on the IMU link, garbled Modbus replies) exist only where there is
+// a wire; its time scale is the configuration's, real time unless it says otherwise.
+TEST(Config, TheWireFaultsAndTimeScaleAreSimWires) {
+  EXPECT_EQ(DaemonConfig{}.sim.wire_time_scale, 1.0);
+  EXPECT_EQ(parse_config(R"({"sim": {"wire_time_scale": 200}})", "test").sim.wire_time_scale, 200.0);
+  const json campaign = {{"name", "wire faults"},
+                         {"program", "direct-short"},
+                         {"sim_faults", {{{"kind", "imu_bytes_drop"}, {"at_s", 50}, {"frames", 3}},
+                                         {{"kind", "chamber_corrupt"}, {"at_s", 60}, {"replies", 2}}}}};
+  DaemonConfig sim_wire;
+  sim_wire.devices = "sim-wire";
+  const auto wire = check_campaign(campaign, sim_wire);
+  ASSERT_TRUE(wire.spec.has_value()) << (wire.problems.empty() ? "" : wire.problems.front());
+  ASSERT_EQ(wire.spec->faults.size(), 2u);
+  EXPECT_EQ(wire.spec->faults[0].kind, SimFault::Kind::ImuBytesDrop);
+  EXPECT_EQ(wire.spec->faults[1].frames, 2);
+  const auto sim = check_campaign(campaign, DaemonConfig{});
+  EXPECT_FALSE(sim.spec.has_value());
+  ASSERT_EQ(sim.problems.size(), 2u);
+  EXPECT_NE(sim.problems[0].find("imu_bytes_drop and chamber_corrupt need the sim-wire devices"), std::string::npos);
+}
+
 // The suspenders as objects: each trips on its condition, the chamber only after its persistence,
 // the same objects say when it is clear to move again, and they describe themselves for the API.
 TEST(Suspenders, TripOnTheirConditionAndClearOnTheSameRule) {
