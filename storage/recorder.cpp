@@ -71,96 +71,135 @@ std::vector<ImuFrame> Recorder::take_block_locked() {
 
 Recorder::Push Recorder::push(std::span<const ImuFrame> frames) { return push(frames, options_.wait_when_full); }
 
+// push() is cut into pieces of a few branches each: the optional-access analysis of the static
+// check (.clang-tidy) ran for minutes unfinished on it as one function.
 Recorder::Push Recorder::push(std::span<const ImuFrame> frames, bool wait_when_full) {
   if (frames.empty()) return Push::Queued;
-  std::optional<RecorderAlarmKind> alarm;
-  std::string alarm_message;
+  std::optional<PushAlarm> alarm;  // raised once the lock is released
   Push result = Push::Queued;
   {
     std::unique_lock lock(mutex_);
-    if (error_ || closing_) return Push::Failed;
-    if (write_problem_) return Push::Refused;
-    // Checked here, on the producer's thread, so that a bad batch is refused at once instead of
-    // failing the writer later.
-    std::optional<std::int64_t> previous = last_pushed_t_ns_;
-    for (const auto& frame : frames) {
-      if (previous && frame.t_ns <= *previous) return Push::Rejected;
-      previous = frame.t_ns;
-    }
+    result = admit_locked(frames);
+    if (result != Push::Queued) return result;
     const auto n = static_cast<std::int64_t>(frames.size());
-    const std::int64_t capacity = options_.queue_capacity_frames;
-    if (!wait_when_full && stats_.queued_frames + n > capacity) {
-      // Dropped as a whole, never in part: the gap is then exactly this batch.
-      stats_.dropped_frames += n;
-      lease_->add_dropped(n);
-      if (!pending_drops_.empty() && pending_drops_.back().t1_ns == last_pushed_t_ns_) {
-        pending_drops_.back().t1_ns = frames.back().t_ns;
-        pending_drops_.back().frames += n;
-      } else {
-        pending_drops_.push_back({0, frames.front().t_ns, frames.back().t_ns, n});
-      }
-      last_pushed_t_ns_ = frames.back().t_ns;
-      if (!dropping_) {
-        dropping_ = true;
-        alarm = RecorderAlarmKind::FramesDropped;
-        alarm_message = "recorder '" + path_ + "': the queue is full (" + std::to_string(stats_.queued_frames) +
-                        " of " + std::to_string(capacity) + " frames); dropping frames from t = " +
-                        std::to_string(frames.front().t_ns) + " ns (the writer falls behind the device)";
-      }
+    if (!wait_when_full && stats_.queued_frames + n > options_.queue_capacity_frames) {
+      alarm = drop_batch_locked(frames);
       result = Push::Dropped;
     } else {
-      std::size_t done = 0;
-      while (done < frames.size()) {
-        // Waits for room for the next slice; a slice never exceeds one block, so any batch fits
-        // eventually whatever the capacity.
-        const std::size_t slice = std::min(frames.size() - done, kBlockFrames);
-        cv_space_.wait(lock, [&] {
-          return error_ || closing_ || write_problem_ ||
-                 stats_.queued_frames + static_cast<std::int64_t>(slice) <= capacity;
-        });
-        if (error_ || closing_) return Push::Failed;
-        // The slices before this one are held; the producer takes up after last_accepted_t_ns().
-        if (write_problem_) return Push::Refused;
-        std::size_t copied = 0;
-        while (copied < slice) {
-          if (queue_.empty() || queue_.back().kind != Item::Kind::Frames ||
-              queue_.back().frames.size() >= kBlockFrames) {
-            Item item;
-            item.kind = Item::Kind::Frames;
-            item.frames = take_block_locked();
-            queue_.push_back(std::move(item));
-          }
-          std::vector<ImuFrame>& block = queue_.back().frames;
-          const std::size_t room = std::min(kBlockFrames - block.size(), slice - copied);
-          const auto first = frames.begin() + static_cast<std::ptrdiff_t>(done + copied);
-          block.insert(block.end(), first, first + static_cast<std::ptrdiff_t>(room));
-          copied += room;
-        }
-        const auto added = static_cast<std::int64_t>(slice);
-        stats_.queued_frames += added;
-        stats_.accepted_frames += added;
-        last_pushed_t_ns_ = frames[done + slice - 1].t_ns;
-        lease_->add_accepted(added, *last_pushed_t_ns_);
-        done += slice;
-      }
-      dropping_ = false;
-      if (stats_.queued_frames > stats_.high_water_frames) {
-        stats_.high_water_frames = stats_.queued_frames;
-        lease_->raise_high_water(stats_.high_water_frames);
-      }
-      const auto alarm_level = static_cast<std::int64_t>(options_.high_water_alarm_fraction *
-                                                         static_cast<double>(capacity));
-      if (!high_water_alarmed_ && stats_.queued_frames >= alarm_level) {
-        high_water_alarmed_ = true;
-        alarm = RecorderAlarmKind::QueueHighWater;
-        alarm_message = "recorder '" + path_ + "': the queue holds " + std::to_string(stats_.queued_frames) + " of " +
-                        std::to_string(capacity) + " frames (the writer falls behind the device)";
-      }
-      cv_work_.notify_one();
+      result = queue_batch_locked(lock, frames);
+      if (result != Push::Queued) return result;
+      alarm = after_queued_locked();
     }
   }
-  if (alarm) raise(*alarm, std::move(alarm_message));
+  if (alarm) raise(alarm->kind, std::move(alarm->message));
   return result;
+}
+
+// Producer's thread, lock held: Push::Queued if the recorder can take the batch, else the answer.
+// The times are checked here, so that a bad batch is refused at once instead of failing the
+// writer later.
+Recorder::Push Recorder::admit_locked(std::span<const ImuFrame> frames) const {
+  if (error_ || closing_) return Push::Failed;
+  if (write_problem_) return Push::Refused;
+  bool have_previous = false;
+  std::int64_t previous = 0;
+  if (last_pushed_t_ns_) {
+    have_previous = true;
+    previous = *last_pushed_t_ns_;
+  }
+  for (const auto& frame : frames) {
+    if (have_previous && frame.t_ns <= previous) return Push::Rejected;
+    have_previous = true;
+    previous = frame.t_ns;
+  }
+  return Push::Queued;
+}
+
+// Producer's thread, lock held: a batch that does not fit is dropped as a whole, never in part
+// (the gap is then exactly this batch); the first drop of a run of drops raises the alarm.
+std::optional<Recorder::PushAlarm> Recorder::drop_batch_locked(std::span<const ImuFrame> frames) {
+  const auto n = static_cast<std::int64_t>(frames.size());
+  stats_.dropped_frames += n;
+  lease_->add_dropped(n);
+  if (!pending_drops_.empty() && pending_drops_.back().t1_ns == last_pushed_t_ns_) {
+    pending_drops_.back().t1_ns = frames.back().t_ns;
+    pending_drops_.back().frames += n;
+  } else {
+    pending_drops_.push_back({0, frames.front().t_ns, frames.back().t_ns, n});
+  }
+  last_pushed_t_ns_ = frames.back().t_ns;
+  if (dropping_) return std::nullopt;
+  dropping_ = true;
+  return PushAlarm{RecorderAlarmKind::FramesDropped,
+                   "recorder '" + path_ + "': the queue is full (" + std::to_string(stats_.queued_frames) + " of " +
+                       std::to_string(options_.queue_capacity_frames) + " frames); dropping frames from t = " +
+                       std::to_string(frames.front().t_ns) + " ns (the writer falls behind the device)"};
+}
+
+// Producer's thread, lock held: the batch into the queue, slice by slice, each waiting for room.
+// A slice never exceeds one block, so any batch fits eventually whatever the capacity. Push::Queued,
+// or why it stopped (the slices before are held; the producer takes up after last_accepted_t_ns()).
+Recorder::Push Recorder::queue_batch_locked(std::unique_lock<std::mutex>& lock, std::span<const ImuFrame> frames) {
+  const std::int64_t capacity = options_.queue_capacity_frames;
+  std::size_t done = 0;
+  while (done < frames.size()) {
+    const std::size_t slice = std::min(frames.size() - done, kBlockFrames);
+    cv_space_.wait(lock, [&] {
+      return error_ || closing_ || write_problem_ ||
+             stats_.queued_frames + static_cast<std::int64_t>(slice) <= capacity;
+    });
+    if (error_ || closing_) return Push::Failed;
+    if (write_problem_) return Push::Refused;
+    copy_slice_locked(frames.subspan(done, slice));
+    const auto added = static_cast<std::int64_t>(slice);
+    stats_.queued_frames += added;
+    stats_.accepted_frames += added;
+    const std::int64_t last_t_ns = frames[done + slice - 1].t_ns;
+    last_pushed_t_ns_ = last_t_ns;
+    lease_->add_accepted(added, last_t_ns);
+    done += slice;
+  }
+  return Push::Queued;
+}
+
+// Lock held: frames appended to the queue's last block of frames, new blocks as they fill.
+void Recorder::copy_slice_locked(std::span<const ImuFrame> slice) {
+  std::size_t copied = 0;
+  while (copied < slice.size()) {
+    if (queue_.empty() || queue_.back().kind != Item::Kind::Frames || queue_.back().frames.size() >= kBlockFrames) {
+      Item item;
+      item.kind = Item::Kind::Frames;
+      item.frames = take_block_locked();
+      queue_.push_back(std::move(item));
+    }
+    std::vector<ImuFrame>& block = queue_.back().frames;
+    const std::size_t room = std::min(kBlockFrames - block.size(), slice.size() - copied);
+    const auto first = slice.begin() + static_cast<std::ptrdiff_t>(copied);
+    block.insert(block.end(), first, first + static_cast<std::ptrdiff_t>(room));
+    copied += room;
+  }
+}
+
+// Producer's thread, lock held, the whole batch queued: the high-water mark, its alarm, the writer
+// woken.
+std::optional<Recorder::PushAlarm> Recorder::after_queued_locked() {
+  std::optional<PushAlarm> alarm;
+  dropping_ = false;
+  if (stats_.queued_frames > stats_.high_water_frames) {
+    stats_.high_water_frames = stats_.queued_frames;
+    lease_->raise_high_water(stats_.high_water_frames);
+  }
+  const std::int64_t capacity = options_.queue_capacity_frames;
+  const auto alarm_level =
+      static_cast<std::int64_t>(options_.high_water_alarm_fraction * static_cast<double>(capacity));
+  if (!high_water_alarmed_ && stats_.queued_frames >= alarm_level) {
+    high_water_alarmed_ = true;
+    alarm = PushAlarm{RecorderAlarmKind::QueueHighWater,
+                      "recorder '" + path_ + "': the queue holds " + std::to_string(stats_.queued_frames) + " of " +
+                          std::to_string(capacity) + " frames (the writer falls behind the device)"};
+  }
+  cv_work_.notify_one();
+  return alarm;
 }
 
 bool Recorder::enqueue_small(Item item) {

@@ -153,6 +153,18 @@ class Recorder {
   };
   static constexpr std::size_t kBlockFrames = RunDb::kFramesPerChunk;
 
+  // An alarm push() raises once its lock is released.
+  struct PushAlarm {
+    RecorderAlarmKind kind;
+    std::string message;
+  };
+  // The pieces of push(), lock held.
+  Push admit_locked(std::span<const ImuFrame> frames) const;
+  std::optional<PushAlarm> drop_batch_locked(std::span<const ImuFrame> frames);
+  Push queue_batch_locked(std::unique_lock<std::mutex>& lock, std::span<const ImuFrame> frames);
+  void copy_slice_locked(std::span<const ImuFrame> slice);
+  std::optional<PushAlarm> after_queued_locked();
+
   void run();
   void commit_batch();
   void release_batch_locked();

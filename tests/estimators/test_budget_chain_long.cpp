@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "calib_fixture.hpp"
+#include "core/expect_value.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/rate_steps.hpp"
 #include "estimators/tumble.hpp"
@@ -41,7 +42,7 @@ ImuModel nonlinear_imu(unsigned seed) {
 
 // |error| / sigma of the 27 linear coefficients stage 1 estimates, against the model's own sigma.
 std::vector<double> z_of(const ImuModel& truth, const ImuModel& est) {
-  return calibtest::stage1_abs_z(truth, est, *est.sigma);
+  return calibtest::stage1_abs_z(truth, est, expect_value(est.sigma, "the sigma of a stage-1 result"));
 }
 
 ImuModel direct_stage(const ImuModel& truth, std::uint64_t seed, const ImuModel& start) {
@@ -79,11 +80,12 @@ ChainOutcome run_chains() {
     const std::vector<double>&z = out.z.back(), &z_a = out.z_type_a.back();
     for (std::size_t c = 0; c < z.size(); ++c)
       if (z[c] > 3.0) std::printf("IMU %u: coefficient %zu at %.2f sigma (type A alone %.2f)\n", i, c, z[c], z_a[c]);
+    const ImuErrorSet& tumbled_sigma = expect_value(tumbled.sigma, "the sigma of the tumble's result");
     for (int j = 0; j < 3; ++j)
       std::printf("IMU %u gyro %d: c1 c2 truth %+.3f %+.3f, the rate-steps test's %+.3f %+.3f (sigma %.3f %.3f) ppm\n", i,
                   j, truth.gyro.scale_nonlinear(j, 0) * 1e6, truth.gyro.scale_nonlinear(j, 1) * 1e6,
                   tumbled.gyro.scale_nonlinear(j, 0) * 1e6, tumbled.gyro.scale_nonlinear(j, 1) * 1e6,
-                  tumbled.sigma->gyro.scale_nonlinear(j, 0) * 1e6, tumbled.sigma->gyro.scale_nonlinear(j, 1) * 1e6);
+                  tumbled_sigma.gyro.scale_nonlinear(j, 0) * 1e6, tumbled_sigma.gyro.scale_nonlinear(j, 1) * 1e6);
   }
   return out;
 }

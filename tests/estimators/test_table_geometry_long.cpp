@@ -11,6 +11,7 @@
 #include <random>
 
 #include "calib_fixture.hpp"
+#include "core/expect_value.hpp"
 #include "core/earth.hpp"
 #include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -127,10 +128,11 @@ TEST(TableGeometryLong, StageOneBudgetCoversAnUnknownTable) {
     RecordingMeta meta = sim.meta();
     // With the geometry its certificate's 1-sigma a tenth of it (example-table's), without it the
     // errors' full size.
-    meta.table->sigma = scaled(t.sigma, 0.1);
+    table::TableCertificate& certificate = expect_value(meta.table, "the simulated table's certificate");
+    certificate.sigma = scaled(t.sigma, 0.1);
     direct::DirectCalibrator with(meta);
-    meta.table->geometry.reset();
-    meta.table->sigma = t.sigma;
+    certificate.geometry.reset();
+    certificate.sigma = t.sigma;
     direct::DirectCalibrator without(meta);
     ImuFrame f;
     while (sim.next(f)) {
@@ -140,7 +142,7 @@ TEST(TableGeometryLong, StageOneBudgetCoversAnUnknownTable) {
     const ImuModel with_model = with.finish().model;
     calibtest::expect_within(truth, with_model, calibtest::kStage1Limits);
     const ImuModel est = without.finish().model;
-    const std::vector<double> z = z_of(truth, est, *est.sigma), z_a = z_of(truth, est, est.budget.at("type_a"));
+    const std::vector<double> z = z_of(truth, est, expect_value(est.sigma, "the sigma of a stage-1 result")), z_a = z_of(truth, est, est.budget.at("type_a"));
     const auto count = [](const std::vector<double>& v) {
       return static_cast<std::size_t>(std::count_if(v.begin(), v.end(), [](double x) { return x <= 2.0; }));
     };
