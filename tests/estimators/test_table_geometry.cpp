@@ -12,6 +12,7 @@
 
 #include "calib_fixture.hpp"
 #include "core/earth.hpp"
+#include "core/expect_value.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
@@ -276,8 +277,9 @@ TEST(TableGeometry, StageThreeBudgetAddsUpToItsSigma) {
   cfg.table = imperfect_table();
   RecordingMeta meta;
   const std::vector<ImuFrame> frames = simulate(p, truth, cfg, meta);
-  meta.table->sigma = meta.table->geometry;  // the certificate's sigma the errors' full size
-  meta.table->geometry.reset();
+  table::TableCertificate& certificate = expect_value(meta.table, "the simulated table's certificate");
+  certificate.sigma = certificate.geometry;  // the certificate's sigma the errors' full size
+  certificate.geometry.reset();
   ImuModel start = direct::to_body_frame(truth);
   start.sigma = ImuErrorSet{};
   start.sigma->accel.k2_per_g << 1e-6, 1e-6, 1e-6;

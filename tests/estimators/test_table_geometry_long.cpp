@@ -183,12 +183,13 @@ TEST(TableGeometryLong, StageThreeBudgetCoversAnUnknownTable) {
     truth_sim.mount_r0_p_m.reset();
     sim::Simulator sim(p, truth_sim, s.cfg);
     RecordingMeta meta = sim.meta();
-    meta.table->sigma = scaled(t.sigma, 0.1);
+    table::TableCertificate& certificate = expect_value(meta.table, "the simulated table's certificate");
+    certificate.sigma = scaled(t.sigma, 0.1);
     ImuModel start = s.start;
     start.mount_r0_p_m = s.cfg.mount.r0_p_m;
     navfilter::NavCalibrationFilter with(meta, start);
-    meta.table->geometry.reset();
-    meta.table->sigma = t.sigma;
+    certificate.geometry.reset();
+    certificate.sigma = t.sigma;
     navfilter::NavCalibrationFilter without(meta, start);
     ImuFrame f;
     while (sim.next(f)) {
