@@ -83,6 +83,28 @@ std::vector<double> instants(std::mt19937_64& rng, std::size_t n, double lo, dou
   return {};
 }
 
+// The overnight soaks' schedule: each fault at a random instant of [300 s, end - 300 s] (its
+// `at_s` set in `faults`), in random order, and three kills where the run's stored progress passes
+// them (stored once a second of wall time: `time_scale` program seconds), so not in the last
+// stretch, which may pass between two updates. Empty kills (and a test failure) when none fit.
+struct Schedule {
+  json sim_faults;
+  std::vector<double> kill_at;
+};
+constexpr std::size_t kKills = 3;
+Schedule schedule(std::mt19937_64& rng, std::vector<PlannedFault>& faults, double duration_s, double time_scale) {
+  std::vector<double> at = instants(rng, faults.size(), 300.0, duration_s - 300.0, duration_s / 40.0);
+  std::shuffle(at.begin(), at.end(), rng);
+  std::vector<double> kill_at = instants(rng, kKills, 600.0, duration_s - 5.0 * time_scale, duration_s / 10.0);
+  if (at.size() != faults.size() || kill_at.size() != kKills) return {json::array(), {}};
+  Schedule out{json::array(), std::move(kill_at)};
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    faults[i].spec["at_s"] = at[i];
+    out.sim_faults.push_back(faults[i].spec);
+  }
+  return out;
+}
+
 std::vector<json> events_of(const json& c, const std::string& kind) {
   std::vector<json> out;
   for (const auto& e : c.at("events"))
@@ -370,20 +392,11 @@ TEST(Chaos, AnOvernightCampaignSurvivesEveryFaultThreeKillsAndAFullDisk) {
        "table drive fault"},
       {{{"kind", "disk_full"}, {"duration_s", between(5, 20)}}, {"disk full"}, "disk full"},
   };
-  constexpr std::size_t kKills = 3;
-  std::vector<double> at = instants(rng, faults.size(), 300.0, duration_s - 300.0, duration_s / 40.0);
-  ASSERT_EQ(at.size(), faults.size());
-  std::shuffle(at.begin(), at.end(), rng);
-  // The kills where the run's stored progress passes them (stored once a second of wall time:
-  // kTimeScale program seconds), so not in the last stretch, which may pass between two updates.
   constexpr double kTimeScale = 500.0;
-  const std::vector<double> kill_at = instants(rng, kKills, 600.0, duration_s - 5.0 * kTimeScale, duration_s / 10.0);
-  ASSERT_EQ(kill_at.size(), kKills);
-  json sim_faults = json::array();
-  for (std::size_t i = 0; i < faults.size(); ++i) {
-    faults[i].spec["at_s"] = at[i];
-    sim_faults.push_back(faults[i].spec);
-  }
+  const Schedule sched = schedule(rng, faults, duration_s, kTimeScale);
+  const json& sim_faults = sched.sim_faults;
+  const std::vector<double>& kill_at = sched.kill_at;
+  ASSERT_FALSE(kill_at.empty());
   std::printf("chaos A: seed %llu, %.0f s of program at %g Hz; faults %s; kill -9 at %.0f, %.0f, %.0f s\n",
               static_cast<unsigned long long>(seed), duration_s, rate_hz, sim_faults.dump().c_str(), kill_at[0],
               kill_at[1], kill_at[2]);
@@ -672,18 +685,10 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   auto may_be_absorbed = [](const PlannedFault& f) {
     return f.spec.at("kind") == "drop_connection" || f.spec.at("kind") == "chamber_corrupt";
   };
-  std::vector<double> at = instants(rng, faults.size(), 300.0, duration_s - 300.0, duration_s / 40.0);
-  ASSERT_EQ(at.size(), faults.size());
-  std::shuffle(at.begin(), at.end(), rng);
-  // The kills where the stored progress (once a host second: `scale` program seconds) passes them.
-  constexpr std::size_t kKills = 3;
-  const std::vector<double> kill_at = instants(rng, kKills, 600.0, duration_s - 5.0 * scale, duration_s / 10.0);
-  ASSERT_EQ(kill_at.size(), kKills);
-  json sim_faults = json::array();
-  for (std::size_t i = 0; i < faults.size(); ++i) {
-    faults[i].spec["at_s"] = at[i];
-    sim_faults.push_back(faults[i].spec);
-  }
+  const Schedule sched = schedule(rng, faults, duration_s, scale);
+  const json& sim_faults = sched.sim_faults;
+  const std::vector<double>& kill_at = sched.kill_at;
+  ASSERT_FALSE(kill_at.empty());
   std::printf("chaos C: seed %llu, %.0f s of program at %g Hz through the wire at %gx; faults %s; kill -9 at %.0f, "
               "%.0f, %.0f s\n",
               static_cast<unsigned long long>(seed), duration_s, kRateHz, scale, sim_faults.dump().c_str(), kill_at[0],
