@@ -250,7 +250,10 @@ int main(int argc, char** argv) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
       if (!plan_table.empty()) plan_opt.table = table::read_table_certificate_file(plan_table);
       if (plan_table_sigma_arcsec > 0) plan_opt.table = plan::uniform_table_certificate(plan_table_sigma_arcsec);
-      if (planc->count("--gravity-sigma-mps2") > 0) plan_opt.settings.direct.gravity_sigma_mps2 = plan_gravity_sigma_mps2;
+      if (planc->count("--gravity-sigma-mps2") > 0) {
+        plan_opt.settings.direct.gravity_sigma_mps2 = plan_gravity_sigma_mps2;
+        plan_opt.settings.navigation.gravity_sigma_mps2 = plan_gravity_sigma_mps2;
+      }
       if (plan_optimize) {
         plan_search.predict = plan_opt;
         // Many programs are predicted: 20 Hz unless a rate is given.

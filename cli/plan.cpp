@@ -36,13 +36,13 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
       for (const auto& [name, v] : e.at("estimates").items())
         if (v.at(1).get<double>() > 0 && std::find(names.begin(), names.end(), name) == names.end())
           names.push_back(name);
-  // Stage 1's budget: each coefficient's dominant source and its share of the variance.
-  const nlohmann::json* budget = nullptr;
-  if (j.at("stages").contains("direct") && j.at("stages").at("direct").contains("budget"))
-    budget = &j.at("stages").at("direct").at("budget");
+  // Stage 1's and stage 3's budgets: each coefficient's dominant source and its share of the variance.
+  std::vector<std::string> with_budget;
+  for (const auto& [stage, e] : j.at("stages").items())
+    if (e.contains("budget")) with_budget.push_back(stage);
   std::printf("  %-30s", "coefficient");
   for (const auto& [stage, e] : j.at("stages").items()) std::printf(" %14s", stage.c_str());
-  if (budget) std::printf("  %s", "direct: dominant source (its share of u^2)");
+  if (!with_budget.empty()) std::printf("  %s", "dominant source (its share of u^2)");
   std::printf("\n");
   for (const std::string& name : names) {
     std::printf("  %-30s", name.c_str());
@@ -53,16 +53,19 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
         std::printf(" %14s", e.value("status", "-") == "done" ? "-" : e.value("status", "-").c_str());
       }
     }
-    if (budget && budget->contains(name)) {
-      const nlohmann::json& b = budget->at(name);
+    for (const std::string& stage : with_budget) {
+      const nlohmann::json& budget = j.at("stages").at(stage).at("budget");
+      if (!budget.contains(name)) continue;
+      const nlohmann::json& b = budget.at(name);
       const std::string dominant = b.at("dominant").get<std::string>();
       const double x = b.at("contributions").at(dominant).get<double>(), u = b.at("combined").get<double>();
-      std::printf("  %s (%.0f %%)", dominant.c_str(), u > 0 ? 100.0 * x * x / (u * u) : 0.0);
+      std::printf("  %s: %s (%.0f %%)", stage.c_str(), dominant.c_str(), u > 0 ? 100.0 * x * x / (u * u) : 0.0);
     }
     std::printf("\n");
   }
-  if (j.at("stages").contains("direct") && j.at("stages").at("direct").contains("requirements")) {
-    const nlohmann::json& req = j.at("stages").at("direct").at("requirements");
+  for (const auto& [stage, e] : j.at("stages").items()) {
+    if (!e.contains("requirements")) continue;
+    const nlohmann::json& req = e.at("requirements");
     // "at most 0.31 (gyro.bias_dph.x)", "none suffices (gyro.bias_dph.x)", "no limit"
     const auto bound = [](const nlohmann::json& b, const char* key) {
       char text[160];
@@ -75,7 +78,8 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
                       b.at("limiting").get<std::string>().c_str());
       return std::string(text);
     };
-    std::printf("the bench for stage 1's limits (every coefficient's combined 1-sigma within its limit):\n");
+    std::printf("the bench for %s's limits (every coefficient's combined 1-sigma within its limit):\n",
+                stage == "direct" ? "stage 1" : stage == "navigation" ? "stage 3" : stage.c_str());
     if (req.at("sources").empty())
       std::printf("  no bench source in the budget: give the table's certificate (--table, --table-sigma-arcsec)\n");
     else
@@ -87,7 +91,6 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
     if (!req.at("whole_table").is_null())
       std::printf("  the whole table certificate scaled together (no g error): factor %s\n",
                   bound(req.at("whole_table"), "max_factor").c_str());
-    std::printf("  (stage 3's requirements: not predicted yet)\n");
   }
   for (const auto& [stage, e] : j.at("stages").items())
     if (e.contains("message")) std::printf("  %s: %s\n", stage.c_str(), e.at("message").get<std::string>().c_str());

@@ -60,6 +60,18 @@ inline constexpr std::array<Block, 15> kAll = {kAttitude,     kVelocity,     kPo
 using StateVector = Eigen::Matrix<double, state::kSize, 1>;
 using StateMatrix = Eigen::Matrix<double, state::kSize, state::kSize>;
 
+// Stage 3's accuracy limits: three times the seed's 1-sigma figures (method.md, ch. 4), body frame.
+struct Limits {
+  double gyro_bias_dph = 0.003;
+  double gyro_scale_ppm = 1.5;      // scale_pos_ppm and scale_neg_ppm
+  double gyro_angle_arcsec = 0.3;   // misalignment_arcsec
+  double gyro_delay_us = 3.0;
+  double accel_bias_mps2 = 1.5e-5;
+  double accel_scale_ppm = 0.9;
+  double accel_angle_arcsec = 0.9;  // yz zx zy (x and the x-y plane are the body axes)
+  double accel_delay_us = 50.0;
+};
+
 struct Options {
   double propagate_interval_s = 0.1;  // covariance propagation
   double update_interval_s = 1.0;     // velocity and position measurements

@@ -14,6 +14,14 @@ Targets stage1_limits(const direct::Limits& l) {
           {"accel.misalignment_arcsec", l.accel_angle_arcsec}};
 }
 
+Targets stage3_limits(const navfilter::Limits& l) {
+  return {{"gyro.bias_dph", l.gyro_bias_dph},           {"gyro.scale_pos_ppm", l.gyro_scale_ppm},
+          {"gyro.scale_neg_ppm", l.gyro_scale_ppm},      {"gyro.misalignment_arcsec", l.gyro_angle_arcsec},
+          {"gyro.delay_us", l.gyro_delay_us},            {"accel.bias_mps2", l.accel_bias_mps2},
+          {"accel.scale_ppm", l.accel_scale_ppm},        {"accel.misalignment_arcsec", l.accel_angle_arcsec},
+          {"accel.delay_us", l.accel_delay_us}};
+}
+
 std::vector<CoefficientBudget> coefficient_budgets(const ImuModel& model) {
   // Each source's entries named and in their units as the sigma's are (model_coefficients).
   const auto named = [](const ImuErrorSet& set) {

@@ -13,6 +13,7 @@
 
 #include "core/imu_model.hpp"
 #include "estimators/direct_calibration.hpp"
+#include "estimators/nav_filter.hpp"
 
 namespace imucal::plan {
 
@@ -21,6 +22,8 @@ using Targets = std::map<std::string, double>;
 
 // Stage 1's accuracy limits (direct::Limits) by group.
 Targets stage1_limits(const direct::Limits& limits = {});
+// Stage 3's (navfilter::Limits), delays included.
+Targets stage3_limits(const navfilter::Limits& limits = {});
 
 struct CoefficientBudget {
   std::string key;    // "gyro.bias_dph.x"

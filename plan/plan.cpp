@@ -170,6 +170,30 @@ std::vector<Weak> nonlinear_shortfall(const ImuModel& tumble_model, const Target
   return out;
 }
 
+namespace {
+
+// The budget of a stage's predicted model by coefficient, and for each bench source (`bench`: its
+// 1-sigma by name) the largest 1-sigma at which every coefficient meets `limits`.
+void bench_requirements(StagePrediction& sp, const ImuModel& model, const std::map<std::string, double>& bench,
+                        const Targets& limits) {
+  sp.budget = coefficient_budgets(model);
+  sp.limits = limits;
+  std::vector<std::string> sources, table_sources, site_sources;
+  for (const auto& entry : bench) {
+    sources.push_back(entry.first);
+    (entry.first.rfind("table.", 0) == 0 ? table_sources : site_sources).push_back(entry.first);
+  }
+  for (const std::string& s : sources) {
+    std::vector<std::string> others = sources;
+    std::erase(others, s);
+    sp.requirements.push_back(
+        {s, bench.at(s), source_requirement(sp.budget, limits, {s}, others), source_requirement(sp.budget, limits, {s})});
+  }
+  if (!table_sources.empty()) sp.whole_table = source_requirement(sp.budget, limits, table_sources, site_sources);
+}
+
+}  // namespace
+
 table::TableCertificate uniform_table_certificate(double sigma_arcsec) {
   const double s = sigma_arcsec * units::kArcsecToRad;
   table::TableGeometry sigma;
@@ -262,22 +286,15 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     sp.status = pipeline::to_string(o.status);
     sp.message = o.message;
     sp.model = o.model;
-    if (o.stage == pipeline::Stage::Direct && o.model) {
-      sp.budget = coefficient_budgets(*o.model);
-      const std::map<std::string, double> bench = direct::bench_source_sigmas(meta, options.settings.direct);
-      std::vector<std::string> sources, table_sources, site_sources;
-      for (const auto& entry : bench) {
-        sources.push_back(entry.first);
-        (entry.first.rfind("table.", 0) == 0 ? table_sources : site_sources).push_back(entry.first);
-      }
-      for (const std::string& s : sources) {
-        std::vector<std::string> others = sources;
-        std::erase(others, s);
-        sp.requirements.push_back({s, bench.at(s), source_requirement(sp.budget, stage1_limits(), {s}, others),
-                                   source_requirement(sp.budget, stage1_limits(), {s})});
-      }
-      if (!table_sources.empty())
-        sp.whole_table = source_requirement(sp.budget, stage1_limits(), table_sources, site_sources);
+    // Stage 1 and stage 3 state a budget of the bench's sources (stage 3 as its filter's consider
+    // parameters, the same list): its dominant sources, and what the bench must give for the
+    // stage's limits.
+    if (o.stage == pipeline::Stage::Direct && o.model)
+      bench_requirements(sp, *o.model, direct::bench_source_sigmas(meta, options.settings.direct), stage1_limits());
+    if (o.stage == pipeline::Stage::Navigation && o.model) {
+      direct::Options as_stage3;  // the bench's sigmas as stage 3 was told them
+      as_stage3.gravity_sigma_mps2 = options.settings.navigation.gravity_sigma_mps2;
+      bench_requirements(sp, *o.model, direct::bench_source_sigmas(meta, as_stage3), stage3_limits());
     }
     if (o.status == pipeline::Status::Undetermined || o.status == pipeline::Status::Failed) {
       // The stage's message lists what it cannot determine, one "  - what: why (fix)" per line.
@@ -379,8 +396,8 @@ json Prediction::to_json() const {
         b[c.key] = {{"combined", c.combined}, {"dominant", c.dominant}, {"contributions", c.contributions}};
       e["budget"] = b;
     }
-    if (s.stage == "direct" && s.model) {
-      // What the bench must give for stage 1's limits (combined standard uncertainty <= limit).
+    if (!s.limits.empty()) {
+      // What the bench must give for the stage's limits (combined standard uncertainty <= limit).
       // A factor on a 1-sigma; with the sigma, the largest 1-sigma itself (null: unbounded).
       const auto bound = [](const SourceRequirement& r, double sigma) {
         const bool bounded = std::isfinite(r.max_factor);
@@ -393,7 +410,7 @@ json Prediction::to_json() const {
       for (const StagePrediction::Requirement& r : s.requirements)
         sources.push_back({{"source", r.source}, {"sigma", r.sigma}, {"alone", bound(r.alone, r.sigma)},
                            {"with_others", bound(r.with_others, r.sigma)}});
-      e["requirements"] = {{"limits", stage1_limits()}, {"sources", sources},
+      e["requirements"] = {{"limits", s.limits}, {"sources", sources},
                            {"whole_table", s.whole_table ? bound(*s.whole_table, 0.0) : json(nullptr)}};
     }
     st[s.stage] = e;

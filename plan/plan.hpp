@@ -59,11 +59,14 @@ struct StagePrediction {
   std::string message;
   std::optional<ImuModel> model;  // its sigma section is the prediction (instrument frame for direct)
   nlohmann::json history;         // navigation: {"t_s": [...], "sigma": {coefficient: [...]}}
-  // Stage 1 (issue 34): the model's budget per coefficient with its dominant source, and the
-  // bench's requirements for stage 1's limits (direct::Limits): per bench source of the budget,
-  // its 1-sigma here and the largest at which every coefficient still meets its limit. Stage 3's
-  // requirements (the table-attitude sigma it is told) are not predicted yet: empty there.
+  // Stage 1 and stage 3 (issue 34): the model's budget per coefficient with its dominant source,
+  // and the bench's requirements for the stage's limits (`limits`: direct::Limits, navfilter::
+  // Limits; empty for the other stages): per bench source of the budget, its 1-sigma here and the
+  // largest at which every coefficient still meets its limit. Stage 3's budget is its filter's
+  // (the consider parameters): its requirements assume each source's share scales with its sigma,
+  // which errs on the safe side (a larger table error weighs the table's attitude less).
   std::vector<CoefficientBudget> budget;
+  Targets limits;
   struct Requirement {
     std::string source;             // "table.outer_tilt_arcsec", "site.gravity_mps2"
     double sigma = 0.0;             // its 1-sigma in this prediction, its unit (arcsec; m/s^2)

@@ -413,6 +413,11 @@ test('the builder\'s prediction with stage 1\'s budget: the dominant source and 
   assert.equal(r.sources[0].withOthers.maxFactor, 0);
   assert.equal(r.wholeTable.maxFactor, 0.5);
   assert.equal(benchRequirements({ stages: { navigation: {} } }), null);
+  // Stage 3's, asked for by its stage's key.
+  const stage3 = { stages: { navigation: prediction.stages.direct } };
+  assert.equal(benchRequirements(stage3, 'navigation').sources[0].alone.maxSigma, 0.0296);
+  assert.equal(dominantSources(stage3, 'navigation').get('gyro.bias_dph.x').source, 'table.middle_axis_arcsec');
+  assert.equal(dominantSources(stage3).size, 0);
   assert.equal(dominantSources({}).size, 0);
 });
 

@@ -58,12 +58,13 @@ export function summary(rows) {
 }
 
 /**
- * Stage 1's dominant source per coefficient from the prediction's budget (issue 34):
- * name -> {source, share} (share: its part of u², 0..1); empty without a budget.
+ * A stage's dominant source per coefficient from the prediction's budget (issue 34; stage 1,
+ * `direct`, and stage 3, `navigation`, state one): name -> {source, share} (share: its part of
+ * u², 0..1); empty without a budget.
  */
-export function dominantSources(prediction) {
+export function dominantSources(prediction, stage = 'direct') {
   const out = new Map();
-  for (const [name, b] of Object.entries(prediction?.stages?.direct?.budget || {})) {
+  for (const [name, b] of Object.entries(prediction?.stages?.[stage]?.budget || {})) {
     const x = b.contributions?.[b.dominant];
     if (typeof x === 'number' && b.combined > 0) out.set(name, { source: b.dominant, share: (x * x) / (b.combined * b.combined) });
   }
@@ -71,13 +72,14 @@ export function dominantSources(prediction) {
 }
 
 /**
- * What the bench must give for stage 1's limits (the prediction's stages.direct.requirements):
+ * What the bench must give for a stage's limits (the prediction's stages[stage].requirements;
+ * stage 1's, `direct`, or stage 3's, `navigation`):
  * {sources: [{source, sigma, alone, withOthers}], wholeTable} with each bound
  * {maxSigma, maxFactor, limiting} (maxSigma null: no limit; maxFactor 0: none suffices, the
  * coefficient `limiting` exceeds its limit without the source); null without requirements.
  */
-export function benchRequirements(prediction) {
-  const req = prediction?.stages?.direct?.requirements;
+export function benchRequirements(prediction, stage = 'direct') {
+  const req = prediction?.stages?.[stage]?.requirements;
   if (!req) return null;
   const bound = (b) => ({ maxSigma: b?.max_sigma ?? null, maxFactor: b?.max_factor ?? null, limiting: b?.limiting ?? null });
   return {

@@ -727,16 +727,18 @@ export function mount(root, ctx) {
     planStatus.textContent = `${duration(p.duration_s)} of program at ${num(p.rate_hz, 3)} Hz: ${s.met} of ${s.judged} targets met` +
       (s.worst && !s.worst.meets ? `; worst ${s.worst.name} at ${num(s.worst.ratio, 2)}× its target.` : '.');
     clear(planBody);
-    const dominant = dominantSources(p);
+    const dominant = { direct: dominantSources(p, 'direct'), navigation: dominantSources(p, 'navigation') };
     for (const row of rows) {
-      // Stage 1's dominant source (stage 3's budget is not predicted yet).
-      const d = row.stage === 'direct' ? dominant.get(row.name) : null;
+      // The dominant source of the stage that predicts the row (stage 1's or stage 3's budget).
+      const d = dominant[row.stage]?.get(row.name) ?? null;
       planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name } },
         h('td', {}, row.name), h('td', { class: 'num' }, num(row.sigma, 3)),
         h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage),
         h('td', { class: 'dominant' }, d ? `${sourceName(d.source)} (${Math.round(100 * d.share)} %)` : '')));
     }
-    renderBench(benchRequirements(p));
+    clear(planBench);
+    renderBench(benchRequirements(p, 'direct'), 'stage 1');
+    renderBench(benchRequirements(p, 'navigation'), 'stage 3');
     clear(planWeak);
     for (const w of p.weak || [])
       planWeak.append(h('li', { class: 'problem' }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
@@ -748,22 +750,22 @@ export function mount(root, ctx) {
       planWeak.append(h('li', { class: 'problem short-of-needs', dataset: { coefficient: w.coefficient } }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
   }
 
-  // The bench for stage 1's limits: per source its 1-sigma and the largest that still meets them.
-  function renderBench(req) {
-    clear(planBench);
+  // The bench for a stage's limits: per source its 1-sigma and the largest that still meets them.
+  function renderBench(req, stageName) {
     if (!req) return;
     const text = (b) => (b.maxSigma === null && b.maxFactor === null ? 'no limit'
       : b.maxFactor === 0 ? `none suffices (${b.limiting})` : `≤ ${num(b.maxSigma ?? b.maxFactor, 3)} (${b.limiting})`);
-    planBench.append(h('h3', {}, 'Bench for stage 1\'s limits'),
+    const first = stageName === 'stage 1';
+    planBench.append(h('h3', {}, `Bench for ${stageName}'s limits`),
       req.sources.length === 0
         ? h('p', { class: 'hint' }, 'No table certificate in imucald\'s configuration (table): the table\'s errors are not in the budget.')
-        : h('table', { class: 'plan-table', id: 'plan-bench-table' },
+        : h('table', { class: 'plan-table', id: first ? 'plan-bench-table' : 'plan-bench-table-stage3' },
           h('thead', {}, h('tr', {}, h('th', {}, 'Source'), h('th', { class: 'num' }, '1σ'), h('th', {}, 'Alone'), h('th', {}, 'With the others'))),
           h('tbody', {}, ...req.sources.map((r) => h('tr', { dataset: { source: r.source } },
             h('td', {}, sourceName(r.source)), h('td', { class: 'num' }, num(r.sigma, 3)), h('td', {}, text(r.alone)), h('td', {}, text(r.withOthers)))))),
-      req.wholeTable ? h('p', { class: 'hint', id: 'plan-whole-table' },
+      req.wholeTable ? h('p', { class: 'hint', id: first ? 'plan-whole-table' : 'plan-whole-table-stage3' },
         `The whole table certificate scaled together (no g error): ${req.wholeTable.maxFactor === null ? 'no limit' : `at most ${num(req.wholeTable.maxFactor, 3)}× (${req.wholeTable.limiting})`}.`) : null,
-      h('p', { class: 'hint' }, 'Stage 3\'s requirements: not predicted yet.'));
+    );
   }
 
   function renderVerdict() {
