@@ -13,6 +13,7 @@
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
 #include "daemon/run/alarms.hpp"
+#include "daemon/source_web_dir.hpp"
 
 namespace imucal::daemon {
 
@@ -24,9 +25,8 @@ std::string find_web_dir(const std::string& configured) {
   if (!configured.empty()) return configured;
   std::error_code ec;
   if (fs::is_directory("web", ec)) return "web";
-#ifdef IMUCAL_SOURCE_WEB_DIR
-  if (fs::is_directory(IMUCAL_SOURCE_WEB_DIR, ec)) return IMUCAL_SOURCE_WEB_DIR;
-#endif
+  const std::string built_from = source_web_dir();
+  if (!built_from.empty() && fs::is_directory(built_from, ec)) return built_from;
   return {};
 }
 

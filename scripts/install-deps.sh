@@ -18,8 +18,9 @@ packages+=(chromium fonts-dejavu-core)
 # for its RTU server (a Recommends of python3-pymodbus, which --no-install-recommends would skip).
 packages+=(python3-pymodbus python3-serial-asyncio)
 # The static check (scripts/static-check.sh): clang-tidy and clang-query of LLVM 16, Debian 12's
-# newest (14, the default, lacks the checks of optional access the check is growing into).
-packages+=(clang-tidy-16 clang-tools-16)
+# newest (14, the default, lacks the checks of optional access the check is growing into), and
+# clang-16's preprocessor for the keys of the check's cache.
+packages+=(clang-tidy-16 clang-tools-16 clang-16)
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 

@@ -8,6 +8,11 @@
 # checks did not run either. Each file's seconds go to $out/times.txt; the slowest are printed.
 # The matches are first run on scripts/static/dangling_examples.cpp, whose lines marked BAD they
 # must all find and whose lines marked ok none, so that a query that stopped matching fails here.
+# A file whose check found nothing is remembered (a cache, as ccache is for the compiler): keyed
+# by the tools' versions, the checks' configuration and the file's whole preprocessed translation
+# unit (clang-16 -E, every header included, the checkout's path taken out), so a file is checked
+# again whenever anything it sees changes; a file with findings is always checked again. The cache
+# is $IMUCAL_STATIC_CACHE (default ~/.cache/imucal-static-check); IMUCAL_STATIC_CACHE=off checks all.
 # Usage: scripts/static-check.sh [--optional] [FILE...]   (default: every source in the compile
 # database). --optional: clang-tidy's bugprone-unchecked-optional-access alone, each file limited
 # to 120 s (a quick look while mending its findings or a slow function; CI's mode runs it too,
@@ -45,25 +50,65 @@ if [ -n "$query" ] && ! diff -u "$out/examples.expected" "$out/examples.found"; 
   exit 1
 fi
 
-if (($#)); then
-  printf '%s\n' "$@" >"$out/files"
-else
-  python3 - >"$out/files" <<'PY'
-import json, os
+# Each source with the command that preprocesses it as clang-tidy sees it (the cache's key):
+# "file<TAB>command" lines, the compile database's command run by clang-16 with -E.
+python3 - "$@" >"$out/sources" <<'PY'
+import json, os, shlex, sys
 root = os.getcwd()
+wanted = {os.path.normpath(f) for f in sys.argv[1:]}
 for e in json.load(open("build/tidy/compile_commands.json")):
     f = os.path.relpath(e["file"], root)
-    if not f.startswith(("build/", "..")):
-        print(f)
+    if f.startswith(("build/", "..")) or (wanted and f not in wanted):
+        continue
+    args = shlex.split(e["command"])
+    pp = ["clang++-16"]
+    skip = False
+    for a in args[1:]:
+        if skip:
+            skip = False
+        elif a == "-o":
+            skip = True
+        elif a != "-c":
+            pp.append(a)
+    pp[-1:-1] = ["-E", "-Wno-everything"]
+    print(f + "\t" + "cd " + shlex.quote(e["directory"]) + " && " + shlex.join(pp))
 PY
+cut -f1 "$out/sources" >"$out/files"
+if (($#)) && [ "$(wc -l <"$out/files")" -ne $# ]; then
+  echo "static-check: not every file named is a source of the compile database (build/tidy):"
+  printf '%s\n' "$@" | sort | comm -23 - <(sort "$out/files")
+  exit 1
 fi
+
+# What every file's key starts with: the tools, the checks and their configuration.
+cache=${IMUCAL_STATIC_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/imucal-static-check}
+if [ "$cache" != off ]; then
+  mkdir -p "$cache"
+  { clang-tidy-16 --version; clang-query-16 --version; clang++-16 --version
+    echo "$STATIC_TIDY_ARGS|$STATIC_QUERY|$STATIC_TIMEOUT_S"
+    cat .clang-tidy tests/.clang-tidy scripts/static/*; } | sha256sum | cut -c1-64 >"$out/config.key"
+fi
+export STATIC_CACHE="$cache" STATIC_CONFIG_KEY="$(cat "$out/config.key" 2>/dev/null || true)" STATIC_ROOT="$PWD"
 echo "static-check: $(wc -l <"$out/files") sources, clang-tidy and clang-query on $jobs cores"
 
 # Both tools on every file; each file's findings to a log of its own (parallel runs interleave).
-rm -rf "$out/logs" "$out/times.txt" && mkdir -p "$out/logs"
+rm -rf "$out/logs" "$out/times.txt" "$out/cached.txt" && mkdir -p "$out/logs" && touch "$out/times.txt"
 started=$EPOCHREALTIME
 check_one() {
-  local f=$1 log=$2/logs/$(echo "$1" | tr / _) rc=0 start=$EPOCHREALTIME
+  local f=$1 log=$2/logs/$(echo "$1" | tr / _) rc=0 start=$EPOCHREALTIME key=""
+  if [ "$STATIC_CACHE" != off ]; then
+    # The translation unit as clang sees it, with the checkout's path taken out (a clean clone
+    # elsewhere has the same key); a file that does not preprocess is checked (and fails there).
+    if bash -c "$(awk -F'\t' -v f="$f" '$1 == f { print $2; exit }' "$2/sources")" >"$log.i" 2>/dev/null; then
+      key=$( { echo "$STATIC_CONFIG_KEY $f"; sed "s|$STATIC_ROOT/||g" "$log.i"; } | sha256sum | cut -c1-64)
+    fi
+    rm -f "$log.i"
+    if [ -n "$key" ] && [ -e "$STATIC_CACHE/$key" ]; then
+      : >"$log.tidy"
+      echo "$f" >>"$2/cached.txt"
+      return 0
+    fi
+  fi
   # --optional limits each file (its analysis can run for many minutes); the check of CI does not:
   # a limit on wall time fails on a loaded machine (program.cpp took over 120 s beside the
   # sanitizer build at nice 19), and its checks end on their own.
@@ -85,6 +130,12 @@ check_one() {
   local end=$EPOCHREALTIME
   # Wall seconds: clang-tidy, clang-query (one line per file; parallel runs append whole lines).
   awk -v a="$start" -v b="$mid" -v c="$end" -v f="$f" 'BEGIN { printf "%.1f %.1f %s\n", b - a, c - b, f }' >>"$2/times.txt"
+  # Remembered only when both tools finished and found nothing.
+  # (The same two patterns as the findings below.)
+  if [ -n "$key" ] && ! grep -qE '^[^ ].*:[0-9]+:[0-9]+: (warning|error):' "$log.tidy" &&
+     ! { grep -sE '^[^ ].*:[0-9]+:[0-9]+: note: "dangling' "$log.query" | grep -qv '^/usr/'; }; then
+    touch "$STATIC_CACHE/$key"
+  fi
 }
 export -f check_one
 xargs -P "$jobs" -I{} bash -c 'check_one "$1" "$2"' _ {} "$out" <"$out/files"
@@ -103,4 +154,5 @@ if ((n)); then
   echo "static-check: $n finding(s) (each file's full output: $out/logs/)"
   exit 1
 fi
-printf 'static-check: no findings (%d sources in %.0f s)\n' "$(wc -l <"$out/files")" "$wall"
+printf 'static-check: no findings (%d sources, %d of them unchanged since a clean check, in %.0f s)\n' \
+  "$(wc -l <"$out/files")" "$(cat "$out/cached.txt" 2>/dev/null | wc -l)" "$wall"

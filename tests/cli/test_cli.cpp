@@ -15,6 +15,7 @@
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 namespace fs = std::filesystem;
 
@@ -26,7 +27,7 @@ struct CliRun {
 };
 
 CliRun run(const std::string& args) {
-  const std::string cmd = std::string(IMUCAL_BIN) + " " + args + " 2>&1";
+  const std::string cmd = imucaltest::program("imucal") + " " + args + " 2>&1";
   CliRun r{0, {}};
   FILE* p = popen(cmd.c_str(), "r");
   std::array<char, 4096> buf{};
@@ -36,7 +37,7 @@ CliRun run(const std::string& args) {
 }
 
 fs::path fresh_dir(const std::string& name) {
-  const fs::path d = fs::path(IMUCAL_TEST_TMP) / name;
+  const fs::path d = fs::path(imucaltest::test_tmp_dir()) / name;
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -76,7 +77,7 @@ TEST(Cli, UnknownWordsAreNamedFirstAndExitWithStatusTwo) {
   // imucald follows the same rule.
   const auto daemon = [](const std::string& args) {
     CliRun d{0, {}};
-    FILE* p = popen((std::string(IMUCALD_BIN) + " " + args + " 2>&1").c_str(), "r");
+    FILE* p = popen((imucaltest::program("imucald") + " " + args + " 2>&1").c_str(), "r");
     std::array<char, 4096> buf{};
     while (std::fgets(buf.data(), buf.size(), p)) d.output += buf.data();
     d.status = pclose(p);
@@ -179,8 +180,8 @@ TEST(Cli, SimulateCalibrateNavigateExportImport) {
 
 TEST(Cli, MalformedBundleIsRefusedWithItsLine) {
   const fs::path d = fresh_dir("cli-bad-bundle");
-  fs::copy_file(IMUCAL_TEST_DATA "/example-direct/meta.json", d / "meta.json");
-  std::ifstream in(IMUCAL_TEST_DATA "/example-direct/frames.csv");
+  fs::copy_file(imucaltest::test_data_dir() + "/example-direct/meta.json", d / "meta.json");
+  std::ifstream in(imucaltest::test_data_dir() + "/example-direct/frames.csv");
   std::ofstream out(d / "frames.csv");
   std::string line;
   for (int i = 0; i < 10 && std::getline(in, line); ++i) out << (i == 6 ? "0.35,abc" + line.substr(line.find(',', 9)) : line) << "\n";
@@ -208,7 +209,7 @@ TEST(Cli, ThermalSectionIsAppliedByNavigateAndTheNavigationStage) {
   // the run's temperatures to the compensation.
   const fs::path d = fresh_dir("cli-thermal-nav");
   const std::string db = (d / "run.db").string();
-  const std::string truth = std::string(IMUCAL_SOURCE_DIR) + "/examples/truth-thermal.json";
+  const std::string truth = imucaltest::source_dir() + "/examples/truth-thermal.json";
   CliRun r = run("simulate --program thermal-short --chamber thermal-short --imu " + truth + " --db " + db +
                  " --rate 20 --duration 1800 --seed 4");
   ASSERT_EQ(r.status, 0) << r.output;
@@ -246,7 +247,7 @@ TEST(Cli, SimulateOnAnImperfectTable) {
   const std::string db = (d / "run.db").string();
   // A recording's meta.json names the table too: the independent example's.
   CliRun r = run("simulate --program direct-short --imu ideal --db " + db + " --rate 20 --seed 3 --table " +
-                 IMUCAL_TEST_DATA "/example-table/meta.json");
+                 imucaltest::test_data_dir() + "/example-table/meta.json");
   ASSERT_EQ(r.status, 0) << r.output;
   r = run("calibrate --db " + db + " --stage direct --out " + (d / "model.json").string());
   ASSERT_EQ(r.status, 0) << r.output;
@@ -258,7 +259,7 @@ TEST(Cli, SimulateOnAnImperfectTable) {
   r = run("export --db " + db + " --out " + (d / "bundle").string());
   ASSERT_EQ(r.status, 0) << r.output;
   const auto meta = nlohmann::json::parse(std::ifstream(d / "bundle" / "meta.json"));
-  const auto given = nlohmann::json::parse(std::ifstream(IMUCAL_TEST_DATA "/example-table/meta.json"));
+  const auto given = nlohmann::json::parse(std::ifstream(imucaltest::test_data_dir() + "/example-table/meta.json"));
   EXPECT_NEAR(meta.at("table").at("geometry").at("middle_axis_arcsec").at(0).get<double>(),
               given.at("table").at("geometry").at("middle_axis_arcsec").at(0).get<double>(), 1e-12);
   EXPECT_EQ(meta.at("table").at("certificate"), given.at("table").at("certificate"));
@@ -278,9 +279,9 @@ TEST(Cli, SimulateOnAnImperfectTable) {
 TEST(Cli, PlanNamesTheDominantSourceAndTheTableItNeeds) {
   const fs::path dir = fresh_dir("cli-plan-bench");
   const std::string out = (dir / "plan.json").string();
-  const CliRun r = run("plan --program direct-short --rate 20 --imu " IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json "
-                       "--table " IMUCAL_SOURCE_DIR "/tests/data/example-table/meta.json --gravity-sigma-mps2 1e-6 --json " +
-                       out);
+  const CliRun r = run("plan --program direct-short --rate 20 --imu " + imucaltest::source_dir() +
+                       "/examples/truth-nav-grade.json --table " + imucaltest::source_dir() +
+                       "/tests/data/example-table/meta.json --gravity-sigma-mps2 1e-6 --json " + out);
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("dominant source (its share of u^2)"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("direct: table.middle_axis_arcsec ("), std::string::npos) << r.output;
@@ -293,8 +294,9 @@ TEST(Cli, PlanNamesTheDominantSourceAndTheTableItNeeds) {
   EXPECT_EQ(direct.at("requirements").at("sources").size(), 7u);
   EXPECT_EQ(direct.at("requirements").at("limits").at("gyro.bias_dph"), 0.002);
   EXPECT_TRUE(direct.at("budget").at("gyro.bias_dph.x").contains("dominant"));
-  const CliRun both = run("plan --program direct-short --imu " IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json "
-                          "--table " IMUCAL_SOURCE_DIR "/tests/data/example-table/meta.json --table-sigma-arcsec 1");
+  const CliRun both = run("plan --program direct-short --imu " + imucaltest::source_dir() +
+                          "/examples/truth-nav-grade.json --table " + imucaltest::source_dir() +
+                          "/tests/data/example-table/meta.json --table-sigma-arcsec 1");
   EXPECT_NE(both.status, 0);
   EXPECT_NE(both.output.find("excludes"), std::string::npos) << both.output;
 }

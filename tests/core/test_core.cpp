@@ -19,6 +19,7 @@
 #include "core/number_text.hpp"
 #include "core/table.hpp"
 #include "core/units.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using Eigen::Matrix3d;
@@ -173,7 +174,7 @@ TEST(ModelJson, UnknownKeysAndBadValuesAreNamed) {
 }
 
 TEST(ModelJson, ReadsTheIndependentSimulatorsTruth) {
-  const ImuModel m = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  const ImuModel m = read_imu_model_file(imucaltest::test_data_dir() + "/example-direct/truth.json");
   EXPECT_NEAR(m.gyro.bias_radps[0] * units::kRadpsToDph, 0.03721472649399559, 1e-15);
   EXPECT_NEAR(m.accel.misalignment_rad.zy * units::kRadToArcsec, 20.657489403031462, 1e-12);
   EXPECT_NEAR(m.gyro.noise.arw_rad_rts / units::kDegRthToRadRts, 0.0005, 1e-15);
@@ -376,7 +377,7 @@ TEST(ModelJson, NonlinearTermsReadAsTheSpecWritesThem) {
 // A model without the terms writes exactly the keys it wrote before they existed (their values go
 // through unchanged code), in the sigma section too.
 TEST(ModelJson, AModelWithoutTheTermsWritesNoneOfTheirKeys) {
-  ImuModel m = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  ImuModel m = read_imu_model_file(imucaltest::test_data_dir() + "/example-direct/truth.json");
   m.sigma = ImuErrorSet{};
   m.sigma->gyro.bias_radps.setConstant(1e-9);
   const auto j = nlohmann::json::parse(imu_model_to_json_text(m));
@@ -397,7 +398,7 @@ TEST(ModelJson, AModelWithoutTheTermsWritesNoneOfTheirKeys) {
 // Issue 34's budget: each source with the keys of `sigma`, read back as written; a model without
 // one (every model before it) reads with none and writes no key; a malformed source is named.
 TEST(ModelJson, TheBudgetRoundTripsAndAnOlderModelStillReads) {
-  ImuModel m = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  ImuModel m = read_imu_model_file(imucaltest::test_data_dir() + "/example-direct/truth.json");
   EXPECT_TRUE(m.budget.empty());
   EXPECT_FALSE(nlohmann::json::parse(imu_model_to_json_text(m)).contains("budget"));
   m.sigma = ImuErrorSet{};

@@ -22,6 +22,7 @@
 
 #include "core/recording.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 namespace imucal::daemontest {
 
@@ -29,7 +30,7 @@ using nlohmann::json;
 
 inline std::string scratch_dir(const std::string& name) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string dir = std::string(IMUCAL_TEST_TMP) + "/daemon/" + name + "-" +
+  std::string dir = imucaltest::test_tmp_dir() + "/daemon/" + name + "-" +
                     (info != nullptr ? std::string(info->name()) : std::string("x")) + "-" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);

@@ -41,6 +41,7 @@
 #include "core/number_text.hpp"
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -153,7 +154,7 @@ struct Imucald {
   DaemonProcess p;
   std::vector<std::string> more_args;  // e.g. --config FILE
   void start() {
-    p = spawn_imucald(IMUCAL_IMUCALD, data_dir, log, kOperatorToken, devices, more_args);
+    p = spawn_imucald(imucaltest::program("imucald"), data_dir, log, kOperatorToken, devices, more_args);
     ASSERT_GT(p.port, 0) << "imucald did not start; see " << log;
   }
   Client client() const { return Client{p.port, kOperatorToken}; }
@@ -184,7 +185,7 @@ json overnight_campaign(double rate_hz, std::uint64_t seed) {
   return {{"name", "chaos overnight"},
           {"program", {"thermal-short", "direct", "lever-arm", "navigation", "evaluate"}},
           {"chamber", {{"profile", "thermal-short"}}},
-          {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))},
+          {"truth", json::parse(std::ifstream(imucaltest::source_dir() + "/examples/truth-thermal.json"))},
           {"rate_hz", rate_hz},
           {"seed", seed % 1000 + 1}};
 }

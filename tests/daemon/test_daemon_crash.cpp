@@ -12,6 +12,7 @@
 
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -20,7 +21,7 @@ namespace {
 
 using Daemon = DaemonProcess;
 Daemon spawn(const std::string& data_dir, const std::string& log_path, const char* devices = "sim") {
-  return spawn_imucald(IMUCAL_IMUCALD, data_dir, log_path, kOperatorToken, devices);
+  return spawn_imucald(imucaltest::program("imucald"), data_dir, log_path, kOperatorToken, devices);
 }
 
 }  // namespace
@@ -208,7 +209,7 @@ TEST(Crash, AThermalRunResumedInItsColdSoakFindsTheChamberWhereItWas) {
   const Client op{first.port, kOperatorToken};
   const json campaign = {{"name", "cold soak, kill"}, {"program", "thermal-short"}, {"rate_hz", 20},
                          {"time_scale", 400},
-                         {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"))}};
+                         {"truth", json::parse(std::ifstream(imucaltest::source_dir() + "/examples/truth-thermal.json"))}};
   const auto id = op.post_and_start(campaign);
   ASSERT_GT(id, 0);
   // The soak at 15 C is 1200..3000 s of program.

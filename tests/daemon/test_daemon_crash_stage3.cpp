@@ -11,6 +11,7 @@
 
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -19,13 +20,13 @@ namespace {
 
 using Daemon = DaemonProcess;
 Daemon spawn(const std::string& data_dir, const std::string& log_path) {
-  return spawn_imucald(IMUCAL_IMUCALD, data_dir, log_path, kOperatorToken);
+  return spawn_imucald(imucaltest::program("imucald"), data_dir, log_path, kOperatorToken);
 }
 
 // The navigation-grade truth with stage 1's residual errors (seed ch. 4: 0.01 deg/h, 10 ppm,
 // 1e-3 m/s^2, 3"), delays unknown: what stage 3 starts from.
 json start_model() {
-  std::ifstream in(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json");
+  std::ifstream in(imucaltest::source_dir() + "/examples/truth-nav-grade.json");
   json m = json::parse(in);
   const double sign[3] = {1, -1, 1};
   for (int j = 0; j < 3; ++j) {
@@ -48,7 +49,7 @@ json campaign(const std::string& name, double time_scale) {
           {"seed", 11},
           {"time_scale", time_scale},
           // Inline: a campaign names a truth of the daemon's truths folder or carries it, never a path.
-          {"truth", json::parse(std::ifstream(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"))},
+          {"truth", json::parse(std::ifstream(imucaltest::source_dir() + "/examples/truth-nav-grade.json"))},
           {"model", start_model()},
           {"estimators", {"stage3"}}};
 }

@@ -19,6 +19,7 @@
 #include "sim/sim_devices.hpp"
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -31,7 +32,7 @@ struct SimDevicesProcess {
   json config;  // {"devices": {...}}
 
   SimDevicesProcess(const std::vector<std::string>& args, const std::string& log_path) {
-    std::vector<std::string> argv = {IMUCAL_IMUCAL, "sim-devices"};
+    std::vector<std::string> argv = {imucaltest::program("imucal"), "sim-devices"};
     argv.insert(argv.end(), args.begin(), args.end());
     Child child = spawn_child(argv, log_path);
     pid = child.pid;
@@ -230,7 +231,7 @@ TEST(ConfiguredDevices, ACampaignThroughTheConfiguredAddressesRecordsEveryFrame)
 TEST(ConfiguredDevices, ATableSpeakingADialectOnlyTheTestDefinesRunsACampaign) {
   const std::string dir = scratch_dir("devices-dialect");
   const std::string socket_path = socket_path_for("dialect");
-  const std::string dialect = std::string(IMUCAL_TEST_DATA) + "/table-dialect-test-rtc.json";
+  const std::string dialect = imucaltest::test_data_dir() + "/table-dialect-test-rtc.json";
   SimDevicesProcess devices({"--imu-socket", socket_path, "--rate-hz", "100", "--seed", "6", "--table-dialect", dialect},
                             dir + "/sim-devices.stderr");
   ASSERT_TRUE(devices.config.is_object()) << "imucal sim-devices printed no configuration; see " << dir;

@@ -10,6 +10,7 @@
 #include "../estimators/nav_calib_fixture.hpp"
 #include "service_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -18,7 +19,7 @@ namespace fs = std::filesystem;
 namespace {
 
 int run_imucal(const std::vector<std::string>& args, const fs::path& log) {
-  std::vector<std::string> argv = {IMUCAL_IMUCAL};
+  std::vector<std::string> argv = {imucaltest::program("imucal")};
   argv.insert(argv.end(), args.begin(), args.end());
   Child child = spawn_child(argv, log.string());
   read_stdout_until(child, [](const std::string&) { return false; }, 1800);
@@ -29,7 +30,7 @@ int run_imucal(const std::vector<std::string>& args, const fs::path& log) {
 
 TEST(DaemonFull, TheFullCampaignRunsEveryStageOnlineAndMatchesTheCommandLine) {
   // The truth by name from a truths folder (a campaign names no path): examples/truth-nav-grade.json.
-  LocalDaemon d("full", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = IMUCAL_SOURCE_DIR "/examples"; });
+  LocalDaemon d("full", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = imucaltest::source_dir() + "/examples"; });
   const std::string truth = "truth-nav-grade";
   const auto id = d.post_campaign({{"name", "lab"}, {"program", "full"}, {"truth", truth}, {"rate_hz", 100},
                                    {"time_scale", 0}});
@@ -50,7 +51,7 @@ TEST(DaemonFull, TheFullCampaignRunsEveryStageOnlineAndMatchesTheCommandLine) {
   EXPECT_EQ(results.at("stage3").at("model").at("frame"), "body");
   // Stage 3's model against the truth: every coefficient within stage 3's limits (three times the
   // seed's 1-sigma, docs/stage3.md).
-  const ImuModel truth_body = direct::to_body_frame(read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"));
+  const ImuModel truth_body = direct::to_body_frame(read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json"));
   const ImuModel stage3 = imu_model_from_json_text(results.at("stage3").at("model").dump(), "stage 3's model");
   EXPECT_LE(navcaltest::expect_stage3_limits(truth_body, stage3), 1.0);
 

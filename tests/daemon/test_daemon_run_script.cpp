@@ -13,14 +13,15 @@
 
 #include "daemon_fixture.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
 
 TEST(RunScript, ServesTheUiAndHealthOnTheSimulatedBenchAndStopsOnCtrlC) {
   const std::string dir = scratch_dir("run-script");
-  ::setenv("IMUCAL_RUN_PREBUILT", std::filesystem::path(IMUCAL_IMUCALD).parent_path().c_str(), 1);
-  Child child = spawn_child({"/bin/bash", IMUCAL_SOURCE_DIR "/scripts/run.sh", "--listen", "127.0.0.1:0", "--data-dir",
+  ::setenv("IMUCAL_RUN_PREBUILT", std::filesystem::path(imucaltest::program("imucald")).parent_path().c_str(), 1);
+  Child child = spawn_child({"/bin/bash", imucaltest::source_dir() + "/scripts/run.sh", "--listen", "127.0.0.1:0", "--data-dir",
                              dir + "/data"},
                             dir + "/stderr.log");
   ::unsetenv("IMUCAL_RUN_PREBUILT");
@@ -67,14 +68,14 @@ TEST(RunScript, AStartThatFailsKeepsNoTokenItNeverPrinted) {
   ::getsockname(busy, reinterpret_cast<sockaddr*>(&addr), &len);
   const std::string port = std::to_string(ntohs(addr.sin_port));
 
-  Child failed = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:" + port, "--data-dir", dir + "/data"}, dir + "/stderr-1.log");
+  Child failed = spawn_child({imucaltest::program("imucald"), "--listen", "127.0.0.1:" + port, "--data-dir", dir + "/data"}, dir + "/stderr-1.log");
   const std::string said = read_stdout_until(failed, [](const std::string&) { return false; }, 30.0);
   EXPECT_NE(wait_exit(failed.pid, 30.0), 0);
   EXPECT_EQ(said.find("use it as"), std::string::npos) << said;
   EXPECT_FALSE(std::filesystem::exists(dir + "/data/operator-token")) << "a token nobody was shown";
   ::close(busy);
 
-  Child ok = spawn_child({IMUCAL_IMUCALD, "--listen", "127.0.0.1:0", "--data-dir", dir + "/data"}, dir + "/stderr-2.log");
+  Child ok = spawn_child({imucaltest::program("imucald"), "--listen", "127.0.0.1:0", "--data-dir", dir + "/data"}, dir + "/stderr-2.log");
   const std::string shown =
       read_stdout_until(ok, [](const std::string& t) { return t.find("use it as") != std::string::npos; }, 60.0);
   EXPECT_NE(shown.find("generated a one-time operator token"), std::string::npos) << shown;

@@ -24,6 +24,7 @@
 #include <gtest/gtest.h>
 
 #include "service_fixture.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -83,7 +84,7 @@ std::string settled(const std::string& state) {
 }
 
 std::set<std::string> documented_routes() {
-  std::ifstream in(IMUCAL_SOURCE_DIR "/docs/api.md");
+  std::ifstream in(imucaltest::source_dir() + "/docs/api.md");
   std::set<std::string> out;
   const std::regex route("`(GET|POST|PUT|PATCH|DELETE) (/api/[^` ?]*)[^`]*`");
   std::string line;

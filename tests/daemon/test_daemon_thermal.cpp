@@ -8,13 +8,14 @@
 #include <algorithm>
 
 #include "service_fixture.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
 
 TEST(DaemonThermal, TheBuiltInThermalCampaignFollowsItsChamberProfileAndFeedsStageTwo) {
   // The truth by name from a truths folder (a campaign names no path): examples/truth-thermal.json.
-  LocalDaemon d("thermal", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = IMUCAL_SOURCE_DIR "/examples"; });
+  LocalDaemon d("thermal", false, [](daemon::DaemonConfig& c) { c.sim.truths_dir = imucaltest::source_dir() + "/examples"; });
   const std::string truth = "truth-thermal";
   const auto id = d.post_campaign(
       {{"name", "overnight"}, {"program", "thermal-short"}, {"truth", truth}, {"rate_hz", 20}, {"time_scale", 0}});

@@ -16,6 +16,7 @@
 #include "daemon/http/static_files.hpp"
 #include "daemon/run/suspenders.hpp"
 #include "daemon_fixture.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemon;
@@ -524,13 +525,13 @@ TEST(Api, TargetsAndCookies) {
 }
 
 TEST(Config, TheCommentedExampleParses) {
-  const DaemonConfig c = load_config_file(std::string(IMUCAL_SOURCE_DIR) + "/examples/imucald.json");
+  const DaemonConfig c = load_config_file(imucaltest::source_dir() + "/examples/imucald.json");
   EXPECT_EQ(c.users.size(), 2u);
   EXPECT_EQ(c.users[1].role, Role::Operator);
   EXPECT_EQ(c.http.port, 8080);
   EXPECT_TRUE(std::isinf(c.table_limits.axis[0].max_deg));
   // Its real-devices example, put in place as the comment says, is a valid devices object.
-  std::ifstream in(std::string(IMUCAL_SOURCE_DIR) + "/examples/imucald.json");
+  std::ifstream in(imucaltest::source_dir() + "/examples/imucald.json");
   json example = json::parse(in);
   example["devices"] = example.at("_devices_real");
   const DaemonConfig real = parse_config(example.dump(), "example");

@@ -7,6 +7,7 @@
 #include "../estimators/test_thermal_fixture.hpp"
 #include "daemon/run/estimator_worker.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 
@@ -17,8 +18,8 @@ TEST(EstimatorWorker, NavigationAppliesTheThermalSection) {
   const ImuModel& truth = stretch.truth;
   const motion::Program& program = stretch.program;
   const sim::SimConfig& cfg = stretch.cfg;
-  const std::string path = std::string(IMUCAL_TEST_TMP) + "/worker-thermal.db";
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  const std::string path = imucaltest::test_tmp_dir() + "/worker-thermal.db";
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
   std::filesystem::remove(path);
   std::int64_t last_t_ns = 0;
   {

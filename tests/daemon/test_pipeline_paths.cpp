@@ -19,6 +19,7 @@
 #include "sim/simulator.hpp"
 #include "storage/run_db.hpp"
 #include "subprocess.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using nlohmann::json;
@@ -35,7 +36,7 @@ struct Recording {
 Recording record(const std::string& name, const std::string& program_name, double rate_hz, double duration_s,
                  const ImuModel& truth, const sim::ThermalSource* thermal = nullptr) {
   Recording r;
-  const fs::path dir = fs::path(IMUCAL_TEST_TMP) / "pipeline-paths";
+  const fs::path dir = fs::path(imucaltest::test_tmp_dir()) / "pipeline-paths";
   fs::create_directories(dir);
   r.path = (dir / (name + ".db")).string();
   fs::remove(r.path);
@@ -63,7 +64,7 @@ Recording record(const std::string& name, const std::string& program_name, doubl
   return r;
 }
 
-ImuModel nav_grade_truth() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
+ImuModel nav_grade_truth() { return read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json"); }
 
 // The worker's model: the file committed in uneven steps, then finished.
 ImuModel worker_model(const Recording& rec, const std::string& estimator, const ImuModel& start) {
@@ -79,7 +80,7 @@ ImuModel worker_model(const Recording& rec, const std::string& estimator, const 
 ImuModel cli_model(const Recording& rec, const std::string& stage, const ImuModel& start) {
   const fs::path dir = fs::path(rec.path).parent_path();
   const std::string out = (dir / (stage + "-cli.json")).string();
-  std::vector<std::string> argv = {IMUCAL_IMUCAL, "calibrate", "--db", rec.path, "--stage", stage, "--out", out};
+  std::vector<std::string> argv = {imucaltest::program("imucal"), "calibrate", "--db", rec.path, "--stage", stage, "--out", out};
   if (imu_model_to_json_text(start) != imu_model_to_json_text(ImuModel{})) {
     const std::string start_path = (dir / (stage + "-start.json")).string();
     write_imu_model_file(start, start_path);

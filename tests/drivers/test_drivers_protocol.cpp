@@ -27,6 +27,7 @@
 #include "drivers/table_dialect.hpp"
 #include "drivers/tcp_table.hpp"
 #include "drivers/word_order.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal::drivers;
 
@@ -677,7 +678,7 @@ namespace {
 const dialect::Dialect& acl() { return dialect::imucal_acl(); }
 
 std::string test_dialect_text() {
-  std::ifstream in(std::string(IMUCAL_TEST_DATA) + "/table-dialect-test-rtc.json");
+  std::ifstream in(imucaltest::test_data_dir() + "/table-dialect-test-rtc.json");
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();

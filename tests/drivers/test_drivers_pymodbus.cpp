@@ -31,6 +31,7 @@
 #include "drivers/modbus_chamber.hpp"
 #include "drivers/power_relay.hpp"
 #include "test_helpers.hpp"
+#include "tests/test_paths.hpp"
 
 extern char** environ;
 
@@ -42,7 +43,7 @@ using nlohmann::json;
 
 namespace {
 
-const std::string kServerScript = std::string(IMUCAL_SOURCE_DIR) + "/tests/drivers/pymodbus_chamber.py";
+const std::string kServerScript = imucaltest::source_dir() + "/tests/drivers/pymodbus_chamber.py";
 const std::string kInstallHint =
     "python3-pymodbus is not importable by any python3 tried (IMUCAL_PYTHON3, /usr/bin/python3, python3 "
     "on PATH): run scripts/install-deps.sh";
@@ -91,8 +92,8 @@ class PymodbusChamber {
   PymodbusChamber(const std::string& map_json, Transport transport) {
     const auto& py = python_with_pymodbus();
     if (!py) throw std::runtime_error(kInstallHint);
-    std::filesystem::create_directories(IMUCAL_TEST_TMP);
-    map_path_ = std::string(IMUCAL_TEST_TMP) + "/pymodbus-map-" + std::to_string(::getpid()) + "-" +
+    std::filesystem::create_directories(imucaltest::test_tmp_dir());
+    map_path_ = imucaltest::test_tmp_dir() + "/pymodbus-map-" + std::to_string(::getpid()) + "-" +
                 std::to_string(counter()++) + ".json";
     std::ofstream(map_path_) << map_json;
 

@@ -19,6 +19,7 @@
 #include "sim/sim_table.hpp"
 #include "sim/table_servo.hpp"
 #include "test_helpers.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::drivers;
@@ -505,7 +506,7 @@ TEST(TcpTable, ConfigurationFromJson) {
 // only the tests define (tests/data/table-dialect-test-rtc.json: other tokens, time tags in
 // seconds, error codes that are not numbers, no reply checksum).
 namespace {
-const std::string kTestDialectPath = std::string(IMUCAL_TEST_DATA) + "/table-dialect-test-rtc.json";
+const std::string kTestDialectPath = imucaltest::test_data_dir() + "/table-dialect-test-rtc.json";
 
 Rig rtc_rig(std::function<void(TcpTableConfig&)> tweak = {}) {
   sim::SimTableConfig tc;

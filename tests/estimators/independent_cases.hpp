@@ -18,6 +18,7 @@
 #include "independent_bundle.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 namespace imucal_test::cases {
 
@@ -116,7 +117,7 @@ struct Outcome {
 
 // Import the bundle into a fresh run and calibrate it as `imucal calibrate --stage direct` does.
 inline Outcome import_and_calibrate(const std::string& bundle_dir, const std::string& name) {
-  const std::string db = std::string(IMUCAL_TEST_TMP) + "/" + name + ".db";
+  const std::string db = imucaltest::test_tmp_dir() + "/" + name + ".db";
   std::filesystem::remove(db);
   Outcome out;
   out.import = storage::import_bundle(bundle_dir, db);
@@ -193,7 +194,7 @@ inline gen::Config direct_config(unsigned truth_seed, double rate_hz, double hol
 
 inline void run_case(const gen::Config& cfg, const std::string& name, int expect_statics,
               const calibtest::Limits& limits = calibtest::kStage1Limits, bool check_sigma = true) {
-  const std::string dir = std::string(IMUCAL_TEST_TMP) + "/" + name;
+  const std::string dir = imucaltest::test_tmp_dir() + "/" + name;
   std::filesystem::remove_all(dir);
   gen::write_bundle(cfg, dir);
   const Outcome out = import_and_calibrate(dir, name);

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <filesystem>
+#include "tests/test_paths.hpp"
 
 namespace {
 Eigen::Matrix3d table_skew(const Eigen::Vector3d& v) { return imucal::table::skew(v); }
@@ -106,16 +107,16 @@ TEST(Direct, FindsTheStaticsItselfWhenTheRecordingHasNoSegments) {
 }
 
 TEST(Direct, IndependentRecordingCalibratesToItsTruth) {
-  const std::string db = std::string(IMUCAL_TEST_TMP) + "/direct-example.db";
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  const std::string db = imucaltest::test_tmp_dir() + "/direct-example.db";
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
   std::filesystem::remove(db);
-  storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
+  storage::import_bundle(imucaltest::test_data_dir() + "/example-direct", db);
   const auto run = storage::RunDb::open(db);
   direct::DirectCalibrator cal(run.meta());
   run.for_each_frame([&](const ImuFrame& f) { cal.push(f); });
   const direct::Result r = cal.finish();
   for (const auto& n : r.notes) std::printf("%s\n", n.c_str());
-  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  const ImuModel truth = read_imu_model_file(imucaltest::test_data_dir() + "/example-direct/truth.json");
   calibtest::expect_within(truth, r.model, calibtest::kStage1Limits);
 }
 

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "independent_cases.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal_test::cases;
@@ -109,12 +110,12 @@ double worst_ratio(const ImuModel& truth, const ImuModel& est) {
 // axes and 1" + 0.5" encoder harmonics (tests/data/example-table/README.md): the recording's
 // table.geometry, applied by the reference, brings stage 1 within its limits and its sigma.
 TEST(IndependentBundle, ImperfectTableCalibratesWithItsGeometry) {
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
-  const Outcome out = import_and_calibrate(IMUCAL_TEST_DATA "/example-table", "example-table");
-  const auto run = storage::RunDb::open(std::string(IMUCAL_TEST_TMP) + "/example-table.db");
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
+  const Outcome out = import_and_calibrate(imucaltest::test_data_dir() + "/example-table", "example-table");
+  const auto run = storage::RunDb::open(imucaltest::test_tmp_dir() + "/example-table.db");
   const auto table = run.meta().table;
   ASSERT_TRUE(table && table->geometry) << "the import keeps the table's certificate";
-  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
+  const ImuModel truth = read_imu_model_file(imucaltest::test_data_dir() + "/example-table/truth.json");
   calibtest::expect_within(truth, out.result.model, calibtest::kStage1Limits);
   print_worst(truth, out.result.model);
   std::printf("  worst error / limit with the table's geometry: %.3f\n", worst_ratio(truth, out.result.model));
@@ -126,13 +127,13 @@ namespace {
 // line does.
 template <class Edit>
 Outcome example_table_with(const std::string& name, const Edit& edit) {
-  const std::filesystem::path dir = std::filesystem::path(IMUCAL_TEST_TMP) / name;
+  const std::filesystem::path dir = std::filesystem::path(imucaltest::test_tmp_dir()) / name;
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  std::filesystem::create_symlink(std::filesystem::absolute(IMUCAL_TEST_DATA "/example-table/frames.csv"),
+  std::filesystem::create_symlink(std::filesystem::absolute(imucaltest::test_data_dir() + "/example-table/frames.csv"),
                                   dir / "frames.csv");
   {
-    std::ifstream in(IMUCAL_TEST_DATA "/example-table/meta.json");
+    std::ifstream in(imucaltest::test_data_dir() + "/example-table/meta.json");
     nlohmann::json meta = nlohmann::json::parse(in);
     edit(meta);
     std::ofstream(dir / "meta.json") << meta.dump(1);
@@ -177,7 +178,7 @@ Coverage coverage(const ImuModel& truth, ImuModel est, const ImuErrorSet& sigma,
 TEST(IndependentBundle, ImperfectTableMissesTheLimitsWithoutItsGeometry) {
   const Outcome out =
       example_table_with("example-table-no-geometry", [](nlohmann::json& meta) { meta["table"].erase("geometry"); });
-  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
+  const ImuModel truth = read_imu_model_file(imucaltest::test_data_dir() + "/example-table/truth.json");
   const double worst = worst_ratio(truth, out.result.model);
   std::printf("  worst error / limit on the ideal table's reference: %.2f\n", worst);
   EXPECT_GT(worst, 5.0);
@@ -189,7 +190,7 @@ TEST(IndependentBundle, ImperfectTableMissesTheLimitsWithoutItsGeometry) {
 // sigma (the budget's type_a, all there was before) covers far fewer.
 TEST(IndependentBundle, ImperfectTableWithoutItsGeometryIsCoveredByTheBudget) {
   const Outcome out = example_table_with("example-table-certificate-only", delete_geometry_and_widen_sigma);
-  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-table/truth.json");
+  const ImuModel truth = read_imu_model_file(imucaltest::test_data_dir() + "/example-table/truth.json");
   const ImuModel& est = out.result.model;
   ASSERT_TRUE(est.sigma.has_value());
   ASSERT_TRUE(est.budget.count("type_a")) << "the budget lists the fit's own sigma";
@@ -242,7 +243,7 @@ void expect_same_budget(const ImuModel& back, const ImuModel& est) {
 }  // namespace
 
 TEST(IndependentBundle, ImperfectTableBudgetAddsUpAndRoundTrips) {
-  const Outcome out = import_and_calibrate(IMUCAL_TEST_DATA "/example-table", "example-table-budget");
+  const Outcome out = import_and_calibrate(imucaltest::test_data_dir() + "/example-table", "example-table-budget");
   const ImuModel& est = out.result.model;
   const std::optional<ImuErrorSet>& sigma = est.sigma;
   ASSERT_TRUE(sigma.has_value());

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "independent_cases.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal_test::cases;
@@ -44,7 +45,7 @@ void calibrate_one(unsigned seed, Worst& worst, std::map<std::string, std::vecto
   // 90 s holds: 45 min of statics, so the gyro-bias limit is 3.8 sigma rather than 3.1.
   gen::Config cfg = direct_config(seed, seed % 4 < 2 ? 20.0 : 50.0, 90.0);
   if (seed % 2) without_optional_parts(cfg);
-  const std::string dir = std::string(IMUCAL_TEST_TMP) + "/independent-long";
+  const std::string dir = imucaltest::test_tmp_dir() + "/independent-long";
   std::filesystem::remove_all(dir);
   gen::write_bundle(cfg, dir);
   const Outcome out = import_and_calibrate(dir, "independent-long");

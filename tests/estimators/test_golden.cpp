@@ -17,13 +17,14 @@
 #include "lever_fixture.hpp"
 #include "nav_calib_fixture.hpp"
 #include "storage/bundle.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using nlohmann::json;
 
 namespace {
 
-const std::string kGoldenDir = IMUCAL_TEST_DATA "/golden";
+const std::string kGoldenDir = imucaltest::test_data_dir() + "/golden";
 
 // values and tolerances are flat name -> number maps.
 void check_golden(const std::string& name, const std::map<std::string, double>& values,
@@ -71,10 +72,10 @@ void flatten(const ImuModel& m, std::map<std::string, double>& v, std::map<std::
 
 // Each test imports into its own file: ctest runs the tests of one executable in parallel.
 storage::RunDb example_run(const std::string& name) {
-  const std::string db = std::string(IMUCAL_TEST_TMP) + "/golden-" + name + ".db";
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  const std::string db = imucaltest::test_tmp_dir() + "/golden-" + name + ".db";
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
   std::filesystem::remove(db);
-  storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
+  storage::import_bundle(imucaltest::test_data_dir() + "/example-direct", db);
   return storage::RunDb::open(db);
 }
 

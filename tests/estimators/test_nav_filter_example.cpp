@@ -10,19 +10,20 @@
 #include "nav_calib_fixture.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 
 namespace {
 // CI checks the project out beside ../shared (the brief); a missing example is a failure, not a skip.
-const std::string kExample = IMUCAL_SOURCE_DIR "/../shared/data/example-navigation";
+const std::string kExample = imucaltest::source_dir() + "/../shared/data/example-navigation";
 }  // namespace
 
 TEST(NavFilterExample, IndependentRecordingWithinTheSeedsLimits) {
   ASSERT_TRUE(std::filesystem::exists(kExample + "/frames.csv"))
       << kExample << " missing: the suite expects ../shared beside the checkout";
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
-  const std::string db_path = IMUCAL_TEST_TMP "/example-navigation.db";
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
+  const std::string db_path = imucaltest::test_tmp_dir() + "/example-navigation.db";
   std::filesystem::remove(db_path);
   storage::import_bundle(kExample, db_path);
   const auto db = storage::RunDb::open(db_path);

@@ -7,6 +7,7 @@
 #include "storage/bundle.hpp"
 
 #include <filesystem>
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 
@@ -52,15 +53,15 @@ TEST(Noise, RandomWalksFromTheDirectProgramStatics) {
 
 // The independent recording: its statics end exactly where its moves end, on the same instant.
 TEST(Noise, IndependentRecordingGivesItsTruthNoise) {
-  const std::string db = std::string(IMUCAL_TEST_TMP) + "/noise-example.db";
-  std::filesystem::create_directories(IMUCAL_TEST_TMP);
+  const std::string db = imucaltest::test_tmp_dir() + "/noise-example.db";
+  std::filesystem::create_directories(imucaltest::test_tmp_dir());
   std::filesystem::remove(db);
-  storage::import_bundle(IMUCAL_TEST_DATA "/example-direct", db);
+  storage::import_bundle(imucaltest::test_data_dir() + "/example-direct", db);
   const auto run = storage::RunDb::open(db);
   noise::NoiseAnalyzer a(run.meta());
   run.for_each_frame([&](const ImuFrame& f) { a.push(f); });
   const ImuModel m = a.finish().apply(ImuModel{});
-  const ImuModel truth = read_imu_model_file(IMUCAL_TEST_DATA "/example-direct/truth.json");
+  const ImuModel truth = read_imu_model_file(imucaltest::test_data_dir() + "/example-direct/truth.json");
   EXPECT_NEAR(m.gyro.noise.arw_rad_rts / truth.gyro.noise.arw_rad_rts, 1.0, 0.10);
   EXPECT_NEAR(m.accel.noise.vrw_mps_rts / truth.accel.noise.vrw_mps_rts, 1.0, 0.10);
 }

@@ -15,10 +15,11 @@
 #include "estimators/thermal.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
+#include "tests/test_paths.hpp"
 
 namespace imucal::thermaltest {
 
-inline ImuModel truth_thermal() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-thermal.json"); }
+inline ImuModel truth_thermal() { return read_imu_model_file(imucaltest::source_dir() + "/examples/truth-thermal.json"); }
 
 // The truth without noise and without the unmodelled oscillation ("clean").
 inline ImuModel clean(ImuModel m) {

@@ -13,13 +13,14 @@
 #include "plan/optimize.hpp"
 #include "plan/plan.hpp"
 #include "core/units.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using nlohmann::json;
 
 namespace {
 
-ImuModel nav_grade() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
+ImuModel nav_grade() { return read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json"); }
 
 }  // namespace
 

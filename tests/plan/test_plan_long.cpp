@@ -42,6 +42,7 @@
 #include "pipeline/pipeline.hpp"
 #include "plan/optimize.hpp"
 #include "plan/plan.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using nlohmann::json;
@@ -49,7 +50,7 @@ using nlohmann::json;
 namespace {
 
 
-ImuModel nav_grade() { return read_imu_model_file(IMUCAL_SOURCE_DIR "/examples/truth-nav-grade.json"); }
+ImuModel nav_grade() { return read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json"); }
 
 class MemorySource final : public pipeline::FrameSource {
  public:

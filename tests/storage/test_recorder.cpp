@@ -28,6 +28,7 @@
 #include "storage/run_db.hpp"
 #include "storage/writer_lease.hpp"
 #include "tests/storage/crash_frames.hpp"
+#include "tests/test_paths.hpp"
 
 namespace imucal::storage {
 namespace {
@@ -38,7 +39,7 @@ using test::expected_frame;
 
 fs::path scratch_dir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  return fs::path(IMUCAL_TEST_TMP) / "storage" /
+  return fs::path(imucaltest::test_tmp_dir()) / "storage" /
          (std::string(info->test_suite_name()) + "." + info->name() + "." + std::to_string(::getpid()));
 }
 

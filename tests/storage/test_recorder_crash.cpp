@@ -26,6 +26,7 @@
 
 #include "storage/run_db.hpp"
 #include "tests/storage/crash_frames.hpp"
+#include "tests/test_paths.hpp"
 
 extern char** environ;
 
@@ -53,11 +54,11 @@ Child spawn_writer(const std::string& run) {
   posix_spawn_file_actions_addclose(&actions, fds[0]);
   posix_spawn_file_actions_addclose(&actions, fds[1]);
   const std::string interval = std::to_string(kCommitIntervalS), rate = std::to_string(kRateHz);
-  std::vector<char*> argv = {const_cast<char*>(IMUCAL_CRASH_WRITER), const_cast<char*>("record"),
+  std::vector<char*> argv = {const_cast<char*>(imucaltest::program("storage_crash_writer").c_str()), const_cast<char*>("record"),
                              const_cast<char*>(run.c_str()), const_cast<char*>(interval.c_str()),
                              const_cast<char*>(rate.c_str()), nullptr};
   Child child;
-  const int rc = ::posix_spawn(&child.pid, IMUCAL_CRASH_WRITER, &actions, nullptr, argv.data(), environ);
+  const int rc = ::posix_spawn(&child.pid, imucaltest::program("storage_crash_writer").c_str(), &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
   ::close(fds[1]);
   if (rc != 0) throw std::runtime_error("posix_spawn failed");
@@ -92,7 +93,7 @@ bool same(const ImuFrame& a, const ImuFrame& b) {
 }
 
 void kill_at_random_moments() {
-  const fs::path dir = fs::path(IMUCAL_TEST_TMP) / "storage" / ("crash." + std::to_string(::getpid()));
+  const fs::path dir = fs::path(imucaltest::test_tmp_dir()) / "storage" / ("crash." + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   const std::string run = (dir / "run.db").string();
@@ -186,7 +187,7 @@ TEST(RecorderCrashLong, KillNineManyTimes) { kill_at_random_moments(); }
 TEST(RecorderCrash, KillNineAtRandomMomentsLosesAtMostOneCommitInterval) { kill_at_random_moments(); }
 
 TEST(RecorderCrash, SecondProcessGetsAClearErrorWhileAWriterRecords) {
-  const fs::path dir = fs::path(IMUCAL_TEST_TMP) / "storage" / ("second." + std::to_string(::getpid()));
+  const fs::path dir = fs::path(imucaltest::test_tmp_dir()) / "storage" / ("second." + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   const std::string run = (dir / "run.db").string();
@@ -204,10 +205,10 @@ TEST(RecorderCrash, SecondProcessGetsAClearErrorWhileAWriterRecords) {
   posix_spawn_file_actions_adddup2(&actions, fds[1], STDOUT_FILENO);
   posix_spawn_file_actions_addclose(&actions, fds[0]);
   posix_spawn_file_actions_addclose(&actions, fds[1]);
-  std::vector<char*> argv = {const_cast<char*>(IMUCAL_CRASH_WRITER), const_cast<char*>("try-write"),
+  std::vector<char*> argv = {const_cast<char*>(imucaltest::program("storage_crash_writer").c_str()), const_cast<char*>("try-write"),
                              const_cast<char*>(run.c_str()), nullptr};
   pid_t second = -1;
-  ASSERT_EQ(::posix_spawn(&second, IMUCAL_CRASH_WRITER, &actions, nullptr, argv.data(), environ), 0);
+  ASSERT_EQ(::posix_spawn(&second, imucaltest::program("storage_crash_writer").c_str(), &actions, nullptr, argv.data(), environ), 0);
   posix_spawn_file_actions_destroy(&actions);
   ::close(fds[1]);
   int status = 0;

@@ -28,6 +28,7 @@
 #include "core/units.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
+#include "tests/test_paths.hpp"
 
 namespace imucal::storage {
 namespace {
@@ -35,13 +36,13 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-const std::string kExampleDir = IMUCAL_TEST_DATA "/example-direct";
+const std::string kExampleDir = imucaltest::test_data_dir() + "/example-direct";
 
 // Scratch files live in one folder per test, IMUCAL_TEST_TMP/storage/<suite>.<test>.<pid>, which
 // the fixture removes when the test passed (and keeps for inspection when it failed).
 fs::path scratch_dir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  return fs::path(IMUCAL_TEST_TMP) / "storage" /
+  return fs::path(imucaltest::test_tmp_dir()) / "storage" /
          (std::string(info->test_suite_name()) + "." + info->name() + "." + std::to_string(::getpid()));
 }
 
