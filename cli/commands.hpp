@@ -65,6 +65,9 @@ int run_plan(const std::string& program_arg, const std::string& imu_path, const 
 int run_plan_optimize(const std::string& program_arg, const std::string& imu_path, const plan::OptimizeOptions& opt,
                       const std::string& target_arg, const std::string& program_out, const std::string& json_out);
 int run_passwd();
+int run_keygen(const std::string& out_path);
+// key_path or fingerprint (not both): the lab's key; both empty: the key is not checked.
+int run_verify(const std::string& document_path, const std::string& key_path, const std::string& fingerprint);
 int run_export(const std::string& db_path, const std::string& dir);
 int run_import(const std::string& dir, const std::string& db_path);
 int run_campaign(const std::string& file, const daemon::CampaignRunOptions& options, bool json);

@@ -15,6 +15,7 @@
 #include "core/table_json.hpp"
 #include "plan/optimize.hpp"
 #include "plan/plan.hpp"
+#include "signing/signing.hpp"
 
 using namespace imucal;
 
@@ -228,6 +229,36 @@ int main(int argc, char** argv) {
       "passwd", "Print the hash of a password (read from standard input) for a user's password_hash in imucald's "
                 "configuration");
 
+  std::string keygen_out;
+  auto* keygen = app.add_subcommand(
+      "keygen", "Make the lab's Ed25519 key for signing certificates and test reports: FILE (the secret key, mode "
+                "0600) and FILE.pub (the public key); prints its fingerprint (docs/signing.md)");
+  keygen->add_option("--out", keygen_out, "the key file to write (must not exist, nor FILE.pub)")->required();
+
+  std::string verify_file, verify_key, verify_fingerprint;
+  auto* verify = app.add_subcommand(
+      "verify", "Verify a signed certificate or test report offline: its format, content hash, signature and that "
+                "the key is the lab's; exit status 0 only when all four pass (docs/signing.md)");
+  verify->add_option("file", verify_file, "the signed JSON document (imucal-signed/1)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  auto* verify_key_option =
+      verify->add_option("--key", verify_key, "the lab's public key (LAB.pub, from imucal keygen)")->check(
+          CLI::ExistingFile);
+  verify->add_option("--fingerprint", verify_fingerprint,
+                     "the lab's key fingerprint (ed25519:xxxx:..., as imucal keygen prints it)")
+      ->excludes(verify_key_option)
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            try {
+              signing::parse_fingerprint(text);
+              return std::string();
+            } catch (const std::invalid_argument& e) {
+              return std::string(e.what());
+            }
+          },
+          "FINGERPRINT"));
+
   // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
   imucal::bench::add_storage_bench_commands(*bench);
@@ -246,6 +277,8 @@ int main(int argc, char** argv) {
     if (cmp->parsed()) return cli::run_compare(cmp_model, cmp_truth, cmp_json);
     if (simdev->parsed()) return cli::run_sim_devices(simdev_args);
     if (passwd->parsed()) return cli::run_passwd();
+    if (keygen->parsed()) return cli::run_keygen(keygen_out);
+    if (verify->parsed()) return cli::run_verify(verify_file, verify_key, verify_fingerprint);
     if (planc->parsed()) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
       if (!plan_table.empty()) plan_opt.table = table::read_table_certificate_file(plan_table);

@@ -6,8 +6,11 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libmodbus-dev libboost1.81-dev libboost-url1.81-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
-  libsqlite3-dev sqlite3 libgtest-dev libgmock-dev libcli11-dev libbenchmark-dev libsodium-dev libarchive-dev
+  libsqlite3-dev sqlite3 libgtest-dev libgmock-dev libcli11-dev libbenchmark-dev libarchive-dev
 )
+# libsodium: the password hashes of imucald's users (Argon2id, daemon/config) and the lab's Ed25519
+# signatures of certificates and test reports with their SHA-256 and base64 (signing/, docs/signing.md).
+packages+=(libsodium-dev)
 # The browser tests (tests/browser, ctest label `browser`): Debian's Chromium driven by Playwright,
 # and Node.js with npm. nodejs and npm are added only when their commands are missing, so a Node.js
 # installed another way (NodeSource's nodejs bundles npm and conflicts with Debian's npm) is kept.

@@ -13,8 +13,12 @@ import sys
 # are checked one by one ("daemon/run"), "daemon" itself being only the files directly in daemon/;
 # "daemon/*" allows every one of them.
 BELOW_DAEMON = {"core", "motion_programs", "drivers", "estimators", "storage", "sim", "pipeline", "plan"}
+# signing uses nothing of imucal (libsodium and JSON only) and is used by the daemon's folders and
+# the command line alone: the libraries below the daemon sign nothing.
+SIGNING = "signing"
 ALLOWED = {
     "core": set(),
+    "signing": set(),
     "motion_programs": {"core"},
     "drivers": {"core"},  # no estimator, no simulation, no storage
     "estimators": {"core", "motion_programs"},
@@ -22,22 +26,22 @@ ALLOWED = {
     "sim": {"core", "motion_programs", "estimators", "drivers"},
     "pipeline": {"core", "motion_programs", "estimators", "storage"},
     "plan": {"core", "motion_programs", "estimators", "pipeline", "sim"},
-    "daemon/config": {"core", "motion_programs", "drivers"},
-    "daemon/db": {"core", "storage"},
-    "daemon/campaign": {"core", "motion_programs", "pipeline", "daemon/config", "daemon/db"},
-    "daemon/production": {"core", "daemon/config", "daemon/db"},
-    "daemon/devices": {"core", "motion_programs", "drivers", "sim", "daemon/config", "daemon/campaign"},
-    "daemon/run": {"core", "motion_programs", "estimators", "storage", "pipeline",
+    "daemon/config": {SIGNING, "core", "motion_programs", "drivers"},
+    "daemon/db": {SIGNING, "core", "storage"},
+    "daemon/campaign": {SIGNING, "core", "motion_programs", "pipeline", "daemon/config", "daemon/db"},
+    "daemon/production": {SIGNING, "core", "daemon/config", "daemon/db"},
+    "daemon/devices": {SIGNING, "core", "motion_programs", "drivers", "sim", "daemon/config", "daemon/campaign"},
+    "daemon/run": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline",
                    "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices"},
-    "daemon/analysis": {"core", "motion_programs", "estimators", "storage", "pipeline"},
-    "daemon/http": BELOW_DAEMON | {"daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
+    "daemon/analysis": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline"},
+    "daemon/http": BELOW_DAEMON | {SIGNING, "daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
                                    "daemon/devices", "daemon/run", "daemon/analysis"},
-    "daemon": BELOW_DAEMON | {"daemon/*"},
-    "cli": BELOW_DAEMON | {"daemon", "daemon/*", "bench"},
+    "daemon": BELOW_DAEMON | {SIGNING, "daemon/*"},
+    "cli": BELOW_DAEMON | {SIGNING, "daemon", "daemon/*", "bench"},
     "bench": BELOW_DAEMON,
 }
 TARGETS = {
-    "imucal_core": "core", "imucal_motion": "motion_programs", "imucal_drivers": "drivers",
+    "imucal_core": "core", "imucal_signing": "signing", "imucal_motion": "motion_programs", "imucal_drivers": "drivers",
     "imucal_estimators": "estimators", "imucal_storage": "storage", "imucal_sim": "sim",
     "imucal_pipeline": "pipeline", "imucal_plan": "plan", "imucal_daemon": "daemon",
     "imucal_bench_storage": "bench",

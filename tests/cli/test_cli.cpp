@@ -1,4 +1,5 @@
-// imucal end to end: simulate, calibrate, navigate, export, import, and clear errors on bad input.
+// imucal end to end: simulate, calibrate, navigate, export, import, keygen and verify, and clear
+// errors on bad input.
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +15,7 @@
 
 #include "core/imu_model.hpp"
 #include "core/units.hpp"
+#include "signing/signing.hpp"
 #include "storage/run_db.hpp"
 #include "tests/test_paths.hpp"
 
@@ -299,4 +301,73 @@ TEST(Cli, PlanNamesTheDominantSourceAndTheTableItNeeds) {
                           "/tests/data/example-table/meta.json --table-sigma-arcsec 1");
   EXPECT_NE(both.status, 0);
   EXPECT_NE(both.output.find("excludes"), std::string::npos) << both.output;
+}
+
+// keygen, then a document signed with its key (the daemon signs; the CLI only verifies), checked
+// by `imucal verify`: 0 only when every check passes, 1 naming the check that failed, 2 for a
+// command line it cannot run (docs/signing.md).
+TEST(Cli, KeygenThenVerifyNamesTheFailingCheck) {
+  const auto exit_status = [](const CliRun& r) { return WIFEXITED(r.status) ? WEXITSTATUS(r.status) : -1; };
+  const fs::path d = fresh_dir("cli-sign");
+  const std::string key = (d / "lab.key").string();
+  CliRun r = run("keygen --out " + key);
+  ASSERT_EQ(exit_status(r), 0) << r.output;
+  const auto at = r.output.find("fingerprint: ");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const std::string fp = r.output.substr(at + 13, r.output.find('\n', at) - at - 13);
+  const imucal::signing::KeyPair lab = imucal::signing::read_key_file(key);
+  EXPECT_EQ(fp, imucal::signing::fingerprint(lab.public_key));
+  EXPECT_NE(r.output.find("\"certificates\": {\"signing_key_file\": \"" + key + "\"}"), std::string::npos) << r.output;
+  r = run("keygen --out " + key);
+  EXPECT_EQ(exit_status(r), 1) << r.output;
+  EXPECT_NE(r.output.find(key + " already exists"), std::string::npos) << r.output;
+
+  const nlohmann::json content = {{"number", "LAB-2026-000007"},
+                                  {"unit", {{"serial", "IMU-0007"}}},
+                                  {"results", {{"gyro", {{"bias_dph", {0.0123, -0.0071, 0.0042}}}}}}};
+  const std::string good = (d / "certificate.json").string();
+  std::ofstream(good) << imucal::signing::sign_document(content, imucal::signing::kCertificate, lab).dump(2);
+  r = run("verify " + good + " --key " + key + ".pub");
+  EXPECT_EQ(exit_status(r), 0) << r.output;
+  for (const char* check : {"format", "content hash", "signature", "key"})
+    EXPECT_NE(r.output.find("  " + std::string(check)), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("FAILED"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("VERIFIED: a certificate signed by the lab's key " + fp), std::string::npos) << r.output;
+  r = run("verify " + good + " --fingerprint " + fp);
+  EXPECT_EQ(exit_status(r), 0) << r.output;
+  // No lab key: intact, but not verified.
+  r = run("verify " + good);
+  EXPECT_EQ(exit_status(r), 1) << r.output;
+  EXPECT_NE(r.output.find("NOT CHECKED"), std::string::npos) << r.output;
+
+  // A digit changed in the file.
+  std::stringstream text;
+  text << std::ifstream(good).rdbuf();
+  std::string tampered_text = text.str();
+  tampered_text.replace(tampered_text.find("0.0123"), 6, "0.0124");
+  const std::string tampered = (d / "tampered.json").string();
+  std::ofstream(tampered) << tampered_text;
+  r = run("verify " + tampered + " --key " + key + ".pub");
+  EXPECT_EQ(exit_status(r), 1) << r.output;
+  EXPECT_NE(r.output.find("NOT VERIFIED: the content hash check failed"), std::string::npos) << r.output;
+
+  // Another lab's key.
+  const std::string other = (d / "other.key").string();
+  ASSERT_EQ(exit_status(run("keygen --out " + other)), 0);
+  r = run("verify " + good + " --key " + other + ".pub");
+  EXPECT_EQ(exit_status(r), 1) << r.output;
+  EXPECT_NE(r.output.find("NOT VERIFIED: the key check failed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("not by the lab's key " + imucal::signing::fingerprint(imucal::signing::read_public_key(other))),
+            std::string::npos)
+      << r.output;
+
+  // Command lines verify cannot run: 2.
+  EXPECT_EQ(exit_status(run("verify " + good + " --key " + key + ".pub --fingerprint " + fp)), 2);
+  r = run("verify " + good + " --fingerprint ed25519:1234");
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("not a key fingerprint"), std::string::npos) << r.output;
+  EXPECT_EQ(exit_status(run("verify " + (d / "no-such.json").string())), 2);
+  r = run("verify " + good + " --key " + good);
+  EXPECT_EQ(exit_status(r), 2) << r.output;
+  EXPECT_NE(r.output.find("'format'"), std::string::npos) << r.output;
 }
