@@ -1,6 +1,7 @@
 // imucal: the command line. A thin shell over the libraries: the options of every subcommand,
 // registered here with CLI11, and the subcommands themselves, one file each in cli/.
 #include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
