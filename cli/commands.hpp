@@ -68,6 +68,8 @@ int run_passwd();
 int run_keygen(const std::string& out_path);
 // key_path or fingerprint (not both): the lab's key; both empty: the key is not checked.
 int run_verify(const std::string& document_path, const std::string& key_path, const std::string& fingerprint);
+// imucal audit verify DATA_DIR: 0 when the audit trail holds, 1 naming the first entry that does not.
+int run_audit_verify(const std::string& data_dir);
 int run_export(const std::string& db_path, const std::string& dir);
 int run_import(const std::string& dir, const std::string& db_path);
 int run_campaign(const std::string& file, const daemon::CampaignRunOptions& options, bool json);

@@ -260,6 +260,14 @@ int main(int argc, char** argv) {
           },
           "FINGERPRINT"));
 
+  auto* audit = app.add_subcommand("audit", "The audit trail of an imucald data directory: audit verify");
+  audit->require_subcommand(1);
+  std::string audit_dir;
+  auto* audit_verify = audit->add_subcommand(
+      "verify", "Check the audit trail of DATA_DIR offline: every entry's hash, its link to the one before, no "
+                "gap, the recorded last entry; names the first entry that does not hold (exit status 1)");
+  audit_verify->add_option("data_dir", audit_dir, "imucald's data directory (holding imucald.db)")->required();
+
   // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
   imucal::bench::add_storage_bench_commands(*bench);
@@ -280,6 +288,7 @@ int main(int argc, char** argv) {
     if (passwd->parsed()) return cli::run_passwd();
     if (keygen->parsed()) return cli::run_keygen(keygen_out);
     if (verify->parsed()) return cli::run_verify(verify_file, verify_key, verify_fingerprint);
+    if (audit_verify->parsed()) return cli::run_audit_verify(audit_dir);
     if (planc->parsed()) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
       if (!plan_table.empty()) plan_opt.table = table::read_table_certificate_file(plan_table);

@@ -80,8 +80,9 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   // The truths a campaign may name, read now: no request reads a file the client names.
   resolve_named_models(config_);
   db_ = std::make_unique<DaemonDb>((fs::path(config_.data_dir) / "imucald.db").string());
-  for (const auto id : db_->recover_after_restart("found active at start-up: the daemon stopped without parking it "
-                                                  "(crash or power loss)")) {
+  const auto recovered = db_->recover_after_restart("found active at start-up: the daemon stopped without parking it "
+                                                   "(crash or power loss)");
+  for (const auto id : recovered) {
     spdlog::warn("campaign {} was active when the daemon stopped; it is now interrupted (resume to continue)", id);
     // The alarms the change implies (an interruption raises one), as for the sequencer's changes;
     // nobody is connected yet to be told, GET /api/alarms lists them.
@@ -93,6 +94,13 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   api_ = std::make_unique<Api>(config_, *db_, *sequencer_, *auth_);
+  // The audit trail: the configuration and the users this start loaded, then what recovery did.
+  nlohmann::json users = nlohmann::json::array();
+  for (const auto& u : config_.users) users.push_back({{"name", u.name}, {"role", to_string(u.role)}});
+  api_->audit("imucald", "service.started", "imucald",
+              {{"version", api_->status().at("version")}, {"devices", config_.devices}, {"data_dir", config_.data_dir},
+               {"config_dir", config_.config_dir}, {"site", config_.site_name}, {"users", users},
+               {"signing_key", signing_key_path(config_)}, {"interrupted_at_start", recovered}});
   web_dir_ = find_web_dir(config_.http.web_dir);
   files_ = std::make_unique<StaticFiles>(web_dir_);
 }
@@ -103,13 +111,20 @@ Service::~Service() {
 }
 
 void Service::start(bool http) {
+  HttpServer* server = nullptr;
   if (http) {
     server_ = std::make_unique<HttpServer>(config_.http, *api_, *sequencer_, *files_);
-    HttpServer* server = server_.get();
-    sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
+    server = server_.get();
     api_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
     server_->start(config_.http.host, config_.http.port);
   }
+  // The run's events to their subscribers: the certificates (a run that ends is issued its own),
+  // then the live view.
+  Api* api = api_.get();
+  sequencer_->set_event_listener([api, server](const nlohmann::json& event) {
+    api->on_run_event(event);
+    if (server) server->broadcast_event(event);
+  });
   sequencer_->start();
 }
 

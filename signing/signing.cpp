@@ -71,6 +71,15 @@ Sha256 sha256(const std::string& text) {
   return digest;
 }
 
+}  // namespace
+
+std::string sha256_hex(const std::string& bytes) {
+  const Sha256 digest = sha256(bytes);
+  return to_hex(digest.data(), digest.size());
+}
+
+namespace {
+
 std::string iso8601_utc_now() {
   const std::time_t now = std::time(nullptr);
   std::tm utc{};

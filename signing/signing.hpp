@@ -37,6 +37,9 @@ struct KeyPair {
 // it. Throws nlohmann::json::type_error on a string that is not valid UTF-8.
 std::string canonical_json(const nlohmann::json& content);
 
+// Lower-case hex SHA-256 of `bytes` (a certificate's content_sha256, the audit trail's links).
+std::string sha256_hex(const std::string& bytes);
+
 // A new key pair from the system's random source.
 KeyPair generate_key_pair();
 

@@ -185,6 +185,10 @@ void read_certificates(const json& j, DaemonConfig& c, std::vector<std::string>&
     if (v->empty()) problems.push_back(r.at("sequence_file") + " must name a file (relative to the configuration file or absolute)");
     else c.certificates.sequence_file = *v;
   }
+  if (auto v = r.string("signing_key_file")) {
+    if (v->empty()) problems.push_back(r.at("signing_key_file") + " must name the lab's key file (imucal keygen), or be left out");
+    else c.certificates.signing_key_file = *v;
+  }
 }
 
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
@@ -358,6 +362,12 @@ std::string certificate_sequence_path(const DaemonConfig& config) {
   const std::filesystem::path file = config.certificates.sequence_file.empty() ? CertificateConfig::kDefaultSequenceFile
                                                                                : config.certificates.sequence_file;
   if (file.is_absolute()) return file.string();
+  return (std::filesystem::path(config.config_dir.empty() ? config.data_dir : config.config_dir) / file).string();
+}
+
+std::string signing_key_path(const DaemonConfig& config) {
+  const std::filesystem::path file = config.certificates.signing_key_file;
+  if (file.empty() || file.is_absolute()) return file.string();
   return (std::filesystem::path(config.config_dir.empty() ? config.data_dir : config.config_dir) / file).string();
 }
 

@@ -118,6 +118,9 @@ struct CertificateConfig {
   std::string prefix;         // empty: derived from the site's name (certificate_prefix)
   std::string sequence_file;  // empty: kDefaultSequenceFile; relative: to the configuration file's directory
   static constexpr const char* kDefaultSequenceFile = "imucal-certificate-sequence.json";
+  // The lab's Ed25519 key (`imucal keygen`, docs/signing.md): certificates and test reports are
+  // signed with it. Empty: nothing is signed. Relative: to the configuration file's directory.
+  std::string signing_key_file;
 };
 
 struct DaemonConfig {
@@ -176,6 +179,8 @@ std::string certificate_prefix(const DaemonConfig& config);
 // resolved against the configuration file's directory, or the data directory when the daemon
 // runs without a configuration file.
 std::string certificate_sequence_path(const DaemonConfig& config);
+// The signing key's path as configured, resolved as the sequence file's (empty: none configured).
+std::string signing_key_path(const DaemonConfig& config);
 
 // "HOST:PORT" (port 0: any free port). Throws ConfigError.
 void parse_listen(const std::string& text, std::string& host, std::uint16_t& port);

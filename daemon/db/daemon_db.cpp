@@ -103,6 +103,48 @@ CREATE TABLE IF NOT EXISTS alarm(
   acknowledged_ms INTEGER
 );
 CREATE INDEX IF NOT EXISTS alarm_campaign ON alarm(campaign_id);
+-- Certificates as issued (issue 35): the content is frozen at issue (canonical JSON, its SHA-256,
+-- the signed envelope when the lab has a key) and the database itself refuses to change or delete
+-- it; superseded_by is set once, when a later certificate replaces it. Created where missing.
+CREATE TABLE IF NOT EXISTS issued_certificate(
+  sequence INTEGER PRIMARY KEY,
+  number TEXT NOT NULL UNIQUE,
+  campaign_id INTEGER NOT NULL REFERENCES campaign(id),
+  issued_ms INTEGER NOT NULL,
+  content_json TEXT NOT NULL,
+  content_sha256 TEXT NOT NULL,
+  signed_json TEXT,
+  supersedes TEXT,
+  superseded_by TEXT,
+  reason TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS issued_certificate_campaign ON issued_certificate(campaign_id);
+CREATE TRIGGER IF NOT EXISTS issued_certificate_frozen
+BEFORE UPDATE OF sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, reason
+ON issued_certificate
+BEGIN SELECT RAISE(ABORT, 'an issued certificate never changes: issue a new one that supersedes it'); END;
+CREATE TRIGGER IF NOT EXISTS issued_certificate_superseded_once
+BEFORE UPDATE OF superseded_by ON issued_certificate WHEN OLD.superseded_by IS NOT NULL
+BEGIN SELECT RAISE(ABORT, 'an issued certificate is superseded once'); END;
+-- The audit trail (audit_chain.hpp): appended only; the triggers make an edit a deliberate act,
+-- and the chain makes one that went past them visible (imucal audit verify).
+CREATE TABLE IF NOT EXISTS audit(
+  seq INTEGER PRIMARY KEY,
+  t_ms INTEGER NOT NULL,
+  actor TEXT NOT NULL,
+  action TEXT NOT NULL,
+  subject TEXT NOT NULL,
+  details_json TEXT NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  sha256 TEXT NOT NULL
+);
+CREATE TRIGGER IF NOT EXISTS audit_append_only BEFORE UPDATE ON audit
+BEGIN SELECT RAISE(ABORT, 'the audit trail is appended only'); END;
+CREATE TRIGGER IF NOT EXISTS audit_kept BEFORE DELETE ON audit
+BEGIN SELECT RAISE(ABORT, 'the audit trail is appended only'); END;
+CREATE TRIGGER IF NOT EXISTS issued_certificate_kept
+BEFORE DELETE ON issued_certificate
+BEGIN SELECT RAISE(ABORT, 'an issued certificate is never deleted'); END;
 )sql";
 
 using storage::sql::Statement;
@@ -488,8 +530,177 @@ void DaemonDb::insert_certificate(const CertificateRow& row) {
 
 std::int64_t DaemonDb::max_certificate_sequence() {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "SELECT COALESCE(MAX(sequence), 0) FROM certificate");
+  Statement s(db_,
+              "SELECT MAX(COALESCE((SELECT MAX(sequence) FROM certificate), 0), "
+              "COALESCE((SELECT MAX(sequence) FROM issued_certificate), 0))");
   return s.step() ? s.column_int64(0) : 0;
+}
+
+namespace {
+
+IssuedCertificateRow issued_row(const Statement& s) {
+  return IssuedCertificateRow{s.column_int64(0),         s.column_text(1),          s.column_int64(2),
+                              s.column_int64(3),         s.column_text(4),          s.column_text(5),
+                              s.column_optional_text(6), s.column_optional_text(7), s.column_optional_text(8),
+                              s.column_text(9)};
+}
+
+}  // namespace
+
+void DaemonDb::insert_issued(const IssuedCertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  {
+    Statement s(db_, "INSERT INTO issued_certificate(sequence, number, campaign_id, issued_ms, content_json, "
+                     "content_sha256, signed_json, supersedes, reason) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)");
+    s.bind(1, row.sequence).bind(2, row.number).bind(3, row.campaign_id).bind(4, row.issued_ms);
+    s.bind(5, row.content_json).bind(6, row.content_sha256).bind(7, row.signed_json).bind(8, row.supersedes);
+    s.bind(9, row.reason);
+    s.run();
+  }
+  if (row.supersedes) {
+    Statement s(db_, "UPDATE issued_certificate SET superseded_by = ?1 WHERE number = ?2");
+    s.bind(1, row.number).bind(2, *row.supersedes);
+    s.run();
+  }
+  txn.commit();
+}
+
+std::optional<IssuedCertificateRow> DaemonDb::issued(const std::string& number) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
+                 "superseded_by, reason FROM issued_certificate WHERE number = ?1");
+  s.bind(1, number);
+  if (!s.step()) return std::nullopt;
+  return issued_row(s);
+}
+
+std::optional<IssuedCertificateRow> DaemonDb::current_issued(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
+                 "superseded_by, reason FROM issued_certificate "
+                 "WHERE campaign_id = ?1 AND superseded_by IS NULL ORDER BY sequence DESC LIMIT 1");
+  s.bind(1, campaign_id);
+  if (!s.step()) return std::nullopt;
+  return issued_row(s);
+}
+
+std::vector<IssuedCertificateRow> DaemonDb::issued_history(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
+                 "superseded_by, reason FROM issued_certificate WHERE campaign_id = ?1 ORDER BY sequence");
+  s.bind(1, campaign_id);
+  std::vector<IssuedCertificateRow> out;
+  while (s.step()) out.push_back(issued_row(s));
+  return out;
+}
+
+namespace {
+
+constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry
+
+// "SEQ SHA256"; a damaged value gives seq -1, which no trail matches.
+std::pair<std::int64_t, std::string> parse_audit_head(const std::string& text) {
+  const auto space = text.find(' ');
+  if (space == std::string::npos) return {-1, text};
+  try {
+    return {static_cast<std::int64_t>(std::stoll(text.substr(0, space))), text.substr(space + 1)};
+  } catch (const std::exception&) {
+    return {-1, text};
+  }
+}
+
+AuditEntry audit_row(const Statement& s) {
+  return AuditEntry{s.column_int64(0), s.column_int64(1), s.column_text(2), s.column_text(3),
+                    s.column_text(4),  s.column_text(5),  s.column_text(6), s.column_text(7)};
+}
+
+}  // namespace
+
+AuditEntry DaemonDb::append_audit(const std::string& actor, const std::string& action, const std::string& subject,
+                                  const std::string& details_json) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  AuditEntry e;
+  e.prev_sha256 = kAuditGenesis;
+  {
+    Statement last(db_, "SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
+    if (last.step()) {
+      e.seq = last.column_int64(0);
+      e.prev_sha256 = last.column_text(1);
+    }
+  }
+  e.seq += 1;
+  e.t_ms = now_unix_ms();
+  e.actor = actor;
+  e.action = action;
+  e.subject = subject;
+  e.details_json = details_json;
+  e.sha256 = audit_entry_sha256(e);
+  {
+    Statement s(db_, "INSERT INTO audit(seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
+                     "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)");
+    s.bind(1, e.seq).bind(2, e.t_ms).bind(3, e.actor).bind(4, e.action).bind(5, e.subject).bind(6, e.details_json);
+    s.bind(7, e.prev_sha256).bind(8, e.sha256);
+    s.run();
+  }
+  {
+    Statement s(db_, "INSERT OR REPLACE INTO setting(key, value) VALUES (?1, ?2)");
+    s.bind(1, std::string(kAuditHeadKey)).bind(2, std::to_string(e.seq) + " " + e.sha256);
+    s.run();
+  }
+  txn.commit();
+  return e;
+}
+
+std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::string>>> read_audit_trail(
+    const std::string& path) {
+  storage::sql::Connection db(path, storage::sql::Connection::Open::read_write, "daemon database");
+  std::vector<AuditEntry> entries;
+  {
+    Statement s(db, "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit ORDER BY seq");
+    while (s.step()) entries.push_back(audit_row(s));
+  }
+  std::optional<std::pair<std::int64_t, std::string>> head;
+  Statement s(db, "SELECT value FROM setting WHERE key = ?1");
+  s.bind(1, std::string(kAuditHeadKey));
+  if (s.step()) head = parse_audit_head(s.column_text(0));
+  return {std::move(entries), head};
+}
+
+std::vector<AuditEntry> DaemonDb::audit_entries(const AuditQuery& q) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+              "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit "
+              "WHERE (?1 IS NULL OR t_ms >= ?1) AND (?2 IS NULL OR t_ms <= ?2) AND (?3 = '' OR actor = ?3) "
+              "AND (?4 = '' OR substr(action, 1, length(?4)) = ?4) AND (?5 = '' OR subject = ?5) "
+              "ORDER BY seq DESC LIMIT ?6");
+  s.bind(1, q.from_ms).bind(2, q.to_ms).bind(3, q.actor).bind(4, q.action_prefix).bind(5, q.subject).bind(6, q.limit);
+  std::vector<AuditEntry> out;
+  while (s.step()) out.push_back(audit_row(s));
+  return out;
+}
+
+std::vector<AuditEntry> DaemonDb::audit_trail() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit ORDER BY seq");
+  std::vector<AuditEntry> out;
+  while (s.step()) out.push_back(audit_row(s));
+  return out;
+}
+
+std::optional<std::pair<std::int64_t, std::string>> DaemonDb::audit_head() {
+  const auto text = setting(kAuditHeadKey);
+  if (!text) return std::nullopt;
+  return parse_audit_head(*text);
+}
+
+std::vector<std::int64_t> DaemonDb::campaigns_with_issued() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT DISTINCT campaign_id FROM issued_certificate WHERE superseded_by IS NULL ORDER BY campaign_id");
+  std::vector<std::int64_t> out;
+  while (s.step()) out.push_back(s.column_int64(0));
+  return out;
 }
 
 namespace {

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "daemon/db/audit_chain.hpp"
 #include "daemon/db/run_state.hpp"
 #include "storage/sqlite.hpp"
 
@@ -64,6 +65,22 @@ struct CertificateRow {
   std::string bench_json;     // certificate_bench_json() when it was issued
 };
 
+// A certificate as issued (issue 35, docs/api.md "Certificates"): its content is frozen when it is
+// issued and never changes (the database refuses an UPDATE or a DELETE of it); a later certificate
+// of the same campaign supersedes it, and only `superseded_by` is ever set, once.
+struct IssuedCertificateRow {
+  std::int64_t sequence = 0;  // the site-wide sequence number; PRIMARY KEY: issue order
+  std::string number;         // "LAB-2026-000123"
+  std::int64_t campaign_id = 0;
+  std::int64_t issued_ms = 0;
+  std::string content_json;    // the canonical JSON (imucal-certificate/1) that is hashed and signed
+  std::string content_sha256;  // hex SHA-256 of content_json
+  std::optional<std::string> signed_json;    // the signed envelope (imucal-signed/1) with the lab's key
+  std::optional<std::string> supersedes;     // the number it replaces
+  std::optional<std::string> superseded_by;  // the number that replaced it
+  std::string reason;                        // why it was issued ("the run ended", "limits changed ...")
+};
+
 struct TransitionRow {
   std::int64_t t_ms = 0;
   std::optional<RunState> from;
@@ -106,6 +123,11 @@ struct ProgressRow {
 
 std::int64_t now_unix_ms();
 std::string iso8601_utc(std::int64_t unix_ms);
+
+// The audit trail and its recorded head from a daemon database file, read only (no migration, no
+// lock on the data directory): for `imucal audit verify` beside a running imucald or on a copy.
+std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::string>>> read_audit_trail(
+    const std::string& path);
 
 class DaemonDb {
  public:
@@ -166,8 +188,20 @@ class DaemonDb {
 
   std::optional<CertificateRow> certificate(std::int64_t campaign_id);
   void insert_certificate(const CertificateRow& row);
-  // The highest certificate sequence number this database has recorded (0: none).
+  // The highest certificate sequence number this database has recorded (0: none), issued
+  // certificates and the numbers of before them alike.
   std::int64_t max_certificate_sequence();
+
+  // Issued certificates. insert_issued stores `row` and, when it supersedes one, marks that one
+  // superseded in the same transaction.
+  void insert_issued(const IssuedCertificateRow& row);
+  std::optional<IssuedCertificateRow> issued(const std::string& number);
+  // The campaign's certificate in force (none superseding it), or none.
+  std::optional<IssuedCertificateRow> current_issued(std::int64_t campaign_id);
+  // Every certificate of the campaign, in issue order.
+  std::vector<IssuedCertificateRow> issued_history(std::int64_t campaign_id);
+  // The campaigns that have a certificate in force.
+  std::vector<std::int64_t> campaigns_with_issued();
 
   // Alarms. raise_alarm returns the new row. clear_alarms ends the active alarms of a campaign
   // (only those from `source` when given) and returns them as cleared.
@@ -184,6 +218,20 @@ class DaemonDb {
   // Oldest first. `campaign`: that campaign's only. `all` false: only those that still need
   // someone (active, or not acknowledged). At most `limit` (the newest ones).
   std::vector<AlarmRow> alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit = 1000);
+
+  // The audit trail (audit_chain.hpp). append_audit links the entry to the last one and records
+  // the new head in one transaction; details_json must be a JSON object's text.
+  AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
+                          const std::string& details_json);
+  struct AuditQuery {
+    std::optional<std::int64_t> from_ms, to_ms;  // inclusive
+    std::string actor, action_prefix, subject;   // empty: any
+    std::int64_t limit = 1000;                   // newest first
+  };
+  std::vector<AuditEntry> audit_entries(const AuditQuery& query);
+  // The whole trail in order, and the head recorded beside it, for check_audit_chain.
+  std::vector<AuditEntry> audit_trail();
+  std::optional<std::pair<std::int64_t, std::string>> audit_head();
 
   std::optional<std::string> setting(const std::string& key);
   void set_setting(const std::string& key, const std::string& value);

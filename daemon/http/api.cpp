@@ -1,6 +1,7 @@
 #include "daemon/http/api.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <filesystem>
@@ -18,6 +19,7 @@
 #include "daemon/analysis/run_series.hpp"
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/config/device_config.hpp"
+#include "daemon/db/csv.hpp"
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/run/alarms.hpp"
@@ -277,6 +279,11 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
                                          static_cast<std::size_t>(config.http.max_analysis_jobs));
   chamber_map_ = chamber_map_json(config);
   table_dialect_ = table_dialect_json(config);
+  if (const std::string key = signing_key_path(config); !key.empty()) {
+    signing_key_ = signing::read_key_file(key);
+    spdlog::info("certificates and test reports are signed with the key {} ({})", key,
+                 signing::fingerprint(signing_key_->public_key));
+  }
   // Without a configuration file the sequence can only live in the data directory.
   if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
@@ -362,7 +369,7 @@ json Api::status() {
 
 // One endpoint. A pattern's segments are literal, or a placeholder: {id} a campaign id (a
 // segment that is not one answers 404 "no campaign"), {command} a run command (a segment that is
-// not one does not match), {alarm} and {serial} any segment. Where patterns of several
+// not one does not match), {alarm}, {serial} and {number} any segment. Where patterns of several
 // specificities match a path, the one with the most literal segments wins (/api/campaigns/1/model
 // is the model, not a command). GET routes answer HEAD too.
 struct Call {
@@ -465,6 +472,7 @@ const std::vector<Api::Route>& Api::routes() {
       {"PUT", "/api/limits", A::operator_, [](Api& a, const Call& c) { return a.replace_limits(c.request, *c.who); }},
       {"GET", "/api/compare", A::viewer, [](Api& a, const Call& c) { return a.compare_campaigns(c.target.query); }},
       {"GET", "/api/alarms", A::viewer, [](Api& a, const Call& c) { return a.list_alarms(c.target.query); }},
+      {"GET", "/api/audit", A::viewer, [](Api& a, const Call& c) { return a.list_audit(c.target.query); }},
       {"POST", "/api/alarms/{alarm}/ack", A::operator_,
        [](Api& a, const Call& c) { return a.acknowledge_alarm(c.args[0], *c.who); }},
       {"GET", "/api/imus", A::viewer,
@@ -505,7 +513,9 @@ const std::vector<Api::Route>& Api::routes() {
       {"GET", "/api/campaigns/{id}/events.csv", A::viewer, [](Api& a, const Call& c) { return a.campaign_events_csv(c.id); }},
       {"GET", "/api/campaigns/{id}/certificate", A::viewer,
        [](Api& a, const Call& c) { return a.campaign_certificate(c.id); }},
-      {"GET", "/api/campaigns/{id}/report", A::viewer, [](Api& a, const Call& c) { return a.campaign_report(c.id); }},
+      {"GET", "/api/campaigns/{id}/report", A::viewer, [](Api& a, const Call& c) { return a.campaign_report(c.id, c.target.query); }},
+      {"GET", "/api/certificates/{number}", A::viewer,
+       [](Api& a, const Call& c) { return a.certificate_by_number(c.args[0]); }},
       {"POST", "/api/campaigns/{id}/accept", A::operator_,
        [](Api& a, const Call& c) { return a.campaign_accept(c.id, c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/prompt", A::operator_,
@@ -668,6 +678,12 @@ HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const
     return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
   db_.accept(id, *reason, who.user);
   spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, *reason);
+  audit(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", *reason}, {"state", to_string(row->state)}});
+  try {
+    issue_certificate(id, "partial run accepted by " + who.user + ": " + *reason);
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: accepted, but no certificate yet: {}", id, e.what());
+  }
   return json_reply(200, summary(expect_value(db_.campaign(id), "the campaign just accepted")));
 }
 
@@ -708,6 +724,8 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
   const auto who = authenticate(request, false);
   const std::int64_t id = store_campaign(db_, check, "posted by " + (who ? who->user : std::string("?")));
   spdlog::info("campaign {} '{}' posted ({}, {:.1f} s)", id, spec.name, spec.program_label, check.duration_s);
+  audit(who ? who->user : std::string("?"), "campaign.created", "campaign " + std::to_string(id),
+        {{"name", spec.name}, {"program", spec.program_label}, {"duration_s", check.duration_s}});
   HttpReply r = json_reply(201, {{"id", id}, {"state", "created"}, {"duration_s", check.duration_s}});
   r.headers.emplace_back("Location", "/api/campaigns/" + std::to_string(id));
   return r;
@@ -718,6 +736,7 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   if (auto bad = parse_body(request, body)) return *bad;
   if (!body.is_object()) return error_reply(400, "the limits must be a JSON object {\"format\": \"imucal-limits/1\", ...}");
   body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
+  const json before = limits_.document();
   try {
     limits_.replace(body);
   } catch (const std::invalid_argument& e) {
@@ -726,6 +745,15 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
     return error_reply(500, std::string("the limits were not saved: ") + e.what());
   }
   spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
+  audit(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
+  // A certificate states its verdict: one that the new limits change is superseded.
+  for (const std::int64_t id : db_.campaigns_with_issued()) {
+    try {
+      issue_certificate(id, "acceptance limits changed by " + who.user);
+    } catch (const std::exception& e) {
+      spdlog::error("campaign {}: its certificate could not be reissued under the new limits: {}", id, e.what());
+    }
+  }
   json doc = limits_.document();
   doc["source"] = limits_.current().source;
   return json_reply(200, doc);
@@ -844,7 +872,7 @@ json Api::detail_json(const CampaignRow& row) {
 
 // The run's test report (test_report.hpp): its figures from the results, the temperatures from
 // its recording, the gravity as the certificate states it.
-HttpReply Api::campaign_report(std::int64_t id) {
+HttpReply Api::campaign_report(std::int64_t id, const std::map<std::string, std::string>& query) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   TemperatureSummary temperatures;
@@ -856,43 +884,221 @@ HttpReply Api::campaign_report(std::int64_t id) {
       spdlog::warn("campaign {}: the report goes without temperatures: {}", id, e.what());
     }
   }
-  return json_reply(200, test_report_json(detail_json(*row), certificate_bench_json(config_, row->ended_ms.value_or(0)),
-                                          temperatures));
+  json report = test_report_json(detail_json(*row), certificate_bench_json(config_, row->ended_ms.value_or(0)), temperatures);
+  // ?signed=1: the report in the lab's signed envelope (imucal-signed/1, kind test-report), the
+  // file `imucal verify` checks; signed as it reads now (a report is not frozen as a certificate is).
+  if (const auto it = query.find("signed"); it != query.end() && it->second != "0") {
+    if (!signing_key_)
+      return error_reply(409, "the lab has no signing key (certificates.signing_key_file in the configuration): nothing is signed");
+    return json_reply(200, signing::sign_document(report, signing::kTestReport, *signing_key_));
+  }
+  report["signed_by"] = signing_key_ ? json(signing::fingerprint(signing_key_->public_key)) : json(nullptr);
+  return json_reply(200, report);
 }
 
-HttpReply Api::campaign_certificate(std::int64_t id) {
-  const auto reply = [](const CertificateRow& c) {
-    json out = {{"campaign_id", c.campaign_id}, {"number", c.number}, {"sequence", c.sequence},
-                {"issued", iso8601_utc(c.issued_ms)}};
-    const json bench = parse_or_null(c.bench_json);
-    if (bench.is_object()) out.update(bench);
-    return json_reply(200, out);
-  };
+// What a certificate states (docs/api.md "Certificates"): the campaign as it ended, with its
+// verdict under the limits in force and its acceptance; the model; the site; the software; the
+// bench as configured. Frozen in the issued record: the page is rendered from this and nothing else.
+json Api::certificate_content(const CampaignRow& row, const std::string& bench_json) {
+  const json detail = detail_json(row);
+  json campaign = json::object();
+  for (const char* key : {"id", "name", "state", "program", "started", "ended", "error", "frames", "lost_frames",
+                          "bad_frames", "complete", "accepted", "verdict", "imu", "imu_serial", "progress", "transitions"})
+    campaign[key] = detail.value(key, json(nullptr));
+  const json& spec = detail.at("spec");
+  campaign["spec"] = {{"chamber", spec.is_object() ? spec.value("chamber", json(nullptr)) : json(nullptr)},
+                      {"estimators", spec.is_object() ? spec.value("estimators", json::array()) : json::array()}};
+  return {{"format", "imucal-certificate/1"},
+          {"campaign", campaign},
+          {"model", parse_or_null(row.model_json)},
+          {"site", status().at("site")},
+          {"software", {{"imucald", IMUCAL_VERSION}}},
+          {"bench", parse_or_null(bench_json)}};
+}
+
+namespace {
+
+// The keys of an issued certificate's content that name the issue itself (the software that
+// issued it among them), not what it states: two contents that differ only in these state the same.
+constexpr std::array<const char*, 6> kIssueKeys = {"number", "sequence", "issued", "supersedes", "reason", "software"};
+
+json statement_of(json content) {
+  for (const char* key : kIssueKeys) content.erase(key);
+  return content;
+}
+
+}  // namespace
+
+namespace {
+
+json text_or_null(const std::optional<std::string>& text) { return text ? json(*text) : json(nullptr); }
+
+// A run that is issued a certificate: ended, with a model, counting as its unit's calibration.
+bool certifiable(const CampaignRow& row) {
+  return is_final(row.state) && row.ended_ms.has_value() && row.model_json.has_value() && counts_as_calibration(row);
+}
+
+}  // namespace
+
+// Written as small pieces, each with an optional or two: clang 16's optional-access analysis (the
+// static check) costs minutes on one function that branches on several.
+std::optional<IssuedCertificateRow> Api::issue_certificate(std::int64_t id, const std::string& reason) {
   std::lock_guard lock(certificate_mutex_);
-  if (const auto existing = db_.certificate(id)) return reply(*existing);
   const auto row = db_.campaign(id);
-  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  // A number is for a run whose results are final: one still running (or interrupted, which can
-  // resume) could change after its certificate was signed.
-  if (!is_final(row->state) || !row->ended_ms)
-    return error_reply(409, "campaign " + std::to_string(id) + " has not ended (state " + std::string(to_string(row->state)) +
-                                "): a certificate is issued only for an ended run with a model");
-  if (!row->model_json)
-    return error_reply(409, "campaign " + std::to_string(id) + " ended without a model: there is nothing to certify");
-  CertificateRow c;
-  c.campaign_id = id;
-  try {
-    c.sequence = certificate_sequence_.next(db_.max_certificate_sequence());
-  } catch (const std::exception& e) {
-    spdlog::error("campaign {}: no certificate number: {}", id, e.what());
-    return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
-  }
+  if (!row) return std::nullopt;
+  const CampaignRow& r = *row;
+  if (!certifiable(r)) return db_.current_issued(id);
+  if (const auto current = db_.current_issued(id)) return reissue(r, *current, reason);
+  if (const auto legacy = db_.certificate(id)) return freeze_legacy(r, *legacy);
+  IssuedCertificateRow c = numbered(r.id, reason);
+  return store_issued(c, certificate_content(r, certificate_bench_json(config_, r.ended_ms.value_or(0)).dump()));
+}
+
+// The certificate in force, or a new one superseding it when what it states is no longer true.
+IssuedCertificateRow Api::reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason) {
+  // The bench and the site the run used, from the certificate in force (a table replaced since did
+  // not calibrate this unit); what changes is what is true of the run today (its verdict, acceptance).
+  const json stated = parse_or_null(current.content_json);
+  json content = certificate_content(row, stated.value("bench", json()).dump());
+  content["site"] = stated.value("site", content.at("site"));
+  if (statement_of(stated) == statement_of(content)) return current;
+  IssuedCertificateRow c = numbered(row.id, reason);
+  c.supersedes = current.number;
+  return store_issued(c, std::move(content));
+}
+
+// A number given before certificates were frozen keeps its number and date; what it states is
+// frozen now, at its first reading since, with the bench kept with the number.
+IssuedCertificateRow Api::freeze_legacy(const CampaignRow& row, const CertificateRow& legacy) {
+  IssuedCertificateRow c;
+  c.campaign_id = row.id;
+  c.sequence = legacy.sequence;
+  c.number = legacy.number;
+  c.issued_ms = legacy.issued_ms;
+  c.reason = "numbered before certificates were frozen; frozen at its first reading since";
+  return store_issued(c, certificate_content(row, legacy.bench_json));
+}
+
+// A new number from the site's sequence (throws when it cannot be taken).
+IssuedCertificateRow Api::numbered(std::int64_t campaign_id, const std::string& reason) {
+  IssuedCertificateRow c;
+  c.campaign_id = campaign_id;
+  c.sequence = certificate_sequence_.next(db_.max_certificate_sequence());
   c.issued_ms = now_unix_ms();
   c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
-  c.bench_json = certificate_bench_json(config_, *row->ended_ms).dump();
-  db_.insert_certificate(c);
-  spdlog::info("campaign {}: certificate {} issued (sequence file {})", id, c.number, certificate_sequence_.path());
-  return reply(c);
+  c.reason = reason;
+  return c;
+}
+
+// Completes the content with the issue's own keys, hashes it, signs it with the lab's key, stores
+// it (superseding the old one in the same transaction) and writes the audit trail.
+IssuedCertificateRow Api::store_issued(IssuedCertificateRow c, json content) {
+  const json supersedes = text_or_null(c.supersedes);
+  content["number"] = c.number;
+  content["sequence"] = c.sequence;
+  content["issued"] = iso8601_utc(c.issued_ms);
+  content["supersedes"] = supersedes;
+  content["reason"] = c.reason;
+  c.content_json = signing::canonical_json(content);
+  c.content_sha256 = signing::sha256_hex(c.content_json);
+  if (signing_key_) c.signed_json = signing::sign_document(content, signing::kCertificate, *signing_key_).dump();
+  db_.insert_issued(c);
+  audit("imucald", "certificate.issued", c.number,
+        {{"campaign", c.campaign_id}, {"reason", c.reason}, {"supersedes", supersedes}, {"content_sha256", c.content_sha256}});
+  if (supersedes.is_string())
+    audit("imucald", "certificate.superseded", supersedes.get<std::string>(),
+          {{"campaign", c.campaign_id}, {"superseded_by", c.number}});
+  spdlog::info("campaign {}: certificate {} issued ({}){}", c.campaign_id, c.number, c.reason,
+               supersedes.is_string() ? ", superseding " + supersedes.get<std::string>() : std::string());
+  return c;
+}
+
+json Api::issued_json(const IssuedCertificateRow& c) {
+  const json content = parse_or_null(c.content_json);
+  json out = {{"number", c.number},
+              {"sequence", c.sequence},
+              {"campaign_id", c.campaign_id},
+              {"issued", iso8601_utc(c.issued_ms)},
+              {"reason", c.reason},
+              {"supersedes", text_or_null(c.supersedes)},
+              {"superseded_by", text_or_null(c.superseded_by)},
+              {"content_sha256", c.content_sha256},
+              {"content", content},
+              {"signed", parse_or_null(c.signed_json)}};
+  // The bench's keys at the top too, as before certificates were frozen.
+  if (content.is_object() && content.value("bench", json()).is_object()) out.update(content.at("bench"));
+  json history = json::array();
+  for (const auto& h : db_.issued_history(c.campaign_id))
+    history.push_back({{"number", h.number},
+                       {"issued", iso8601_utc(h.issued_ms)},
+                       {"reason", h.reason},
+                       {"superseded_by", text_or_null(h.superseded_by)}});
+  out["history"] = history;
+  return out;
+}
+
+namespace {
+
+// Why the run has no certificate (409's text), or empty when it may have one.
+std::string no_certificate_because(const CampaignRow& row) {
+  const std::string id = std::to_string(row.id);
+  // A run still going (or interrupted, which can resume) could change after its certificate was issued.
+  if (!is_final(row.state) || !row.ended_ms.has_value())
+    return "campaign " + id + " has not ended (state " + std::string(to_string(row.state)) +
+           "): a certificate is issued only for an ended run with a model";
+  if (!row.model_json.has_value()) return "campaign " + id + " ended without a model: there is nothing to certify";
+  if (!counts_as_calibration(row))
+    return "campaign " + id + " is a partial run (" + std::string(to_string(row.state)) +
+           "): a certificate is issued once an operator accepts it (POST /api/campaigns/" + id + "/accept with a reason)";
+  return {};
+}
+
+}  // namespace
+
+HttpReply Api::campaign_certificate(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (const auto current = db_.current_issued(id)) return json_reply(200, issued_json(*current));
+  if (const std::string why = no_certificate_because(*row); !why.empty()) return error_reply(409, why);
+  try {
+    // A run that ended before certificates were issued at the end, or whose issue failed then.
+    if (const auto issued = issue_certificate(id, "issued at its first request")) return json_reply(200, issued_json(*issued));
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: no certificate: {}", id, e.what());
+    return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
+  }
+  return error_reply(409, "campaign " + std::to_string(id) + " has no certificate");
+}
+
+HttpReply Api::certificate_by_number(const std::string& number) {
+  const auto c = db_.issued(number);
+  if (!c) return error_reply(404, "no certificate numbered '" + number + "' was issued here");
+  return json_reply(200, issued_json(*c));
+}
+
+void Api::audit(const std::string& actor, const std::string& action, const std::string& subject, const json& details) {
+  try {
+    db_.append_audit(actor, action, subject, details.dump());
+  } catch (const std::exception& e) {
+    // The change itself is made; a trail that could not take it is said loudly, in the log.
+    spdlog::error("audit trail: cannot append {} {} by {}: {}", action, subject, actor, e.what());
+  }
+}
+
+void Api::on_run_event(const json& event) {
+  if (event.value("kind", "") != "transition") return;
+  const json& campaign = event.value("campaign", json());
+  if (!campaign.is_number_integer()) return;
+  const std::int64_t id = campaign.get<std::int64_t>();
+  audit("imucald", "campaign.transition", "campaign " + std::to_string(id),
+        {{"from", event.value("from", json())}, {"to", event.value("to", json())}, {"reason", event.value("reason", json())}});
+  if (event.value("to", "") != "done") return;
+  try {
+    issue_certificate(id, "the run ended");
+  } catch (const std::exception& e) {
+    // Issued at its first request instead (campaign_certificate); the run itself is unharmed.
+    spdlog::error("campaign {}: no certificate at the end of the run: {}", id, e.what());
+  }
 }
 
 HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {
@@ -968,6 +1174,8 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
     if (outcome.state) extra["state"] = to_string(*outcome.state);
     return error_reply(outcome.http_status, outcome.error, extra);
   }
+  audit(who.user, "campaign.command", "campaign " + std::to_string(id),
+        {{"command", command}, {"reason", reason}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});
   // A command that succeeded has moved the campaign to its new state.
   return json_reply(200, {{"id", id}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});
 }
@@ -986,6 +1194,7 @@ HttpReply Api::campaign_prompt(std::int64_t id, const ApiRequest& request, const
   if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
   const auto outcome = sequencer_.answer_prompt(id, who.user);
   if (outcome.http_status != 200) return error_reply(outcome.http_status, outcome.error);
+  audit(who.user, "campaign.prompt_answered", "campaign " + std::to_string(id), {{"answer", "done"}});
   return json_reply(200, {{"id", id}, {"answered", "done"}});
 }
 
@@ -1057,6 +1266,68 @@ HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {
   return json_reply(200, {{"alarms", list}});
 }
 
+namespace {
+
+// One key of GET /api/audit's query into `q`; the 400's text when it is wrong, else empty.
+std::string read_audit_key(const std::string& key, const std::string& value, DaemonDb::AuditQuery& q) {
+  if (key == "from" || key == "to") {
+    const std::int64_t day = date_day_number(value).value_or(std::numeric_limits<std::int64_t>::min());
+    if (day == std::numeric_limits<std::int64_t>::min()) return key + " must be a date YYYY-MM-DD (UTC), not '" + value + "'";
+    if (key == "from") q.from_ms = day * 86'400'000;
+    else q.to_ms = (day + 1) * 86'400'000 - 1;  // the whole day
+  } else if (key == "actor") {
+    q.actor = value;
+  } else if (key == "action") {
+    q.action_prefix = value;
+  } else if (key == "subject") {
+    q.subject = value;
+  } else if (key == "limit") {
+    const std::int64_t limit = parse_id(value).value_or(0);
+    if (limit < 1 || limit > 100000) return "limit must be a number from 1 to 100000, not '" + value + "'";
+    q.limit = limit;
+  } else if (key != "format") {
+    return "unknown query key '" + key + "' (from, to, actor, action, subject, limit, format)";
+  }
+  return {};
+}
+
+HttpReply audit_csv(const std::vector<AuditEntry>& entries) {
+  HttpReply r;
+  r.body = "seq,time_utc,actor,action,subject,details,sha256\r\n";
+  for (const auto& e : entries)
+    r.body += std::to_string(e.seq) + "," + iso8601_utc(e.t_ms) + "," + csv_field(e.actor) + "," + csv_field(e.action) +
+              "," + csv_field(e.subject) + "," + csv_field(e.details_json) + "," + e.sha256 + "\r\n";
+  r.content_type = "text/csv; charset=utf-8";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"imucal-audit.csv\"");
+  return r;
+}
+
+}  // namespace
+
+// GET /api/audit: the trail, newest first, filtered; ?format=csv for a spreadsheet.
+HttpReply Api::list_audit(const std::map<std::string, std::string>& query) {
+  DaemonDb::AuditQuery q;
+  for (const auto& [key, value] : query)
+    if (const std::string bad = read_audit_key(key, value, q); !bad.empty()) return error_reply(400, bad);
+  const auto format_it = query.find("format");
+  const std::string format = format_it == query.end() ? std::string("json") : format_it->second;
+  if (format != "json" && format != "csv") return error_reply(400, "format must be json or csv, not '" + format + "'");
+  const auto entries = db_.audit_entries(q);
+  if (format == "csv") return audit_csv(entries);
+  json list = json::array();
+  for (const auto& e : entries)
+    list.push_back({{"seq", e.seq},
+                    {"t", iso8601_utc(e.t_ms)},
+                    {"actor", e.actor},
+                    {"action", e.action},
+                    {"subject", e.subject},
+                    {"details", parse_or_null(e.details_json)},
+                    {"sha256", e.sha256}});
+  const AuditCheck check = check_audit_chain(db_.audit_trail(), db_.audit_head());
+  return json_reply(200, {{"entries", list}, {"intact", check.ok()}, {"check", check.message}});
+}
+
 HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& who) {
   const auto id = parse_id(id_text);
   if (!id) return error_reply(404, "no alarm '" + id_text + "': an alarm id is a number (GET /api/alarms lists them)");
@@ -1072,6 +1343,8 @@ HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& wh
   spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row.campaign_id, row.id, row.severity,
                row.message, who.user);
   broadcast(alarm_message("acknowledged", row));
+  audit(who.user, "alarm.acknowledged", "alarm " + std::to_string(row.id),
+        {{"campaign", row.campaign_id}, {"severity", row.severity}, {"message", row.message}});
   return json_reply(200, alarm_json(row));
 }
 

@@ -24,6 +24,7 @@
 #include "daemon/production/certificates.hpp"
 #include "daemon/production/limits_file.hpp"
 #include "daemon/run/sequencer.hpp"
+#include "signing/signing.hpp"
 
 namespace imucal::daemon {
 
@@ -61,6 +62,12 @@ class Api {
   void set_shutting_down() { shutting_down_ = true; }
   // Where the analyses' progress is published ({"type": "analysis", ...}, docs/api.md).
   void set_event_listener(std::function<void(const nlohmann::json&)> listener);
+  // The sequencer's events (Sequencer::EventListener): a run that ends `done` is issued its
+  // certificate here.
+  void on_run_event(const nlohmann::json& event);
+  // Appends to the audit trail (daemon_db.hpp); a failure is logged, never thrown at the caller.
+  void audit(const std::string& actor, const std::string& action, const std::string& subject,
+             const nlohmann::json& details);
 
  private:
   static const std::vector<Route>& routes();
@@ -86,7 +93,7 @@ class Api {
   // 404 naming why when the campaign has no run file (never started, or not written yet).
   std::optional<HttpReply> no_recording(const CampaignRow& row, const std::string& prefix = "") const;
   HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);
-  HttpReply campaign_report(std::int64_t id);
+  HttpReply campaign_report(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
   nlohmann::json summary(const CampaignRow& row);
@@ -94,12 +101,29 @@ class Api {
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
   // GET /api/compare?a=ID&b=ID: two runs' models side by side (acceptance.hpp compare_json).
   HttpReply compare_campaigns(const std::map<std::string, std::string>& query);
-  // GET /api/campaigns/{id}/certificate: the campaign's certificate number, issued on the first
-  // request (ended runs with a model only), then always the same.
+  // GET /api/campaigns/{id}/certificate: the campaign's certificate in force (issued when the run
+  // ended, when a partial run was accepted, or on this request for a run that counts as a
+  // calibration and has none yet); GET /api/certificates/{number}: any one ever issued.
   HttpReply campaign_certificate(std::int64_t id);
+  HttpReply certificate_by_number(const std::string& number);
+  // Issues the campaign's certificate when it counts as a calibration (complete, or accepted) and
+  // has a model: a first one, or one superseding the certificate in force when what that states
+  // (the verdict under today's limits, the acceptance, the bench) is no longer what is true. Returns
+  // the certificate in force afterwards (none when the run does not count), or throws
+  // std::runtime_error when no number can be taken.
+  std::optional<IssuedCertificateRow> issue_certificate(std::int64_t id, const std::string& reason);
+  // The certificate's canonical content (imucal-certificate/1) for the run as it stands now.
+  nlohmann::json certificate_content(const CampaignRow& row, const std::string& bench_json);
+  nlohmann::json issued_json(const IssuedCertificateRow& c);
+  // issue_certificate's pieces (api.cpp says why they are pieces).
+  IssuedCertificateRow reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason);
+  IssuedCertificateRow freeze_legacy(const CampaignRow& row, const CertificateRow& legacy);
+  IssuedCertificateRow numbered(std::int64_t campaign_id, const std::string& reason);
+  IssuedCertificateRow store_issued(IssuedCertificateRow c, nlohmann::json content);
   // GET /api/alarms: those still needing someone (or all with ?all=1), of every campaign (or of
   // ?campaign=ID), newest first.
   HttpReply list_alarms(const std::map<std::string, std::string>& query);
+  HttpReply list_audit(const std::map<std::string, std::string>& query);
   // POST /api/alarms/{id}/ack: who acknowledged it and when, once; broadcast.
   HttpReply acknowledge_alarm(const std::string& id_text, const Principal& who);
   // GET /api/campaigns/{id}/events.csv: the run's log with its alarms (alarms.hpp run_log_csv).
@@ -114,7 +138,10 @@ class Api {
   Auth& auth_;
   LimitsFile limits_;
   CertificateSequence certificate_sequence_;
-  std::mutex certificate_mutex_;  // a campaign's number is looked up and issued as one step
+  std::mutex certificate_mutex_;  // a campaign's certificate is looked up and issued as one step
+  // The lab's key (config certificates.signing_key_file), read when the service starts: a key file
+  // others can read stops the start (signing::read_key_file says why and how to mend it).
+  std::optional<signing::KeyPair> signing_key_;
   nlohmann::json programs_;  // built once: the built-in programs do not change
   nlohmann::json chamber_map_;  // built once: the configured register map does not change
   nlohmann::json table_dialect_;  // built once, as the chamber map

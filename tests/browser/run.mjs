@@ -745,12 +745,32 @@ try {
     { badStates: ['done', 'failed', 'aborted'] });
   assert.equal((await apiCall('POST', `/api/campaigns/${stoppedId}/stop`, {})).status, 200);
   await waitCampaign(stoppedId, (c) => c.state === 'done', 'the stopped run');
+  // No certificate until an operator accepts the partial run (issue 35): the page says how.
+  await page.goto(`${base}/certificate.html?id=${stoppedId}`);
+  await page.waitForSelector('#certificate-error');
+  assert.match(await page.textContent('#certificate-error'), /partial run.*accepts it/);
+  // Accepted on the campaign page, with a reason; then its certificate is issued.
+  await page.goto(`${base}/#/campaigns/${stoppedId}`);
+  await page.waitForSelector('#accept-partial');
+  assert.match(await page.textContent('#not-accepted'), /not accepted/);
+  await page.click('#accept-partial');
+  await page.fill('#confirm-reason', 'stopped at 80 %: every static of the first two cycles recorded');
+  await page.click('#confirm-ok');
+  await page.waitForSelector('#certificate');
   await page.goto(`${base}/certificate.html?id=${stoppedId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');
   assert.equal((await page.textContent('#certificate-partial')).trim(), 'PARTIAL');
-  assert.match(await page.textContent('#certificate-partial-reason'), /^Partial run: stopped at \d+ % of the program \(stop by /);
+  assert.match(await page.textContent('#certificate-partial-reason'),
+    /^Partial run: stopped at \d+ % of the program \(stop by .*accepted as a calibration by operator: stopped at 80 %/);
+  assert.match(await page.textContent('#certificate-verification'), /Content SHA-256 [0-9a-f]{64}/);
   await shot(page, '08c-certificate-partial');
-  log('certificate of a stopped run: PARTIAL in its title block, with why and when');
+  log('a stopped run: no certificate until accepted; accepted on its page with a reason, then PARTIAL in its title block');
+
+  // The certificates superseded when the limits changed stay, marked, under their numbers.
+  await page.goto(`${base}/certificate.html?number=${encodeURIComponent(certNumber)}`);
+  await page.waitForSelector('#certificate[data-ready="true"]');
+  assert.match(await page.textContent('#certificate-superseded'), /SUPERSEDED by certificate BROWSER-LAB-/);
+  log(`certificate ${certNumber} (issued before the limits): kept, marked superseded`);
 
   // ---- the rate-steps test: scale factor against rate, per gyro ----
   const stepsId = await startCampaign({ name: 'browser test: rate steps', program: 'rate-steps-short', rate_hz: 20, seed: 13,

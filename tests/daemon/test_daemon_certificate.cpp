@@ -4,9 +4,12 @@
 // for a run that has not ended, and the bench a certificate states (reference equipment, gravity),
 // with the configuration's errors naming the field at fault.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <set>
 #include <thread>
@@ -14,6 +17,9 @@
 #include "core/earth.hpp"
 #include "daemon/production/certificates.hpp"
 #include "service_fixture.hpp"
+#include "signing/signing.hpp"
+#include "storage/sqlite.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -207,4 +213,160 @@ TEST(Certificate, DatesAreDaysOfTheGregorianCalendar) {
   EXPECT_FALSE(daemon::date_day_number("2026-13-01"));
   EXPECT_FALSE(daemon::date_day_number("2026-1-01"));
   EXPECT_FALSE(daemon::date_day_number("tomorrow"));
+}
+
+// Issue 35, deliverable 1: a certificate is issued when its run ends (in the order runs end, not
+// the order someone first opens them), its content is frozen and hashed (and signed with the lab's
+// key), and new limits, which change its verdict, issue a new certificate superseding it: the old
+// one is unchanged, marked superseded and still there; the new one takes the next number. A partial
+// run gets its certificate when an operator accepts it.
+TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange) {
+  const std::string dir = scratch_dir("certificate-issued-lab");  // not the daemon's: that one starts empty
+  const std::string key_file = dir + "/lab.key";
+  signing::write_key_file(key_file, signing::generate_key_pair());
+  const signing::PublicKey lab_key = signing::read_public_key(key_file + ".pub");
+  LocalDaemon d("certificate-issued", false, [&](daemon::DaemonConfig& c) {
+    configure(c, dir + "/sequence.json");
+    c.certificates.signing_key_file = key_file;
+  });
+  const auto a = run_campaign(d, "first", "FOG-21");
+  const auto b = run_campaign(d, "second", "FOG-22");
+  // Opened in the other order: numbered as the runs ended.
+  const json cb = d.get(certificate_target(b));
+  const json ca = d.get(certificate_target(a));
+  ASSERT_TRUE(ca.contains("number")) << ca.dump();
+  ASSERT_TRUE(cb.contains("number")) << cb.dump();
+  EXPECT_LT(ca.at("sequence").get<std::int64_t>(), cb.at("sequence").get<std::int64_t>());
+  EXPECT_EQ(ca.at("reason"), "the run ended");
+  EXPECT_TRUE(ca.at("supersedes").is_null());
+  EXPECT_TRUE(ca.at("superseded_by").is_null());
+  // What it states, frozen: no limits for PN-100 yet; signed over the content, with the lab's key.
+  EXPECT_TRUE(ca.at("content").at("campaign").at("verdict").is_null()) << ca.at("content").at("campaign").dump();
+  EXPECT_EQ(ca.at("content").at("number"), ca.at("number"));
+  const signing::Verification v = signing::verify_document(ca.at("signed"), lab_key);
+  EXPECT_TRUE(v.verified()) << v.message;
+  EXPECT_EQ(ca.at("signed").at("content"), ca.at("content"));
+  EXPECT_EQ(ca.at("signed").at("content_sha256"), ca.at("content_sha256"));
+  const std::string old_number = ca.at("number");
+
+  // Limits for the part: every certificate of it now states a verdict it did not; each is superseded.
+  const json limits = {{"format", "imucal-limits/1"},
+                       {"part_numbers", {{"PN-100", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+  ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+  const json old_after = d.get("/api/certificates/" + old_number);
+  EXPECT_EQ(old_after.at("content"), ca.at("content")) << "the issued certificate changed";
+  EXPECT_EQ(old_after.at("content_sha256"), ca.at("content_sha256"));
+  EXPECT_EQ(old_after.at("signed"), ca.at("signed"));
+  EXPECT_EQ(old_after.at("issued"), ca.at("issued"));
+  const json ca2 = d.get(certificate_target(a));
+  const json cb2 = d.get(certificate_target(b));
+  EXPECT_EQ(old_after.at("superseded_by"), ca2.at("number"));
+  EXPECT_EQ(ca2.at("supersedes"), old_number);
+  EXPECT_NE(ca2.at("reason").get<std::string>().find("acceptance limits changed by"), std::string::npos) << ca2.at("reason");
+  EXPECT_EQ(ca2.at("sequence").get<std::int64_t>(), cb.at("sequence").get<std::int64_t>() + 1) << "numbered next";
+  EXPECT_EQ(cb2.at("sequence").get<std::int64_t>(), ca2.at("sequence").get<std::int64_t>() + 1);
+  EXPECT_TRUE(ca2.at("content").at("campaign").at("verdict").is_object()) << ca2.at("content").dump().substr(0, 600);
+  EXPECT_TRUE(signing::verify_document(ca2.at("signed"), lab_key).verified());
+  EXPECT_EQ(ca2.at("history").size(), 2u);
+  // The same limits again change nothing: nothing is issued.
+  ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+  EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
+  EXPECT_EQ(d.call("GET", "/api/certificates/NO-SUCH-1").status, 404);
+
+  // A partial run: no certificate until an operator accepts it, then one saying so.
+  json slow = certificate_campaign("stopped early", "FOG-23");
+  slow["time_scale"] = 20;
+  const auto p = d.post_campaign(slow);
+  ASSERT_EQ(d.command(p, "start"), 200);
+  d.wait_for(p, [](const json& c) { return c.at("program_time_s").get<double>() > 0.8 * c.at("duration_s").get<double>(); });
+  ASSERT_EQ(d.command(p, "stop"), 200);
+  const json stopped = d.wait_final(p);
+  ASSERT_FALSE(stopped.at("complete").get<bool>());
+  ASSERT_TRUE(stopped.at("has_model").get<bool>()) << stopped.at("results").dump().substr(0, 600);
+  const auto refused = d.call("GET", certificate_target(p));
+  EXPECT_EQ(refused.status, 409);
+  EXPECT_NE(refused.body.find("accept"), std::string::npos) << refused.body;
+  const auto accepted = d.call("POST", "/api/campaigns/" + std::to_string(p) + "/accept",
+                               json{{"reason", "stopped at 80 %: enough statics"}}.dump());
+  ASSERT_EQ(accepted.status, 200) << accepted.body;
+  const json cp = d.get(certificate_target(p));
+  EXPECT_NE(cp.at("reason").get<std::string>().find("partial run accepted by"), std::string::npos) << cp.dump().substr(0, 400);
+  EXPECT_EQ(cp.at("sequence").get<std::int64_t>(), cb2.at("sequence").get<std::int64_t>() + 1);
+  EXPECT_TRUE(cp.at("content").at("campaign").at("accepted").is_object());
+}
+
+namespace {
+
+// `imucal audit verify DIR`: its exit status and what it printed.
+std::pair<int, std::string> audit_verify(const std::string& data_dir) {
+  const std::string command = imucaltest::program("imucal") + " audit verify '" + data_dir + "' 2>&1";
+  std::string out;
+  FILE* p = ::popen(command.c_str(), "r");
+  if (!p) return {-1, "popen failed"};
+  char buf[512];
+  while (std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = ::pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+}  // namespace
+
+// Issue 35, deliverable 3: who changed what, when, each entry chained to the one before; an edit
+// or a deletion anywhere makes `imucal audit verify` fail, naming the first bad entry.
+TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
+  std::string data_dir;
+  {
+    LocalDaemon d("audit", false, [&](daemon::DaemonConfig& c) { configure(c, scratch_dir("audit-site") + "/seq.json"); });
+    data_dir = d.config.data_dir;
+    const auto id = run_campaign(d, "audited", "FOG-31");
+    const json limits = {{"format", "imucal-limits/1"},
+                         {"part_numbers", {{"PN-100", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+    ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+    const json trail = d.get("/api/audit?limit=1000");
+    EXPECT_TRUE(trail.at("intact").get<bool>()) << trail.at("check");
+    std::map<std::string, int> actions;
+    for (const json& e : trail.at("entries")) ++actions[e.at("action").get<std::string>()];
+    EXPECT_EQ(actions["service.started"], 1);
+    EXPECT_EQ(actions["campaign.created"], 1);
+    EXPECT_EQ(actions["campaign.command"], 1);  // start
+    EXPECT_GE(actions["campaign.transition"], 3);  // created -> queued -> running -> done
+    EXPECT_EQ(actions["limits.replaced"], 1);
+    EXPECT_EQ(actions["certificate.issued"], 2);  // at the end, and under the new limits
+    EXPECT_EQ(actions["certificate.superseded"], 1);
+    // Who: the operator's name on what the operator did, imucald on what the service did.
+    const json mine = d.get("/api/audit?action=limits.&actor=operator");
+    ASSERT_EQ(mine.at("entries").size(), 1u) << mine.dump();
+    EXPECT_TRUE(mine.at("entries")[0].at("details").at("before").is_object());
+    EXPECT_EQ(mine.at("entries")[0].at("details").at("after").at("part_numbers").size(), 1u);
+    const json about = d.get("/api/audit?subject=campaign%20" + std::to_string(id));
+    EXPECT_GE(about.at("entries").size(), 4u);
+    const auto csv = d.call("GET", "/api/audit?format=csv&action=limits.");
+    EXPECT_EQ(csv.status, 200);
+    EXPECT_EQ(csv.body.rfind("seq,time_utc,actor,action,subject,details,sha256\r\n", 0), 0u) << csv.body.substr(0, 200);
+    EXPECT_EQ(d.call("GET", "/api/audit?since=2026-01-01").status, 400);
+    EXPECT_EQ(d.call("GET", "/api/audit?from=yesterday").status, 400);
+  }
+  const auto [ok_status, ok_text] = audit_verify(data_dir);
+  EXPECT_EQ(ok_status, 0) << ok_text;
+  EXPECT_NE(ok_text.find("OK: audit trail intact"), std::string::npos) << ok_text;
+
+  // Tampered copies of the database: one entry edited, one deleted, the last one deleted.
+  const auto tampered = [&](const std::string& name, const std::string& sql) {
+    const std::string copy = scratch_dir("audit-" + name);
+    std::filesystem::copy_file(data_dir + "/imucald.db", copy + "/imucald.db");
+    storage::sql::Connection db(copy + "/imucald.db", storage::sql::Connection::Open::read_write, "test");
+    db.exec("DROP TRIGGER audit_append_only; DROP TRIGGER audit_kept; " + sql);
+    return copy;
+  };
+  // (The WAL was checkpointed when the service closed the database.)
+  const auto [edited_status, edited] = audit_verify(tampered("edited", "UPDATE audit SET actor = 'mallory' WHERE seq = 4"));
+  EXPECT_EQ(edited_status, 1) << edited;
+  EXPECT_NE(edited.find("audit entry 4: changed after it was written"), std::string::npos) << edited;
+  const auto [deleted_status, deleted] = audit_verify(tampered("deleted", "DELETE FROM audit WHERE seq = 3"));
+  EXPECT_EQ(deleted_status, 1) << deleted;
+  EXPECT_NE(deleted.find("audit entry 4: entries 3 to 3 before it are missing"), std::string::npos) << deleted;
+  const auto [tail_status, tail] = audit_verify(tampered("tail", "DELETE FROM audit WHERE seq = (SELECT MAX(seq) FROM audit)"));
+  EXPECT_EQ(tail_status, 1) << tail;
+  EXPECT_NE(tail.find("entries at the end were deleted"), std::string::npos) << tail;
+  EXPECT_NE(audit_verify(scratch_dir("audit-empty")).second.find("no imucald database"), std::string::npos);
 }

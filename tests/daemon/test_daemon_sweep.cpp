@@ -133,6 +133,8 @@ std::vector<Row> rows(const std::int64_t model_run) {
       {"GET", "/api/campaigns/{id}/events.csv", Access::viewer, always(200), sub("/events.csv")},
       {"GET", "/api/alarms", Access::viewer, always(200),
        [](const SweepRun& r) { return "/api/alarms?all=1&campaign=" + std::to_string(r.id); }},
+      {"GET", "/api/audit", Access::viewer, always(200),
+       [](const SweepRun& r) { return "/api/audit?subject=campaign%20" + std::to_string(r.id) + "&limit=20"; }},
       {"POST", "/api/alarms/{id}/ack", Access::operator_,
        [](const SweepRun& r) { return r.detail.at("alarms").empty() ? std::set<int>{404} : std::set<int>{200, 409}; },
        [](const SweepRun& r) {
@@ -152,7 +154,13 @@ std::vector<Row> rows(const std::int64_t model_run) {
       {"GET", "/api/campaigns/{id}/series", Access::viewer,
        [](const SweepRun& r) { return std::set<int>{r.recorded() ? 200 : 404}; }, sub("/series?points=50")},
       {"GET", "/api/campaigns/{id}/certificate", Access::viewer,
-       [](const SweepRun& r) { return std::set<int>{r.final() && r.has_model() ? 200 : 409}; }, sub("/certificate")},
+       [](const SweepRun& r) {
+         if (!r.final() || !r.has_model()) return std::set<int>{409};
+         // A partial run has one once the accept row above has accepted it (as operator).
+         return r.detail.value("complete", false) ? std::set<int>{200} : std::set<int>{200, 409};
+       },
+       sub("/certificate")},
+      {"GET", "/api/certificates/{number}", Access::viewer, always(404), fixed("/api/certificates/SWEEP-2026-999999")},
       {"GET", "/api/campaigns/{id}/progress", Access::viewer, always(200), sub("/progress")},
       {"GET", "/api/campaigns/{id}/recording", Access::viewer,
        [](const SweepRun& r) { return std::set<int>{r.busy() ? 409 : r.recorded() ? 200 : 404}; }, sub("/recording")},

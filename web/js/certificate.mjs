@@ -16,23 +16,26 @@ import { coefficientName, unitOf } from './coefficients.mjs';
 
 const sheet = document.getElementById('certificate');
 const message = document.getElementById('toolbar-message');
-const id = Number(new URLSearchParams(location.search).get('id'));
+const query = new URLSearchParams(location.search);
+const id = Number(query.get('id'));
+const wantedNumber = query.get('number');
+let issued = null;  // the certificate record as issued, for the signed download
 
 document.getElementById('print').addEventListener('click', () => window.print());
 document.getElementById('save-html').addEventListener('click', saveHtml);
+document.getElementById('save-json').addEventListener('click', saveJson);
 
 async function load() {
-  if (!Number.isInteger(id) || id < 1) {
-    clear(sheet).append(h('p', { class: 'error' }, 'No campaign given: open this page from a campaign\'s results (certificate.html?id=N).'));
+  if (!wantedNumber && (!Number.isInteger(id) || id < 1)) {
+    clear(sheet).append(h('p', { class: 'error' }, 'No campaign given: open this page from a campaign\'s results (certificate.html?id=N, or ?number=NUMBER).'));
     return;
   }
   const get = (path) => api('GET', path, undefined, { auth: false });
-  let detail, model, status, cert;
+  let record;
   try {
-    [detail, status] = await Promise.all([get(`/api/campaigns/${id}`), get('/api/status')]);
-    model = await get(`/api/campaigns/${id}/model`);
-    // The number is issued on the first request and the same ever after (docs/api.md "Certificates").
-    cert = await get(`/api/campaigns/${id}/certificate`);
+    // The certificate as issued (docs/api.md "Certificates"): the page shows its frozen content
+    // and nothing read today, so it prints the same as the day it was issued.
+    record = await get(wantedNumber ? `/api/certificates/${encodeURIComponent(wantedNumber)}` : `/api/campaigns/${id}/certificate`);
   } catch (e) {
     const text = e instanceof ApiError && e.status === 401
       ? 'Sign in to imucal first (in the main page), then reload this page.'
@@ -40,7 +43,10 @@ async function load() {
     clear(sheet).append(h('p', { class: 'error', id: 'certificate-error' }, text));
     return;
   }
-  render(detail, model, status, cert);
+  issued = record;
+  const c = record.content;
+  render(c.campaign, c.model, { site: c.site, version: c.software?.imucald }, { ...c.bench, number: record.number, issued: record.issued },
+    record);
 }
 
 function coefficientTable(rows, judged) {
@@ -105,7 +111,27 @@ function factsTable(facts) {
   return h('table', { class: 'facts' }, body);
 }
 
-function render(d, model, status, cert) {
+// What supersedes what, and how to check a download of it: the signed JSON, its content's SHA-256,
+// the lab key's fingerprint and the command that checks them offline.
+function issueNotes(record) {
+  const notes = [];
+  if (record.superseded_by) {
+    notes.push(h('p', { class: 'superseded-note', id: 'certificate-superseded' },
+      `SUPERSEDED by certificate ${record.superseded_by}: this certificate no longer states the current result.`));
+  }
+  if (record.supersedes) notes.push(h('p', { class: 'small', id: 'certificate-supersedes' }, `Supersedes certificate ${record.supersedes} (${record.reason}).`));
+  return notes;
+}
+
+function verification(record) {
+  const fp = record.signed?.signature?.key_fingerprint;
+  return h('p', { class: 'small verification', id: 'certificate-verification' },
+    `Content SHA-256 ${record.content_sha256}. `,
+    fp ? `Signed with the lab's key ${fp}: check a download of the signed JSON with ` : 'Not signed (the lab has configured no key). ',
+    fp ? h('code', {}, `imucal verify certificate-${record.number}.json --fingerprint ${fp}`) : null, fp ? '.' : null);
+}
+
+function render(d, model, status, cert, record) {
   const number = cert.number;
   const site = status.site || {};
   // The serial the run file records (GET /api/campaigns/{id}: imu_serial): the campaign's unit's
@@ -142,6 +168,7 @@ function render(d, model, status, cert) {
       partial ? h('p', { class: 'partial-note', id: 'certificate-partial-reason' }, `Partial run: ${partial}.`) : null,
       h('p', { class: `verdict-note ${verdict.status ? verdict.status.toLowerCase() : 'none'}`, id: 'certificate-verdict-text' },
         verdict.status ? `${verdict.status}: ${verdict.text}` : verdict.text)),
+    ...issueNotes(record),
     cert.simulated ? h('p', { class: 'sim-note' }, 'Made with simulated devices: this documents a simulation, not a physical instrument.') : null,
     factsTable(facts),
     h('h2', {}, 'Coefficients'),
@@ -153,8 +180,22 @@ function render(d, model, status, cert) {
       h('div', {}, h('span', { class: 'line' }), 'Operator'), h('div', {}, h('span', { class: 'line' }), 'Checked by'), h('div', {}, h('span', { class: 'line' }), 'Date')),
     // The budget behind u, an annex on a page of its own.
     ...(budgetSection(model) || []),
+    verification(record),
     h('footer', {}, `Certificate ${number}, issued ${dateTime(cert.issued)} by imucal for campaign ${d.id}; printed ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.`));
   sheet.dataset.ready = 'true';
+}
+
+// The signed envelope (imucal-signed/1) as issued, for `imucal verify`; the record when unsigned.
+function saveJson() {
+  if (!issued) return;
+  const text = `${JSON.stringify(issued.signed || issued, null, 1)}\n`;
+  const url = URL.createObjectURL(new Blob([text], { type: 'application/json' }));
+  const a = h('a', { href: url, download: `certificate-${issued.number}.json` });
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+  message.textContent = issued.signed ? 'Saved the signed certificate.' : 'Saved (not signed: the lab has no key configured).';
 }
 
 async function saveHtml() {

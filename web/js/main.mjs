@@ -14,6 +14,7 @@ import * as liveView from './views/live.mjs';
 import * as campaignView from './views/campaign.mjs';
 import * as unitView from './views/unit.mjs';
 import * as unitsView from './views/units.mjs';
+import * as auditView from './views/audit.mjs';
 
 const viewRoot = document.getElementById('view');
 const banner = document.getElementById('banner');
@@ -46,6 +47,7 @@ const routes = [
   { re: /^#\/live$/, view: liveView, nav: 'live' },
   { re: /^#\/imus\/?$/, view: unitsView, nav: 'units' },
   { re: /^#\/imus\/([^/]+)$/, view: unitView, nav: 'units', params: (m) => ({ serial: decodeURIComponent(m[1]) }) },
+  { re: /^#\/audit\/?$/, view: auditView, nav: 'audit' },
 ];
 
 let unmount = null;

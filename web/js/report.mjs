@@ -32,6 +32,12 @@ async function load() {
     clear(sheet).append(h('p', { class: 'error', id: 'report-error' }, text));
     return;
   }
+  if (report.signed_by) {
+    const signed = document.getElementById('report-signed');
+    signed.href = `/api/campaigns/${id}/report?signed=1`;
+    signed.download = `test-report-campaign-${id}.signed.json`;
+    signed.hidden = false;
+  }
   render(report);
 }
 
@@ -106,6 +112,11 @@ function render(r) {
       h('h2', { id: `test-${test.test}` }, test.title),
       h('p', { class: 'small' }, `${test.standard}. ${conditionsText(test.conditions)}`),
       figureTable(test, judged)]) : [h('p', { class: 'error', id: 'no-tests' }, 'This run has no finished test or calibration stage.')]),
+    // A signed copy: the lab's key's fingerprint and the command that checks a download offline.
+    h('p', { class: 'small verification', id: 'report-verification' }, r.signed_by
+      ? ['Signed with the lab\'s key ', r.signed_by, ': "Signed JSON" above downloads it; check it with ',
+        h('code', {}, `imucal verify test-report-campaign-${r.campaign.id}.signed.json --fingerprint ${r.signed_by}`), '.']
+      : 'Not signed (the lab has configured no key).'),
     h('footer', {}, `Test report of campaign ${r.campaign.id} by imucal (${r.format}); printed ${dateTime(new Date().toISOString())}. ` +
       'GET /api/campaigns/' + r.campaign.id + '/report gives the same figures as JSON.'));
   sheet.dataset.ready = 'true';

@@ -3,10 +3,11 @@
 // convergence, the Allan, thermal and Schuler-test plots imucald computes from the recording (or
 // what the run would need for them), the downloads
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
-import { get, ApiError } from '../api.mjs';
+import { get, post, ApiError } from '../api.mjs';
 import { verdictBadge } from './units.mjs';
 import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
-import { commandBar } from '../dialogs.mjs';
+import { commandBar, confirmDialog } from '../dialogs.mjs';
+import { isOperator } from '../session.mjs';
 import { coefficientRows, unitOf, groupOf, labelOf } from '../coefficients.mjs';
 import { convergencePanel } from '../convergence.mjs';
 import { contributionRows } from '../contributions.mjs';
@@ -114,6 +115,36 @@ export function mount(root, ctx) {
 
   // ---- results ----
 
+  // The certificate of a run that counts as a calibration; for a partial run, its acceptance first
+  // (an operator's, with a reason: it is kept with the run and in the audit trail).
+  function certificateControl(d) {
+    const link = h('a', { class: 'button', id: 'certificate', href: `certificate.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Calibration certificate (print)');
+    if (d.complete || d.accepted) return link;
+    const note = h('span', { class: 'muted', id: 'not-accepted' }, 'Partial run, not accepted: no certificate is issued until an operator accepts it.');
+    if (!isOperator()) return note;
+    const accept = h('button', { type: 'button', id: 'accept-partial' }, 'Accept as calibration…');
+    accept.addEventListener('click', async () => {
+      const answer = await confirmDialog({
+        title: `Accept campaign ${id} as its unit's calibration?`,
+        body: [`It ended ${d.state} at ${Math.round(100 * (d.progress || 0))} % of its program. Accepted, it counts as a calibration and its certificate is issued, stating the partial run and your reason.`],
+        confirmLabel: 'Accept', reason: true,
+      });
+      if (!answer.ok) return;
+      if (!answer.reason) {
+        pageError.textContent = 'Not accepted: say why the partial run is good enough (the reason is kept with the run).';
+        return;
+      }
+      try {
+        await post(`/api/campaigns/${id}/accept`, { reason: answer.reason });
+        resultsFor = null;
+        await refresh();
+      } catch (e) {
+        pageError.textContent = `Not accepted: ${e.message}`;
+      }
+    });
+    return h('span', {}, note, ' ', accept);
+  }
+
   async function loadResults() {
     const d = detail;
     results.hidden = false;
@@ -134,7 +165,7 @@ export function mount(root, ctx) {
       downloads.append(
         h('a', { class: 'button primary', id: 'download-model', href: `/api/campaigns/${id}/model`, download: `campaign-${id}-model-instrument.json` }, 'Model JSON (instrument frame)'),
         h('a', { class: 'button', id: 'download-model-body', href: `/api/campaigns/${id}/model?frame=body`, download: `campaign-${id}-model-body.json` }, 'Model JSON (body frame)'),
-        h('a', { class: 'button', id: 'certificate', href: `certificate.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Calibration certificate (print)'));
+        certificateControl(d));
     } else {
       downloads.append(h('span', { class: 'muted', id: 'no-model' }, d.state === 'done' ? 'This campaign produced no model (see the estimator notes below).' : `No model: the campaign ended ${d.state}.`));
     }
