@@ -538,6 +538,13 @@ std::int64_t DaemonDb::max_certificate_sequence() {
 
 namespace {
 
+// The columns issued_row and audit_row read, in their order: one list per table for every query
+// (a macro, so that each query stays one string literal for Statement).
+#define IMUCAL_ISSUED_SELECT                                                                              \
+  "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, " \
+  "superseded_by, reason FROM issued_certificate "
+#define IMUCAL_AUDIT_SELECT "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit "
+
 IssuedCertificateRow issued_row(const Statement& s) {
   return IssuedCertificateRow{s.column_int64(0),         s.column_text(1),          s.column_int64(2),
                               s.column_int64(3),         s.column_text(4),          s.column_text(5),
@@ -568,8 +575,7 @@ void DaemonDb::insert_issued(const IssuedCertificateRow& row) {
 
 std::optional<IssuedCertificateRow> DaemonDb::issued(const std::string& number) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
-                 "superseded_by, reason FROM issued_certificate WHERE number = ?1");
+  Statement s(db_, IMUCAL_ISSUED_SELECT "WHERE number = ?1");
   s.bind(1, number);
   if (!s.step()) return std::nullopt;
   return issued_row(s);
@@ -577,8 +583,7 @@ std::optional<IssuedCertificateRow> DaemonDb::issued(const std::string& number) 
 
 std::optional<IssuedCertificateRow> DaemonDb::current_issued(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
-                 "superseded_by, reason FROM issued_certificate "
+  Statement s(db_, IMUCAL_ISSUED_SELECT
                  "WHERE campaign_id = ?1 AND superseded_by IS NULL ORDER BY sequence DESC LIMIT 1");
   s.bind(1, campaign_id);
   if (!s.step()) return std::nullopt;
@@ -587,8 +592,7 @@ std::optional<IssuedCertificateRow> DaemonDb::current_issued(std::int64_t campai
 
 std::vector<IssuedCertificateRow> DaemonDb::issued_history(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, "
-                 "superseded_by, reason FROM issued_certificate WHERE campaign_id = ?1 ORDER BY sequence");
+  Statement s(db_, IMUCAL_ISSUED_SELECT "WHERE campaign_id = ?1 ORDER BY sequence");
   s.bind(1, campaign_id);
   std::vector<IssuedCertificateRow> out;
   while (s.step()) out.push_back(issued_row(s));
@@ -658,7 +662,7 @@ std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::st
   storage::sql::Connection db(path, storage::sql::Connection::Open::read_write, "daemon database");
   std::vector<AuditEntry> entries;
   {
-    Statement s(db, "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit ORDER BY seq");
+    Statement s(db, IMUCAL_AUDIT_SELECT "ORDER BY seq");
     while (s.step()) entries.push_back(audit_row(s));
   }
   std::optional<std::pair<std::int64_t, std::string>> head;
@@ -671,7 +675,7 @@ std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::st
 std::vector<AuditEntry> DaemonDb::audit_entries(const AuditQuery& q) {
   std::lock_guard lock(mutex_);
   Statement s(db_,
-              "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit "
+              IMUCAL_AUDIT_SELECT
               "WHERE (?1 IS NULL OR t_ms >= ?1) AND (?2 IS NULL OR t_ms <= ?2) AND (?3 = '' OR actor = ?3) "
               "AND (?4 = '' OR substr(action, 1, length(?4)) = ?4) AND (?5 = '' OR subject = ?5) "
               "ORDER BY seq DESC LIMIT ?6");
@@ -683,7 +687,7 @@ std::vector<AuditEntry> DaemonDb::audit_entries(const AuditQuery& q) {
 
 std::vector<AuditEntry> DaemonDb::audit_trail() {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit ORDER BY seq");
+  Statement s(db_, IMUCAL_AUDIT_SELECT "ORDER BY seq");
   std::vector<AuditEntry> out;
   while (s.step()) out.push_back(audit_row(s));
   return out;

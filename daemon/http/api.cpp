@@ -927,15 +927,21 @@ json statement_of(json content) {
   return content;
 }
 
-}  // namespace
-
-namespace {
-
 json text_or_null(const std::optional<std::string>& text) { return text ? json(*text) : json(nullptr); }
 
-// A run that is issued a certificate: ended, with a model, counting as its unit's calibration.
-bool certifiable(const CampaignRow& row) {
-  return is_final(row.state) && row.ended_ms.has_value() && row.model_json.has_value() && counts_as_calibration(row);
+// Why the run has no certificate (409's text), or empty when it may have one: ended, with a
+// model, counting as its unit's calibration.
+std::string no_certificate_because(const CampaignRow& row) {
+  const std::string id = std::to_string(row.id);
+  // A run still going (or interrupted, which can resume) could change after its certificate was issued.
+  if (!is_final(row.state) || !row.ended_ms.has_value())
+    return "campaign " + id + " has not ended (state " + std::string(to_string(row.state)) +
+           "): a certificate is issued only for an ended run with a model";
+  if (!row.model_json.has_value()) return "campaign " + id + " ended without a model: there is nothing to certify";
+  if (!counts_as_calibration(row))
+    return "campaign " + id + " is a partial run (" + std::string(to_string(row.state)) +
+           "): a certificate is issued once an operator accepts it (POST /api/campaigns/" + id + "/accept with a reason)";
+  return {};
 }
 
 }  // namespace
@@ -947,7 +953,7 @@ std::optional<IssuedCertificateRow> Api::issue_certificate(std::int64_t id, cons
   const auto row = db_.campaign(id);
   if (!row) return std::nullopt;
   const CampaignRow& r = *row;
-  if (!certifiable(r)) return db_.current_issued(id);
+  if (!no_certificate_because(r).empty()) return db_.current_issued(id);
   if (const auto current = db_.current_issued(id)) return reissue(r, *current, reason);
   if (const auto legacy = db_.certificate(id)) return freeze_legacy(r, *legacy);
   IssuedCertificateRow c = numbered(r.id, reason);
@@ -1036,24 +1042,6 @@ json Api::issued_json(const IssuedCertificateRow& c) {
   out["history"] = history;
   return out;
 }
-
-namespace {
-
-// Why the run has no certificate (409's text), or empty when it may have one.
-std::string no_certificate_because(const CampaignRow& row) {
-  const std::string id = std::to_string(row.id);
-  // A run still going (or interrupted, which can resume) could change after its certificate was issued.
-  if (!is_final(row.state) || !row.ended_ms.has_value())
-    return "campaign " + id + " has not ended (state " + std::string(to_string(row.state)) +
-           "): a certificate is issued only for an ended run with a model";
-  if (!row.model_json.has_value()) return "campaign " + id + " ended without a model: there is nothing to certify";
-  if (!counts_as_calibration(row))
-    return "campaign " + id + " is a partial run (" + std::string(to_string(row.state)) +
-           "): a certificate is issued once an operator accepts it (POST /api/campaigns/" + id + "/accept with a reason)";
-  return {};
-}
-
-}  // namespace
 
 HttpReply Api::campaign_certificate(std::int64_t id) {
   const auto row = db_.campaign(id);
