@@ -854,7 +854,8 @@ json Api::detail_json(const CampaignRow& row) {
   out["run_db"] = row.run_db.empty() ? json(nullptr) : json(row.run_db);
   // The serial the run file records (the IMU's own report; the simulator's for simulated runs).
   json serial = nullptr;
-  if (!row.run_db.empty()) {
+  // A run that is starting names its file a moment before the recorder creates it.
+  if (!row.run_db.empty() && std::filesystem::exists(run_path(row))) {
     std::lock_guard lock(serial_mutex_);
     auto it = serial_cache_.find(id);
     if (it == serial_cache_.end()) {

@@ -319,6 +319,9 @@ TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
     LocalDaemon d("audit", false, [&](daemon::DaemonConfig& c) { configure(c, scratch_dir("audit-site") + "/seq.json"); });
     data_dir = d.config.data_dir;
     const auto id = run_campaign(d, "audited", "FOG-31");
+    // The state says done a moment before the run's end issues its certificate (the run's end
+    // event follows the state it reports): read it, which waits for it or issues it.
+    ASSERT_TRUE(d.get(certificate_target(id)).contains("number"));
     const json limits = {{"format", "imucal-limits/1"},
                          {"part_numbers", {{"PN-100", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
     ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
