@@ -24,6 +24,9 @@ packages+=(python3-pymodbus python3-serial-asyncio)
 # newest (14, the default, lacks the checks of optional access the check is growing into), and
 # clang-16's preprocessor for the keys of the check's cache.
 packages+=(clang-tidy-16 clang-tools-16 clang-16)
+# The soak tests (tests/daemon/test_daemon_chaos.cpp) take the stacks of an imucald whose run
+# stopped moving, so a hang seen once in CI says where it waits.
+packages+=(gdb)
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 

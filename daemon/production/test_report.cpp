@@ -180,6 +180,14 @@ json test_report_json(const json& detail, const json& bench, const TemperatureSu
       f["pass"] = it->second.at("pass");
       f["reason"] = it->second.value("reason", "");
     }
+  // A FAIL names what failed: each coefficient outside its limits, or limited and not determined
+  // (which no test lists among its figures).
+  json failed = json::array();
+  for (const auto& [key, c] : judged)
+    if (!c.at("pass").get<bool>())
+      failed.push_back({{"key", key}, {"value", c.value("value", json(nullptr))}, {"sigma", c.value("sigma", json(nullptr))},
+                        {"limit_value", c.value("limit_value", json(nullptr))},
+                        {"limit_sigma", c.value("limit_sigma", json(nullptr))}, {"reason", c.value("reason", "")}});
   const json spec = detail.value("spec", json::object());
   json temperatures = nullptr;
   if (t.samples > 0)
@@ -200,7 +208,8 @@ json test_report_json(const json& detail, const json& bench, const TemperatureSu
                           {"simulated", bench.value("simulated", false)}}},
           {"tests", tests},
           {"verdict", verdict.is_object() ? json{{"part_number", verdict.value("part_number", "")},
-                                                 {"pass", verdict.at("pass")}, {"failures", verdict.value("failures", 0)}}
+                                                 {"pass", verdict.at("pass")}, {"failures", verdict.value("failures", 0)},
+                                                 {"failed", failed}}
                                           : json(nullptr)}};
 }
 

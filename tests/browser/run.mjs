@@ -113,6 +113,12 @@ function startDaemon(listen) {
   });
 }
 
+// The pages a page prints to on A4 (Chromium's PDF, saved to `file`).
+async function printedPages(p, file) {
+  await p.pdf({ path: file, format: 'A4', printBackground: true, preferCSSPageSize: true });
+  return (fs.readFileSync(file, 'latin1').match(/\/Type\s*\/Page\b/g) || []).length;
+}
+
 async function stopDaemon(d) {
   if (!d || d.process.exitCode !== null) return d?.process.exitCode;
   d.process.removeAllListeners('exit');
@@ -513,10 +519,11 @@ try {
   const certHtml = fs.readFileSync(certFile, 'utf8');
   assert.ok(certHtml.includes('Calibration certificate') && certHtml.includes('@page') && !certHtml.includes('<script'), 'the saved certificate is self-contained');
   const pdfFile = path.join(outDir, `certificate-campaign-${id}.pdf`);
-  await cert.pdf({ path: pdfFile, format: 'A4', printBackground: true, preferCSSPageSize: true });
-  const pdfPages = (fs.readFileSync(pdfFile, 'latin1').match(/\/Type\s*\/Page\b/g) || []).length;
-  // The coefficients on one A4 page, the uncertainty budget (issue 34) on a second.
-  assert.equal(pdfPages, 2, 'the certificate of a direct run prints on one A4 page, its budget on a second');
+  // The certificate on one A4 page; the uncertainty budget (issue 34), its annex, on a second when asked for.
+  assert.equal(await printedPages(cert, pdfFile), 1, 'the certificate of a direct run prints on one A4 page');
+  assert.ok(await cert.isVisible('#certificate-budget'), 'the budget annex shows on the screen');
+  await cert.check('#print-annex');
+  assert.equal(await printedPages(cert, pdfFile), 2, 'with its budget annex on a second page');
   const budgetCells = await cert.$$eval('#certificate-budget tr[data-key="gyro.bias_dph.x"] td.num', (tds) => tds.length);
   assert.ok(budgetCells >= 3, 'the budget shows gyro bias x: type A, the site\'s g, u and U');
   await cert.close();
@@ -736,6 +743,8 @@ try {
   const againNumber = (await page.textContent('#certificate-number')).trim();
   assert.notEqual(againNumber, certNumber, 'another campaign, another number');
   await shot(page, '08b-certificate-verdict');
+  assert.equal(await printedPages(page, path.join(outDir, `certificate-campaign-${againId}.pdf`)), 1,
+    'with limits, a verdict column and a FAIL the certificate still prints on one A4 page');
   log(`certificate ${againNumber}: FAIL against PN-BROWSER's limits, per coefficient`);
 
   // A run stopped early: its certificate says partial in the title block, with why and when.
@@ -753,10 +762,15 @@ try {
   await page.goto(`${base}/#/campaigns/${stoppedId}`);
   await page.waitForSelector('#accept-partial');
   assert.match(await page.textContent('#not-accepted'), /not accepted/);
+  // Its badge says what it amounts to: stopped, until accepted; partial once accepted.
+  assert.equal(await page.getAttribute('#campaign-state .badge', 'data-outcome'), 'stopped');
   await page.click('#accept-partial');
   await page.fill('#confirm-reason', 'stopped at 80 %: every static of the first two cycles recorded');
   await page.click('#confirm-ok');
   await page.waitForSelector('#certificate');
+  await page.waitForSelector('#campaign-state .badge[data-outcome="partial"]');
+  await page.goto(`${base}/#/campaigns`);
+  await page.waitForSelector(`tr[data-id="${stoppedId}"] .badge[data-outcome="partial"]`);
   await page.goto(`${base}/certificate.html?id=${stoppedId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');
   assert.equal((await page.textContent('#certificate-partial')).trim(), 'PARTIAL');
@@ -868,6 +882,18 @@ try {
     for (const e of expected) assert.ok(text.includes(e), `the ${test} report shows ${e}`);
     await shot(reportPage, `22-test-report-${test}`);
   }
+  // A direct run's report: every figure its stage estimated, and a FAIL naming its coefficients.
+  const directReport = (await apiCall('GET', `/api/campaigns/${againId}/report`)).body;
+  const directModel = (await apiCall('GET', `/api/campaigns/${againId}`)).body.results.direct.estimates;
+  const estimated = Object.values(directModel).filter(([, sigma]) => sigma > 0).length;
+  const directFigures = directReport.tests.find((t) => t.test === 'direct').figures;
+  assert.equal(directFigures.length, estimated, 'the direct report lists every coefficient its stage estimated');
+  assert.ok(estimated >= 27, `the direct stage estimated ${estimated} coefficients`);
+  await reportPage.goto(`${base}/report.html?id=${againId}`);
+  await reportPage.waitForSelector('#report[data-ready="true"] table[data-test="direct"]');
+  assert.equal(await reportPage.$$eval('table[data-test="direct"] tbody tr', (rows) => rows.length), estimated);
+  assert.match(await reportPage.textContent('[data-fact="Verdict"]'), /^FAIL against the limits of part number PN-BROWSER: .*gyro\.delay_us\.x\): not determined by this run/);
+  await shot(reportPage, '22-test-report-direct');
   const reportJson = await apiCall('GET', `/api/campaigns/${tumbleId}/report`);
   assert.equal(reportJson.body.format, 'imucal-test-report/1');
   await reportPage.close();

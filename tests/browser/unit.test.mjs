@@ -7,6 +7,7 @@ import { Series, BoundedList } from '../../web/js/series.mjs';
 import { parseField, SEGMENT_TYPES, mapProblems, compress } from '../../web/js/program_edit.mjs';
 import { flatten, coefficientRows, unitOf, labelOf } from '../../web/js/coefficients.mjs';
 import { alarmStatus, needsAttention, applyAlarm, alarmStatusText, alarmSummary } from '../../web/js/alarms.mjs';
+import { runOutcome } from '../../web/js/outcome.mjs';
 
 test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
   const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
@@ -441,4 +442,19 @@ test('certificate budget: one column per source, type A first, each coefficient\
   assert.deepEqual(t.rows[1].contributions, { type_a: 0.001 });
   assert.equal(t.rows[2].dominant, 'site.gravity_mps2');
   assert.deepEqual(budgetTable({ sigma: {} }), { sources: [], rows: [] });
+});
+
+test('every list tells done, stopped, partial, failed and aborted apart (issue 35)', () => {
+  const o = (c) => runOutcome(c).outcome;
+  assert.equal(o({ state: 'done', complete: true }), 'done');
+  assert.equal(o({ state: 'done' }), 'done', 'a run stored before `complete` existed ran to its end');
+  assert.equal(o({ state: 'done', complete: false }), 'stopped');
+  assert.equal(o({ state: 'done', complete: false, accepted: { reason: 'r' } }), 'partial');
+  assert.equal(o({ state: 'failed', complete: false }), 'failed');
+  assert.equal(o({ state: 'failed', complete: false, accepted: { reason: 'r' } }), 'partial');
+  assert.equal(o({ state: 'aborted', complete: false }), 'aborted');
+  assert.equal(o({ state: 'aborted', complete: false, accepted: { reason: 'r' } }), 'partial');
+  assert.equal(o({ state: 'running' }), 'running');
+  assert.match(runOutcome({ state: 'failed', error: 'the table stopped answering' }).title, /table stopped/);
+  assert.match(runOutcome({ state: 'done', complete: false, accepted: { reason: 'first two cycles' } }).title, /first two cycles/);
 });

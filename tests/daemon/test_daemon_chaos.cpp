@@ -27,14 +27,19 @@
 // rate; IMUCAL_CHAOS_WIRE_SCALE part C's time scale. bench/README.md has the command that prints
 // the soak's figures.
 #include <signal.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <random>
+#include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -258,6 +263,49 @@ bool final_state(const json& c) {
   return s == "done" || s == "failed" || s == "aborted";
 }
 
+// The stacks of every thread of process `pid` (gdb), or why there are none.
+std::string thread_stacks(pid_t pid) {
+  if (::access("/usr/bin/gdb", X_OK) != 0) return "(no stacks: gdb is not installed, scripts/install-deps.sh installs it)";
+  const std::string command = "/usr/bin/gdb -p " + std::to_string(pid) + " -batch -ex 'thread apply all bt' 2>&1";
+  std::string out;
+  if (FILE* p = ::popen(command.c_str(), "r")) {
+    char buf[4096];
+    while (std::fgets(buf, sizeof buf, p)) out += buf;
+    ::pclose(p);
+  }
+  return out;
+}
+
+// Waits for `done` (the run's end) as wait_for does, and watches the run: a run whose program time stands still
+// for `stall_s` of wall time (no fault of the soaks lasts a tenth of that) is a hang. Its daemon's
+// stacks and log's tail are printed, so that a hang seen once under load says where it waits.
+json wait_watching(Imucald& d, std::int64_t id, double timeout_s, const std::function<bool(const json&)>& done = final_state,
+                   double stall_s = 240.0) {
+  const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
+  double last_t_s = -1.0;
+  auto last_move = Clock::now();
+  json last;
+  while (Clock::now() < deadline) {
+    last = d.client().get_json("/api/campaigns/" + std::to_string(id));
+    if (last.is_object() && done(last)) return last;
+    const double t_s = last.is_object() ? last.value("program_time_s", -1.0) : -1.0;
+    if (t_s != last_t_s) {
+      last_t_s = t_s;
+      last_move = Clock::now();
+    } else if (since(last_move) > stall_s) {
+      std::ifstream log(d.log);
+      const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+      ADD_FAILURE() << "campaign " << id << "'s program time stood at " << t_s << " s for " << stall_s
+                    << " s of wall time; its daemon's threads:\n" << thread_stacks(d.p.pid) << "\nthe log's end:\n"
+                    << text.substr(text.size() > 6000 ? text.size() - 6000 : 0) << "\nthe campaign: " << last.dump().substr(0, 2000);
+      return last;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ADD_FAILURE() << "timed out waiting on campaign " << id << "; last: " << last.dump().substr(0, 2000);
+  return last;
+}
+
 // Kills the daemon when the run's stored program time passes each of `kill_at_s`, restarts it and
 // resumes the run; returns the program time (stored) at each kill. Then waits for the run's end.
 // `after_kill(run)` looks at the campaign as it stood before each kill while the daemon is down.
@@ -265,9 +313,8 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
                     std::vector<double>& killed_at_s, const std::function<void(const json&)>& after_kill = {}) {
   const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
   for (const double at_s : kill_at_s) {
-    const json before = d.client().wait_for(id, [&](const json& c) {
-      return final_state(c) || c.at("program_time_s").get<double>() >= at_s;
-    }, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
+    const json before = wait_watching(d, id, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()),
+                                      [&](const json& c) { return final_state(c) || c.at("program_time_s").get<double>() >= at_s; });
     if (final_state(before) || !before.contains("program_time_s")) {
       ADD_FAILURE() << "the run ended before the kill at " << at_s << " s: " << before.dump().substr(0, 2000);
       return before;
@@ -291,7 +338,7 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
       return final_state(c) || redos >= kills;
     }, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
   }
-  return d.client().wait_for(id, final_state, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
+  return wait_watching(d, id, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()));
 }
 
 // The faults of the wire (sim-wire), drawn from `rng`: durations drawn in seconds of host time
@@ -331,7 +378,7 @@ SoakRuns run_soak(Imucald& d, const json& disturbed_spec, const json& reference_
   if (r.disturbed.value("state", "") != "done" || d.p.port == 0) return r;
   const auto t1 = Clock::now();
   const auto id2 = post_and_start(d.client(), reference_spec);
-  r.undisturbed = d.client().wait_for(id2, final_state, 1800.0);
+  r.undisturbed = wait_watching(d, id2, 1800.0);
   r.undisturbed_wall_s = since(t1);
   return r;
 }

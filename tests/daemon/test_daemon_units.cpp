@@ -372,3 +372,44 @@ TEST(Units, TheTestReportStatesFiguresConditionsAndTheVerdict) {
   EXPECT_EQ(transients, 3) << "the three gyros warm up; the accelerometers do not";
   EXPECT_EQ(d.call("GET", "/api/campaigns/999/report").status, 404);
 }
+
+// Issue 35, deliverable 5: a `direct` run's report lists every figure its stage estimated, and a
+// FAIL names its coefficients: those outside their limits and those limited but not determined.
+TEST(Units, TheDirectReportListsEveryFigureAndAFailNamesItsCoefficients) {
+  LocalDaemon d("report-direct");
+  const json limits = {{"format", "imucal-limits/1"},
+                       {"part_numbers", {{"PN-DIRECT", {{"gyro.bias_dph.y", {{"max_abs", 1e-9}}},
+                                                        {"gyro.delay_us", {{"max_abs", 10}}},
+                                                        {"accel.bias_mps2", {{"max_abs", 1.0}}}}}}}};
+  ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
+  const auto id = d.post_campaign({{"name", "direct report"}, {"program", "direct-short"}, {"rate_hz", 20},
+                                   {"time_scale", 0}, {"truth", noisy_truth()}, {"estimators", {"direct"}},
+                                   {"imu", {{"serial", "FOG-DIRECT"}, {"part_number", "PN-DIRECT"}}}});
+  ASSERT_EQ(d.command(id, "start"), 200);
+  ASSERT_EQ(d.wait_final(id, 300).at("state"), "done");
+  const json detail = d.campaign(id);
+  std::set<std::string> estimated;
+  for (const auto& [key, pair] : detail.at("results").at("direct").at("estimates").items())
+    if (pair.at(1).get<double>() > 0) estimated.insert(key);
+  EXPECT_EQ(estimated.size(), 27u);  // stage 1: biases, scale factors and axis angles of both triads
+  const json report = d.get("/api/campaigns/" + std::to_string(id) + "/report");
+  std::set<std::string> listed;
+  for (const json& t : report.at("tests"))
+    if (t.at("test") == "direct")
+      for (const json& f : t.at("figures")) {
+        listed.insert(f.at("key").get<std::string>());
+        EXPECT_GT(f.at("u").get<double>(), 0.0) << f.dump();
+      }
+  EXPECT_EQ(listed, estimated);
+  const json& verdict = report.at("verdict");
+  EXPECT_FALSE(verdict.at("pass").get<bool>());
+  std::map<std::string, std::string> failed;
+  for (const json& f : verdict.at("failed")) failed[f.at("key").get<std::string>()] = f.at("reason").get<std::string>();
+  EXPECT_EQ(failed.size(), 4u) << verdict.dump();  // gyro bias y; the three delays
+  EXPECT_TRUE(failed.contains("gyro.bias_dph.y")) << verdict.dump();
+  for (const char* axis : {"x", "y", "z"}) {
+    EXPECT_EQ(failed[std::string("gyro.delay_us.") + axis], "not determined by this run") << verdict.dump();
+    EXPECT_FALSE(failed.contains(std::string("accel.bias_mps2.") + axis));
+  }
+  EXPECT_EQ(verdict.at("failures").get<int>(), 4);
+}

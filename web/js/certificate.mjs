@@ -6,7 +6,7 @@
 // "Download HTML" saves it as one self-contained file (styles inlined, no scripts), so it can be
 // archived or mailed and still print the same.
 import { api, ApiError } from './api.mjs';
-import { h, clear, dateTime, num } from './format.mjs';
+import { h, clear, fill, dateTime, num } from './format.mjs';
 import {
   certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText,
   roundedNumbers, UNCERTAINTY_TEXT, COVERAGE_K, NOT_DETERMINED,
@@ -24,6 +24,9 @@ let issued = null;  // the certificate record as issued, for the signed download
 document.getElementById('print').addEventListener('click', () => window.print());
 document.getElementById('save-html').addEventListener('click', saveHtml);
 document.getElementById('save-json').addEventListener('click', saveJson);
+// The certificate is one A4 page; the budget annex (shown on screen) prints when asked for.
+const printAnnex = document.getElementById('print-annex');
+printAnnex.addEventListener('change', () => sheet.classList.toggle('with-annex', printAnnex.checked));
 
 async function load() {
   if (!wantedNumber && (!Number.isInteger(id) || id < 1)) {
@@ -78,7 +81,7 @@ function coefficientTable(rows, judged) {
 
 // The uncertainty budget (the model's `budget`): per coefficient each source's standard
 // uncertainty, their root-sum-square u and U = k u; null when the model states none.
-function budgetSection(model) {
+function budgetSection(model, number) {
   const t = budgetTable(model);
   if (!t.rows.length) return null;
   const two = (v) => (typeof v === 'number' ? Number(v.toPrecision(2)).toString() : '—');
@@ -88,11 +91,12 @@ function budgetSection(model) {
     ...t.sources.map((s) => h('td', { class: `num${s === r.dominant ? ' dominant' : ''}`, dataset: { source: s } },
       s in r.contributions ? two(r.contributions[s]) : '')),
     h('td', { class: 'num' }, two(r.u)), h('td', { class: 'num' }, r.u === null ? '—' : two(COVERAGE_K * r.u)))));
-  return [h('h2', { class: 'budget-head' }, 'Uncertainty budget'),
+  return h('section', { class: 'annex', id: 'certificate-annex' },
+    h('h2', { class: 'budget-head' }, `Annex to certificate ${number}: uncertainty budget`),
     h('p', { class: 'small' }, 'Each source\'s standard uncertainty (k = 1) per coefficient, in the coefficient\'s unit, ' +
       'computed from its sensitivity; u is their root-sum-square. The largest of each row is marked.'),
     h('table', { class: 'coefficients budget', id: 'certificate-budget' },
-      h('thead', {}, h('tr', {}, ...head.map((x, i) => h('th', { class: i >= 2 ? 'num' : null }, x)))), body)];
+      h('thead', {}, h('tr', {}, ...head.map((x, i) => h('th', { class: i >= 2 ? 'num' : null }, x)))), body));
 }
 
 function factsTable(facts) {
@@ -160,7 +164,7 @@ function render(d, model, status, cert, record) {
   const badges = h('div', { class: 'badges' },
     verdict.status ? h('span', { class: `badge ${verdict.status.toLowerCase()}`, id: 'certificate-verdict' }, verdict.status) : null,
     partial ? h('span', { class: 'badge partial', id: 'certificate-partial' }, 'PARTIAL') : null);
-  clear(sheet).append(
+  fill(sheet,
     cert.simulated ? h('div', { class: 'watermark', 'aria-hidden': 'true' }, 'SIMULATION') : null,
     h('header', {}, h('h1', {}, 'Calibration certificate'),
       h('div', { class: 'title-right' }, h('p', { class: 'number', id: 'certificate-number' }, number), badges)),
@@ -178,10 +182,11 @@ function render(d, model, status, cert, record) {
     h('div', { class: 'conventions', id: 'certificate-conventions' }, ...conventionsText(model.frame).map((t) => h('p', {}, t))),
     h('div', { class: 'signatures' },
       h('div', {}, h('span', { class: 'line' }), 'Operator'), h('div', {}, h('span', { class: 'line' }), 'Checked by'), h('div', {}, h('span', { class: 'line' }), 'Date')),
-    // The budget behind u, an annex on a page of its own.
-    ...(budgetSection(model) || []),
     verification(record),
-    h('footer', {}, `Certificate ${number}, issued ${dateTime(cert.issued)} by imucal for campaign ${d.id}; printed ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.`));
+    h('footer', {}, `Certificate ${number}, issued ${dateTime(cert.issued)} by imucal for campaign ${d.id}; printed ${dateTime(new Date().toISOString())}. The model JSON of this campaign is the authoritative form of these coefficients.` +
+      (model.budget ? ' The uncertainty budget behind u is its annex (and in the signed JSON).' : '')),
+    // The budget behind u: an annex, printed on a page of its own when asked for.
+    budgetSection(model, number));
   sheet.dataset.ready = 'true';
 }
 

@@ -162,10 +162,9 @@ export function gravityStatement(g) {
 
 /** The uncertainty statement beside the coefficient table. */
 export const UNCERTAINTY_TEXT =
-  `u (k = 1): combined standard uncertainty, the estimator's own 1 σ (type A) combined with the type B sources its ` +
-  `stage computes (the rate table's certificate, the site's gravity, the start model's terms; the budget below, ` +
-  `where the model states one); U = k · u: expanded uncertainty with coverage factor k = ${COVERAGE_K} (about 95 % for ` +
-  'a normal distribution). "Not determined": this run did not estimate the coefficient.';
+  `u (k = 1): combined standard uncertainty, the estimator's own (type A) with the type B sources of its stage (the ` +
+  `table's certificate, the site's gravity, the start model's terms: the budget annex); U = k u, coverage factor k = ${COVERAGE_K}, ` +
+  'about 95 % for a normal distribution. "Not determined": this run did not estimate it.';
 
 /** The conventions, stated on the certificate itself (the model's frame: "instrument" or "body"). */
 export function conventionsText(frame) {

@@ -1,5 +1,6 @@
 // Formatting and small DOM helpers shared by the views. Every text that comes from the server is
 // put into the page with textContent (h() below), never as HTML.
+import { runOutcome } from './outcome.mjs';
 
 /** Creates an element: h('td', {class: 'num', title: 'x'}, 'text', childNode, ...). */
 export function h(tag, attrs = {}, ...children) {
@@ -27,6 +28,12 @@ function append(el, children) {
 
 export function clear(el) {
   while (el.firstChild) el.removeChild(el.firstChild);
+  return el;
+}
+
+/** Replaces el's children, skipping null, undefined and false as h() does (Element.append would print "null"). */
+export function fill(el, ...children) {
+  append(clear(el), children);
   return el;
 }
 
@@ -80,6 +87,12 @@ export const ACTIVE_STATES = new Set(['running', 'pausing', 'paused', 'suspended
 
 export function stateBadge(state) {
   return h('span', { class: `badge state-${state || 'unknown'}`, 'data-state': state }, state || '—');
+}
+
+/** One badge for what a run amounts to (outcome.mjs): done, stopped, partial, failed, aborted, or its live state. */
+export function outcomeBadge(c) {
+  const o = runOutcome(c);
+  return h('span', { class: `badge state-${o.outcome}`, 'data-state': c.state, 'data-outcome': o.outcome, title: o.title }, o.outcome);
 }
 
 /** Which commands the run-state table of docs/api.md allows from a state. */

@@ -5,7 +5,7 @@
 // and the verdict where the part number limits a figure. Numbers are rounded as the certificate
 // rounds them (certificate_rows.mjs).
 import { api, ApiError } from './api.mjs';
-import { h, clear, dateTime, duration, num } from './format.mjs';
+import { h, clear, fill, dateTime, duration, num } from './format.mjs';
 import { roundedNumbers, gravityStatement } from './certificate_rows.mjs';
 import { coefficientName, unitOf } from './coefficients.mjs';
 
@@ -85,6 +85,16 @@ function figureTable(test, judged) {
     body);
 }
 
+// PASS, or FAIL naming each coefficient that failed and why (a limited coefficient the run did
+// not determine fails too, and is in no test's table).
+function verdictText(v) {
+  if (!v) return 'no acceptance limits for this unit: not judged';
+  const head = `${v.pass ? 'PASS' : 'FAIL'} against the limits of part number ${v.part_number}`;
+  if (v.pass) return head;
+  const failed = (v.failed || []).map((f) => `${coefficientName(f.key)} (${f.key}): ${f.reason}`);
+  return failed.length ? `${head}: ${failed.join('; ')}` : `${head} (${v.failures} outside)`;
+}
+
 function render(r) {
   const c = r.conditions || {};
   const t = c.temperatures;
@@ -99,10 +109,9 @@ function render(r) {
     ['Gravity', gravityStatement(c.gravity)],
     ['Temperatures', t ? `chamber ${num(t.chamber_C.min, 3)} … ${num(t.chamber_C.max, 3)} °C (mean ${num(t.chamber_C.mean, 3)}), ` +
       `IMU ${num(t.imu_C.min, 3)} … ${num(t.imu_C.max, 3)} °C (mean ${num(t.imu_C.mean, 3)}), ${t.samples} readings` : 'not recorded'],
-    ['Verdict', r.verdict ? `${r.verdict.pass ? 'PASS' : 'FAIL'} against the limits of part number ${r.verdict.part_number}` +
-      `${r.verdict.pass ? '' : ` (${r.verdict.failures} outside)`}` : 'no acceptance limits for this unit: not judged'],
+    ['Verdict', verdictText(r.verdict)],
   ];
-  clear(sheet).append(
+  fill(sheet,
     c.simulated ? h('div', { class: 'watermark', 'aria-hidden': 'true' }, 'SIMULATION') : null,
     h('header', {}, h('h1', {}, 'Test report'), h('p', { class: 'number', id: 'report-campaign' }, `campaign ${r.campaign.id}`)),
     c.simulated ? h('p', { class: 'sim-note' }, 'Made with simulated devices: this documents a simulation, not a physical instrument.') : null,

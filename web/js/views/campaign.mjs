@@ -5,7 +5,7 @@
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
 import { get, post, ApiError } from '../api.mjs';
 import { verdictBadge } from './units.mjs';
-import { h, clear, duration, dateTime, num, stateBadge, FINAL_STATES } from '../format.mjs';
+import { h, clear, duration, dateTime, num, stateBadge, outcomeBadge, FINAL_STATES } from '../format.mjs';
 import { commandBar, confirmDialog } from '../dialogs.mjs';
 import { isOperator } from '../session.mjs';
 import { coefficientRows, unitOf, groupOf, labelOf } from '../coefficients.mjs';
@@ -68,7 +68,7 @@ export function mount(root, ctx) {
     const d = detail;
     title.textContent = `Campaign ${d.id}: ${d.name}`;
     document.title = `imucal · ${d.name}`;
-    clear(badge).append(stateBadge(d.state));
+    clear(badge).append(outcomeBadge(d));
     commands.update();
     const wall = d.started ? ((d.ended ? Date.parse(d.ended) : Date.now()) - Date.parse(d.started)) / 1000 : null;
     const rows = [
@@ -99,7 +99,7 @@ export function mount(root, ctx) {
     }
     if (detail && run.state !== detail.state) {
       detail.state = run.state;
-      clear(badge).append(stateBadge(run.state));
+      clear(badge).append(outcomeBadge({ state: run.state }));
       commands.update();
     }
   };

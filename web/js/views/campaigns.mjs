@@ -1,7 +1,7 @@
 // Campaigns: what runs and waits (the queue), what was created and not started yet, and the
 // history with state, duration and result.
 import { get } from '../api.mjs';
-import { h, clear, duration, dateTime, stateBadge, FINAL_STATES } from '../format.mjs';
+import { h, clear, duration, dateTime, outcomeBadge, FINAL_STATES } from '../format.mjs';
 import { isOperator } from '../session.mjs';
 
 export function mount(root, ctx) {
@@ -80,7 +80,7 @@ export function mount(root, ctx) {
       // The unit's page: its calibrations and their trends.
       h('td', {}, c.imu ? h('a', { class: 'unit-link', href: `#/imus/${encodeURIComponent(c.imu.serial)}` }, c.imu.serial) : ''),
       h('td', {}, c.program),
-      h('td', {}, stateBadge(c.state), c.queue_position != null ? h('span', { class: 'muted' }, ` #${c.queue_position + 1} in queue`) : ''),
+      h('td', {}, outcomeBadge(c), c.queue_position != null ? h('span', { class: 'muted' }, ` #${c.queue_position + 1} in queue`) : ''),
       h('td', {}, dateTime(c.created)),
       h('td', {}, dateTime(c.started)),
       h('td', { class: 'num' }, duration(c.duration_s)),

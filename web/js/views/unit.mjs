@@ -4,7 +4,7 @@
 // its sigma, the turn-on to turn-on repeatability, and two calibrations side by side
 // (GET /api/compare).
 import { get } from '../api.mjs';
-import { h, clear, dateTime, stateBadge, num } from '../format.mjs';
+import { h, clear, dateTime, outcomeBadge, num } from '../format.mjs';
 import { verdictBadge } from './units.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
 import { flatten, orderOf, unitOf } from '../coefficients.mjs';
@@ -116,7 +116,7 @@ export function mount(root, ctx) {
       clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
         h('td', { class: 'num' }, h('a', { href: `#/campaigns/${c.campaign_id}` }, c.campaign_id)),
         h('td', {}, c.name), h('td', {}, c.program), h('td', {}, dateTime(c.date)),
-        h('td', {}, stateBadge(c.state), c.complete ? '' : h('span', { class: 'result-bad' }, ' partial')),
+        h('td', {}, outcomeBadge(c)),
         h('td', {}, counts(c)), h('td', {}, verdictCell(c.verdict)), h('td', {}, changeCell(c.change)))));
       const withModel = calibrations.filter((c) => c.model);
       const option = (c) => h('option', { value: c.campaign_id }, `#${c.campaign_id} ${c.name} (${dateTime(c.date)})`);
