@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -12,6 +13,7 @@
 
 #include "daemon/config/password_hash.hpp"
 
+#include "core/earth.hpp"
 #include "core/json_reader.hpp"
 #include "core/table_json.hpp"
 
@@ -137,24 +139,57 @@ void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems
   if (auto v = r.integer("max_files", 1, 1000)) c.log.max_files = static_cast<int>(*v);
 }
 
+// A required text that says something (a certificate must identify what it names), into `target`.
+void read_required_text(ObjectReader& r, const char* key, std::string& target, std::vector<std::string>& problems) {
+  if (auto v = r.string(key, true)) {
+    if (v->find_first_not_of(" \t") == std::string::npos) problems.push_back(r.at(key) + " must not be empty");
+    else target = *v;
+  }
+}
+
+// calibration_due: required, a date of the calendar (the start check and the certificate compare it).
+void read_due_date(ObjectReader& r, std::string& target, std::vector<std::string>& problems) {
+  read_required_text(r, "calibration_due", target, problems);
+  if (!target.empty() && !date_day_number(target)) {
+    problems.push_back(r.at("calibration_due") + " must be a date YYYY-MM-DD, not \"" + target + "\"");
+    target.clear();
+  }
+}
+
 ReferenceInstrument read_instrument(const json& j, const std::string& where, std::vector<std::string>& problems) {
   ObjectReader r(j, where, problems);
   ReferenceInstrument out;
   // A certificate must identify the instrument completely: each of these is required.
-  for (const auto& [key, target] : {std::pair<const char*, std::string*>{"make", &out.make},
-                                    {"model", &out.model},
-                                    {"serial", &out.serial},
-                                    {"calibration_due", &out.calibration_due}}) {
-    if (auto v = r.string(key, true)) {
-      if (v->find_first_not_of(" \t") == std::string::npos) problems.push_back(r.at(key) + " must not be empty");
-      else *target = *v;
-    }
-  }
-  if (!out.calibration_due.empty() && !date_day_number(out.calibration_due)) {
-    problems.push_back(r.at("calibration_due") + " must be a date YYYY-MM-DD, not \"" + out.calibration_due + "\"");
-    out.calibration_due.clear();
-  }
+  read_required_text(r, "make", out.make, problems);
+  read_required_text(r, "model", out.model, problems);
+  read_required_text(r, "serial", out.serial, problems);
+  read_due_date(r, out.calibration_due, problems);
   if (auto v = r.string("calibration_certificate")) out.calibration_certificate = *v;
+  if (auto v = r.string("uncertainty")) {
+    if (v->find_first_not_of(" \t") == std::string::npos)
+      problems.push_back(r.at("uncertainty") + " must say the uncertainty as the instrument's certificate states it "
+                                              "(e.g. \"1 arcsec (k=2)\"), or be left out");
+    else
+      out.uncertainty = *v;
+  }
+  return out;
+}
+
+GravitySurvey read_gravity_survey(const json& j, const std::string& where, std::vector<std::string>& problems) {
+  ObjectReader r(j, where, problems);
+  GravitySurvey out;
+  read_required_text(r, "surveyed_by", out.surveyed_by, problems);
+  read_required_text(r, "calibration_certificate", out.calibration_certificate, problems);
+  read_due_date(r, out.calibration_due, problems);
+  // One number for the site's g's uncertainty: the one the calibration uses.
+  if (r.has("uncertainty")) {
+    (void)r.get("uncertainty");
+    char sigma[32];
+    std::snprintf(sigma, sizeof sigma, "%g", earth::kMeasuredGravitySigma_mps2);
+    problems.push_back(r.at("uncertainty") + " is not configured: the uncertainty of a measured g is the 1-sigma the "
+                                             "calibration uses for it (" + sigma + " m/s^2, core/earth.hpp), stated on "
+                                             "every certificate");
+  }
   return out;
 }
 
@@ -162,6 +197,7 @@ void read_reference_equipment(const json& j, DaemonConfig& c, std::vector<std::s
   ObjectReader r(j, "config.reference_equipment", problems);
   if (const json* v = r.get("table")) c.reference_equipment.table = read_instrument(*v, r.at("table"), problems);
   if (const json* v = r.get("chamber")) c.reference_equipment.chamber = read_instrument(*v, r.at("chamber"), problems);
+  if (const json* v = r.get("gravity")) c.reference_equipment.gravity = read_gravity_survey(*v, r.at("gravity"), problems);
 }
 
 // Letters, digits and '-', starting with a letter or digit: it goes into file names and
@@ -309,6 +345,10 @@ DaemonConfig parse_config(const std::string& json_text, const std::string& sourc
     if (const json* v = r.get("reference_equipment")) read_reference_equipment(*v, c, problems);
     if (const json* v = r.get("certificates")) read_certificates(*v, c, problems);
   }
+  // A survey measures a g: without the measured value the site's g is normal gravity's.
+  if (c.reference_equipment.gravity && !c.site.gravity_mps2)
+    problems.push_back("config.reference_equipment.gravity names a gravity survey, but config.site.gravity_mps2 (the g "
+                       "it measured) is not set: give the measured g, or leave the survey out");
   if (!problems.empty()) {
     std::string message = source + ": " + std::to_string(problems.size()) + " problem(s):";
     for (const auto& p : problems) message += "\n  - " + p;
@@ -344,6 +384,23 @@ std::optional<std::int64_t> date_day_number(const std::string& text) {
   const int doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
   const int doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
   return static_cast<std::int64_t>(era) * 146097 + doe - 719468;
+}
+
+std::string date_text(std::int64_t day_number) {
+  // Howard Hinnant's civil-from-days.
+  const std::int64_t z = day_number + 719468;
+  const std::int64_t era = (z >= 0 ? z : z - 146096) / 146097;
+  const std::int64_t doe = z - era * 146097;
+  const std::int64_t yoe = (doe - doe / 1460 + doe / 36524 - doe / 146096) / 365;
+  const std::int64_t doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+  const std::int64_t mp = (5 * doy + 2) / 153;
+  const std::int64_t d = doy - (153 * mp + 2) / 5 + 1;
+  const std::int64_t m = mp < 10 ? mp + 3 : mp - 9;
+  const std::int64_t y = yoe + era * 400 + (m <= 2 ? 1 : 0);
+  char text[80];  // room for any 64-bit year, as the compiler counts
+  std::snprintf(text, sizeof text, "%04lld-%02lld-%02lld", static_cast<long long>(y), static_cast<long long>(m),
+                static_cast<long long>(d));
+  return text;
 }
 
 std::string certificate_prefix(const DaemonConfig& config) {

@@ -104,11 +104,25 @@ struct ReferenceInstrument {
   std::string make, model, serial;
   std::string calibration_due;          // "YYYY-MM-DD": when its own calibration runs out
   std::string calibration_certificate;  // optional: its own certificate's number
+  // Optional: its uncertainty as its certificate states it, free text ("1 arcsec (k=2)").
+  std::string uncertainty;
 };
 
-// The reference equipment of the bench (`reference_equipment`): printed on every certificate.
+// The survey that measured the site's g (`site.gravity_mps2`): who, its certificate (report)
+// number, and when the site is to be surveyed again. Its uncertainty is not configured: it is the
+// 1-sigma the calibration uses for a measured g (earth::site_gravity_sigma_mps2), one number.
+struct GravitySurvey {
+  std::string surveyed_by;
+  std::string calibration_certificate;
+  std::string calibration_due;  // "YYYY-MM-DD"
+};
+
+// The reference equipment of the bench (`reference_equipment`): printed on every certificate; a
+// campaign does not start while one is past its due date unless an operator overrides it
+// (daemon/production/reference_equipment.hpp).
 struct ReferenceEquipment {
   std::optional<ReferenceInstrument> table, chamber;
+  std::optional<GravitySurvey> gravity;
 };
 
 // Certificate numbers (`certificates`, docs/daemon.md "Certificates"): PREFIX-YYYY-NNNNNN, the
@@ -170,6 +184,8 @@ DaemonConfig load_config_file(const std::string& path);
 // A date "YYYY-MM-DD" of the Gregorian calendar as its day number since 1970-01-01, or nothing
 // when it is not one (reference_equipment's calibration_due: checked here, compared by it).
 std::optional<std::int64_t> date_day_number(const std::string& text);
+// The inverse: "YYYY-MM-DD" of a day number since 1970-01-01 (proleptic Gregorian calendar).
+std::string date_text(std::int64_t day_number);
 
 // The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
 // every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most

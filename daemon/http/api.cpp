@@ -20,6 +20,7 @@
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/config/device_config.hpp"
 #include "daemon/db/csv.hpp"
+#include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/run/alarms.hpp"
@@ -356,6 +357,8 @@ json Api::status() {
                     {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}}},
           {"active", active},
           {"queue", db_.queue()},
+          // Judged today (UTC): the live page warns of an instrument due within a week or overdue.
+          {"reference_equipment", reference_equipment_json(config_, utc_day(now_unix_ms()), true)},
           {"limits",
            {{"table", limits_table},
             {"chamber", {{"min_C", config_.chamber.min_C}, {"max_C", config_.chamber.max_C},
@@ -1144,24 +1147,78 @@ HttpReply Api::campaign_progress(std::int64_t id) {
   return json_reply(200, out);
 }
 
+namespace {
+
+// Instruments past their due date, as the 409 of a start and the override's audit entry name them.
+json overdue_json(const std::vector<InstrumentDue>& overdue) {
+  json out = json::array();
+  for (const InstrumentDue& d : overdue)
+    out.push_back({{"instrument", d.instrument}, {"identity", d.identity}, {"serial", d.serial},
+                   {"certificate", d.certificate}, {"calibration_due", d.calibration_due}});
+  return out;
+}
+
+}  // namespace
+
+// A start while reference equipment is past its due date is refused (409 naming each instrument)
+// unless the body overrides it with a reason; the instruments are judged today (UTC) by the one
+// rule (equipment_due). Only a campaign that start would queue is judged: another state gets the
+// sequencer's own answer. Nothing to refuse: nullopt, and `overdue` holds what the override covers.
+std::optional<HttpReply> Api::refuse_overdue_start(std::int64_t id, bool overridden, std::vector<InstrumentDue>& overdue) {
+  const auto row = db_.campaign(id);
+  if (!row || row->state != RunState::Created) return std::nullopt;
+  for (InstrumentDue& d : equipment_due(config_.reference_equipment, utc_day(now_unix_ms())))
+    if (d.overdue) overdue.push_back(std::move(d));
+  if (overdue.empty() || overridden) return std::nullopt;
+  return error_reply(409,
+                     "campaign " + std::to_string(id) + " not started: reference equipment is past its due date: " +
+                         overdue_text(overdue) +
+                         ". Calibrate it (and update reference_equipment in the configuration), or start anyway "
+                         "as an operator with a reason: POST /api/campaigns/" + std::to_string(id) +
+                         "/start with {\"override_overdue\": \"why\"} (kept in the audit trail)",
+                     {{"state", to_string(row->state)}, {"overdue", overdue_json(overdue)}});
+}
+
 HttpReply Api::campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                                 const Principal& who) {
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
   std::vector<std::string> problems;
   std::string reason;
+  std::optional<std::string> override_overdue;
   {
     ObjectReader r(body, "body", problems);
     if (auto v = r.string("reason")) reason = v->substr(0, 500);
+    override_overdue = r.string("override_overdue");
   }
+  if (override_overdue && command != "start")
+    problems.push_back("body.override_overdue applies to start only (a run already started is not judged again)");
+  else if (override_overdue && override_overdue->find_first_not_of(" \t\r\n") == std::string::npos)
+    problems.push_back("body.override_overdue must say why the campaign starts with reference equipment past its due date");
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
+  std::vector<InstrumentDue> overdue;
+  if (command == "start") {
+    if (auto refused = refuse_overdue_start(id, override_overdue.has_value(), overdue)) return *refused;
+  }
+  const std::string override_reason = override_overdue.value_or("").substr(0, 500);
+  // The run's own record says so too: the transition's reason names what was overridden and why.
+  std::string stored_reason = reason;
+  if (!overdue.empty())
+    stored_reason += (reason.empty() ? "" : "; ") + std::string("overdue reference equipment overridden (") +
+                     overdue_text(overdue) + "): " + override_reason;
   // The route matches only a command's name ({command}).
   const auto outcome = sequencer_.command(id, expect_value(parse_command(command), "the command the route matched"),
-                                          who.user, reason);
+                                          who.user, stored_reason);
   if (outcome.http_status != 200) {
     json extra = json::object();
     if (outcome.state) extra["state"] = to_string(*outcome.state);
     return error_reply(outcome.http_status, outcome.error, extra);
+  }
+  if (!overdue.empty()) {
+    spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, who.user,
+                 overdue_text(overdue), override_reason);
+    audit(who.user, "campaign.override_overdue", "campaign " + std::to_string(id),
+          {{"command", command}, {"instruments", overdue_json(overdue)}, {"reason", override_reason}});
   }
   audit(who.user, "campaign.command", "campaign " + std::to_string(id),
         {{"command", command}, {"reason", reason}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});

@@ -23,6 +23,7 @@
 #include "daemon/http/static_files.hpp"
 #include "daemon/production/certificates.hpp"
 #include "daemon/production/limits_file.hpp"
+#include "daemon/production/reference_equipment.hpp"
 #include "daemon/run/sequencer.hpp"
 #include "signing/signing.hpp"
 
@@ -96,6 +97,9 @@ class Api {
   HttpReply campaign_report(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
+  // A start refused for reference equipment past its due date (409), unless `overridden`; fills
+  // `overdue` with what is overdue today for a campaign a start would queue.
+  std::optional<HttpReply> refuse_overdue_start(std::int64_t id, bool overridden, std::vector<InstrumentDue>& overdue);
   nlohmann::json summary(const CampaignRow& row);
   // An operator's acceptance of a partial run as its unit's calibration.
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);

@@ -14,6 +14,7 @@
 #include <stdexcept>
 
 #include "core/earth.hpp"
+#include "daemon/production/reference_equipment.hpp"
 
 namespace imucal::daemon {
 
@@ -86,20 +87,6 @@ void replace_file(const std::string& path, const std::string& text) {
   }
 }
 
-json instrument_json(const std::optional<ReferenceInstrument>& i, std::int64_t ended_ms) {
-  if (!i) return nullptr;
-  // calibration_due was checked to be a date when the configuration was read.
-  const std::int64_t due_day = date_day_number(i->calibration_due).value_or(0);
-  const std::int64_t used_day = ended_ms >= 0 ? ended_ms / 86'400'000 : (ended_ms - 86'399'999) / 86'400'000;
-  json out = {{"make", i->make},
-              {"model", i->model},
-              {"serial", i->serial},
-              {"calibration_due", i->calibration_due},
-              {"overdue", due_day < used_day}};
-  out["calibration_certificate"] = i->calibration_certificate.empty() ? json(nullptr) : json(i->calibration_certificate);
-  return out;
-}
-
 }  // namespace
 
 CertificateSequence::CertificateSequence(std::string path) : path_(std::move(path)) {}
@@ -153,11 +140,11 @@ json certificate_bench_json(const DaemonConfig& config, std::int64_t campaign_en
   const bool configured = config.site.gravity_mps2.has_value();
   return {{"devices", config.devices},
           {"simulated", config.devices.rfind("sim", 0) == 0},
-          {"reference_equipment",
-           {{"table", instrument_json(config.reference_equipment.table, campaign_ended_ms)},
-            {"chamber", instrument_json(config.reference_equipment.chamber, campaign_ended_ms)}}},
+          // Judged on the day the run ended: out of calibration when it was used.
+          {"reference_equipment", reference_equipment_json(config, utc_day(campaign_ended_ms), false)},
           {"gravity",
            {{"value_mps2", earth::site_gravity_mps2(config.site)},
+            {"sigma_mps2", earth::site_gravity_sigma_mps2(config.site)},
             {"source", configured ? "configured" : "normal_gravity"},
             {"latitude_deg", config.site.latitude_deg},
             {"height_m", config.site.height_m}}}};

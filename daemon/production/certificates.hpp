@@ -46,11 +46,13 @@ std::string certificate_number(const std::string& prefix, int year, std::int64_t
 // What a certificate states about the bench, as configured when its number is issued (kept with
 // the number, so that a certificate shows the same equipment when printed again later):
 //   {"devices", "simulated",
-//    "reference_equipment": {"table": {make, model, serial, calibration_due, calibration_certificate,
-//                                      "overdue"} | null, "chamber": ... },
-//    "gravity": {"value_mps2", "source": "configured" | "normal_gravity", "latitude_deg", "height_m"}}
-// `overdue`: the instrument's calibration was due before the day the campaign ended (UTC), i.e.
-// it was out of calibration when it was used.
+//    "reference_equipment": reference_equipment_json (reference_equipment.hpp): the table, the
+//                           chamber and the gravity survey with their certificates, uncertainties
+//                           and due dates, each judged on the day the campaign ended (UTC):
+//                           `overdue`, it was out of calibration when it was used,
+//    "gravity": {"value_mps2", "sigma_mps2", "source": "configured" | "normal_gravity", "latitude_deg", "height_m"}}
+// (Certificates issued before issue 35's reference equipment lack the gravity survey, the
+// uncertainties and sigma_mps2: what was issued stays as it was.)
 nlohmann::json certificate_bench_json(const DaemonConfig& config, std::int64_t campaign_ended_ms);
 
 }  // namespace imucal::daemon

@@ -68,18 +68,25 @@ function passwordHash(password) {
   if (!fs.existsSync(imucal)) skip(`no ${imucal} to make the viewer's password hash (build the release preset)`);
   return execFileSync(imucal, ['passwd'], { input: `${password}\n` }).toString().trim();
 }
-fs.writeFileSync(path.join(tmp, 'imucald.json'), JSON.stringify({
+// The table's calibration due in three days (UTC): the live page warns of it, campaigns start. Before
+// the restart below the configuration makes it overdue, and a start asks for an override.
+const dayText = (days) => new Date(Date.now() + days * 86400e3).toISOString().slice(0, 10);
+const tableDue = dayText(3);
+const viewerHash = passwordHash(VIEWER.password);
+const browserConfig = (tableCalibrationDue) => JSON.stringify({
   _comment: 'browser test: simulated devices, one viewer; the operator signs in with the generated token',
   site: { name: 'browser test lab' },
   // Certificate numbers BROWSER-LAB-YYYY-NNNNNN, the sequence beside this file.
   certificates: { prefix: 'BROWSER-LAB' },
-  reference_equipment: { table: { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: '2020-01-31' } },
+  reference_equipment: { table: { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: tableCalibrationDue,
+    uncertainty: '1 arcsec (k=2)' } },
   // Only hashes go into a configuration: made by `imucal passwd` (beside imucald), as a lab would.
-  users: [{ name: VIEWER.user, role: 'viewer', password_hash: passwordHash(VIEWER.password) }],
+  users: [{ name: VIEWER.user, role: 'viewer', password_hash: viewerHash }],
   http: { web_dir: webDir },
   // The truths a campaign may name: examples/truth-nav-grade.json is "truth-nav-grade".
   sim: { truths_dir: path.join(repo, 'examples') },
-}, null, 1));
+}, null, 1);
+fs.writeFileSync(path.join(tmp, 'imucald.json'), browserConfig(tableDue));
 
 // ---- the daemon ---------------------------------------------------------------------------------
 
@@ -534,7 +541,9 @@ try {
   await waitText(page, '#run-title', /Nothing runs/);
   assert.equal((await page.textContent('#imu-frames')).trim(), '—', 'no frame count of the last run');
   assert.equal((await page.textContent('#estimator-status')).trim(), '—', 'no estimator of the last run');
-  log('idle live page: the bench, none of the last run\'s figures');
+  // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
+  await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
+  log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');
 
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
   // Posted with the API (the builder was covered above), as fast as the machine goes, at a low
@@ -949,6 +958,8 @@ try {
   await waitText(page, '#verdict', /^Valid/);
   await page.waitForSelector('#live-indicator[data-state="open"]');
   daemonDownOnPurpose = true;
+  // Restarted with the table's calibration run out: a start is refused until an operator overrides it.
+  fs.writeFileSync(path.join(tmp, 'imucald.json'), browserConfig('2020-01-31'));
   const code = await stopDaemon(daemon);
   assert.equal(code, 0, 'imucald stops cleanly on SIGTERM');
   await waitText(page, '#banner', /Live connection lost/);
@@ -966,6 +977,26 @@ try {
   assert.equal(await page.inputValue('#c-name'), 'typed before the restart');
   await shot(page, '12-connection-restored');
   log('WebSocket lost and restored with a banner; signed in again; the form kept its text');
+
+  // ---- an overdue table: Start asks why, the override starts it and the audit trail keeps it ----
+  const overdue = await apiCall('POST', '/api/campaigns', { name: 'browser test: overdue table', program: 'direct-short', rate_hz: 10, time_scale: 1 });
+  assert.equal(overdue.status, 201, JSON.stringify(overdue.body));
+  await page.goto(`${base}/#/campaigns/${overdue.body.id}`);
+  await waitText(page, '#campaign-state', /created/);
+  await page.click('.command-bar .cmd-start');
+  await page.click('#confirm-ok');
+  await waitText(page, '#confirm-dialog[open] h2', /with overdue reference equipment/);
+  assert.match(await page.textContent('#confirm-dialog'), /rate table \(Acme Motion ATS-3, serial T-0815\) was due for calibration on 2020-01-31/);
+  await shot(page, '12b-overdue-override');
+  await page.fill('#confirm-reason', 'browser test: the table was checked against the reference cube');
+  await page.click('#confirm-ok');
+  await waitText(page, '#campaign-state', /queued|running/);
+  const override = (await apiCall('GET', '/api/audit?action=campaign.override_overdue')).body.entries;
+  assert.equal(override.length, 1, JSON.stringify(override));
+  assert.equal(override[0].actor, 'operator');
+  assert.equal(override[0].details.reason, 'browser test: the table was checked against the reference cube');
+  await apiCall('POST', `/api/campaigns/${overdue.body.id}/abort`, { reason: 'browser test cleanup' });
+  log('an overdue table: Start asked for a reason, the override started the campaign and is in the audit trail');
 
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {

@@ -282,6 +282,26 @@ test('certificate rows: names with units, k = 2 beside k = 1, "not determined" i
   assert.equal(real[0].overdue, true);
   assert.match(real[0].text, /Acme ATS-3, serial number T-1; calibration due 2020-01-31 — OVERDUE/);
   assert.equal(real[1].missing, true);
+  assert.equal(real.length, 2, 'a certificate issued before the gravity survey was stated gets no line for it');
+  // Issue 35: uncertainties and the gravity survey, on certificates issued since.
+  const now = equipmentLines({ simulated: false, devices: 'real', gravity: { value_mps2: 9.81912, source: 'configured' },
+    reference_equipment: {
+      table: { make: 'Acme', model: 'ATS-3', serial: 'T-1', calibration_due: '2027-01-31', calibration_certificate: 'DKD-1',
+        uncertainty: '1 arcsec (k=2)', overdue: false },
+      chamber: { make: 'ClimaCo', model: 'CC', serial: 'C-1', calibration_due: '2027-01-31', calibration_certificate: null,
+        uncertainty: null, overdue: false },
+      gravity: { surveyed_by: 'Federal Geodesy Agency', calibration_certificate: 'GS-17', calibration_due: '2026-01-01',
+        uncertainty: '1e-06 m/s^2 (1 sigma)', sigma_mps2: 1e-6, overdue: true } } });
+  assert.deepEqual(now.map((l) => l.role), ['Rate table', 'Climatic chamber', 'Gravity survey']);
+  assert.match(now[0].text, /serial number T-1; calibration due 2027-01-31 \(its certificate DKD-1\); uncertainty 1 arcsec \(k=2\)$/);
+  assert.match(now[1].text, /; uncertainty not stated$/);
+  assert.equal(now[2].overdue, true);
+  assert.match(now[2].text, /^surveyed by Federal Geodesy Agency, certificate GS-17; standard uncertainty of g 1e-06 m\/s\^2 \(1 sigma\); next survey due 2026-01-01 — OVERDUE/);
+  const normal = equipmentLines({ simulated: true, devices: 'sim', gravity: { source: 'normal_gravity' }, reference_equipment: { gravity: null } });
+  assert.equal(normal.length, 2);
+  assert.equal(normal[1].missing, false);
+  assert.match(normal[1].text, /not measured/);
+  assert.match(gravityStatement({ value_mps2: 9.81912, source: 'configured', sigma_mps2: 1e-6 }), /configured .*; standard uncertainty 1\.0e-6 m\/s²$/);
   assert.match(gravityStatement({ value_mps2: 9.81912, source: 'configured' }), /^9\.8191200 m\/s², configured/);
   assert.match(gravityStatement({ value_mps2: 9.8191, source: 'normal_gravity', latitude_deg: 59.94, height_m: 10 }), /normal gravity formula at latitude 59\.94/);
   const conventions = conventionsText('instrument').join(' ');
@@ -457,4 +477,28 @@ test('every list tells done, stopped, partial, failed and aborted apart (issue 3
   assert.equal(o({ state: 'running' }), 'running');
   assert.match(runOutcome({ state: 'failed', error: 'the table stopped answering' }).title, /table stopped/);
   assert.match(runOutcome({ state: 'done', complete: false, accepted: { reason: 'first two cycles' } }).title, /first two cycles/);
+});
+
+test('reference equipment: the live page warns a week ahead and the start asks for an override', async () => {
+  const { equipmentWarnings, overdueStartQuestion } = await import('../../web/js/equipment.mjs');
+  assert.deepEqual(equipmentWarnings(undefined), []);
+  assert.deepEqual(equipmentWarnings({ table: null, chamber: null, gravity: null }), []);
+  const table = { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: '2026-12-01' };
+  const warnings = equipmentWarnings({
+    table: { ...table, due_in_days: 3, due_soon: true, overdue: false },
+    chamber: { make: 'ClimaCo', model: 'CC-200', serial: 'C-4711', calibration_due: '2027-06-01', due_in_days: 185, due_soon: false, overdue: false },
+    gravity: { surveyed_by: 'NGS', calibration_certificate: 'G-1', calibration_due: '2026-11-01', due_in_days: -27, due_soon: false, overdue: true },
+  });
+  assert.deepEqual(warnings.map((w) => [w.instrument, w.overdue]), [['gravity', true], ['table', false]], 'overdue first, the far one not at all');
+  assert.match(warnings[0].text, /^The gravity survey by NGS \(certificate G-1\) was due for a new survey on 2026-11-01 \(27 days ago\)/);
+  assert.match(warnings[1].text, /^The rate table Acme Motion ATS-3 \(serial T-0815\) is due for calibration on 2026-12-01 \(in 3 days\)/);
+  assert.match(equipmentWarnings({ table: { ...table, due_in_days: 0, due_soon: true, overdue: false } })[0].text, /\(today\)/);
+  assert.match(equipmentWarnings({ table: { ...table, due_in_days: 1, due_soon: true, overdue: false } })[0].text, /\(tomorrow\)/);
+  assert.match(equipmentWarnings({ table: { ...table, due_in_days: -1, due_soon: false, overdue: true } })[0].text, /\(1 day ago\)/);
+
+  assert.equal(overdueStartQuestion({ error: 'campaign 7 was already started', state: 'done' }), null);
+  const question = overdueStartQuestion({ error: '...', state: 'created', overdue: [
+    { instrument: 'table', identity: 'Acme Motion ATS-3, serial T-0815', serial: 'T-0815', certificate: 'DKD-1', calibration_due: '2020-01-31' }] });
+  assert.equal(question[0], 'The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31.');
+  assert.match(question[1], /audit trail/);
 });

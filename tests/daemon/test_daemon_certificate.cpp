@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +16,8 @@
 #include <thread>
 
 #include "core/earth.hpp"
+#include "core/expect_value.hpp"
+#include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/certificates.hpp"
 #include "service_fixture.hpp"
 #include "signing/signing.hpp"
@@ -40,10 +43,19 @@ json certificate_campaign(const std::string& name, const std::string& serial) {
           {"imu", {{"serial", serial}, {"part_number", "PN-100"}}}};
 }
 
+// Starts a campaign with an operator's override of the overdue table (configure() below names a
+// table whose calibration ran out in 2020): its certificates then state the table as overdue.
+int start_overriding(LocalDaemon& d, std::int64_t id) {
+  const auto r = d.call("POST", "/api/campaigns/" + std::to_string(id) + "/start",
+                        json{{"override_overdue", "test bench: the overdue table is what the certificate must state"}}.dump());
+  EXPECT_EQ(r.status, 200) << r.body;
+  return r.status;
+}
+
 // A campaign run to its end on the simulated bench.
 std::int64_t run_campaign(LocalDaemon& d, const std::string& name, const std::string& serial) {
   const auto id = d.post_campaign(certificate_campaign(name, serial));
-  EXPECT_EQ(d.command(id, "start"), 200);
+  start_overriding(d, id);
   EXPECT_EQ(d.wait_final(id).at("state"), "done");
   return id;
 }
@@ -63,8 +75,10 @@ std::string config_error(const std::string& text) {
 void configure(daemon::DaemonConfig& c, const std::string& sequence_file) {
   c.certificates.prefix = "LAB";
   c.certificates.sequence_file = sequence_file;
-  c.reference_equipment.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123"};
-  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", ""};
+  c.reference_equipment.table =
+      daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123", "1 arcsec (k=2)"};
+  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", "", ""};
+  c.reference_equipment.gravity = daemon::GravitySurvey{"Federal Geodesy Agency", "GS-2024-17", "2999-12-31"};
   c.site.gravity_mps2 = 9.81912;
 }
 
@@ -104,6 +118,18 @@ TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
     EXPECT_TRUE(ca.at("reference_equipment").at("table").at("overdue").get<bool>());
     EXPECT_FALSE(ca.at("reference_equipment").at("chamber").at("overdue").get<bool>());
     EXPECT_TRUE(ca.at("reference_equipment").at("chamber").at("calibration_certificate").is_null());
+    EXPECT_EQ(ca.at("reference_equipment").at("table").at("uncertainty"), "1 arcsec (k=2)");
+    EXPECT_TRUE(ca.at("reference_equipment").at("chamber").at("uncertainty").is_null());
+    // The gravity survey: its certificate, its due date, and the 1-sigma the calibration used for g.
+    const json survey = ca.at("reference_equipment").at("gravity");
+    EXPECT_EQ(survey.at("surveyed_by"), "Federal Geodesy Agency");
+    EXPECT_EQ(survey.at("calibration_certificate"), "GS-2024-17");
+    EXPECT_EQ(survey.at("calibration_due"), "2999-12-31");
+    EXPECT_FALSE(survey.at("overdue").get<bool>());
+    EXPECT_DOUBLE_EQ(survey.at("sigma_mps2").get<double>(), earth::kMeasuredGravitySigma_mps2);
+    EXPECT_DOUBLE_EQ(ca.at("gravity").at("sigma_mps2").get<double>(), earth::kMeasuredGravitySigma_mps2);
+    // A certificate judges the day the run ended, not today: no "due soon" on it.
+    EXPECT_FALSE(ca.at("reference_equipment").at("table").contains("due_soon"));
     EXPECT_EQ(ca.at("gravity").at("source"), "configured");
     EXPECT_DOUBLE_EQ(ca.at("gravity").at("value_mps2").get<double>(), 9.81912);
 
@@ -121,6 +147,7 @@ TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
   LocalDaemon fresh("certificate-b", false, [&](daemon::DaemonConfig& c) {
     configure(c, sequence_file);
     c.site.gravity_mps2.reset();
+    c.reference_equipment.gravity.reset();  // nothing measured: no survey
   });
   const auto c = run_campaign(fresh, "after a new data directory", "FOG-7");
   const json cc = fresh.get(certificate_target(c));
@@ -129,6 +156,8 @@ TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
   EXPECT_NE(third_number, second_number);
   EXPECT_EQ(third_number.substr(third_number.size() - 6), "000003") << third_number;
   EXPECT_EQ(cc.at("gravity").at("source"), "normal_gravity");
+  EXPECT_DOUBLE_EQ(cc.at("gravity").at("sigma_mps2").get<double>(), earth::kNormalGravitySigma_mps2);
+  EXPECT_TRUE(cc.at("reference_equipment").at("gravity").is_null());
   EXPECT_DOUBLE_EQ(cc.at("gravity").at("value_mps2").get<double>(), earth::site_gravity_mps2(fresh.config.site));
 }
 
@@ -187,6 +216,35 @@ TEST(Certificate, ConfigurationNamesTheFieldAtFault) {
   EXPECT_NE(empty.find("config.reference_equipment.table.make must not be empty"), std::string::npos) << empty;
   const std::string typo = config_error(R"({"reference_equipment": {"tabel": {}}})");
   EXPECT_NE(typo.find("tabel"), std::string::npos) << typo;
+  // Uncertainties as the instruments' certificates state them; the gravity survey of the measured g.
+  const daemon::DaemonConfig full = parse_config(R"j({"site": {"gravity_mps2": 9.81912}, "reference_equipment": {
+      "table": {"make": "A", "model": "B", "serial": "C", "calibration_due": "2027-01-01", "uncertainty": "1 arcsec (k=2)"},
+      "gravity": {"surveyed_by": "Federal Geodesy Agency", "calibration_certificate": "GS-1", "calibration_due": "2030-06-30"}}})j",
+                                                 "full.json");
+  ASSERT_TRUE(full.reference_equipment.table.has_value());
+  EXPECT_EQ(full.reference_equipment.table->uncertainty, "1 arcsec (k=2)");
+  ASSERT_TRUE(full.reference_equipment.gravity.has_value());
+  EXPECT_EQ(full.reference_equipment.gravity->calibration_certificate, "GS-1");
+  EXPECT_EQ(full.reference_equipment.gravity->calibration_due, "2030-06-30");
+  const std::string blank_uncertainty = config_error(
+      R"({"reference_equipment": {"table": {"make": "A", "model": "B", "serial": "C", "calibration_due": "2027-01-01", "uncertainty": ""}}})");
+  EXPECT_NE(blank_uncertainty.find("config.reference_equipment.table.uncertainty must say"), std::string::npos) << blank_uncertainty;
+  const std::string survey_date = config_error(
+      R"({"site": {"gravity_mps2": 9.81}, "reference_equipment": {"gravity": {"surveyed_by": "X", "calibration_certificate": "G", "calibration_due": "30.06.2030"}}})");
+  EXPECT_NE(survey_date.find("config.reference_equipment.gravity.calibration_due must be a date YYYY-MM-DD, not \"30.06.2030\""),
+            std::string::npos)
+      << survey_date;
+  const std::string survey_missing =
+      config_error(R"({"site": {"gravity_mps2": 9.81}, "reference_equipment": {"gravity": {"surveyed_by": "X", "calibration_due": "2030-01-01"}}})");
+  EXPECT_NE(survey_missing.find("config.reference_equipment.gravity.calibration_certificate is required"), std::string::npos)
+      << survey_missing;
+  // The survey's uncertainty is the one number the calibration uses, never a second one here.
+  const std::string survey_sigma = config_error(R"({"site": {"gravity_mps2": 9.81}, "reference_equipment": {"gravity":
+      {"surveyed_by": "X", "calibration_certificate": "G", "calibration_due": "2030-01-01", "uncertainty": "0.02 mGal"}}})");
+  EXPECT_NE(survey_sigma.find("config.reference_equipment.gravity.uncertainty is not configured"), std::string::npos) << survey_sigma;
+  const std::string no_g = config_error(
+      R"({"reference_equipment": {"gravity": {"surveyed_by": "X", "calibration_certificate": "G", "calibration_due": "2030-01-01"}}})");
+  EXPECT_NE(no_g.find("config.site.gravity_mps2 (the g it measured) is not set"), std::string::npos) << no_g;
   const std::string prefix = config_error(R"({"certificates": {"prefix": "LAB 1"}})");
   EXPECT_NE(prefix.find("config.certificates.prefix must be"), std::string::npos) << prefix;
 
@@ -213,6 +271,186 @@ TEST(Certificate, DatesAreDaysOfTheGregorianCalendar) {
   EXPECT_FALSE(daemon::date_day_number("2026-13-01"));
   EXPECT_FALSE(daemon::date_day_number("2026-1-01"));
   EXPECT_FALSE(daemon::date_day_number("tomorrow"));
+}
+
+// Issue 35, deliverable 4: the one rule for which instrument is overdue or due soon on a day, at
+// the day boundaries; the start check, the certificate and the live page all judge with it.
+TEST(ReferenceEquipment, OneRuleJudgesTheDueDatesAtTheDayBoundaries) {
+  const std::int64_t due = expect_value(daemon::date_day_number("2026-12-10"), "a date");
+  EXPECT_EQ(daemon::date_text(due), "2026-12-10");
+  EXPECT_EQ(daemon::date_text(0), "1970-01-01");
+  EXPECT_EQ(daemon::date_text(19783), "2024-03-01");
+  EXPECT_EQ(daemon::date_text(-1), "1969-12-31");
+  // A Unix time's day in UTC: midnight starts the day, the millisecond before it is the day before.
+  EXPECT_EQ(daemon::utc_day(0), 0);
+  EXPECT_EQ(daemon::utc_day(86'399'999), 0);
+  EXPECT_EQ(daemon::utc_day(86'400'000), 1);
+  EXPECT_EQ(daemon::utc_day(-1), -1);
+  EXPECT_EQ(daemon::utc_day(due * 86'400'000 + 86'399'999), due);
+
+  daemon::ReferenceEquipment e;
+  e.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2026-12-10", "DKD-123", "1 arcsec (k=2)"};
+  const auto on = [&](std::int64_t day) {
+    const auto judged = daemon::equipment_due(e, day);
+    EXPECT_EQ(judged.size(), 1u);
+    return judged.empty() ? daemon::InstrumentDue{} : judged.front();
+  };
+  // Eight days ahead: nothing to say; seven: due soon; the due day itself: still usable, due soon;
+  // the day after: overdue.
+  EXPECT_FALSE(on(due - 8).due_soon);
+  EXPECT_FALSE(on(due - 8).overdue);
+  EXPECT_EQ(on(due - 8).due_in_days, 8);
+  EXPECT_TRUE(on(due - 7).due_soon);
+  EXPECT_TRUE(on(due).due_soon);
+  EXPECT_FALSE(on(due).overdue);
+  EXPECT_EQ(on(due).due_in_days, 0);
+  EXPECT_TRUE(on(due + 1).overdue);
+  EXPECT_FALSE(on(due + 1).due_soon);
+  EXPECT_EQ(on(due + 1).due_in_days, -1);
+  EXPECT_EQ(on(due + 1).serial, "T-0815");
+  EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due)), "");
+  EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due + 1)),
+            "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2026-12-10");
+
+  // All three instruments, in order; the JSON the certificate and the status carry is the rule's.
+  daemon::DaemonConfig c;
+  c.reference_equipment = e;
+  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2026-12-03", "", ""};
+  c.reference_equipment.gravity = daemon::GravitySurvey{"Federal Geodesy Agency", "GS-2024-17", "2026-11-30"};
+  c.site.gravity_mps2 = 9.81912;
+  const auto all = daemon::equipment_due(c.reference_equipment, due - 7);
+  ASSERT_EQ(all.size(), 3u);
+  EXPECT_EQ(all[0].instrument, "table");
+  EXPECT_EQ(all[1].instrument, "chamber");
+  EXPECT_EQ(all[2].instrument, "gravity");
+  EXPECT_TRUE(all[2].overdue);
+  EXPECT_EQ(all[2].identity, "by Federal Geodesy Agency, certificate GS-2024-17");
+  const json status = daemon::reference_equipment_json(c, due - 7, true);
+  EXPECT_TRUE(status.at("table").at("due_soon").get<bool>());
+  EXPECT_EQ(status.at("table").at("due_in_days"), 7);
+  EXPECT_EQ(status.at("chamber").at("due_in_days"), 0);
+  EXPECT_TRUE(status.at("gravity").at("overdue").get<bool>());
+  EXPECT_DOUBLE_EQ(status.at("gravity").at("sigma_mps2").get<double>(), earth::site_gravity_sigma_mps2(c.site));
+  const json certificate = daemon::reference_equipment_json(c, due - 7, false);
+  EXPECT_FALSE(certificate.at("table").contains("due_in_days"));
+  EXPECT_EQ(certificate.at("table").at("overdue"), status.at("table").at("overdue"));
+  c.reference_equipment = {};
+  EXPECT_EQ(daemon::reference_equipment_json(c, due, true),
+            json({{"table", nullptr}, {"chamber", nullptr}, {"gravity", nullptr}}));
+}
+
+namespace {
+
+std::string start_target(std::int64_t id) { return "/api/campaigns/" + std::to_string(id) + "/start"; }
+
+// Today's date (UTC) `days` from now, as the configuration writes it.
+std::string days_from_today(std::int64_t days) {
+  return daemon::date_text(daemon::utc_day(daemon::now_unix_ms()) + days);
+}
+
+}  // namespace
+
+// Issue 35, deliverable 4, its acceptance: a campaign with an expired table certificate refuses to
+// start; an operator starts it anyway with a reason, which the audit trail keeps with their name.
+TEST(ReferenceEquipment, AnExpiredTableRefusesTheStartUntilAnOperatorOverridesWithAReason) {
+  LocalDaemon d("equipment-expired", false, [&](daemon::DaemonConfig& c) { configure(c, scratch_dir("equipment-site") + "/seq.json"); });
+  const auto id = d.post_campaign(certificate_campaign("with an expired table", "FOG-41"));
+
+  const auto refused = d.call("POST", start_target(id));
+  ASSERT_EQ(refused.status, 409) << refused.body;
+  const json why = json::parse(refused.body);
+  const std::string error = why.at("error");
+  for (const char* words : {"not started", "rate table", "T-0815", "2020-01-31", "override_overdue"})
+    EXPECT_NE(error.find(words), std::string::npos) << words << " missing from: " << error;
+  EXPECT_EQ(error.find("C-4711"), std::string::npos) << "the chamber is not overdue: " << error;
+  ASSERT_EQ(why.at("overdue").size(), 1u);
+  EXPECT_EQ(why.at("overdue")[0].at("instrument"), "table");
+  EXPECT_EQ(why.at("overdue")[0].at("serial"), "T-0815");
+  EXPECT_EQ(why.at("overdue")[0].at("calibration_due"), "2020-01-31");
+  EXPECT_EQ(d.campaign(id).at("state"), "created");
+
+  // An override needs a reason; it belongs to start alone; a viewer cannot give one.
+  const auto blank = d.call("POST", start_target(id), json{{"override_overdue", "  "}}.dump());
+  EXPECT_EQ(blank.status, 400) << blank.body;
+  EXPECT_NE(blank.body.find("body.override_overdue must say why"), std::string::npos) << blank.body;
+  EXPECT_EQ(d.call("POST", start_target(id), json{{"override_overdue", 1}}.dump()).status, 400);
+  const auto on_pause = d.call("POST", "/api/campaigns/" + std::to_string(id) + "/pause",
+                               json{{"override_overdue", "why not"}}.dump());
+  EXPECT_EQ(on_pause.status, 400) << on_pause.body;
+  const auto viewer = d.call("POST", start_target(id), json{{"override_overdue", "I am only a viewer"}}.dump(), kViewerToken);
+  EXPECT_EQ(viewer.status, 403) << viewer.body;
+  EXPECT_EQ(d.campaign(id).at("state"), "created");
+  EXPECT_TRUE(d.get("/api/audit?action=campaign.override_overdue").at("entries").empty());
+
+  // The status the live page reads says so, judged today.
+  const json status = d.get("/api/status");
+  EXPECT_TRUE(status.at("reference_equipment").at("table").at("overdue").get<bool>());
+  EXPECT_LT(status.at("reference_equipment").at("table").at("due_in_days").get<std::int64_t>(), 0);
+  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("overdue").get<bool>());
+  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
+
+  const std::string reason = "customer deadline; table checked against the reference cube on 2026-11-20";
+  const auto started = d.call("POST", start_target(id), json{{"override_overdue", reason}, {"reason", "yearly"}}.dump());
+  ASSERT_EQ(started.status, 200) << started.body;
+  EXPECT_EQ(json::parse(started.body).at("state"), "queued");
+  const json trail = d.get("/api/audit?action=campaign.override_overdue");
+  ASSERT_EQ(trail.at("entries").size(), 1u) << trail.dump();
+  const json entry = trail.at("entries")[0];
+  EXPECT_EQ(entry.at("actor"), "operator");
+  EXPECT_EQ(entry.at("subject"), "campaign " + std::to_string(id));
+  EXPECT_EQ(entry.at("details").at("reason"), reason);
+  ASSERT_EQ(entry.at("details").at("instruments").size(), 1u);
+  EXPECT_EQ(entry.at("details").at("instruments")[0].at("instrument"), "table");
+  EXPECT_EQ(entry.at("details").at("instruments")[0].at("serial"), "T-0815");
+  EXPECT_EQ(entry.at("details").at("instruments")[0].at("calibration_due"), "2020-01-31");
+  EXPECT_TRUE(trail.at("intact").get<bool>());
+  // The run's own record says it too: the start's transition names the override and its reason.
+  const json run = d.campaign(id);
+  const auto queued = std::find_if(run.at("transitions").begin(), run.at("transitions").end(),
+                                   [](const json& t) { return t.at("to") == "queued"; });
+  ASSERT_NE(queued, run.at("transitions").end()) << run.at("transitions").dump();
+  const std::string transition = queued->at("reason");
+  EXPECT_NE(transition.find("start by operator: yearly; overdue reference equipment overridden"), std::string::npos) << transition;
+  EXPECT_NE(transition.find(reason), std::string::npos) << transition;
+  EXPECT_EQ(d.command(id, "abort"), 200);
+  d.wait_final(id);
+  // Started already: a second start is the sequencer's 409, not judged again.
+  const auto again = d.call("POST", start_target(id));
+  EXPECT_EQ(again.status, 409);
+  EXPECT_NE(again.body.find("already started"), std::string::npos) << again.body;
+}
+
+// Due in three days: the start goes ahead (no override asked, none audited) and the status the
+// live page reads says the table is due soon.
+TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
+  LocalDaemon d("equipment-due-soon", false, [&](daemon::DaemonConfig& c) {
+    configure(c, scratch_dir("equipment-soon-site") + "/seq.json");
+    c.reference_equipment.table->calibration_due = days_from_today(3);
+    c.reference_equipment.gravity->calibration_due = days_from_today(8);
+  });
+  const json status = d.get("/api/status");
+  const json table = status.at("reference_equipment").at("table");
+  EXPECT_TRUE(table.at("due_soon").get<bool>()) << table.dump();
+  EXPECT_FALSE(table.at("overdue").get<bool>());
+  // (2 if midnight UTC passed since the configuration was made.)
+  EXPECT_GE(table.at("due_in_days").get<std::int64_t>(), 2);
+  EXPECT_LE(table.at("due_in_days").get<std::int64_t>(), 3);
+  EXPECT_EQ(table.at("uncertainty"), "1 arcsec (k=2)");
+  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
+  EXPECT_EQ(status.at("reference_equipment").at("gravity").at("surveyed_by"), "Federal Geodesy Agency");
+  EXPECT_GE(status.at("reference_equipment").at("gravity").at("due_in_days").get<std::int64_t>(), 7);
+
+  const auto id = d.post_campaign(certificate_campaign("table due soon", "FOG-42"));
+  const auto started = d.call("POST", start_target(id));
+  ASSERT_EQ(started.status, 200) << started.body;
+  // An override where nothing is overdue changes nothing and is not audited as one.
+  const auto other = d.post_campaign(certificate_campaign("needless override", "FOG-43"));
+  ASSERT_EQ(d.call("POST", start_target(other), json{{"override_overdue", "just in case"}}.dump()).status, 200);
+  EXPECT_TRUE(d.get("/api/audit?action=campaign.override_overdue").at("entries").empty());
+  EXPECT_EQ(d.wait_final(id).at("state"), "done");
+  EXPECT_EQ(d.wait_final(other).at("state"), "done");
+  const json cert = d.get(certificate_target(id));
+  EXPECT_FALSE(cert.at("reference_equipment").at("table").at("overdue").get<bool>()) << cert.dump().substr(0, 600);
 }
 
 // Issue 35, deliverable 1: a certificate is issued when its run ends (in the order runs end, not
@@ -277,7 +515,7 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   json slow = certificate_campaign("stopped early", "FOG-23");
   slow["time_scale"] = 20;
   const auto p = d.post_campaign(slow);
-  ASSERT_EQ(d.command(p, "start"), 200);
+  ASSERT_EQ(start_overriding(d, p), 200);
   d.wait_for(p, [](const json& c) { return c.at("program_time_s").get<double>() > 0.8 * c.at("duration_s").get<double>(); });
   ASSERT_EQ(d.command(p, "stop"), 200);
   const json stopped = d.wait_final(p);
@@ -332,6 +570,7 @@ TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
     EXPECT_EQ(actions["service.started"], 1);
     EXPECT_EQ(actions["campaign.created"], 1);
     EXPECT_EQ(actions["campaign.command"], 1);  // start
+    EXPECT_EQ(actions["campaign.override_overdue"], 1);  // of the overdue table, by the operator
     EXPECT_GE(actions["campaign.transition"], 3);  // created -> queued -> running -> done
     EXPECT_EQ(actions["limits.replaced"], 1);
     EXPECT_EQ(actions["certificate.issued"], 2);  // at the end, and under the new limits

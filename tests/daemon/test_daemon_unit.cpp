@@ -540,6 +540,15 @@ TEST(Config, TheCommentedExampleParses) {
   EXPECT_EQ(real.device_addresses->table.port, 5000);
   ASSERT_TRUE(real.device_addresses->power_relay);
   EXPECT_EQ(real.device_addresses->power_relay->host, "192.168.10.21");
+  // Its gravity survey, put in place with a measured g as its comment says.
+  ASSERT_TRUE(c.reference_equipment.table.has_value());
+  EXPECT_EQ(c.reference_equipment.table->uncertainty, "1 arcsec (k=2)");
+  json surveyed = json::parse(std::ifstream(imucaltest::source_dir() + "/examples/imucald.json"));
+  surveyed["reference_equipment"]["gravity"] = surveyed.at("reference_equipment").at("_gravity");
+  surveyed["site"]["gravity_mps2"] = 9.81912;
+  const DaemonConfig with_survey = parse_config(surveyed.dump(), "example");
+  ASSERT_TRUE(with_survey.reference_equipment.gravity.has_value());
+  EXPECT_EQ(with_survey.reference_equipment.gravity->calibration_certificate, "GS-2024-17");
 }
 
 // The wire's own faults (bytes on the IMU link, garbled Modbus replies) exist only where there is

@@ -133,31 +133,57 @@ export function partialStatement(d) {
 
 /**
  * The reference equipment as lines [{role, text, overdue, missing}] from the certificate reply
- * (GET /api/campaigns/{id}/certificate). Simulated devices are said to be simulated.
+ * (GET /api/campaigns/{id}/certificate): the rate table and the chamber (simulated devices are said
+ * to be simulated), then the survey of the site's g. Each with its certificate, its uncertainty
+ * and its due date, OVERDUE when it was due before the run ended (imucald's judgement, stated in
+ * the certificate). What a certificate issued before a field existed does not state (the
+ * uncertainties, the gravity survey) is left out, not shown as missing: it is printed as issued.
  */
 export function equipmentLines(cert) {
+  const equipment = cert.reference_equipment || {};
+  const lines = [];
   if (cert.simulated) {
-    return [{ role: 'Reference equipment', overdue: false, missing: false,
-      text: `Simulated three-axis rate table and chamber (imucald devices "${cert.devices}"): no physical reference equipment.` }];
+    lines.push({ role: 'Reference equipment', overdue: false, missing: false,
+      text: `Simulated three-axis rate table and chamber (imucald devices "${cert.devices}"): no physical reference equipment.` });
+  } else {
+    for (const [key, role] of [['table', 'Rate table'], ['chamber', 'Climatic chamber']]) {
+      const i = equipment[key];
+      if (!i) {
+        lines.push({ role, overdue: false, missing: true, text: `not stated in the configuration (reference_equipment.${key})` });
+        continue;
+      }
+      const text = `${i.make} ${i.model}, serial number ${i.serial}; calibration due ${i.calibration_due}` +
+        `${i.calibration_certificate ? ` (its certificate ${i.calibration_certificate})` : ''}` +
+        `${'uncertainty' in i ? `; uncertainty ${i.uncertainty || 'not stated'}` : ''}` +
+        `${i.overdue ? ' — OVERDUE: its calibration had run out when this run was made' : ''}`;
+      lines.push({ role, overdue: Boolean(i.overdue), missing: false, text });
+    }
   }
-  const roles = [['table', 'Rate table'], ['chamber', 'Climatic chamber']];
-  return roles.map(([key, role]) => {
-    const i = cert.reference_equipment?.[key];
-    if (!i) return { role, overdue: false, missing: true, text: `not stated in the configuration (reference_equipment.${key})` };
-    const text = `${i.make} ${i.model}, serial number ${i.serial}; calibration due ${i.calibration_due}` +
-      `${i.calibration_certificate ? ` (its certificate ${i.calibration_certificate})` : ''}` +
-      `${i.overdue ? ' — OVERDUE: its calibration had run out when this run was made' : ''}`;
-    return { role, overdue: Boolean(i.overdue), missing: false, text };
-  });
+  if ('gravity' in equipment) lines.push(gravitySurveyLine(equipment.gravity, cert.gravity));
+  return lines;
 }
 
-/** The site's gravity and how it was obtained. */
+function gravitySurveyLine(survey, gravity) {
+  const role = 'Gravity survey';
+  if (!survey) {
+    return gravity?.source === 'normal_gravity'
+      ? { role, overdue: false, missing: false, text: 'none: the site\'s g is computed (WGS-84 normal gravity), not measured' }
+      : { role, overdue: false, missing: true, text: 'not stated in the configuration (reference_equipment.gravity)' };
+  }
+  const text = `surveyed by ${survey.surveyed_by}, certificate ${survey.calibration_certificate}; ` +
+    `standard uncertainty of g ${survey.uncertainty}; next survey due ${survey.calibration_due}` +
+    `${survey.overdue ? ' — OVERDUE: the survey was due before this run was made' : ''}`;
+  return { role, overdue: Boolean(survey.overdue), missing: false, text };
+}
+
+/** The site's gravity and how it was obtained (with the 1-sigma the calibration used, when stated). */
 export function gravityStatement(g) {
   if (!g) return '—';
   const value = `${num(g.value_mps2, 8)} m/s²`;
+  const sigma = typeof g.sigma_mps2 === 'number' ? `; standard uncertainty ${num(g.sigma_mps2, 2)} m/s²` : '';
   return g.source === 'configured'
-    ? `${value}, configured (measured at the table's axis intersection)`
-    : `${value}, WGS-84 normal gravity formula at latitude ${num(g.latitude_deg, 6)}°, height ${num(g.height_m, 4)} m`;
+    ? `${value}, configured (measured at the table's axis intersection)${sigma}`
+    : `${value}, WGS-84 normal gravity formula at latitude ${num(g.latitude_deg, 6)}°, height ${num(g.height_m, 4)} m${sigma}`;
 }
 
 /** The uncertainty statement beside the coefficient table. */

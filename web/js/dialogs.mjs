@@ -3,14 +3,16 @@
 import { h, allowedCommands } from './format.mjs';
 import { post } from './api.mjs';
 import { isOperator } from './session.mjs';
+import { overdueStartQuestion } from './equipment.mjs';
 
 /**
  * A modal question. Resolves {ok, reason}. `reason: true` offers a free-text reason that the
  * daemon stores with the transition.
  */
-export function confirmDialog({ title, body, confirmLabel = 'OK', danger = false, reason = false }) {
+export function confirmDialog({ title, body, confirmLabel = 'OK', danger = false, reason = false,
+  reasonPlaceholder = 'optional, kept with the campaign' }) {
   return new Promise((resolve) => {
-    const reasonInput = reason ? h('input', { type: 'text', id: 'confirm-reason', maxlength: 500, placeholder: 'optional, kept with the campaign' }) : null;
+    const reasonInput = reason ? h('input', { type: 'text', id: 'confirm-reason', maxlength: 500, placeholder: reasonPlaceholder }) : null;
     const ok = h('button', { type: 'submit', class: danger ? 'danger' : 'primary', id: 'confirm-ok' }, confirmLabel);
     const cancel = h('button', { type: 'button', id: 'confirm-cancel' }, 'Cancel');
     const form = h('form', { method: 'dialog' },
@@ -34,6 +36,33 @@ export function confirmDialog({ title, body, confirmLabel = 'OK', danger = false
     dialog.showModal();
     cancel.focus();  // the safe choice has the focus
   });
+}
+
+/**
+ * POST start. When imucald refuses it for reference equipment past its due date (409 with
+ * `overdue`, docs/api.md), asks the operator whether to start anyway and why, and starts again
+ * with the reason as `override_overdue`. Resolves with imucald's reply, or null when the operator
+ * declined or gave no reason (`say` gets a sentence for the page); rejects with any other refusal.
+ */
+export async function startCampaign(id, reason, say) {
+  try {
+    return await post(`/api/campaigns/${id}/start`, reason ? { reason } : {});
+  } catch (e) {
+    const question = e.status === 409 ? overdueStartQuestion(e.body) : null;
+    if (!question) throw e;
+    const answer = await confirmDialog({ title: `Start campaign ${id} with overdue reference equipment?`, body: question,
+      confirmLabel: 'Start anyway — the table will move', danger: true, reason: true,
+      reasonPlaceholder: 'required: why the run may use it (kept in the audit trail)' });
+    if (!answer.ok) {
+      say?.('Not started: reference equipment is past its due date.');
+      return null;
+    }
+    if (!answer.reason) {
+      say?.('Not started: say why the campaign may start with overdue reference equipment (the reason is kept in the audit trail).');
+      return null;
+    }
+    return post(`/api/campaigns/${id}/start`, { ...(reason ? { reason } : {}), override_overdue: answer.reason });
+  }
 }
 
 const COMMANDS = {
@@ -78,7 +107,10 @@ export function commandBar({ getCampaign, onDone }) {
     message.textContent = '';
     buttons[name].disabled = true;
     try {
-      const r = await post(`/api/campaigns/${c.id}/${name}`, reason ? { reason } : {});
+      const r = name === 'start'
+        ? await startCampaign(c.id, reason, (text) => { message.textContent = text; })
+        : await post(`/api/campaigns/${c.id}/${name}`, reason ? { reason } : {});
+      if (!r) return;  // not started: the operator declined the override (the message says so)
       onDone?.(name, r, null);
     } catch (e) {
       message.textContent = `${spec.label}: ${e.message}`;

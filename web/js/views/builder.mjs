@@ -7,7 +7,7 @@
 import { get, post, ApiError } from '../api.mjs';
 import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
-import { confirmDialog } from '../dialogs.mjs';
+import { confirmDialog, startCampaign } from '../dialogs.mjs';
 import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical, campaignFieldLabel, problemForPeople } from '../program_edit.mjs';
 import { SEED_TARGETS, predictionRows, summary, dominantSources, benchRequirements } from '../plan.mjs';
 import { sourceName } from '../budget.mjs';
@@ -866,9 +866,9 @@ export function mount(root, ctx) {
       const created = await post('/api/campaigns', b);
       sessionStorage.removeItem(DRAFT_KEY);
       if (andStart) {
-        try {
-          await post(`/api/campaigns/${created.id}/start`, {});
-        } catch (e) {
+        // (Reference equipment past its due date: the operator is asked for the override's reason.)
+        const started = await startCampaign(created.id, '').catch(() => null);
+        if (!started) {
           ctx.navigate(`#/campaigns/${created.id}`);
           return;
         }

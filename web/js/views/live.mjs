@@ -11,6 +11,7 @@ import { convergencePanel } from '../convergence.mjs';
 import { unitOf } from '../coefficients.mjs';
 import { AXES } from '../live.mjs';
 import { recordingPlots } from '../recording_plots.mjs';
+import { equipmentWarnings } from '../equipment.mjs';
 
 const WINDOWS = [['60', '1 min'], ['600', '10 min'], ['3600', '1 h'], ['Infinity', 'whole run']];
 
@@ -75,10 +76,17 @@ export function mount(root, ctx) {
       h('div', { class: 'flags', id: 'imu-flags' })),
     h('section', { class: 'card small', id: 'estimators-card' }, h('h2', {}, 'Estimators'), h('div', { id: 'estimator-status' })));
 
+  // Reference equipment past its due date or due within a week (GET /api/status
+  // reference_equipment, judged today by imucald): a campaign will not start without an override.
+  const equipmentBanner = h('div', { class: 'equipment-banner', id: 'equipment-banner', role: 'alert', hidden: true });
   // The chamber controller's register map, and whether the maker's manual vouches for it; the
   // table controller's dialect and what it was written from (GET /api/status chamber_map and
-  // table_dialect; none on the in-process simulation).
-  ctx.status().then((s) => {
+  // table_dialect; none on the in-process simulation). Asked afresh: the due dates are today's.
+  ctx.status(true).then((s) => {
+    const warnings = equipmentWarnings(s?.reference_equipment);
+    equipmentBanner.replaceChildren(...warnings.map((w) => h('p', { class: w.overdue ? 'overdue' : 'due-soon', dataset: { instrument: w.instrument } }, w.text)));
+    equipmentBanner.classList.toggle('overdue', warnings.some((w) => w.overdue));
+    equipmentBanner.hidden = warnings.length === 0;
     const td = s?.table_dialect;
     const tel = cards.querySelector('#table-dialect');
     if (td && tel) {
@@ -137,7 +145,7 @@ export function mount(root, ctx) {
     h('p', { class: 'muted', id: 'innovations-note' }),
     h('div', { class: 'conv-grid', id: 'innovations' }));
   const eventsBody = h('tbody', { id: 'events' });
-  root.append(runBox, cards,
+  root.append(equipmentBanner, runBox, cards,
     h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Table, chamber and IMU'), windowSel), plotGrid, recordingBox),
     h('section', { class: 'card' }, h('div', { class: 'section-head' }, h('h2', {}, 'Estimators converging (estimate ± σ over program time)'), convPick), convEl),
     innovationsCard,
