@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <set>
 #include <limits>
 
 #include <boost/url/parse.hpp>
@@ -749,8 +750,12 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   }
   spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
   audit(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
-  // A certificate states its verdict: one that the new limits change is superseded.
+  // A certificate states its verdict: one that the new limits change is superseded. Only units of
+  // the part numbers whose limits changed can have a new verdict (this runs on an HTTP thread).
+  const std::set<std::string> changed = changed_part_numbers(before, limits_.document());
   for (const std::int64_t id : db_.campaigns_with_issued()) {
+    const auto row = db_.campaign(id);
+    if (!row || !row->imu_part_number || !changed.contains(*row->imu_part_number)) continue;
     try {
       issue_certificate(id, "acceptance limits changed by " + who.user);
     } catch (const std::exception& e) {

@@ -166,6 +166,20 @@ json limits_to_json(const std::map<std::string, PartLimits>& limits) {
   return {{"format", "imucal-limits/1"}, {"part_numbers", parts}};
 }
 
+std::set<std::string> changed_part_numbers(const json& before, const json& after) {
+  const auto parts = [](const json& doc) {
+    return doc.is_object() && doc.contains("part_numbers") && doc.at("part_numbers").is_object() ? doc.at("part_numbers")
+                                                                                                  : json::object();
+  };
+  const json a = parts(before), b = parts(after);
+  std::set<std::string> changed;
+  for (const auto& [part_number, limits] : a.items())
+    if (!b.contains(part_number) || b.at(part_number) != limits) changed.insert(part_number);
+  for (const auto& [part_number, limits] : b.items())
+    if (!a.contains(part_number)) changed.insert(part_number);
+  return changed;
+}
+
 json verdict_json(const json& model, const PartLimits& limits, const std::string& source) {
   const auto sigmas = as_map(model.is_object() && model.contains("sigma") ? flat_coefficients(model.at("sigma"))
                                                                            : std::vector<std::pair<std::string, double>>{});

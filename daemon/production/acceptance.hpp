@@ -9,6 +9,7 @@
 
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -46,6 +47,10 @@ struct PartLimits {
 // a limit that is not a positive number, an unknown field).
 std::map<std::string, PartLimits> limits_from_json(const nlohmann::json& file);
 nlohmann::json limits_to_json(const std::map<std::string, PartLimits>& limits);
+
+// The part numbers whose limits differ between two limits documents (imucal-limits/1 as
+// limits_to_json writes them): added, removed or changed. Only their units' verdicts can change.
+std::set<std::string> changed_part_numbers(const nlohmann::json& before, const nlohmann::json& after);
 
 // The verdict of a model against a part number's limits:
 //   {"part_number", "pass", "failures", "limits": source,

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <set>
 
 #include "daemon/production/acceptance.hpp"
 #include "daemon/production/test_report.hpp"
@@ -155,4 +156,19 @@ TEST(Acceptance, AGroupSigmaLimitDoesNotApplyToANoiseTerm) {
   // The others under the group: judged on both limits as before.
   EXPECT_TRUE(row(v.at("coefficients"), "gyro.bias_dph.x")->at("pass").get<bool>());
   EXPECT_EQ(row(v.at("coefficients"), "gyro.noise.bias_instability_dph")->at("reason"), "not determined by this run");
+}
+
+// New limits supersede only the certificates of the part numbers whose limits changed.
+TEST(Acceptance, OnlyThePartNumbersWhoseLimitsChangedAreNamed) {
+  const json before = {{"format", "imucal-limits/1"},
+                       {"part_numbers", {{"A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}},
+                                         {"B", {{"gyro.bias_dph", {{"max_abs", 2.0}}}}},
+                                         {"C", {{"accel.scale_ppm", {{"max_abs", 50.0}}}}}}}};
+  json after = before;
+  after["part_numbers"]["B"]["gyro.bias_dph"]["max_abs"] = 3.0;  // changed
+  after["part_numbers"].erase("C");                              // removed
+  after["part_numbers"]["D"] = {{"gyro.bias_dph", {{"max_abs", 1.0}}}};  // added
+  EXPECT_EQ(changed_part_numbers(before, after), (std::set<std::string>{"B", "C", "D"}));
+  EXPECT_TRUE(changed_part_numbers(before, before).empty());
+  EXPECT_EQ(changed_part_numbers(json::object(), before), (std::set<std::string>{"A", "B", "C"}));
 }

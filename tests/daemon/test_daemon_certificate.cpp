@@ -509,6 +509,11 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   // The same limits again change nothing: nothing is issued.
   ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
   EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
+  // Limits for another part number: these units' certificates are not even looked at.
+  json more = limits;
+  more["part_numbers"]["PN-200"] = {{"gyro.bias_dph", {{"max_abs", 0.5}}}};
+  ASSERT_EQ(d.call("PUT", "/api/limits", more.dump()).status, 200);
+  EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
   EXPECT_EQ(d.call("GET", "/api/certificates/NO-SUCH-1").status, 404);
 
   // A partial run: no certificate until an operator accepts it, then one saying so.
