@@ -82,6 +82,18 @@ void configure(daemon::DaemonConfig& c, const std::string& sequence_file) {
   c.site.gravity_mps2 = 9.81912;
 }
 
+// `imucal ARGS`: its exit status and what it printed (standard output and error).
+std::pair<int, std::string> run_imucal(const std::string& args) {
+  const std::string command = imucaltest::program("imucal") + " " + args + " 2>&1";
+  std::string out;
+  FILE* p = ::popen(command.c_str(), "r");
+  if (!p) return {-1, "popen failed"};
+  char buf[512];
+  while (std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = ::pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
 }  // namespace
 
 TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
@@ -506,6 +518,33 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_TRUE(ca2.at("content").at("campaign").at("verdict").is_object()) << ca2.at("content").dump().substr(0, 600);
   EXPECT_TRUE(signing::verify_document(ca2.at("signed"), lab_key).verified());
   EXPECT_EQ(ca2.at("history").size(), 2u);
+  // Both downloads checked offline by `imucal verify`, as a customer would: verified; a digit
+  // changed, the signature changed or another lab's key, each named as the check that failed.
+  const auto verify = [&](const json& download, const std::string& public_key) {
+    const std::string file = dir + "/download.json";
+    std::ofstream(file) << download.dump(1);
+    return run_imucal("verify '" + file + "' --key '" + public_key + "'");
+  };
+  for (const json* c : {&ca, &ca2}) {
+    const auto [status, out] = verify(c->at("signed"), key_file + ".pub");
+    EXPECT_EQ(status, 0) << out;
+  }
+  json digit = ca2.at("signed");
+  digit["content"]["sequence"] = digit["content"]["sequence"].get<std::int64_t>() + 1;
+  const auto [digit_status, digit_out] = verify(digit, key_file + ".pub");
+  EXPECT_EQ(digit_status, 1) << digit_out;
+  EXPECT_NE(digit_out.find("NOT VERIFIED: the content hash check failed"), std::string::npos) << digit_out;
+  json resigned = ca2.at("signed");
+  std::string value = resigned["signature"]["value"];
+  value[0] = value[0] == 'A' ? 'B' : 'A';
+  resigned["signature"]["value"] = value;
+  const auto [signature_status, signature_out] = verify(resigned, key_file + ".pub");
+  EXPECT_EQ(signature_status, 1) << signature_out;
+  EXPECT_NE(signature_out.find("NOT VERIFIED: the signature check failed"), std::string::npos) << signature_out;
+  signing::write_key_file(dir + "/other-lab.key", signing::generate_key_pair());
+  const auto [other_status, other_out] = verify(ca2.at("signed"), dir + "/other-lab.key.pub");
+  EXPECT_EQ(other_status, 1) << other_out;
+  EXPECT_NE(other_out.find("NOT VERIFIED: the key check failed"), std::string::npos) << other_out;
   // The same limits again change nothing: nothing is issued.
   ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
   EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
@@ -541,16 +580,7 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
 namespace {
 
 // `imucal audit verify DIR`: its exit status and what it printed.
-std::pair<int, std::string> audit_verify(const std::string& data_dir) {
-  const std::string command = imucaltest::program("imucal") + " audit verify '" + data_dir + "' 2>&1";
-  std::string out;
-  FILE* p = ::popen(command.c_str(), "r");
-  if (!p) return {-1, "popen failed"};
-  char buf[512];
-  while (std::fgets(buf, sizeof buf, p)) out += buf;
-  const int status = ::pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+std::pair<int, std::string> audit_verify(const std::string& data_dir) { return run_imucal("audit verify '" + data_dir + "'"); }
 
 }  // namespace
 
