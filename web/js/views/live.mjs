@@ -82,11 +82,16 @@ export function mount(root, ctx) {
   // The chamber controller's register map, and whether the maker's manual vouches for it; the
   // table controller's dialect and what it was written from (GET /api/status chamber_map and
   // table_dialect; none on the in-process simulation). Asked afresh: the due dates are today's.
-  ctx.status(true).then((s) => {
+  const showDueDates = (s) => {
     const warnings = equipmentWarnings(s?.reference_equipment);
     equipmentBanner.replaceChildren(...warnings.map((w) => h('p', { class: w.overdue ? 'overdue' : 'due-soon', dataset: { instrument: w.instrument } }, w.text)));
     equipmentBanner.classList.toggle('overdue', warnings.some((w) => w.overdue));
     equipmentBanner.hidden = warnings.length === 0;
+  };
+  // A live page left open over days (an unattended night, a weekend) asks again every hour.
+  const dueDatesTimer = setInterval(() => ctx.status(true).then(showDueDates).catch(() => {}), 3600 * 1000);
+  ctx.status(true).then((s) => {
+    showDueDates(s);
     const td = s?.table_dialect;
     const tel = cards.querySelector('#table-dialect');
     if (td && tel) {
@@ -382,6 +387,7 @@ export function mount(root, ctx) {
     store.removeEventListener('progress', onProgress);
     store.removeEventListener('run', wholeRunMode);
     clearInterval(recordingTimer);
+    clearInterval(dueDatesTimer);
     recording?.();
     angles.destroy();
     rates.destroy();
