@@ -145,6 +145,20 @@ BEGIN SELECT RAISE(ABORT, 'the audit trail is appended only'); END;
 CREATE TRIGGER IF NOT EXISTS issued_certificate_kept
 BEFORE DELETE ON issued_certificate
 BEGIN SELECT RAISE(ABORT, 'an issued certificate is never deleted'); END;
+-- A certificate's page as printed (issue 35): the bytes the lab's browser rendered from the issued
+-- content when an operator first opened it, with their SHA-256; stored once and kept, so a reprint
+-- years later, by a newer imucal, can be compared with what the customer received.
+CREATE TABLE IF NOT EXISTS issued_page(
+  number TEXT PRIMARY KEY REFERENCES issued_certificate(number),
+  html TEXT NOT NULL,
+  sha256 TEXT NOT NULL,
+  stored_ms INTEGER NOT NULL,
+  stored_by TEXT NOT NULL
+);
+CREATE TRIGGER IF NOT EXISTS issued_page_frozen BEFORE UPDATE ON issued_page
+BEGIN SELECT RAISE(ABORT, 'a stored certificate page never changes'); END;
+CREATE TRIGGER IF NOT EXISTS issued_page_kept BEFORE DELETE ON issued_page
+BEGIN SELECT RAISE(ABORT, 'a stored certificate page is never deleted'); END;
 )sql";
 
 using storage::sql::Statement;
@@ -571,6 +585,28 @@ void DaemonDb::insert_issued(const IssuedCertificateRow& row) {
     s.run();
   }
   txn.commit();
+}
+
+bool DaemonDb::insert_issued_page(const IssuedPageRow& row) {
+  std::lock_guard lock(mutex_);  // one imucald per data directory: nothing else inserts between
+  {
+    Statement stored(db_, "SELECT 1 FROM issued_page WHERE number = ?1");
+    stored.bind(1, row.number);
+    if (stored.step()) return false;
+  }
+  Statement s(db_, "INSERT INTO issued_page(number, html, sha256, stored_ms, stored_by) VALUES (?1, ?2, ?3, ?4, ?5)");
+  s.bind(1, row.number).bind(2, row.html).bind(3, row.sha256).bind(4, row.stored_ms).bind(5, row.stored_by);
+  s.run();
+  return true;
+}
+
+std::optional<IssuedPageRow> DaemonDb::issued_page(const std::string& number, bool with_html) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, with_html ? "SELECT number, html, sha256, stored_ms, stored_by FROM issued_page WHERE number = ?1"
+                             : "SELECT number, '', sha256, stored_ms, stored_by FROM issued_page WHERE number = ?1");
+  s.bind(1, number);
+  if (!s.step()) return std::nullopt;
+  return IssuedPageRow{s.column_text(0), s.column_text(1), s.column_text(2), s.column_int64(3), s.column_text(4)};
 }
 
 std::optional<IssuedCertificateRow> DaemonDb::issued(const std::string& number) {

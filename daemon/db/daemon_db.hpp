@@ -81,6 +81,15 @@ struct IssuedCertificateRow {
   std::string reason;                        // why it was issued ("the run ended", "limits changed ...")
 };
 
+// A certificate's page as printed (HTML, self-contained), stored once.
+struct IssuedPageRow {
+  std::string number;
+  std::string html;    // empty when read without it
+  std::string sha256;  // hex SHA-256 of html
+  std::int64_t stored_ms = 0;
+  std::string stored_by;
+};
+
 struct TransitionRow {
   std::int64_t t_ms = 0;
   std::optional<RunState> from;
@@ -200,6 +209,9 @@ class DaemonDb {
   std::optional<IssuedCertificateRow> current_issued(std::int64_t campaign_id);
   // Every certificate of the campaign, in issue order.
   std::vector<IssuedCertificateRow> issued_history(std::int64_t campaign_id);
+  // A certificate's printed page: stored once (false when one is stored already: it is kept).
+  bool insert_issued_page(const IssuedPageRow& row);
+  std::optional<IssuedPageRow> issued_page(const std::string& number, bool with_html);
   // The campaigns that have a certificate in force.
   std::vector<std::int64_t> campaigns_with_issued();
 

@@ -520,6 +520,10 @@ const std::vector<Api::Route>& Api::routes() {
       {"GET", "/api/campaigns/{id}/report", A::viewer, [](Api& a, const Call& c) { return a.campaign_report(c.id, c.target.query); }},
       {"GET", "/api/certificates/{number}", A::viewer,
        [](Api& a, const Call& c) { return a.certificate_by_number(c.args[0]); }},
+      {"GET", "/api/certificates/{number}/page", A::viewer,
+       [](Api& a, const Call& c) { return a.certificate_page(c.args[0]); }},
+      {"PUT", "/api/certificates/{number}/page", A::operator_,
+       [](Api& a, const Call& c) { return a.store_certificate_page(c.args[0], c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/accept", A::operator_,
        [](Api& a, const Call& c) { return a.campaign_accept(c.id, c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/prompt", A::operator_,
@@ -938,6 +942,10 @@ json statement_of(json content) {
 
 json text_or_null(const std::optional<std::string>& text) { return text ? json(*text) : json(nullptr); }
 
+json page_json(const IssuedPageRow& p) {
+  return {{"number", p.number}, {"sha256", p.sha256}, {"stored", iso8601_utc(p.stored_ms)}, {"stored_by", p.stored_by}};
+}
+
 // Why the run has no certificate (409's text), or empty when it may have one: ended, with a
 // model, counting as its unit's calibration.
 std::string no_certificate_because(const CampaignRow& row) {
@@ -1049,6 +1057,8 @@ json Api::issued_json(const IssuedCertificateRow& c) {
                        {"reason", h.reason},
                        {"superseded_by", text_or_null(h.superseded_by)}});
   out["history"] = history;
+  const auto page = db_.issued_page(c.number, false);
+  out["page"] = page ? page_json(*page) : json(nullptr);
   return out;
 }
 
@@ -1065,6 +1075,43 @@ HttpReply Api::campaign_certificate(std::int64_t id) {
     return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
   }
   return error_reply(409, "campaign " + std::to_string(id) + " has no certificate");
+}
+
+// The page as printed: the browser renders it from the issued content (certificate.mjs) and sends
+// the self-contained HTML once; it must state the certificate's number and content hash, the two
+// things that tie it to the signed record.
+HttpReply Api::store_certificate_page(const std::string& number, const ApiRequest& request, const Principal& who) {
+  const auto c = db_.issued(number);
+  if (!c) return error_reply(404, "no certificate numbered '" + number + "' was issued here");
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  if (!body.is_object() || !body.contains("html") || !body.at("html").is_string())
+    return error_reply(400, "the body must be {\"html\": \"<the page as printed>\"}");
+  std::string html = body.at("html").get<std::string>();
+  if (html.find(c->number) == std::string::npos || html.find(c->content_sha256) == std::string::npos)
+    return error_reply(400, "body.html is not certificate " + c->number +
+                                "'s page: it must state the certificate's number and its content SHA-256");
+  if (const auto stored = db_.issued_page(number, false))
+    return error_reply(409, "certificate " + number + "'s page was stored on " + iso8601_utc(stored->stored_ms) + " by " +
+                                stored->stored_by + " (SHA-256 " + stored->sha256 + "); a stored page never changes");
+  IssuedPageRow page{number, std::move(html), "", now_unix_ms(), who.user};
+  page.sha256 = signing::sha256_hex(page.html);
+  if (!db_.insert_issued_page(page)) return error_reply(409, "certificate " + number + "'s page was stored already");
+  audit(who.user, "certificate.page_stored", number, {{"sha256", page.sha256}, {"bytes", page.html.size()}});
+  return json_reply(201, page_json(page));
+}
+
+HttpReply Api::certificate_page(const std::string& number) {
+  const auto page = db_.issued_page(number, true);
+  if (!page)
+    return error_reply(404, db_.issued(number) ? "certificate " + number + "'s page has not been stored (an operator's first opening of it stores it)"
+                                               : "no certificate numbered '" + number + "' was issued here");
+  HttpReply r;
+  r.body = page->html;
+  r.content_type = "text/html; charset=utf-8";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"certificate-" + file_name_part(number) + ".html\"");
+  return r;
 }
 
 HttpReply Api::certificate_by_number(const std::string& number) {

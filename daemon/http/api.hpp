@@ -110,6 +110,10 @@ class Api {
   // calibration and has none yet); GET /api/certificates/{number}: any one ever issued.
   HttpReply campaign_certificate(std::int64_t id);
   HttpReply certificate_by_number(const std::string& number);
+  // PUT /api/certificates/{number}/page: the page as the browser printed it, stored once;
+  // GET: those bytes.
+  HttpReply store_certificate_page(const std::string& number, const ApiRequest& request, const Principal& who);
+  HttpReply certificate_page(const std::string& number);
   // Issues the campaign's certificate when it counts as a calibration (complete, or accepted) and
   // has a model: a first one, or one superseding the certificate in force when what that states
   // (the verdict under today's limits, the acceptance, the bench) is no longer what is true. Returns

@@ -151,7 +151,8 @@ async function apiCall(method, p, body) {
   const r = await fetch(base + p, { method, headers: { Authorization: `Bearer ${TOKEN}`, 'Content-Type': 'application/json' },
     body: body === undefined ? undefined : JSON.stringify(body) });
   const text = await r.text();
-  return { status: r.status, body: text ? JSON.parse(text) : null };
+  const json = (r.headers.get('content-type') || '').startsWith('application/json');
+  return { status: r.status, body: !text ? null : json ? JSON.parse(text) : text };
 }
 
 // Posts a campaign and starts it; its id.
@@ -514,6 +515,14 @@ try {
     (tds) => [Number(tds[1].textContent), Number(tds[2].textContent)]);
   assert.ok(u1 > 0 && Math.abs(u2 / u1 - 2) < 0.1, `U (k = 2) ${u2} is twice u (k = 1) ${u1}`);
   assert.equal(await cert.$('#certificate-verdict'), null, 'no PASS or FAIL without limits');
+  // The page as first printed, stored once with the issued record; the same bytes ever after.
+  await cert.waitForSelector('#stored-page:not([hidden])');
+  const storedPage = await apiCall('GET', `/api/certificates/${certNumber}/page`);
+  assert.equal(storedPage.status, 200);
+  const storedHtml = storedPage.body;
+  assert.ok(storedHtml.includes(certNumber) && storedHtml.includes('@page') && !storedHtml.includes('<script'), 'the stored page is the certificate, self-contained');
+  const again = await apiCall('PUT', `/api/certificates/${certNumber}/page`, { html: storedHtml });
+  assert.equal(again.status, 409, 'a stored page never changes');
   // Opened again: the same number.
   await cert.reload();
   await cert.waitForSelector('#certificate[data-ready="true"]');

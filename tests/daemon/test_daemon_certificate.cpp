@@ -541,6 +541,24 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   const auto [signature_status, signature_out] = verify(resigned, key_file + ".pub");
   EXPECT_EQ(signature_status, 1) << signature_out;
   EXPECT_NE(signature_out.find("NOT VERIFIED: the signature check failed"), std::string::npos) << signature_out;
+  // The page as printed, stored once: it must be this certificate's; then it never changes.
+  const std::string page_target = "/api/certificates/" + ca2.at("number").get<std::string>() + "/page";
+  EXPECT_EQ(d.call("GET", page_target).status, 404);
+  const std::string html = "<!doctype html><p>" + ca2.at("number").get<std::string>() + " " +
+                           ca2.at("content_sha256").get<std::string>() + "</p>\n";
+  const auto not_it = d.call("PUT", page_target, json{{"html", "<p>" + ca2.at("number").get<std::string>() + "</p>"}}.dump());
+  EXPECT_EQ(not_it.status, 400) << not_it.body;
+  EXPECT_EQ(d.call("PUT", page_target, json{{"html", html}}.dump(), kViewerToken).status, 403);
+  const auto stored = d.call("PUT", page_target, json{{"html", html}}.dump());
+  ASSERT_EQ(stored.status, 201) << stored.body;
+  EXPECT_EQ(json::parse(stored.body).at("sha256"), signing::sha256_hex(html));
+  const auto twice = d.call("PUT", page_target, json{{"html", html + " "}}.dump());
+  EXPECT_EQ(twice.status, 409) << twice.body;
+  EXPECT_NE(twice.body.find("never changes"), std::string::npos) << twice.body;
+  const auto page = d.call("GET", page_target, "", kViewerToken);
+  EXPECT_EQ(page.status, 200);
+  EXPECT_EQ(page.body, html) << "the stored bytes, unchanged";
+  EXPECT_EQ(d.get(certificate_target(a)).at("page").at("sha256"), signing::sha256_hex(html));
   signing::write_key_file(dir + "/other-lab.key", signing::generate_key_pair());
   const auto [other_status, other_out] = verify(ca2.at("signed"), dir + "/other-lab.key.pub");
   EXPECT_EQ(other_status, 1) << other_out;

@@ -94,6 +94,8 @@ class Fuzzer {
       {"GET", "/api/campaigns/{id}/series", nullptr},
       {"GET", "/api/campaigns/{id}/certificate", nullptr},
       {"GET", "/api/certificates/{serial}", nullptr},
+      {"GET", "/api/certificates/{serial}/page", nullptr},
+      {"PUT", "/api/certificates/{serial}/page", R"({"html": "<p>page</p>"})"},
       {"GET", "/api/campaigns/{id}/progress", nullptr},
       {"GET", "/api/campaigns/{id}/recording", nullptr},
       {"GET", "/api/campaigns/{id}/allan", nullptr},

@@ -50,6 +50,38 @@ async function load() {
   const c = record.content;
   render(c.campaign, c.model, { site: c.site, version: c.software?.imucald }, { ...c.bench, number: record.number, issued: record.issued },
     record);
+  await keepPage(record);
+}
+
+// The page as printed, stored once with the issued record (PUT /api/certificates/{number}/page):
+// the first opening by an operator sends it; a viewer's opening leaves it to an operator's. The
+// toolbar then offers the stored bytes, which a later reprint can be compared with.
+async function keepPage(record) {
+  let page = record.page;
+  if (!page) {
+    try {
+      page = await api('PUT', `/api/certificates/${encodeURIComponent(record.number)}/page`, { html: await selfContainedHtml() }, { auth: false });
+    } catch (e) {
+      if (!(e instanceof ApiError) || ![401, 403, 409].includes(e.status)) message.textContent = `The printed page was not stored: ${e.message}`;
+      return;
+    }
+  }
+  const link = document.getElementById('stored-page');
+  link.href = `/api/certificates/${encodeURIComponent(record.number)}/page`;
+  link.title = `The page as first printed, stored ${dateTime(page.stored)} by ${page.stored_by}; SHA-256 ${page.sha256}`;
+  link.dataset.sha256 = page.sha256;
+  link.hidden = false;
+}
+
+// The page as one self-contained file: styles inlined, no scripts, no toolbar.
+async function selfContainedHtml() {
+  const css = await (await fetch('css/certificate.css')).text();
+  const doc = document.documentElement.cloneNode(true);
+  for (const el of doc.querySelectorAll('script, link[rel="stylesheet"], .no-print')) el.remove();
+  const style = document.createElement('style');
+  style.textContent = css;
+  doc.querySelector('head').append(style);
+  return `<!doctype html>\n${doc.outerHTML}\n`;
 }
 
 function coefficientTable(rows, judged) {
@@ -205,13 +237,7 @@ function saveJson() {
 
 async function saveHtml() {
   try {
-    const css = await (await fetch('css/certificate.css')).text();
-    const doc = document.documentElement.cloneNode(true);
-    for (const el of doc.querySelectorAll('script, link[rel="stylesheet"], .no-print')) el.remove();
-    const style = document.createElement('style');
-    style.textContent = css;
-    doc.querySelector('head').append(style);
-    const html = `<!doctype html>\n${doc.outerHTML}\n`;
+    const html = await selfContainedHtml();
     const url = URL.createObjectURL(new Blob([html], { type: 'text/html' }));
     const a = h('a', { href: url, download: `certificate-campaign-${id}.html` });
     document.body.append(a);
