@@ -147,6 +147,32 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.equal(rows[0].group, 'Gyro bias', 'groups in the order of the model');
 });
 
+test("a body-frame model against imucald's comparison: the truth in the model's frame, zeros by definition not judged", () => {
+  const model = { frame: 'body', gyro: { misalignment_arcsec: { xy: 20, xz: 10, yx: -5, yz: 3, zx: 1, zy: 2 } },
+    accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 4, zx: 5, zy: 6 } },
+    sigma: { gyro: { misalignment_arcsec: { xy: 0.1, xz: 0.1, yx: 0.1, yz: 0.1, zx: 0.1, zy: 0.1 } },
+      accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 0.2, zx: 0.2, zy: 0.2 } } } };
+  // What GET /api/campaigns/{id}/truth answers: the truth already turned into the body frame.
+  const comparison = { frame: 'body', truth_frame: 'instrument', converted: true,
+    truth: { frame: 'body', gyro: { misalignment_arcsec: { xy: 20.05, xz: 10, yx: -5, yz: 3, zx: 1, zy: 2 } },
+      accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 4.1, zx: 5, zy: 6 } } },
+    zero_by_definition: ['accel.misalignment_arcsec.xy', 'accel.misalignment_arcsec.xz', 'accel.misalignment_arcsec.yx'],
+    rows: [] };
+  const rows = coefficientRows(model, comparison);
+  const gxy = rows.find((r) => r.name === 'gyro.misalignment_arcsec.xy');
+  assert.ok(Math.abs(gxy.ratio + 0.5) < 1e-9, `the body-frame truth is the one compared (${gxy.ratio})`);
+  assert.ok(Math.abs(rows.find((r) => r.name === 'accel.misalignment_arcsec.yz').ratio + 0.5) < 1e-9);
+  for (const k of ['xy', 'xz', 'yx']) {
+    const r = rows.find((x) => x.name === `accel.misalignment_arcsec.${k}`);
+    assert.equal(r.byDefinition, true, `accel ${k} is zero by definition of the body frame`);
+    assert.deepEqual([r.sigma, r.truth, r.error, r.ratio], [null, null, null, null], 'and not judged (no 0 ± 0)');
+    assert.equal(r.estimated, true, 'still listed');
+  }
+  assert.equal(rows.find((r) => r.name === 'accel.misalignment_arcsec.zy').byDefinition, false);
+  // A plain truth model (no comparison) is still read as a model in the same frame.
+  assert.equal(coefficientRows(model, comparison.truth).find((r) => r.name === 'accel.misalignment_arcsec.xy').byDefinition, false);
+});
+
 test("each stage's contribution to the final model, with stage 3's uncertainty reduction", async () => {
   const { contributionRows, stateOf } = await import('../../web/js/contributions.mjs');
   assert.deepEqual(stateOf('gyro.misalignment_arcsec.yz'), ['gyro_misalignment_rad', 3]);

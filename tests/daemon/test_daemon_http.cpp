@@ -417,10 +417,25 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   EXPECT_EQ(allan.at("gyro_x").at("unit"), "deg/h");
   EXPECT_EQ(allan.at("arw_deg_rth").size(), 3u);
 
+  // What the run cannot give is a 200 saying so (no error in a browser's console, issue 36).
   const auto thermal = op.get_computed(base + "/thermal");
-  EXPECT_EQ(thermal.status, 404);
-  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("not available for this run"), std::string::npos);
-  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("thermal"), std::string::npos);
+  EXPECT_EQ(thermal.status, 200);
+  EXPECT_EQ(thermal.json_body().at("available"), false) << thermal.body;
+  EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("not available for this run"), std::string::npos);
+  EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("thermal"), std::string::npos);
+
+  // The model against the simulation's truth, in the model's frame (stage 1: the instrument
+  // frame, nothing converted, nothing zero by definition).
+  const auto cmp = op.get(base + "/truth");
+  ASSERT_EQ(cmp.status, 200) << cmp.body.substr(0, 500);
+  const json comparison = cmp.json_body();
+  EXPECT_EQ(comparison.at("frame"), "instrument");
+  EXPECT_EQ(comparison.at("truth_frame"), "instrument");
+  EXPECT_EQ(comparison.at("converted"), false);
+  EXPECT_TRUE(comparison.at("zero_by_definition").empty());
+  EXPECT_EQ(comparison.at("truth").at("frame"), "instrument");
+  ASSERT_GE(comparison.at("rows").size(), 27u);
+  EXPECT_EQ(comparison.at("rows").at(0).at("key"), "gyro.bias_dph.x");
 
   const auto evaluation = op.get_computed(base + "/evaluation");
   ASSERT_EQ(evaluation.status, 200) << evaluation.body.substr(0, 500);
