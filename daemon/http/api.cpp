@@ -357,6 +357,10 @@ std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow
 }
 
 json Api::status() {
+  // The truths a simulated campaign may name, for the builder's choice (docs/api.md).
+  json truths = json::array();
+  for (const NamedTruth& t : named_truths(config_))
+    truths.push_back({{"name", t.name}, {"description", t.description}, {"builtin", t.builtin}});
   json limits_table = json::object();
   for (std::size_t a = 0; a < 3; ++a) {
     const auto& l = config_.table_limits.axis[a];
@@ -389,7 +393,8 @@ json Api::status() {
                          {"tolerance_C", config_.chamber.tolerance_C}}},
             {"campaign", {{"max_duration_s", config_.campaign.max_duration_s},
                           {"max_rate_hz", config_.campaign.max_rate_hz},
-                          {"estimators", known_estimators()}}}}}};
+                          {"estimators", known_estimators()}, {"truths", truths},
+                          {"default_truth", config_.sim.truth}}}}}};
 }
 
 // One endpoint. A pattern's segments are literal, or a placeholder: {id} a campaign id (a

@@ -256,6 +256,24 @@ try {
   await page.fill('#c-name', 'browser test: direct-short');
   await page.fill('#c-rate', '50');
   await page.fill('#c-time-scale', '25');
+  // The simulated IMU (issue 36, item 3): said so; its truth chosen by name, a realistic
+  // navigation-grade unit with noise by default, or a model file uploaded from this computer.
+  await waitText(page, '#simulated-imu', /The IMU is simulated/);
+  assert.equal(await page.inputValue('#c-truth-kind'), 'nav-grade', 'the builder starts with the navigation-grade truth');
+  await waitText(page, '#c-truth-description', /navigation-grade FOG IMU with noise/);
+  const truthNames = await page.$$eval('#c-truth-kind option', (os) => os.map((o) => o.value));
+  for (const n of ['ideal', 'nav-grade', 'truth-nav-grade', 'truth-thermal'])
+    assert.ok(truthNames.includes(n), `the builder offers the truth ${n} (${truthNames.join(', ')})`);
+  await page.selectOption('#c-truth-kind', '__upload__');
+  await page.setInputFiles('#c-truth-file', { name: 'not-a-model.json', mimeType: 'application/json', buffer: Buffer.from('{"format": "something else"}') });
+  await waitText(page, '#c-truth-file-error', /not-a-model\.json is not an IMU model/);
+  await page.setInputFiles('#c-truth-file', path.join(repo, 'examples', 'truth-thermal.json'));
+  await waitText(page, '#c-truth-description', /uploaded from this computer/);
+  assert.equal(await page.textContent('#c-truth-file-error'), '', 'an IMU model file is accepted');
+  assert.equal(await page.evaluate(() => JSON.parse(sessionStorage.getItem('imucal.builder.draft') || 'null')?.campaign?.truth?.format), 'imucal-imu-model/1',
+    'the uploaded model goes inline with the campaign');
+  // This campaign's checks (the Allan curve's quantisation, ...) are those of an error-free unit: said so.
+  await page.selectOption('#c-truth-kind', 'ideal');
   await waitText(page, '#verdict', /^Valid/);
   const rateRow = await page.$eval('#segments', (tb) => [...tb.querySelectorAll('tr.segment')].findIndex((tr) => tr.dataset.name === 'rate-z+'));
   assert.ok(rateRow >= 0, 'direct-short has a segment rate-z+');
@@ -639,8 +657,7 @@ try {
   // 300x: the 6 h program runs about 75 s, long enough that stage 3's live plots are still moving
   // when the checks below look at them on a loaded machine (at 1000x the run, 30 s, once ended first).
   await page.fill('#c-time-scale', '300');
-  await page.selectOption('#c-truth-kind', 'path');
-  await page.fill('#c-truth-path', 'truth-nav-grade');
+  await page.selectOption('#c-truth-kind', 'truth-nav-grade');
   await waitText(page, '#verdict', /^Valid/, 30000);
   // The prediction beside the program (issue 16): every coefficient's 1-sigma against the seed's
   // targets, stage 3's where it refines stage 1.

@@ -528,3 +528,23 @@ test('reference equipment: the live page warns a week ahead and the start asks f
   assert.equal(question[0], 'The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31.');
   assert.match(question[1], /audit trail/);
 });
+
+test('the simulated truth in the builder: the names offered, nav-grade by default, an uploaded file checked', async () => {
+  const { truthChoices, defaultTruth, parseTruthFile, truthLabel } = await import('../../web/js/truths.mjs');
+  const offered = [{ name: 'ideal', description: 'error-free', builtin: true }, { name: 'nav-grade', description: 'navigation grade', builtin: true },
+    { name: 'lab-unit', description: 'the model lab-unit.json of the truths folder', builtin: false }];
+  assert.deepEqual(truthChoices(offered).map((t) => t.name), ['ideal', 'nav-grade', 'lab-unit']);
+  assert.deepEqual(truthChoices(undefined).map((t) => t.name), ['ideal'], 'an older imucald: ideal only');
+  assert.equal(defaultTruth(offered), 'nav-grade', 'a realistic unit with noise by default');
+  assert.equal(defaultTruth([{ name: 'ideal' }]), 'ideal');
+  const model = parseTruthFile('{"format": "imucal-imu-model/1", "frame": "instrument", "gyro": {"bias_dph": [0.1, 0, 0]}}', 'unit.json');
+  assert.deepEqual(model.model.gyro.bias_dph, [0.1, 0, 0]);
+  assert.match(parseTruthFile('{"format": "imucal-imu-model/1", "frame": "body"}', 'b.json').error, /b\.json is in the body frame/);
+  assert.match(parseTruthFile('{"format": "x"}', 'x.json').error, /x\.json is not an IMU model/);
+  assert.match(parseTruthFile('not json', 'n.json').error, /n\.json is not JSON/);
+  assert.match(parseTruthFile('[1]', 'a.json').error, /not a JSON object/);
+  assert.match(parseTruthFile('', 'e.json').error, /empty/);
+  assert.match(parseTruthFile('{}' + ' '.repeat(1 << 20), 'big.json').error, /larger than 1 MiB/);
+  assert.equal(truthLabel('nav-grade'), 'nav-grade');
+  assert.match(truthLabel({ format: 'imucal-imu-model/1' }), /uploaded/);
+});

@@ -424,6 +424,14 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("not available for this run"), std::string::npos);
   EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("thermal"), std::string::npos);
 
+  // The truths a campaign may name, for the builder: ideal, the built-in nav-grade; the API's
+  // default stays ideal.
+  const json campaign_limits = op.get("/api/status").json_body().at("limits").at("campaign");
+  EXPECT_EQ(campaign_limits.at("default_truth"), "ideal");
+  std::vector<std::string> truth_names;
+  for (const auto& t : campaign_limits.at("truths")) truth_names.push_back(t.at("name").get<std::string>());
+  EXPECT_EQ(truth_names, (std::vector<std::string>{"ideal", "nav-grade"}));
+
   // The model against the simulation's truth, in the model's frame (stage 1: the instrument
   // frame, nothing converted, nothing zero by definition).
   const auto cmp = op.get(base + "/truth");

@@ -441,7 +441,7 @@ export function mount(root, ctx) {
     const right = rows.filter((r) => !left.includes(r));
     const bads = rows.filter((r) => r.ratio !== null && Math.abs(r.ratio) > 3).length;
     const frame = model.frame || 'instrument';
-    const zeros = rows.filter((r) => r.byDefinition).map((r) => r.name.split('.').slice(1).join('.'));
+    const zeros = rows.filter((r) => r.byDefinition).map((r) => r.name);
     return h('div', { class: 'coefficients' },
       h('h3', {}, `Coefficients (${frame} frame)`),
       withTruth ? h('p', { class: bads ? 'result-bad' : 'result-ok', id: 'truth-verdict', dataset: { frame: truth.frame, truthFrame: truth.truth_frame } },
