@@ -566,6 +566,12 @@ try {
   await waitText(page, '#run-title', /Nothing runs/);
   assert.equal((await page.textContent('#imu-frames')).trim(), '—', 'no frame count of the last run');
   assert.equal((await page.textContent('#estimator-status')).trim(), '—', 'no estimator of the last run');
+  // The run that ended is kept (issue 36, item 2): its final state, a link to its results, its plots.
+  await waitText(page, '#finished-run', new RegExp(`The last run, campaign ${id} .*has ended: done\\. See the results of campaign ${id}`));
+  assert.equal(await page.getAttribute('#finished-run-link', 'href'), `#/campaigns/${id}`);
+  assert.ok(await page.evaluate((cid) => window.imucal.store.finished?.id === cid && window.imucal.store.angles.view(Infinity)[0].length > 0
+    && window.imucal.store.frameRate.view(Infinity)[0].length > 0, id), 'its plots, the frame rate included, are still drawn');
+  await shot(page, '08c-live-finished-run');
   // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
   await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
   log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');

@@ -548,3 +548,33 @@ test('the simulated truth in the builder: the names offered, nav-grade by defaul
   assert.equal(truthLabel('nav-grade'), 'nav-grade');
   assert.match(truthLabel({ format: 'imucal-imu-model/1' }), /uploaded/);
 });
+
+test('the live store keeps a finished run (its plots, convergence and final state) until another starts', async () => {
+  const realFetch = globalThis.fetch;
+  // /progress of a run: none here (the live messages fill the plots).
+  globalThis.fetch = async () => ({ ok: false, status: 404, headers: { get: () => 'application/json' }, json: async () => ({ error: 'none' }), text: async () => '{}' });
+  try {
+    const { LiveStore } = await import('../../web/js/live.mjs');
+    const store = new LiveStore();
+    const at = (s) => new Date(Date.UTC(2026, 10, 28, 1, 0, s)).toISOString();
+    const running = (s) => ({ type: 'telemetry', t: at(s), run: { id: 7, name: 'full', state: 'running' }, table: { angle_deg: [s, 0, 0], rate_dps: [0, 0, 0] },
+      imu: { frame_rate_hz: 100 }, estimators: { stage3: { program_time_s: s, estimates: { 'gyro.bias_dph.x': [0.04, 0.001] } } } });
+    for (let s = 0; s < 5; s++) store.ingest(running(s));
+    store.ingest({ type: 'event', campaign: 7, kind: 'transition', from: 'running', to: 'done' });
+    for (let s = 5; s < 9; s++) store.ingest({ type: 'telemetry', t: at(s), run: null, table: { angle_deg: [99, 0, 0], rate_dps: [0, 0, 0] }, imu: { frame_rate_hz: 0 } });
+    assert.deepEqual(store.finished, { id: 7, name: 'full', state: 'done' }, 'the finished run, its final state');
+    assert.equal(store.runId, null);
+    const [times, x] = store.angles.view(Infinity);
+    assert.equal(times.length, 5, 'the run\'s samples kept, the idle bench not drawn over them');
+    assert.equal(x[4], 4);
+    assert.equal(store.frameRate.view(Infinity)[0].length, 5, 'the frame-rate plot keeps the run (not blank)');
+    assert.ok(store.estimators.get('stage3').coefficients.has('gyro.bias_dph.x'), 'and its convergence');
+    // The next run starts empty and forgets the finished one.
+    store.ingest({ type: 'telemetry', t: at(20), run: { id: 8, name: 'next', state: 'running' }, table: { angle_deg: [1, 0, 0], rate_dps: [0, 0, 0] } });
+    assert.equal(store.finished, null);
+    assert.equal(store.angles.view(Infinity)[0].length, 1);
+    assert.equal(store.estimators.size, 0);
+  } finally {
+    globalThis.fetch = realFetch;
+  }
+});
