@@ -292,6 +292,10 @@ export function mount(root, ctx) {
     // The simulated IMU's truth: a name imucald offers (nav-grade by default) or a model file
     // uploaded from this computer, sent inline; never a path on the daemon's machine.
     const choices = truthChoices(limits?.campaign?.truths);
+    // A draft naming a truth imucald does not offer (kept from before): shown as it is, and
+    // imucald's answer names the ones it knows.
+    if (typeof c.truth === 'string' && !choices.some((t) => t.name === c.truth))
+      choices.push({ name: c.truth, description: 'not offered by imucald: choose another', builtin: false });
     const truthSel = h('select', { id: 'c-truth-kind', dataset: { path: 'truth' } },
       ...choices.map((t) => h('option', { value: t.name }, t.name === 'ideal' ? 'ideal (an error-free, noise-free IMU)' : t.name)),
       h('option', { value: UPLOAD }, 'a truth JSON file from this computer…'));
@@ -303,8 +307,7 @@ export function mount(root, ctx) {
         ? (c.truth && typeof c.truth === 'object' ? truthLabel(c.truth) : 'Choose an imucal-imu-model/1 file (instrument frame).')
         : chosen?.description || '';
     };
-    truthSel.value = typeof c.truth === 'object' && c.truth !== null ? UPLOAD
-      : choices.some((t) => t.name === c.truth) ? c.truth : 'ideal';
+    truthSel.value = typeof c.truth === 'object' && c.truth !== null ? UPLOAD : typeof c.truth === 'string' ? c.truth : 'ideal';
     truthFile.hidden = truthSel.value !== UPLOAD;
     describe();
     truthSel.addEventListener('change', () => {
