@@ -14,6 +14,7 @@
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
 #include "core/units.hpp"
+#include "daemon/campaign/builtin_truths.hpp"
 #include "daemon/db/daemon_db.hpp"
 #include "motion_programs/chamber.hpp"
 #include "pipeline/pipeline.hpp"
@@ -746,6 +747,9 @@ void resolve_named_models(DaemonConfig& config) {
   const fs::path dir = fs::path(config.sim.truths_dir).is_absolute() ? fs::path(config.sim.truths_dir)
                                                                      : fs::path(config.data_dir) / config.sim.truths_dir;
   config.sim.truths_dir = dir.string();
+  // The built-in truths first: a file of the folder with the same name replaces one.
+  config.named_models[kBuiltinNavGradeTruth] =
+      imu_model_to_json_text(imu_model_from_json_text(builtin::kNavGradeTruth, "the built-in truth nav-grade"));
   std::error_code ec;
   if (fs::is_directory(dir, ec)) {
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -779,6 +783,23 @@ void resolve_named_models(DaemonConfig& config) {
     throw ConfigError("config.sim.truth '" + truth + "': neither a model of the truths folder " + dir.string() +
                       " nor a readable imucal-imu-model/1 file: " + e.what());
   }
+}
+
+std::vector<NamedTruth> named_truths(const DaemonConfig& config) {
+  std::vector<NamedTruth> out;
+  out.push_back({"ideal", "an error-free, noise-free IMU (nothing to calibrate: every sigma tiny)", true});
+  for (const auto& [name, text] : config.named_models) {
+    const bool builtin = name == kBuiltinNavGradeTruth &&
+                         text == imu_model_to_json_text(imu_model_from_json_text(builtin::kNavGradeTruth, "nav-grade"));
+    std::string description;
+    const json model = json::parse(text, nullptr, false);
+    if (model.is_object() && model.contains("comment") && model.at("comment").is_string())
+      description = model.at("comment").get<std::string>();
+    if (builtin) description = "a realistic navigation-grade FOG IMU with noise (built in: examples/truth-nav-grade.json)";
+    if (description.empty()) description = "the model " + name + ".json of the truths folder";
+    out.push_back({name, description, builtin});
+  }
+  return out;
 }
 
 CampaignCheck check_campaign_text(const std::string& json_text, const DaemonConfig& config) {

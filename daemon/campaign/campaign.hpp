@@ -115,6 +115,18 @@ inline constexpr std::uintmax_t kNamedModelMaxBytes = 1 << 20;
 // sim.truth names neither a model of the folder nor a readable file.
 void resolve_named_models(DaemonConfig& config);
 
+// The truths a simulated campaign may name (GET /api/status, limits.campaign.truths): "ideal" (an
+// error-free, noise-free IMU), the built-in "nav-grade" (examples/truth-nav-grade.json: a realistic
+// navigation-grade FOG IMU with noise, compiled in) and every model of the truths folder (a file
+// NAME.json there replaces a built-in of the same name). Each with what it is, for the builder.
+struct NamedTruth {
+  std::string name;
+  std::string description;
+  bool builtin = false;
+};
+inline constexpr const char* kBuiltinNavGradeTruth = "nav-grade";
+std::vector<NamedTruth> named_truths(const DaemonConfig& config);
+
 class DaemonDb;
 // Stores a checked campaign in state `created` with its unit's identity (the one way the API and
 // `imucal campaign run` store campaigns). Returns its id.

@@ -26,6 +26,7 @@
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/run/alarms.hpp"
 #include "estimators/direct_calibration.hpp"
+#include "estimators/truth_comparison.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
@@ -57,6 +58,27 @@ HttpReply error_reply(int status, const std::string& message, json extra = json:
 }
 
 json opt_time(const std::optional<std::int64_t>& ms) { return ms ? json(iso8601_utc(*ms)) : json(nullptr); }
+
+// A stored model (its own frame) against a stored truth (instrument frame), in the model's frame.
+TruthComparison truth_comparison_of(const std::string& model_text, const std::string& truth_text) {
+  return compare_with_truth(imu_model_from_json_text(model_text, "stored model"),
+                            imu_model_from_json_text(truth_text, "the campaign's truth"));
+}
+
+// GET /api/campaigns/{id}/truth (docs/api.md).
+json truth_comparison_json(const TruthComparison& cmp) {
+  json rows = json::array();
+  json by_definition = json::array();
+  for (const TruthComparisonRow& r : cmp.rows) {
+    if (r.by_definition) by_definition.push_back(r.key);
+    rows.push_back({{"key", r.key}, {"estimate", r.estimate}, {"sigma", r.sigma}, {"truth", r.truth}, {"error", r.error},
+                    {"error_over_sigma", r.error_over_sigma ? json(*r.error_over_sigma) : json(nullptr)},
+                    {"by_definition", r.by_definition}});
+  }
+  return {{"frame", cmp.frame}, {"truth_frame", cmp.truth_frame}, {"converted", cmp.converted},
+          {"truth", json::parse(imu_model_to_json_text(cmp.truth))}, {"zero_by_definition", by_definition},
+          {"rows", rows}};
+}
 
 json parse_or_null(const std::optional<std::string>& text) {
   if (!text) return nullptr;
@@ -336,6 +358,10 @@ std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow
 }
 
 json Api::status() {
+  // The truths a simulated campaign may name, for the builder's choice (docs/api.md).
+  json truths = json::array();
+  for (const NamedTruth& t : named_truths(config_))
+    truths.push_back({{"name", t.name}, {"description", t.description}, {"builtin", t.builtin}});
   json limits_table = json::object();
   for (std::size_t a = 0; a < 3; ++a) {
     const auto& l = config_.table_limits.axis[a];
@@ -368,7 +394,8 @@ json Api::status() {
                          {"tolerance_C", config_.chamber.tolerance_C}}},
             {"campaign", {{"max_duration_s", config_.campaign.max_duration_s},
                           {"max_rate_hz", config_.campaign.max_rate_hz},
-                          {"estimators", known_estimators()}}}}}};
+                          {"estimators", known_estimators()}, {"truths", truths},
+                          {"default_truth", config_.sim.truth}}}}}};
 }
 
 // One endpoint. A pattern's segments are literal, or a placeholder: {id} a campaign id (a
@@ -504,6 +531,7 @@ const std::vector<Api::Route>& Api::routes() {
       {"GET", "/api/campaigns/{id}", A::viewer, [](Api& a, const Call& c) { return a.campaign_detail(c.id); }},
       {"GET", "/api/campaigns/{id}/model", A::viewer,
        [](Api& a, const Call& c) { return a.campaign_model(c.id, c.target.query); }},
+      {"GET", "/api/campaigns/{id}/truth", A::viewer, [](Api& a, const Call& c) { return a.campaign_truth(c.id); }},
       {"GET", "/api/campaigns/{id}/progress", A::viewer, [](Api& a, const Call& c) { return a.campaign_progress(c.id); }},
       {"GET", "/api/campaigns/{id}/recording", A::viewer,
        [](Api& a, const Call& c) { return a.campaign_recording(c.id, c.request.method == "HEAD"); }},
@@ -1145,6 +1173,21 @@ void Api::on_run_event(const json& event) {
   }
 }
 
+// The campaign's model against its simulation's truth, the truth turned into the model's frame
+// (estimators/truth_comparison.hpp, the comparison `imucal compare` prints).
+HttpReply Api::campaign_truth(std::int64_t id) {
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no campaign " + std::to_string(id));
+  if (!row->model_json)
+    return error_reply(404, "campaign " + std::to_string(id) + " has no model (state " +
+                                std::string(to_string(row->state)) + ")");
+  const json spec = json::parse(row->spec_json, nullptr, false);
+  if (!spec.is_object() || !spec.contains("truth") || !spec.at("truth").is_object())
+    return error_reply(404, "campaign " + std::to_string(id) + " has no simulated truth");
+  const TruthComparison cmp = truth_comparison_of(*row->model_json, spec.at("truth").dump());
+  return json_reply(200, truth_comparison_json(cmp));
+}
+
 HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
@@ -1555,8 +1598,9 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
         body = evaluation_from_run(path, variants, progress);
       }
     } catch (const NotAvailable& e) {
-      status = 404;
-      body = {{"error", e.what()}};
+      // What this run cannot give is an answer, not an error (docs/api.md): the results page asks
+      // every run, and a 404 would be logged as an error in every browser's console.
+      body = {{"available", false}, {"reason", e.what()}};
     }
     return {status, body};
   };

@@ -84,6 +84,7 @@ class Api {
   // GET /api/campaigns/{id}'s body, which the test report is also made from.
   nlohmann::json detail_json(const CampaignRow& row);
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
+  HttpReply campaign_truth(std::int64_t id);
   HttpReply campaign_progress(std::int64_t id);
   // The recording bundle as a tar file, built once per run under DATA_DIR/exports/.
   HttpReply campaign_recording(std::int64_t id, bool head);

@@ -147,6 +147,32 @@ test('a model flattens to the names the live estimates use, with units', () => {
   assert.equal(rows[0].group, 'Gyro bias', 'groups in the order of the model');
 });
 
+test("a body-frame model against imucald's comparison: the truth in the model's frame, zeros by definition not judged", () => {
+  const model = { frame: 'body', gyro: { misalignment_arcsec: { xy: 20, xz: 10, yx: -5, yz: 3, zx: 1, zy: 2 } },
+    accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 4, zx: 5, zy: 6 } },
+    sigma: { gyro: { misalignment_arcsec: { xy: 0.1, xz: 0.1, yx: 0.1, yz: 0.1, zx: 0.1, zy: 0.1 } },
+      accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 0.2, zx: 0.2, zy: 0.2 } } } };
+  // What GET /api/campaigns/{id}/truth answers: the truth already turned into the body frame.
+  const comparison = { frame: 'body', truth_frame: 'instrument', converted: true,
+    truth: { frame: 'body', gyro: { misalignment_arcsec: { xy: 20.05, xz: 10, yx: -5, yz: 3, zx: 1, zy: 2 } },
+      accel: { misalignment_arcsec: { xy: 0, xz: 0, yx: 0, yz: 4.1, zx: 5, zy: 6 } } },
+    zero_by_definition: ['accel.misalignment_arcsec.xy', 'accel.misalignment_arcsec.xz', 'accel.misalignment_arcsec.yx'],
+    rows: [] };
+  const rows = coefficientRows(model, comparison);
+  const gxy = rows.find((r) => r.name === 'gyro.misalignment_arcsec.xy');
+  assert.ok(Math.abs(gxy.ratio + 0.5) < 1e-9, `the body-frame truth is the one compared (${gxy.ratio})`);
+  assert.ok(Math.abs(rows.find((r) => r.name === 'accel.misalignment_arcsec.yz').ratio + 0.5) < 1e-9);
+  for (const k of ['xy', 'xz', 'yx']) {
+    const r = rows.find((x) => x.name === `accel.misalignment_arcsec.${k}`);
+    assert.equal(r.byDefinition, true, `accel ${k} is zero by definition of the body frame`);
+    assert.deepEqual([r.sigma, r.truth, r.error, r.ratio], [null, null, null, null], 'and not judged (no 0 ± 0)');
+    assert.equal(r.estimated, true, 'still listed');
+  }
+  assert.equal(rows.find((r) => r.name === 'accel.misalignment_arcsec.zy').byDefinition, false);
+  // A plain truth model (no comparison) is still read as a model in the same frame.
+  assert.equal(coefficientRows(model, comparison.truth).find((r) => r.name === 'accel.misalignment_arcsec.xy').byDefinition, false);
+});
+
 test("each stage's contribution to the final model, with stage 3's uncertainty reduction", async () => {
   const { contributionRows, stateOf } = await import('../../web/js/contributions.mjs');
   assert.deepEqual(stateOf('gyro.misalignment_arcsec.yz'), ['gyro_misalignment_rad', 3]);
@@ -501,4 +527,54 @@ test('reference equipment: the live page warns a week ahead and the start asks f
     { instrument: 'table', identity: 'Acme Motion ATS-3, serial T-0815', serial: 'T-0815', certificate: 'DKD-1', calibration_due: '2020-01-31' }] });
   assert.equal(question[0], 'The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31.');
   assert.match(question[1], /audit trail/);
+});
+
+test('the simulated truth in the builder: the names offered, nav-grade by default, an uploaded file checked', async () => {
+  const { truthChoices, defaultTruth, parseTruthFile, truthLabel } = await import('../../web/js/truths.mjs');
+  const offered = [{ name: 'ideal', description: 'error-free', builtin: true }, { name: 'nav-grade', description: 'navigation grade', builtin: true },
+    { name: 'lab-unit', description: 'the model lab-unit.json of the truths folder', builtin: false }];
+  assert.deepEqual(truthChoices(offered).map((t) => t.name), ['ideal', 'nav-grade', 'lab-unit']);
+  assert.deepEqual(truthChoices(undefined).map((t) => t.name), ['ideal'], 'an older imucald: ideal only');
+  assert.equal(defaultTruth(offered), 'nav-grade', 'a realistic unit with noise by default');
+  assert.equal(defaultTruth([{ name: 'ideal' }]), 'ideal');
+  const model = parseTruthFile('{"format": "imucal-imu-model/1", "frame": "instrument", "gyro": {"bias_dph": [0.1, 0, 0]}}', 'unit.json');
+  assert.deepEqual(model.model.gyro.bias_dph, [0.1, 0, 0]);
+  assert.match(parseTruthFile('{"format": "imucal-imu-model/1", "frame": "body"}', 'b.json').error, /b\.json is in the body frame/);
+  assert.match(parseTruthFile('{"format": "x"}', 'x.json').error, /x\.json is not an IMU model/);
+  assert.match(parseTruthFile('not json', 'n.json').error, /n\.json is not JSON/);
+  assert.match(parseTruthFile('[1]', 'a.json').error, /not a JSON object/);
+  assert.match(parseTruthFile('', 'e.json').error, /empty/);
+  assert.match(parseTruthFile('{}' + ' '.repeat(1 << 20), 'big.json').error, /larger than 1 MiB/);
+  assert.equal(truthLabel('nav-grade'), 'nav-grade');
+  assert.match(truthLabel({ format: 'imucal-imu-model/1' }), /uploaded/);
+});
+
+test('the live store keeps a finished run (its plots, convergence and final state) until another starts', async () => {
+  const realFetch = globalThis.fetch;
+  // /progress of a run: none here (the live messages fill the plots).
+  globalThis.fetch = async () => ({ ok: false, status: 404, headers: { get: () => 'application/json' }, json: async () => ({ error: 'none' }), text: async () => '{}' });
+  try {
+    const { LiveStore } = await import('../../web/js/live.mjs');
+    const store = new LiveStore();
+    const at = (s) => new Date(Date.UTC(2026, 10, 28, 1, 0, s)).toISOString();
+    const running = (s) => ({ type: 'telemetry', t: at(s), run: { id: 7, name: 'full', state: 'running' }, table: { angle_deg: [s, 0, 0], rate_dps: [0, 0, 0] },
+      imu: { frame_rate_hz: 100 }, estimators: { stage3: { program_time_s: s, estimates: { 'gyro.bias_dph.x': [0.04, 0.001] } } } });
+    for (let s = 0; s < 5; s++) store.ingest(running(s));
+    store.ingest({ type: 'event', campaign: 7, kind: 'transition', from: 'running', to: 'done' });
+    for (let s = 5; s < 9; s++) store.ingest({ type: 'telemetry', t: at(s), run: null, table: { angle_deg: [99, 0, 0], rate_dps: [0, 0, 0] }, imu: { frame_rate_hz: 0 } });
+    assert.deepEqual(store.finished, { id: 7, name: 'full', state: 'done' }, 'the finished run, its final state');
+    assert.equal(store.runId, null);
+    const [times, x] = store.angles.view(Infinity);
+    assert.equal(times.length, 5, 'the run\'s samples kept, the idle bench not drawn over them');
+    assert.equal(x[4], 4);
+    assert.equal(store.frameRate.view(Infinity)[0].length, 5, 'the frame-rate plot keeps the run (not blank)');
+    assert.ok(store.estimators.get('stage3').coefficients.has('gyro.bias_dph.x'), 'and its convergence');
+    // The next run starts empty and forgets the finished one.
+    store.ingest({ type: 'telemetry', t: at(20), run: { id: 8, name: 'next', state: 'running' }, table: { angle_deg: [1, 0, 0], rate_dps: [0, 0, 0] } });
+    assert.equal(store.finished, null);
+    assert.equal(store.angles.view(Infinity)[0].length, 1);
+    assert.equal(store.estimators.size, 0);
+  } finally {
+    globalThis.fetch = realFetch;
+  }
 });

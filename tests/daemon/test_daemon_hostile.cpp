@@ -17,8 +17,10 @@
 #include <gtest/gtest.h>
 
 #include "core/units.hpp"
+#include "core/imu_model.hpp"
 #include "daemon/analysis/analysis_jobs.hpp"
 #include "service_fixture.hpp"
+#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -55,7 +57,23 @@ TEST(Campaign, ModelsAreNamedNeverPaths) {
   std::ofstream(dir + "/truths/broken.json") << "{";
   ASSERT_EQ(::mkfifo((dir + "/truths/fifo.json").c_str(), 0600), 0);  // would block a reader
   daemon::resolve_named_models(config);
-  EXPECT_EQ(config.named_models.size(), 1u) << "the FIFO and the broken file are skipped";
+  EXPECT_EQ(config.named_models.size(), 2u) << "the built-in nav-grade and nav: the FIFO and the broken file are skipped";
+  // The built-in realistic truth (issue 36, item 3): examples/truth-nav-grade.json, noise included.
+  const auto builtin = daemon::check_campaign(json{{"name", "x"}, {"program", "direct-short"}, {"truth", "nav-grade"}}, config);
+  ASSERT_TRUE(builtin.spec) << builtin.problems.front();
+  EXPECT_EQ(builtin.spec->truth.gyro.bias_radps, read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json").gyro.bias_radps);
+  EXPECT_GT(builtin.spec->truth.gyro.noise.arw_rad_rts, 0.0);
+  EXPECT_GT(builtin.spec->truth.accel.noise.vrw_mps_rts, 0.0);
+  const auto truths = daemon::named_truths(config);
+  ASSERT_EQ(truths.size(), 3u);
+  EXPECT_EQ(truths[0].name, "ideal");
+  EXPECT_EQ(truths[1].name, "nav");
+  EXPECT_EQ(truths[2].name, "nav-grade");
+  EXPECT_TRUE(truths[2].builtin);
+  EXPECT_FALSE(truths[1].builtin);
+  EXPECT_NE(truths[2].description.find("navigation-grade"), std::string::npos) << truths[2].description;
+  // The API's default stays ideal (many tests rely on it); the builder sends nav-grade by name.
+  EXPECT_EQ(config.sim.truth, "ideal");
   const auto named = daemon::check_campaign(json{{"name", "x"}, {"program", "direct-short"}, {"truth", "nav"}}, config);
   ASSERT_TRUE(named.spec) << named.problems.front();
   EXPECT_NEAR(named.spec->truth.gyro.bias_radps.x(), 0.5 * units::kDphToRadps, 1e-15);

@@ -417,10 +417,33 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   EXPECT_EQ(allan.at("gyro_x").at("unit"), "deg/h");
   EXPECT_EQ(allan.at("arw_deg_rth").size(), 3u);
 
+  // What the run cannot give is a 200 saying so (no error in a browser's console, issue 36).
   const auto thermal = op.get_computed(base + "/thermal");
-  EXPECT_EQ(thermal.status, 404);
-  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("not available for this run"), std::string::npos);
-  EXPECT_NE(thermal.json_body().at("error").get<std::string>().find("thermal"), std::string::npos);
+  EXPECT_EQ(thermal.status, 200);
+  EXPECT_EQ(thermal.json_body().at("available"), false) << thermal.body;
+  EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("not available for this run"), std::string::npos);
+  EXPECT_NE(thermal.json_body().at("reason").get<std::string>().find("thermal"), std::string::npos);
+
+  // The truths a campaign may name, for the builder: ideal, the built-in nav-grade; the API's
+  // default stays ideal.
+  const json campaign_limits = op.get("/api/status").json_body().at("limits").at("campaign");
+  EXPECT_EQ(campaign_limits.at("default_truth"), "ideal");
+  std::vector<std::string> truth_names;
+  for (const auto& t : campaign_limits.at("truths")) truth_names.push_back(t.at("name").get<std::string>());
+  EXPECT_EQ(truth_names, (std::vector<std::string>{"ideal", "nav-grade"}));
+
+  // The model against the simulation's truth, in the model's frame (stage 1: the instrument
+  // frame, nothing converted, nothing zero by definition).
+  const auto cmp = op.get(base + "/truth");
+  ASSERT_EQ(cmp.status, 200) << cmp.body.substr(0, 500);
+  const json comparison = cmp.json_body();
+  EXPECT_EQ(comparison.at("frame"), "instrument");
+  EXPECT_EQ(comparison.at("truth_frame"), "instrument");
+  EXPECT_EQ(comparison.at("converted"), false);
+  EXPECT_TRUE(comparison.at("zero_by_definition").empty());
+  EXPECT_EQ(comparison.at("truth").at("frame"), "instrument");
+  ASSERT_GE(comparison.at("rows").size(), 27u);
+  EXPECT_EQ(comparison.at("rows").at(0).at("key"), "gyro.bias_dph.x");
 
   const auto evaluation = op.get_computed(base + "/evaluation");
   ASSERT_EQ(evaluation.status, 200) << evaluation.body.substr(0, 500);

@@ -87,24 +87,32 @@ export function orderOf(name) {
 }
 
 /**
- * Rows for the result table: [{name, group, unit, estimate, sigma, truth, error, ratio}] from the
- * model (with its sigma section) and, in a simulated run, the truth model.
+ * Rows for the result table: [{name, group, unit, estimate, sigma, truth, error, ratio,
+ * byDefinition}] from the model (with its sigma section) and, in a simulated run, the truth IN
+ * THE MODEL'S FRAME: imucald's comparison (GET /api/campaigns/{id}/truth: {frame, truth,
+ * zero_by_definition, rows}), which turned the truth into the model's frame, or a truth model
+ * already in that frame. A coefficient that is zero by the frame's definition (body frame:
+ * accelerometer xy, xz, yx) has no truth, error or ratio: it is not judged.
  */
 export function coefficientRows(model, truth) {
   const est = flatten(model);
   const sig = flatten(model?.sigma);
-  const tru = truth && typeof truth === 'object' ? flatten(truth) : null;
+  const comparison = truth && typeof truth === 'object' && Array.isArray(truth.rows) ? truth : null;
+  const truthModel = comparison ? comparison.truth : truth;
+  const tru = truthModel && typeof truthModel === 'object' ? flatten(truthModel) : null;
+  const byDefinition = new Set(comparison?.zero_by_definition || []);
   const rows = [];
   for (const [name, estimate] of est) {
     const isNoise = name.includes('.noise.');
-    const sigma = sig.has(name) ? sig.get(name) : null;
-    const t = tru && tru.has(name) ? tru.get(name) : null;
+    const zero = byDefinition.has(name);
+    const sigma = sig.has(name) && !zero ? sig.get(name) : null;
+    const t = tru && tru.has(name) && !zero ? tru.get(name) : null;
     const error = t === null ? null : estimate - t;
     const ratio = error !== null && sigma > 0 ? error / sigma : null;
     // Lever arms and delays the stage did not estimate come as zeros with a zero sigma.
-    const estimated = isNoise || sigma === null ? estimate !== 0 || isNoise : !(sigma === 0 && estimate === 0);
+    const estimated = zero || (isNoise || sigma === null ? estimate !== 0 || isNoise : !(sigma === 0 && estimate === 0));
     rows.push({ name, group: groupOf(name)?.title || (isNoise ? 'Noise' : 'Other'), unit: unitOf(name),
-      estimate, sigma, truth: t, error, ratio, estimated });
+      estimate, sigma, truth: t, error, ratio, estimated, byDefinition: zero });
   }
   rows.sort((a, b) => orderOf(a.name) - orderOf(b.name) || 0);
   return rows;

@@ -171,6 +171,9 @@ export class LiveStore extends EventTarget {
     this.latest = null;
     this.runId = null;
     this.runName = null;
+    // The run that ended last, kept until another starts: {id, name, state} (null: none seen).
+    this.finished = null;
+    this.lastStates = new Map();  // campaign id -> the state its last transition event gave
     const opts = { recentCapacity: 6000, historyCapacity: 2000 };  // 10 min at 10 Hz; the whole run
     this.angles = new Series(3, opts);
     this.rates = new Series(3, opts);
@@ -201,16 +204,29 @@ export class LiveStore extends EventTarget {
     const id = run ? run.id : null;
     if (id !== this.runId) {
       const previous = this.runId;
+      const previousName = this.runName;
       this.runId = id;
       this.runName = run ? run.name : null;
-      // One campaign's plots never carry another's: each run (and the idle bench after it)
-      // starts empty; the whole run comes back from its recording (views/live.mjs).
-      for (const s of [this.angles, this.rates, this.chamber, this.frameRate]) s.clear();
-      this.estimators.clear();
+      if (id === null && previous !== null) {
+        // The run ended: the page keeps it (its plots, convergence and last state, with a link to
+        // its results) until another run starts; the idle bench is not drawn over it.
+        this.finished = { id: previous, name: previousName, state: this.finishedState(previous) };
+      } else {
+        // One campaign's plots never carry another's: each run starts empty; the whole run
+        // comes back from its recording (views/live.mjs).
+        for (const s of [this.angles, this.rates, this.chamber, this.frameRate]) s.clear();
+        this.estimators.clear();
+        this.finished = null;
+      }
       if (id !== null) this.loadProgress(id);
       this.dispatchEvent(new CustomEvent('run', { detail: { id, previous } }));
     }
     this.latest = m;
+    // A finished run's plots stand as it left them (their time axis the run's).
+    if (id === null && this.finished) {
+      this.dispatchEvent(new CustomEvent('telemetry', { detail: m }));
+      return;
+    }
     const tb = m.table || {};
     if (Array.isArray(tb.angle_deg)) this.angles.push(t, tb.angle_deg);
     if (Array.isArray(tb.rate_dps)) this.rates.push(t, tb.rate_dps);
@@ -224,7 +240,17 @@ export class LiveStore extends EventTarget {
     this.dispatchEvent(new CustomEvent('telemetry', { detail: m }));
   }
 
+  // The last state a transition event gave the run `id` (its final one once it has ended).
+  finishedState(id) {
+    return this.lastStates.get(id) ?? null;
+  }
+
   ingestEvent(m) {
+    if (m.kind === 'transition' && Number.isInteger(m.campaign) && typeof m.to === 'string') {
+      this.lastStates.set(m.campaign, m.to);
+      if (this.lastStates.size > 50) this.lastStates.delete(this.lastStates.keys().next().value);
+      if (this.finished && this.finished.id === m.campaign) this.finished.state = m.to;
+    }
     this.events.push(m);
     this.dispatchEvent(new CustomEvent('event', { detail: m }));
   }

@@ -11,6 +11,10 @@ import { confirmDialog, startCampaign } from '../dialogs.mjs';
 import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical, campaignFieldLabel, problemForPeople } from '../program_edit.mjs';
 import { SEED_TARGETS, predictionRows, summary, dominantSources, benchRequirements } from '../plan.mjs';
 import { sourceName } from '../budget.mjs';
+import { truthChoices, defaultTruth, parseTruthFile, truthLabel } from '../truths.mjs';
+
+// The truth select's choice that uploads a model file.
+const UPLOAD = '__upload__';
 
 const DRAFT_KEY = 'imucal.builder.draft';
 // The prediction's unit noise and targets outlive a draft: they describe the lab's units.
@@ -25,6 +29,7 @@ export function mount(root, ctx) {
   let programs = [];
   let units = [];            // GET /api/imus: the serials already known, offered as you type
   let limits = null;
+  let devices = null;  // GET /api/status: sim, sim-wire or real
   let draft = null;          // {template, modified, campaign: {...}, program: {...}}
   let fieldErrors = new Map();  // input id -> message (client-side)
   let validation = { state: 'idle', problems: [], duration_s: null, segments: [] };
@@ -118,6 +123,7 @@ export function mount(root, ctx) {
       programs = p.programs || [];
       loadUnits();
       limits = status.limits || null;
+      devices = status.devices || null;
       clear(templateSelect).append(...programs.map((pr) => h('option', { value: pr.name }, `${pr.name} (${duration(pr.duration_s)})`)));
       const saved = readDraft();
       const wanted = ctx.params.template;
@@ -176,7 +182,7 @@ export function mount(root, ctx) {
         rate_hz: 100,
         time_scale: 10,
         seed: 1,
-        truth: 'ideal',
+        truth: defaultTruth(limits?.campaign?.truths),
         // A thermal program brings its chamber profile; the others hold the safe set point.
         chamber: p.chamber ? structuredClone(p.chamber)
           : { setpoint_C: limits?.chamber?.safe_setpoint_C ?? 25, tolerance_C: limits?.chamber?.tolerance_C ?? 2, steps: [] },
@@ -283,20 +289,46 @@ export function mount(root, ctx) {
       return fieldRow(campaignFieldLabel(key), el, key, hint);
     };
     const maxRate = limits?.campaign?.max_rate_hz;
+    // The simulated IMU's truth: a name imucald offers (nav-grade by default) or a model file
+    // uploaded from this computer, sent inline; never a path on the daemon's machine.
+    const choices = truthChoices(limits?.campaign?.truths);
+    // A draft naming a truth imucald does not offer (kept from before): shown as it is, and
+    // imucald's answer names the ones it knows.
+    if (typeof c.truth === 'string' && !choices.some((t) => t.name === c.truth))
+      choices.push({ name: c.truth, description: 'not offered by imucald: choose another', builtin: false });
     const truthSel = h('select', { id: 'c-truth-kind', dataset: { path: 'truth' } },
-      h('option', { value: 'ideal' }, 'ideal (an error-free IMU)'), h('option', { value: 'path' }, 'a named truth of the daemon\'s truths folder'));
-    const truthPath = input('c-truth-path', 'truth', typeof c.truth === 'string' && c.truth !== 'ideal' ? c.truth : '', { type: 'text', placeholder: 'name, e.g. nav-grade' });
-    truthSel.value = c.truth === 'ideal' || c.truth === undefined ? 'ideal' : 'path';
-    truthPath.hidden = truthSel.value === 'ideal';
-    const onTruth = () => {
-      truthPath.hidden = truthSel.value === 'ideal';
-      if (truthSel.value === 'ideal') setCampaign('truth', 'ideal', null, truthPath);
-      else setCampaign('truth', truthPath.value.trim(), truthPath.value.trim() ? (/[\/\\]/.test(truthPath.value) ? 'A name, not a path: the daemon reads its truths folder only (docs/api.md).' : null) : 'Enter the name of a truth (a model file NAME.json in the daemon\'s truths folder).', truthPath);
+      ...choices.map((t) => h('option', { value: t.name }, t.name === 'ideal' ? 'ideal (an error-free, noise-free IMU)' : t.name)),
+      h('option', { value: UPLOAD }, 'a truth JSON file from this computer…'));
+    const truthFile = h('input', { id: 'c-truth-file', type: 'file', accept: '.json,application/json', 'aria-label': 'truth file', dataset: { path: 'truth' } });
+    const truthNote = h('span', { class: 'hint', id: 'c-truth-description' });
+    const describe = () => {
+      const chosen = choices.find((t) => t.name === truthSel.value);
+      truthNote.textContent = truthSel.value === UPLOAD
+        ? (c.truth && typeof c.truth === 'object' ? truthLabel(c.truth) : 'Choose an imucal-imu-model/1 file (instrument frame).')
+        : chosen?.description || '';
     };
-    truthSel.addEventListener('change', onTruth);
-    truthPath.addEventListener('input', onTruth);
-    const truthField = h('div', { class: 'field', dataset: { field: 'truth' } }, h('label', { for: 'c-truth-kind' }, 'truth (simulation)'),
-      truthSel, truthPath, h('div', { class: 'field-error', id: 'c-truth-path-error', role: 'alert' }));
+    truthSel.value = typeof c.truth === 'object' && c.truth !== null ? UPLOAD : typeof c.truth === 'string' ? c.truth : 'ideal';
+    truthFile.hidden = truthSel.value !== UPLOAD;
+    describe();
+    truthSel.addEventListener('change', () => {
+      truthFile.hidden = truthSel.value !== UPLOAD;
+      if (truthSel.value !== UPLOAD) setCampaign('truth', truthSel.value, null, truthFile);
+      else if (!(c.truth && typeof c.truth === 'object')) setError(truthFile, 'Choose a truth file to upload.');
+      describe();
+    });
+    truthFile.addEventListener('change', async () => {
+      const file = truthFile.files?.[0];
+      if (!file) return;
+      const r = parseTruthFile(await file.text(), file.name);
+      if (destroyed) return;
+      setCampaign('truth', r.model, r.error || null, truthFile);
+      describe();
+    });
+    const simulatedNote = (devices || '').startsWith('sim')
+      ? h('p', { class: 'muted', id: 'simulated-imu' }, `The IMU is simulated (devices: ${devices}): its errors and noise are the truth chosen here, and the results compare the calibration with it.`)
+      : null;
+    const truthField = h('div', { class: 'field', dataset: { field: 'truth' } }, h('label', { for: 'c-truth-kind' }, 'truth (simulated IMU)'),
+      truthSel, truthFile, truthNote, h('div', { class: 'field-error', id: 'c-truth-file-error', role: 'alert' }), simulatedNote);
 
     campaignBox.append(
       fieldRow(campaignFieldLabel('name'), name, 'name'),

@@ -149,15 +149,19 @@ export function mount(root, ctx) {
     const d = detail;
     results.hidden = false;
     clear(results).append(h('h2', {}, 'Results'));
-    const [model, progress, status] = await Promise.all([
+    // The truth of a simulated run in the model's frame (imucald turns it, written in the
+    // instrument frame, into a body-frame model's frame): asked only when the run has both.
+    const hasTruth = d.spec && typeof d.spec.truth === 'object' && d.spec.truth !== null;
+    const [model, progress, status, comparison] = await Promise.all([
       d.has_model ? get(`/api/campaigns/${id}/model`).catch((e) => ({ _error: e })) : null,
       get(`/api/campaigns/${id}/progress`).catch(() => null),
       ctx.status().catch(() => null),
+      d.has_model && hasTruth ? get(`/api/campaigns/${id}/truth`).catch(() => null) : null,
     ]);
     if (stopped) return;
     modelNoise = model && !model._error ? model : null;
-    const truth = d.spec && typeof d.spec.truth === 'object' ? d.spec.truth : null;
-    const simulated = (status?.devices || '').startsWith('sim') || truth !== null;
+    const truth = comparison && Array.isArray(comparison.rows) ? comparison : null;
+    const simulated = (status?.devices || '').startsWith('sim') || hasTruth;
 
     // Downloads
     const downloads = h('div', { class: 'downloads', id: 'downloads' });
@@ -279,7 +283,8 @@ export function mount(root, ctx) {
   }
 
   // Each panel asks imucald for its data; a run that cannot give it gets the daemon's reason
-  // ("not available for this run: needs program ..."), shown in the panel.
+  // ({"available": false, "reason": "not available for this run: needs program ..."}, a 200, so
+  // that the browser logs no error), shown in the panel.
   async function optionalPlots(box) {
     const sources = [
       { key: 'allan', title: 'Allan deviation', render: renderAllan },
@@ -291,6 +296,13 @@ export function mount(root, ctx) {
       const note = h('p', { class: 'muted', id: `plot-${s.key}-status` }, 'Computing from the recording…');
       el.append(note);
       box.append(el);
+      // A campaign never started has no recording: nothing to ask imucald for.
+      if (!detail.run_db) {
+        el.dataset.available = 'false';
+        note.className = 'muted not-available';
+        note.textContent = 'Not available: the campaign was never started (no recording).';
+        return;
+      }
       try {
         // Computed as a job on imucald (202 until ready): say how far it is meanwhile.
         const data = await get(`/api/campaigns/${id}/${s.key}`, { onPending: (p) => {
@@ -301,6 +313,14 @@ export function mount(root, ctx) {
           return true;
         } });
         if (stopped) return;
+        // What the run cannot give is an answer, not an error (docs/api.md): {available: false, reason}.
+        if (data && data.available === false) {
+          el.dataset.available = 'false';
+          note.className = 'muted not-available';
+          const reason = String(data.reason || 'not available for this run');
+          note.textContent = `${reason[0].toUpperCase()}${reason.slice(1)}.`;
+          return;
+        }
         note.remove();
         el.dataset.available = 'true';
         s.render(el, data);
@@ -420,12 +440,16 @@ export function mount(root, ctx) {
     const left = rows.filter((r) => r.name.startsWith('gyro.') && !r.name.includes('.noise.') && r.group !== 'Other');
     const right = rows.filter((r) => !left.includes(r));
     const bads = rows.filter((r) => r.ratio !== null && Math.abs(r.ratio) > 3).length;
+    const frame = model.frame || 'instrument';
+    const zeros = rows.filter((r) => r.byDefinition).map((r) => r.name);
     return h('div', { class: 'coefficients' },
-      h('h3', {}, `Coefficients (${model.frame || 'instrument'} frame)`),
-      withTruth ? h('p', { class: bads ? 'result-bad' : 'result-ok', id: 'truth-verdict' },
-        bads ? `${bads} coefficient(s) are more than 3 σ from the simulation's truth (marked).` : 'Every coefficient is within 3 σ of the simulation\'s truth.')
-        : (simulated ? h('p', { class: 'muted' }, 'The truth of this simulated run is a file on the daemon\'s machine; the error is not shown.') : null),
-      h('div', { class: 'coefficient-columns', id: 'coefficient-table' }, table(left, withTruth), table(right, withTruth)),
+      h('h3', {}, `Coefficients (${frame} frame)`),
+      withTruth ? h('p', { class: bads ? 'result-bad' : 'result-ok', id: 'truth-verdict', dataset: { frame: truth.frame, truthFrame: truth.truth_frame } },
+        bads ? `${bads} coefficient(s) are more than 3 σ from the simulation's truth (marked).` : 'Every coefficient is within 3 σ of the simulation\'s truth.',
+        truth.converted ? ` The truth, written in the ${truth.truth_frame} frame, is compared in the ${truth.frame} frame.` : '',
+        zeros.length ? ` ${zeros.join(', ')}: 0 by definition of the ${frame} frame (not judged).` : '')
+        : (simulated ? h('p', { class: 'muted' }, 'The truth of this simulated run could not be read; the error is not shown.') : null),
+      h('div', { class: 'coefficient-columns', id: 'coefficient-table' }, table(left, withTruth, frame), table(right, withTruth, frame)),
       skipped.length ? h('p', { class: 'muted' }, `Not estimated by this campaign (zero with zero σ in the model): ${skipped.join(', ')}.`) : null);
   }
 
@@ -459,7 +483,7 @@ export function mount(root, ctx) {
         body));
   }
 
-  function table(rows, withTruth) {
+  function table(rows, withTruth, frame) {
     const body = h('tbody');
     let group = null;
     for (const r of rows) {
@@ -468,7 +492,17 @@ export function mount(root, ctx) {
         body.append(h('tr', { class: 'group-row' }, h('th', { colspan: withTruth ? 7 : 4 }, group)));
       }
       const bad = r.ratio !== null && Math.abs(r.ratio) > 3;
-      body.append(h('tr', { dataset: { coefficient: r.name }, class: bad ? 'out-3sigma' : '' },
+      const data = { coefficient: r.name };
+      if (r.ratio !== null) data.ratio = String(r.ratio);
+      if (r.byDefinition) {
+        data.byDefinition = 'true';
+        body.append(h('tr', { dataset: data, class: 'by-definition' },
+          h('td', { class: 'coef' }, r.name.split('.').slice(1).join('.')),
+          h('td', { class: 'unit' }, r.unit),
+          h('td', { class: 'num estimate', colspan: withTruth ? 5 : 2 }, `0 by definition of the ${frame} frame`)));
+        continue;
+      }
+      body.append(h('tr', { dataset: data, class: bad ? 'out-3sigma' : '' },
         h('td', { class: 'coef' }, r.name.split('.').slice(1).join('.')),
         h('td', { class: 'unit' }, r.unit),
         h('td', { class: 'num estimate' }, num(r.estimate, 5)),

@@ -47,6 +47,8 @@ export function mount(root, ctx) {
   const leftText = h('div', { class: 'kv', id: 'run-left' });
   const speedText = h('div', { class: 'kv', id: 'run-speed' });
   const progress = h('div', { class: 'progress wide', id: 'run-progress' }, h('div', { class: 'bar' }), h('span', {}));
+  // The run that ended, kept with its plots and convergence until another starts (issue 36).
+  const finishedBox = h('p', { class: 'finished-run', id: 'finished-run', hidden: true });
   let current = null;  // {id, name, state} of the run shown
   const commands = commandBar({
     getCampaign: () => current,
@@ -54,7 +56,7 @@ export function mount(root, ctx) {
   });
   runBox.append(
     h('div', { class: 'run-head' }, runTitle, runState, h('div', { class: 'spacer' }), commands),
-    suspendedBanner, promptBox,
+    suspendedBanner, promptBox, finishedBox,
     h('div', { class: 'run-facts' }, stepText, timeText, leftText, speedText), progress);
 
   const cards = h('div', { class: 'cards' });
@@ -245,6 +247,21 @@ export function mount(root, ctx) {
     clear(el).append(...list.map(([cls, text]) => h('span', { class: `flag ${cls}` }, text)));
   };
 
+  // The last run's end: what it was, how it ended, where its results are; the plots and the
+  // convergence below are still its own.
+  function drawFinished(fin) {
+    const sig = fin ? `${fin.id}|${fin.state}|${fin.name}` : '';
+    if (finishedBox.dataset.sig === sig) return;
+    finishedBox.dataset.sig = sig;
+    finishedBox.hidden = !fin;
+    if (!fin) { finishedBox.replaceChildren(); finishedBox.dataset.campaign = ''; return; }
+    finishedBox.dataset.campaign = String(fin.id);
+    finishedBox.replaceChildren(`The last run, campaign ${fin.id}${fin.name ? ` (${fin.name})` : ''}, has ended`,
+      fin.state ? ': ' : '.', fin.state ? stateBadge(fin.state) : '', fin.state ? '. ' : ' ',
+      h('a', { href: `#/campaigns/${fin.id}`, id: 'finished-run-link' }, `See the results of campaign ${fin.id}`),
+      '. The plots and the convergence below are its own until another run starts.');
+  }
+
   let lastSuspendReason = '';
   function drawNumbers() {
     if (destroyed) return;
@@ -293,6 +310,7 @@ export function mount(root, ctx) {
       suspendedBanner.hidden = true;
       promptBox.hidden = true;
     }
+    drawFinished(run ? null : store.finished);
     if (!m) return;
     const tb = m.table || {};
     AXES.forEach((a, i) => {
