@@ -303,6 +303,10 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
                                          static_cast<std::size_t>(config.http.max_analysis_jobs));
   chamber_map_ = chamber_map_json(config);
   table_dialect_ = table_dialect_json(config);
+  // The truths a simulated campaign may name, for the builder's choice (docs/api.md).
+  truths_ = json::array();
+  for (const NamedTruth& t : named_truths(config))
+    truths_.push_back({{"name", t.name}, {"description", t.description}, {"builtin", t.builtin}});
   if (const std::string key = signing_key_path(config); !key.empty()) {
     signing_key_ = signing::read_key_file(key);
     spdlog::info("certificates and test reports are signed with the key {} ({})", key,
@@ -357,11 +361,14 @@ std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow
   return std::nullopt;
 }
 
+// The site as the configuration states it: GET /api/status says it, a certificate states it.
+json Api::site_json() const {
+  return {{"name", config_.site_name}, {"latitude_deg", config_.site.latitude_deg},
+          {"longitude_deg", config_.site.longitude_deg}, {"height_m", config_.site.height_m},
+          {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}};
+}
+
 json Api::status() {
-  // The truths a simulated campaign may name, for the builder's choice (docs/api.md).
-  json truths = json::array();
-  for (const NamedTruth& t : named_truths(config_))
-    truths.push_back({{"name", t.name}, {"description", t.description}, {"builtin", t.builtin}});
   json limits_table = json::object();
   for (std::size_t a = 0; a < 3; ++a) {
     const auto& l = config_.table_limits.axis[a];
@@ -379,9 +386,7 @@ json Api::status() {
           {"started", iso8601_utc(started_ms_)},
           {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
           {"devices", config_.devices},
-          {"site", {{"name", config_.site_name}, {"latitude_deg", config_.site.latitude_deg},
-                    {"longitude_deg", config_.site.longitude_deg}, {"height_m", config_.site.height_m},
-                    {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}}},
+          {"site", site_json()},
           {"active", active},
           {"queue", db_.queue()},
           // Judged today (UTC): the live page warns of an instrument due within a week or overdue.
@@ -394,7 +399,7 @@ json Api::status() {
                          {"tolerance_C", config_.chamber.tolerance_C}}},
             {"campaign", {{"max_duration_s", config_.campaign.max_duration_s},
                           {"max_rate_hz", config_.campaign.max_rate_hz},
-                          {"estimators", known_estimators()}, {"truths", truths},
+                          {"estimators", known_estimators()}, {"truths", truths_},
                           {"default_truth", config_.sim.truth}}}}}};
 }
 
@@ -952,7 +957,7 @@ json Api::certificate_content(const CampaignRow& row, const std::string& bench_j
   return {{"format", "imucal-certificate/1"},
           {"campaign", campaign},
           {"model", parse_or_null(row.model_json)},
-          {"site", status().at("site")},
+          {"site", site_json()},
           {"software", {{"imucald", IMUCAL_VERSION}}},
           {"bench", parse_or_null(bench_json)}};
 }
@@ -1119,12 +1124,13 @@ HttpReply Api::store_certificate_page(const std::string& number, const ApiReques
   if (html.find(c->number) == std::string::npos || html.find(c->content_sha256) == std::string::npos)
     return error_reply(400, "body.html is not certificate " + c->number +
                                 "'s page: it must state the certificate's number and its content SHA-256");
-  if (const auto stored = db_.issued_page(number, false))
-    return error_reply(409, "certificate " + number + "'s page was stored on " + iso8601_utc(stored->stored_ms) + " by " +
-                                stored->stored_by + " (SHA-256 " + stored->sha256 + "); a stored page never changes");
   IssuedPageRow page{number, std::move(html), "", now_unix_ms(), who.user};
   page.sha256 = signing::sha256_hex(page.html);
-  if (!db_.insert_issued_page(page)) return error_reply(409, "certificate " + number + "'s page was stored already");
+  if (!db_.insert_issued_page(page)) {
+    const IssuedPageRow stored = expect_value(db_.issued_page(number, false), "the page stored before");
+    return error_reply(409, "certificate " + number + "'s page was stored on " + iso8601_utc(stored.stored_ms) + " by " +
+                                stored.stored_by + " (SHA-256 " + stored.sha256 + "); a stored page never changes");
+  }
   audit(who.user, "certificate.page_stored", number, {{"sha256", page.sha256}, {"bytes", page.html.size()}});
   return json_reply(201, page_json(page));
 }

@@ -57,6 +57,7 @@ class Api {
   // Who is asking: bearer token, session cookie, or (WebSocket only) ?token= in the query.
   std::optional<Principal> authenticate(const ApiRequest& request, bool allow_query_token);
   nlohmann::json status();
+  nlohmann::json site_json() const;
   // For the live WebSocket: has the session that opened it ended (sign-out, idle timeout)?
   bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
   // From now on every change is refused with 503.
@@ -154,6 +155,7 @@ class Api {
   nlohmann::json programs_;  // built once: the built-in programs do not change
   nlohmann::json chamber_map_;  // built once: the configured register map does not change
   nlohmann::json table_dialect_;  // built once, as the chamber map
+  nlohmann::json truths_;         // the named simulated truths, built once, as the chamber map
   std::int64_t started_ms_;
   std::chrono::steady_clock::time_point started_;
   std::atomic<bool> shutting_down_{false};
