@@ -1321,10 +1321,10 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
     audit(who.user, "campaign.override_overdue", "campaign " + std::to_string(id),
           {{"command", command}, {"instruments", overdue_json(overdue)}, {"reason", override_reason}});
   }
-  audit(who.user, "campaign.command", "campaign " + std::to_string(id),
-        {{"command", command}, {"reason", reason}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});
   // A command that succeeded has moved the campaign to its new state.
-  return json_reply(200, {{"id", id}, {"state", to_string(expect_value(outcome.state, "the state after a command that succeeded"))}});
+  const std::string state(to_string(expect_value(outcome.state, "the state after a command that succeeded")));
+  audit(who.user, "campaign.command", "campaign " + std::to_string(id), {{"command", command}, {"reason", reason}, {"state", state}});
+  return json_reply(200, {{"id", id}, {"state", state}});
 }
 
 // The operator's answer to what the run asks (a power cycle of the IMU): {"answer": "done"}.
