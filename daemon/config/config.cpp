@@ -9,6 +9,7 @@
 #include <sstream>
 #include <tuple>
 
+#include <boost/asio/ip/address.hpp>
 #include <nlohmann/json.hpp>
 
 #include "daemon/config/password_hash.hpp"
@@ -123,6 +124,24 @@ void read_http(const json& j, DaemonConfig& c, std::vector<std::string>& problem
   if (auto v = r.integer("max_analysis_jobs", 1, 10000)) c.http.max_analysis_jobs = *v;
   if (auto v = r.integer("threads", 1, 64)) c.http.threads = static_cast<int>(*v);
   if (auto v = r.string("web_dir")) c.http.web_dir = *v;
+  if (const json* v = r.get("trusted_proxies")) {
+    const std::string where = r.at("trusted_proxies");
+    if (!v->is_array()) {
+      problems.push_back(where + " must be an array of IP addresses (the reverse proxies in front of imucald)");
+    } else {
+      c.http.trusted_proxies.clear();
+      for (std::size_t i = 0; i < v->size(); ++i) {
+        const json& a = (*v)[i];
+        boost::system::error_code ec;
+        if (a.is_string()) (void)boost::asio::ip::make_address(a.get<std::string>(), ec);
+        if (!a.is_string() || ec)
+          problems.push_back(where + "[" + std::to_string(i) + "] must be an IP address such as \"127.0.0.1\", not " +
+                             json_text(a).substr(0, 80));
+        else
+          c.http.trusted_proxies.push_back(a.get<std::string>());
+      }
+    }
+  }
 }
 
 void read_log(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {

@@ -85,6 +85,8 @@ struct HttpConfig {
   std::int64_t max_analysis_jobs = 16;
   int threads = 1;
   std::string web_dir;  // empty: ./web if it exists, else the source tree's web/
+  // Reverse proxies whose X-Forwarded-For names the client (client_address.hpp); none by default.
+  std::vector<std::string> trusted_proxies;
 };
 
 struct LogConfig {

@@ -203,10 +203,13 @@ DaemonDb::DaemonDb(const std::string& path)
     while (s.step())
       if (s.column_text(0) != "ok") throw DbError("daemon database '" + path + "' is damaged: " + s.column_text(0));
   }
+  // The schema's statements create only what is missing, so on a current database the
+  // transaction writes nothing and commits on a full disk too (imucald then starts, shows the full
+  // disk and defers its writes) instead of refusing to start.
   storage::sql::Transaction txn(db_);
   db_.exec(kSchema);
   if (version < 2) db_.exec(kMigrationTo2);
-  db_.exec("PRAGMA user_version=" + std::to_string(kSchemaVersion));
+  if (version != kSchemaVersion) db_.exec("PRAGMA user_version=" + std::to_string(kSchemaVersion));
   txn.commit();
 }
 
@@ -658,7 +661,7 @@ AuditEntry audit_row(const Statement& s) {
 }  // namespace
 
 AuditEntry DaemonDb::append_audit(const std::string& actor, const std::string& action, const std::string& subject,
-                                  const std::string& details_json) {
+                                  const std::string& details_json, std::optional<std::int64_t> t_ms) {
   std::lock_guard lock(mutex_);
   storage::sql::Transaction txn(db_);
   AuditEntry e;
@@ -671,7 +674,7 @@ AuditEntry DaemonDb::append_audit(const std::string& actor, const std::string& a
     }
   }
   e.seq += 1;
-  e.t_ms = now_unix_ms();
+  e.t_ms = t_ms.value_or(now_unix_ms());
   e.actor = actor;
   e.action = action;
   e.subject = subject;

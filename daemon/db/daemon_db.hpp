@@ -232,9 +232,10 @@ class DaemonDb {
   std::vector<AlarmRow> alarms(const std::optional<std::int64_t>& campaign, bool all, std::int64_t limit = 1000);
 
   // The audit trail (audit_chain.hpp). append_audit links the entry to the last one and records
-  // the new head in one transaction; details_json must be a JSON object's text.
+  // the new head in one transaction; details_json must be a JSON object's text. `t_ms`: when it
+  // happened (now when absent; an entry kept in memory through a full disk keeps its own time).
   AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
-                          const std::string& details_json);
+                          const std::string& details_json, std::optional<std::int64_t> t_ms = std::nullopt);
   struct AuditQuery {
     std::optional<std::int64_t> from_ms, to_ms;  // inclusive
     std::string actor, action_prefix, subject;   // empty: any

@@ -379,8 +379,15 @@ json Api::status() {
   if (const auto id = sequencer_.active_id()) {
     if (const auto row = db_.campaign(*id)) active = {{"id", row->id}, {"name", row->name}, {"state", to_string(row->state)}};
   }
+  // The data directory's file system: a full disk suspends runs and refuses changes (503) while
+  // the writes the daemon must make wait in memory.
+  std::error_code ec;
+  const auto space = std::filesystem::space(config_.data_dir, ec);
+  const json storage = {{"free_bytes", ec ? json() : json(space.available)},
+                        {"deferred_writes", sequencer_.deferred_writes()}};
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
+          {"storage", storage},
           {"chamber_map", chamber_map_},
           {"table_dialect", table_dialect_},
           {"started", iso8601_utc(started_ms_)},
@@ -1155,8 +1162,14 @@ HttpReply Api::certificate_by_number(const std::string& number) {
 }
 
 void Api::audit(const std::string& actor, const std::string& action, const std::string& subject, const json& details) {
+  // Through the sequencer's ordered writes: on a full disk the entry waits in memory, with the
+  // time it happened, behind the run's own deferred writes, and is chained when space returns.
+  const std::int64_t t_ms = now_unix_ms();
   try {
-    db_.append_audit(actor, action, subject, details.dump());
+    sequencer_.write_db("audit entry " + action + " " + subject + " by " + actor,
+                        [this, actor, action, subject, text = details.dump(), t_ms] {
+                          db_.append_audit(actor, action, subject, text, t_ms);
+                        });
   } catch (const std::exception& e) {
     // The change itself is made; a trail that could not take it is said loudly, in the log.
     spdlog::error("audit trail: cannot append {} {} by {}: {}", action, subject, actor, e.what());

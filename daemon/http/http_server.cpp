@@ -1,4 +1,5 @@
 #include "daemon/http/http_server.hpp"
+#include "daemon/http/client_address.hpp"
 
 #include <atomic>
 #include <chrono>
@@ -312,7 +313,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     ar.content_type = std::string(req[http::field::content_type]);
     ar.origin = std::string(req[http::field::origin]);
     ar.host = std::string(req[http::field::host]);
-    ar.client = slot_ ? slot_->client() : std::string();
+    ar.client = slot_ ? client_address(slot_->client(), req["X-Forwarded-For"], server_.config.trusted_proxies)
+                      : std::string();
     ar.body = req.body();
     return ar;
   }

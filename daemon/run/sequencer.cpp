@@ -374,6 +374,11 @@ bool Sequencer::write_db(const std::string& what, std::function<void()> write) {
   return false;
 }
 
+std::size_t Sequencer::deferred_writes() const {
+  std::lock_guard lock(db_writes_mutex_);
+  return deferred_writes_.size();
+}
+
 bool Sequencer::store_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected) {
   {
     std::lock_guard lock(db_writes_mutex_);

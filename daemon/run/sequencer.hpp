@@ -86,6 +86,15 @@ class Sequencer {
   // Progress of the active run's estimators (latest), for GET /api/campaigns/{id}.
   nlohmann::json active_estimators() const;
 
+  // A write to the daemon database that a full disk (or an I/O error) must not turn into a failed
+  // run, a lost audit entry or a dead daemon: done now when the database takes it, else kept in memory in order and
+  // tried again (retry_db_writes, from publish and the queue runner) -- the run goes on with its
+  // state in memory meanwhile. Later writes queue behind a deferred one, so the database sees
+  // them in their order. Returns whether it was stored now. Other errors propagate.
+  bool write_db(const std::string& what, std::function<void()> write);
+  // How many writes wait in memory for the database (0 unless it could not be written).
+  std::size_t deferred_writes() const;
+
  private:
   friend struct RunContext;
   enum class Outcome { Completed, Redo, Pause, Stop, Abort, Shutdown, Fail };
@@ -99,12 +108,6 @@ class Sequencer {
                     std::optional<double> program_time_s, const std::string& reason);
   // Clears and raises the alarms a state change implies (alarms.hpp), broadcast.
   void transition_alarms(std::int64_t id, RunState from, RunState to, const std::string& reason);
-  // A write to the daemon database that a full disk (or an I/O error) must not turn into a failed
-  // run or a dead daemon: done now when the database takes it, else kept in memory in order and
-  // tried again (retry_db_writes, from publish and the queue runner) -- the run goes on with its
-  // state in memory meanwhile. Later writes queue behind a deferred one, so the database sees
-  // them in their order. Returns whether it was stored now. Other errors propagate.
-  bool write_db(const std::string& what, std::function<void()> write);
   // The run's state: stored now, or deferred as write_db does (then taken as done).
   bool store_state(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected);
   // Tries the deferred writes again, oldest first, up to the first that still fails. True when
@@ -154,7 +157,7 @@ class Sequencer {
   };
   std::optional<Prompt> prompt_;
   RecorderHooks recorder_hooks_;
-  std::mutex db_writes_mutex_;  // guards deferred_writes_ and orders the writes through it
+  mutable std::mutex db_writes_mutex_;  // guards deferred_writes_ and orders the writes through it
   std::deque<std::pair<std::string, std::function<void()>>> deferred_writes_;
   std::thread thread_;
 

@@ -164,6 +164,7 @@ struct Imucald {
   }
   Client client() const { return Client{p.port, kOperatorToken}; }
   void kill9() {
+    if (p.pid <= 0) return;  // already ended (wait_watching said how)
     ::kill(p.pid, SIGKILL);
     EXPECT_EQ(wait_exit(p.pid, 30), 128 + SIGKILL);
     p = {};
@@ -263,22 +264,49 @@ bool final_state(const json& c) {
   return s == "done" || s == "failed" || s == "aborted";
 }
 
-// The stacks of every thread of process `pid` (gdb), or why there are none.
-std::string thread_stacks(pid_t pid) {
+// gdb's stacks of every thread (`args`: the process or the program and its core), lines cut at 300
+// characters (a frame inside Boost's templates runs to thousands), or why there are none.
+std::string gdb(const std::string& args) {
   if (::access("/usr/bin/gdb", X_OK) != 0) return "(no stacks: gdb is not installed, scripts/install-deps.sh installs it)";
-  const std::string command = "/usr/bin/gdb -p " + std::to_string(pid) + " -batch -ex 'thread apply all bt' 2>&1";
+  const std::string command = "/usr/bin/gdb -batch -ex 'thread apply all bt' " + args + " 2>&1";
   std::string out;
   if (FILE* p = ::popen(command.c_str(), "r")) {
     char buf[4096];
-    while (std::fgets(buf, sizeof buf, p)) out += buf;
+    while (std::fgets(buf, sizeof buf, p)) {
+      const std::string line(buf);
+      out += line.size() > 300 ? line.substr(0, 300) + "...\n" : line;
+    }
     ::pclose(p);
   }
   return out;
 }
 
-// Waits for `done` (the run's end) as wait_for does, and watches the run: a run whose program time stands still
-// for `stall_s` of wall time (no fault of the soaks lasts a tenth of that) is a hang. Its daemon's
-// stacks and log's tail are printed, so that a hang seen once under load says where it waits.
+// The stacks of every thread of the running process `pid`.
+std::string thread_stacks(pid_t pid) { return gdb("-p " + std::to_string(pid)); }
+
+// The stacks in the core a dead daemon left in its log's directory (spawn_imucald runs it there),
+// or where none was found.
+std::string core_stacks(const Imucald& d, pid_t pid) {
+  const std::string dir = d.log.substr(0, d.log.rfind('/'));
+  const std::string names[] = {"core." + std::to_string(pid), "core"};
+  for (const std::string& name : names) {
+    if (::access((dir + "/" + name).c_str(), R_OK) == 0)
+      return gdb(imucaltest::program("imucald") + " " + dir + "/" + name);
+  }
+  return "(no core file in " + dir + "; /proc/sys/kernel/core_pattern decides where cores go)";
+}
+
+std::string log_tail(const Imucald& d) {
+  std::ifstream log(d.log);
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  return text.substr(text.size() > 6000 ? text.size() - 6000 : 0);
+}
+
+// Waits for `done` (the run's end) as wait_for does, and watches the run and its daemon: a daemon
+// that ends on its own is a failure said at once, with its exit status and, when it died of a
+// signal and left a core, its stacks; a run whose program time stands still for `stall_s` of wall
+// time (no fault of the soaks lasts a tenth of that) is a hang, its daemon's stacks printed. So a
+// crash or a hang seen once under load says where it happened. Null after either.
 json wait_watching(Imucald& d, std::int64_t id, double timeout_s, const std::function<bool(const json&)>& done = final_state,
                    double stall_s = 240.0) {
   const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
@@ -286,19 +314,27 @@ json wait_watching(Imucald& d, std::int64_t id, double timeout_s, const std::fun
   auto last_move = Clock::now();
   json last;
   while (Clock::now() < deadline) {
-    last = d.client().get_json("/api/campaigns/" + std::to_string(id));
-    if (last.is_object() && done(last)) return last;
-    const double t_s = last.is_object() ? last.value("program_time_s", -1.0) : -1.0;
+    if (const auto status = exited(d.p.pid)) {
+      const pid_t pid = d.p.pid;
+      d.p = {};
+      ADD_FAILURE() << "imucald (process " << pid << ") ended on its own with status " << *status
+                    << (*status > 128 ? " (signal " + std::to_string(*status - 128) + ")" : std::string())
+                    << " while campaign " << id << " ran; its stacks:\n" << core_stacks(d, pid)
+                    << "\nthe log's end:\n" << log_tail(d) << "\nthe campaign as last read: " << last.dump().substr(0, 2000);
+      return json();
+    }
+    const json now = d.client().get_json("/api/campaigns/" + std::to_string(id));
+    if (now.is_object()) last = now;
+    if (now.is_object() && done(now)) return now;
+    const double t_s = now.is_object() ? now.value("program_time_s", -1.0) : -1.0;
     if (t_s != last_t_s) {
       last_t_s = t_s;
       last_move = Clock::now();
     } else if (since(last_move) > stall_s) {
-      std::ifstream log(d.log);
-      const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
       ADD_FAILURE() << "campaign " << id << "'s program time stood at " << t_s << " s for " << stall_s
                     << " s of wall time; its daemon's threads:\n" << thread_stacks(d.p.pid) << "\nthe log's end:\n"
-                    << text.substr(text.size() > 6000 ? text.size() - 6000 : 0) << "\nthe campaign: " << last.dump().substr(0, 2000);
-      return last;
+                    << log_tail(d) << "\nthe campaign: " << last.dump().substr(0, 2000);
+      return json();
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
   }
@@ -315,6 +351,7 @@ json run_with_kills(Imucald& d, std::int64_t id, const std::vector<double>& kill
   for (const double at_s : kill_at_s) {
     const json before = wait_watching(d, id, std::max(1.0, std::chrono::duration<double>(deadline - Clock::now()).count()),
                                       [&](const json& c) { return final_state(c) || c.at("program_time_s").get<double>() >= at_s; });
+    if (before.is_null()) return before;  // wait_watching said why
     if (final_state(before) || !before.contains("program_time_s")) {
       ADD_FAILURE() << "the run ended before the kill at " << at_s << " s: " << before.dump().substr(0, 2000);
       return before;
@@ -375,10 +412,12 @@ SoakRuns run_soak(Imucald& d, const json& disturbed_spec, const json& reference_
   const auto id = post_and_start(d.client(), disturbed_spec);
   r.disturbed = run_with_kills(d, id, kill_at_s, 1800.0, r.killed_at_s, after_kill);
   r.disturbed_wall_s = since(t0);
+  if (!r.disturbed.is_object()) r.disturbed = json::object();  // a crash or a hang, said already
   if (r.disturbed.value("state", "") != "done" || d.p.port == 0) return r;
   const auto t1 = Clock::now();
   const auto id2 = post_and_start(d.client(), reference_spec);
   r.undisturbed = wait_watching(d, id2, 1800.0);
+  if (!r.undisturbed.is_object()) r.undisturbed = json::object();
   r.undisturbed_wall_s = since(t1);
   return r;
 }

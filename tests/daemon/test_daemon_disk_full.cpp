@@ -72,3 +72,58 @@ TEST(DaemonDiskFull, ARunFailingWhileTheDiskIsFullFailsCleanlyAndIsStoredWhenSpa
   ASSERT_EQ(d.command(next, "start"), 200);
   EXPECT_EQ(d.wait_final(next, 120).at("state"), "done");
 }
+
+// imucald started on a full disk (issue 33): it starts (its schema already current, opening the
+// database writes nothing), answers, refuses changes with a 503 that says why, and keeps what it
+// must record meanwhile: its own audit entry for the start waits in memory, with the time it
+// happened, and is chained into the trail once space returns.
+TEST(DaemonDiskFull, ImucaldStartsOnAFullDiskAndItsAuditEntryIsStoredWhenSpaceReturns) {
+  const daemon::DaemonConfig config = test_config(scratch_dir("disk-full-start"));
+  {
+    daemon::Service first(config);
+    first.start(false);
+    first.stop();
+  }
+  DiskFullSwitch disk;
+  storage::disk_fault::set_full(true);
+  const auto before_ms = daemon::now_unix_ms();
+  std::unique_ptr<daemon::Service> service;
+  ASSERT_NO_THROW(service = std::make_unique<daemon::Service>(config));
+  service->start(false);
+  auto call = [&](const std::string& method, const std::string& target, const std::string& body = "") {
+    daemon::ApiRequest r;
+    r.method = method;
+    r.target = target;
+    r.body = body;
+    r.content_type = body.empty() ? "" : "application/json";
+    r.authorization = std::string("Bearer ") + kOperatorToken;
+    return service->api().handle(r);
+  };
+  EXPECT_EQ(call("GET", "/api/status").status, 200);
+  const auto refused = call("POST", "/api/campaigns", json{{"name", "x"}, {"program", "direct-short"}}.dump());
+  EXPECT_EQ(refused.status, 503) << refused.body;
+  EXPECT_NE(refused.body.find("disk is full"), std::string::npos) << refused.body;
+  auto started = [&] { return json::parse(call("GET", "/api/audit?action=service.started").body); };
+  EXPECT_EQ(started().at("entries").size(), 1u) << "the second start's entry cannot be stored yet";
+
+  // The stored entry's time must be before this: sleep so that "when it was stored" would differ.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const auto space_back_ms = daemon::now_unix_ms();
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  storage::disk_fault::set_full(false);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  json audit = started();
+  while (audit.at("entries").size() < 2 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    audit = started();
+  }
+  ASSERT_EQ(audit.at("entries").size(), 2u) << audit.dump();
+  EXPECT_TRUE(audit.at("intact").get<bool>()) << audit.dump();
+  // Newest first: the second start, stamped when it happened (ISO 8601 orders as text), not when
+  // it was stored.
+  const std::string t = audit.at("entries").at(0).at("t").get<std::string>();
+  EXPECT_GE(t, daemon::iso8601_utc(before_ms));
+  EXPECT_LT(t, daemon::iso8601_utc(space_back_ms + 1));
+  EXPECT_EQ(call("POST", "/api/campaigns", json{{"name", "x"}, {"program", "direct-short"}}.dump()).status, 201);
+  service->stop();
+}

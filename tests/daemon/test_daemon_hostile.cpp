@@ -252,3 +252,33 @@ TEST(Hostile, AnalysisJobsAreBounded) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   EXPECT_EQ(jobs.request(key(3), blocking).ready, false) << "room again: it starts";
 }
+
+// Behind a reverse proxy the configuration trusts, sign-in throttling counts the client the
+// proxy names in X-Forwarded-For (issue 33), not the proxy: one guesser behind nginx does not lock
+// out the lab. Without the setting the header is ignored, so a client cannot dodge its own
+// lock-out by writing one.
+TEST(Hostile, SignInThrottlingCountsTheClientBehindATrustedProxy) {
+  const json wrong = {{"user", "viewer"}, {"password", "a wrong guess"}};
+  const json right = {{"user", "viewer"}, {"password", "viewer-password"}};
+  auto login = [](std::uint16_t port, const json& body, const std::string& forwarded_for) {
+    std::map<std::string, std::string> headers = {{"Content-Type", "application/json"}};
+    if (!forwarded_for.empty()) headers["X-Forwarded-For"] = forwarded_for;
+    return http_request(port, "POST", "/api/login", body.dump(), headers).status;
+  };
+  {
+    LocalDaemon d("proxy-trusted", true, [](daemon::DaemonConfig& c) { c.http.trusted_proxies = {"127.0.0.1"}; });
+    const std::uint16_t port = d.service->port();
+    for (int i = 0; i < 5; ++i) EXPECT_EQ(login(port, wrong, "10.0.0.1"), 401);
+    EXPECT_EQ(login(port, right, "10.0.0.1"), 429);
+    // Another client behind the same proxy; and one whose own header claims to be someone else
+    // (the proxy appends the address it saw: the rightmost untrusted entry counts).
+    EXPECT_EQ(login(port, right, "10.0.0.2"), 200);
+    EXPECT_EQ(login(port, right, "10.0.0.2, 10.0.0.1"), 429);
+  }
+  {
+    LocalDaemon d("proxy-untrusted", true);
+    const std::uint16_t port = d.service->port();
+    for (int i = 0; i < 5; ++i) EXPECT_EQ(login(port, wrong, "10.0.0.1"), 401);
+    EXPECT_EQ(login(port, right, "10.0.0.9"), 429);
+  }
+}

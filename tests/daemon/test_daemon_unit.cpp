@@ -13,6 +13,7 @@
 #include "daemon/db/run_state.hpp"
 #include "daemon/http/api.hpp"
 #include "daemon/http/auth.hpp"
+#include "daemon/http/client_address.hpp"
 #include "daemon/http/static_files.hpp"
 #include "daemon/run/suspenders.hpp"
 #include "daemon_fixture.hpp"
@@ -628,4 +629,31 @@ TEST(Suspenders, TripOnTheirConditionAndClearOnTheSameRule) {
     EXPECT_EQ(e.at("severity"), "suspend");
   }
   EXPECT_NE(list.dump().find("for 2 s"), std::string::npos) << "the condition states the configured persistence";
+}
+
+TEST(ClientAddress, ATrustedProxysForwardedForNamesTheClientAndNothingElseDoes) {
+  const std::vector<std::string> proxies = {"127.0.0.1", "10.0.0.5"};
+  // Not from a trusted proxy: the peer, whatever the header says.
+  EXPECT_EQ(client_address("192.168.1.7", "10.9.9.9", proxies), "192.168.1.7");
+  EXPECT_EQ(client_address("192.168.1.7", "", {}), "192.168.1.7");
+  // From one: the rightmost entry that is not a trusted proxy.
+  EXPECT_EQ(client_address("127.0.0.1", "192.168.1.7", proxies), "192.168.1.7");
+  EXPECT_EQ(client_address("127.0.0.1", "6.6.6.6, 192.168.1.7, 10.0.0.5", proxies), "192.168.1.7");
+  EXPECT_EQ(client_address("127.0.0.1", " 2001:db8::1 ", proxies), "2001:db8::1");
+  // No header, an unreadable entry, or proxies all the way: the peer.
+  EXPECT_EQ(client_address("127.0.0.1", "", proxies), "127.0.0.1");
+  EXPECT_EQ(client_address("127.0.0.1", "192.168.1.7, not-an-address", proxies), "127.0.0.1");
+  EXPECT_EQ(client_address("127.0.0.1", "10.0.0.5", proxies), "127.0.0.1");
+}
+
+TEST(Config, TrustedProxiesMustBeAddresses) {
+  EXPECT_EQ(parse_config(R"({"http": {"trusted_proxies": ["127.0.0.1", "::1"]}})", "test").http.trusted_proxies,
+            (std::vector<std::string>{"127.0.0.1", "::1"}));
+  try {
+    parse_config(R"({"http": {"trusted_proxies": ["127.0.0.1", "nginx.local"]}})", "test");
+    FAIL() << "a host name was taken as a proxy's address";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("config.http.trusted_proxies[1] must be an IP address"), std::string::npos)
+        << e.what();
+  }
 }
