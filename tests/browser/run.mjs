@@ -220,6 +220,45 @@ async function shot(page, name) {
   log(`screenshot ${path.relative(repo, file)}`);
 }
 
+// What a person sees wrong in a page's layout (issue 36): two labels, inputs, selects or buttons
+// drawn over each other, or a table wider than the card it is in (cut off or spilling out). Only
+// what is visible counts; a label around its own checkbox is one thing.
+async function layoutProblems(page, scope = 'main') {
+  return page.evaluate((scopeSelector) => {
+    const out = [];
+    const root = document.querySelector(scopeSelector) || document.body;
+    const visible = (el) => {
+      const r = el.getBoundingClientRect();
+      if (r.width < 1 || r.height < 1) return null;
+      const st = getComputedStyle(el);
+      return st.visibility === 'hidden' || st.display === 'none' ? null : r;
+    };
+    const name = (el) => `${el.tagName.toLowerCase()}${el.id ? `#${el.id}` : ''}${el.className && typeof el.className === 'string' ? `.${el.className.trim().split(/\s+/).join('.')}` : ''}` +
+      ` "${(el.textContent || el.value || '').trim().slice(0, 30)}"`;
+    const items = [...root.querySelectorAll('label, input, select, textarea, button')]
+      .filter((el) => !el.closest('details:not([open])') && el.type !== 'hidden')
+      .map((el) => ({ el, r: visible(el) })).filter((x) => x.r);
+    for (let i = 0; i < items.length; i++)
+      for (let k = i + 1; k < items.length; k++) {
+        const a = items[i], b = items[k];
+        if (a.el.contains(b.el) || b.el.contains(a.el)) continue;
+        if (a.el.tagName === 'LABEL' && a.el.htmlFor && a.el.htmlFor === b.el.id) continue;
+        const w = Math.min(a.r.right, b.r.right) - Math.max(a.r.left, b.r.left);
+        const hgt = Math.min(a.r.bottom, b.r.bottom) - Math.max(a.r.top, b.r.top);
+        if (w > 2 && hgt > 2) out.push(`${name(a.el)} overlaps ${name(b.el)} (${Math.round(w)}x${Math.round(hgt)} px)`);
+      }
+    for (const t of root.querySelectorAll('table')) {
+      const r = visible(t);
+      const card = t.parentElement?.closest('.card, .builder-side, section, aside');
+      if (!r || !card) continue;
+      const c = card.getBoundingClientRect();
+      if (r.right > c.right + 1 || r.left < c.left - 1)
+        out.push(`table${t.id ? `#${t.id}` : ''} (${Math.round(r.left)}-${Math.round(r.right)} px) is wider than its panel (${Math.round(c.left)}-${Math.round(c.right)} px)`);
+    }
+    return out;
+  }, scope);
+}
+
 async function waitText(page, selector, re, timeout = 15000) {
   await page.waitForFunction(([s, src, flags]) => {
     const el = document.querySelector(s);
@@ -276,6 +315,8 @@ try {
   // This campaign's checks (the Allan curve's quantisation, ...) are those of an error-free unit: said so.
   await page.selectOption('#c-truth-kind', 'ideal');
   await waitText(page, '#verdict', /^Valid/);
+  // At 1366 px the estimators' checkboxes wrap inside their field, clear of the rate field.
+  assert.deepEqual(await layoutProblems(page, '#campaign-fields'), [], 'the campaign fields lay out at 1366x768');
   const rateRow = await page.$eval('#segments', (tb) => [...tb.querySelectorAll('tr.segment')].findIndex((tr) => tr.dataset.name === 'rate-z+'));
   assert.ok(rateRow >= 0, 'direct-short has a segment rate-z+');
   await page.fill(`#seg-${rateRow}-rate_dps`, 'fast');  // not a number: caught here, nothing sent
@@ -292,13 +333,17 @@ try {
   await page.fill(`#seg-${rateRow}-revolutions`, '30');
   await waitText(page, `#seg-${rateRow}-problems`, /rate 400 deg\/s exceeds the limit 300 deg\/s/);
   assert.ok(await page.$eval(`#segment-${rateRow}`, (tr) => tr.classList.contains('has-problems')), 'the offending segment is marked');
-  await page.click('#create');
-  await waitText(page, '#server-message', /refused the campaign: campaign is invalid/);
+  // Refused by the check: nothing to create (issue 36, item 6: Create stayed enabled, then a 422).
+  assert.ok(await page.isDisabled('#create') && await page.isDisabled('#create-start'), 'Create is disabled once the check refused');
+  assert.match(await page.getAttribute('#create', 'title'), /refused this campaign/);
+  // imucald refuses it by itself as well, and stores nothing.
+  const refusedPost = await apiCall('POST', '/api/campaigns', JSON.parse(await page.textContent('#json-preview')));
+  assert.equal(refusedPost.status, 422, JSON.stringify(refusedPost.body));
   const afterRefusal = await apiCall('GET', '/api/campaigns');
   assert.equal(afterRefusal.body.campaigns.length, 0, 'a refused campaign is not stored');
   await page.$eval(`#segment-${rateRow}`, (el) => el.scrollIntoView({ block: 'center' }));
   await shot(page, '02-builder-limit-violation');
-  log('limit violation shown inline beside segment rate-z+ and refused by imucald (422)');
+  log('limit violation shown inline beside segment rate-z+, Create disabled, refused by imucald too (422)');
 
   // ---- the session ends; imucald closes the WebSocket; signing in again keeps the form ----
   await page.fill('#c-name', 'browser test: direct-short (after sign-in)');
@@ -680,8 +725,24 @@ try {
   const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.children[3].textContent]));
   assert.ok(predicted.length >= 36, `${predicted.length} coefficients predicted`);
   assert.deepEqual(predicted.find(([n]) => n === 'gyro.bias_dph.x'), ['gyro.bias_dph.x', 'navigation']);
+  // The prediction states the campaign's own rate (issue 36, item 6: it said "at 20.0 Hz" for a
+  // 50 Hz campaign), and its table fits the side panel at 1366 px.
+  await waitText(page, '#plan-status', /at the campaign's 50 Hz \(simulated at 20 Hz/);
   await page.$eval('#plan-table', (e) => e.scrollIntoView());
+  assert.deepEqual(await layoutProblems(page), [], 'the builder with its prediction lays out at 1366x768');
   await shot(page, '15a-builder-prediction');
+  // The fastest time scale: the wall time in ms, not "about 0.0 s".
+  await page.fill('#c-time-scale', '100000');
+  await waitText(page, '#verdict', /^Valid: .* of program, about [\d.]+ ms at ×100000\.$/, 30000);
+  // While the form is invalid the last prediction is not shown as if it were this campaign's.
+  await page.fill('#c-rate', 'x');
+  await waitText(page, '#plan-status', /No prediction while the campaign is invalid/);
+  assert.equal(await page.$$eval('#plan-rows tr', (rows) => rows.length), 0, 'the old prediction is taken away');
+  await page.$eval('#c-name', (e) => e.scrollIntoView({ block: 'center' }));
+  await shot(page, '15c-builder-invalid-no-prediction');
+  await page.fill('#c-rate', '50');
+  await page.fill('#c-time-scale', '300');
+  await waitText(page, '#plan-status', /targets met/, 90000);
   log(`the builder predicts ${predicted.length} coefficients before launch: ${await page.textContent('#plan-status')}`);
   await page.click('#create-start');
   await page.waitForSelector('#confirm-dialog[open]');
@@ -761,23 +822,55 @@ try {
   await waitCampaign(againId, (c) => c.state === 'done', 'the second calibration');
   await page.click('#nav a[data-nav="units"]');
   await page.waitForSelector('#units-rows tr[data-serial="FOG-BROWSER-1"]');
-  await page.waitForFunction(() => document.querySelector('#limits-text').value.includes('imucal-limits/1'));
-  const limits = (extra) => JSON.stringify({ format: 'imucal-limits/1', part_numbers: { 'PN-BROWSER': {
-    'gyro.bias_dph': { max_abs: 1.0, max_sigma: 0.1 }, 'accel.bias_mps2': { max_abs: 0.01 }, ...extra } } }, null, 2);
-  await page.fill('#limits-text', limits({ 'gyro.bias': { max_abs: 1 } }));
+  // The limits in a form (issue 36, item 5): a part number, a row per coefficient key with its
+  // two bounds; what the page can see is marked beside the input, the rest imucald names.
+  await waitText(page, '#limits-message', /^From /);
+  await page.click('#limits-add-part');
+  await page.fill('#limits-part-0-number', 'PN-BROWSER');
+  await page.click('#limits-save');  // the new row has no key and no bound: nothing is sent
+  await waitText(page, '#limits-message[data-state="error"]', /^Not saved: 2 problems to fix, marked in the form\.$/);
+  await waitText(page, '#limits-0-0-error', /Choose the coefficient.*Give a limit on \|value\|, on σ, or both/);
+  assert.equal(await page.getAttribute('#limits-0-0-key', 'aria-invalid'), 'true', 'the empty key is marked');
+  const limitRow = async (i, key, maxAbs, maxSigma) => {
+    if (!(await page.$(`#limits-0-${i}-key`))) await page.click('#limits-part-0-add');
+    await page.fill(`#limits-0-${i}-key`, key);
+    await page.fill(`#limits-0-${i}-maxAbs`, maxAbs);
+    await page.fill(`#limits-0-${i}-maxSigma`, maxSigma);
+  };
+  await limitRow(0, 'gyro.bias_dph', '1.0', 'small');
+  await waitText(page, '#limits-0-0-error', /^not a number\.$/);
+  await waitText(page, '#limits-0-0-name', /Gyro bias, every axis, in °\/h/);
+  await page.fill('#limits-0-0-maxSigma', '0.1');
+  await limitRow(1, 'accel.bias_mps2', '0.01', '');
+  await limitRow(2, 'gyro.noise.arw_deg_rth', '', '0.001');
+  await waitText(page, '#limits-0-2-error', /noise term carries no σ/);
+  await page.fill('#limits-0-2-key', 'gyro.bias');  // a typo only imucald can tell
+  await page.fill('#limits-0-2-maxAbs', '1');
+  await page.fill('#limits-0-2-maxSigma', '');
   badRequestOnPurpose = true;
   await page.click('#limits-save');
-  await waitText(page, '#limits-message', /Not saved: .*gyro\.bias/);
+  await waitText(page, '#limits-message[data-state="error"]', /Not saved: .*gyro\.bias/);
+  await waitText(page, '#limits-0-2-error', /part_numbers\["PN-BROWSER"\]\["gyro\.bias"\]: no coefficient/);
+  assert.ok(await page.$eval('#limits-0-2', (tr) => tr.classList.contains('has-problems')), 'the refused key\'s row is marked');
   await page.evaluate(() => new Promise((r) => setTimeout(r, 200)));  // the console message arrives
   badRequestOnPurpose = false;
-  await page.fill('#limits-text', limits({}));
+  assert.deepEqual(await layoutProblems(page), [], 'the limits form lays out at 1366x768');
+  await page.$eval('#limits-card', (el) => el.scrollIntoView());
+  await shot(page, '09f-limits-form-refused');
+  await page.click('#limits-0-2-remove');
   await page.click('#limits-save');
-  await waitText(page, '#limits-message', /^Saved/);
+  await waitText(page, '#limits-message[data-state="ok"]', /^Saved/);
   await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /PASS/);
+  // The same limits as the file itself, under "Advanced".
+  await page.click('#limits-advanced summary');
+  assert.deepEqual(JSON.parse(await page.inputValue('#limits-text')).part_numbers, { 'PN-BROWSER': {
+    'gyro.bias_dph': { max_abs: 1, max_sigma: 0.1 }, 'accel.bias_mps2': { max_abs: 0.01 } } });
+  await page.click('#limits-advanced summary');
+  await page.$eval('#limits-card', (el) => el.scrollIntoView());
   await shot(page, '09c-units-and-limits');
-  log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits typed in the limits editor (a typo refused by name)');
+  log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits set in the limits form (problems beside their rows, a typo refused by imucald by name)');
   // A limit on what a direct run does not determine: the gyro delays fail, with the reason.
-  await page.fill('#limits-text', limits({ 'gyro.delay_us': { max_abs: 10 } }));
+  await limitRow(2, 'gyro.delay_us', '10', '');
   await page.click('#limits-save');
   await waitText(page, '#limits-message', /^Saved/);
   await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /FAIL/);

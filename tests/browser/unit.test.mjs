@@ -578,3 +578,50 @@ test('the live store keeps a finished run (its plots, convergence and final stat
     globalThis.fetch = realFetch;
   }
 });
+
+test('the limits form: a file into rows and back, every problem beside its row (issue 36, item 5)', async () => {
+  const { limitsToForm, formToLimits, emptyRow, locateServerProblem } = await import('../../web/js/limits_form.mjs');
+  const file = { format: 'imucal-limits/1', comment: 'lab limits', part_numbers: {
+    'FOG-3A': { 'gyro.bias_dph': { max_abs: 0.05, max_sigma: 0.001 }, 'gyro.noise.arw_deg_rth': { max_abs: 0.001 } } } };
+  const form = limitsToForm(file);
+  assert.deepEqual(form.parts[0].rows[0], { key: 'gyro.bias_dph', maxAbs: '0.05', maxSigma: '0.001' });
+  assert.deepEqual(form.parts[0].rows[1], { key: 'gyro.noise.arw_deg_rth', maxAbs: '0.001', maxSigma: '' });
+  // Unchanged, the form stands for the same file.
+  assert.deepEqual(formToLimits(form), { doc: file, problems: [] });
+  // No file yet: no part numbers, and the form's document is an empty limits file.
+  assert.deepEqual(formToLimits(limitsToForm({ format: 'imucal-limits/1' })).doc, { format: 'imucal-limits/1', part_numbers: {} });
+
+  form.parts[0].rows[0].maxSigma = '-1';
+  form.parts[0].rows[1].maxSigma = '0.1';
+  form.parts[0].rows.push(emptyRow(), { key: 'gyro.bias_dph', maxAbs: '1e-2', maxSigma: 'abc' }, { key: 'gyro bias', maxAbs: '1', maxSigma: '' });
+  form.parts.push({ partNumber: ' FOG-3A ', rows: [] });
+  const r = formToLimits(form);
+  assert.equal(r.doc, null, 'nothing half-checked is sent');
+  const at = (part, row, field) => r.problems.filter((q) => q.part === part && q.row === row && q.field === field).map((q) => q.message);
+  assert.deepEqual(at(0, 0, 'maxSigma'), ['Must be a positive number, in the key\'s unit.']);
+  assert.deepEqual(at(0, 1, 'maxSigma'), ['A noise term carries no σ: limit its value only.']);
+  assert.deepEqual(at(0, 2, 'key'), ['Choose the coefficient (or group) this limit is for.']);
+  assert.deepEqual(at(0, 2, null), ['Give a limit on |value|, on σ, or both.']);
+  assert.deepEqual(at(0, 3, 'key'), ['gyro.bias_dph has a limit already in this part number.']);
+  assert.deepEqual(at(0, 3, 'maxSigma'), ['not a number.']);
+  assert.equal(at(0, 4, 'key').length, 1, 'a key with a space is not a coefficient name');
+  assert.deepEqual(at(1, null, 'partNumber'), ['Part number FOG-3A is listed twice.']);
+  assert.equal(r.problems.length, 8);
+
+  // imucald's refusal names the part number and key: found back in the form.
+  const located = limitsToForm({ part_numbers: { 'PN-1': { 'gyro.bias_dph': { max_abs: 1 }, 'gyro.bias': { max_abs: 1 } } } });
+  assert.deepEqual(locateServerProblem('limits.part_numbers["PN-1"]["gyro.bias"]: no coefficient of the model is named so', located), { part: 0, row: 1 });
+  assert.deepEqual(locateServerProblem('limits.part_numbers["PN-1"] must be an object of coefficient keys', located), { part: 0, row: null });
+  assert.equal(locateServerProblem('limits.part_numbers["PN-2"]["gyro.bias"]: ...', located), null);
+  assert.equal(locateServerProblem('limits.format must be "imucal-limits/1"', located), null);
+});
+
+test('a duration never reads "0.0 s" when it is not zero (issue 36, item 6: ×100000)', async () => {
+  const { duration } = await import('../../web/js/format.mjs');
+  assert.equal(duration(507 / 100000), '5.1 ms');
+  assert.equal(duration(0.05), '50 ms');
+  assert.equal(duration(2e-5), 'under 0.1 ms');
+  assert.equal(duration(0), '0.0 s');
+  assert.equal(duration(0.2), '0.2 s');
+  assert.equal(duration(119.6), '2 min 00 s');
+});

@@ -37,11 +37,14 @@ export function fill(el, ...children) {
   return el;
 }
 
-/** Seconds as "1 h 02 min", "6 min 42 s", "12.3 s". */
+/** Seconds as "1 h 02 min", "6 min 42 s", "12.3 s", "5.1 ms". */
 export function duration(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return '—';
   const sign = s < 0 ? '-' : '';
   s = Math.abs(s);
+  // Below a tenth of a second (a program at ×100000 takes milliseconds of wall time) in ms, so
+  // that a time that is not zero never reads "0.0 s".
+  if (s > 0 && s < 0.0995) return s < 1e-4 ? `${sign}under 0.1 ms` : `${sign}${num(s * 1000, 2)} ms`;
   if (s < 9.95) return `${sign}${s.toFixed(1)} s`;
   // Rounded once, at the precision shown, so that 119.6 s is "2 min 00 s", never "1 min 60 s".
   const wholeSeconds = Math.round(s);
