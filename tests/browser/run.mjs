@@ -259,6 +259,16 @@ async function layoutProblems(page, scope = 'main') {
   }, scope);
 }
 
+// A chart's tick labels as drawn (plots.mjs keeps them in data-x-ticks and data-y-ticks): at least
+// three different ones on each axis, so that a magnitude can be read (issue 36, item 7: the
+// convergence and innovation plots showed one "0").
+async function assertTicks(page, selector, what) {
+  for (const axis of ['x', 'y']) {
+    const labels = ((await page.getAttribute(`${selector} .uplot`, `data-${axis}-ticks`)) || '').split(' ').filter(Boolean);
+    assert.ok(new Set(labels).size >= 3, `${what}: ${new Set(labels).size} different tick labels on the ${axis} axis (${labels.join(' ')})`);
+  }
+}
+
 async function waitText(page, selector, re, timeout = 15000) {
   await page.waitForFunction(([s, src, flags]) => {
     const el = document.querySelector(s);
@@ -286,6 +296,14 @@ try {
   await waitText(page, '#who', /operator/);
   await page.waitForSelector('#live-indicator[data-state="open"]');
   log('signed in as operator with the one-time token; live connection open');
+  // The first screen says what bench this is and what to do first (issue 36, item 9).
+  await waitText(page, '#bench h2', /^Simulated bench — browser test lab$/);
+  await waitText(page, '#bench-devices [data-device="Rate table"]', /connected, homed/);
+  await waitText(page, '#bench-devices [data-device="Chamber"]', /connected, [\d.]+ °C/);
+  await waitText(page, '#bench-devices [data-device="IMU"]', /connected/);
+  await page.waitForSelector('#first-steps:not([hidden]) a[href="#/new"]');
+  assert.deepEqual(await layoutProblems(page), [], 'the first screen lays out at 1366x768');
+  await shot(page, '01b-first-screen');
 
   // ---- build from a template, see a limit violation refused ----
   await page.click('#new-campaign');
@@ -445,7 +463,10 @@ try {
   log(`the suspension raised alarm ${alarmId}; cleared when the run resumed, listed until acknowledged`);
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart .uplot')?.dataset.points) >= 2, null, { timeout: 20000 });
   await shot(page, '04-live');
+  for (const plot of ['angles', 'rates', 'chamber', 'imu-rate'])
+    await assertTicks(page, `#plot-${plot}`, `the live ${plot} plot`);
   await page.$eval('#convergence', (el) => el.scrollIntoView());
+  await assertTicks(page, '#live-conv-grid .conv-chart', 'the live convergence plot');
   await shot(page, '04b-live-estimators');
   await page.evaluate(() => window.scrollTo(0, 0));
   log('live plots move (angles, rates, chamber, frame rate, estimator convergence)');
@@ -471,6 +492,8 @@ try {
     const t = window.imucal.store.latest?.table;
     return t && t.interlock_closed === false && t.rate_dps.every((r) => r === 0);
   });
+  // Who paused it and how it goes on (issue 36, item 8).
+  await waitText(page, '#paused-banner', /^Paused by operator at \d\d:\d\d:\d\d\. .*presses Resume/);
   await shot(page, '05-live-paused');
   await page.click('.command-bar .cmd-resume');
   await page.waitForSelector('#confirm-dialog[open]');
@@ -488,6 +511,10 @@ try {
   // ---- results ----
   await page.goto(`${base}/#/campaigns/${id}`);
   await waitText(page, '#campaign-state', /done/, 60000);
+  // The unit under test on its campaign's page (issue 36, item 8), its serial a link to its history.
+  assert.equal(await page.textContent('#campaign-unit'), 'FOG-BROWSER-1');
+  assert.equal(await page.getAttribute('#campaign-unit', 'href'), '#/imus/FOG-BROWSER-1');
+  assert.match(await page.textContent('#campaign-meta'), /part number\s*PN-BROWSER/);
 
   // ---- the alarm outlives its run until the operator acknowledges it; the CSV log keeps it ----
   const listed = `#alarm-list tr[data-alarm-id="${alarmId}"]`;
@@ -722,7 +749,7 @@ try {
   // The prediction beside the program (issue 16): every coefficient's 1-sigma against the seed's
   // targets, stage 3's where it refines stage 1.
   await waitText(page, '#plan-status', /targets met/, 90000);
-  const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.children[3].textContent]));
+  const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.dataset.stage]));
   assert.ok(predicted.length >= 36, `${predicted.length} coefficients predicted`);
   assert.deepEqual(predicted.find(([n]) => n === 'gyro.bias_dph.x'), ['gyro.bias_dph.x', 'navigation']);
   // The prediction states the campaign's own rate (issue 36, item 6: it said "at 20.0 Hz" for a
@@ -731,9 +758,10 @@ try {
   await page.$eval('#plan-table', (e) => e.scrollIntoView());
   assert.deepEqual(await layoutProblems(page), [], 'the builder with its prediction lays out at 1366x768');
   await shot(page, '15a-builder-prediction');
-  // The fastest time scale: the wall time in ms, not "about 0.0 s".
+  // The fastest time scale: a wall time that is not zero never reads "about 0.0 s" (6 h at
+  // ×100000 is 0.2 s; direct-short's 7 min would be 4 ms).
   await page.fill('#c-time-scale', '100000');
-  await waitText(page, '#verdict', /^Valid: .* of program, about [\d.]+ ms at ×100000\.$/, 30000);
+  await waitText(page, '#verdict', /^Valid: .* of program, about (?!0\.0 s)[\d.]+ m?s at ×100000\.$/, 30000);
   // While the form is invalid the last prediction is not shown as if it were this campaign's.
   await page.fill('#c-rate', 'x');
   await waitText(page, '#plan-status', /No prediction while the campaign is invalid/);
@@ -768,6 +796,8 @@ try {
   await page.$eval('#convergence', (el) => el.scrollIntoView());
   await shot(page, '15-live-stage3');
   await page.$eval('#innovations-card', (el) => el.scrollIntoView());
+  await assertTicks(page, '#innovations .conv-chart', 'an innovation plot');
+  await assertTicks(page, '#live-conv-grid .conv-chart', 'stage 3\'s convergence plot');
   await shot(page, '15b-live-stage3-innovations');
   log(`campaign ${fullId} (full) from the builder: stage 3's states converging live, innovations against their gates`);
   await page.goto(`${base}/#/campaigns/${fullId}`);
@@ -820,6 +850,10 @@ try {
   const againId = await startCampaign({ name: 'browser test: FOG-BROWSER-1 again', program: 'direct-short', rate_hz: 20,
     seed: 11, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
   await waitCampaign(againId, (c) => c.state === 'done', 'the second calibration');
+  // A third, for the trend over calibrations 1, 2, 3.
+  const thirdId = await startCampaign({ name: 'browser test: FOG-BROWSER-1 third', program: 'direct-short', rate_hz: 20,
+    seed: 14, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
+  await waitCampaign(thirdId, (c) => c.state === 'done', 'the third calibration');
   await page.click('#nav a[data-nav="units"]');
   await page.waitForSelector('#units-rows tr[data-serial="FOG-BROWSER-1"]');
   // The limits in a form (issue 36, item 5): a part number, a row per coefficient key with its
@@ -878,6 +912,10 @@ try {
   await page.waitForSelector(`#unit-calibrations tr[data-id="${againId}"]`);
   assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /FAIL.*gyro\.delay_us\.x: not determined by this run/);
   assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /significant|none significant/);
+  // The trend's x axis counts calibrations: 1, 2, 3, not 1.00, 1.10, ... (issue 36, item 7).
+  await page.waitForSelector('#unit-trend .uplot');
+  assert.equal(await page.getAttribute('#unit-trend .uplot', 'data-x-ticks'), '1 2 3', 'the trend is over calibrations 1, 2 and 3');
+  await assertTicks(page, '#unit-trend', 'the unit\'s trend');
   await page.click('#compare-go');
   await page.waitForSelector('#compare-table tr[data-key="gyro.bias_dph.x"]');
   assert.match(await page.textContent('#compare-summary'), /significant difference/);

@@ -625,3 +625,53 @@ test('a duration never reads "0.0 s" when it is not zero (issue 36, item 6: ×10
   assert.equal(duration(0.2), '0.2 s');
   assert.equal(duration(119.6), '2 min 00 s');
 });
+
+test('axis ticks read differently at one scale, the power of ten beside the unit (issue 36, item 7)', async () => {
+  const { axisTicks, axisUnit } = await import('../../web/js/format.mjs');
+  // A convergence plot of a bias near 1e-4 °/h: once "1.0e-4" three times, or a lone "0".
+  assert.deepEqual(axisTicks([1.02e-4, 1.04e-4, 1.06e-4], 2e-6), { labels: ['102', '104', '106'], exponent: -6 });
+  assert.equal(axisUnit('°/h', -6), '×10⁻⁶ °/h');
+  assert.deepEqual(axisTicks([-2e-5, 0, 2e-5], 1e-5).labels, ['-20', '0', '20']);
+  // Ordinary magnitudes as they are, with the spacing's decimals; no "-0".
+  assert.deepEqual(axisTicks([-0.5, 0, 0.5, 1], 0.5), { labels: ['-0.5', '0.0', '0.5', '1.0'], exponent: 0 });
+  assert.deepEqual(axisTicks([0.1, 0.2, 0.30000000000000004], 0.1).labels, ['0.1', '0.2', '0.3']);
+  assert.deepEqual(axisTicks([0, 500, 1000], 500).labels, ['0', '500', '1000']);
+  assert.deepEqual(axisTicks([1, 2, 3], 1).labels, ['1', '2', '3']);
+  assert.deepEqual(axisTicks([2e6, 4e6], 2e6), { labels: ['2', '4'], exponent: 6 });
+  assert.equal(axisUnit('m', 0), 'm');
+  assert.equal(axisUnit(undefined, 3), '×10³');
+});
+
+test('a paused run says who paused it and how it goes on (issue 36, item 8)', async () => {
+  const { pauseNote } = await import('../../web/js/outcome.mjs');
+  const transitions = [
+    { t: 'T1', from: 'queued', to: 'running', reason: 'start by operator' },
+    { t: 'T2', from: 'running', to: 'pausing', reason: 'pause by alice: cable check' },
+    { t: 'T3', from: 'pausing', to: 'paused', reason: 'table at rest' },
+  ];
+  const n = pauseNote(transitions, (t) => `at-${t}`);
+  assert.equal(n.by, 'alice');
+  assert.equal(n.why, 'cable check');
+  assert.match(n.text, /^Paused by alice at at-T2 \(cable check\)\. .*Resume/);
+  // The newest pause counts; without transitions (not loaded yet) it still says how to go on.
+  assert.equal(pauseNote([...transitions, { t: 'T4', to: 'running', reason: 'resume by bob' }, { t: 'T5', to: 'pausing', reason: 'pause by bob' }]).by, 'bob');
+  assert.match(pauseNote(null).text, /^Paused\. .*presses Resume/);
+});
+
+test('the first screen names the bench and its devices (issue 36, item 9)', async () => {
+  const { benchSummary } = await import('../../web/js/bench.mjs');
+  const idle = { run: null, table: { connected: true, homed: true }, chamber: { connected: true, temperature_C: 25.04 },
+    imu: { connected: true, frame_rate_hz: 50 } };
+  const sim = benchSummary({ devices: 'sim', site: { name: 'lab 1' } }, idle);
+  assert.equal(sim.simulated, true);
+  assert.equal(sim.title, 'Simulated bench');
+  assert.equal(sim.site, 'lab 1');
+  assert.deepEqual(sim.devices.map((d) => `${d.name}: ${d.state}, ${d.text}`),
+    ['Rate table: ok, connected, homed', 'Chamber: ok, connected, 25.0 °C', 'IMU: ok, connected']);
+  // A real bench with its chamber down; before the first telemetry nothing is claimed.
+  const real = benchSummary({ devices: 'real' }, { ...idle, chamber: { connected: false }, run: { id: 1 } });
+  assert.equal(real.simulated, false);
+  assert.match(real.text, /moves the table/);
+  assert.deepEqual(real.devices.map((d) => d.text), ['connected, homed', 'not connected', 'connected, 50.0 frames/s']);
+  assert.deepEqual(benchSummary({ devices: 'sim-wire' }, null).devices.map((d) => d.state), ['unknown', 'unknown', 'unknown']);
+});

@@ -66,9 +66,9 @@ export function mount(root, ctx) {
   const planBench = h('div', { id: 'plan-bench' });
   const planTable = h('table', { class: 'plan-table', id: 'plan-table' },
     h('colgroup', {}, h('col', { class: 'c-name' }), h('col', { class: 'c-sigma' }), h('col', { class: 'c-target' }),
-      h('col', { class: 'c-stage' }), h('col', { class: 'c-dominant' })),
-    h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
-      h('th', {}, 'Stage'), h('th', {}, 'Limited by'))),
+      h('col', { class: 'c-dominant' })),
+    h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient (stage)'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
+      h('th', {}, 'Limited by'))),
     planBody);
   const planNoise = h('div', { class: 'grid-form', id: 'plan-noise' },
     h('label', { for: 'plan-arw' }, 'Gyro ARW, deg/√h'),
@@ -775,9 +775,11 @@ export function mount(root, ctx) {
     for (const row of rows) {
       // The dominant source of the stage that predicts the row (stage 1's or stage 3's budget).
       const d = dominant[row.stage]?.get(row.name) ?? null;
-      planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name } },
-        h('td', {}, row.name), h('td', { class: 'num' }, num(row.sigma, 3)),
-        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage),
+      // Four columns fit the side panel: the stage under the name, the name breakable after each dot.
+      planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name, stage: row.stage } },
+        h('td', {}, row.name.split('.').flatMap((p, i) => (i ? [h('wbr'), `.${p}`] : [p])), h('span', { class: 'plan-stage' }, row.stage)),
+        h('td', { class: 'num' }, num(row.sigma, 3)),
+        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)),
         h('td', { class: 'dominant' }, d ? `${sourceName(d.source)} (${Math.round(100 * d.share)} %)` : '')));
     }
     clear(planBench);
@@ -801,8 +803,9 @@ export function mount(root, ctx) {
   // not the frames; \`imucal plan\` on direct-short gives the same σ within 0.5 % at 20 and 100 Hz).
   function rateText(simulatedHz) {
     const own = draft.campaign.rate_hz;
-    if (!(own > 0) || own === simulatedHz) return `${num(simulatedHz, 3)} Hz`;
-    return `the campaign's ${num(own, 3)} Hz (simulated at ${num(simulatedHz, 3)} Hz: white noise's σ does not depend on the frame rate)`;
+    const hz = (v) => `${Number(v.toPrecision(6))} Hz`;  // 50 Hz as typed, not "50.0 Hz"
+    if (!(own > 0) || own === simulatedHz) return hz(simulatedHz);
+    return `the campaign's ${hz(own)} (simulated at ${hz(simulatedHz)}: white noise's σ does not depend on the frame rate)`;
   }
 
   // The bench for a stage's limits: per source its 1-sigma and the largest that still meets them.
