@@ -298,7 +298,7 @@ try {
   log('signed in as operator with the one-time token; live connection open');
   // The first screen says what bench this is and what to do first (issue 36, item 9).
   await waitText(page, '#bench h2', /^Simulated bench — browser test lab$/);
-  await waitText(page, '#bench-devices [data-device="Rate table"]', /connected, homed/);
+  await waitText(page, '#bench-devices [data-device="Rate table"]', /connected, (homed|not homed yet)/);
   await waitText(page, '#bench-devices [data-device="Chamber"]', /connected, [\d.]+ °C/);
   await waitText(page, '#bench-devices [data-device="IMU"]', /connected/);
   await page.waitForSelector('#first-steps:not([hidden]) a[href="#/new"]');
@@ -463,6 +463,7 @@ try {
   log(`the suspension raised alarm ${alarmId}; cleared when the run resumed, listed until acknowledged`);
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart .uplot')?.dataset.points) >= 2, null, { timeout: 20000 });
   await shot(page, '04-live');
+  assert.deepEqual(await layoutProblems(page), [], 'the live page lays out at 1366x768 during a run');
   for (const plot of ['angles', 'rates', 'chamber', 'imu-rate'])
     await assertTicks(page, `#plot-${plot}`, `the live ${plot} plot`);
   await page.$eval('#convergence', (el) => el.scrollIntoView());
@@ -928,6 +929,20 @@ try {
   await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '09e-results-verdict');
   log('results: the verdict per coefficient against PN-BROWSER\'s limits');
+  // The pages of issue 36 at 1920x1080 as at 1366x768: nothing overlapping, no table wider than its panel.
+  await page.setViewportSize({ width: 1920, height: 1080 });
+  for (const [route, ready, name] of [['#/campaigns', '#bench-devices', '23a-1920-campaigns'], ['#/imus', '#limits-part-0', '23b-1920-units-and-limits'],
+    ['#/new', '#plan-table', '23c-1920-builder'], [`#/campaigns/${againId}`, '#verdict-table', '23d-1920-results']]) {
+    await page.goto(`${base}/${route}`);
+    await page.waitForSelector(ready);
+    assert.deepEqual(await layoutProblems(page), [], `${route} lays out at 1920x1080`);
+    await shot(page, name);
+  }
+  await page.setViewportSize({ width: 1366, height: 768 });
+  await page.goto(`${base}/#/campaigns`);
+  await page.waitForSelector('#history-campaigns tr');
+  assert.deepEqual(await layoutProblems(page), [], 'the campaigns list lays out at 1366x768');
+  log('the first screen, the units and limits, the builder and a results page lay out at 1920x1080; the campaigns list at 1366x768');
   // Its certificate: FAIL in the title block, the limits and the result per limited coefficient.
   await page.goto(`${base}/certificate.html?id=${againId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');

@@ -673,5 +673,7 @@ test('the first screen names the bench and its devices (issue 36, item 9)', asyn
   assert.equal(real.simulated, false);
   assert.match(real.text, /moves the table/);
   assert.deepEqual(real.devices.map((d) => d.text), ['connected, homed', 'not connected', 'connected, 50.0 frames/s']);
+  const unhomed = benchSummary({ devices: 'sim' }, { ...idle, table: { connected: true, homed: false } }).devices[0];
+  assert.deepEqual([unhomed.state, unhomed.text], ['warn', 'connected, not homed yet (a run homes it first)']);
   assert.deepEqual(benchSummary({ devices: 'sim-wire' }, null).devices.map((d) => d.state), ['unknown', 'unknown', 'unknown']);
 });

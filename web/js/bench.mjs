@@ -5,22 +5,25 @@
 // docs/api.md: `devices` is sim, sim-wire, or real when the configuration names the devices.
 const KINDS = {
   sim: { simulated: true, title: 'Simulated bench',
-    text: 'the rate table, the thermal chamber and the IMU are simulated inside imucald, in accelerated time; nothing moves.' },
+    text: 'The rate table, the thermal chamber and the IMU are simulated inside imucald, in accelerated time; nothing moves.' },
   'sim-wire': { simulated: true, title: 'Simulated bench on the wire',
-    text: 'simulated table, chamber and IMU speak the real protocols on loopback, through the real drivers, in real time; nothing moves.' },
+    text: 'The simulated table, chamber and IMU speak the real protocols on loopback, through the real drivers, in real time; nothing moves.' },
   real: { simulated: false, title: 'Real bench',
-    text: 'the rate table, the chamber and the IMU named in imucald\'s configuration. Starting a campaign moves the table.' },
+    text: 'The rate table, the chamber and the IMU named in imucald\'s configuration. Starting a campaign moves the table.' },
 };
 
 // One device's state from its telemetry block: connected or not, and a word on what it does.
+// `detail` gives its words, a warning among them as {warn: text} (a table not homed yet).
 function deviceState(block, detail) {
   if (!block) return { state: 'unknown', text: 'no reading yet' };
   if (block.connected === false) return { state: 'bad', text: 'not connected' };
-  return { state: 'ok', text: ['connected', ...detail(block).filter(Boolean)].join(', ') };
+  const words = detail(block).filter(Boolean);
+  const warn = words.some((w) => typeof w === 'object');
+  return { state: warn ? 'warn' : 'ok', text: ['connected', ...words.map((w) => (typeof w === 'object' ? w.warn : w))].join(', ') };
 }
 
 /**
- * {simulated, title, text, site, devices: [{name, state: ok|bad|unknown, text}]}; `status` GET
+ * {simulated, title, text, site, devices: [{name, state: ok|warn|bad|unknown, text}]}; `status` GET
  * /api/status, `telemetry` the newest live message (or null before the first).
  */
 export function benchSummary(status, telemetry) {
@@ -33,7 +36,8 @@ export function benchSummary(status, telemetry) {
     text: kind.text,
     site: status?.site?.name || null,
     devices: [
-      { name: 'Rate table', ...deviceState(t.table, (b) => [b.homed === false ? 'not homed' : b.homed ? 'homed' : null, b.fault ? `fault: ${b.fault}` : null]) },
+      { name: 'Rate table', ...deviceState(t.table, (b) => [b.homed === false ? { warn: 'not homed yet (a run homes it first)' } : b.homed ? 'homed' : null,
+        b.fault ? { warn: `fault: ${b.fault}` } : null]) },
       { name: 'Chamber', ...deviceState(t.chamber, (b) => [fixed1(b.temperature_C) !== null ? `${fixed1(b.temperature_C)} °C` : null]) },
       // The IMU's frame figures belong to a run (between runs they are the last run's).
       { name: 'IMU', ...deviceState(t.imu, (b) => [t.run && b.frame_rate_hz > 0 ? `${fixed1(b.frame_rate_hz)} frames/s` : null]) },

@@ -90,7 +90,7 @@ export function lineChart(el, spec) {
     axes: [
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' },
         label: time ? undefined : spec.log ? spec.x : () => axisUnit(spec.x, exponents.x),
-        labelSize: 18, labelGap: 0, size: time ? 30 : 26,
+        labelSize: 18, labelGap: 0, size: 30,
         // Whole seconds at least on a time axis: an idle chart's span of a few milliseconds once
         // gave a row of identical "14:03:25" ticks. Whole numbers for counted things.
         ...(time ? { incrs: TIME_INCRS_S } : spec.xIntegers ? { incrs: INTEGER_INCRS } : {}),
@@ -103,8 +103,9 @@ export function lineChart(el, spec) {
         } : spec.log ? logTicks('x') : linearTicks('x') },
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' },
         label: spec.log ? spec.y : () => axisUnit(spec.y, exponents.y), labelSize: 22, size: 56,
-        // Ticks 22 px apart at least: a small multiple 100 px high still gets four or five.
-        space: 22,
+        // Ticks 16 px apart at least (a label is 12 px high): a plot 100 px high gets five or
+        // six, so even a range of 480° keeps three labels (0, 200 alone at uPlot's 30 px).
+        space: 16,
         values: spec.log ? logTicks('y') : linearTicks('y') },
     ],
     legend: { show: spec.legend ?? true, live: true },

@@ -138,7 +138,7 @@ export function mount(root, ctx) {
       h('h2', {}, `${b.title}${b.site ? ` — ${b.site}` : ''}`),
       h('p', { class: 'bench-text' }, b.text),
       h('ul', { class: 'bench-devices', id: 'bench-devices' }, ...b.devices.map((d) =>
-        h('li', { dataset: { device: d.name, state: d.state } }, h('strong', {}, d.name), ' ', h('span', { class: `flag ${d.state === 'ok' ? 'ok' : d.state === 'bad' ? 'bad' : ''}` }, d.text)))),
+        h('li', { dataset: { device: d.name, state: d.state } }, h('strong', {}, d.name), ' ', h('span', { class: `flag ${['ok', 'warn', 'bad'].includes(d.state) ? d.state : ''}` }, d.text)))),
       h('h3', {}, 'What to do first'), firstSteps);
   }
   ctx.status().then((s) => { daemonStatus = s; drawBench(); }).catch((e) => { bench.textContent = `Cannot read imucald's status: ${e.message}`; });
