@@ -654,6 +654,11 @@ try {
   assert.ok(await page.evaluate((cid) => window.imucal.store.finished?.id === cid && window.imucal.store.angles.view(Infinity)[0].length > 0
     && window.imucal.store.frameRate.view(Infinity)[0].length > 0, id), 'its plots, the frame rate included, are still drawn');
   await shot(page, '08c-live-finished-run');
+  // The idle page's time axes: each time once (issue 36, item 7: "04:05:17" repeated along an axis).
+  for (const plot of ['angles', 'rates', 'chamber', 'imu-rate']) {
+    const times = (await page.getAttribute(`#plot-${plot} .uplot`, 'data-x-ticks')).split(' ');
+    assert.equal(new Set(times).size, times.length, `the idle ${plot} plot's time ticks differ: ${times.join(' ')}`);
+  }
   // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
   await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
   log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');

@@ -624,6 +624,9 @@ test('a duration never reads "0.0 s" when it is not zero (issue 36, item 6: ×10
   assert.equal(duration(0), '0.0 s');
   assert.equal(duration(0.2), '0.2 s');
   assert.equal(duration(119.6), '2 min 00 s');
+  const { fixed } = await import('../../web/js/format.mjs');
+  assert.equal(fixed(-0.0001, 3), '0.000');
+  assert.equal(fixed(-0.0006, 3), '-0.001');
 });
 
 test('axis ticks read differently at one scale, the power of ten beside the unit (issue 36, item 7)', async () => {

@@ -82,7 +82,9 @@ export function num(v, digits = 4) {
 }
 
 export function fixed(v, decimals) {
-  return typeof v === 'number' && Number.isFinite(v) ? v.toFixed(decimals) : '—';
+  if (typeof v !== 'number' || !Number.isFinite(v)) return '—';
+  const t = v.toFixed(decimals);
+  return /^-0(\.0*)?$/.test(t) ? t.slice(1) : t;  // a table at -0.0001° reads 0.000, not -0.000
 }
 
 export const FINAL_STATES = new Set(['done', 'failed', 'aborted']);

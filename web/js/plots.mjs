@@ -103,9 +103,10 @@ export function lineChart(el, spec) {
         } : spec.log ? logTicks('x') : linearTicks('x') },
       { stroke: '#555', grid: { stroke: '#eee' }, ticks: { stroke: '#ddd' },
         label: spec.log ? spec.y : () => axisUnit(spec.y, exponents.y), labelSize: 22, size: 56,
-        // Ticks 16 px apart at least (a label is 12 px high): a plot 100 px high gets five or
-        // six, so even a range of 480° keeps three labels (0, 200 alone at uPlot's 30 px).
-        space: 16,
+        // About six ticks whatever the height, never closer than 16 px (a label is 12 px high):
+        // a plot 100 px high still gets five or six, so even a range of 480° keeps three labels
+        // (0 and 200 alone at uPlot's 30 px), and a tall one is not crowded.
+        space: (u, axisIdx, min, max, dim) => Math.max(16, Math.min(30, dim / 6)),
         values: spec.log ? logTicks('y') : linearTicks('y') },
     ],
     legend: { show: spec.legend ?? true, live: true },
