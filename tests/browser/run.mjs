@@ -922,6 +922,8 @@ try {
   await page.waitForSelector('#unit-trend .uplot');
   assert.equal(await page.getAttribute('#unit-trend .uplot', 'data-x-ticks'), '1 2 3', 'the trend is over calibrations 1, 2 and 3');
   await assertTicks(page, '#unit-trend', 'the unit\'s trend');
+  await page.$eval('#unit-trend', (el) => { el.scrollIntoView(); window.scrollBy(0, -80); });
+  await shot(page, '09g-unit-trend-three-calibrations');
   await page.click('#compare-go');
   await page.waitForSelector('#compare-table tr[data-key="gyro.bias_dph.x"]');
   assert.match(await page.textContent('#compare-summary'), /significant difference/);
