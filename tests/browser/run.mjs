@@ -783,6 +783,10 @@ try {
   await page.click('#confirm-ok');
   await page.waitForURL(/#\/live$/);
   const fullId = (await apiCall('GET', '/api/campaigns')).body.campaigns.find((c) => c.name === 'browser test: full').id;
+  // Stage 3 before its part of the program: said neutrally, not an orange warning (issue 36, item 8).
+  await waitText(page, '#estimator-status [data-estimator="stage3"] .badge.est-pending', /^not reached yet$/, 30000);
+  assert.equal(await page.$('#estimator-status [data-estimator="stage3"] .estimator-message'), null, 'no warning text for a stage not reached');
+  await shot(page, '15d-live-stage-not-reached-yet');
   // A second campaign's plots start empty: none of the first run's samples (issue 18, item 2).
   {
     await page.waitForFunction(() => window.imucal.store.runId !== null && window.imucal.store.angles.view(Infinity)[0].length > 0, null, { timeout: 60000 });
