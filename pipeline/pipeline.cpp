@@ -249,16 +249,33 @@ Feed feed(Stage stage, const RecordingMeta& meta, bool asked, const Settings& se
     return f;
   }
   double t0 = chosen.front()->t0_s, t1 = chosen.front()->t1_s;
-  std::string names;
+  // Each program named once, in the order it first comes, with how many parts it made: a
+  // thermal run's stage 1 is fed by some 30 parts of 'direct' between the chamber's steps, once
+  // listed as 'direct', 'direct', ... 30 times (issue 36, item 7).
+  std::vector<std::pair<std::string, int>> programs;
   for (const Part* p : chosen) {
     f.segments.insert(f.segments.end(), p->segments.begin(), p->segments.end());
     t0 = std::min(t0, p->t0_s);
     t1 = std::max(t1, p->t1_s);
-    names += (names.empty() ? "'" : ", '") + p->program + "'";
+    const auto known = std::find_if(programs.begin(), programs.end(), [&](const auto& e) { return e.first == p->program; });
+    if (known == programs.end()) {
+      programs.emplace_back(p->program, 1);
+    } else {
+      ++known->second;
+    }
+  }
+  std::string names;
+  if (programs.size() == chosen.size()) {  // one part each: "part 'direct'", "parts 'direct', 'lever-arm'"
+    for (const auto& [program, count] : programs) names += (names.empty() ? "'" : ", '") + program + "'";
+    names = (chosen.size() == 1 ? "part " : "parts ") + names;
+  } else {
+    for (const auto& [program, count] : programs)
+      names += (names.empty() ? "" : ", ") +
+               (count == 1 ? "part '" + program + "'" : std::to_string(count) + " parts of '" + program + "'");
   }
   f.t0_ns = nanoseconds(t0 - kLead_s);
   f.t1_ns = nanoseconds(t1);
-  f.source = (chosen.size() == 1 ? "part " : "parts ") + names + " (" + span_text(t0, t1) + ")";
+  f.source = names + " (" + span_text(t0, t1) + ")";
   return f;
 }
 

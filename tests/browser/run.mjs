@@ -220,6 +220,55 @@ async function shot(page, name) {
   log(`screenshot ${path.relative(repo, file)}`);
 }
 
+// What a person sees wrong in a page's layout (issue 36): two labels, inputs, selects or buttons
+// drawn over each other, or a table wider than the card it is in (cut off or spilling out). Only
+// what is visible counts; a label around its own checkbox is one thing.
+async function layoutProblems(page, scope = 'main') {
+  return page.evaluate((scopeSelector) => {
+    const out = [];
+    const root = document.querySelector(scopeSelector) || document.body;
+    const visible = (el) => {
+      const r = el.getBoundingClientRect();
+      if (r.width < 1 || r.height < 1) return null;
+      const st = getComputedStyle(el);
+      return st.visibility === 'hidden' || st.display === 'none' ? null : r;
+    };
+    const name = (el) => `${el.tagName.toLowerCase()}${el.id ? `#${el.id}` : ''}${el.className && typeof el.className === 'string' ? `.${el.className.trim().split(/\s+/).join('.')}` : ''}` +
+      ` "${(el.textContent || el.value || '').trim().slice(0, 30)}"`;
+    const items = [...root.querySelectorAll('label, input, select, textarea, button')]
+      .filter((el) => !el.closest('details:not([open])') && el.type !== 'hidden')
+      .map((el) => ({ el, r: visible(el) })).filter((x) => x.r);
+    for (let i = 0; i < items.length; i++)
+      for (let k = i + 1; k < items.length; k++) {
+        const a = items[i], b = items[k];
+        if (a.el.contains(b.el) || b.el.contains(a.el)) continue;
+        if (a.el.tagName === 'LABEL' && a.el.htmlFor && a.el.htmlFor === b.el.id) continue;
+        const w = Math.min(a.r.right, b.r.right) - Math.max(a.r.left, b.r.left);
+        const hgt = Math.min(a.r.bottom, b.r.bottom) - Math.max(a.r.top, b.r.top);
+        if (w > 2 && hgt > 2) out.push(`${name(a.el)} overlaps ${name(b.el)} (${Math.round(w)}x${Math.round(hgt)} px)`);
+      }
+    for (const t of root.querySelectorAll('table')) {
+      const r = visible(t);
+      const card = t.parentElement?.closest('.card, .builder-side, section, aside');
+      if (!r || !card) continue;
+      const c = card.getBoundingClientRect();
+      if (r.right > c.right + 1 || r.left < c.left - 1)
+        out.push(`table${t.id ? `#${t.id}` : ''} (${Math.round(r.left)}-${Math.round(r.right)} px) is wider than its panel (${Math.round(c.left)}-${Math.round(c.right)} px)`);
+    }
+    return out;
+  }, scope);
+}
+
+// A chart's tick labels as drawn (plots.mjs keeps them in data-x-ticks and data-y-ticks): at least
+// three different ones on each axis, so that a magnitude can be read (issue 36, item 7: the
+// convergence and innovation plots showed one "0").
+async function assertTicks(page, selector, what) {
+  for (const axis of ['x', 'y']) {
+    const labels = ((await page.getAttribute(`${selector} .uplot`, `data-${axis}-ticks`)) || '').split(' ').filter(Boolean);
+    assert.ok(new Set(labels).size >= 3, `${what}: ${new Set(labels).size} different tick labels on the ${axis} axis (${labels.join(' ')})`);
+  }
+}
+
 async function waitText(page, selector, re, timeout = 15000) {
   await page.waitForFunction(([s, src, flags]) => {
     const el = document.querySelector(s);
@@ -247,6 +296,14 @@ try {
   await waitText(page, '#who', /operator/);
   await page.waitForSelector('#live-indicator[data-state="open"]');
   log('signed in as operator with the one-time token; live connection open');
+  // The first screen says what bench this is and what to do first (issue 36, item 9).
+  await waitText(page, '#bench h2', /^Simulated bench — browser test lab$/);
+  await waitText(page, '#bench-devices [data-device="Rate table"]', /connected, (homed|not homed yet)/);
+  await waitText(page, '#bench-devices [data-device="Chamber"]', /connected, [\d.]+ °C/);
+  await waitText(page, '#bench-devices [data-device="IMU"]', /connected/);
+  await page.waitForSelector('#first-steps:not([hidden]) a[href="#/new"]');
+  assert.deepEqual(await layoutProblems(page), [], 'the first screen lays out at 1366x768');
+  await shot(page, '01b-first-screen');
 
   // ---- build from a template, see a limit violation refused ----
   await page.click('#new-campaign');
@@ -276,6 +333,8 @@ try {
   // This campaign's checks (the Allan curve's quantisation, ...) are those of an error-free unit: said so.
   await page.selectOption('#c-truth-kind', 'ideal');
   await waitText(page, '#verdict', /^Valid/);
+  // At 1366 px the estimators' checkboxes wrap inside their field, clear of the rate field.
+  assert.deepEqual(await layoutProblems(page, '#campaign-fields'), [], 'the campaign fields lay out at 1366x768');
   const rateRow = await page.$eval('#segments', (tb) => [...tb.querySelectorAll('tr.segment')].findIndex((tr) => tr.dataset.name === 'rate-z+'));
   assert.ok(rateRow >= 0, 'direct-short has a segment rate-z+');
   await page.fill(`#seg-${rateRow}-rate_dps`, 'fast');  // not a number: caught here, nothing sent
@@ -292,13 +351,17 @@ try {
   await page.fill(`#seg-${rateRow}-revolutions`, '30');
   await waitText(page, `#seg-${rateRow}-problems`, /rate 400 deg\/s exceeds the limit 300 deg\/s/);
   assert.ok(await page.$eval(`#segment-${rateRow}`, (tr) => tr.classList.contains('has-problems')), 'the offending segment is marked');
-  await page.click('#create');
-  await waitText(page, '#server-message', /refused the campaign: campaign is invalid/);
+  // Refused by the check: nothing to create (issue 36, item 6: Create stayed enabled, then a 422).
+  assert.ok(await page.isDisabled('#create') && await page.isDisabled('#create-start'), 'Create is disabled once the check refused');
+  assert.match(await page.getAttribute('#create', 'title'), /refused this campaign/);
+  // imucald refuses it by itself as well, and stores nothing.
+  const refusedPost = await apiCall('POST', '/api/campaigns', JSON.parse(await page.textContent('#json-preview')));
+  assert.equal(refusedPost.status, 422, JSON.stringify(refusedPost.body));
   const afterRefusal = await apiCall('GET', '/api/campaigns');
   assert.equal(afterRefusal.body.campaigns.length, 0, 'a refused campaign is not stored');
   await page.$eval(`#segment-${rateRow}`, (el) => el.scrollIntoView({ block: 'center' }));
   await shot(page, '02-builder-limit-violation');
-  log('limit violation shown inline beside segment rate-z+ and refused by imucald (422)');
+  log('limit violation shown inline beside segment rate-z+, Create disabled, refused by imucald too (422)');
 
   // ---- the session ends; imucald closes the WebSocket; signing in again keeps the form ----
   await page.fill('#c-name', 'browser test: direct-short (after sign-in)');
@@ -400,7 +463,11 @@ try {
   log(`the suspension raised alarm ${alarmId}; cleared when the run resumed, listed until acknowledged`);
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart .uplot')?.dataset.points) >= 2, null, { timeout: 20000 });
   await shot(page, '04-live');
+  assert.deepEqual(await layoutProblems(page), [], 'the live page lays out at 1366x768 during a run');
+  for (const plot of ['angles', 'rates', 'chamber', 'imu-rate'])
+    await assertTicks(page, `#plot-${plot}`, `the live ${plot} plot`);
   await page.$eval('#convergence', (el) => el.scrollIntoView());
+  await assertTicks(page, '#live-conv-grid .conv-chart', 'the live convergence plot');
   await shot(page, '04b-live-estimators');
   await page.evaluate(() => window.scrollTo(0, 0));
   log('live plots move (angles, rates, chamber, frame rate, estimator convergence)');
@@ -426,6 +493,8 @@ try {
     const t = window.imucal.store.latest?.table;
     return t && t.interlock_closed === false && t.rate_dps.every((r) => r === 0);
   });
+  // Who paused it and how it goes on (issue 36, item 8).
+  await waitText(page, '#paused-banner', /^Paused by operator at \d\d:\d\d:\d\d\. .*presses Resume/);
   await shot(page, '05-live-paused');
   await page.click('.command-bar .cmd-resume');
   await page.waitForSelector('#confirm-dialog[open]');
@@ -443,6 +512,10 @@ try {
   // ---- results ----
   await page.goto(`${base}/#/campaigns/${id}`);
   await waitText(page, '#campaign-state', /done/, 60000);
+  // The unit under test on its campaign's page (issue 36, item 8), its serial a link to its history.
+  assert.equal(await page.textContent('#campaign-unit'), 'FOG-BROWSER-1');
+  assert.equal(await page.getAttribute('#campaign-unit', 'href'), '#/imus/FOG-BROWSER-1');
+  assert.match(await page.textContent('#campaign-meta'), /part number\s*PN-BROWSER/);
 
   // ---- the alarm outlives its run until the operator acknowledges it; the CSV log keeps it ----
   const listed = `#alarm-list tr[data-alarm-id="${alarmId}"]`;
@@ -581,6 +654,11 @@ try {
   assert.ok(await page.evaluate((cid) => window.imucal.store.finished?.id === cid && window.imucal.store.angles.view(Infinity)[0].length > 0
     && window.imucal.store.frameRate.view(Infinity)[0].length > 0, id), 'its plots, the frame rate included, are still drawn');
   await shot(page, '08c-live-finished-run');
+  // The idle page's time axes: each time once (issue 36, item 7: "04:05:17" repeated along an axis).
+  for (const plot of ['angles', 'rates', 'chamber', 'imu-rate']) {
+    const times = (await page.getAttribute(`#plot-${plot} .uplot`, 'data-x-ticks')).split(' ');
+    assert.equal(new Set(times).size, times.length, `the idle ${plot} plot's time ticks differ: ${times.join(' ')}`);
+  }
   // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
   await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
   log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');
@@ -677,17 +755,38 @@ try {
   // The prediction beside the program (issue 16): every coefficient's 1-sigma against the seed's
   // targets, stage 3's where it refines stage 1.
   await waitText(page, '#plan-status', /targets met/, 90000);
-  const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.children[3].textContent]));
+  const predicted = await page.$$eval('#plan-rows tr', (rows) => rows.map((r) => [r.dataset.name, r.dataset.stage]));
   assert.ok(predicted.length >= 36, `${predicted.length} coefficients predicted`);
   assert.deepEqual(predicted.find(([n]) => n === 'gyro.bias_dph.x'), ['gyro.bias_dph.x', 'navigation']);
+  // The prediction states the campaign's own rate (issue 36, item 6: it said "at 20.0 Hz" for a
+  // 50 Hz campaign), and its table fits the side panel at 1366 px.
+  await waitText(page, '#plan-status', /at the campaign's 50 Hz \(simulated at 20 Hz/);
   await page.$eval('#plan-table', (e) => e.scrollIntoView());
+  assert.deepEqual(await layoutProblems(page), [], 'the builder with its prediction lays out at 1366x768');
   await shot(page, '15a-builder-prediction');
+  // The fastest time scale: a wall time that is not zero never reads "about 0.0 s" (6 h at
+  // ×100000 is 0.2 s; direct-short's 7 min would be 4 ms).
+  await page.fill('#c-time-scale', '100000');
+  await waitText(page, '#verdict', /^Valid: .* of program, about (?!0\.0 s)[\d.]+ m?s at ×100000\.$/, 30000);
+  // While the form is invalid the last prediction is not shown as if it were this campaign's.
+  await page.fill('#c-rate', 'x');
+  await waitText(page, '#plan-status', /No prediction while the campaign is invalid/);
+  assert.equal(await page.$$eval('#plan-rows tr', (rows) => rows.length), 0, 'the old prediction is taken away');
+  await page.$eval('#c-name', (e) => e.scrollIntoView({ block: 'center' }));
+  await shot(page, '15c-builder-invalid-no-prediction');
+  await page.fill('#c-rate', '50');
+  await page.fill('#c-time-scale', '300');
+  await waitText(page, '#plan-status', /targets met/, 90000);
   log(`the builder predicts ${predicted.length} coefficients before launch: ${await page.textContent('#plan-status')}`);
   await page.click('#create-start');
   await page.waitForSelector('#confirm-dialog[open]');
   await page.click('#confirm-ok');
   await page.waitForURL(/#\/live$/);
   const fullId = (await apiCall('GET', '/api/campaigns')).body.campaigns.find((c) => c.name === 'browser test: full').id;
+  // Stage 3 before its part of the program: said neutrally, not an orange warning (issue 36, item 8).
+  await waitText(page, '#estimator-status [data-estimator="stage3"] .badge.est-pending', /^not reached yet$/, 30000);
+  assert.equal(await page.$('#estimator-status [data-estimator="stage3"] .estimator-message'), null, 'no warning text for a stage not reached');
+  await shot(page, '15d-live-stage-not-reached-yet');
   // A second campaign's plots start empty: none of the first run's samples (issue 18, item 2).
   {
     await page.waitForFunction(() => window.imucal.store.runId !== null && window.imucal.store.angles.view(Infinity)[0].length > 0, null, { timeout: 60000 });
@@ -707,6 +806,8 @@ try {
   await page.$eval('#convergence', (el) => el.scrollIntoView());
   await shot(page, '15-live-stage3');
   await page.$eval('#innovations-card', (el) => el.scrollIntoView());
+  await assertTicks(page, '#innovations .conv-chart', 'an innovation plot');
+  await assertTicks(page, '#live-conv-grid .conv-chart', 'stage 3\'s convergence plot');
   await shot(page, '15b-live-stage3-innovations');
   log(`campaign ${fullId} (full) from the builder: stage 3's states converging live, innovations against their gates`);
   await page.goto(`${base}/#/campaigns/${fullId}`);
@@ -759,25 +860,61 @@ try {
   const againId = await startCampaign({ name: 'browser test: FOG-BROWSER-1 again', program: 'direct-short', rate_hz: 20,
     seed: 11, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
   await waitCampaign(againId, (c) => c.state === 'done', 'the second calibration');
+  // A third, for the trend over calibrations 1, 2, 3.
+  const thirdId = await startCampaign({ name: 'browser test: FOG-BROWSER-1 third', program: 'direct-short', rate_hz: 20,
+    seed: 14, time_scale: 0, estimators: ['direct'], imu: { serial: 'FOG-BROWSER-1', part_number: 'PN-BROWSER' } });
+  await waitCampaign(thirdId, (c) => c.state === 'done', 'the third calibration');
   await page.click('#nav a[data-nav="units"]');
   await page.waitForSelector('#units-rows tr[data-serial="FOG-BROWSER-1"]');
-  await page.waitForFunction(() => document.querySelector('#limits-text').value.includes('imucal-limits/1'));
-  const limits = (extra) => JSON.stringify({ format: 'imucal-limits/1', part_numbers: { 'PN-BROWSER': {
-    'gyro.bias_dph': { max_abs: 1.0, max_sigma: 0.1 }, 'accel.bias_mps2': { max_abs: 0.01 }, ...extra } } }, null, 2);
-  await page.fill('#limits-text', limits({ 'gyro.bias': { max_abs: 1 } }));
+  // The limits in a form (issue 36, item 5): a part number, a row per coefficient key with its
+  // two bounds; what the page can see is marked beside the input, the rest imucald names.
+  await waitText(page, '#limits-message', /^From /);
+  await page.click('#limits-add-part');
+  await page.fill('#limits-part-0-number', 'PN-BROWSER');
+  await page.click('#limits-save');  // the new row has no key and no bound: nothing is sent
+  await waitText(page, '#limits-message[data-state="error"]', /^Not saved: 2 problems to fix, marked in the form\.$/);
+  await waitText(page, '#limits-0-0-error', /Choose the coefficient.*Give a limit on \|value\|, on σ, or both/);
+  assert.equal(await page.getAttribute('#limits-0-0-key', 'aria-invalid'), 'true', 'the empty key is marked');
+  const limitRow = async (i, key, maxAbs, maxSigma) => {
+    if (!(await page.$(`#limits-0-${i}-key`))) await page.click('#limits-part-0-add');
+    await page.fill(`#limits-0-${i}-key`, key);
+    await page.fill(`#limits-0-${i}-maxAbs`, maxAbs);
+    await page.fill(`#limits-0-${i}-maxSigma`, maxSigma);
+  };
+  await limitRow(0, 'gyro.bias_dph', '1.0', 'small');
+  await waitText(page, '#limits-0-0-error', /^not a number\.$/);
+  await waitText(page, '#limits-0-0-name', /Gyro bias, every axis, in °\/h/);
+  await page.fill('#limits-0-0-maxSigma', '0.1');
+  await limitRow(1, 'accel.bias_mps2', '0.01', '');
+  await limitRow(2, 'gyro.noise.arw_deg_rth', '', '0.001');
+  await waitText(page, '#limits-0-2-error', /noise term carries no σ/);
+  await page.fill('#limits-0-2-key', 'gyro.bias');  // a typo only imucald can tell
+  await page.fill('#limits-0-2-maxAbs', '1');
+  await page.fill('#limits-0-2-maxSigma', '');
   badRequestOnPurpose = true;
   await page.click('#limits-save');
-  await waitText(page, '#limits-message', /Not saved: .*gyro\.bias/);
+  await waitText(page, '#limits-message[data-state="error"]', /Not saved: .*gyro\.bias/);
+  await waitText(page, '#limits-0-2-error', /part_numbers\["PN-BROWSER"\]\["gyro\.bias"\]: no coefficient/);
+  assert.ok(await page.$eval('#limits-0-2', (tr) => tr.classList.contains('has-problems')), 'the refused key\'s row is marked');
   await page.evaluate(() => new Promise((r) => setTimeout(r, 200)));  // the console message arrives
   badRequestOnPurpose = false;
-  await page.fill('#limits-text', limits({}));
+  assert.deepEqual(await layoutProblems(page), [], 'the limits form lays out at 1366x768');
+  await page.$eval('#limits-card', (el) => el.scrollIntoView());
+  await shot(page, '09f-limits-form-refused');
+  await page.click('#limits-0-2-remove');
   await page.click('#limits-save');
-  await waitText(page, '#limits-message', /^Saved/);
+  await waitText(page, '#limits-message[data-state="ok"]', /^Saved/);
   await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /PASS/);
+  // The same limits as the file itself, under "Advanced".
+  await page.click('#limits-advanced summary');
+  assert.deepEqual(JSON.parse(await page.inputValue('#limits-text')).part_numbers, { 'PN-BROWSER': {
+    'gyro.bias_dph': { max_abs: 1, max_sigma: 0.1 }, 'accel.bias_mps2': { max_abs: 0.01 } } });
+  await page.click('#limits-advanced summary');
+  await page.$eval('#limits-card', (el) => el.scrollIntoView());
   await shot(page, '09c-units-and-limits');
-  log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits typed in the limits editor (a typo refused by name)');
+  log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits set in the limits form (problems beside their rows, a typo refused by imucald by name)');
   // A limit on what a direct run does not determine: the gyro delays fail, with the reason.
-  await page.fill('#limits-text', limits({ 'gyro.delay_us': { max_abs: 10 } }));
+  await limitRow(2, 'gyro.delay_us', '10', '');
   await page.click('#limits-save');
   await waitText(page, '#limits-message', /^Saved/);
   await waitText(page, '#units-rows tr[data-serial="FOG-BROWSER-1"]', /FAIL/);
@@ -785,6 +922,12 @@ try {
   await page.waitForSelector(`#unit-calibrations tr[data-id="${againId}"]`);
   assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /FAIL.*gyro\.delay_us\.x: not determined by this run/);
   assert.match(await page.textContent(`#unit-calibrations tr[data-id="${againId}"]`), /significant|none significant/);
+  // The trend's x axis counts calibrations: 1, 2, 3, not 1.00, 1.10, ... (issue 36, item 7).
+  await page.waitForSelector('#unit-trend .uplot');
+  assert.equal(await page.getAttribute('#unit-trend .uplot', 'data-x-ticks'), '1 2 3', 'the trend is over calibrations 1, 2 and 3');
+  await assertTicks(page, '#unit-trend', 'the unit\'s trend');
+  await page.$eval('#unit-trend', (el) => { el.scrollIntoView(); window.scrollBy(0, -80); });
+  await shot(page, '09g-unit-trend-three-calibrations');
   await page.click('#compare-go');
   await page.waitForSelector('#compare-table tr[data-key="gyro.bias_dph.x"]');
   assert.match(await page.textContent('#compare-summary'), /significant difference/);
@@ -797,6 +940,20 @@ try {
   await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '09e-results-verdict');
   log('results: the verdict per coefficient against PN-BROWSER\'s limits');
+  // The pages of issue 36 at 1920x1080 as at 1366x768: nothing overlapping, no table wider than its panel.
+  await page.setViewportSize({ width: 1920, height: 1080 });
+  for (const [route, ready, name] of [['#/campaigns', '#bench-devices', '23a-1920-campaigns'], ['#/imus', '#limits-part-0', '23b-1920-units-and-limits'],
+    ['#/new', '#plan-table', '23c-1920-builder'], [`#/campaigns/${againId}`, '#verdict-table', '23d-1920-results']]) {
+    await page.goto(`${base}/${route}`);
+    await page.waitForSelector(ready);
+    assert.deepEqual(await layoutProblems(page), [], `${route} lays out at 1920x1080`);
+    await shot(page, name);
+  }
+  await page.setViewportSize({ width: 1366, height: 768 });
+  await page.goto(`${base}/#/campaigns`);
+  await page.waitForSelector('#history-campaigns tr');
+  assert.deepEqual(await layoutProblems(page), [], 'the campaigns list lays out at 1366x768');
+  log('the first screen, the units and limits, the builder and a results page lay out at 1920x1080; the campaigns list at 1366x768');
   // Its certificate: FAIL in the title block, the limits and the result per limited coefficient.
   await page.goto(`${base}/certificate.html?id=${againId}`);
   await page.waitForSelector('#certificate[data-ready="true"]');

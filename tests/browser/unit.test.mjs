@@ -578,3 +578,105 @@ test('the live store keeps a finished run (its plots, convergence and final stat
     globalThis.fetch = realFetch;
   }
 });
+
+test('the limits form: a file into rows and back, every problem beside its row (issue 36, item 5)', async () => {
+  const { limitsToForm, formToLimits, emptyRow, locateServerProblem } = await import('../../web/js/limits_form.mjs');
+  const file = { format: 'imucal-limits/1', comment: 'lab limits', part_numbers: {
+    'FOG-3A': { 'gyro.bias_dph': { max_abs: 0.05, max_sigma: 0.001 }, 'gyro.noise.arw_deg_rth': { max_abs: 0.001 } } } };
+  const form = limitsToForm(file);
+  assert.deepEqual(form.parts[0].rows[0], { key: 'gyro.bias_dph', maxAbs: '0.05', maxSigma: '0.001' });
+  assert.deepEqual(form.parts[0].rows[1], { key: 'gyro.noise.arw_deg_rth', maxAbs: '0.001', maxSigma: '' });
+  // Unchanged, the form stands for the same file.
+  assert.deepEqual(formToLimits(form), { doc: file, problems: [] });
+  // No file yet: no part numbers, and the form's document is an empty limits file.
+  assert.deepEqual(formToLimits(limitsToForm({ format: 'imucal-limits/1' })).doc, { format: 'imucal-limits/1', part_numbers: {} });
+
+  form.parts[0].rows[0].maxSigma = '-1';
+  form.parts[0].rows[1].maxSigma = '0.1';
+  form.parts[0].rows.push(emptyRow(), { key: 'gyro.bias_dph', maxAbs: '1e-2', maxSigma: 'abc' }, { key: 'gyro bias', maxAbs: '1', maxSigma: '' });
+  form.parts.push({ partNumber: ' FOG-3A ', rows: [] });
+  const r = formToLimits(form);
+  assert.equal(r.doc, null, 'nothing half-checked is sent');
+  const at = (part, row, field) => r.problems.filter((q) => q.part === part && q.row === row && q.field === field).map((q) => q.message);
+  assert.deepEqual(at(0, 0, 'maxSigma'), ['Must be a positive number, in the key\'s unit.']);
+  assert.deepEqual(at(0, 1, 'maxSigma'), ['A noise term carries no σ: limit its value only.']);
+  assert.deepEqual(at(0, 2, 'key'), ['Choose the coefficient (or group) this limit is for.']);
+  assert.deepEqual(at(0, 2, null), ['Give a limit on |value|, on σ, or both.']);
+  assert.deepEqual(at(0, 3, 'key'), ['gyro.bias_dph has a limit already in this part number.']);
+  assert.deepEqual(at(0, 3, 'maxSigma'), ['not a number.']);
+  assert.equal(at(0, 4, 'key').length, 1, 'a key with a space is not a coefficient name');
+  assert.deepEqual(at(1, null, 'partNumber'), ['Part number FOG-3A is listed twice.']);
+  assert.equal(r.problems.length, 8);
+
+  // imucald's refusal names the part number and key: found back in the form.
+  const located = limitsToForm({ part_numbers: { 'PN-1': { 'gyro.bias_dph': { max_abs: 1 }, 'gyro.bias': { max_abs: 1 } } } });
+  assert.deepEqual(locateServerProblem('limits.part_numbers["PN-1"]["gyro.bias"]: no coefficient of the model is named so', located), { part: 0, row: 1 });
+  assert.deepEqual(locateServerProblem('limits.part_numbers["PN-1"] must be an object of coefficient keys', located), { part: 0, row: null });
+  assert.equal(locateServerProblem('limits.part_numbers["PN-2"]["gyro.bias"]: ...', located), null);
+  assert.equal(locateServerProblem('limits.format must be "imucal-limits/1"', located), null);
+});
+
+test('a duration never reads "0.0 s" when it is not zero (issue 36, item 6: ×100000)', async () => {
+  const { duration } = await import('../../web/js/format.mjs');
+  assert.equal(duration(507 / 100000), '5.1 ms');
+  assert.equal(duration(0.05), '50 ms');
+  assert.equal(duration(2e-5), 'under 0.1 ms');
+  assert.equal(duration(0), '0.0 s');
+  assert.equal(duration(0.2), '0.2 s');
+  assert.equal(duration(119.6), '2 min 00 s');
+  const { fixed } = await import('../../web/js/format.mjs');
+  assert.equal(fixed(-0.0001, 3), '0.000');
+  assert.equal(fixed(-0.0006, 3), '-0.001');
+});
+
+test('axis ticks read differently at one scale, the power of ten beside the unit (issue 36, item 7)', async () => {
+  const { axisTicks, axisUnit } = await import('../../web/js/format.mjs');
+  // A convergence plot of a bias near 1e-4 °/h: once "1.0e-4" three times, or a lone "0".
+  assert.deepEqual(axisTicks([1.02e-4, 1.04e-4, 1.06e-4], 2e-6), { labels: ['102', '104', '106'], exponent: -6 });
+  assert.equal(axisUnit('°/h', -6), '×10⁻⁶ °/h');
+  assert.deepEqual(axisTicks([-2e-5, 0, 2e-5], 1e-5).labels, ['-20', '0', '20']);
+  // Ordinary magnitudes as they are, with the spacing's decimals; no "-0".
+  assert.deepEqual(axisTicks([-0.5, 0, 0.5, 1], 0.5), { labels: ['-0.5', '0.0', '0.5', '1.0'], exponent: 0 });
+  assert.deepEqual(axisTicks([0.1, 0.2, 0.30000000000000004], 0.1).labels, ['0.1', '0.2', '0.3']);
+  assert.deepEqual(axisTicks([0, 500, 1000], 500).labels, ['0', '500', '1000']);
+  assert.deepEqual(axisTicks([1, 2, 3], 1).labels, ['1', '2', '3']);
+  assert.deepEqual(axisTicks([2e6, 4e6], 2e6), { labels: ['2', '4'], exponent: 6 });
+  assert.equal(axisUnit('m', 0), 'm');
+  assert.equal(axisUnit(undefined, 3), '×10³');
+});
+
+test('a paused run says who paused it and how it goes on (issue 36, item 8)', async () => {
+  const { pauseNote } = await import('../../web/js/outcome.mjs');
+  const transitions = [
+    { t: 'T1', from: 'queued', to: 'running', reason: 'start by operator' },
+    { t: 'T2', from: 'running', to: 'pausing', reason: 'pause by alice: cable check' },
+    { t: 'T3', from: 'pausing', to: 'paused', reason: 'table at rest' },
+  ];
+  const n = pauseNote(transitions, (t) => `at-${t}`);
+  assert.equal(n.by, 'alice');
+  assert.equal(n.why, 'cable check');
+  assert.match(n.text, /^Paused by alice at at-T2 \(cable check\)\. .*Resume/);
+  // The newest pause counts; without transitions (not loaded yet) it still says how to go on.
+  assert.equal(pauseNote([...transitions, { t: 'T4', to: 'running', reason: 'resume by bob' }, { t: 'T5', to: 'pausing', reason: 'pause by bob' }]).by, 'bob');
+  assert.match(pauseNote(null).text, /^Paused\. .*presses Resume/);
+});
+
+test('the first screen names the bench and its devices (issue 36, item 9)', async () => {
+  const { benchSummary } = await import('../../web/js/bench.mjs');
+  const idle = { run: null, table: { connected: true, homed: true }, chamber: { connected: true, temperature_C: 25.04 },
+    imu: { connected: true, frame_rate_hz: 50 } };
+  const sim = benchSummary({ devices: 'sim', site: { name: 'lab 1' } }, idle);
+  assert.equal(sim.simulated, true);
+  assert.equal(sim.title, 'Simulated bench');
+  assert.equal(sim.site, 'lab 1');
+  assert.deepEqual(sim.devices.map((d) => `${d.name}: ${d.state}, ${d.text}`),
+    ['Rate table: ok, connected, homed', 'Chamber: ok, connected, 25.0 °C', 'IMU: ok, connected']);
+  // A real bench with its chamber down; before the first telemetry nothing is claimed.
+  const real = benchSummary({ devices: 'real' }, { ...idle, chamber: { connected: false }, run: { id: 1 } });
+  assert.equal(real.simulated, false);
+  assert.match(real.text, /moves the table/);
+  assert.deepEqual(real.devices.map((d) => d.text), ['connected, homed', 'not connected', 'connected, 50.0 frames/s']);
+  const unhomed = benchSummary({ devices: 'sim' }, { ...idle, table: { connected: true, homed: false } }).devices[0];
+  assert.deepEqual([unhomed.state, unhomed.text], ['warn', 'connected, not homed yet (a run homes it first)']);
+  assert.deepEqual(benchSummary({ devices: 'sim-wire' }, null).devices.map((d) => d.state), ['unknown', 'unknown', 'unknown']);
+});

@@ -224,3 +224,27 @@ TEST(PipelinePaths, StageThreeShowsItsFilterWhileItRuns) {
   EXPECT_EQ(end.at("status"), "done");
   EXPECT_TRUE(end.at("estimates").contains("gyro.delay_us.z"));
 }
+
+// What fed a stage names each program once with its count (issue 36, item 7): a thermal run's
+// stage 1 came from some 30 parts of 'direct' between the chamber's steps, once listed 30 times.
+TEST(PipelinePaths, AStagesSourceNamesEachProgramOnceWithItsCount) {
+  RecordingMeta meta;
+  for (int i = 0; i < 30; ++i) {
+    meta.segments.push_back({"direct/pos-" + std::to_string(i), "static", 100.0 * i, 100.0 * i + 60.0});
+    meta.segments.push_back({"soak/step-" + std::to_string(i), "hold", 100.0 * i + 60.0, 100.0 * i + 100.0});
+  }
+  const pipeline::Feed thirty = pipeline::feed(pipeline::Stage::Direct, meta, false);
+  EXPECT_EQ(thirty.source.rfind("30 parts of 'direct' (", 0), 0u) << thirty.source;
+  EXPECT_EQ(thirty.segments.size(), 30u);
+  // Two programs, one of them twice; and one part each, named as before.
+  meta.segments = {{"direct/a", "static", 0, 10}, {"soak/b", "hold", 10, 20}, {"direct-short/c", "static", 20, 30},
+                   {"soak/d", "hold", 30, 40}, {"direct/e", "static", 40, 50}};
+  const std::string mixed = pipeline::feed(pipeline::Stage::Direct, meta, false).source;
+  EXPECT_EQ(mixed.rfind("2 parts of 'direct', part 'direct-short' (", 0), 0u) << mixed;
+  meta.segments.pop_back();
+  const std::string each = pipeline::feed(pipeline::Stage::Direct, meta, false).source;
+  EXPECT_EQ(each.rfind("parts 'direct', 'direct-short' (", 0), 0u) << each;
+  meta.segments.resize(2);  // a part of 'direct' and one of another program
+  const std::string one = pipeline::feed(pipeline::Stage::Direct, meta, false).source;
+  EXPECT_EQ(one.rfind("part 'direct' (", 0), 0u) << one;
+}

@@ -13,7 +13,7 @@ const AXIS_COLOR = { x: COLORS[0], y: COLORS[1], z: COLORS[2], xy: COLORS[0], xz
  * @param {() => Map<string, import('./series.mjs').Series>} getSeries  coefficient -> [est, lo, hi]
  * markers: () => program times drawn as vertical lines (stage 3's restarts).
  */
-export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 150, markers = null } = {}) {
+export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 180, markers = null } = {}) {
   const tabs = h('div', { class: 'tabs small', role: 'tablist', id: `${idPrefix}-tabs` });
   const grid = h('div', { class: 'conv-grid', id: `${idPrefix}-grid` });
   const empty = h('p', { class: 'muted', id: `${idPrefix}-empty` }, 'No estimates yet: the estimator waits for enough static positions and rotations.');
@@ -67,7 +67,7 @@ export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 15
         const suffix = name.slice(name.lastIndexOf('.') + 1);
         const color = AXIS_COLOR[suffix] || COLORS[0];
         chart = lineChart(box, {
-          title: `${name}  [${unitOf(name)}]`, x: 'program s', height,
+          title: `${name}  [${unitOf(name)}]`, x: 'program s', y: unitOf(name), height,
           series: [{ label: 'estimate', color }, { label: '−σ', band: true }, { label: '+σ', band: true }],
           bands: [[3, 2, `${color}33`]],
           legend: false,

@@ -37,11 +37,14 @@ export function fill(el, ...children) {
   return el;
 }
 
-/** Seconds as "1 h 02 min", "6 min 42 s", "12.3 s". */
+/** Seconds as "1 h 02 min", "6 min 42 s", "12.3 s", "5.1 ms". */
 export function duration(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return '—';
   const sign = s < 0 ? '-' : '';
   s = Math.abs(s);
+  // Below a tenth of a second (a program at ×100000 takes milliseconds of wall time) in ms, so
+  // that a time that is not zero never reads "0.0 s".
+  if (s > 0 && s < 0.0995) return s < 1e-4 ? `${sign}under 0.1 ms` : `${sign}${num(s * 1000, 2)} ms`;
   if (s < 9.95) return `${sign}${s.toFixed(1)} s`;
   // Rounded once, at the precision shown, so that 119.6 s is "2 min 00 s", never "1 min 60 s".
   const wholeSeconds = Math.round(s);
@@ -79,7 +82,9 @@ export function num(v, digits = 4) {
 }
 
 export function fixed(v, decimals) {
-  return typeof v === 'number' && Number.isFinite(v) ? v.toFixed(decimals) : '—';
+  if (typeof v !== 'number' || !Number.isFinite(v)) return '—';
+  const t = v.toFixed(decimals);
+  return /^-0(\.0*)?$/.test(t) ? t.slice(1) : t;  // a table at -0.0001° reads 0.000, not -0.000
 }
 
 export const FINAL_STATES = new Set(['done', 'failed', 'aborted']);
@@ -122,4 +127,38 @@ export function clockTick(unix_s, step_s) {
   if (step_s < 60) return `${hm}:${two(d.getSeconds())}`;
   if (step_s < 86400) return hm;
   return `${two(d.getMonth() + 1)}-${two(d.getDate())} ${hm}`;
+}
+
+const SUPERSCRIPT = { '-': '⁻', 0: '⁰', 1: '¹', 2: '²', 3: '³', 4: '⁴', 5: '⁵', 6: '⁶', 7: '⁷', 8: '⁸', 9: '⁹' };
+
+/**
+ * The labels of a linear axis's ticks `vals`, `incr` apart (uPlot's ticks), all at one scale so
+ * that each reads differently: {labels, exponent}. Values far from 1 (below 0.01 or from 10^5)
+ * are written in units of 10^exponent, a multiple of 3 (0.000012 °/h as "12" on an axis of
+ * "×10⁻⁶ °/h"); the decimals are those of the spacing, so neighbours never share a label (a
+ * convergence plot's ticks 1.02e-4 and 1.04e-4 once both read "1.0e-4", or only "0" showed).
+ */
+export function axisTicks(vals, incr) {
+  const finite = vals.filter((v) => Number.isFinite(v));
+  const top = Math.max(0, ...finite.map((v) => Math.abs(v)));
+  const exponent = top > 0 && (top < 1e-2 || top >= 1e5) ? 3 * Math.floor(Math.log10(top) / 3) : 0;
+  const scale = 10 ** exponent;
+  const step = Number.isFinite(incr) && incr > 0 ? incr / scale : 1;
+  // The spacing's own decimals (0.25 has two), found on the rounded spacing so that 0.1 + 0.2 does not count as 17.
+  const stepText = String(Number(step.toPrecision(6)));
+  const decimals = /e-(\d+)$/.test(stepText) ? Number(/e-(\d+)$/.exec(stepText)[1]) + (stepText.split('e')[0].split('.')[1]?.length || 0)
+    : (stepText.split('.')[1]?.length || 0);
+  const labels = vals.map((v) => {
+    if (!Number.isFinite(v)) return '';
+    const t = (v / scale).toFixed(Math.min(decimals, 12));
+    return /^-0(\.0*)?$/.test(t) ? t.slice(1) : t;
+  });
+  return { labels, exponent };
+}
+
+/** An axis's unit with the power of ten its ticks are written in: "×10⁻⁶ °/h". */
+export function axisUnit(unit, exponent) {
+  if (!exponent) return unit || '';
+  const power = `×10${String(exponent).split('').map((c) => SUPERSCRIPT[c]).join('')}`;
+  return unit ? `${power} ${unit}` : power;
 }

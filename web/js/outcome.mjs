@@ -21,3 +21,25 @@ export function runOutcome(c) {
   if (state === 'done') return { outcome: 'stopped', title: 'stopped before the end of its program; not a calibration unless accepted' };
   return { outcome: state, title: state === 'failed' ? (c.error || 'ended on an error') : 'aborted by an operator' };
 }
+
+/**
+ * Who paused a run, and how it goes on (issue 36, item 8), from its transitions (docs/api.md:
+ * {t, from, to, reason}; imucald writes a command's reason as "pause by alice" or "pause by
+ * alice: why"): {by, why, t, text}. `at` formats the transition's time for the text.
+ */
+export function pauseNote(transitions, at = (t) => t) {
+  // The command's transition (running -> pausing) names who; the one into paused that follows,
+  // when the table is at rest, may not.
+  // Only this pause's: those since the run last went to running.
+  const list = transitions || [];
+  const since = list.map((x) => x.to).lastIndexOf('running');
+  const pauses = list.slice(since + 1).reverse().filter((x) => x.to === 'pausing' || x.to === 'paused');
+  const last = pauses.find((x) => /^pause by /.test(x.reason || '')) || pauses[0];
+  const m = /^pause by ([^:]+?)(?::\s*(.*))?$/.exec(last?.reason || '');
+  const by = m ? m[1] : null;
+  const why = m ? m[2] || null : null;
+  const who = by ? `Paused by ${by}${last?.t ? ` at ${at(last.t)}` : ''}${why ? ` (${why})` : ''}.` : 'Paused.';
+  return { by, why, t: last?.t || null,
+    text: `${who} The table holds still with its interlock open; nothing recorded is lost. To go on, an operator presses ` +
+      'Resume (the table moves again and the interrupted segment is redone); Stop ends the run with what it has recorded.' };
+}

@@ -64,6 +64,12 @@ export function mount(root, ctx) {
   const planWeak = h('ul', { class: 'problems', id: 'plan-weak' });
   // Stage 1's budget (issue 34): the table accuracy the program needs for stage 1's limits.
   const planBench = h('div', { id: 'plan-bench' });
+  const planTable = h('table', { class: 'plan-table', id: 'plan-table' },
+    h('colgroup', {}, h('col', { class: 'c-name' }), h('col', { class: 'c-sigma' }), h('col', { class: 'c-target' }),
+      h('col', { class: 'c-dominant' })),
+    h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient (stage)'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
+      h('th', {}, 'Limited by'))),
+    planBody);
   const planNoise = h('div', { class: 'grid-form', id: 'plan-noise' },
     h('label', { for: 'plan-arw' }, 'Gyro ARW, deg/√h'),
     h('input', { id: 'plan-arw', inputmode: 'decimal', value: String(planSettings.arw_deg_rth), onchange: planInputChanged }),
@@ -103,10 +109,7 @@ export function mount(root, ctx) {
         h('h2', {}, 'Predicted accuracy'), planStatus,
         h('details', { id: 'plan-settings' }, h('summary', {}, 'Unit noise and 1-sigma targets (default: the seed\'s figures)'),
           planNoise, planTargets),
-        h('table', { class: 'plan-table', id: 'plan-table' },
-          h('thead', {}, h('tr', {}, h('th', {}, 'Coefficient'), h('th', { class: 'num' }, '1σ'), h('th', { class: 'num' }, 'Target'),
-            h('th', {}, 'Stage'), h('th', {}, 'Limited by'))),
-          planBody),
+        planTable,
         planBench,
         planWeak)));
 
@@ -659,9 +662,12 @@ export function mount(root, ctx) {
     clearTimeout(validateTimer);
     clearTimeout(planTimer);
     planSeq++;  // a prediction under way is for the previous program
+    // The prediction on show is the previous campaign's: marked so at once (greyed, its status
+    // saying so), and taken away if the edit makes the campaign invalid (renderVerdict).
     if (lastPrediction) {
       planStatus.dataset.state = 'checking';
       planStatus.textContent = 'Edited: predicted again once the campaign is valid.';
+      planTable.dataset.stale = 'true';
     }
     const local = clientProblems();
     if (local.length) {
@@ -743,29 +749,37 @@ export function mount(root, ctx) {
       renderPrediction(r);
     } catch (e) {
       if (seq !== planSeq || destroyed) return;
-      lastPrediction = null;
-      clear(planBody);
-      clear(planWeak);
-      clear(planBench);
-      planStatus.dataset.state = 'error';
-      planStatus.textContent = `No prediction: ${e.message}`;
+      clearPrediction('error', `No prediction: ${e.message}`);
     }
+  }
+
+  function clearPrediction(state, text) {
+    lastPrediction = null;
+    clear(planBody);
+    clear(planWeak);
+    clear(planBench);
+    delete planTable.dataset.stale;
+    planStatus.dataset.state = state;
+    planStatus.textContent = text;
   }
 
   function renderPrediction(p) {
     const rows = predictionRows(p, planSettings.targets);
     const s = summary(rows);
     planStatus.dataset.state = s.judged && s.met === s.judged ? 'valid' : 'invalid';
-    planStatus.textContent = `${duration(p.duration_s)} of program at ${num(p.rate_hz, 3)} Hz: ${s.met} of ${s.judged} targets met` +
+    delete planTable.dataset.stale;
+    planStatus.textContent = `${duration(p.duration_s)} of program at ${rateText(p.rate_hz)}: ${s.met} of ${s.judged} targets met` +
       (s.worst && !s.worst.meets ? `; worst ${s.worst.name} at ${num(s.worst.ratio, 2)}× its target.` : '.');
     clear(planBody);
     const dominant = { direct: dominantSources(p, 'direct'), navigation: dominantSources(p, 'navigation') };
     for (const row of rows) {
       // The dominant source of the stage that predicts the row (stage 1's or stage 3's budget).
       const d = dominant[row.stage]?.get(row.name) ?? null;
-      planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name } },
-        h('td', {}, row.name), h('td', { class: 'num' }, num(row.sigma, 3)),
-        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)), h('td', {}, row.stage),
+      // Four columns fit the side panel: the stage under the name, the name breakable after each dot.
+      planBody.append(h('tr', { class: row.meets === false ? 'misses' : row.meets ? 'meets' : '', dataset: { name: row.name, stage: row.stage } },
+        h('td', {}, row.name.split('.').flatMap((p, i) => (i ? [h('wbr'), `.${p}`] : [p])), h('span', { class: 'plan-stage' }, row.stage)),
+        h('td', { class: 'num' }, num(row.sigma, 3)),
+        h('td', { class: 'num' }, row.target === null ? '' : num(row.target, 3)),
         h('td', { class: 'dominant' }, d ? `${sourceName(d.source)} (${Math.round(100 * d.share)} %)` : '')));
     }
     clear(planBench);
@@ -780,6 +794,18 @@ export function mount(root, ctx) {
     // The tumble's terms determined less well than the unit needs (issue 34).
     for (const w of p.short_of_needs || [])
       planWeak.append(h('li', { class: 'problem short-of-needs', dataset: { coefficient: w.coefficient } }, `${w.coefficient} (${w.stage}): ${w.why}; needs ${w.fix}`));
+  }
+
+  // The campaign's own frame rate, and the one the prediction simulated when that differs.
+  // imucald simulates at 20 Hz unless told (docs/api.md): a 6 h program's prediction took 45 s at
+  // 20 Hz on the 2-core test machine and grows with the rate, while the σ it predicts do not
+  // (the sensors' white noise is a density: its effect on a static's mean depends on the time,
+  // not the frames; \`imucal plan\` on direct-short gives the same σ within 0.5 % at 20 and 100 Hz).
+  function rateText(simulatedHz) {
+    const own = draft.campaign.rate_hz;
+    const hz = (v) => `${Number(v.toPrecision(6))} Hz`;  // 50 Hz as typed, not "50.0 Hz"
+    if (!(own > 0) || own === simulatedHz) return hz(simulatedHz);
+    return `the campaign's ${hz(own)} (simulated at ${hz(simulatedHz)}: white noise's σ does not depend on the frame rate)`;
   }
 
   // The bench for a stage's limits: per source its 1-sigma and the largest that still meets them.
@@ -814,6 +840,8 @@ export function mount(root, ctx) {
       error: 'The check failed.',
     };
     verdict.textContent = texts[v.state] || v.state;
+    if ((v.state === 'local' || v.state === 'invalid') && (lastPrediction || planTable.dataset.stale))
+      clearPrediction('idle', 'No prediction while the campaign is invalid: predicted again once it is valid.');
     // Inline: each problem beside its segment or field; the rest in the side panel.
     for (const ul of root.querySelectorAll('.segment-problems')) clear(ul);
     for (const tr of root.querySelectorAll('tr.segment')) tr.classList.remove('has-problems');
@@ -864,10 +892,13 @@ export function mount(root, ctx) {
 
   function updateRoleUi() {
     const operator = isOperator();
-    const blocked = validation.state === 'local' || validation.state === 'checking';
+    // A campaign imucald's check refused would only be refused again (422): fix it first.
+    const blocked = validation.state === 'local' || validation.state === 'checking' || validation.state === 'invalid';
     for (const b of [createButton, startButton]) {
       b.disabled = !operator || blocked;
-      b.title = !operator ? 'operator role required' : blocked ? 'wait for the check, or fix the marked fields' : '';
+      b.title = !operator ? 'operator role required'
+        : validation.state === 'invalid' ? 'imucald refused this campaign: fix the problems listed'
+          : blocked ? 'wait for the check, or fix the marked fields' : '';
     }
     viewerNote.hidden = operator;
   }

@@ -5,7 +5,8 @@
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
 import { get, post, ApiError } from '../api.mjs';
 import { verdictBadge } from './units.mjs';
-import { h, clear, duration, dateTime, num, stateBadge, outcomeBadge, FINAL_STATES } from '../format.mjs';
+import { h, clear, duration, dateTime, timeOfDay, num, stateBadge, outcomeBadge, FINAL_STATES } from '../format.mjs';
+import { pauseNote } from '../outcome.mjs';
 import { commandBar, confirmDialog } from '../dialogs.mjs';
 import { isOperator } from '../session.mjs';
 import { coefficientRows, unitOf, groupOf, labelOf } from '../coefficients.mjs';
@@ -34,12 +35,13 @@ export function mount(root, ctx) {
   });
   const meta = h('dl', { class: 'meta', id: 'campaign-meta' });
   const liveStrip = h('div', { class: 'live-strip', id: 'campaign-live', hidden: true });
+  const pausedBanner = h('div', { class: 'suspended-banner paused-banner', id: 'paused-banner', role: 'status', hidden: true });
   const results = h('section', { class: 'card', id: 'results', hidden: true });
   const record = h('section', { class: 'card', id: 'record' });
   root.append(
     h('div', { class: 'page-head' }, h('div', { class: 'title-line' }, title, badge), commands),
     pageError,
-    h('section', { class: 'card' }, meta, liveStrip),
+    h('section', { class: 'card' }, meta, pausedBanner, liveStrip),
     results, record);
 
   async function refresh() {
@@ -71,7 +73,11 @@ export function mount(root, ctx) {
     clear(badge).append(outcomeBadge(d));
     commands.update();
     const wall = d.started ? ((d.ended ? Date.parse(d.ended) : Date.now()) - Date.parse(d.started)) / 1000 : null;
+    // The unit under test first (issue 36, item 8): its serial links to its history.
+    const imu = d.imu || d.spec?.imu || {};
     const rows = [
+      ['unit', imu.serial ? h('a', { href: `#/imus/${encodeURIComponent(imu.serial)}`, id: 'campaign-unit' }, imu.serial) : 'not named'],
+      ['part number', imu.part_number || '—'],
       ['program', d.program], ['created', dateTime(d.created)], ['started', dateTime(d.started)], ['ended', dateTime(d.ended)],
       ['program length', duration(d.duration_s)], ['program time', `${duration(d.program_time_s)} (${Math.round(100 * (d.progress || 0))} %)`],
       ['wall time', duration(wall)], ['frames', `${d.frames ?? '—'} recorded, ${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad`],
@@ -82,6 +88,9 @@ export function mount(root, ctx) {
     ];
     if (d.error) rows.push(['error', d.error]);
     clear(meta).append(...rows.flatMap(([k, v]) => [h('dt', {}, k), h('dd', { class: k === 'error' ? 'result-bad' : '' }, v ?? '—')]));
+    const paused = d.state === 'paused' || d.state === 'pausing';
+    pausedBanner.hidden = !paused;
+    if (paused) pausedBanner.textContent = pauseNote(d.transitions, timeOfDay).text;
     renderRecord();
   }
 
@@ -248,7 +257,7 @@ export function mount(root, ctx) {
       if (map.size) {
         const box = h('div', { id: 'results-convergence' });
         results.append(h('h3', {}, `Convergence of the ${name} estimator (estimate ± σ over program time)`), box);
-        const panel = convergencePanel(box, () => map, { idPrefix: 'res-conv', height: 150, markers: () => restarts });
+        const panel = convergencePanel(box, () => map, { idPrefix: 'res-conv', markers: () => restarts });
         panel.update();
         cleanups.push(() => panel.destroy());
       }

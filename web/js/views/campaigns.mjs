@@ -3,6 +3,7 @@
 import { get } from '../api.mjs';
 import { h, clear, duration, dateTime, outcomeBadge, FINAL_STATES } from '../format.mjs';
 import { isOperator } from '../session.mjs';
+import { benchSummary } from '../bench.mjs';
 
 export function mount(root, ctx) {
   const status = h('div', { class: 'form-error', role: 'alert' });
@@ -17,7 +18,11 @@ export function mount(root, ctx) {
       h('th', { class: 'num' }, 'Wall time'), h('th', {}, 'Progress / result'))),
     body);
 
+  // The first screen says what bench this is and what to do first (issue 36, item 9).
+  const bench = h('section', { class: 'card bench-card', id: 'bench' });
+  const firstSteps = h('ol', { class: 'first-steps', id: 'first-steps', hidden: true });
   root.append(
+    bench,
     h('div', { class: 'page-head' },
       h('h1', {}, 'Campaigns'),
       h('div', { class: 'actions' }, updated,
@@ -62,6 +67,8 @@ export function mount(root, ctx) {
     clear(createdBody).append(...created.map(row));
     root.querySelector('#created-section').hidden = created.length === 0;
     clear(historyBody).append(...history.map(row));
+    // The steps until the first campaign has run here.
+    firstSteps.hidden = list.length > 0;
     root.querySelector('#active-empty').hidden = active.length > 0;
     root.querySelector('#history-empty').hidden = history.length > 0;
   }
@@ -108,6 +115,37 @@ export function mount(root, ctx) {
       h('div', { class: 'bar', style: `width:${pct}%` }), h('span', {}, `${pct} %`));
   }
 
+  let daemonStatus = null;
+  function drawBench() {
+    if (stopped || !daemonStatus) return;
+    const b = benchSummary(daemonStatus, ctx.store.latest);
+    const sig = JSON.stringify(b);
+    if (bench.dataset.sig === sig) return;
+    bench.dataset.sig = sig;
+    bench.dataset.simulated = String(b.simulated);
+    const steps = isOperator()
+      ? [[h('a', { href: '#/new' }, 'New campaign'), ': start from a built-in program (', h('code', {}, 'direct-short'),
+        ' is a quick first calibration: stage 1 in a few minutes of program), name the unit under test',
+        b.simulated ? ' and choose the simulated IMU\'s truth' : '', '. The builder checks it with imucald and predicts its accuracy.'],
+      ['"Create and start…": ', b.simulated ? 'the simulated table moves' : 'the table moves as soon as the devices are free',
+        '; watch it on ', h('a', { href: '#/live' }, 'Live'), ' (pause, stop, abort there).'],
+      ['When it is done, its page here has the results, the model, the certificate and the test report; ',
+        h('a', { href: '#/imus' }, 'Units'), ' keeps each unit\'s calibrations and the acceptance limits.']]
+      : [['You are signed in as a viewer: you can watch runs on ', h('a', { href: '#/live' }, 'Live'),
+        ' and read every result; an operator builds and starts campaigns.']];
+    clear(firstSteps).append(...steps.map((s) => h('li', {}, ...s)));
+    clear(bench).append(
+      h('h2', {}, `${b.title}${b.site ? ` — ${b.site}` : ''}`),
+      h('p', { class: 'bench-text' }, b.text),
+      h('ul', { class: 'bench-devices', id: 'bench-devices' }, ...b.devices.map((d) =>
+        h('li', { dataset: { device: d.name, state: d.state } }, h('strong', {}, d.name), ' ', h('span', { class: `flag ${['ok', 'warn', 'bad'].includes(d.state) ? d.state : ''}` }, d.text)))),
+      h('h3', {}, 'What to do first'), firstSteps);
+  }
+  ctx.status().then((s) => { daemonStatus = s; drawBench(); }).catch((e) => { bench.textContent = `Cannot read imucald's status: ${e.message}`; });
+  // Connected or not, as the telemetry says (10 a second; the card is redrawn only on a change).
+  const onTelemetry = () => drawBench();
+  ctx.store.addEventListener('telemetry', onTelemetry);
+
   refresh();
   timer = setInterval(refresh, 4000);
   // A state change anywhere shows at once, not at the next poll.
@@ -123,5 +161,6 @@ export function mount(root, ctx) {
     clearInterval(timer);
     clearTimeout(soon);
     ctx.store.removeEventListener('event', onEvent);
+    ctx.store.removeEventListener('telemetry', onTelemetry);
   };
 }

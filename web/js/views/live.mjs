@@ -2,7 +2,7 @@
 // readings, their plots, the estimators converging, and alarms and suspensions as they happen.
 // Everything comes from the page's one WebSocket through the LiveStore; this view only draws,
 // once per animation frame at most.
-import { post } from '../api.mjs';
+import { get, post } from '../api.mjs';
 import { isOperator } from '../session.mjs';
 import { h, clear, duration, num, fixed, stateBadge, timeOfDay } from '../format.mjs';
 import { lineChart, schedule, AXIS_COLORS, COLORS } from '../plots.mjs';
@@ -10,6 +10,7 @@ import { commandBar } from '../dialogs.mjs';
 import { convergencePanel } from '../convergence.mjs';
 import { unitOf } from '../coefficients.mjs';
 import { AXES } from '../live.mjs';
+import { pauseNote } from '../outcome.mjs';
 import { recordingPlots } from '../recording_plots.mjs';
 import { equipmentWarnings } from '../equipment.mjs';
 
@@ -22,6 +23,10 @@ export function mount(root, ctx) {
 
   const runBox = h('section', { class: 'card run-card', id: 'run-card' });
   const suspendedBanner = h('div', { class: 'suspended-banner', id: 'suspended-banner', role: 'alert', hidden: true });
+  // A paused run says who paused it and how it goes on (its transitions, asked once per pause).
+  const pausedBanner = h('div', { class: 'suspended-banner paused-banner', id: 'paused-banner', role: 'status', hidden: true });
+  let pauseFor = '';
+  let pauseTransitions = null;
   // What the run asks the operator (a power cycle of the IMU): it waits for the answer.
   const promptText = h('p', { id: 'prompt-text' });
   const promptError = h('div', { class: 'form-error', id: 'prompt-error', role: 'alert' });
@@ -56,7 +61,7 @@ export function mount(root, ctx) {
   });
   runBox.append(
     h('div', { class: 'run-head' }, runTitle, runState, h('div', { class: 'spacer' }), commands),
-    suspendedBanner, promptBox, finishedBox,
+    suspendedBanner, pausedBanner, promptBox, finishedBox,
     h('div', { class: 'run-facts' }, stepText, timeText, leftText, speedText), progress);
 
   const cards = h('div', { class: 'cards' });
@@ -218,7 +223,7 @@ export function mount(root, ctx) {
       if (!chart) {
         const box = h('div', { class: 'conv-chart', dataset: { innovation: name } });
         grid.append(box);
-        chart = lineChart(box, { title: `${name}  [${unitOf(name)}]`, x: 'program s', height: 130, legend: false,
+        chart = lineChart(box, { title: `${name}  [${unitOf(name)}]`, x: 'program s', y: unitOf(name), height: 170, legend: false,
           series: [{ label: 'innovation', color: COLORS[0] }, { label: '−gate', band: true }, { label: '+gate', band: true }],
           bands: [[3, 2, 'rgba(46,125,50,0.12)']], markers: () => store.estimators.get('stage3')?.restarts || [] });
         innovationCharts.set(name, chart);
@@ -263,6 +268,19 @@ export function mount(root, ctx) {
   }
 
   let lastSuspendReason = '';
+  function drawPaused(run) {
+    const paused = run && (run.state === 'paused' || run.state === 'pausing');
+    pausedBanner.hidden = !paused;
+    if (!paused) { pauseFor = ''; pauseTransitions = null; return; }
+    if (pauseFor !== String(run.id)) {
+      pauseFor = String(run.id);
+      get(`/api/campaigns/${run.id}`).then((d) => {
+        if (pauseFor === String(d.id)) { pauseTransitions = d.transitions || []; drawPaused(current); }
+      }).catch(() => { /* the banner says "Paused." and how to go on without who */ });
+    }
+    const text = pauseNote(pauseTransitions, timeOfDay).text;
+    if (pausedBanner.textContent !== text) pausedBanner.textContent = text;
+  }
   function drawNumbers() {
     if (destroyed) return;
     const m = store.latest;
@@ -297,6 +315,7 @@ export function mount(root, ctx) {
       const suspended = run.state === 'suspended';
       suspendedBanner.hidden = !suspended;
       if (suspended) suspendedBanner.textContent = `Suspended${lastSuspendReason ? `: ${lastSuspendReason}` : ''}. The run resumes by itself once the condition has cleared and settled; the interrupted segment is then redone.`;
+      drawPaused(run);
     } else {
       runTitle.textContent = 'Nothing runs';
       clear(runState);
@@ -308,6 +327,7 @@ export function mount(root, ctx) {
       progress.firstChild.style.width = '0%';
       progress.lastChild.textContent = '';
       suspendedBanner.hidden = true;
+      drawPaused(null);
       promptBox.hidden = true;
     }
     drawFinished(run ? null : store.finished);
@@ -355,14 +375,20 @@ export function mount(root, ctx) {
       clear(estBox);
       if (!Object.keys(est).length) estBox.append(h('p', { class: 'muted' }, run ? 'No estimator runs in this campaign.' : '—'));
       for (const [name, e] of Object.entries(est)) {
+        // During a run, a stage that lacks data has not had its part of the program yet (or not
+        // all of it): said neutrally, what it still needs folded away, not as a warning.
+        const pending = e.status === 'undetermined' || e.status === 'waiting';
+        const started = (e.statics ?? 0) > 0 || (e.updates ?? 0) > 0 || Object.keys(e.estimates || {}).length > 0;
+        const label = pending ? (started ? 'not determined yet' : 'not reached yet') : e.status;
         estBox.append(h('div', { class: 'estimator', dataset: { estimator: name, status: e.status } },
-          h('strong', {}, name), ' ', h('span', { class: `badge est-${e.status}` }, e.status),
+          h('strong', {}, name), ' ', h('span', { class: `badge est-${pending ? 'pending' : e.status}` }, label),
           e.statics !== undefined ? h('div', { class: 'muted' }, `${e.statics} statics, ${e.rotations ?? 0} rotations, at ${duration(e.program_time_s)}`) : null,
           e.max_velocity_error_mps !== undefined ? h('div', { class: 'muted' }, `max velocity error ${num(e.max_velocity_error_mps, 3)} m/s, position ${num(e.max_position_error_m, 3)} m`) : null,
           e.filter_status !== undefined ? h('div', { class: `muted filter-status${e.filter_status === 'running' ? '' : ' warn'}`, dataset: { filterStatus: e.filter_status.split(':')[0] } },
             `filter ${e.filter_status}; ${e.updates ?? 0} updates, ${e.rejected ?? 0} rejected, ${e.restarts ?? 0} restart(s), at ${duration(e.program_time_s)}`) : null,
           // The whole message: a stage that cannot determine something lists what, one per line.
-          e.message ? h('div', { class: 'estimator-message' }, e.message) : null));
+          e.message && pending ? h('details', { class: 'estimator-needs' }, h('summary', {}, 'what it still needs'), h('div', { class: 'muted pre-line' }, e.message))
+            : e.message ? h('div', { class: 'estimator-message' }, e.message) : null));
       }
     }
   }

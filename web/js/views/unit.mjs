@@ -102,7 +102,7 @@ export function mount(root, ctx) {
     const lo = values.map((v, i) => (v == null || sigmas[i] == null ? null : v - sigmas[i]));
     if (chart) chart.destroy();
     clear(plotBox);
-    chart = lineChart(plotBox, { title: `${name} [${unitOf(name)}]`, x: 'calibration', y: unitOf(name), height: 220, points: true,
+    chart = lineChart(plotBox, { title: `${name} [${unitOf(name)}]`, x: 'calibration', xIntegers: true, y: unitOf(name), height: 220, points: true,
       series: [{ label: 'value', color: COLORS[0] }, { label: '+1σ', band: true }, { label: '−1σ', band: true }],
       bands: [[2, 3, 'rgba(21,101,192,0.15)']] });
     chart.setData([points.map((_, i) => i + 1), values, hi, lo]);
