@@ -549,6 +549,14 @@ struct NavCalibrationFilter::Impl {
         return;
       }
     feedback();
+    // A delay moved beyond what the compensation window follows: the filter has run away (the
+    // window is sized for +-max_delay_s, docs/stage3.md); compensating would read past its frames.
+    if (const std::string delay = comp.unfollowed_delay(); !delay.empty()) {
+      std::snprintf(buf, sizeof buf, "diverged at t=%.1f s: the %s estimate left the +-%.3g s the compensation follows",
+                    t_s, delay.c_str(), opt.max_delay_s);
+      fail(buf);
+      return;
+    }
     const StateVector now = model_to_state(model), start = model_to_state(model_at_start);
     for (int i = 0; i < 6; ++i)
       if (std::abs(now[kGyroAngles.index + i] - start[kGyroAngles.index + i]) > 60.0 * units::kArcsecToRad ||

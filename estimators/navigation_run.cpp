@@ -18,17 +18,23 @@ namespace imucal::nav {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
+Compensator::Reach Compensator::reach(double delay_s) const {
+  const double s = delay_s / dt_nominal_s_;
+  const double n = std::floor(s);
+  const bool fractional = s != n;
+  return {static_cast<int>(n) + (fractional ? 3 : 1), (fractional ? 2 : 1) - static_cast<int>(n)};
+}
+
 Compensator::Compensator(const ImuModel& model, double dt_nominal_s, double max_abs_delay_s)
     : model_(model), dt_nominal_s_(dt_nominal_s) {
-  // The frames shifted() reads for a delay of s samples, at the offsets -1..1 of the rate
-  // derivative: one frame beyond the shift on each side, and with a fractional delay one more on
-  // each side for the cubic. Whole-sample delays (zero among them) need no more than before.
+  // The frames shifted() reads for a delay of s samples: one frame beyond the shift on each side,
+  // and with a fractional delay one more on each side for the cubic. Whole-sample delays (zero
+  // among them) need no more than before.
   const auto cover = [&](double delay_s) {
-    const double s = delay_s / dt_nominal_s_;
-    const double n = std::floor(s);
-    const bool fractional = s != n;
-    lookahead_ = std::max(lookahead_, static_cast<int>(n) + (fractional ? 3 : 1));
-    lookback_ = std::max(lookback_, (fractional ? 2 : 1) - static_cast<int>(n));
+    if (!std::isfinite(delay_s)) return;  // unfollowed_delay() says so before anything is read
+    const Reach r = reach(delay_s);
+    lookahead_ = std::max(lookahead_, r.ahead);
+    lookback_ = std::max(lookback_, r.behind);
   };
   for (int j = 0; j < 3; ++j) {
     cover(model.gyro.delay_s[j]);
@@ -40,6 +46,27 @@ Compensator::Compensator(const ImuModel& model, double dt_nominal_s, double max_
     lookahead_ = std::max(lookahead_, m + 2);
     lookback_ = std::max(lookback_, m + 2);
   }
+}
+
+std::string Compensator::unfollowed_delay() const {
+  // Within a hundred times the window first, so that the casts in reach() stay in range.
+  const double bound_s = 100.0 * (lookahead_ + lookback_) * dt_nominal_s_;
+  for (const bool gyro : {true, false}) {
+    const Vector3d& delay = gyro ? model_.gyro.delay_s : model_.accel.delay_s;
+    for (int j = 0; j < 3; ++j) {
+      bool out = !(std::abs(delay[j]) <= bound_s);
+      if (!out) {
+        const Reach r = reach(delay[j]);
+        out = r.ahead > lookahead_ || r.behind > lookback_;
+      }
+      if (out) {
+        char text[96];
+        std::snprintf(text, sizeof text, "%s %c delay %.6g s", gyro ? "gyro" : "accelerometer", "xyz"[j], delay[j]);
+        return text;
+      }
+    }
+  }
+  return {};
 }
 
 // Channel j's output lags its input by tau_j, so the input over (t_{k-1}, t_k] is the output over
@@ -83,6 +110,13 @@ Vector3d Compensator::rate_radps(const std::deque<ImuFrame>& window, int offset,
 }
 
 CompensatedSample Compensator::compensate(const std::deque<ImuFrame>& window) const {
+  // Never read outside the window (a delay run away, or a window too short): an error, not
+  // memory past the deque's end.
+  if (window.size() < static_cast<std::size_t>(lookback_ + 1 + lookahead_))
+    throw std::logic_error("nav::Compensator: a window of " + std::to_string(window.size()) + " frames, " +
+                           std::to_string(lookback_ + 1 + lookahead_) + " needed");
+  if (const std::string delay = unfollowed_delay(); !delay.empty())
+    throw std::logic_error("nav::Compensator: the " + delay + " is beyond the frames its window holds");
   CompensatedSample c;
   const auto k = static_cast<std::size_t>(lookback_);
   const double dt = static_cast<double>(window[k].t_ns - window[k - 1].t_ns) * 1e-9;

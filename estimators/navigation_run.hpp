@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <string>
 #include <functional>
 #include <memory>
 
@@ -56,9 +57,20 @@ class Compensator {
   int lookahead() const { return lookahead_; }
   int lookback() const { return lookback_; }
   // window[lookback()] is the frame being compensated; window holds lookback()+1+lookahead() frames.
+  // Throws std::logic_error when a delay of the model has left the window (see unfollowed_delay).
   CompensatedSample compensate(const std::deque<ImuFrame>& window) const;
+  // The first delay of the model it compensates with that the window cannot follow, in words
+  // ("gyro y delay 0.0213 s"), or empty: a filter that moved a delay there has diverged (its
+  // frames would be read from outside the window), and says so instead of compensating.
+  std::string unfollowed_delay() const;
 
  private:
+  // Frames ahead of and behind the current one that a delay of `delay_s` reads (the cubic's four
+  // around the shifted instant, at the rate derivative's offsets -1..1).
+  struct Reach {
+    int ahead = 0, behind = 0;
+  };
+  Reach reach(double delay_s) const;
   // Channel outputs over the interval `offset` frames from the current one, moved back by each
   // channel's delay onto the interval of its input.
   Eigen::Vector3d shifted(const std::deque<ImuFrame>& window, bool gyro, int offset) const;

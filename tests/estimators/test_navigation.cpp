@@ -1,5 +1,8 @@
 // Strapdown navigation: the textbook error signatures, each within 10 % of its formula.
 #include <cstdio>
+#include <deque>
+#include <limits>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -233,4 +236,31 @@ TEST(Navigation, NonlinearTermsCostNothingWithTheTrueModelAndShowWithout) {
     EXPECT_GT(without.max_velocity_error_mps, 5 * floor.max_velocity_error_mps) << name;
   }
   std::printf("\n");
+}
+
+// The compensation reads a window of frames around the current one, sized for the model's delays
+// and the +-max_delay_s a filter may move them through. A delay the filter drove beyond it (a run
+// away estimate, or NaN) is said in words and compensating is refused: before, the frames were
+// read from past the window's end (imucald died of it once in the chaos soak).
+TEST(Compensator, ADelayBeyondItsWindowIsNamedAndNeverReadOutsideIt) {
+  ImuModel model;
+  const double dt_s = 0.01;
+  const nav::Compensator comp(model, dt_s, 0.01);
+  std::deque<ImuFrame> window(static_cast<std::size_t>(comp.lookback() + 1 + comp.lookahead()));
+  for (std::size_t i = 0; i < window.size(); ++i) window[i].t_ns = static_cast<std::int64_t>(i + 1) * 10'000'000;
+  EXPECT_EQ(comp.unfollowed_delay(), "");
+  model.accel.delay_s.y() = 0.0095;  // within +-10 ms: followed
+  EXPECT_EQ(comp.unfollowed_delay(), "");
+  EXPECT_NO_THROW(comp.compensate(window));
+  model.accel.delay_s.y() = 0.035;
+  EXPECT_EQ(comp.unfollowed_delay(), "accelerometer y delay 0.035 s");
+  EXPECT_THROW(comp.compensate(window), std::logic_error);
+  model.accel.delay_s.y() = 0.0;
+  model.gyro.delay_s.z() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(comp.unfollowed_delay(), "gyro z delay nan s");
+  model.gyro.delay_s.z() = -1e300;
+  EXPECT_EQ(comp.unfollowed_delay(), "gyro z delay -1e+300 s");
+  model.gyro.delay_s.z() = 0.0;
+  window.pop_back();
+  EXPECT_THROW(comp.compensate(window), std::logic_error);
 }
