@@ -582,7 +582,7 @@ try {
     && window.imucal.store.frameRate.view(Infinity)[0].length > 0, id), 'its plots, the frame rate included, are still drawn');
   await shot(page, '08c-live-finished-run');
   // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
-  await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
+  await waitText(page, '#equipment-banner', new RegExp(`rate table \\(Acme Motion ATS-3, serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
   log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');
 
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
