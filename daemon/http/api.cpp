@@ -12,6 +12,7 @@
 #include <boost/url/url_view.hpp>
 #include <spdlog/spdlog.h>
 
+#include "core/earth.hpp"
 #include "core/expect_value.hpp"
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
@@ -102,6 +103,45 @@ json unit_json(const CampaignRow& row) {
   const json spec = json::parse(row.spec_json, nullptr, false);
   if (spec.is_object() && spec.contains("imu")) return spec.at("imu");
   return {{"serial", *row.imu_serial}, {"part_number", row.imu_part_number.value_or("")}};
+}
+
+// Whether the site's g a certificate was issued with is still the configured one (issue 35,
+// deliverable 1: a corrected gravity supersedes certificates). Null when they agree, or when the
+// certificate states no g; else both values and a sentence for a person. "Agree": within 1e-9
+// m/s^2, a thousandth of a measured g's 1-sigma (earth::site_gravity_sigma_mps2), so that only a
+// changed configuration counts, never a number's last bit after its trip through JSON.
+json gravity_correction(const json& content, const DaemonConfig& config) {
+  const json bench = content.is_object() ? content.value("bench", json()) : json();
+  const json gravity = bench.is_object() ? bench.value("gravity", json()) : json();
+  if (!gravity.is_object() || !gravity.value("value_mps2", json()).is_number()) return nullptr;
+  const double issued_with = gravity.at("value_mps2").get<double>();
+  const double now = earth::site_gravity_mps2(config.site);
+  if (std::abs(issued_with - now) <= 1e-9) return nullptr;
+  const bool configured = config.site.gravity_mps2.has_value();
+  const std::string text =
+      "The site's g has been corrected since this certificate was issued: its run was calibrated with g = " +
+      number_text(issued_with, 9) + " m/s^2, the configuration now gives " + number_text(now, 9) + " m/s^2 (" +
+      (configured ? "configured" : "WGS-84 normal gravity") +
+      "). Its coefficients stand on the old value until a certificate from the recording calibrated again with the "
+      "corrected g supersedes it.";
+  return {{"issued_with_mps2", issued_with},
+          {"now_mps2", now},
+          {"source_now", configured ? "configured" : "normal_gravity"},
+          {"text", text}};
+}
+
+// The certificates in force of `rows`' campaigns that state another g than the configured one.
+json gravity_corrected_certificates(DaemonDb& db, const DaemonConfig& config, const std::vector<CampaignRow>& rows) {
+  json out = json::array();
+  for (const CampaignRow& row : rows) {
+    const auto issued = db.current_issued(row.id);
+    if (!issued) continue;
+    const json correction = gravity_correction(parse_or_null(issued->content_json), config);
+    if (correction.is_null()) continue;
+    out.push_back({{"campaign_id", row.id}, {"number", issued->number},
+                   {"issued_with_mps2", correction.at("issued_with_mps2")}, {"now_mps2", correction.at("now_mps2")}});
+  }
+  return out;
 }
 
 // A serial as part of a download's file name: what is not a letter, digit, '-', '_' or '.'
@@ -519,7 +559,9 @@ const std::vector<Api::Route>& Api::routes() {
        [](Api& a, const Call& c) {
          const auto rows = a.db_.unit_campaigns(c.args[0]);
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
-         return json_reply(200, unit_detail_json(c.args[0], rows, a.limits_.current()));
+         json out = unit_detail_json(c.args[0], rows, a.limits_.current());
+         out["gravity_corrected"] = gravity_corrected_certificates(a.db_, a.config_, rows);
+         return json_reply(200, out);
        }},
       {"GET", "/api/imus/{serial}/history.csv", A::viewer,
        [](Api& a, const Call& c) {
@@ -1098,6 +1140,8 @@ json Api::issued_json(const IssuedCertificateRow& c) {
   out["history"] = history;
   const auto page = db_.issued_page(c.number, false);
   out["page"] = page ? page_json(*page) : json(nullptr);
+  // Said on reading, never written into the issued content: the content stays as issued.
+  out["gravity_corrected"] = gravity_correction(content, config_);
   return out;
 }
 

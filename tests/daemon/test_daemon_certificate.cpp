@@ -541,6 +541,46 @@ TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
   }
 }
 
+// Issue 35, deliverable 1, in part: a certificate issued with one site g, read after the
+// configuration's g was corrected, says so (its content unchanged), and the unit's page lists it.
+// (Superseding it needs the run calibrated again from its recording with the corrected g: not done.)
+TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheOldOne) {
+  const std::string dir = scratch_dir("gravity-corrected-lab");
+  LocalDaemon d("gravity-corrected", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
+  const auto id = run_campaign(d, "before the correction", "FOG-71");
+  const json before = d.get(certificate_target(id));
+  ASSERT_TRUE(before.contains("number")) << before.dump().substr(0, 400);
+  EXPECT_TRUE(before.at("gravity_corrected").is_null()) << before.at("gravity_corrected");
+  EXPECT_TRUE(d.get("/api/imus/FOG-71").at("gravity_corrected").empty());
+
+  // The site surveyed again: imucald restarted on the same data directory with the corrected g.
+  d.service->stop();
+  d.service.reset();
+  d.config.site.gravity_mps2 = 9.81925;
+  d.service = std::make_unique<daemon::Service>(d.config);
+  d.service->start(false);
+  const json after = d.get(certificate_target(id));
+  EXPECT_EQ(after.at("number"), before.at("number")) << "not reissued";
+  EXPECT_EQ(after.at("content"), before.at("content")) << "the issued content never changes";
+  const json corrected = after.at("gravity_corrected");
+  ASSERT_TRUE(corrected.is_object()) << after.dump().substr(0, 400);
+  EXPECT_DOUBLE_EQ(corrected.at("issued_with_mps2").get<double>(), 9.81912);
+  EXPECT_DOUBLE_EQ(corrected.at("now_mps2").get<double>(), 9.81925);
+  EXPECT_EQ(corrected.at("source_now"), "configured");
+  const std::string text = corrected.at("text");
+  for (const char* words : {"corrected since this certificate was issued", "9.81912", "9.81925"})
+    EXPECT_NE(text.find(words), std::string::npos) << words << " missing from: " << text;
+  const json unit = d.get("/api/imus/FOG-71");
+  ASSERT_EQ(unit.at("gravity_corrected").size(), 1u) << unit.at("gravity_corrected");
+  EXPECT_EQ(unit.at("gravity_corrected")[0].at("number"), before.at("number"));
+  EXPECT_EQ(unit.at("gravity_corrected")[0].at("campaign_id"), id);
+
+  // A run after the correction is certified with the corrected g: nothing to say of it.
+  const auto later = run_campaign(d, "after the correction", "FOG-71");
+  EXPECT_TRUE(d.get(certificate_target(later)).at("gravity_corrected").is_null());
+  EXPECT_EQ(d.get("/api/imus/FOG-71").at("gravity_corrected").size(), 1u);
+}
+
 // `imucal campaign run` (no daemon) judges the configuration's reference equipment with imucald's
 // own code: refused naming the instrument and its due date, unless given --override-overdue with a
 // reason, which is then recorded with the run, audited and stated on its certificate.

@@ -155,6 +155,10 @@ function issueNotes(record) {
     notes.push(h('p', { class: 'superseded-note', id: 'certificate-superseded' },
       `SUPERSEDED by certificate ${record.superseded_by}: this certificate no longer states the current result.`));
   }
+  // Said by imucald on reading (not part of the issued content): the site's g was corrected since.
+  if (record.gravity_corrected) {
+    notes.push(h('p', { class: 'superseded-note', id: 'certificate-gravity-corrected' }, record.gravity_corrected.text));
+  }
   if (record.supersedes) notes.push(h('p', { class: 'small', id: 'certificate-supersedes' }, `Supersedes certificate ${record.supersedes} (${record.reason}).`));
   return notes;
 }
