@@ -20,6 +20,8 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
+// Who the audit trail and an override name: the person running it, not the program (as imucald
+// names the signed-in user).
 std::string operator_name(const CampaignRunOptions& options) {
   if (!options.operator_name.empty()) return options.operator_name;
   const char* user = std::getenv("USER");

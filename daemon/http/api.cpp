@@ -1301,12 +1301,16 @@ HttpReply Api::campaign_progress(std::int64_t id) {
 namespace {
 
 // Instruments past their due date, as the 409 of a start, the override's audit entry and its
-// record with the run name them.
-json overdue_json(const std::vector<InstrumentDue>& overdue) {
+// record with the run name them. `with_line`: each with its line for a person (due_line, which
+// counts the days from today: the 409's, for the UI's dialog; not for what is kept).
+json overdue_json(const std::vector<InstrumentDue>& overdue, bool with_line = false) {
   json out = json::array();
-  for (const InstrumentDue& d : overdue)
-    out.push_back({{"instrument", d.instrument}, {"identity", d.identity}, {"serial", d.serial},
-                   {"certificate", d.certificate}, {"calibration_due", d.calibration_due}, {"text", due_line(d)}});
+  for (const InstrumentDue& d : overdue) {
+    json i = {{"instrument", d.instrument}, {"identity", d.identity}, {"serial", d.serial},
+              {"certificate", d.certificate}, {"calibration_due", d.calibration_due}};
+    if (with_line) i["text"] = due_line(d);
+    out.push_back(std::move(i));
+  }
   return out;
 }
 
@@ -1356,7 +1360,7 @@ Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const
             "campaign " + std::to_string(id) + " not started: reference equipment is past its due date: " +
                 overdue_text(overdue) + ". Calibrate it (and update reference_equipment in the configuration), or " +
                 request.how_to_override,
-            {{"state", row ? json(to_string(row->state)) : json(nullptr)}, {"overdue", overdue_json(overdue)}},
+            {{"state", row ? json(to_string(row->state)) : json(nullptr)}, {"overdue", overdue_json(overdue, true)}},
             {}};
   }
   const std::string override_reason = override_overdue.value_or("").substr(0, 500);
