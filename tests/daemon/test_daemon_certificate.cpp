@@ -492,7 +492,7 @@ TEST(ReferenceEquipment, TheCertificateOfARunStartedUnderAnOverrideStatesWhoOver
   // The certificate's table line says OVERDUE as well (judged on the day the run ended).
   EXPECT_TRUE(cert.at("content").at("bench").at("reference_equipment").at("table").at("overdue").get<bool>());
   // In what is hashed and signed: the envelope carries it and verifies with the lab's key.
-  EXPECT_EQ(signing::sha256_hex(signing::canonical_json(cert.at("content"))), cert.at("content_sha256"));
+  EXPECT_EQ(signing::sha256_hex(signing::canonical_json(cert.at("content"))), cert.at("content_sha256").get<std::string>());
   EXPECT_EQ(cert.at("signed").at("content").at("campaign").at("override_overdue"), kept);
   const signing::Verification v = signing::verify_document(cert.at("signed"), lab_key);
   EXPECT_TRUE(v.verified()) << v.message;
