@@ -129,6 +129,13 @@ int main(int argc, char** argv) {
                                                         "else as fast as possible)")
       ->check(CLI::NonNegativeNumber);
   camp_run->add_flag("--json", camp_json, "print the summary as one JSON object");
+  std::string camp_override;
+  auto* camp_override_opt = camp_run->add_option(
+      "--override-overdue", camp_override,
+      "start although reference equipment in --config is past its due date, saying why (kept in the audit trail "
+      "and stated on the run's certificate)");
+  camp_run->add_option("--operator", camp_opts.operator_name,
+                       "who runs it, for the audit trail and an override (default: the login name)");
 
   std::string cmp_model, cmp_truth, cmp_json;
   auto* cmp = app.add_subcommand("compare", "Compare a calibration result with the truth of a simulated run");
@@ -277,6 +284,7 @@ int main(int argc, char** argv) {
     if (camp_run->parsed()) {
       if (camp_time_scale >= 0) camp_opts.time_scale = camp_time_scale;
       camp_opts.progress = !camp_json;
+      if (camp_override_opt->count() > 0) camp_opts.override_overdue = camp_override;
       return cli::run_campaign(camp_file, camp_opts, camp_json);
     }
     if (sim->parsed()) return cli::run_simulate(sim_args);

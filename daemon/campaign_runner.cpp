@@ -1,6 +1,7 @@
 #include "daemon/campaign_runner.hpp"
 
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,18 @@ namespace imucal::daemon {
 
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// Who the audit trail and an override name: the person running it, not the program (as imucald
+// names the signed-in user).
+std::string operator_name(const CampaignRunOptions& options) {
+  if (!options.operator_name.empty()) return options.operator_name;
+  const char* user = std::getenv("USER");
+  return user != nullptr && *user != '\0' ? user : "imucal";
+}
+
+}  // namespace
 
 CampaignRunResult run_campaign_file(const std::string& campaign_file, const CampaignRunOptions& options) {
   CampaignRunResult out;
@@ -81,8 +94,21 @@ CampaignRunResult run_campaign_file(const std::string& campaign_file, const Camp
     service.start(false);
     out.id = store_campaign(service.db(), check, "imucal campaign run " + campaign_file);
     const auto t0 = Clock::now();
-    const auto started = service.sequencer().command(out.id, Command::Start, "imucal", "campaign run");
-    if (started.http_status != 200) throw std::runtime_error(started.error);
+    // Started as imucald starts a campaign: the reference equipment judged by the same code.
+    const auto started = service.api().command_campaign(
+        out.id, Command::Start,
+        {operator_name(options), "campaign run", options.override_overdue, "--override-overdue",
+         "run it again with --override-overdue REASON (kept in the audit trail and stated on the run's certificate)"});
+    // Not started: overdue equipment without an override, or an override that gives no reason.
+    if (started.status == 400 || (started.status == 409 && started.extra.contains("overdue"))) {
+      service.stop();
+      out.exit_code = 2;
+      out.state = "created";
+      out.error = started.error;
+      return out;
+    }
+    if (started.status != 200) throw std::runtime_error(started.error);
+    out.override_overdue = service.api().overdue_override_json(out.id);
     int last_pct = -1;
     for (;;) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));

@@ -17,10 +17,18 @@ struct CampaignRunOptions {
   std::string model_out;               // write the model here (optional)
   std::optional<double> time_scale;    // overrides the campaign's
   bool progress = true;                // progress lines on stderr
+  // Who runs it: the audit trail's actor, and the operator an override names (empty: the login
+  // name, else "imucal").
+  std::string operator_name;
+  // Why the campaign may start although reference equipment in the configuration is past its due
+  // date; without it such a campaign is refused, as imucald refuses it (Api::command_campaign).
+  std::optional<std::string> override_overdue;
 };
 
 struct CampaignRunResult {
-  int exit_code = 1;  // 0 done, 1 failed or aborted, 2 invalid campaign or configuration
+  // 0 done, 1 failed or aborted, 2 invalid campaign or configuration, or not started (reference
+  // equipment past its due date and no override: state "created", error says which and how)
+  int exit_code = 1;
   std::int64_t id = 0;
   std::string state;
   double program_s = 0.0, wall_s = 0.0;
@@ -29,6 +37,7 @@ struct CampaignRunResult {
   std::string error;
   nlohmann::json results = nlohmann::json::object();
   bool has_model = false;
+  nlohmann::json override_overdue = nullptr;  // the override the run was started under (docs/api.md)
 };
 
 CampaignRunResult run_campaign_file(const std::string& campaign_file, const CampaignRunOptions& options);

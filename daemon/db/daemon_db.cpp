@@ -159,6 +159,17 @@ CREATE TRIGGER IF NOT EXISTS issued_page_frozen BEFORE UPDATE ON issued_page
 BEGIN SELECT RAISE(ABORT, 'a stored certificate page never changes'); END;
 CREATE TRIGGER IF NOT EXISTS issued_page_kept BEFORE DELETE ON issued_page
 BEGIN SELECT RAISE(ABORT, 'a stored certificate page is never deleted'); END;
+-- A start with reference equipment past its due date, overridden by an operator (issue 35): kept
+-- with the run so that its certificate states who overrode which instrument and why. Created
+-- where missing, as the certificate table, without a migration.
+CREATE TABLE IF NOT EXISTS overdue_override(
+  campaign_id INTEGER PRIMARY KEY REFERENCES campaign(id),
+  t_ms INTEGER NOT NULL,
+  overridden_by TEXT NOT NULL,
+  reason TEXT NOT NULL,
+  instruments_json TEXT NOT NULL,
+  text TEXT NOT NULL
+);
 )sql";
 
 using storage::sql::Statement;
@@ -588,6 +599,32 @@ void DaemonDb::insert_issued(const IssuedCertificateRow& row) {
     s.run();
   }
   txn.commit();
+}
+
+void DaemonDb::insert_overdue_override(const OverdueOverrideRow& row) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "INSERT INTO overdue_override(campaign_id, t_ms, overridden_by, reason, instruments_json, text) "
+                   "VALUES (?1, ?2, ?3, ?4, ?5, ?6)");
+  s.bind(1, row.campaign_id).bind(2, row.t_ms).bind(3, row.by).bind(4, row.reason).bind(5, row.instruments_json);
+  s.bind(6, row.text);
+  s.run();
+}
+
+void DaemonDb::remove_overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "DELETE FROM overdue_override WHERE campaign_id = ?1");
+  s.bind(1, campaign_id);
+  s.run();
+}
+
+std::optional<OverdueOverrideRow> DaemonDb::overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT campaign_id, t_ms, overridden_by, reason, instruments_json, text FROM overdue_override "
+                   "WHERE campaign_id = ?1");
+  s.bind(1, campaign_id);
+  if (!s.step()) return std::nullopt;
+  return OverdueOverrideRow{s.column_int64(0), s.column_int64(1), s.column_text(2),
+                            s.column_text(3), s.column_text(4),  s.column_text(5)};
 }
 
 bool DaemonDb::insert_issued_page(const IssuedPageRow& row) {

@@ -81,6 +81,17 @@ struct IssuedCertificateRow {
   std::string reason;                        // why it was issued ("the run ended", "limits changed ...")
 };
 
+// A start an operator made while reference equipment was past its due date (issue 35): who, when,
+// why, and the instruments as judged then. Kept with the run so that its certificate states it.
+struct OverdueOverrideRow {
+  std::int64_t campaign_id = 0;
+  std::int64_t t_ms = 0;
+  std::string by;
+  std::string reason;
+  std::string instruments_json;  // a JSON array: instrument, identity, serial, certificate, calibration_due
+  std::string text;              // overdue_text() of them: "the rate table (...) was due for calibration on ..."
+};
+
 // A certificate's page as printed (HTML, self-contained), stored once.
 struct IssuedPageRow {
   std::string number;
@@ -214,6 +225,13 @@ class DaemonDb {
   std::optional<IssuedPageRow> issued_page(const std::string& number, bool with_html);
   // The campaigns that have a certificate in force.
   std::vector<std::int64_t> campaigns_with_issued();
+
+  // The override of overdue reference equipment a campaign was started under (one per campaign:
+  // only a campaign not yet started is judged, and it starts once). remove_overdue_override undoes
+  // the record of a start the sequencer then refused.
+  void insert_overdue_override(const OverdueOverrideRow& row);
+  void remove_overdue_override(std::int64_t campaign_id);
+  std::optional<OverdueOverrideRow> overdue_override(std::int64_t campaign_id);
 
   // Alarms. raise_alarm returns the new row. clear_alarms ends the active alarms of a campaign
   // (only those from `source` when given) and returns them as cleared.

@@ -12,6 +12,7 @@
 #include <boost/url/url_view.hpp>
 #include <spdlog/spdlog.h>
 
+#include "core/earth.hpp"
 #include "core/expect_value.hpp"
 #include "core/json_reader.hpp"
 #include "core/number_text.hpp"
@@ -102,6 +103,45 @@ json unit_json(const CampaignRow& row) {
   const json spec = json::parse(row.spec_json, nullptr, false);
   if (spec.is_object() && spec.contains("imu")) return spec.at("imu");
   return {{"serial", *row.imu_serial}, {"part_number", row.imu_part_number.value_or("")}};
+}
+
+// Whether the site's g a certificate was issued with is still the configured one (issue 35,
+// deliverable 1: a corrected gravity supersedes certificates). Null when they agree, or when the
+// certificate states no g; else both values and a sentence for a person. "Agree": within 1e-9
+// m/s^2, a thousandth of a measured g's 1-sigma (earth::site_gravity_sigma_mps2), so that only a
+// changed configuration counts, never a number's last bit after its trip through JSON.
+json gravity_correction(const json& content, const DaemonConfig& config) {
+  const json bench = content.is_object() ? content.value("bench", json()) : json();
+  const json gravity = bench.is_object() ? bench.value("gravity", json()) : json();
+  if (!gravity.is_object() || !gravity.value("value_mps2", json()).is_number()) return nullptr;
+  const double issued_with = gravity.at("value_mps2").get<double>();
+  const double now = earth::site_gravity_mps2(config.site);
+  if (std::abs(issued_with - now) <= 1e-9) return nullptr;
+  const bool configured = config.site.gravity_mps2.has_value();
+  const std::string text =
+      "The site's g has been corrected since this certificate was issued: its run was calibrated with g = " +
+      number_text(issued_with, 9) + " m/s^2, the configuration now gives " + number_text(now, 9) + " m/s^2 (" +
+      (configured ? "configured" : "WGS-84 normal gravity") +
+      "). Its coefficients stand on the old value until a certificate from the recording calibrated again with the "
+      "corrected g supersedes it.";
+  return {{"issued_with_mps2", issued_with},
+          {"now_mps2", now},
+          {"source_now", configured ? "configured" : "normal_gravity"},
+          {"text", text}};
+}
+
+// The certificates in force of `rows`' campaigns that state another g than the configured one.
+json gravity_corrected_certificates(DaemonDb& db, const DaemonConfig& config, const std::vector<CampaignRow>& rows) {
+  json out = json::array();
+  for (const CampaignRow& row : rows) {
+    const auto issued = db.current_issued(row.id);
+    if (!issued) continue;
+    const json correction = gravity_correction(parse_or_null(issued->content_json), config);
+    if (correction.is_null()) continue;
+    out.push_back({{"campaign_id", row.id}, {"number", issued->number},
+                   {"issued_with_mps2", correction.at("issued_with_mps2")}, {"now_mps2", correction.at("now_mps2")}});
+  }
+  return out;
 }
 
 // A serial as part of a download's file name: what is not a letter, digit, '-', '_' or '.'
@@ -526,7 +566,9 @@ const std::vector<Api::Route>& Api::routes() {
        [](Api& a, const Call& c) {
          const auto rows = a.db_.unit_campaigns(c.args[0]);
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
-         return json_reply(200, unit_detail_json(c.args[0], rows, a.limits_.current()));
+         json out = unit_detail_json(c.args[0], rows, a.limits_.current());
+         out["gravity_corrected"] = gravity_corrected_certificates(a.db_, a.config_, rows);
+         return json_reply(200, out);
        }},
       {"GET", "/api/imus/{serial}/history.csv", A::viewer,
        [](Api& a, const Call& c) {
@@ -886,6 +928,8 @@ json Api::detail_json(const CampaignRow& row) {
                            {"to", to_string(t.to)},
                            {"reason", t.reason}});
   out["transitions"] = transitions;
+  // Started with reference equipment past its due date: who overrode which instrument, and why.
+  out["override_overdue"] = overdue_override_json(id);
   json events = json::array();
   for (const auto& e : db_.events(id))
     events.push_back({{"t", iso8601_utc(e.t_ms)},
@@ -958,6 +1002,10 @@ json Api::certificate_content(const CampaignRow& row, const std::string& bench_j
   for (const char* key : {"id", "name", "state", "program", "started", "ended", "error", "frames", "lost_frames",
                           "bad_frames", "complete", "accepted", "verdict", "imu", "imu_serial", "progress", "transitions"})
     campaign[key] = detail.value(key, json(nullptr));
+  // A run started under an override of overdue reference equipment states it (who, which, why).
+  // Only such a run: the content of every other certificate stays as issued before overrides
+  // were stated, so that a reissue, which compares contents, does not supersede them for nothing.
+  if (const json o = detail.value("override_overdue", json()); !o.is_null()) campaign["override_overdue"] = o;
   const json& spec = detail.at("spec");
   campaign["spec"] = {{"chamber", spec.is_object() ? spec.value("chamber", json(nullptr)) : json(nullptr)},
                       {"estimators", spec.is_object() ? spec.value("estimators", json::array()) : json::array()}};
@@ -1099,6 +1147,8 @@ json Api::issued_json(const IssuedCertificateRow& c) {
   out["history"] = history;
   const auto page = db_.issued_page(c.number, false);
   out["page"] = page ? page_json(*page) : json(nullptr);
+  // Said on reading, never written into the issued content: the content stays as issued.
+  out["gravity_corrected"] = gravity_correction(content, config_);
   return out;
 }
 
@@ -1263,34 +1313,97 @@ HttpReply Api::campaign_progress(std::int64_t id) {
 
 namespace {
 
-// Instruments past their due date, as the 409 of a start and the override's audit entry name them.
-json overdue_json(const std::vector<InstrumentDue>& overdue) {
+// Instruments past their due date, as the 409 of a start, the override's audit entry and its
+// record with the run name them. `with_line`: each with its line for a person (due_line, which
+// counts the days from today: the 409's, for the UI's dialog; not for what is kept).
+json overdue_json(const std::vector<InstrumentDue>& overdue, bool with_line = false) {
   json out = json::array();
-  for (const InstrumentDue& d : overdue)
-    out.push_back({{"instrument", d.instrument}, {"identity", d.identity}, {"serial", d.serial},
-                   {"certificate", d.certificate}, {"calibration_due", d.calibration_due}});
+  for (const InstrumentDue& d : overdue) {
+    json i = {{"instrument", d.instrument}, {"identity", d.identity}, {"serial", d.serial},
+              {"certificate", d.certificate}, {"calibration_due", d.calibration_due}};
+    if (with_line) i["text"] = due_line(d);
+    out.push_back(std::move(i));
+  }
   return out;
 }
 
+bool blank(const std::string& text) { return text.find_first_not_of(" \t\r\n") == std::string::npos; }
+
 }  // namespace
 
-// A start while reference equipment is past its due date is refused (409 naming each instrument)
-// unless the body overrides it with a reason; the instruments are judged today (UTC) by the one
-// rule (equipment_due). Only a campaign that start would queue is judged: another state gets the
-// sequencer's own answer. Nothing to refuse: nullopt, and `overdue` holds what the override covers.
-std::optional<HttpReply> Api::refuse_overdue_start(std::int64_t id, bool overridden, std::vector<InstrumentDue>& overdue) {
+std::vector<InstrumentDue> Api::overdue_for_start(std::int64_t id) {
+  std::vector<InstrumentDue> overdue;
   const auto row = db_.campaign(id);
-  if (!row || row->state != RunState::Created) return std::nullopt;
+  if (!row || row->state != RunState::Created) return overdue;
   for (InstrumentDue& d : equipment_due(config_.reference_equipment, utc_day(now_unix_ms())))
     if (d.overdue) overdue.push_back(std::move(d));
-  if (overdue.empty() || overridden) return std::nullopt;
-  return error_reply(409,
-                     "campaign " + std::to_string(id) + " not started: reference equipment is past its due date: " +
-                         overdue_text(overdue) +
-                         ". Calibrate it (and update reference_equipment in the configuration), or start anyway "
-                         "as an operator with a reason: POST /api/campaigns/" + std::to_string(id) +
-                         "/start with {\"override_overdue\": \"why\"} (kept in the audit trail)",
-                     {{"state", to_string(row->state)}, {"overdue", overdue_json(overdue)}});
+  return overdue;
+}
+
+json Api::overdue_override_json(std::int64_t id) {
+  const auto o = db_.overdue_override(id);
+  if (!o) return nullptr;
+  return {{"by", o->by}, {"at", iso8601_utc(o->t_ms)}, {"reason", o->reason},
+          {"instruments", parse_or_null(o->instruments_json)}, {"text", o->text}};
+}
+
+// A start while reference equipment is past its due date (judged today, UTC, by the one rule,
+// equipment_due) is refused with 409 naming each instrument, unless the request overrides it with
+// a reason. Only a campaign that start would queue is judged: another state gets the sequencer's
+// own answer. The override is recorded with the run before the sequencer is asked (and removed
+// when it refuses), so that no run can end, and be certified, without it.
+Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const CommandRequest& request) {
+  const std::optional<std::string>& override_overdue = request.override_overdue;
+  std::string problem;
+  if (override_overdue && command != Command::Start)
+    problem = request.override_name + " applies to start only (a run already started is not judged again)";
+  else if (override_overdue && blank(*override_overdue))
+    problem = request.override_name + " must say why the campaign starts with reference equipment past its due date";
+  if (!problem.empty()) return {400, problem, {{"problems", json::array({problem})}}, {}};
+
+  std::unique_lock start_lock(start_mutex_, std::defer_lock);
+  std::vector<InstrumentDue> overdue;
+  if (command == Command::Start) {
+    start_lock.lock();
+    overdue = overdue_for_start(id);
+  }
+  if (!overdue.empty() && !override_overdue) {
+    const auto row = db_.campaign(id);
+    return {409,
+            "campaign " + std::to_string(id) + " not started: reference equipment is past its due date: " +
+                overdue_text(overdue) + ". Calibrate it (and update reference_equipment in the configuration), or " +
+                request.how_to_override,
+            {{"state", row ? json(to_string(row->state)) : json(nullptr)}, {"overdue", overdue_json(overdue, true)}},
+            {}};
+  }
+  const std::string override_reason = override_overdue.value_or("").substr(0, 500);
+  // The run's own record says so too: the transition's reason names what was overridden and why.
+  std::string stored_reason = request.reason;
+  if (!overdue.empty()) {
+    stored_reason += (request.reason.empty() ? "" : "; ") + std::string("overdue reference equipment overridden (") +
+                     overdue_text(overdue) + "): " + override_reason;
+    db_.insert_overdue_override(
+        {id, now_unix_ms(), request.user, override_reason, overdue_json(overdue).dump(), overdue_text(overdue)});
+  }
+  const auto outcome = sequencer_.command(id, command, request.user, stored_reason);
+  if (outcome.http_status != 200) {
+    if (!overdue.empty()) db_.remove_overdue_override(id);
+    json extra = json::object();
+    if (outcome.state) extra["state"] = to_string(*outcome.state);
+    return {outcome.http_status, outcome.error, extra, {}};
+  }
+  const std::string name(to_string(command));
+  if (!overdue.empty()) {
+    spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, request.user,
+                 overdue_text(overdue), override_reason);
+    audit(request.user, "campaign.override_overdue", "campaign " + std::to_string(id),
+          {{"command", name}, {"instruments", overdue_json(overdue)}, {"reason", override_reason}});
+  }
+  // A command that succeeded has moved the campaign to its new state.
+  const std::string state(to_string(expect_value(outcome.state, "the state after a command that succeeded")));
+  audit(request.user, "campaign.command", "campaign " + std::to_string(id),
+        {{"command", name}, {"reason", request.reason}, {"state", state}});
+  return {200, {}, json::object(), state};
 }
 
 HttpReply Api::campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
@@ -1298,46 +1411,21 @@ HttpReply Api::campaign_command(std::int64_t id, const std::string& command, con
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
   std::vector<std::string> problems;
-  std::string reason;
-  std::optional<std::string> override_overdue;
+  CommandRequest ask{who.user, {}, {}, "body.override_overdue",
+                     "start anyway as an operator with a reason: POST /api/campaigns/" + std::to_string(id) +
+                         "/start with {\"override_overdue\": \"why\"} (kept in the audit trail and stated on the "
+                         "run's certificate)"};
   {
     ObjectReader r(body, "body", problems);
-    if (auto v = r.string("reason")) reason = v->substr(0, 500);
-    override_overdue = r.string("override_overdue");
+    if (auto v = r.string("reason")) ask.reason = v->substr(0, 500);
+    ask.override_overdue = r.string("override_overdue");
   }
-  if (override_overdue && command != "start")
-    problems.push_back("body.override_overdue applies to start only (a run already started is not judged again)");
-  else if (override_overdue && override_overdue->find_first_not_of(" \t\r\n") == std::string::npos)
-    problems.push_back("body.override_overdue must say why the campaign starts with reference equipment past its due date");
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
-  std::vector<InstrumentDue> overdue;
-  if (command == "start") {
-    if (auto refused = refuse_overdue_start(id, override_overdue.has_value(), overdue)) return *refused;
-  }
-  const std::string override_reason = override_overdue.value_or("").substr(0, 500);
-  // The run's own record says so too: the transition's reason names what was overridden and why.
-  std::string stored_reason = reason;
-  if (!overdue.empty())
-    stored_reason += (reason.empty() ? "" : "; ") + std::string("overdue reference equipment overridden (") +
-                     overdue_text(overdue) + "): " + override_reason;
   // The route matches only a command's name ({command}).
-  const auto outcome = sequencer_.command(id, expect_value(parse_command(command), "the command the route matched"),
-                                          who.user, stored_reason);
-  if (outcome.http_status != 200) {
-    json extra = json::object();
-    if (outcome.state) extra["state"] = to_string(*outcome.state);
-    return error_reply(outcome.http_status, outcome.error, extra);
-  }
-  if (!overdue.empty()) {
-    spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, who.user,
-                 overdue_text(overdue), override_reason);
-    audit(who.user, "campaign.override_overdue", "campaign " + std::to_string(id),
-          {{"command", command}, {"instruments", overdue_json(overdue)}, {"reason", override_reason}});
-  }
-  // A command that succeeded has moved the campaign to its new state.
-  const std::string state(to_string(expect_value(outcome.state, "the state after a command that succeeded")));
-  audit(who.user, "campaign.command", "campaign " + std::to_string(id), {{"command", command}, {"reason", reason}, {"state", state}});
-  return json_reply(200, {{"id", id}, {"state", state}});
+  const CommandAnswer answer =
+      command_campaign(id, expect_value(parse_command(command), "the command the route matched"), ask);
+  if (answer.status != 200) return error_reply(answer.status, answer.error, answer.extra);
+  return json_reply(200, {{"id", id}, {"state", answer.state}});
 }
 
 // The operator's answer to what the run asks (a power cycle of the IMU): {"answer": "done"}.

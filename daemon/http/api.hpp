@@ -64,6 +64,29 @@ class Api {
   void set_shutting_down() { shutting_down_ = true; }
   // Where the analyses' progress is published ({"type": "analysis", ...}, docs/api.md).
   void set_event_listener(std::function<void(const nlohmann::json&)> listener);
+  // A command to a campaign as a person gives it, through the API or `imucal campaign run`
+  // (campaign_runner.cpp): the one place a start is judged against the reference equipment's due
+  // dates (equipment_due), an override of overdue equipment checked, recorded with the run (its
+  // certificate states it), audited and logged, and the command audited.
+  struct CommandRequest {
+    std::string user;                             // who gives it (the audit trail's actor)
+    std::string reason;                           // the operator's reason for the command (may be empty)
+    std::optional<std::string> override_overdue;  // start only: why overdue equipment does not stop it
+    // How the caller names the override to a person, for the refusals: "body.override_overdue"
+    // and "POST /api/campaigns/7/start with {...}" for the API, the CLI's option for the CLI.
+    std::string override_name;
+    std::string how_to_override;
+  };
+  struct CommandAnswer {
+    int status = 200;  // as HTTP: 400 a bad override, 409 refused (overdue, or the sequencer's), ...
+    std::string error;
+    nlohmann::json extra = nlohmann::json::object();  // the error reply's other keys (state, overdue, problems)
+    std::string state;                                // the new state when status is 200
+  };
+  CommandAnswer command_campaign(std::int64_t id, Command command, const CommandRequest& request);
+  // The override of overdue reference equipment a campaign was started under (docs/api.md
+  // "Campaigns": override_overdue), or null.
+  nlohmann::json overdue_override_json(std::int64_t id);
   // The sequencer's events (Sequencer::EventListener): a run that ends `done` is issued its
   // certificate here.
   void on_run_event(const nlohmann::json& event);
@@ -99,9 +122,9 @@ class Api {
   HttpReply campaign_report(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_command(std::int64_t id, const std::string& command, const ApiRequest& request,
                              const Principal& who);
-  // A start refused for reference equipment past its due date (409), unless `overridden`; fills
-  // `overdue` with what is overdue today for a campaign a start would queue.
-  std::optional<HttpReply> refuse_overdue_start(std::int64_t id, bool overridden, std::vector<InstrumentDue>& overdue);
+  // The instruments overdue today (UTC) for a campaign a start would queue (none for a campaign in
+  // another state: the sequencer answers that start itself).
+  std::vector<InstrumentDue> overdue_for_start(std::int64_t id);
   nlohmann::json summary(const CampaignRow& row);
   // An operator's acceptance of a partial run as its unit's calibration.
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
@@ -149,6 +172,9 @@ class Api {
   LimitsFile limits_;
   CertificateSequence certificate_sequence_;
   std::mutex certificate_mutex_;  // a campaign's certificate is looked up and issued as one step
+  // A start is judged, its override recorded and the sequencer asked as one step: two starts of
+  // one campaign never both record an override.
+  std::mutex start_mutex_;
   // The lab's key (config certificates.signing_key_file), read when the service starts: a key file
   // others can read stops the start (signing::read_key_file says why and how to mend it).
   std::optional<signing::KeyPair> signing_key_;

@@ -42,7 +42,10 @@ void add_due(json& out, const InstrumentDue& d, bool with_days) {
   if (!with_days) return;
   out["due_in_days"] = d.due_in_days;
   out["due_soon"] = d.due_soon;
+  out["text"] = due_line(d);
 }
+
+std::string days(std::int64_t n) { return std::to_string(n) + (n == 1 ? " day" : " days"); }
 
 json instrument_json(const ReferenceInstrument& i, const InstrumentDue& d, bool with_days) {
   json out = {{"make", i.make},
@@ -70,13 +73,36 @@ std::vector<InstrumentDue> equipment_due(const ReferenceEquipment& equipment, st
   return out;
 }
 
+std::string due_sentence(const InstrumentDue& d) {
+  return "the " + d.title + " (" + d.identity + ") " + (d.overdue ? "was" : "is") + " due for " +
+         (d.instrument == "gravity" ? "a new survey" : "calibration") + " on " + d.calibration_due;
+}
+
+std::string due_line(const InstrumentDue& d) {
+  std::string out = due_sentence(d);
+  out[0] = 'T';
+  const std::int64_t n = d.due_in_days;
+  if (d.overdue) return out + " (" + days(-n) + " ago).";
+  return out + " (" + (n == 0 ? "today" : n == 1 ? "tomorrow" : "in " + days(n)) + ").";
+}
+
+std::string due_banner(const std::vector<InstrumentDue>& judged_list) {
+  bool overdue = false, soon = false;
+  for (const InstrumentDue& d : judged_list) {
+    overdue = overdue || d.overdue;
+    soon = soon || d.due_soon;
+  }
+  if (overdue)
+    return "A campaign starts only when an operator overrides this with a reason, which the audit trail keeps and "
+           "the run's certificate states.";
+  if (soon) return "After its due date no campaign starts without an operator's override.";
+  return {};
+}
+
 std::string overdue_text(const std::vector<InstrumentDue>& judged_list) {
   std::string out;
-  for (const InstrumentDue& d : judged_list) {
-    if (!d.overdue) continue;
-    out += (out.empty() ? "the " : "; the ") + d.title + " (" + d.identity + ") was due for " +
-           (d.instrument == "gravity" ? "a new survey" : "calibration") + " on " + d.calibration_due;
-  }
+  for (const InstrumentDue& d : judged_list)
+    if (d.overdue) out += (out.empty() ? "" : "; ") + due_sentence(d);
   return out;
 }
 
@@ -100,6 +126,10 @@ json reference_equipment_json(const DaemonConfig& config, std::int64_t day, bool
               {"sigma_mps2", sigma}};
     add_due(j, *d, with_days);
     out["gravity"] = std::move(j);
+  }
+  if (with_days) {
+    const std::string banner = due_banner(judged_list);
+    out["banner"] = banner.empty() ? json(nullptr) : json(banner);
   }
   return out;
 }

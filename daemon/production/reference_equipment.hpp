@@ -41,8 +41,21 @@ std::int64_t utc_day(std::int64_t unix_ms);
 // after `day`.
 std::vector<InstrumentDue> equipment_due(const ReferenceEquipment& equipment, std::int64_t day);
 
-// The overdue ones of `judged` in words, for an operator: "the rate table Acme Motion ATS-3, serial
-// T-0815, was due for calibration on 2020-01-31; ...".
+// One instrument's due date in words, the one place they are written (the daemon's refusals, the
+// live page's banner and the override dialog in the browser all show these, web/js/equipment.mjs
+// composes none): "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on
+// 2020-01-31" when overdue, "... is due for calibration on ..." otherwise ("a new survey" for the
+// gravity survey).
+std::string due_sentence(const InstrumentDue& d);
+// The sentence as a line for a person, with how far the due day is: "The rate table (...) was due
+// for calibration on 2020-01-31 (3 days ago).", "... (today).", "... (tomorrow).", "... (in 5 days).".
+std::string due_line(const InstrumentDue& d);
+// What follows for a start, after the lines of the instruments overdue or due soon: empty when
+// none is; else the consequence of an overdue one (a start needs an operator's override), or of a
+// due date passing.
+std::string due_banner(const std::vector<InstrumentDue>& judged);
+
+// The overdue ones of `judged` in words, for an operator: their due_sentence joined with "; ".
 std::string overdue_text(const std::vector<InstrumentDue>& judged);
 
 // What to say of the reference equipment, judged on `day` (utc_day of the run's end for a
@@ -52,7 +65,9 @@ std::string overdue_text(const std::vector<InstrumentDue>& judged);
 //    "gravity": {surveyed_by, calibration_certificate, calibration_due, uncertainty, sigma_mps2, overdue} | null}
 // calibration_certificate and uncertainty are null when not configured. The gravity survey's
 // uncertainty is the 1-sigma the calibration uses for the site's g (earth::site_gravity_sigma_mps2),
-// not a configured number. `with_days` adds due_in_days and due_soon to each (the live page's).
+// not a configured number. `with_days` (the live page's) adds due_in_days, due_soon and `text`
+// (due_line) to each, and `banner` (due_banner; null when nothing is due soon or overdue) beside
+// them.
 nlohmann::json reference_equipment_json(const DaemonConfig& config, std::int64_t day, bool with_days);
 
 }  // namespace imucal::daemon

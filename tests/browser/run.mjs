@@ -660,7 +660,7 @@ try {
     assert.equal(new Set(times).size, times.length, `the idle ${plot} plot's time ticks differ: ${times.join(' ')}`);
   }
   // The reference equipment due within a week (issue 35): named with its date (2 days if midnight passed).
-  await waitText(page, '#equipment-banner', new RegExp(`rate table Acme Motion ATS-3 \\(serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
+  await waitText(page, '#equipment-banner', new RegExp(`rate table \\(Acme Motion ATS-3, serial T-0815\\) is due for calibration on ${tableDue} \\(in [23] days\\)`));
   log('idle live page: the bench, none of the last run\'s figures; the table due in 3 days announced');
 
   // ---- the Schuler test and the thermal plots, from campaigns that ran the programs they need ----
@@ -1191,7 +1191,7 @@ try {
   log('WebSocket lost and restored with a banner; signed in again; the form kept its text');
 
   // ---- an overdue table: Start asks why, the override starts it and the audit trail keeps it ----
-  const overdue = await apiCall('POST', '/api/campaigns', { name: 'browser test: overdue table', program: 'direct-short', rate_hz: 10, time_scale: 1 });
+  const overdue = await apiCall('POST', '/api/campaigns', { name: 'browser test: overdue table', program: 'direct-short', rate_hz: 10, time_scale: 0 });
   assert.equal(overdue.status, 201, JSON.stringify(overdue.body));
   await page.goto(`${base}/#/campaigns/${overdue.body.id}`);
   await waitText(page, '#campaign-state', /created/);
@@ -1202,13 +1202,21 @@ try {
   await shot(page, '12b-overdue-override');
   await page.fill('#confirm-reason', 'browser test: the table was checked against the reference cube');
   await page.click('#confirm-ok');
-  await waitText(page, '#campaign-state', /queued|running/);
+  await waitText(page, '#campaign-state', /queued|running|done/);
   const override = (await apiCall('GET', '/api/audit?action=campaign.override_overdue')).body.entries;
   assert.equal(override.length, 1, JSON.stringify(override));
   assert.equal(override[0].actor, 'operator');
   assert.equal(override[0].details.reason, 'browser test: the table was checked against the reference cube');
-  await apiCall('POST', `/api/campaigns/${overdue.body.id}/abort`, { reason: 'browser test cleanup' });
-  log('an overdue table: Start asked for a reason, the override started the campaign and is in the audit trail');
+  // Its certificate states the override: who, which instrument (imucald's words), why; one A4 page still.
+  await waitCampaign(overdue.body.id, (c) => c.state === 'done', 'the run started under the override');
+  await page.goto(`${base}/certificate.html?id=${overdue.body.id}`);
+  await page.waitForSelector('#certificate[data-ready="true"]');
+  const overrideFact = await page.textContent('#certificate td[data-fact="Overdue equipment overridden"]');
+  assert.match(overrideFact, /^Started by operator \(.*\) although the rate table \(Acme Motion ATS-3, serial T-0815\) was due for calibration on 2020-01-31; reason given: browser test: the table was checked against the reference cube$/);
+  await shot(page, '12c-certificate-override');
+  assert.equal(await printedPages(page, path.join(outDir, `certificate-campaign-${overdue.body.id}.pdf`)), 1,
+    'the override\'s line keeps the certificate on one A4 page');
+  log('an overdue table: Start asked for a reason, the override started the campaign, is in the audit trail and on its certificate');
 
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {

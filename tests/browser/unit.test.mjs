@@ -227,8 +227,8 @@ test('the builder\'s prediction: each coefficient from the last stage that has i
 });
 
 test('certificate rows: names with units, k = 2 beside k = 1, "not determined" instead of zeros, the verdict per coefficient', async () => {
-  const { certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText, COVERAGE_K } =
-    await import('../../web/js/certificate_rows.mjs');
+  const { certificateRows, verdictStatement, partialStatement, overrideStatement, equipmentLines, gravityStatement, conventionsText,
+    COVERAGE_K } = await import('../../web/js/certificate_rows.mjs');
   const { coefficientName } = await import('../../web/js/coefficients.mjs');
   assert.equal(coefficientName('gyro.bias_dph.x'), 'Gyro bias, x axis');
   assert.equal(coefficientName('accel.misalignment_arcsec.yz'), 'Accelerometer misalignment, sensor y about z');
@@ -299,6 +299,14 @@ test('certificate rows: names with units, k = 2 beside k = 1, "not determined" i
       { to: 'stopping', reason: 'stop by alice', t: '2026-01-01T14:03:00Z' }] });
   assert.match(stopped, /^stopped at 59 % of the program \(stop by alice, \d\d:\d\d:\d\d\)$/);
   assert.match(partialStatement({ state: 'failed', complete: false, progress: 0.2, error: 'table fault' }), /failed at 20 % .*table fault/);
+
+  // A run started under an operator's override of overdue equipment says who, which (imucald's
+  // words) and why; one started without says nothing.
+  assert.equal(overrideStatement({ state: 'done', override_overdue: null }), null);
+  assert.equal(overrideStatement({ state: 'done' }), null);
+  assert.match(overrideStatement({ override_overdue: { by: 'alice', at: '2026-11-28T09:14:02.000Z', reason: 'customer deadline',
+    text: 'the rate table (Acme ATS-3, serial T-1) was due for calibration on 2020-01-31' } }),
+  /^Started by alice \(2026-11-2\d \d\d:\d\d:02, local time\) although the rate table \(Acme ATS-3, serial T-1\) was due for calibration on 2020-01-31; reason given: customer deadline$/);
 
   // Reference equipment: simulated said so; real with an overdue instrument marked.
   assert.match(equipmentLines({ simulated: true, devices: 'sim' })[0].text, /Simulated three-axis rate table/);
@@ -505,27 +513,33 @@ test('every list tells done, stopped, partial, failed and aborted apart (issue 3
   assert.match(runOutcome({ state: 'done', complete: false, accepted: { reason: 'first two cycles' } }).title, /first two cycles/);
 });
 
-test('reference equipment: the live page warns a week ahead and the start asks for an override', async () => {
+test('reference equipment: the live page shows imucald\'s warnings a week ahead and the start asks for an override', async () => {
   const { equipmentWarnings, overdueStartQuestion } = await import('../../web/js/equipment.mjs');
-  assert.deepEqual(equipmentWarnings(undefined), []);
-  assert.deepEqual(equipmentWarnings({ table: null, chamber: null, gravity: null }), []);
-  const table = { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: '2026-12-01' };
+  assert.equal(equipmentWarnings(undefined), null);
+  assert.equal(equipmentWarnings({ table: null, chamber: null, gravity: null, banner: null }), null);
+  // The words are imucald's (GET /api/status reference_equipment: each instrument's text, the
+  // banner's sentence); the page picks those due soon or overdue and puts the overdue first.
+  const tableText = 'The rate table (Acme Motion ATS-3, serial T-0815) is due for calibration on 2026-12-01 (in 3 days).';
+  const gravityText = 'The gravity survey (by NGS, certificate G-1) was due for a new survey on 2026-11-01 (27 days ago).';
+  const banner = 'No campaign starts while reference equipment is past its due date unless an operator overrides it.';
   const warnings = equipmentWarnings({
-    table: { ...table, due_in_days: 3, due_soon: true, overdue: false },
-    chamber: { make: 'ClimaCo', model: 'CC-200', serial: 'C-4711', calibration_due: '2027-06-01', due_in_days: 185, due_soon: false, overdue: false },
-    gravity: { surveyed_by: 'NGS', calibration_certificate: 'G-1', calibration_due: '2026-11-01', due_in_days: -27, due_soon: false, overdue: true },
+    table: { calibration_due: '2026-12-01', due_in_days: 3, due_soon: true, overdue: false, text: tableText },
+    chamber: { calibration_due: '2027-06-01', due_in_days: 185, due_soon: false, overdue: false, text: 'The climatic chamber ...' },
+    gravity: { calibration_due: '2026-11-01', due_in_days: -27, due_soon: false, overdue: true, text: gravityText },
+    banner,
   });
-  assert.deepEqual(warnings.map((w) => [w.instrument, w.overdue]), [['gravity', true], ['table', false]], 'overdue first, the far one not at all');
-  assert.match(warnings[0].text, /^The gravity survey by NGS \(certificate G-1\) was due for a new survey on 2026-11-01 \(27 days ago\)/);
-  assert.match(warnings[1].text, /^The rate table Acme Motion ATS-3 \(serial T-0815\) is due for calibration on 2026-12-01 \(in 3 days\)/);
-  assert.match(equipmentWarnings({ table: { ...table, due_in_days: 0, due_soon: true, overdue: false } })[0].text, /\(today\)/);
-  assert.match(equipmentWarnings({ table: { ...table, due_in_days: 1, due_soon: true, overdue: false } })[0].text, /\(tomorrow\)/);
-  assert.match(equipmentWarnings({ table: { ...table, due_in_days: -1, due_soon: false, overdue: true } })[0].text, /\(1 day ago\)/);
+  assert.deepEqual(warnings.lines.map((w) => [w.instrument, w.overdue, w.text]), [['gravity', true, gravityText], ['table', false, tableText]],
+    'overdue first, the far one not at all, in imucald\'s words');
+  assert.equal(warnings.overdue, true);
+  assert.equal(warnings.sentence, banner);
+  assert.equal(equipmentWarnings({ table: { due_in_days: 0, due_soon: true, overdue: false, text: tableText }, banner }).overdue, false);
 
   assert.equal(overdueStartQuestion({ error: 'campaign 7 was already started', state: 'done' }), null);
+  const overdueText = 'The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31 (2493 days ago).';
   const question = overdueStartQuestion({ error: '...', state: 'created', overdue: [
-    { instrument: 'table', identity: 'Acme Motion ATS-3, serial T-0815', serial: 'T-0815', certificate: 'DKD-1', calibration_due: '2020-01-31' }] });
-  assert.equal(question[0], 'The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31.');
+    { instrument: 'table', identity: 'Acme Motion ATS-3, serial T-0815', serial: 'T-0815', certificate: 'DKD-1', calibration_due: '2020-01-31',
+      text: overdueText }] });
+  assert.equal(question[0], overdueText);
   assert.match(question[1], /audit trail/);
 });
 

@@ -323,6 +323,18 @@ TEST(ReferenceEquipment, OneRuleJudgesTheDueDatesAtTheDayBoundaries) {
   EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due)), "");
   EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due + 1)),
             "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2026-12-10");
+  // The live page's lines and banner, written here only (web/js/equipment.mjs shows them).
+  const std::string table = "The rate table (Acme Motion ATS-3, serial T-0815) ";
+  EXPECT_EQ(daemon::due_line(on(due - 8)), table + "is due for calibration on 2026-12-10 (in 8 days).");
+  EXPECT_EQ(daemon::due_line(on(due - 1)), table + "is due for calibration on 2026-12-10 (tomorrow).");
+  EXPECT_EQ(daemon::due_line(on(due)), table + "is due for calibration on 2026-12-10 (today).");
+  EXPECT_EQ(daemon::due_line(on(due + 1)), table + "was due for calibration on 2026-12-10 (1 day ago).");
+  EXPECT_EQ(daemon::due_line(on(due + 30)), table + "was due for calibration on 2026-12-10 (30 days ago).");
+  EXPECT_EQ(daemon::due_banner(daemon::equipment_due(e, due - 8)), "");
+  EXPECT_NE(daemon::due_banner(daemon::equipment_due(e, due - 7)).find("no campaign starts without an operator's override"),
+            std::string::npos);
+  EXPECT_NE(daemon::due_banner(daemon::equipment_due(e, due + 1)).find("only when an operator overrides this with a reason"),
+            std::string::npos);
 
   // All three instruments, in order; the JSON the certificate and the status carry is the rule's.
   daemon::DaemonConfig c;
@@ -342,13 +354,19 @@ TEST(ReferenceEquipment, OneRuleJudgesTheDueDatesAtTheDayBoundaries) {
   EXPECT_EQ(status.at("table").at("due_in_days"), 7);
   EXPECT_EQ(status.at("chamber").at("due_in_days"), 0);
   EXPECT_TRUE(status.at("gravity").at("overdue").get<bool>());
+  EXPECT_EQ(status.at("gravity").at("text"),
+            "The gravity survey (by Federal Geodesy Agency, certificate GS-2024-17) was due for a new survey on 2026-11-30 (3 days ago).");
+  EXPECT_EQ(status.at("table").at("text"), daemon::due_line(all[0]));
+  EXPECT_EQ(status.at("banner"), daemon::due_banner(all));
   EXPECT_DOUBLE_EQ(status.at("gravity").at("sigma_mps2").get<double>(), earth::site_gravity_sigma_mps2(c.site));
   const json certificate = daemon::reference_equipment_json(c, due - 7, false);
   EXPECT_FALSE(certificate.at("table").contains("due_in_days"));
+  EXPECT_FALSE(certificate.at("table").contains("text")) << "a certificate states no day-relative words";
+  EXPECT_FALSE(certificate.contains("banner"));
   EXPECT_EQ(certificate.at("table").at("overdue"), status.at("table").at("overdue"));
   c.reference_equipment = {};
   EXPECT_EQ(daemon::reference_equipment_json(c, due, true),
-            json({{"table", nullptr}, {"chamber", nullptr}, {"gravity", nullptr}}));
+            json({{"table", nullptr}, {"chamber", nullptr}, {"gravity", nullptr}, {"banner", nullptr}}));
 }
 
 namespace {
@@ -379,6 +397,9 @@ TEST(ReferenceEquipment, AnExpiredTableRefusesTheStartUntilAnOperatorOverridesWi
   EXPECT_EQ(why.at("overdue")[0].at("instrument"), "table");
   EXPECT_EQ(why.at("overdue")[0].at("serial"), "T-0815");
   EXPECT_EQ(why.at("overdue")[0].at("calibration_due"), "2020-01-31");
+  EXPECT_TRUE(why.at("overdue")[0].at("text").get<std::string>().starts_with(
+      "The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31 ("))
+      << why.dump();
   EXPECT_EQ(d.campaign(id).at("state"), "created");
 
   // An override needs a reason; it belongs to start alone; a viewer cannot give one.
@@ -400,6 +421,8 @@ TEST(ReferenceEquipment, AnExpiredTableRefusesTheStartUntilAnOperatorOverridesWi
   EXPECT_LT(status.at("reference_equipment").at("table").at("due_in_days").get<std::int64_t>(), 0);
   EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("overdue").get<bool>());
   EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
+  EXPECT_NE(status.at("reference_equipment").at("banner").get<std::string>().find("only when an operator overrides"),
+            std::string::npos) << status.at("reference_equipment").dump();
 
   const std::string reason = "customer deadline; table checked against the reference cube on 2026-11-20";
   const auto started = d.call("POST", start_target(id), json{{"override_overdue", reason}, {"reason", "yearly"}}.dump());
@@ -432,6 +455,49 @@ TEST(ReferenceEquipment, AnExpiredTableRefusesTheStartUntilAnOperatorOverridesWi
   EXPECT_NE(again.body.find("already started"), std::string::npos) << again.body;
 }
 
+// Issue 35, deliverable 4: a run started under an operator's override of overdue equipment says so
+// on its certificate, in the content that is hashed and signed: which instrument was past its due
+// date (imucald's own words and each instrument's serial and date), the operator and the reason.
+TEST(ReferenceEquipment, TheCertificateOfARunStartedUnderAnOverrideStatesWhoOverrodeWhichInstrumentAndWhy) {
+  const std::string dir = scratch_dir("equipment-override-lab");
+  const std::string key_file = dir + "/lab.key";
+  signing::write_key_file(key_file, signing::generate_key_pair());
+  const signing::PublicKey lab_key = signing::read_public_key(key_file + ".pub");
+  LocalDaemon d("equipment-override", false, [&](daemon::DaemonConfig& c) {
+    configure(c, dir + "/sequence.json");
+    c.certificates.signing_key_file = key_file;
+  });
+  const auto id = d.post_campaign(certificate_campaign("started under an override", "FOG-51"));
+  const std::string reason = "customer deadline; table checked against the reference cube on 2026-11-20";
+  const auto started = d.call("POST", start_target(id), json{{"override_overdue", reason}}.dump());
+  ASSERT_EQ(started.status, 200) << started.body;
+
+  // Kept with the run from its start (GET /api/campaigns/{id}).
+  const json kept = d.campaign(id).at("override_overdue");
+  ASSERT_TRUE(kept.is_object()) << kept.dump();
+  EXPECT_EQ(kept.at("by"), "operator");
+  EXPECT_EQ(kept.at("reason"), reason);
+  EXPECT_EQ(kept.at("text"), "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31");
+  ASSERT_EQ(kept.at("instruments").size(), 1u) << kept.dump();
+  EXPECT_EQ(kept.at("instruments")[0].at("instrument"), "table");
+  EXPECT_EQ(kept.at("instruments")[0].at("serial"), "T-0815");
+  EXPECT_EQ(kept.at("instruments")[0].at("calibration_due"), "2020-01-31");
+  EXPECT_FALSE(kept.at("instruments")[0].contains("text")) << "no words counting days from a day gone by";
+  EXPECT_TRUE(std::regex_match(kept.at("at").get<std::string>(), std::regex(R"(\d{4}-\d\d-\d\dT.*Z)"))) << kept.dump();
+
+  ASSERT_EQ(d.wait_final(id).at("state"), "done");
+  const json cert = d.get(certificate_target(id));
+  ASSERT_TRUE(cert.contains("content")) << cert.dump().substr(0, 600);
+  EXPECT_EQ(cert.at("content").at("campaign").at("override_overdue"), kept) << cert.at("content").at("campaign").dump();
+  // The certificate's table line says OVERDUE as well (judged on the day the run ended).
+  EXPECT_TRUE(cert.at("content").at("bench").at("reference_equipment").at("table").at("overdue").get<bool>());
+  // In what is hashed and signed: the envelope carries it and verifies with the lab's key.
+  EXPECT_EQ(signing::sha256_hex(signing::canonical_json(cert.at("content"))), cert.at("content_sha256").get<std::string>());
+  EXPECT_EQ(cert.at("signed").at("content").at("campaign").at("override_overdue"), kept);
+  const signing::Verification v = signing::verify_document(cert.at("signed"), lab_key);
+  EXPECT_TRUE(v.verified()) << v.message;
+}
+
 // Due in three days: the start goes ahead (no override asked, none audited) and the status the
 // live page reads says the table is due soon.
 TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
@@ -451,6 +517,11 @@ TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
   EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
   EXPECT_EQ(status.at("reference_equipment").at("gravity").at("surveyed_by"), "Federal Geodesy Agency");
   EXPECT_GE(status.at("reference_equipment").at("gravity").at("due_in_days").get<std::int64_t>(), 7);
+  EXPECT_TRUE(table.at("text").get<std::string>().starts_with(
+      "The rate table (Acme Motion ATS-3, serial T-0815) is due for calibration on " +
+      table.at("calibration_due").get<std::string>() + " (in "))
+      << table.dump();
+  EXPECT_EQ(status.at("reference_equipment").at("banner"), "After its due date no campaign starts without an operator's override.");
 
   const auto id = d.post_campaign(certificate_campaign("table due soon", "FOG-42"));
   const auto started = d.call("POST", start_target(id));
@@ -463,6 +534,106 @@ TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
   EXPECT_EQ(d.wait_final(other).at("state"), "done");
   const json cert = d.get(certificate_target(id));
   EXPECT_FALSE(cert.at("reference_equipment").at("table").at("overdue").get<bool>()) << cert.dump().substr(0, 600);
+  // Nothing was overridden: neither run records an override, nor does its certificate state one.
+  for (const auto run : {id, other}) {
+    EXPECT_TRUE(d.campaign(run).at("override_overdue").is_null()) << run;
+    const json stated = d.get(certificate_target(run)).at("content").at("campaign");
+    EXPECT_FALSE(stated.contains("override_overdue")) << stated.dump().substr(0, 600);
+  }
+}
+
+// Issue 35, deliverable 1, in part: a certificate issued with one site g, read after the
+// configuration's g was corrected, says so (its content unchanged), and the unit's page lists it.
+// (Superseding it needs the run calibrated again from its recording with the corrected g: not done.)
+TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheOldOne) {
+  const std::string dir = scratch_dir("gravity-corrected-lab");
+  LocalDaemon d("gravity-corrected", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
+  const auto id = run_campaign(d, "before the correction", "FOG-71");
+  const json before = d.get(certificate_target(id));
+  ASSERT_TRUE(before.contains("number")) << before.dump().substr(0, 400);
+  EXPECT_TRUE(before.at("gravity_corrected").is_null()) << before.at("gravity_corrected");
+  EXPECT_TRUE(d.get("/api/imus/FOG-71").at("gravity_corrected").empty());
+
+  // The site surveyed again: imucald restarted on the same data directory with the corrected g.
+  d.service->stop();
+  d.service.reset();
+  d.config.site.gravity_mps2 = 9.81925;
+  d.service = std::make_unique<daemon::Service>(d.config);
+  d.service->start(false);
+  const json after = d.get(certificate_target(id));
+  EXPECT_EQ(after.at("number"), before.at("number")) << "not reissued";
+  EXPECT_EQ(after.at("content"), before.at("content")) << "the issued content never changes";
+  const json corrected = after.at("gravity_corrected");
+  ASSERT_TRUE(corrected.is_object()) << after.dump().substr(0, 400);
+  EXPECT_DOUBLE_EQ(corrected.at("issued_with_mps2").get<double>(), 9.81912);
+  EXPECT_DOUBLE_EQ(corrected.at("now_mps2").get<double>(), 9.81925);
+  EXPECT_EQ(corrected.at("source_now"), "configured");
+  const std::string text = corrected.at("text");
+  for (const char* words : {"corrected since this certificate was issued", "9.81912", "9.81925"})
+    EXPECT_NE(text.find(words), std::string::npos) << words << " missing from: " << text;
+  const json unit = d.get("/api/imus/FOG-71");
+  ASSERT_EQ(unit.at("gravity_corrected").size(), 1u) << unit.at("gravity_corrected");
+  EXPECT_EQ(unit.at("gravity_corrected")[0].at("number"), before.at("number"));
+  EXPECT_EQ(unit.at("gravity_corrected")[0].at("campaign_id"), id);
+
+  // A run after the correction is certified with the corrected g: nothing to say of it.
+  const auto later = run_campaign(d, "after the correction", "FOG-71");
+  EXPECT_TRUE(d.get(certificate_target(later)).at("gravity_corrected").is_null());
+  EXPECT_EQ(d.get("/api/imus/FOG-71").at("gravity_corrected").size(), 1u);
+}
+
+// `imucal campaign run` (no daemon) judges the configuration's reference equipment with imucald's
+// own code: refused naming the instrument and its due date, unless given --override-overdue with a
+// reason, which is then recorded with the run, audited and stated on its certificate.
+TEST(ReferenceEquipment, CampaignRunRefusesOverdueEquipmentUnlessOverriddenWithAReason) {
+  const std::string dir = scratch_dir("equipment-campaign-run");
+  const std::string config = dir + "/imucald.json";
+  const std::string campaign = dir + "/campaign.json";
+  std::ofstream(config) << json{{"certificates", {{"prefix", "RUN"}, {"sequence_file", dir + "/sequence.json"}}},
+                                {"reference_equipment",
+                                 {{"table", {{"make", "Acme Motion"}, {"model", "ATS-3"}, {"serial", "T-0815"},
+                                             {"calibration_due", "2020-01-31"}}},
+                                  {"chamber", {{"make", "ClimaCo"}, {"model", "CC-200"}, {"serial", "C-4711"},
+                                               {"calibration_due", "2999-12-31"}}}}}}
+                               .dump(1);
+  std::ofstream(campaign) << certificate_campaign("from the command line", "FOG-61").dump(1);
+  const std::string run = "campaign run '" + campaign + "' --config '" + config + "' --data-dir '" + dir + "/data'";
+
+  const auto [refused_status, refused] = run_imucal(run);
+  EXPECT_EQ(refused_status, 2) << refused;
+  for (const char* words : {"not started", "rate table", "T-0815", "2020-01-31", "--override-overdue"})
+    EXPECT_NE(refused.find(words), std::string::npos) << words << " missing from: " << refused;
+  EXPECT_EQ(refused.find("C-4711"), std::string::npos) << "the chamber is not overdue: " << refused;
+  const auto [blank_status, blank] = run_imucal(run + " --override-overdue ' '");
+  EXPECT_EQ(blank_status, 2) << blank;
+  EXPECT_NE(blank.find("--override-overdue must say why"), std::string::npos) << blank;
+
+  const std::string reason = "rehearsal of the overdue table on the simulated bench";
+  const auto [status, out] = run_imucal(run + " --override-overdue '" + reason + "' --operator alice");
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("overridden by alice: " + reason), std::string::npos) << out;
+
+  daemon::DaemonDb db(dir + "/data/imucald.db");
+  const auto campaigns = db.unit_campaigns(std::string("FOG-61"));
+  ASSERT_EQ(campaigns.size(), 3u);  // two refused (still created), one run
+  const auto done = campaigns.back();
+  EXPECT_EQ(done.state, daemon::RunState::Done);
+  for (std::size_t i = 0; i + 1 < campaigns.size(); ++i) {
+    EXPECT_EQ(campaigns[i].state, daemon::RunState::Created);
+    EXPECT_FALSE(db.overdue_override(campaigns[i].id).has_value());
+  }
+  const auto certificate = db.current_issued(done.id);
+  ASSERT_TRUE(certificate.has_value());
+  const json stated = json::parse(certificate->content_json).at("campaign").at("override_overdue");
+  EXPECT_EQ(stated.at("by"), "alice");
+  EXPECT_EQ(stated.at("reason"), reason);
+  EXPECT_EQ(stated.at("text"), "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31");
+  daemon::DaemonDb::AuditQuery query;
+  query.action_prefix = "campaign.override_overdue";
+  const auto trail = db.audit_entries(query);
+  ASSERT_EQ(trail.size(), 1u);
+  EXPECT_EQ(trail[0].actor, "alice");
+  EXPECT_EQ(trail[0].subject, "campaign " + std::to_string(done.id));
 }
 
 // Issue 35, deliverable 1: a certificate is issued when its run ends (in the order runs end, not

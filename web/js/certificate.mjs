@@ -8,7 +8,7 @@
 import { api, ApiError } from './api.mjs';
 import { h, clear, fill, dateTime, num } from './format.mjs';
 import {
-  certificateRows, verdictStatement, partialStatement, equipmentLines, gravityStatement, conventionsText,
+  certificateRows, verdictStatement, partialStatement, overrideStatement, equipmentLines, gravityStatement, conventionsText,
   roundedNumbers, UNCERTAINTY_TEXT, COVERAGE_K, NOT_DETERMINED,
 } from './certificate_rows.mjs';
 import { budgetTable, sourceName } from './budget.mjs';
@@ -155,6 +155,10 @@ function issueNotes(record) {
     notes.push(h('p', { class: 'superseded-note', id: 'certificate-superseded' },
       `SUPERSEDED by certificate ${record.superseded_by}: this certificate no longer states the current result.`));
   }
+  // Said by imucald on reading (not part of the issued content): the site's g was corrected since.
+  if (record.gravity_corrected) {
+    notes.push(h('p', { class: 'superseded-note', id: 'certificate-gravity-corrected' }, record.gravity_corrected.text));
+  }
   if (record.supersedes) notes.push(h('p', { class: 'small', id: 'certificate-supersedes' }, `Supersedes certificate ${record.supersedes} (${record.reason}).`));
   return notes;
 }
@@ -179,6 +183,7 @@ function render(d, model, status, cert, record) {
   const verdict = verdictStatement(d.verdict, unit.part_number);
   const partial = partialStatement(d);
   const equipment = equipmentLines(cert);
+  const override = overrideStatement(d);
   // [label, text, class, wide]: short facts share a line two by two, wide ones take a line.
   const facts = [
     ['IMU serial number', serial || 'not recorded (the campaign was never started)'],
@@ -189,6 +194,8 @@ function render(d, model, status, cert, record) {
     ['Site', `${site.name || '—'}; latitude ${num(site.latitude_deg, 6)}°, longitude ${num(site.longitude_deg, 6)}°, height ${num(site.height_m, 4)} m; table azimuth ${num(site.middle_axis_azimuth_deg, 4)}°`, null, true],
     ['Gravity', gravityStatement(cert.gravity), null, true],
     ...equipment.map((e) => [e.role, e.text, e.overdue ? 'overdue' : e.missing ? 'missing' : null, true]),
+    // Beside the equipment it concerns: the operator's override of an overdue instrument.
+    ...(override ? [['Overdue equipment overridden', override, 'overdue', true]] : []),
     ['Campaign', `${d.id} "${d.name}", ${d.program}, ${d.frames ?? '—'} frames (${d.lost_frames ?? 0} lost, ${d.bad_frames ?? 0} bad)`, null, true],
     ['Chamber', d.spec?.chamber ? `${d.spec.chamber.setpoint_C} °C ± ${d.spec.chamber.tolerance_C} °C${d.spec.chamber.steps?.length ? `, ${d.spec.chamber.steps.length} set-point steps` : ''}` : '—'],
     ['Method', `${(d.spec?.estimators || []).join(', ') || '—'} estimation, three-axis rate table; imucald ${status.version || ''}, ${model.format || ''}, ${model.frame || 'instrument'} frame`, null, true],

@@ -4,7 +4,7 @@
 // functions of the daemon's replies, without the DOM, so that Node tests them
 // (tests/browser/unit.test.mjs); certificate.mjs only lays them out.
 import { coefficientRows, coefficientName, determined, groupOf } from './coefficients.mjs';
-import { num, timeOfDay, FINAL_STATES } from './format.mjs';
+import { num, dateTime, timeOfDay, FINAL_STATES } from './format.mjs';
 
 /** The coverage factor of the expanded uncertainty: U = k u. */
 export const COVERAGE_K = 2;
@@ -129,6 +129,20 @@ export function partialStatement(d) {
   else text = `${d.state === 'aborted' ? 'aborted' : 'ended'} at ${pct}`;
   if (d.accepted) text += `; accepted as a calibration by ${d.accepted.by}: ${d.accepted.reason}`;
   return text;
+}
+
+/**
+ * The override of overdue reference equipment the run was started under, as one statement, or
+ * null when it was started without one. From the certificate's campaign.override_overdue
+ * (imucald's record of the start: by, at, reason, and `text`, imucald's own words for the
+ * instruments, which the page does not compose again):
+ * "Started by alice (2026-11-28 09:14:02, local time) although the rate table (...) was due for
+ * calibration on 2020-01-31; reason given: customer deadline".
+ */
+export function overrideStatement(campaign) {
+  const o = campaign?.override_overdue;
+  if (!o) return null;
+  return `Started by ${o.by} (${dateTime(o.at)}, local time) although ${o.text}; reason given: ${o.reason}`;
 }
 
 /**

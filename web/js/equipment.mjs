@@ -1,45 +1,28 @@
-// The reference equipment's due dates in words (issue 35): the live page's warning from
-// GET /api/status `reference_equipment` (each instrument judged today by imucald: due_in_days,
-// due_soon, overdue; the rule is the daemon's, not repeated here), and the question the command
-// bar asks when a start is refused for overdue equipment (409 with `overdue`). Pure functions of
-// the daemon's replies, without the DOM, so that Node tests them (tests/browser/unit.test.mjs).
+// The reference equipment's due dates for a person (issue 35): the live page's warning from
+// GET /api/status `reference_equipment` (each instrument judged today by imucald, with imucald's
+// sentence for it in `text`, and the banner's closing sentence in `banner`), and the question the
+// command bar asks when a start is refused for overdue equipment (409 with `overdue`, each with
+// its `text`). The rule and the words are the daemon's (daemon/production/reference_equipment.hpp);
+// this only picks and orders them. Pure functions of the daemon's replies, without the DOM, so
+// that Node tests them (tests/browser/unit.test.mjs).
 
-const TITLES = { table: 'rate table', chamber: 'climatic chamber', gravity: 'gravity survey' };
 const ORDER = ['table', 'chamber', 'gravity'];
 
-/** "the rate table Acme Motion ATS-3 (serial T-0815)", "the gravity survey by NGS (certificate G-1)". */
-export function instrumentName(key, i) {
-  if (key === 'gravity') return `the gravity survey by ${i.surveyed_by} (certificate ${i.calibration_certificate})`;
-  return `the ${TITLES[key] || key} ${i.make} ${i.model} (serial ${i.serial})`;
-}
-
-const days = (n) => `${n} day${n === 1 ? '' : 's'}`;
-
 /**
- * The warnings for the live page: [{instrument, overdue, text}], overdue ones first, for every
- * instrument imucald says is overdue or due within a week; [] when none is (or no equipment is
- * configured).
+ * The banner of the live page: {lines: [{instrument, overdue, text}], overdue, sentence}, overdue
+ * ones first, for every instrument imucald says is overdue or due within a week; null when none
+ * is (or no equipment is configured). `sentence`: what follows for a start (imucald's `banner`).
  */
 export function equipmentWarnings(equipment) {
-  const out = [];
+  const lines = [];
   for (const key of ORDER) {
     const i = equipment?.[key];
     if (!i || !(i.overdue || i.due_soon)) continue;
-    const what = key === 'gravity' ? 'a new survey' : 'calibration';
-    const name = instrumentName(key, i);
-    const n = i.due_in_days;
-    let text;
-    if (i.overdue) {
-      text = `${name[0].toUpperCase()}${name.slice(1)} was due for ${what} on ${i.calibration_due} (${days(-n)} ago): ` +
-        'a campaign starts only when an operator overrides this with a reason, which the audit trail keeps.';
-    } else {
-      const when = n === 0 ? 'today' : n === 1 ? 'tomorrow' : `in ${days(n)}`;
-      text = `${name[0].toUpperCase()}${name.slice(1)} is due for ${what} on ${i.calibration_due} (${when}); ` +
-        'after that date no campaign starts without an operator\'s override.';
-    }
-    out.push({ instrument: key, overdue: Boolean(i.overdue), text });
+    lines.push({ instrument: key, overdue: Boolean(i.overdue), text: i.text });
   }
-  return out.sort((a, b) => Number(b.overdue) - Number(a.overdue));
+  if (!lines.length) return null;
+  lines.sort((a, b) => Number(b.overdue) - Number(a.overdue));
+  return { lines, overdue: lines.some((l) => l.overdue), sentence: equipment.banner || '' };
 }
 
 /**
@@ -50,9 +33,8 @@ export function overdueStartQuestion(body) {
   const list = Array.isArray(body?.overdue) ? body.overdue : [];
   if (!list.length) return null;
   return [
-    ...list.map((o) => `The ${TITLES[o.instrument] || o.instrument} (${o.identity}) was due for ` +
-      `${o.instrument === 'gravity' ? 'a new survey' : 'calibration'} on ${o.calibration_due}.`),
+    ...list.map((o) => o.text),
     'imucald did not start the campaign. Start it anyway only if the results are still sound; say why. ' +
-      'Your name and reason are kept in the audit trail and with the run.',
+      'Your name and reason are kept in the audit trail and with the run, and the run\'s certificate states them.',
   ];
 }

@@ -91,9 +91,11 @@ export function mount(root, ctx) {
   // table_dialect; none on the in-process simulation). Asked afresh: the due dates are today's.
   const showDueDates = (s) => {
     const warnings = equipmentWarnings(s?.reference_equipment);
-    equipmentBanner.replaceChildren(...warnings.map((w) => h('p', { class: w.overdue ? 'overdue' : 'due-soon', dataset: { instrument: w.instrument } }, w.text)));
-    equipmentBanner.classList.toggle('overdue', warnings.some((w) => w.overdue));
-    equipmentBanner.hidden = warnings.length === 0;
+    equipmentBanner.replaceChildren(...(warnings ? [
+      ...warnings.lines.map((w) => h('p', { class: w.overdue ? 'overdue' : 'due-soon', dataset: { instrument: w.instrument } }, w.text)),
+      h('p', { class: 'consequence' }, warnings.sentence)] : []));
+    equipmentBanner.classList.toggle('overdue', Boolean(warnings?.overdue));
+    equipmentBanner.hidden = !warnings;
   };
   // A live page left open over days (an unattended night, a weekend) asks again every hour.
   const dueDatesTimer = setInterval(() => ctx.status(true).then(showDueDates).catch(() => {}), 3600 * 1000);

@@ -14,6 +14,9 @@ export function mount(root, ctx) {
   const url = `/api/imus/${encodeURIComponent(serial)}`;
   const status = h('div', { class: 'form-error', role: 'alert', id: 'unit-error' });
   const info = h('p', { class: 'muted', id: 'unit-info' });
+  // Certificates in force issued with a site g the configuration has since corrected (imucald's
+  // gravity_corrected): they stand on the old value until calibrated again and reissued.
+  const gravityNote = h('div', { class: 'form-error', id: 'unit-gravity-corrected', hidden: true });
   const body = h('tbody', { id: 'unit-calibrations' });
   const select = h('select', { id: 'unit-coefficient' });
   const plotBox = h('div', { class: 'plot', id: 'unit-trend' });
@@ -28,7 +31,7 @@ export function mount(root, ctx) {
     h('div', { class: 'page-head' }, h('h1', {}, `Unit ${serial}`),
       h('div', { class: 'actions' },
         h('a', { class: 'button', id: 'unit-csv', href: `${url}/history.csv`, download: `imu-${serial}-history.csv` }, 'History (CSV)'))),
-    status, info,
+    status, info, gravityNote,
     h('section', { class: 'card' }, h('h2', {}, 'Calibrations'),
       h('table', { class: 'list', id: 'unit-table' },
         h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Program'),
@@ -112,6 +115,14 @@ export function mount(root, ctx) {
     try {
       const u = await get(url);
       calibrations = u.calibrations || [];
+      const corrected = u.gravity_corrected || [];
+      gravityNote.hidden = corrected.length === 0;
+      gravityNote.replaceChildren(...(corrected.length ? [
+        'The site\'s g has been corrected since these certificates were issued with the old value: ',
+        ...corrected.flatMap((c, i) => [i ? ', ' : '',
+          h('a', { href: `certificate.html?number=${encodeURIComponent(c.number)}` }, c.number),
+          ` (campaign ${c.campaign_id}, g ${num(c.issued_with_mps2, 9)} → ${num(c.now_mps2, 9)} m/s²)`]),
+        '.'] : []));
       info.textContent = `${u.part_number ? `Part number ${u.part_number}${u.limits ? ` (limits from ${u.limits})` : ', no acceptance limits'}. ` : ''}${u.calibrations_counted} calibration${u.calibrations_counted === 1 ? '' : 's'} counted of ${calibrations.length} ended campaign${calibrations.length === 1 ? '' : 's'}.`;
       clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
         h('td', { class: 'num' }, h('a', { href: `#/campaigns/${c.campaign_id}` }, c.campaign_id)),
