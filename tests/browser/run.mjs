@@ -7,7 +7,9 @@
 // read the results and download the model and the certificate; a viewer cannot start anything;
 // a lost WebSocket reconnects and says so. Screenshots of the main pages go to --out.
 //
-// Usage: node run.mjs --imucald build/release/bin/imucald [--web web] [--out build/release/screenshots]
+// Usage: node run.mjs --imucald build/release/bin/imucald [--web web] [--out build/release/screenshots] [--gallery docs/img/web]
+// --gallery DIR also writes the pages of docs/web.md's gallery into DIR (issue 36: the repository
+// keeps what an operator sees current); without it the checkout is left as it was.
 // Exit codes: 0 passed, 1 failed, 77 skipped (no Chromium, no imucald; CTest SKIP_RETURN_CODE).
 import { execFileSync, spawn } from 'node:child_process';
 import fs from 'node:fs';
@@ -22,6 +24,7 @@ const args = parseArgs(process.argv.slice(2));
 const imucald = args.imucald || path.join(repo, 'build', 'release', 'bin', 'imucald');
 const webDir = path.resolve(args.web || path.join(repo, 'web'));
 const outDir = path.resolve(args.out || path.join(repo, 'build', 'release', 'screenshots'));
+const galleryDir = typeof args.gallery === 'string' ? path.resolve(args.gallery) : null;
 const chromiumPath = process.env.IMUCAL_CHROMIUM || '/usr/bin/chromium';
 const SKIP = 77;
 const started = Date.now();
@@ -60,6 +63,7 @@ const stale = staleVendoredFiles();
 assert.deepEqual(stale, [], `web/vendor differs from the uPlot in package-lock.json: ${stale.join(', ')}; run \`npm run vendor\` in tests/browser`);
 
 fs.mkdirSync(outDir, { recursive: true });
+if (galleryDir) fs.mkdirSync(galleryDir, { recursive: true });
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'imucal-browser-'));
 const dataDir = path.join(tmp, 'data');
 const VIEWER = { user: 'vera', password: 'viewer-pass-1' };
@@ -220,6 +224,26 @@ async function shot(page, name) {
   log(`screenshot ${path.relative(repo, file)}`);
 }
 
+// The gallery of docs/web.md (--gallery): each page as an operator's 1366x768 window shows it, the
+// same size every time so that a rewrite changes only what the page changed. A PNG kept in git
+// grows the repository at each rewrite: one over 250 KB fails here rather than slipping in.
+const GALLERY_MAX_BYTES = 250 * 1024;
+const galleryFiles = [];
+async function gallery(page, name) {
+  if (!galleryDir) return;
+  const size = page.viewportSize();
+  if (size.width !== 1366 || size.height !== 768) await page.setViewportSize({ width: 1366, height: 768 });
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+  const file = path.join(galleryDir, `${name}.png`);
+  // The caret and CSS animations would make the same page differ between two runs.
+  await page.screenshot({ path: file, caret: 'hide', animations: 'disabled' });
+  if (size.width !== 1366 || size.height !== 768) await page.setViewportSize(size);
+  const bytes = fs.statSync(file).size;
+  assert.ok(bytes < GALLERY_MAX_BYTES, `gallery ${name}.png is ${bytes} bytes, more than ${GALLERY_MAX_BYTES}`);
+  galleryFiles.push(`${name}.png (${Math.round(bytes / 1024)} KB)`);
+  log(`gallery ${path.relative(repo, file)} (${bytes} bytes)`);
+}
+
 // What a person sees wrong in a page's layout (issue 36): two labels, inputs, selects or buttons
 // drawn over each other, or a table wider than the card it is in (cut off or spilling out). Only
 // what is visible counts; a label around its own checkbox is one thing.
@@ -249,7 +273,8 @@ async function layoutProblems(page, scope = 'main') {
       }
     for (const t of root.querySelectorAll('table')) {
       const r = visible(t);
-      const card = t.parentElement?.closest('.card, .builder-side, section, aside');
+      // A certificate's or a report's tables belong to its sheet (what prints on A4).
+      const card = t.parentElement?.closest('.card, .builder-side, section, aside, .sheet');
       if (!r || !card) continue;
       const c = card.getBoundingClientRect();
       if (r.right > c.right + 1 || r.left < c.left - 1)
@@ -304,6 +329,7 @@ try {
   await page.waitForSelector('#first-steps:not([hidden]) a[href="#/new"]');
   assert.deepEqual(await layoutProblems(page), [], 'the first screen lays out at 1366x768');
   await shot(page, '01b-first-screen');
+  await gallery(page, 'home');
 
   // ---- build from a template, see a limit violation refused ----
   await page.click('#new-campaign');
@@ -464,6 +490,7 @@ try {
   await page.waitForFunction(() => Number(document.querySelector('#live-conv-grid .conv-chart .uplot')?.dataset.points) >= 2, null, { timeout: 20000 });
   await shot(page, '04-live');
   assert.deepEqual(await layoutProblems(page), [], 'the live page lays out at 1366x768 during a run');
+  await gallery(page, 'live-run');
   for (const plot of ['angles', 'rates', 'chamber', 'imu-rate'])
     await assertTicks(page, `#plot-${plot}`, `the live ${plot} plot`);
   await page.$eval('#convergence', (el) => el.scrollIntoView());
@@ -568,6 +595,7 @@ try {
   log('results: table angles, IMU rates and temperatures from the recording; zoomed by dragging, read again');
   await page.waitForSelector('#results-convergence .conv-chart .uplot');
   await shot(page, '06-results');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of direct-short lay out at 1366x768');
   await page.$eval('#results-convergence', (el) => el.scrollIntoView());
   await shot(page, '07-results-plots');
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#download-model')]);
@@ -627,6 +655,7 @@ try {
   assert.equal((await cert.textContent('#certificate-number')).trim(), certNumber, 'the same campaign keeps its number');
   await cert.setViewportSize({ width: 1366, height: 768 });
   await shot(cert, '08-certificate');
+  assert.deepEqual(await layoutProblems(cert), [], 'the certificate lays out at 1366x768');
   const [certDownload] = await Promise.all([cert.waitForEvent('download'), cert.click('#save-html')]);
   const certFile = path.join(outDir, `certificate-campaign-${id}.html`);
   await certDownload.saveAs(certFile);
@@ -654,6 +683,7 @@ try {
   assert.ok(await page.evaluate((cid) => window.imucal.store.finished?.id === cid && window.imucal.store.angles.view(Infinity)[0].length > 0
     && window.imucal.store.frameRate.view(Infinity)[0].length > 0, id), 'its plots, the frame rate included, are still drawn');
   await shot(page, '08c-live-finished-run');
+  await gallery(page, 'live-finished');
   // The idle page's time axes: each time once (issue 36, item 7: "04:05:17" repeated along an axis).
   for (const plot of ['angles', 'rates', 'chamber', 'imu-rate']) {
     const times = (await page.getAttribute(`#plot-${plot} .uplot`, 'data-x-ticks')).split(' ');
@@ -683,6 +713,7 @@ try {
   await page.waitForSelector('#plot-allan .uplot');
   await page.$eval('#plot-evaluation', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '13-results-schuler-test');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of direct-short + evaluate lay out at 1366x768');
   await page.goto(`${base}/#/campaigns/${thermalPost.body.id}`);
   await waitText(page, '#campaign-state', /done/, 60000);
   await page.waitForSelector('#plot-thermal .uplot', { timeout: 30000 });
@@ -690,6 +721,7 @@ try {
   await waitText(page, '#no-model', /no model/i);  // no stage 1 in this campaign: said so, no download
   await page.$eval('#plot-thermal', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14-results-thermal');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of thermal-short lay out at 1366x768');
   log('Schuler test (three variants) and thermal plots drawn from campaigns that ran evaluate and thermal-short');
 
   // ---- a stage that cannot determine something says what, every line of it (issue 18, item 3) ----
@@ -717,6 +749,7 @@ try {
   `every missing coefficient on its own line, with the motion that would determine it:\n${messageLines.join('\n')}`);
   await page.$eval('#stage-results', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '14b-results-stage-cannot-determine');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of a stage that cannot determine lay out at 1366x768');
   log(`stage 1 on a z-up-only program: "${messageLines[0]}" and ${messageLines.length - 1} lines naming what is missing`);
 
   // ---- "Acknowledge all": one click for every alarm listed, each kept with its name and time ----
@@ -764,6 +797,7 @@ try {
   await page.$eval('#plan-table', (e) => e.scrollIntoView());
   assert.deepEqual(await layoutProblems(page), [], 'the builder with its prediction lays out at 1366x768');
   await shot(page, '15a-builder-prediction');
+  await gallery(page, 'builder-prediction');
   // The fastest time scale: a wall time that is not zero never reads "about 0.0 s" (6 h at
   // ×100000 is 0.2 s; direct-short's 7 min would be 4 ms).
   await page.fill('#c-time-scale', '100000');
@@ -836,6 +870,9 @@ try {
   const fullVariants = await page.$$eval('#evaluation-table tbody tr', (rows) => rows.map((r) => r.dataset.variant));
   for (const v of ['stage direct', 'stage lever-arm', 'stage stage3'])
     assert.ok(fullVariants.includes(v), `the Schuler test compares ${v} (${fullVariants.join(', ')})`);
+  assert.deepEqual(await layoutProblems(page), [], 'the results of full lay out at 1366x768');
+  await page.$eval('#truth-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
+  await gallery(page, 'results-full');
   await page.$eval('#contributions', (el) => el.scrollIntoView());
   await shot(page, '16-results-full-contributions');
   await page.$eval('#plot-evaluation', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
@@ -854,6 +891,7 @@ try {
   await page.waitForSelector('#unit-trend .uplot');
   assert.match(await page.textContent('#unit-info'), /Part number PN-BROWSER/);
   await shot(page, '09b-unit-page');
+  assert.deepEqual(await layoutProblems(page), [], 'the unit page lays out at 1366x768');
   log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');
 
   // ---- a second calibration of the unit, its part number's limits, verdicts, the comparison ----
@@ -912,6 +950,7 @@ try {
   await page.click('#limits-advanced summary');
   await page.$eval('#limits-card', (el) => el.scrollIntoView());
   await shot(page, '09c-units-and-limits');
+  await gallery(page, 'limits');
   log('units page: FOG-BROWSER-1 passes PN-BROWSER\'s limits set in the limits form (problems beside their rows, a typo refused by imucald by name)');
   // A limit on what a direct run does not determine: the gyro delays fail, with the reason.
   await limitRow(2, 'gyro.delay_us', '10', '');
@@ -933,17 +972,22 @@ try {
   assert.match(await page.textContent('#compare-summary'), /significant difference/);
   await page.$eval('#unit-compare', (el) => { el.scrollIntoView(); window.scrollBy(0, -120); });
   await shot(page, '09d-unit-verdicts-and-comparison');
+  assert.deepEqual(await layoutProblems(page), [], 'the unit page with verdicts and a comparison lays out at 1366x768');
+  await page.evaluate(() => window.scrollTo(0, 0));
+  await gallery(page, 'unit');
   log(`unit page: verdicts per calibration, change since the previous, ${await page.textContent('#compare-summary')}`);
   await page.goto(`${base}/#/campaigns/${againId}`);
   await page.waitForSelector('#verdict-table tr[data-key="gyro.delay_us.z"].result-bad');
   assert.match(await page.textContent('#acceptance-verdict'), /FAIL part number PN-BROWSER/);
   await page.$eval('#acceptance-verdict', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '09e-results-verdict');
+  assert.deepEqual(await layoutProblems(page), [], 'the results with a verdict lay out at 1366x768');
   log('results: the verdict per coefficient against PN-BROWSER\'s limits');
   // The pages of issue 36 at 1920x1080 as at 1366x768: nothing overlapping, no table wider than its panel.
   await page.setViewportSize({ width: 1920, height: 1080 });
   for (const [route, ready, name] of [['#/campaigns', '#bench-devices', '23a-1920-campaigns'], ['#/imus', '#limits-part-0', '23b-1920-units-and-limits'],
-    ['#/new', '#plan-table', '23c-1920-builder'], [`#/campaigns/${againId}`, '#verdict-table', '23d-1920-results']]) {
+    ['#/new', '#plan-table', '23c-1920-builder'], [`#/campaigns/${againId}`, '#verdict-table', '23d-1920-results'],
+    ['#/imus/FOG-BROWSER-1', '#unit-trend .uplot', '23e-1920-unit'], ['#/audit', '#audit-rows tr', '23f-1920-audit']]) {
     await page.goto(`${base}/${route}`);
     await page.waitForSelector(ready);
     assert.deepEqual(await layoutProblems(page), [], `${route} lays out at 1920x1080`);
@@ -964,6 +1008,12 @@ try {
   const againNumber = (await page.textContent('#certificate-number')).trim();
   assert.notEqual(againNumber, certNumber, 'another campaign, another number');
   await shot(page, '08b-certificate-verdict');
+  assert.deepEqual(await layoutProblems(page), [], 'the certificate with a verdict lays out at 1366x768');
+  await gallery(page, 'certificate');
+  await page.setViewportSize({ width: 1920, height: 1080 });
+  assert.deepEqual(await layoutProblems(page), [], 'the certificate with a verdict lays out at 1920x1080');
+  await shot(page, '23g-1920-certificate');
+  await page.setViewportSize({ width: 1366, height: 768 });
   assert.equal(await printedPages(page, path.join(outDir, `certificate-campaign-${againId}.pdf`)), 1,
     'with limits, a verdict column and a FAIL the certificate still prints on one A4 page');
   log(`certificate ${againNumber}: FAIL against PN-BROWSER's limits, per coefficient`);
@@ -999,6 +1049,7 @@ try {
     /^Partial run: stopped at \d+ % of the program \(stop by .*accepted as a calibration by operator: stopped at 80 %/);
   assert.match(await page.textContent('#certificate-verification'), /Content SHA-256 [0-9a-f]{64}/);
   await shot(page, '08c-certificate-partial');
+  assert.deepEqual(await layoutProblems(page), [], 'the certificate of a partial run lays out at 1366x768');
   log('a stopped run: no certificate until accepted; accepted on its page with a reason, then PARTIAL in its title block');
 
   // The certificates superseded when the limits changed stay, marked, under their numbers.
@@ -1021,6 +1072,7 @@ try {
   await page.waitForSelector('#coefficient-table tr[data-coefficient="gyro.scale_nonlinear_ppm.y.c2"]');
   await page.$eval('#rate-steps', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '17-results-rate-steps');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of rate-steps-short lay out at 1366x768');
   log('results of rate-steps-short: IEEE 952 figures per gyro, scale error against rate with the fitted nonlinearity');
 
   // ---- the tumble: K2, K3 and g-sensitivity in the coefficient table, the residual plots ----
@@ -1034,6 +1086,7 @@ try {
   assert.equal(await page.$$eval('#tumble .plot .uplot', (els) => els.length), 2);
   await page.$eval('#tumble', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '18-results-tumble');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of tumble-short lay out at 1366x768');
   log('results of tumble-short: K2, K3 and g-sensitivity with sigma, the residuals of every position');
 
   // ---- the warm-up: each channel's transient from power-on, its time constant and settle time ----
@@ -1050,6 +1103,7 @@ try {
   assert.equal(await page.$$eval('#warm-up .plot .uplot', (els) => els.length), 2);
   await page.$eval('#warm-up', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '19-results-warm-up');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of warm-up-short lay out at 1366x768');
   log('results of warm-up-short: the gyros\' transients with time constants and settle times, the accelerometers without one');
 
   // ---- repeatability: the run asks for each power cycle and waits; answered in the page, then through the API ----
@@ -1081,6 +1135,7 @@ try {
   assert.equal(await page.$$eval('#repeatability .plot .uplot', (els) => els.length), 2);
   await page.$eval('#repeatability', (el) => { el.scrollIntoView(); window.scrollBy(0, -60); });
   await shot(page, '21-results-repeatability');
+  assert.deepEqual(await layoutProblems(page), [], 'the results of repeatability-short lay out at 1366x768');
   log('repeatability-short: five power cycles asked and waited for (one answered in the page, four through the API); per-channel repeatability with its intervals');
 
   // ---- the test reports (IEEE 952 / 1293): a printable page per run, its JSON behind it ----
@@ -1090,6 +1145,12 @@ try {
   for (const expected of ['Test report', 'Turn-on to turn-on bias repeatability', 'IEEE Std 952', 'power ons: 6', 'Gravity',
     'normal gravity formula', 'Temperatures', 'chamber', 'no acceptance limits', 'accelerometer y turn-on to turn-on bias repeatability (1 sigma)', '68 %:'])
     assert.ok(reportText.includes(expected), `the repeatability report shows ${expected}`);
+  await reportPage.setViewportSize({ width: 1366, height: 768 });
+  assert.deepEqual(await layoutProblems(reportPage), [], 'the repeatability report lays out at 1366x768');
+  await gallery(reportPage, 'report');
+  await reportPage.setViewportSize({ width: 1920, height: 1080 });
+  assert.deepEqual(await layoutProblems(reportPage), [], 'the repeatability report lays out at 1920x1080');
+  await shot(reportPage, '23h-1920-test-report');
   await reportPage.setViewportSize({ width: 1366, height: 900 });
   await shot(reportPage, '22-test-report-repeatability');
   const reportPdf = path.join(outDir, `test-report-campaign-${repeatId}.pdf`);
@@ -1101,6 +1162,7 @@ try {
     await reportPage.waitForSelector(`#report[data-ready="true"] table[data-test="${test}"]`);
     const text = await reportPage.textContent('#report');
     for (const e of expected) assert.ok(text.includes(e), `the ${test} report shows ${e}`);
+    assert.deepEqual(await layoutProblems(reportPage), [], `the ${test} report lays out`);
     await shot(reportPage, `22-test-report-${test}`);
   }
   // A direct run's report: every figure its stage estimated, and a FAIL naming its coefficients.
@@ -1115,6 +1177,7 @@ try {
   assert.equal(await reportPage.$$eval('table[data-test="direct"] tbody tr', (rows) => rows.length), estimated);
   assert.match(await reportPage.textContent('[data-fact="Verdict"]'), /^FAIL against the limits of part number PN-BROWSER: .*gyro\.delay_us\.x\): not determined by this run/);
   await shot(reportPage, '22-test-report-direct');
+  assert.deepEqual(await layoutProblems(reportPage), [], 'the direct report lays out');
   const reportJson = await apiCall('GET', `/api/campaigns/${tumbleId}/report`);
   assert.equal(reportJson.body.format, 'imucal-test-report/1');
   await reportPage.close();
@@ -1214,9 +1277,16 @@ try {
   const overrideFact = await page.textContent('#certificate td[data-fact="Overdue equipment overridden"]');
   assert.match(overrideFact, /^Started by operator \(.*\) although the rate table \(Acme Motion ATS-3, serial T-0815\) was due for calibration on 2020-01-31; reason given: browser test: the table was checked against the reference cube$/);
   await shot(page, '12c-certificate-override');
+  assert.deepEqual(await layoutProblems(page), [], 'the certificate with an override lays out at 1366x768');
   assert.equal(await printedPages(page, path.join(outDir, `certificate-campaign-${overdue.body.id}.pdf`)), 1,
     'the override\'s line keeps the certificate on one A4 page');
   log('an overdue table: Start asked for a reason, the override started the campaign, is in the audit trail and on its certificate');
+  // The audit page: the override among who changed what and when, the chain checked.
+  await page.goto(`${base}/#/audit`);
+  await page.waitForSelector('#audit-rows tr[data-action="campaign.override_overdue"]');
+  await waitText(page, '#audit-integrity', /^Chain intact/);
+  assert.deepEqual(await layoutProblems(page), [], 'the audit page lays out at 1366x768');
+  await gallery(page, 'audit');
 
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {
@@ -1242,6 +1312,7 @@ try {
   log(`12 h at 10 Hz: ${bounded.held} points held, whole-run view ${bounded.whole} points in ${bounded.viewMs.toFixed(1)} ms`);
 
   assert.deepEqual(problems, [], 'no unexpected errors in the pages');
+  if (galleryDir) log(`gallery in ${path.relative(repo, galleryDir)}: ${galleryFiles.join(', ')}`);
 } catch (e) {
   failed = true;
   console.error('FAILED:', e.stack || e);

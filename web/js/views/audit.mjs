@@ -60,8 +60,8 @@ export function mount(root) {
       integrity.textContent = r.intact ? `Chain intact: ${r.check}.` : `CHAIN BROKEN: ${r.check}`;
       integrity.className = r.intact ? 'result-ok' : 'result-bad';
       clear(body).append(...r.entries.map((e) => h('tr', { dataset: { seq: e.seq, action: e.action } },
-        h('td', { class: 'num' }, e.seq), h('td', {}, dateTime(e.t)), h('td', {}, e.actor), h('td', {}, e.action),
-        h('td', {}, e.subject), h('td', { class: 'details' }, detailsText(e.details)))));
+        h('td', { class: 'num' }, e.seq), h('td', { class: 'when' }, dateTime(e.t)), h('td', {}, e.actor), h('td', {}, e.action),
+        h('td', { class: 'subject' }, e.subject), h('td', { class: 'details' }, detailsText(e.details)))));
       if (!r.entries.length) body.append(h('tr', {}, h('td', { colspan: 6, class: 'muted' }, 'No entry matches.')));
     } catch (e) {
       error.textContent = `Cannot read the audit trail: ${e.message}`;
