@@ -310,7 +310,7 @@ struct NavCalibrationFilter::Impl {
       }
     }
     window.push_back(f);
-    const auto needed = static_cast<std::size_t>(comp.lookback() + 1 + comp.lookahead());
+    const std::size_t needed = comp.window_frames();
     if (window.size() < needed) return;
     step();
     window.pop_front();

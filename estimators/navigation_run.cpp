@@ -112,9 +112,9 @@ Vector3d Compensator::rate_radps(const std::deque<ImuFrame>& window, int offset,
 CompensatedSample Compensator::compensate(const std::deque<ImuFrame>& window) const {
   // Never read outside the window (a delay run away, or a window too short): an error, not
   // memory past the deque's end.
-  if (window.size() < static_cast<std::size_t>(lookback_ + 1 + lookahead_))
+  if (window.size() < window_frames())
     throw std::logic_error("nav::Compensator: a window of " + std::to_string(window.size()) + " frames, " +
-                           std::to_string(lookback_ + 1 + lookahead_) + " needed");
+                           std::to_string(window_frames()) + " needed");
   if (const std::string delay = unfollowed_delay(); !delay.empty())
     throw std::logic_error("nav::Compensator: the " + delay + " is beyond the frames its window holds");
   CompensatedSample c;
@@ -233,7 +233,7 @@ void NavigationRun::push(const ImuFrame& frame) {
   }
   window_.push_back(frame);
   ++frames_seen_;
-  const auto needed = static_cast<std::size_t>(comp_.lookback() + 1 + comp_.lookahead());
+  const std::size_t needed = comp_.window_frames();
   if (window_.size() < needed) return;
   step();
   window_.pop_front();

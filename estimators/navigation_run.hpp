@@ -56,6 +56,8 @@ class Compensator {
   // Frames on each side of the current one that compensate() reads.
   int lookahead() const { return lookahead_; }
   int lookback() const { return lookback_; }
+  // Frames compensate() reads: lookback() + 1 + lookahead().
+  std::size_t window_frames() const { return static_cast<std::size_t>(lookback_ + 1 + lookahead_); }
   // window[lookback()] is the frame being compensated; window holds lookback()+1+lookahead() frames.
   // Throws std::logic_error when a delay of the model has left the window (see unfollowed_delay).
   CompensatedSample compensate(const std::deque<ImuFrame>& window) const;

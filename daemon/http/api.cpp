@@ -1377,13 +1377,16 @@ Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const
             {}};
   }
   const std::string override_reason = override_overdue.value_or("").substr(0, 500);
+  // The overridden instruments in words and as kept, composed once for the run record, the log and
+  // the audit trail.
+  const std::string overdue_words = overdue_text(overdue);
+  const json overdue_kept = overdue_json(overdue);
   // The run's own record says so too: the transition's reason names what was overridden and why.
   std::string stored_reason = request.reason;
   if (!overdue.empty()) {
     stored_reason += (request.reason.empty() ? "" : "; ") + std::string("overdue reference equipment overridden (") +
-                     overdue_text(overdue) + "): " + override_reason;
-    db_.insert_overdue_override(
-        {id, now_unix_ms(), request.user, override_reason, overdue_json(overdue).dump(), overdue_text(overdue)});
+                     overdue_words + "): " + override_reason;
+    db_.insert_overdue_override({id, now_unix_ms(), request.user, override_reason, overdue_kept.dump(), overdue_words});
   }
   const auto outcome = sequencer_.command(id, command, request.user, stored_reason);
   if (outcome.http_status != 200) {
@@ -1394,10 +1397,10 @@ Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const
   }
   const std::string name(to_string(command));
   if (!overdue.empty()) {
-    spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, request.user,
-                 overdue_text(overdue), override_reason);
+    spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, request.user, overdue_words,
+                 override_reason);
     audit(request.user, "campaign.override_overdue", "campaign " + std::to_string(id),
-          {{"command", name}, {"instruments", overdue_json(overdue)}, {"reason", override_reason}});
+          {{"command", name}, {"instruments", overdue_kept}, {"reason", override_reason}});
   }
   // A command that succeeded has moved the campaign to its new state.
   const std::string state(to_string(expect_value(outcome.state, "the state after a command that succeeded")));

@@ -246,7 +246,7 @@ TEST(Compensator, ADelayBeyondItsWindowIsNamedAndNeverReadOutsideIt) {
   ImuModel model;
   const double dt_s = 0.01;
   const nav::Compensator comp(model, dt_s, 0.01);
-  std::deque<ImuFrame> window(static_cast<std::size_t>(comp.lookback() + 1 + comp.lookahead()));
+  std::deque<ImuFrame> window(comp.window_frames());
   for (std::size_t i = 0; i < window.size(); ++i) window[i].t_ns = static_cast<std::int64_t>(i + 1) * 10'000'000;
   EXPECT_EQ(comp.unfollowed_delay(), "");
   model.accel.delay_s.y() = 0.0095;  // within +-10 ms: followed
