@@ -357,7 +357,7 @@ std::optional<Decoded> StreamDecoder::next() {
   }
 }
 
-SequenceTracker::Step SequenceTracker::feed(std::uint64_t raw, double elapsed_periods) noexcept {
+SequenceTracker::Step SequenceTracker::feed(std::uint64_t raw, double elapsed_periods, bool in_order) noexcept {
   Step s;
   if (!last_) {
     last_ = raw;
@@ -381,7 +381,7 @@ SequenceTracker::Step SequenceTracker::feed(std::uint64_t raw, double elapsed_pe
     // How many whole wraps the silence spans, from the time that passed.
     const double missing = std::max(0.0, elapsed_periods - 1.0);
     const double wraps = std::max(0.0, std::round((missing - static_cast<double>(step)) / static_cast<double>(wrap_)));
-    if (step >= half && wraps == 0.0 && missing < static_cast<double>(half)) {
+    if (!in_order && step >= half && wraps == 0.0 && missing < static_cast<double>(half)) {
       s.kind = Kind::stale;
       return s;
     }

@@ -106,8 +106,9 @@ class SequenceTracker {
     std::uint64_t count = 0;      // the running count of this sample (first: its raw value)
   };
   // `elapsed_periods`: time since the last accepted sample in sample periods (ignored when the
-  // counter is 32 bits or more: it cannot wrap within a run).
-  Step feed(std::uint64_t raw, double elapsed_periods) noexcept;
+  // counter is 32 bits or more: it cannot wrap within a run). `in_order`: the link cannot duplicate
+  // or reorder (a serial line), so a short counter's step back is a gap, never a stale frame.
+  Step feed(std::uint64_t raw, double elapsed_periods, bool in_order = false) noexcept;
   void reset() noexcept { last_.reset(); }
 
  private:

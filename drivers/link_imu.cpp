@@ -55,6 +55,11 @@ struct LinkImu::Impl {
   ImuCounters counts;
   Clock::time_point last_sample{};
   std::int64_t last_rx_ns = 0;
+  // A byte stream's rx stamps are read times: a frame stamped late may have waited in the line's
+  // buffer while the reader was descheduled. Only silence the driver saw (a drain that found the
+  // line empty, stamped before it read) shows that time passed on the IMU's side.
+  std::int64_t silent_until_ns = 0;
+  Clock::duration longest_wait = Clock::duration::max();
   std::optional<std::uint64_t> last_time_raw;  // of the last accepted sample
   std::uint64_t time_ext = 0;                  // its time field, unwrapped, in field counts
   std::uint64_t transport_malformed = 0;       // the transport's count at activate()
@@ -76,6 +81,11 @@ struct LinkImu::Impl {
         sequence(link::sequence_modulus(sample)),
         clock(cfg.clock) {
     if (time_field) time_modulus = modulus_of(*time_field);
+    // A short counter on a line without time tags counts its wraps from the silence the driver
+    // watched, known to within one wait: keep each wait under a quarter of a wrap.
+    const std::uint64_t wrap = link::sequence_modulus(sample);
+    if (cfg.link.stream() && !time_field && wrap != 0 && wrap <= 1u << 16)
+      longest_wait = std::chrono::nanoseconds(static_cast<std::int64_t>(period_ns * static_cast<double>(wrap) / 4.0));
   }
 
   std::string who() const { return "imu '" + cfg.name + "' (" + cfg.link.name + " over " + transport->describe() + ")"; }
@@ -86,13 +96,12 @@ struct LinkImu::Impl {
     published_clock = clock.state();
   }
 
-  // `read_after`: samples read after this one in the same drain. They were waiting together, so
-  // this one came at least that many periods before its stamp (a reader descheduled for a while
-  // reads its backlog at once).
   bool is_sample(const link::Decoded& d) const {
     return d.status == link::DecodeStatus::ok && cfg.link.messages[d.message].kind == link::MessageKind::sample;
   }
 
+  // `read_after`: samples read after this one in the same drain. They were waiting together, so
+  // this one came at least that many periods before its stamp.
   void handle(const link::Decoded& d, std::int64_t rx_ns, ImuBatch& out, std::size_t read_after = 0) {
     ++counts.frames_received;
     if (d.status == link::DecodeStatus::bad_checksum) {
@@ -115,11 +124,14 @@ struct LinkImu::Impl {
   }
 
   void handle_sample(const link::Values& v, std::int64_t rx_ns, std::size_t read_after, ImuBatch& out) {
-    // Time since the last sample in periods: on the IMU's clock when the frame carries it, else
-    // from the stamps, less the backlog read with it (a 7-bit counter would otherwise take a
-    // reader's 256 ms stall for 128 lost samples).
-    double elapsed_periods =
-        std::max(0.0, static_cast<double>(rx_ns - last_rx_ns) / period_ns - static_cast<double>(read_after));
+    // Time since the last sample in periods: on the IMU's clock when the frame carries it. Else,
+    // for datagrams, from their kernel stamps. For a byte stream, from the silence the driver
+    // watched after the last sample: a reader stalled for longer than a 7-bit counter's wrap
+    // reads frames that waited in the line's buffer (or behind a writer that waited for the
+    // reader), and they must not be taken for 128 lost samples. Frames read together after a
+    // watched silence also waited together: a late burst is not a gap.
+    const double since_ns = static_cast<double>((cfg.link.stream() ? silent_until_ns : rx_ns) - last_rx_ns);
+    double elapsed_periods = std::max(0.0, since_ns / period_ns - static_cast<double>(read_after));
     std::uint64_t time_delta = 0;
     if (time_field && last_time_raw) {
       const std::uint64_t raw = expect_value(v.time_raw, kTimeTag), last = *last_time_raw;
@@ -131,7 +143,8 @@ struct LinkImu::Impl {
       }
       elapsed_periods = static_cast<double>(time_delta) * time_field->scale.value_or(1.0) / period_ns;
     }
-    const link::SequenceTracker::Step step = sequence.feed(v.sequence, elapsed_periods);
+    // A line delivers bytes in order: a frame on it is never a duplicate or a reordered one.
+    const link::SequenceTracker::Step step = sequence.feed(v.sequence, elapsed_periods, cfg.link.stream());
     if (step.kind == link::SequenceTracker::Kind::stale) {
       // Older than the last one (duplicate or reordered): never deliver it after newer data.
       ++counts.malformed_frames;
@@ -220,7 +233,9 @@ struct LinkImu::Impl {
   // Reads and decodes every chunk already queued; false when the link is gone.
   bool drain(ImuBatch& out, Result<void>& error) {
     std::vector<LinkChunk> chunks;
+    const std::int64_t before_ns = host_time_ns();
     const Result<void> r = transport->drain(chunks);
+    if (r && chunks.empty()) silent_until_ns = before_ns;
     std::vector<std::pair<link::Decoded, std::int64_t>> on_line;  // a byte stream's frames, as read
     for (const LinkChunk& c : chunks) {
       if (cfg.link.stream()) {
@@ -333,6 +348,7 @@ Result<void> LinkImu::activate() {
   }
   m.last_sample = Clock::now();
   m.last_rx_ns = host_time_ns();
+  m.silent_until_ns = m.last_rx_ns;
   m.state = DeviceState::active;
   m.publish();
   return success();
@@ -376,7 +392,7 @@ Result<void> LinkImu::poll(ImuBatch& out, std::chrono::milliseconds max_wait) {
     // is reported promptly; once stalled, keep waiting the full max_wait (no busy loop).
     auto left = deadline - now;
     const auto stall_left = m.cfg.stall_timeout - (now - m.last_sample);
-    if (stall_left > Clock::duration::zero()) left = std::min(left, stall_left);
+    if (stall_left > Clock::duration::zero()) left = std::min({left, stall_left, m.longest_wait});
     else if (!first_wait) break;
     first_wait = false;
     pollfd p{m.transport->wait_handle(), POLLIN, 0};

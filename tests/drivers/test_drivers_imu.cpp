@@ -433,6 +433,24 @@ TEST(KvhSerial, AReaderStalledLongerThanAWrapCountsItsBacklogRight) {
   EXPECT_LT(c.samples_lost, 128u) << "a whole wrap counted as lost";
 }
 
+// The same at the KVH's own 1000 Hz, stalled long enough for the line to fill: the simulated
+// device then waits for the reader, and its frames come late, some after the reader is back. No
+// wrap was lost: the reader did not watch the line while it stalled, so the time that passed says
+// nothing of what the IMU sent (CI once saw 979 followed by 1107 here).
+TEST(KvhSerial, AReaderStalledBehindAFullLineTakesNoLateFrameForAWrap) {
+  Rig rig(kvh(1000.0));
+  rig.up();
+  ImuBatch all = rig.collect(0.2);
+  std::this_thread::sleep_for(1500ms);  // 1500 samples, 54 kB: more than the line holds
+  const ImuBatch more = rig.collect(0.5);
+  all.samples.insert(all.samples.end(), more.samples.begin(), more.samples.end());
+  ASSERT_GT(all.samples.size(), 500u);
+  rig.expect_truth(all);
+  const ImuCounters c = rig.driver->counters();
+  EXPECT_EQ(c.samples_delivered + c.samples_lost, all.samples.back().sequence - all.samples.front().sequence + 1);
+  EXPECT_EQ(c.samples_lost % 128, c.samples_lost) << "a whole wrap counted as lost";
+}
+
 TEST(KvhSerial, StreamsOverAPseudoTerminalWithThePhysicsInIt) {
   Rig rig(kvh());
   rig.up();

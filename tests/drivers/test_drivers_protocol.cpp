@@ -433,6 +433,14 @@ TEST(ImuCodec, SequenceTrackerUnwrapsShortCountersAndTellsGapsFromStaleFrames) {
   EXPECT_EQ(s.lost, 4u);
   EXPECT_EQ(t.feed(5, 0.1).kind, link::SequenceTracker::Kind::stale);  // a repeat
   EXPECT_EQ(t.feed(3, 0.1).kind, link::SequenceTracker::Kind::stale);  // older
+  {
+    // On a line (in order), a step back of a short counter is a gap: bytes are never reordered.
+    link::SequenceTracker line(128);
+    (void)line.feed(5, 0, true);
+    s = line.feed(3, 0.1, true);
+    EXPECT_EQ(s.kind, link::SequenceTracker::Kind::gap);
+    EXPECT_EQ(s.lost, 125u);
+  }
   // A silence of ~1000 periods: the counter wrapped 7 times; the time says how many.
   s = t.feed((6 + 999) % 128, 1000);
   EXPECT_EQ(s.kind, link::SequenceTracker::Kind::gap);
