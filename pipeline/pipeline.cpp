@@ -964,6 +964,15 @@ std::vector<Outcome> run_to_end(const RecordingMeta& meta, const FrameSource& so
   return p.outcomes();
 }
 
+Calibration calibration_of(const std::vector<Outcome>& outcomes) {
+  Calibration c;
+  for (const Outcome& o : outcomes) {
+    c.reports[names_of(o.stage).estimator] = o.report();
+    if (o.status == Status::Done) c.model = o.model;  // as Pipeline::model(): the last stage done
+  }
+  return c;
+}
+
 void ProgressSource::frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const {
   std::int64_t n = 0;
   inner_.frames(t0_ns, t1_ns, [&](const ImuFrame& f) {

@@ -177,6 +177,15 @@ struct Outcome {
   nlohmann::json report() const;
 };
 
+// What a calibration leaves the daemon: each stage's report under its estimator's name, and the
+// model of the last stage done (none when no stage was). One rule for a run's online estimators
+// and for a run calibrated again from its recording.
+struct Calibration {
+  nlohmann::json reports = nlohmann::json::object();
+  std::optional<ImuModel> model;
+};
+Calibration calibration_of(const std::vector<Outcome>& outcomes);
+
 class Pipeline {
  public:
   // `stages`: in any order (run in pipeline order); `asked` as for feed(). `start`: the model the

@@ -94,6 +94,22 @@ pipeline::Outcome stage_on_run(const storage::RunDb& db, pipeline::Stage stage, 
 
 }  // namespace
 
+Recalibration calibrate_again(const std::string& run_path, const std::vector<std::string>& estimators,
+                              const ImuModel& start, std::optional<double> gravity_mps2,
+                              const AnalysisProgress& progress) {
+  const storage::RunDb db = open_run(run_path);
+  RecordingMeta meta = db.meta();
+  meta.site.gravity_mps2 = gravity_mps2;
+  std::vector<pipeline::Stage> stages;
+  for (const std::string& name : estimators)
+    if (const auto stage = pipeline::stage_of_estimator(name)) stages.push_back(*stage);
+  if (stages.empty()) throw NotAvailable("the campaign ran no calibration stage: there is nothing to calibrate again");
+  const pipeline::RunDbSource run(db);
+  const pipeline::ProgressSource source(run, pipeline::end_of_program_s(meta), progress);
+  pipeline::Calibration c = pipeline::calibration_of(pipeline::run_to_end(meta, source, stages, true, start));
+  return {std::move(c.reports), std::move(c.model)};
+}
+
 json allan_from_run(const std::string& run_path, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
   // A stage that is done has its result.

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/imu_model.hpp"
+#include "core/recording.hpp"
 
 namespace imucal::daemon {
 
@@ -44,6 +45,19 @@ struct Variant {
 // The Schuler test (the evaluate program's tilt and coning segments) of each variant.
 nlohmann::json evaluation_from_run(const std::string& run_path, const std::vector<Variant>& variants,
                                    const AnalysisProgress& progress = {});
+
+// The run's calibration stages (`estimators`, as its campaign lists them; the others are skipped)
+// run again from its recording as its online estimators ran them, from `start`, with the site's g
+// taken from `gravity_mps2` (absent: normal gravity) instead of the one the run recorded: a survey
+// corrected the site's g after the run. Each stage's report under its estimator's name, and the
+// model of the last stage done (none when no stage was).
+struct Recalibration {
+  nlohmann::json results = nlohmann::json::object();
+  std::optional<ImuModel> model;
+};
+Recalibration calibrate_again(const std::string& run_path, const std::vector<std::string>& estimators,
+                              const ImuModel& start, std::optional<double> gravity_mps2,
+                              const AnalysisProgress& progress = {});
 
 // The run's truth model (simulated runs), if the run file carries one.
 std::optional<ImuModel> truth_of_run(const std::string& run_path);

@@ -73,22 +73,32 @@ void AnalysisJobs::publish(const Job& job) {
   }
 }
 
+AnalysisJobs::Answer AnalysisJobs::answer_of(const Job& job) const {
+  Answer a;
+  if (job.state == Job::State::Done) {
+    a.ready = true;
+    a.status = job.status;
+    a.body = job.body;
+  } else {
+    a.pending = describe(job);
+  }
+  return a;
+}
+
+std::optional<AnalysisJobs::Answer> AnalysisJobs::find(const Key& key) const {
+  std::lock_guard lock(mutex_);
+  const auto it = jobs_.find(key);
+  if (it == jobs_.end()) return std::nullopt;
+  return answer_of(*it->second);
+}
+
 AnalysisJobs::Answer AnalysisJobs::request(const Key& key, Compute compute) {
   std::shared_ptr<Job> job;
   Answer a;
   {
     std::lock_guard lock(mutex_);
-    if (const auto it = jobs_.find(key); it != jobs_.end()) {
-      job = it->second;
-      if (job->state == Job::State::Done) {
-        a.ready = true;
-        a.status = job->status;
-        a.body = job->body;
-        return a;
-      }
-      a.pending = describe(*job);
-      return a;  // joined: the job already queued or running answers both
-    }
+    // Joined: the job already queued or running answers both.
+    if (const auto it = jobs_.find(key); it != jobs_.end()) return answer_of(*it->second);
     const auto pending = std::count_if(jobs_.begin(), jobs_.end(),
                                        [](const auto& entry) { return entry.second->state != Job::State::Done; });
     if (static_cast<std::size_t>(pending) >= max_pending_) {

@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -56,11 +57,16 @@ class AnalysisJobs {
   // The answer for `key` if it is ready; else starts `compute` (unless a job for the key is queued
   // or running: then joins it) and says how far it is.
   Answer request(const Key& key, Compute compute);
+  // The answer for `key`, or how far its job has come, when there is one (queued, running or
+  // kept); starts nothing. For a request whose preconditions its own answer changes (a
+  // recalibration supersedes the certificate that called for it): asked again, it finds its answer.
+  std::optional<Answer> find(const Key& key) const;
 
  private:
   struct Job;
   void worker();
   nlohmann::json describe(const Job& job) const;  // the pending state (mutex held)
+  Answer answer_of(const Job& job) const;          // (mutex held)
   void publish(const Job& job);
 
   std::function<void(const nlohmann::json&)> publish_;

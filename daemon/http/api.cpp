@@ -26,6 +26,7 @@
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/run/alarms.hpp"
+#include "daemon/run/estimator_worker.hpp"
 #include "estimators/direct_calibration.hpp"
 #include "estimators/truth_comparison.hpp"
 #include "motion_programs/chamber.hpp"
@@ -608,6 +609,8 @@ const std::vector<Api::Route>& Api::routes() {
        [](Api& a, const Call& c) { return a.store_certificate_page(c.args[0], c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/accept", A::operator_,
        [](Api& a, const Call& c) { return a.campaign_accept(c.id, c.request, *c.who); }},
+      {"POST", "/api/campaigns/{id}/recalibrate", A::operator_,
+       [](Api& a, const Call& c) { return a.campaign_recalibrate(c.id, c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/prompt", A::operator_,
        [](Api& a, const Call& c) { return a.campaign_prompt(c.id, c.request, *c.who); }},
       {"POST", "/api/campaigns/{id}/{command}", A::operator_,
@@ -747,34 +750,124 @@ json Api::summary(const CampaignRow& row) {
           {"accepted", completeness_json(row).at("accepted")}};
 }
 
-HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who) {
+namespace {
+
+// The body {"reason": TEXT} of an operator's decision that must say why (`why`: what it must say):
+// 400 naming what is wrong, or none with `reason` set.
+std::optional<HttpReply> read_reason(const ApiRequest& request, const std::string& why, std::string& reason) {
   json body;
-  if (auto bad = parse_body(request, body)) return *bad;
+  if (auto bad = parse_body(request, body)) return bad;
   std::vector<std::string> problems;
-  std::optional<std::string> reason;
+  std::optional<std::string> text;
   {
     ObjectReader r(body, "body", problems);
-    reason = r.string("reason", true);
+    text = r.string("reason", true);
   }
   if (!problems.empty()) return error_reply(400, problems.front(), {{"problems", problems}});
   // (A missing reason is a problem above already.)
-  if (!reason || reason->find_first_not_of(" \t\r\n") == std::string::npos) {
-    const std::string why = "body.reason must say why the partial run is accepted";
-    return error_reply(400, why, {{"problems", json::array({why})}});
+  if (!text || text->find_first_not_of(" \t\r\n") == std::string::npos) {
+    const std::string what = "body.reason must say " + why;
+    return error_reply(400, what, {{"problems", json::array({what})}});
   }
+  reason = *text;
+  return std::nullopt;
+}
+
+}  // namespace
+
+HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  std::string reason;
+  if (auto bad = read_reason(request, "why the partial run is accepted", reason)) return *bad;
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   if (const std::string why = cannot_accept(*row); !why.empty())
     return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
-  db_.accept(id, *reason, who.user);
-  spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, *reason);
-  audit(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", *reason}, {"state", to_string(row->state)}});
+  db_.accept(id, reason, who.user);
+  spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, reason);
+  audit(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", reason}, {"state", to_string(row->state)}});
   try {
-    issue_certificate(id, "partial run accepted by " + who.user + ": " + *reason);
+    issue_certificate(id, "partial run accepted by " + who.user + ": " + reason);
   } catch (const std::exception& e) {
     spdlog::error("campaign {}: accepted, but no certificate yet: {}", id, e.what());
   }
   return json_reply(200, summary(expect_value(db_.campaign(id), "the campaign just accepted")));
+}
+
+HttpReply Api::campaign_recalibrate(std::int64_t id, const ApiRequest& request, const Principal& who) {
+  std::string reason;
+  if (auto bad = read_reason(request, "why the run is calibrated again", reason)) return *bad;
+  const double g_now = earth::site_gravity_mps2(config_.site);
+  AnalysisJobs::Key key;
+  key.campaign = id;
+  key.analysis = "recalibration";
+  key.state = "g = " + number_text(g_now, 9);
+  // Asked again: its answer, although the certificate it superseded no longer calls for it.
+  if (const auto asked = jobs_->find(key)) return job_reply(*asked);
+  const std::string name = "campaign " + std::to_string(id);
+  const auto row = db_.campaign(id);
+  if (!row) return error_reply(404, "no " + name);
+  const auto current = db_.current_issued(id);
+  if (!current) return error_reply(409, name + " has no certificate to supersede");
+  const json correction = gravity_correction(parse_or_null(current->content_json), config_);
+  if (correction.is_null())
+    return error_reply(409, name + "'s certificate " + current->number + " states the site's g as configured (" +
+                                number_text(g_now, 9) + " m/s^2): there is nothing to calibrate again");
+  if (auto none = no_recording(*row, name + " cannot be calibrated again: ")) return *none;
+  const CampaignCheck check = check_campaign_text(row->spec_json, config_);
+  if (!check.spec)
+    return error_reply(409, name + "'s campaign no longer passes its checks: " +
+                                (check.problems.empty() ? std::string("malformed") : check.problems.front()));
+  EstimatorWorker::Spec spec;
+  try {
+    spec = estimator_spec(*check.spec, db_);
+  } catch (const std::runtime_error& e) {
+    return error_reply(409, name + " cannot be calibrated again: " + e.what());
+  }
+  const double g_before = correction.at("issued_with_mps2").get<double>();
+  auto compute = [this, id, user = who.user, reason, spec, g_before, path = run_path(*row),
+                  g_configured = config_.site.gravity_mps2](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    Recalibration r;
+    try {
+      r = calibrate_again(path, spec.estimators, spec.start_model, g_configured, progress);
+    } catch (const NotAvailable& e) {
+      return {409, {{"error", e.what()}}};
+    }
+    if (!r.model)
+      return {422, {{"error", "calibrated again with the corrected g, no calibration stage was done; the certificate in "
+                              "force stands"},
+                    {"results", r.results}}};
+    try {
+      return {200, recalibrated(id, user, reason, r, g_before)};
+    } catch (const std::exception& e) {
+      return {503, {{"error", "calibrated again, but not stored (" + std::string(e.what()) +
+                                  "); the certificate in force stands: ask again"}}};
+    }
+  };
+  return job_reply(jobs_->request(key, std::move(compute)));
+}
+
+json Api::recalibrated(std::int64_t id, const std::string& who, const std::string& reason, const Recalibration& r,
+                       double g_before_mps2) {
+  std::lock_guard lock(certificate_mutex_);
+  const std::string name = "campaign " + std::to_string(id);
+  const IssuedCertificateRow current = expect_value(db_.current_issued(id), "the certificate a recalibration supersedes");
+  const CampaignRow before = expect_value(db_.campaign(id), "the campaign calibrated again");
+  // The stages calibrated again replace their results; the others (the navigation display) stay.
+  json results = parse_or_null(before.results_json);
+  if (!results.is_object()) results = json::object();
+  for (const auto& [estimator, report] : r.results.items()) results[estimator] = report;
+  const double g_now = earth::site_gravity_mps2(config_.site);
+  db_.set_model(id, imu_model_to_json_text(expect_value(r.model, "the recalibrated model")));
+  db_.set_results(id, results.dump());
+  audit(who, "campaign.recalibrated", name,
+        {{"reason", reason}, {"gravity_before_mps2", g_before_mps2}, {"gravity_after_mps2", g_now},
+         {"certificate", current.number}});
+  const std::string why = "calibrated again from its recording by " + who + " with the corrected site g = " +
+                          number_text(g_now, 9) + " m/s^2 (was " + number_text(g_before_mps2, 9) + "): " + reason;
+  const IssuedCertificateRow c = reissue(expect_value(db_.campaign(id), "the campaign calibrated again"), current, why, true);
+  spdlog::info("{}: calibrated again with g = {} m/s^2 by {}; certificate {} supersedes {}", name, number_text(g_now, 9),
+               who, c.number, current.number);
+  return {{"campaign", id}, {"certificate", issued_json(c)}, {"superseded", current.number}};
 }
 
 HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
@@ -1066,11 +1159,20 @@ std::optional<IssuedCertificateRow> Api::issue_certificate(std::int64_t id, cons
 }
 
 // The certificate in force, or a new one superseding it when what it states is no longer true.
-IssuedCertificateRow Api::reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason) {
+IssuedCertificateRow Api::reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason,
+                                  bool g_corrected) {
   // The bench and the site the run used, from the certificate in force (a table replaced since did
   // not calibrate this unit); what changes is what is true of the run today (its verdict, acceptance).
   const json stated = parse_or_null(current.content_json);
-  json content = certificate_content(row, stated.value("bench", json()).dump());
+  json bench = stated.value("bench", json());
+  if (g_corrected && bench.is_object()) {
+    // Calibrated again with the corrected g: the g and the survey it now stands on.
+    const json now = certificate_bench_json(config_, row.ended_ms.value_or(0));
+    bench["gravity"] = now.at("gravity");
+    if (bench.value("reference_equipment", json()).is_object())
+      bench["reference_equipment"]["gravity"] = now.at("reference_equipment").at("gravity");
+  }
+  json content = certificate_content(row, bench.dump());
   content["site"] = stated.value("site", content.at("site"));
   if (statement_of(stated) == statement_of(content)) return current;
   IssuedCertificateRow c = numbered(row.id, reason);

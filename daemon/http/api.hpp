@@ -29,6 +29,8 @@
 
 namespace imucal::daemon {
 
+struct Recalibration;
+
 struct ApiRequest {
   std::string method;  // "GET", "POST", ...
   std::string target;  // path and query as received
@@ -128,6 +130,13 @@ class Api {
   nlohmann::json summary(const CampaignRow& row);
   // An operator's acceptance of a partial run as its unit's calibration.
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
+  // POST /api/campaigns/{id}/recalibrate: the run calibrated again from its recording with the
+  // site's g as configured now, when its certificate in force states another; the certificate
+  // that results supersedes it. A job: 202 with progress, asked again until 200.
+  HttpReply campaign_recalibrate(std::int64_t id, const ApiRequest& request, const Principal& who);
+  // Stores what the recalibration computed and issues the superseding certificate: the reply's body.
+  nlohmann::json recalibrated(std::int64_t id, const std::string& who, const std::string& reason,
+                              const Recalibration& r, double g_before_mps2);
   // GET /api/compare?a=ID&b=ID: two runs' models side by side (acceptance.hpp compare_json).
   HttpReply compare_campaigns(const std::map<std::string, std::string>& query);
   // GET /api/campaigns/{id}/certificate: the campaign's certificate in force (issued when the run
@@ -149,7 +158,10 @@ class Api {
   nlohmann::json certificate_content(const CampaignRow& row, const std::string& bench_json);
   nlohmann::json issued_json(const IssuedCertificateRow& c);
   // issue_certificate's pieces (api.cpp says why they are pieces).
-  IssuedCertificateRow reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason);
+  // `g_corrected`: the run was calibrated again with the site's g configured now, which its
+  // certificate then states (the other statements of the bench stay as issued).
+  IssuedCertificateRow reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason,
+                               bool g_corrected = false);
   IssuedCertificateRow freeze_legacy(const CampaignRow& row, const CertificateRow& legacy);
   IssuedCertificateRow numbered(std::int64_t campaign_id, const std::string& reason);
   IssuedCertificateRow store_issued(IssuedCertificateRow c, nlohmann::json content);

@@ -11,6 +11,7 @@
 
 #include "core/units.hpp"
 #include "daemon/campaign/campaign.hpp"
+#include "daemon/db/daemon_db.hpp"
 #include "estimators/navigation_run.hpp"
 #include "pipeline/pipeline.hpp"
 #include "storage/run_db.hpp"
@@ -27,6 +28,19 @@ EstimatorWorker::EstimatorWorker(std::string run_db_path, Spec spec, std::option
 }
 
 EstimatorWorker::~EstimatorWorker() { cancel(); }
+
+EstimatorWorker::Spec estimator_spec(const CampaignSpec& spec, DaemonDb& db) {
+  EstimatorWorker::Spec out{spec.estimators, spec.navigation_model, spec.start_model.value_or(ImuModel{})};
+  if (spec.start_model_campaign) {
+    const std::string id = std::to_string(*spec.start_model_campaign);
+    const auto source = db.campaign(*spec.start_model_campaign);
+    if (!source || !source->model_json)
+      throw std::runtime_error("campaign.model names campaign " + id + ", which " +
+                               (source ? "has no model" : "does not exist"));
+    out.start_model = imu_model_from_json_text(*source->model_json, "campaign " + id + "'s model");
+  }
+  return out;
+}
 
 void EstimatorWorker::committed(std::int64_t t_ns) {
   {
@@ -204,11 +218,9 @@ void EstimatorWorker::run() {
     // Final results: each stage's report (its model included) under its estimator's name.
     Results out;
     if (calibration) {
-      for (const pipeline::Outcome& o : calibration->outcomes())
-        out.results[pipeline::names_of(o.stage).estimator] = o.report();
-      if (std::any_of(calibration->outcomes().begin(), calibration->outcomes().end(),
-                      [](const pipeline::Outcome& o) { return o.status == pipeline::Status::Done; }))
-        out.model = calibration->model();
+      pipeline::Calibration c = pipeline::calibration_of(calibration->outcomes());
+      out.results = std::move(c.reports);
+      out.model = std::move(c.model);
     }
     if (monitor) out.results["navigation"] = monitor->finish();
     report();

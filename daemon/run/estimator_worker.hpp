@@ -24,6 +24,9 @@
 
 namespace imucal::daemon {
 
+struct CampaignSpec;
+class DaemonDb;
+
 class EstimatorWorker {
  public:
   // Progress of one estimator (the live message's estimators.<name> block); called on the
@@ -70,5 +73,11 @@ class EstimatorWorker {
   Results results_;
   std::thread thread_;
 };
+
+// The estimators of a campaign as its run starts them: its list, its navigation model and its start
+// model (a previous campaign's model as that campaign has it now). The run and a run calibrated
+// again from its recording resolve them alike. Throws std::runtime_error when the campaign it
+// names has no model.
+EstimatorWorker::Spec estimator_spec(const CampaignSpec& spec, DaemonDb& db);
 
 }  // namespace imucal::daemon

@@ -676,16 +676,7 @@ void Sequencer::run_campaign(std::int64_t id) {
     const auto committed_t = run.last_t_ns;
     // A resumed run's faults up to what is committed fired in the process that recorded it.
     if (committed_t) run.bench->resuming_after(static_cast<double>(*committed_t) / units::kNsPerS);
-    EstimatorWorker::Spec estimators{run.spec.estimators, run.spec.navigation_model, run.spec.start_model.value_or(ImuModel{})};
-    if (run.spec.start_model_campaign) {
-      // A previous campaign's model: the one it has now (a campaign id is resolved when the run starts).
-      const auto source = db_.campaign(*run.spec.start_model_campaign);
-      if (!source || !source->model_json)
-        throw std::runtime_error("campaign.model names campaign " + std::to_string(*run.spec.start_model_campaign) +
-                                 ", which " + (source ? "has no model" : "does not exist"));
-      estimators.start_model = imu_model_from_json_text(
-          *source->model_json, "campaign " + std::to_string(*run.spec.start_model_campaign) + "'s model");
-    }
+    EstimatorWorker::Spec estimators = estimator_spec(run.spec, db_);
     run.estimators = std::make_unique<EstimatorWorker>(
         run.run_db_path, std::move(estimators), committed_t,
         [this, id](const std::string& name, double t_s, const json& progress) {

@@ -544,7 +544,7 @@ TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
 
 // Issue 35, deliverable 1, in part: a certificate issued with one site g, read after the
 // configuration's g was corrected, says so (its content unchanged), and the unit's page lists it.
-// (Superseding it needs the run calibrated again from its recording with the corrected g: not done.)
+// (Superseding it: the next test.)
 TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheOldOne) {
   const std::string dir = scratch_dir("gravity-corrected-lab");
   LocalDaemon d("gravity-corrected", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
@@ -580,6 +580,84 @@ TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheO
   const auto later = run_campaign(d, "after the correction", "FOG-71");
   EXPECT_TRUE(d.get(certificate_target(later)).at("gravity_corrected").is_null());
   EXPECT_EQ(d.get("/api/imus/FOG-71").at("gravity_corrected").size(), 1u);
+}
+
+// Issue 35, deliverable 1: a corrected site g supersedes the certificates issued with the old one.
+// An operator has the run calibrated again from its recording with the corrected g (a job, polled
+// as the analyses are); the new certificate states the new g and the model it gives, numbered next
+// and superseding the old, which stays as issued. The accelerometers' scale factors move by the
+// relative change of g (a reference 100 ppm larger reads as a unit 100 ppm less sensitive); the
+// gyros, calibrated against the Earth's rate, do not move.
+TEST(Certificate, ACorrectedSiteGravitySupersedesTheCertificateWithTheRunCalibratedAgain) {
+  const std::string dir = scratch_dir("gravity-recalibrated-lab");
+  LocalDaemon d("gravity-recalibrated", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
+  const auto id = run_campaign(d, "before the survey", "FOG-72");
+  const std::string target = "/api/campaigns/" + std::to_string(id) + "/recalibrate";
+  const json old_cert = d.get(certificate_target(id));
+  ASSERT_TRUE(old_cert.contains("number")) << old_cert.dump().substr(0, 400);
+  const auto nothing = d.call("POST", target, json{{"reason", "no survey yet"}}.dump());
+  EXPECT_EQ(nothing.status, 409) << nothing.body;
+  EXPECT_NE(nothing.body.find("nothing to calibrate again"), std::string::npos) << nothing.body;
+
+  d.service->stop();
+  d.service.reset();
+  const double g_old = 9.81912, g_new = 9.82012;
+  d.config.site.gravity_mps2 = g_new;
+  d.service = std::make_unique<daemon::Service>(d.config);
+  d.service->start(false);
+  const auto no_reason = d.call("POST", target, json{{"reason", " "}}.dump());
+  EXPECT_EQ(no_reason.status, 400) << no_reason.body;
+  EXPECT_NE(no_reason.body.find("body.reason must say why the run is calibrated again"), std::string::npos) << no_reason.body;
+
+  const std::string reason = "survey GS-2026-03 replaced GS-2024-17";
+  auto r = d.call("POST", target, json{{"reason", reason}}.dump());
+  for (const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
+       r.status == 202 && std::chrono::steady_clock::now() < deadline;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    r = d.call("POST", target, json{{"reason", reason}}.dump());
+  }
+  ASSERT_EQ(r.status, 200) << r.body;
+  const json answer = json::parse(r.body);
+  const json cert = answer.at("certificate");
+  EXPECT_EQ(answer.at("superseded"), old_cert.at("number"));
+  EXPECT_EQ(cert.at("supersedes"), old_cert.at("number"));
+  EXPECT_EQ(cert.at("sequence").get<int>(), old_cert.at("sequence").get<int>() + 1) << "numbered next";
+  EXPECT_NE(cert.at("reason").get<std::string>().find(reason), std::string::npos) << cert.at("reason");
+  EXPECT_DOUBLE_EQ(cert.at("content").at("bench").at("gravity").at("value_mps2").get<double>(), g_new);
+
+  // The old one as issued, marked superseded; the campaign's certificate in force is the new one.
+  const json old_now = d.get("/api/certificates/" + old_cert.at("number").get<std::string>());
+  EXPECT_EQ(old_now.at("content"), old_cert.at("content")) << "an issued certificate never changes";
+  EXPECT_EQ(old_now.at("content_sha256"), old_cert.at("content_sha256"));
+  EXPECT_EQ(old_now.at("superseded_by"), cert.at("number"));
+  const json in_force = d.get(certificate_target(id));
+  EXPECT_EQ(in_force.at("number"), cert.at("number"));
+  EXPECT_TRUE(in_force.at("gravity_corrected").is_null()) << in_force.at("gravity_corrected");
+  EXPECT_TRUE(d.get("/api/imus/FOG-72").at("gravity_corrected").empty());
+
+  // The model moved as the corrected g says, and only the accelerometers' scale factors did.
+  const json& before = old_cert.at("content").at("model");
+  const json& after = cert.at("content").at("model");
+  const double expected_ppm = -(g_new - g_old) / g_new * 1e6;  // about -101.8 ppm
+  for (int axis = 0; axis < 3; ++axis) {
+    const double moved_ppm = after.at("accel").at("scale_ppm")[axis].get<double>() - before.at("accel").at("scale_ppm")[axis].get<double>();
+    EXPECT_NEAR(moved_ppm, expected_ppm, 0.05) << "accelerometer " << axis;  // measured: within 0.005
+    for (const char* key : {"scale_pos_ppm", "bias_dph"})
+      EXPECT_NEAR(after.at("gyro").at(key)[axis].get<double>(), before.at("gyro").at(key)[axis].get<double>(), 1e-6)
+          << "gyro " << key << " " << axis;
+  }
+  EXPECT_EQ(d.get("/api/campaigns/" + std::to_string(id) + "/model"), after) << "the campaign's model is the recalibrated one";
+
+  // Asked again: the answer kept, no third certificate; the audit trail has who, why and both g.
+  const auto again = d.call("POST", target, json{{"reason", reason}}.dump());
+  ASSERT_EQ(again.status, 200) << again.body;
+  EXPECT_EQ(json::parse(again.body).at("certificate").at("number"), cert.at("number"));
+  const json audit = d.get("/api/audit?action=campaign.recalibrated");
+  ASSERT_EQ(audit.at("entries").size(), 1u) << audit.dump().substr(0, 600);
+  const json& entry = audit.at("entries")[0];
+  EXPECT_EQ(entry.at("details").at("reason"), reason);
+  EXPECT_DOUBLE_EQ(entry.at("details").at("gravity_before_mps2").get<double>(), g_old);
+  EXPECT_DOUBLE_EQ(entry.at("details").at("gravity_after_mps2").get<double>(), g_new);
 }
 
 // `imucal campaign run` (no daemon) judges the configuration's reference equipment with imucald's

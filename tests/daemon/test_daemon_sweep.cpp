@@ -151,6 +151,9 @@ std::vector<Row> rows(const std::int64_t model_run) {
          return r.final() && r.has_model() && !r.detail.value("complete", false) ? std::set<int>{200, 409} : std::set<int>{409};
        },
        sub("/accept"), [](const SweepRun&) { return R"({"reason": "the sweep accepts what it may"})"; }},
+      // No run of the sweep has a certificate stating another g than the configured one.
+      {"POST", "/api/campaigns/{id}/recalibrate", Access::operator_, always(409), sub("/recalibrate"),
+       [](const SweepRun&) { return R"({"reason": "the sweep asks for what it may"})"; }},
       {"GET", "/api/campaigns/{id}/series", Access::viewer,
        [](const SweepRun& r) { return std::set<int>{r.recorded() ? 200 : 404}; }, sub("/series?points=50")},
       {"GET", "/api/campaigns/{id}/certificate", Access::viewer,
