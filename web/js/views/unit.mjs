@@ -3,7 +3,9 @@
 // the previous calibration in sigmas, a chosen coefficient over the calibrations as a trend with
 // its sigma, the turn-on to turn-on repeatability, and two calibrations side by side
 // (GET /api/compare).
-import { get } from '../api.mjs';
+import { get, post } from '../api.mjs';
+import { confirmDialog } from '../dialogs.mjs';
+import { isOperator } from '../session.mjs';
 import { h, clear, dateTime, outcomeBadge, num } from '../format.mjs';
 import { verdictBadge } from './units.mjs';
 import { lineChart, COLORS } from '../plots.mjs';
@@ -111,6 +113,40 @@ export function mount(root, ctx) {
     chart.setData([points.map((_, i) => i + 1), values, hi, lo]);
   }
 
+  // An operator has the run calibrated again from its recording with the corrected g (a job on
+  // imucald, polled); its new certificate supersedes the one listed.
+  function recalibrateButton(c) {
+    const button = h('button', { type: 'button', class: 'recalibrate', 'data-campaign': String(c.campaign_id) },
+      'Calibrate again…');
+    button.addEventListener('click', async () => {
+      const answer = await confirmDialog({
+        title: `Calibrate campaign ${c.campaign_id} again with the corrected g?`,
+        body: [`Its stages are run again from its recording with g = ${num(c.now_mps2, 9)} m/s² (was ${num(c.issued_with_mps2, 9)}). `
+          + `A new certificate states the new model and supersedes ${c.number}, which stays as issued.`],
+        confirmLabel: 'Calibrate again', reason: true, reasonPlaceholder: 'required: e.g. the new survey, kept on the new certificate',
+      });
+      if (!answer.ok) return;
+      if (!answer.reason) {
+        status.textContent = 'Not calibrated again: say why (the reason is kept in the audit trail and on the new certificate).';
+        return;
+      }
+      button.disabled = true;
+      try {
+        const done = await post(`/api/campaigns/${c.campaign_id}/recalibrate`, { reason: answer.reason }, {
+          onPending: (p) => { button.textContent = `Calibrating… ${Math.round(100 * (p?.progress || 0))} %`; },
+        });
+        status.textContent = '';
+        button.replaceWith(h('span', { class: 'muted' }, `→ certificate `,
+          h('a', { href: `certificate.html?number=${encodeURIComponent(done.certificate.number)}` }, done.certificate.number)));
+      } catch (e) {
+        button.disabled = false;
+        button.textContent = 'Calibrate again…';
+        status.textContent = `Not calibrated again: ${e.message}`;
+      }
+    });
+    return button;
+  }
+
   (async () => {
     try {
       const u = await get(url);
@@ -121,7 +157,8 @@ export function mount(root, ctx) {
         'The site\'s g has been corrected since these certificates were issued with the old value: ',
         ...corrected.flatMap((c, i) => [i ? ', ' : '',
           h('a', { href: `certificate.html?number=${encodeURIComponent(c.number)}` }, c.number),
-          ` (campaign ${c.campaign_id}, g ${num(c.issued_with_mps2, 9)} → ${num(c.now_mps2, 9)} m/s²)`]),
+          ` (campaign ${c.campaign_id}, g ${num(c.issued_with_mps2, 9)} → ${num(c.now_mps2, 9)} m/s²)`,
+          ...(isOperator() ? [' ', recalibrateButton(c)] : [])]),
         '.'] : []));
       info.textContent = `${u.part_number ? `Part number ${u.part_number}${u.limits ? ` (limits from ${u.limits})` : ', no acceptance limits'}. ` : ''}${u.calibrations_counted} calibration${u.calibrations_counted === 1 ? '' : 's'} counted of ${calibrations.length} ended campaign${calibrations.length === 1 ? '' : 's'}.`;
       clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
