@@ -147,19 +147,49 @@ std::vector<double> Program::breakpoints_s() const {
   return out;
 }
 
+AxisFunc AxisFunc::constant(double theta0_rad) {
+  AxisFunc f;
+  f.kind = Kind::Const;
+  f.theta0 = theta0_rad;
+  return f;
+}
+
+AxisFunc AxisFunc::quadratic(double theta0_rad, double omega0_rps, double alpha_rps2) {
+  AxisFunc f;
+  f.kind = Kind::Quadratic;
+  f.theta0 = theta0_rad;
+  f.omega0 = omega0_rps;
+  f.alpha = alpha_rps2;
+  return f;
+}
+
+AxisFunc AxisFunc::rebased(double dt_s) const {
+  AxisFunc g = *this;
+  switch (kind) {
+    case Kind::Const: break;
+    case Kind::Quadratic: {
+      double angle, rate, accel;
+      eval(dt_s, angle, rate, accel);
+      g.theta0 = angle;
+      g.omega0 = rate;
+      break;
+    }
+    case Kind::Sine: {
+      // theta0 + A (sin(w (tau + dt) + phi) - sin phi) = theta0' + A (sin(w tau + phi') - sin phi')
+      const double phi2 = std::remainder(phase + omega * dt_s, 2.0 * kPi);
+      g.theta0 = theta0 + amp * (std::sin(phi2) - std::sin(phase));
+      g.phase = phi2;
+      break;
+    }
+    case Kind::Cycloid: break;
+  }
+  return g;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Compilation from JSON
 
 namespace {
-
-AxisFunc quadratic(double theta0, double omega0, double alpha) {
-  AxisFunc f;
-  f.kind = AxisFunc::Kind::Quadratic;
-  f.theta0 = theta0;
-  f.omega0 = omega0;
-  f.alpha = alpha;
-  return f;
-}
 
 struct Builder {
   const TableLimits& limits;
@@ -199,10 +229,7 @@ struct Builder {
     p.t1_s = t_s + duration_s;
     p.segment = segment;
     p.kind = kind;
-    for (int a = 0; a < 3; ++a) {
-      p.axis[static_cast<std::size_t>(a)].kind = AxisFunc::Kind::Const;
-      p.axis[static_cast<std::size_t>(a)].theta0 = pose_rad[a];
-    }
+    for (int a = 0; a < 3; ++a) p.axis[static_cast<std::size_t>(a)] = AxisFunc::constant(pose_rad[a]);
     return p;
   }
 
@@ -291,15 +318,15 @@ struct Builder {
     }
     const double sign = w > 0 ? 1.0 : -1.0;
     Piece up = make_piece(t_ramp, name, "rate");
-    up.axis[static_cast<std::size_t>(a)] = quadratic(pose_rad[a], 0.0, sign * acc);
+    up.axis[static_cast<std::size_t>(a)] = AxisFunc::quadratic(pose_rad[a], 0.0, sign * acc);
     push(std::move(up));
     if (t_cruise > 0) {
       Piece cruise = make_piece(t_cruise, name, "rate");
-      cruise.axis[static_cast<std::size_t>(a)] = quadratic(pose_rad[a], w, 0.0);
+      cruise.axis[static_cast<std::size_t>(a)] = AxisFunc::quadratic(pose_rad[a], w, 0.0);
       push(std::move(cruise));
     }
     Piece down = make_piece(t_ramp, name, "rate");
-    down.axis[static_cast<std::size_t>(a)] = quadratic(pose_rad[a], w, -sign * acc);
+    down.axis[static_cast<std::size_t>(a)] = AxisFunc::quadratic(pose_rad[a], w, -sign * acc);
     push(std::move(down));
   }
 

@@ -42,6 +42,13 @@ struct AxisFunc {
 
   // angle, rate, acceleration at tau
   void eval(double tau, double& angle, double& rate, double& accel) const;
+
+  // The kinds the programs and the simulated servo build alike (one factory for both).
+  static AxisFunc constant(double theta0_rad);
+  static AxisFunc quadratic(double theta0_rad, double omega0_rps, double alpha_rps2);
+  // The same motion with its time origin moved forward by dt (exact for Const, Quadratic and
+  // Sine; a Cycloid, which the servo never produces, is returned as it is).
+  AxisFunc rebased(double dt_s) const;
 };
 
 struct Piece {

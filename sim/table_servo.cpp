@@ -23,46 +23,6 @@ constexpr double kFarFuture_s = 1e9;  // "forever" for open-ended pieces
 // past), then pruned.
 constexpr double kHistory_s = 30.0;
 
-AxisFunc constant(double theta) {
-  AxisFunc f;
-  f.kind = AxisFunc::Kind::Const;
-  f.theta0 = theta;
-  return f;
-}
-
-AxisFunc quadratic(double theta0, double omega0, double alpha) {
-  AxisFunc f;
-  f.kind = AxisFunc::Kind::Quadratic;
-  f.theta0 = theta0;
-  f.omega0 = omega0;
-  f.alpha = alpha;
-  return f;
-}
-
-// The same function, with its time origin moved forward by dt (exact for the kinds used here).
-AxisFunc rebase(const AxisFunc& f, double dt) {
-  AxisFunc g = f;
-  switch (f.kind) {
-    case AxisFunc::Kind::Const: break;
-    case AxisFunc::Kind::Quadratic: {
-      double angle, rate, accel;
-      f.eval(dt, angle, rate, accel);
-      g.theta0 = angle;
-      g.omega0 = rate;
-      break;
-    }
-    case AxisFunc::Kind::Sine: {
-      // theta0 + A (sin(w (tau + dt) + phi) - sin phi) = theta0' + A (sin(w tau + phi') - sin phi')
-      const double phi2 = std::remainder(f.phase + f.omega * dt, 2.0 * kPi);
-      g.theta0 = f.theta0 + f.amp * (std::sin(phi2) - std::sin(f.phase));
-      g.phase = phi2;
-      break;
-    }
-    case AxisFunc::Kind::Cycloid: break;  // not produced by the servo
-  }
-  return g;
-}
-
 double sgn(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : 0.0); }
 
 }  // namespace
@@ -70,7 +30,7 @@ double sgn(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : 0.0); }
 TableServo::TableServo(const ServoConfig& config) : config_(config) {
   for (int a = 0; a < 3; ++a) {
     Axis& ax = axes_[static_cast<std::size_t>(a)];
-    ax.segs.push_back({0.0, constant(config.start_deg[static_cast<std::size_t>(a)] * kDegToRad)});
+    ax.segs.push_back({0.0, AxisFunc::constant(config.start_deg[static_cast<std::size_t>(a)] * kDegToRad)});
   }
 }
 
@@ -116,19 +76,19 @@ std::pair<double, double> TableServo::graceful_stop(int axis, double t, double a
     const double t_z = s.t0 + (kPi / 2 + k * kPi - s.f.phase) / s.f.omega;
     double angle, rate, acc;
     s.f.eval(t_z - s.t0, angle, rate, acc);
-    replace_from(axis, t_z, {{t_z, constant(angle)}});
+    replace_from(axis, t_z, {{t_z, AxisFunc::constant(angle)}});
     return {t_z, angle};
   }
   double angle, rate, acc;
   eval(a, t, angle, rate, acc);
   if (std::fabs(rate) * kRadToDeg < config_.moving_threshold_dps) {
-    replace_from(axis, t, {{t, constant(angle)}});
+    replace_from(axis, t, {{t, AxisFunc::constant(angle)}});
     return {t, angle};
   }
   const double T = std::fabs(rate) / accel;
   const double alpha = -sgn(rate) * accel;
   const double rest = angle + rate * T + 0.5 * alpha * T * T;
-  replace_from(axis, t, {{t, quadratic(angle, rate, alpha)}, {t + T, constant(rest)}});
+  replace_from(axis, t, {{t, AxisFunc::quadratic(angle, rate, alpha)}, {t + T, AxisFunc::constant(rest)}});
   return {t + T, rest};
 }
 
@@ -138,11 +98,11 @@ void TableServo::emergency_stop(int axis, double t) {
   eval(a, t, angle, rate, acc);
   const double accel = limits(axis, TableMode::off).accel_dps2 * kDegToRad;
   if (std::fabs(rate) * kRadToDeg < config_.moving_threshold_dps) {
-    replace_from(axis, t, {{t, constant(angle)}});
+    replace_from(axis, t, {{t, AxisFunc::constant(angle)}});
   } else {
     const double T = std::fabs(rate) / accel;
     const double alpha = -sgn(rate) * accel;
-    replace_from(axis, t, {{t, quadratic(angle, rate, alpha)}, {t + T, constant(angle + rate * T + 0.5 * alpha * T * T)}});
+    replace_from(axis, t, {{t, AxisFunc::quadratic(angle, rate, alpha)}, {t + T, AxisFunc::constant(angle + rate * T + 0.5 * alpha * T * T)}});
   }
   a.mode = TableMode::off;
   update_limit_event(axis, t);
@@ -317,12 +277,12 @@ ServoResult TableServo::demand_position(double t_s, int axis, double angle_deg) 
       vpk = v;
     }
     const double th_a = th1 + s * 0.5 * acc * ta * ta;
-    segs.push_back({t1, quadratic(th1, 0.0, s * acc)});
-    if (tc > 0.0) segs.push_back({t1 + ta, quadratic(th_a, s * vpk, 0.0)});
-    segs.push_back({t1 + ta + tc, quadratic(th_a + s * vpk * tc, s * vpk, -s * acc)});
-    segs.push_back({t1 + 2.0 * ta + tc, constant(target)});
+    segs.push_back({t1, AxisFunc::quadratic(th1, 0.0, s * acc)});
+    if (tc > 0.0) segs.push_back({t1 + ta, AxisFunc::quadratic(th_a, s * vpk, 0.0)});
+    segs.push_back({t1 + ta + tc, AxisFunc::quadratic(th_a + s * vpk * tc, s * vpk, -s * acc)});
+    segs.push_back({t1 + 2.0 * ta + tc, AxisFunc::constant(target)});
   } else {
-    segs.push_back({t1, constant(target)});
+    segs.push_back({t1, AxisFunc::constant(target)});
   }
   replace_from(axis, t1, std::move(segs));
   return {};
@@ -351,10 +311,10 @@ ServoResult TableServo::demand_rate(double t_s, int axis, double rate_dps) {
   std::vector<Seg> segs;
   if (T > 0.0) {
     const double alpha = sgn(dw) * acc;
-    segs.push_back({now_, quadratic(angle, rate, alpha)});
-    segs.push_back({now_ + T, quadratic(angle + rate * T + 0.5 * alpha * T * T, target, 0.0)});
+    segs.push_back({now_, AxisFunc::quadratic(angle, rate, alpha)});
+    segs.push_back({now_ + T, AxisFunc::quadratic(angle + rate * T + 0.5 * alpha * T * T, target, 0.0)});
   } else {
-    segs.push_back({now_, target == 0.0 ? constant(angle) : quadratic(angle, target, 0.0)});
+    segs.push_back({now_, target == 0.0 ? AxisFunc::constant(angle) : AxisFunc::quadratic(angle, target, 0.0)});
   }
   replace_from(axis, now_, std::move(segs));
   return {};
@@ -386,7 +346,7 @@ ServoResult TableServo::demand_oscillation(double t_s, int axis, const Oscillati
   auto move = [&](double from, double to, double t0, std::vector<Seg>& segs) {
     const double dd = to - from, s = sgn(dd), D = std::fabs(dd);
     if (D == 0.0) {
-      segs.push_back({t0, constant(to)});
+      segs.push_back({t0, AxisFunc::constant(to)});
       return 0.0;
     }
     double ta, tc, vpk;
@@ -400,10 +360,10 @@ ServoResult TableServo::demand_oscillation(double t_s, int axis, const Oscillati
       vpk = v;
     }
     const double th_a = from + s * 0.5 * acc * ta * ta;
-    segs.push_back({t0, quadratic(from, 0.0, s * acc)});
-    if (tc > 0.0) segs.push_back({t0 + ta, quadratic(th_a, s * vpk, 0.0)});
-    segs.push_back({t0 + ta + tc, quadratic(th_a + s * vpk * tc, s * vpk, -s * acc)});
-    segs.push_back({t0 + 2.0 * ta + tc, constant(to)});
+    segs.push_back({t0, AxisFunc::quadratic(from, 0.0, s * acc)});
+    if (tc > 0.0) segs.push_back({t0 + ta, AxisFunc::quadratic(th_a, s * vpk, 0.0)});
+    segs.push_back({t0 + ta + tc, AxisFunc::quadratic(th_a + s * vpk * tc, s * vpk, -s * acc)});
+    segs.push_back({t0 + 2.0 * ta + tc, AxisFunc::constant(to)});
     return 2.0 * ta + tc;
   };
   std::vector<Seg> segs;
@@ -519,7 +479,7 @@ motion::Program TableServo::program_from(double t_from) const {
     piece.kind = "sim";
     for (std::size_t k = 0; k < 3; ++k) {
       const Seg& s = active(axes_[k], bounds[i]);
-      piece.axis[k] = rebase(s.f, std::max(0.0, bounds[i] - s.t0));
+      piece.axis[k] = s.f.rebased(std::max(0.0, bounds[i] - s.t0));
     }
     p.pieces.push_back(piece);
   }

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "core/hermite.hpp"
 #include "core/units.hpp"
 
 namespace imucal::sim {
@@ -143,15 +144,12 @@ thermal::ChannelTemps ThermalModel::channels(double t) const {
   const double u = std::clamp(t / h, 0.0, static_cast<double>(grid_.size() - 2));
   const auto k = std::min(static_cast<std::size_t>(u), grid_.size() - 2);
   const double s = u - static_cast<double>(k);
-  const double s2 = s * s, s3 = s2 * s;
-  const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
-  const double d00 = (6 * s2 - 6 * s) / h, d10 = 3 * s2 - 4 * s + 1, d01 = (-6 * s2 + 6 * s) / h, d11 = 3 * s2 - 2 * s;
   thermal::ChannelTemps out;
   for (std::size_t c = 0; c < thermal::kChannels; ++c) {
     const double y0 = value6_[k][c], y1 = value6_[k + 1][c], m0 = slope_[k][c], m1 = slope_[k + 1][c];
     const auto i = static_cast<Eigen::Index>(c);
-    out.T_C[i] = h00 * y0 + h10 * h * m0 + h01 * y1 + h11 * h * m1;
-    out.rate_C_per_min[i] = (d00 * y0 + d10 * m0 + d01 * y1 + d11 * m1) * 60.0;
+    out.T_C[i] = cubic_hermite(y0, m0, y1, m1, h, s);
+    out.rate_C_per_min[i] = cubic_hermite_rate(y0, m0, y1, m1, h, s) * 60.0;
   }
   return out;
 }

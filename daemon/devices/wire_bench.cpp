@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "core/expect_value.hpp"
+#include "core/hermite.hpp"
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "drivers/link_imu.hpp"
@@ -657,11 +658,9 @@ bool WireBench::interpolate(std::int64_t host_ns, Eigen::Vector3d& angle_deg) co
   const double u = static_cast<double>(host_ns - r0.t_ns) / static_cast<double>(r1.t_ns - r0.t_ns);
   // Cubic Hermite on angles and rates: exact for the controller's constant-acceleration pieces
   // up to the rate kinks between reads.
-  const double h00 = (2 * u - 3) * u * u + 1, h10 = ((u - 2) * u + 1) * u, h01 = (3 - 2 * u) * u * u,
-               h11 = (u - 1) * u * u;
   for (std::size_t a = 0; a < 3; ++a)
     angle_deg[static_cast<Eigen::Index>(a)] =
-        h00 * r0.angle_deg[a] + h10 * h_s * r0.rate_dps[a] + h01 * r1.angle_deg[a] + h11 * h_s * r1.rate_dps[a];
+        cubic_hermite(r0.angle_deg[a], r0.rate_dps[a], r1.angle_deg[a], r1.rate_dps[a], h_s, u);
   return true;
 }
 

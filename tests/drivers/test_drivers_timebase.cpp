@@ -13,7 +13,7 @@
 #include "core/units.hpp"
 #include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
-#include "sim/bench_campaign.hpp"
+#include "bench/bench_campaign.hpp"
 #include "sim/sim_imu.hpp"
 #include "sim/sim_table.hpp"
 #include "test_helpers.hpp"
@@ -81,9 +81,9 @@ TEST(TimeBase, ImuSensesTheTableMotionItsDriverReports) {
 }
 
 TEST(TimeBase, ShortCampaignThroughAllThreeDriversAt1kHz) {
-  sim::CampaignOptions o;
+  bench::CampaignOptions o;
   o.duration_s = 6.0;
-  const sim::CampaignReport r = sim::run_driver_campaign(o);
+  const bench::CampaignReport r = bench::run_driver_campaign(o);
   std::printf("%s", r.to_text().c_str());
   EXPECT_GT(r.imu_samples, 5000u);
   EXPECT_EQ(r.imu_lost, 0u);

@@ -1,4 +1,4 @@
-#include "sim/bench_campaign.hpp"
+#include "bench/bench_campaign.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -12,6 +12,7 @@
 
 #include <sys/socket.h>
 
+#include "core/hermite.hpp"
 #include "drivers/tcp_table.hpp"
 #include "drivers/link_imu.hpp"
 #include "drivers/modbus_chamber.hpp"
@@ -19,7 +20,9 @@
 #include "sim/sim_imu.hpp"
 #include "sim/sim_table.hpp"
 
-namespace imucal::sim {
+namespace imucal::bench {
+
+using namespace imucal::sim;  // the simulated devices this harness drives
 
 // The simulated devices speak the drivers' types and protocols.
 using namespace imucal::drivers;
@@ -307,9 +310,7 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
       if (std::fabs(a.rate_dps[i]) > std::fabs(a.rate_dps[k])) k = i;
     if (std::fabs(a.rate_dps[k]) < 5.0 || std::fabs(b.rate_dps[k]) < 5.0) continue;
     const double s = static_cast<double>(p.t_ns - a.t_ns) * 1e-9 / h;
-    const double h00 = 2 * s * s * s - 3 * s * s + 1, h10 = s * s * s - 2 * s * s + s, h01 = -2 * s * s * s + 3 * s * s,
-                 h11 = s * s * s - s * s;
-    const double angle = h00 * a.angle_deg[k] + h10 * h * a.rate_dps[k] + h01 * b.angle_deg[k] + h11 * h * b.rate_dps[k];
+    const double angle = cubic_hermite(a.angle_deg[k], a.rate_dps[k], b.angle_deg[k], b.rate_dps[k], h, s);
     const double rate = a.rate_dps[k] + s * (b.rate_dps[k] - a.rate_dps[k]);
     const double err_us = (angle - p.table_deg[static_cast<Eigen::Index>(k)]) / rate * 1e6;
     sum2 += err_us * err_us;
@@ -327,4 +328,4 @@ CampaignReport run_driver_campaign(const CampaignOptions& o) {
   return rep;
 }
 
-}  // namespace imucal::sim
+}  // namespace imucal::bench

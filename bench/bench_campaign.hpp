@@ -11,7 +11,7 @@
 #include <map>
 #include <string>
 
-namespace imucal::sim {
+namespace imucal::bench {
 
 struct CampaignOptions {
   double duration_s = 600.0;
@@ -42,4 +42,4 @@ struct CampaignReport {
 // Throws std::runtime_error when a device cannot be set up.
 CampaignReport run_driver_campaign(const CampaignOptions& options);
 
-}  // namespace imucal::sim
+}  // namespace imucal::bench
