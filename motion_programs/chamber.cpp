@@ -115,9 +115,9 @@ std::vector<std::string> validate_chamber_profile(const ChamberProfile& p, const
     check_C(s, s.to_C);
     if (s.kind == "ramp") {
       const double rate = std::abs(s.to_C - s.from_C) / (s.t1_s - s.t0_s) * 60.0;
-      if (rate > lim.max_rate_C_per_min * (1 + 1e-9)) {
+      if (rate > lim.max_ramp_C_per_min * (1 + 1e-9)) {
         std::snprintf(buf, sizeof buf, "step '%s' (t=%.0f s): ramp %.3f C/min faster than the chamber's %.3f C/min",
-                      s.name.c_str(), s.t0_s, rate, lim.max_rate_C_per_min);
+                      s.name.c_str(), s.t0_s, rate, lim.max_ramp_C_per_min);
         problems.emplace_back(buf);
       }
     }

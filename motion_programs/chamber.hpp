@@ -8,11 +8,13 @@
 
 namespace imucal::motion {
 
-// What the chamber can do; a profile outside these is refused before anything starts.
+// What the chamber can do; a profile outside these is refused before anything starts. The one
+// definition: imucald's configuration (`chamber`) holds one, `imucal simulate` checks against the
+// defaults.
 struct ChamberLimits {
   double min_C = -40.0;
   double max_C = 85.0;
-  double max_rate_C_per_min = 3.0;
+  double max_ramp_C_per_min = 5.0;
 };
 
 // One step of the set point: a soak holds it, a ramp moves it linearly, a set jumps to it and

@@ -274,7 +274,7 @@ void profile_steps(const json& spec, const std::string& where, const DaemonConfi
 // "tolerance_C"}, or just the profile's name.
 void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
                    std::vector<std::string>& problems, bool& malformed) {
-  const ChamberLimits& lim = config.chamber;
+  const motion::ChamberLimits& lim = config.chamber.limits;
   auto in_limits = [&](double c, const std::string& where) {
     if (c < lim.min_C || c > lim.max_C)
       problems.push_back(where + ": " + celsius_text(c) + " is outside the chamber's limits " + celsius_text(lim.min_C) +

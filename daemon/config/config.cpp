@@ -77,14 +77,14 @@ void read_table(const json& j, DaemonConfig& c, std::vector<std::string>& proble
 
 void read_chamber(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
   ObjectReader r(j, "config.chamber", problems);
-  if (auto v = r.number_in("min_C", -100, 300)) c.chamber.min_C = *v;
-  if (auto v = r.number_in("max_C", -100, 300)) c.chamber.max_C = *v;
-  if (auto v = r.number_in("max_ramp_C_per_min", 0, 100)) c.chamber.max_ramp_C_per_min = *v;
+  if (auto v = r.number_in("min_C", -100, 300)) c.chamber.limits.min_C = *v;
+  if (auto v = r.number_in("max_C", -100, 300)) c.chamber.limits.max_C = *v;
+  if (auto v = r.number_in("max_ramp_C_per_min", 0, 100)) c.chamber.limits.max_ramp_C_per_min = *v;
   if (auto v = r.number_in("safe_setpoint_C", -100, 300)) c.chamber.safe_setpoint_C = *v;
   if (auto v = r.number_in("tolerance_C", 0.01, 50)) c.chamber.tolerance_C = *v;
   if (auto v = r.number_in("wait_timeout_s", 1, 7 * 86400.0)) c.chamber.wait_timeout_s = *v;
-  if (c.chamber.min_C >= c.chamber.max_C) problems.push_back("config.chamber: min_C must be below max_C");
-  if (c.chamber.safe_setpoint_C < c.chamber.min_C || c.chamber.safe_setpoint_C > c.chamber.max_C)
+  if (c.chamber.limits.min_C >= c.chamber.limits.max_C) problems.push_back("config.chamber: min_C must be below max_C");
+  if (c.chamber.safe_setpoint_C < c.chamber.limits.min_C || c.chamber.safe_setpoint_C > c.chamber.limits.max_C)
     problems.push_back("config.chamber.safe_setpoint_C must lie between min_C and max_C");
 }
 

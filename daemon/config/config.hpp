@@ -12,6 +12,7 @@
 
 #include "core/recording.hpp"
 #include "daemon/config/device_config.hpp"
+#include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
@@ -32,10 +33,8 @@ struct UserEntry {
   std::string token;     // for `Authorization: Bearer` (empty: none)
 };
 
-struct ChamberLimits {
-  double min_C = -40.0;
-  double max_C = 85.0;
-  double max_ramp_C_per_min = 5.0;
+struct ChamberConfig {
+  motion::ChamberLimits limits;      // what the chamber can do (its range, its fastest ramp)
   double safe_setpoint_C = 25.0;     // where every exit path leaves the chamber
   double tolerance_C = 2.0;          // default band of a campaign
   double wait_timeout_s = 3600.0;    // longest wait for the chamber to reach a set point
@@ -157,7 +156,7 @@ struct DaemonConfig {
   // The table's certificate (`table.geometry`, `table.sigma`, `table.certificate`; formats.md
   // `table`): the simulated bench moves with the geometry, and every run's meta records it.
   std::optional<table::TableCertificate> table_certificate;
-  ChamberLimits chamber;
+  ChamberConfig chamber;
   SimDefaults sim;
   SuspenderSettings suspenders;
   RecorderConfig recorder;
