@@ -91,6 +91,7 @@ class Fuzzer {
       {"GET", "/api/campaigns/{id}/report", nullptr},
       {"GET", "/api/campaigns/{id}/model", nullptr},
       {"POST", "/api/campaigns/{id}/accept", R"({"reason": "ok"})"},
+      {"POST", "/api/campaigns/{id}/recalibrate", R"({"reason": "ok"})"},
       {"GET", "/api/campaigns/{id}/series", nullptr},
       {"GET", "/api/campaigns/{id}/certificate", nullptr},
       {"GET", "/api/certificates/{serial}", nullptr},
