@@ -652,6 +652,26 @@ json normalized_campaign(const json& campaign, const CampaignSpec& spec, json no
 
 }  // namespace
 
+namespace {
+
+// The faults only the devices on the wire (sim-wire) can play, refused on the in-process bench.
+void check_faults_need_no_wire(const std::vector<SimFault>& faults, std::vector<std::string>& problems) {
+  for (std::size_t i = 0; i < faults.size(); ++i) {
+    const std::string where = "campaign.sim_faults[" + std::to_string(i) + "]: ";
+    const SimFault::Kind kind = faults[i].kind;
+    if (kind == SimFault::Kind::RelayStuck)
+      problems.push_back(where + "relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
+    else if (kind == SimFault::Kind::DropConnection)
+      problems.push_back(where + "drop_connection needs the sim-wire devices (the in-process simulation has no "
+                                 "connections; use disconnect)");
+    else if (kind == SimFault::Kind::ImuBytesDrop || kind == SimFault::Kind::ChamberCorrupt)
+      problems.push_back(where + "imu_bytes_drop and chamber_corrupt need the sim-wire devices (the in-process "
+                                 "simulation has no link bytes; use imu_corrupt)");
+  }
+}
+
+}  // namespace
+
 CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
   CampaignCheck check;
   auto& problems = check.problems;
@@ -717,19 +737,7 @@ CampaignCheck check_campaign(const json& campaign, const DaemonConfig& config) {
     }
     if (suspenders != nullptr) read_campaign_suspenders(*suspenders, spec, problems);
     if (faults != nullptr) check_faults(*faults, check.duration_s, spec.faults, problems);
-    for (std::size_t i = 0; i < spec.faults.size(); ++i)
-      if (spec.faults[i].kind == SimFault::Kind::RelayStuck && config.devices == "sim")
-        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
-                           "]: relay_stuck needs the sim-wire devices (the in-process simulation has no power relay)");
-      else if (spec.faults[i].kind == SimFault::Kind::DropConnection && config.devices == "sim")
-        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
-                           "]: drop_connection needs the sim-wire devices (the in-process simulation has no "
-                           "connections; use disconnect)");
-      else if ((spec.faults[i].kind == SimFault::Kind::ImuBytesDrop || spec.faults[i].kind == SimFault::Kind::ChamberCorrupt) &&
-               config.devices == "sim")
-        problems.push_back("campaign.sim_faults[" + std::to_string(i) +
-                           "]: imu_bytes_drop and chamber_corrupt need the sim-wire devices (the in-process simulation "
-                           "has no link bytes; use imu_corrupt)");
+    if (config.devices == "sim") check_faults_need_no_wire(spec.faults, problems);
     if (imu != nullptr) check_imu(*imu, spec.imu, problems);
     check_real_devices(config, spec, faults != nullptr, problems);
   }
