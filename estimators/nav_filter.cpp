@@ -387,12 +387,25 @@ struct NavCalibrationFilter::Impl {
     }
   }
 
+  // The covariance over one covariance step: P = Phi P Phi^T (and the consider parameters'
+  // cross terms), the process noise, then the step's sums cleared for the next.
   void propagate() {
+    const double T = S_dt;
+    const StateMatrix Fdt = transition_dt(T);
+    const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
+    P = Phi * P * Phi.transpose();
+    if (consider.size() > 0) propagate_consider(Phi, T);
+    add_process_noise(T);
+    ++result.covariance_steps;
+    clear_step_sums();
+  }
+
+  // F T over the step, from the navigation state and the step's sums of the sensor terms.
+  StateMatrix transition_dt(double T) const {
     const nav::NavState& s = nav->state();
     const double lat = s.lat_rad, R = ref.RM_m(), Omega = earth::kOmega_radps;
     const Vector3d w_ie = earth::w_ie_n(lat);
     const Vector3d w_en(-s.v_n.y() / R, s.v_n.x() / R, s.v_n.x() * std::tan(lat) / R);
-    const double T = S_dt;
     StateMatrix Fdt = StateMatrix::Zero();
     auto blk = [&](const Block& r, const Block& c) { return Fdt.block(r.index, c.index, r.size, c.size); };
     blk(kAttitude, kAttitude) = -table::skew(w_ie + w_en) * T;
@@ -415,30 +428,34 @@ struct NavCalibrationFilter::Impl {
     blk(kVelocity, kLeverArmY) = S_CKy;
     blk(kVelocity, kLeverArmZ) = S_CKz;
     blk(kPosition, kVelocity) = Matrix3d::Identity() * T;
-    const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
-    P = Phi * P * Phi.transpose();
-    if (consider.size() > 0) {
-      // x' = Phi x + Gamma p: the site's g, if wrong by its sigma, accelerates the vertical channel.
-      ConsiderMatrix Gamma = ConsiderMatrix::Zero(kSize, consider.size());
-      if (consider.gravity >= 0) Gamma(kVelocity.index + 2, consider.gravity) = consider.gravity_sigma_mps2 * T;
-      // A start term wrong by its sigma: the gyro's rate error turns the attitude (-C dw, as a
-      // bias does), the accelerometer's force error the velocity (C df).
-      using Term = Consider::StartTerm;
-      for (const Term& t : consider.start_terms) {
-        auto att = Gamma.block<3, 1>(kAttitude.index, t.column);
-        auto vel = Gamma.block<3, 1>(kVelocity.index, t.column);
-        switch (t.kind) {
-          case Term::kGyroScaleNonlinear: att = -S_Cq.col(3 * t.k + t.j) * t.sigma; break;
-          case Term::kGyroGSensitivity: att = -S_Cfg.col(3 * t.j + t.k) * t.sigma; break;
-          case Term::kAccelK2: vel = S_Ca.col(t.j) * t.sigma; break;
-          case Term::kAccelK3: vel = S_Ca.col(3 + t.j) * t.sigma; break;
-        }
+    return Fdt;
+  }
+
+  // x' = Phi x + Gamma p: the consider parameters' part of the step (Schmidt).
+  void propagate_consider(const StateMatrix& Phi, double T) {
+    ConsiderMatrix Gamma = ConsiderMatrix::Zero(kSize, consider.size());
+    // The site's g, if wrong by its sigma, accelerates the vertical channel.
+    if (consider.gravity >= 0) Gamma(kVelocity.index + 2, consider.gravity) = consider.gravity_sigma_mps2 * T;
+    // A start term wrong by its sigma: the gyro's rate error turns the attitude (-C dw, as a
+    // bias does), the accelerometer's force error the velocity (C df).
+    using Term = Consider::StartTerm;
+    for (const Term& t : consider.start_terms) {
+      auto att = Gamma.block<3, 1>(kAttitude.index, t.column);
+      auto vel = Gamma.block<3, 1>(kVelocity.index, t.column);
+      switch (t.kind) {
+        case Term::kGyroScaleNonlinear: att = -S_Cq.col(3 * t.k + t.j) * t.sigma; break;
+        case Term::kGyroGSensitivity: att = -S_Cfg.col(3 * t.j + t.k) * t.sigma; break;
+        case Term::kAccelK2: vel = S_Ca.col(t.j) * t.sigma; break;
+        case Term::kAccelK3: vel = S_Ca.col(3 + t.j) * t.sigma; break;
       }
-      const ConsiderMatrix PhiPxp = Phi * consider.Pxp;
-      const StateMatrix cross = PhiPxp * Gamma.transpose();
-      P += cross + cross.transpose() + Gamma * Gamma.transpose();
-      consider.Pxp = PhiPxp + Gamma;
     }
+    const ConsiderMatrix PhiPxp = Phi * consider.Pxp;
+    const StateMatrix cross = PhiPxp * Gamma.transpose();
+    P += cross + cross.transpose() + Gamma * Gamma.transpose();
+    consider.Pxp = PhiPxp + Gamma;
+  }
+
+  void add_process_noise(double T) {
     StateVector q = StateVector::Zero();
     const double arw = model.gyro.noise.arw_rad_rts, vrw = model.accel.noise.vrw_mps_rts;
     const double qbg = opt.gyro_bias_rw_radps_rts > 0 ? opt.gyro_bias_rw_radps_rts
@@ -452,7 +469,9 @@ struct NavCalibrationFilter::Impl {
     for (const Block& b : {kGyroScalePos, kGyroScaleNeg, kAccelScale}) seg(q, b).setConstant(opt.scale_rw_rts * opt.scale_rw_rts * T);
     P.diagonal() += q;
     P = 0.5 * (P + P.transpose());
-    ++result.covariance_steps;
+  }
+
+  void clear_step_sums() {
     S_C.setZero();
     S_Cwp.setZero();
     S_Cwn.setZero();

@@ -27,7 +27,6 @@ KNOWN = {
     "daemon/run/estimator_worker.cpp": {"EstimatorWorker::run": 102},
     "daemon/run/sequencer.cpp": {"Sequencer::run_campaign": 160, "Sequencer::finish_run": 96},
     "estimators/direct_calibration.cpp": {"DirectCalibrator::finish": 159},
-    "estimators/nav_filter.cpp": {"propagate": 81},
     "estimators/noise.cpp": {"NoiseAnalyzer::finish": 117},
     "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
     "estimators/repeatability.cpp": {"RepeatabilityEstimator::finish": 97},
