@@ -328,27 +328,8 @@ void WireBench::start(int imu_fd) {
     keep_alive_ns_ = std::max<std::int64_t>(50'000'000, std::llround(addresses_.table.watchdog_s * units::kNsPerS / 4));
 
   dev_ = std::make_unique<Devices>();
-  dr::LinkImuConfig imu_config;
-  imu_config.name = imu.serial;
-  imu_config.link = imu.link;
-  // The driver sees the samples arrive at the IMU's rate times the time scale (their time tags
-  // tick in host time, sim_world.hpp).
-  imu_config.rate_hz = imu.rate_hz * time_scale_;
-  imu_config.stall_timeout = std::chrono::milliseconds(imu.stall_timeout_ms);
-  imu_config.transport_delay_ns = imu.transport_delay_ns;
   // The IMU link first: opening it moves nothing, and without it no run can record.
-  {
-    auto transport = imu_fd >= 0 ? dr::Result<std::unique_ptr<dr::ImuTransport>>(
-                                       dr::socketcan_transport(imu_fd, imu.link, imu.framing, imu_link_))
-                                 : imu_transport(imu);
-    if (transport) {
-      dev_->imu = std::make_unique<dr::LinkImu>(std::move(*transport), imu_config);
-      if (auto r = dev_->imu->connect(); !r) transport = r.error();
-    }
-    if (!transport)
-      throw std::runtime_error("IMU on " + imu_link_ + ": " + transport.error().message +
-                               "; nothing was moved (the table and the chamber were not contacted)");
-  }
+  open_imu(imu_fd);
   dev_->table = std::make_unique<dr::TcpTable>(addresses_.table);
   dev_->chamber = std::make_unique<dr::ModbusChamber>(addresses_.chamber);
 
@@ -369,19 +350,7 @@ void WireBench::start(int imu_fd) {
     next_chamber_read_ns_ = dr::host_time_ns() + std::max(kChamberReadMinPeriod_host_ns, host_ns(kChamberReadPeriod_ns * 1e-9));
     require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
     require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
-    if (addresses_.power_relay) {
-      dev_->relay = std::make_unique<dr::PowerRelay>(*addresses_.power_relay);
-      // A program that cycles the IMU's power needs the relay hours later: checked now, and the
-      // IMU that has just answered must be powered by it (else the coil or its sense is wrong).
-      const auto segments = program_.segments();
-      if (std::any_of(segments.begin(), segments.end(), [](const SegmentInfo& g) { return g.kind == "power-cycle"; })) {
-        auto powered = dev_->relay->powered();
-        require(powered, "power relay");
-        if (!*powered)
-          throw std::runtime_error(dev_->relay->describe() + " says the IMU is unpowered, but the IMU answers: "
-                                   "check the coil and on_when_set (config.devices.power_relay)");
-      }
-    }
+    if (addresses_.power_relay) check_power_relay();
   } catch (const std::exception& e) {
     std::string message = e.what();
     park_after_failed_start(message);
@@ -393,6 +362,42 @@ void WireBench::start(int imu_fd) {
   imu_ = std::make_unique<ImuFacade>(*this);
   if (dev_->relay) power_ = std::make_unique<PowerFacade>(*dev_->relay);
   service(0);
+}
+
+void WireBench::open_imu(int imu_fd) {
+  const ImuDeviceConfig& imu = addresses_.imu;
+  dr::LinkImuConfig imu_config;
+  imu_config.name = imu.serial;
+  imu_config.link = imu.link;
+  // The driver sees the samples arrive at the IMU's rate times the time scale (their time tags
+  // tick in host time, sim_world.hpp).
+  imu_config.rate_hz = imu.rate_hz * time_scale_;
+  imu_config.stall_timeout = std::chrono::milliseconds(imu.stall_timeout_ms);
+  imu_config.transport_delay_ns = imu.transport_delay_ns;
+  auto transport = imu_fd >= 0 ? dr::Result<std::unique_ptr<dr::ImuTransport>>(
+                                     dr::socketcan_transport(imu_fd, imu.link, imu.framing, imu_link_))
+                               : imu_transport(imu);
+  if (transport) {
+    dev_->imu = std::make_unique<dr::LinkImu>(std::move(*transport), imu_config);
+    if (auto r = dev_->imu->connect(); !r) transport = r.error();
+  }
+  if (!transport)
+    throw std::runtime_error("IMU on " + imu_link_ + ": " + transport.error().message +
+                             "; nothing was moved (the table and the chamber were not contacted)");
+}
+
+void WireBench::check_power_relay() {
+  dev_->relay = std::make_unique<dr::PowerRelay>(*addresses_.power_relay);
+  // A program that cycles the IMU's power needs the relay hours later: checked now, and the IMU
+  // that has just answered must be powered by it (else the coil or its sense is wrong).
+  const auto segments = program_.segments();
+  if (std::none_of(segments.begin(), segments.end(), [](const SegmentInfo& g) { return g.kind == "power-cycle"; }))
+    return;
+  auto powered = dev_->relay->powered();
+  require(powered, "power relay");
+  if (!*powered)
+    throw std::runtime_error(dev_->relay->describe() + " says the IMU is unpowered, but the IMU answers: "
+                             "check the coil and on_when_set (config.devices.power_relay)");
 }
 
 // A start that failed half way leaves nothing running: the table's axes off with the interlock
