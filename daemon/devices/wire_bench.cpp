@@ -350,7 +350,7 @@ void WireBench::start(int imu_fd) {
     next_chamber_read_ns_ = dr::host_time_ns() + std::max(kChamberReadMinPeriod_host_ns, host_ns(kChamberReadPeriod_ns * 1e-9));
     require(dev_->imu->configure(), "IMU on " + imu_link_ + ": configure");
     require(dev_->imu->activate(), "IMU on " + imu_link_ + ": activate");
-    if (addresses_.power_relay) check_power_relay();
+    if (addresses_.power_relay) check_power_relay(*addresses_.power_relay);
   } catch (const std::exception& e) {
     std::string message = e.what();
     park_after_failed_start(message);
@@ -386,8 +386,8 @@ void WireBench::open_imu(int imu_fd) {
                              "; nothing was moved (the table and the chamber were not contacted)");
 }
 
-void WireBench::check_power_relay() {
-  dev_->relay = std::make_unique<dr::PowerRelay>(*addresses_.power_relay);
+void WireBench::check_power_relay(const dr::PowerRelayConfig& relay) {
+  dev_->relay = std::make_unique<dr::PowerRelay>(relay);
   // A program that cycles the IMU's power needs the relay hours later: checked now, and the IMU
   // that has just answered must be powered by it (else the coil or its sense is wrong).
   const auto segments = program_.segments();

@@ -144,7 +144,8 @@ class WireBench final : public Bench {
   // Brings the drivers up on addresses_ (the IMU link already open when imu_fd >= 0).
   void start(int imu_fd);
   void open_imu(int imu_fd);   // start's first step: the IMU link opened and connected
-  void check_power_relay();    // start's: the relay a power-cycling program needs, powering the IMU
+  // start's: the relay a power-cycling program needs, powering the IMU.
+  void check_power_relay(const drivers::PowerRelayConfig& relay);
   void park_after_failed_start(std::string& message);
   // One service step: polls the IMU (up to max_wait_ms), reads the table, refreshes the chamber
   // every quarter second, and issues the program's demands that are due.
