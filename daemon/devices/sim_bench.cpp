@@ -305,6 +305,50 @@ void SimBench::advance_world(double seconds) {
 
 void SimBench::wait(double seconds) { advance_world(seconds); }
 
+void SimBench::log_temperatures_until(double t_s, FrameBatch& out) {
+  while (next_temp_t_s_ <= t_s) {
+    TempSample ts;
+    bool logged = true;
+    if (settings_.thermal) {
+      // The thermal model's sensors and air at this instant.
+      logged = settings_.thermal->temperatures(next_temp_t_s_, ts);
+    } else {
+      // The IMU sits in the chamber's air; its sensors follow it closely enough for a simulation.
+      ts.chamber_C = chamber_C_;
+      ts.gyro_C.setConstant(chamber_C_);
+      ts.accel_C.setConstant(chamber_C_);
+    }
+    ts.chamber_C += chamber_offset_C();  // the chamber reading's faults
+    ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
+    ts.chamber_setpoint_C = setpoint_C_;
+    if (logged) out.temps.push_back(ts);
+    next_temp_t_s_ += kTempPeriod_s;
+  }
+}
+
+// Every active fault of the kind counts the frame off (two overlapping faults both count it).
+bool SimBench::drop_fault_takes_frame() {
+  bool taken = false;
+  for (auto& af : faults_) {
+    if (af.drop_left > 0) {
+      --af.drop_left;
+      taken = true;
+    }
+  }
+  return taken;
+}
+
+bool SimBench::corrupt_fault_takes_frame() {
+  bool taken = false;
+  for (auto& af : faults_) {
+    if (af.corrupt_left > 0) {
+      --af.corrupt_left;
+      taken = true;
+    }
+  }
+  return taken;
+}
+
 DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
   out.clear();
   // Idle reads (nothing produced) let a little device time pass, so that a caller polling in a loop
@@ -339,46 +383,15 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
     for (auto& af : faults_) {
       if (!af.fired && t_s >= af.fault.at_s) fire_fault(af);
     }
-    while (next_temp_t_s_ <= t_s) {
-      TempSample ts;
-      bool logged = true;
-      if (settings_.thermal) {
-        // The thermal model's sensors and air at this instant.
-        logged = settings_.thermal->temperatures(next_temp_t_s_, ts);
-      } else {
-        // The IMU sits in the chamber's air; its sensors follow it closely enough for a simulation.
-        ts.chamber_C = chamber_C_;
-        ts.gyro_C.setConstant(chamber_C_);
-        ts.accel_C.setConstant(chamber_C_);
-      }
-      ts.chamber_C += chamber_offset_C();  // the chamber reading's faults
-      ts.t_ns = std::llround(next_temp_t_s_ * units::kNsPerS);
-      ts.chamber_setpoint_C = setpoint_C_;
-      if (logged) out.temps.push_back(ts);
-      next_temp_t_s_ += kTempPeriod_s;
-    }
+    log_temperatures_until(t_s, out);
     if (table_blocked()) {
       held_deg_ = current_angles_deg();
       running_ = false;
       break;
     }
     if (fault_active(SimFault::Kind::ImuDropout)) continue;
-    bool dropped = false;
-    for (auto& af : faults_) {
-      if (af.drop_left > 0) {
-        --af.drop_left;
-        dropped = true;
-      }
-    }
-    if (dropped) continue;  // lost on the way: a gap
-    bool corrupt = false;
-    for (auto& af : faults_) {
-      if (af.corrupt_left > 0) {
-        --af.corrupt_left;
-        corrupt = true;
-      }
-    }
-    if (corrupt) f.dtheta_rad.x() = std::numeric_limits<double>::quiet_NaN();
+    if (drop_fault_takes_frame()) continue;  // lost on the way: a gap
+    if (corrupt_fault_takes_frame()) f.dtheta_rad.x() = std::numeric_limits<double>::quiet_NaN();
     out.frames.push_back(f);
   }
   // The chamber and the pacing move by the batch's device time.
