@@ -83,87 +83,109 @@ int RepeatabilityEstimator::turn_ons_seen() const {
   return static_cast<int>(seen.size());
 }
 
-Result RepeatabilityEstimator::finish(const ImuModel& prior) const {
-  Result out;
-  out.model = prior;
-  char buf[320];
-  // The statics of each power-on merged: their blocks together.
+namespace {
+
+// The power-ons with a static long enough for its blocks, in order (their statics merged); the
+// statics must be at one orientation.
+std::vector<TurnOn> turn_ons_of(const std::vector<Static>& statics) {
+  std::vector<TurnOn> turn_ons;
   const Static* first = nullptr;
-  for (const Static& s : impl_->statics) {
+  for (const Static& s : statics) {
     if (s.frames < 2 * kBlocks) continue;
     if (first && (s.first_deg - first->first_deg).cwiseAbs().maxCoeff() > 0.01)
       throw std::runtime_error("stage repeatability: the statics are at more than one orientation (the power-ons are "
                                "compared at one; program 'repeatability' gives them)");
     if (!first) first = &s;
-    if (out.turn_ons.empty() || out.turn_ons.back().index != s.turn_on) {
+    if (turn_ons.empty() || turn_ons.back().index != s.turn_on) {
       TurnOn t;
       t.index = s.turn_on;
       t.segment = s.name;
       t.t0_s = s.t0_s;
-      out.turn_ons.push_back(t);
+      turn_ons.push_back(t);
     }
   }
-  if (out.turn_ons.size() < 3) {
+  if (turn_ons.size() < 3) {
+    char buf[320];
     std::snprintf(buf, sizeof buf,
                   "stage repeatability: %zu power-on(s) with a static; the spread needs at least 3 (program "
                   "'repeatability' gives 8, 'repeatability-short' 6)",
-                  out.turn_ons.size());
+                  turn_ons.size());
     throw std::runtime_error(buf);
   }
-  for (TurnOn& t : out.turn_ons) {
-    std::vector<Vector6d> block_means;
-    Vector6d sum = Vector6d::Zero();
-    double T = 0;
-    for (const Static& s : impl_->statics) {
-      if (s.turn_on != t.index || s.frames < 2 * kBlocks) continue;
-      for (int b = 0; b < kBlocks; ++b) {
-        if (s.T_s[static_cast<std::size_t>(b)] <= 0) continue;
-        block_means.push_back(s.sum[static_cast<std::size_t>(b)] / s.T_s[static_cast<std::size_t>(b)]);
-        sum += s.sum[static_cast<std::size_t>(b)];
-        T += s.T_s[static_cast<std::size_t>(b)];
-      }
-    }
-    t.duration_s = T;
-    t.mean = sum / T;
-    // The blocks are of nearly equal length: the standard error of their mean.
-    Vector6d var = Vector6d::Zero();
-    for (const Vector6d& m : block_means) var += (m - t.mean).cwiseAbs2();
-    const auto n = static_cast<double>(block_means.size());
-    t.mean_sigma = (var / (n - 1.0) / n).cwiseSqrt();
-  }
+  return turn_ons;
+}
 
-  const auto N = static_cast<double>(out.turn_ons.size());
+// A power-on's mean of the six channels over its statics' blocks, and the mean's standard error.
+void measure_turn_on(const std::vector<Static>& statics, TurnOn& t) {
+  std::vector<Vector6d> block_means;
+  Vector6d sum = Vector6d::Zero();
+  double T = 0;
+  for (const Static& s : statics) {
+    if (s.turn_on != t.index || s.frames < 2 * kBlocks) continue;
+    for (int b = 0; b < kBlocks; ++b) {
+      if (s.T_s[static_cast<std::size_t>(b)] <= 0) continue;
+      block_means.push_back(s.sum[static_cast<std::size_t>(b)] / s.T_s[static_cast<std::size_t>(b)]);
+      sum += s.sum[static_cast<std::size_t>(b)];
+      T += s.T_s[static_cast<std::size_t>(b)];
+    }
+  }
+  t.duration_s = T;
+  t.mean = sum / T;
+  // The blocks are of nearly equal length: the standard error of their mean.
+  Vector6d var = Vector6d::Zero();
+  for (const Vector6d& m : block_means) var += (m - t.mean).cwiseAbs2();
+  const auto n = static_cast<double>(block_means.size());
+  t.mean_sigma = (var / (n - 1.0) / n).cwiseSqrt();
+}
+
+// Channel c's spread over the power-ons, the noise in it, and the repeatability with its
+// chi-square intervals.
+Channel channel_of(int c, const std::vector<TurnOn>& turn_ons) {
+  const auto N = static_cast<double>(turn_ons.size());
+  Channel ch;
+  ch.gyro = c < 3;
+  ch.axis = c % 3;
+  double mean = 0, noise2 = 0;
+  for (const TurnOn& t : turn_ons) {
+    mean += t.mean[c];
+    noise2 += t.mean_sigma[c] * t.mean_sigma[c];
+  }
+  mean /= N;
+  noise2 /= N;
+  double s2 = 0;
+  for (const TurnOn& t : turn_ons) s2 += (t.mean[c] - mean) * (t.mean[c] - mean);
+  s2 /= N - 1.0;
+  ch.spread = std::sqrt(s2);
+  ch.noise = std::sqrt(noise2);
+  // (N - 1) s^2 / sigma^2 is chi-square with N - 1 degrees of freedom: the spread's intervals,
+  // then the noise taken out of each end.
+  const double dof = N - 1.0;
+  const auto spread_at = [&](double z) { return ch.spread * std::sqrt(dof / least_squares::chi_square_quantile(dof, -z)); };
+  const auto less_noise = [&](double s) { return std::sqrt(std::max(0.0, s * s - noise2)); };
+  ch.repeatability = less_noise(ch.spread);
+  ch.lo68 = less_noise(spread_at(-1.0));
+  ch.hi68 = less_noise(spread_at(1.0));
+  ch.lo997 = less_noise(spread_at(-3.0));
+  ch.hi997 = less_noise(spread_at(3.0));
+  ch.repeatability_sigma = 0.5 * (ch.hi68 - ch.lo68);
+  return ch;
+}
+
+}  // namespace
+
+Result RepeatabilityEstimator::finish(const ImuModel& prior) const {
+  Result out;
+  out.model = prior;
+  out.turn_ons = turn_ons_of(impl_->statics);
+  for (TurnOn& t : out.turn_ons) measure_turn_on(impl_->statics, t);
   TurnOnSection section = turn_on_of(prior).value_or(TurnOnSection{});
   TurnOnTerms sigma = section.sigma.value_or(TurnOnTerms{});
   static const char* const kAxes[3] = {"x", "y", "z"};
   for (int c = 0; c < 6; ++c) {
     Channel& ch = out.channels[static_cast<std::size_t>(c)];
-    ch.gyro = c < 3;
-    ch.axis = c % 3;
-    double mean = 0, noise2 = 0;
-    for (const TurnOn& t : out.turn_ons) {
-      mean += t.mean[c];
-      noise2 += t.mean_sigma[c] * t.mean_sigma[c];
-    }
-    mean /= N;
-    noise2 /= N;
-    double s2 = 0;
-    for (const TurnOn& t : out.turn_ons) s2 += (t.mean[c] - mean) * (t.mean[c] - mean);
-    s2 /= N - 1.0;
-    ch.spread = std::sqrt(s2);
-    ch.noise = std::sqrt(noise2);
-    // (N - 1) s^2 / sigma^2 is chi-square with N - 1 degrees of freedom: the spread's intervals,
-    // then the noise taken out of each end.
-    const double dof = N - 1.0;
-    const auto spread_at = [&](double z) { return ch.spread * std::sqrt(dof / least_squares::chi_square_quantile(dof, -z)); };
-    const auto less_noise = [&](double s) { return std::sqrt(std::max(0.0, s * s - noise2)); };
-    ch.repeatability = less_noise(ch.spread);
-    ch.lo68 = less_noise(spread_at(-1.0));
-    ch.hi68 = less_noise(spread_at(1.0));
-    ch.lo997 = less_noise(spread_at(-3.0));
-    ch.hi997 = less_noise(spread_at(3.0));
-    ch.repeatability_sigma = 0.5 * (ch.hi68 - ch.lo68);
+    ch = channel_of(c, out.turn_ons);
     if (ch.repeatability == 0.0) {
+      char buf[320];
       std::snprintf(buf, sizeof buf,
                     "%s %s: the power-ons differ by no more than the noise within the statics (repeatability below "
                     "%.3g %s at 68 %%)",

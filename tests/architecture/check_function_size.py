@@ -27,7 +27,6 @@ KNOWN = {
     "estimators/direct_calibration.cpp": {"DirectCalibrator::finish": 159},
     "estimators/noise.cpp": {"NoiseAnalyzer::finish": 117},
     "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
-    "estimators/repeatability.cpp": {"RepeatabilityEstimator::finish": 97},
     "estimators/thermal.cpp": {"fit_polynomial": 99},
     "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
     "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
