@@ -4,6 +4,7 @@
 #include <cmath>
 #include <complex>
 #include <cstdio>
+#include <functional>
 
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
@@ -79,6 +80,120 @@ void NoiseAnalyzer::push(const ImuFrame& f) {
   if (bin_T_ >= options_.bin_s * (1 - 1e-9)) close_bin();
 }
 
+namespace {
+
+using Series = std::vector<std::reference_wrapper<const std::vector<double>>>;  // one channel's runs
+
+// Cluster sizes spaced about 8 per decade, up to a third of the longest run.
+std::vector<long> cluster_sizes(std::size_t longest) {
+  std::vector<long> m_list;
+  for (double m = 1; m <= static_cast<double>(longest) / 3.0; m *= 1.33) {
+    const long mi = std::lround(m);
+    if (m_list.empty() || mi != m_list.back()) m_list.push_back(mi);
+  }
+  return m_list;
+}
+
+// The overlapping Allan deviation over every run, each cluster size's terms pooled.
+void allan_curve(const Series& runs, double dt, const std::vector<long>& m_list, ChannelNoise& ch) {
+  std::vector<double> sum(m_list.size(), 0.0), terms(m_list.size(), 0.0);
+  for (const std::vector<double>& y : runs) {
+    const std::vector<double> adev = overlapping_adev(y, dt, m_list);
+    for (std::size_t i = 0; i < m_list.size(); ++i) {
+      const double n_terms = static_cast<double>(y.size()) + 1.0 - 2.0 * static_cast<double>(m_list[i]);
+      if (n_terms <= 0) continue;
+      sum[i] += adev[i] * adev[i] * n_terms;
+      terms[i] += n_terms;
+    }
+  }
+  for (std::size_t i = 0; i < m_list.size(); ++i)
+    if (terms[i] > 0) {
+      ch.tau_s.push_back(static_cast<double>(m_list[i]) * dt);
+      ch.adev.push_back(std::sqrt(sum[i] / terms[i]));
+    }
+}
+
+// White noise: sigma(tau) sqrt(tau) where the curve still falls as 1/sqrt(tau) (tau <= 1 s).
+void white_noise(ChannelNoise& ch) {
+  std::vector<double> white;
+  for (std::size_t i = 0; i < ch.tau_s.size(); ++i)
+    if (ch.tau_s[i] <= 1.0) white.push_back(ch.adev[i] * std::sqrt(ch.tau_s[i]));
+  if (!white.empty()) {
+    std::nth_element(white.begin(), white.begin() + static_cast<long>(white.size() / 2), white.end());
+    ch.white = white[white.size() / 2];
+  }
+}
+
+// Bias instability: fit AVAR = a/tau + b + c tau (white, flicker floor, rate random walk) with
+// non-negative terms, each point weighted by its relative precision (about sqrt(m/N)), and read
+// the floor from b: a minimum of the curve would be pulled down by the scatter of the points.
+double bias_instability(const ChannelNoise& ch, double total_static_s) {
+  const auto n = static_cast<Eigen::Index>(ch.tau_s.size());
+  Eigen::MatrixXd A(n, 3);
+  Eigen::VectorXd y(n), wt(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double tau = ch.tau_s[static_cast<std::size_t>(i)], av = ch.adev[static_cast<std::size_t>(i)];
+    A.row(i) << 1.0 / tau, 1.0, tau;
+    y(i) = av * av;
+    const double clusters = std::max(1.0, total_static_s / tau);
+    wt(i) = clusters / (y(i) * y(i));
+  }
+  double best_cost = 1e300;
+  Eigen::Vector3d best = Eigen::Vector3d::Zero();
+  for (int mask = 1; mask < 8; ++mask) {
+    std::vector<Eigen::Index> cols;
+    for (Eigen::Index k = 0; k < 3; ++k)
+      if (mask & (1 << k)) cols.push_back(k);
+    Eigen::MatrixXd As(n, static_cast<Eigen::Index>(cols.size()));
+    for (std::size_t k = 0; k < cols.size(); ++k) As.col(static_cast<Eigen::Index>(k)) = A.col(cols[k]);
+    const Eigen::MatrixXd N = As.transpose() * wt.asDiagonal() * As;
+    const Eigen::VectorXd sol = N.ldlt().solve(As.transpose() * wt.asDiagonal() * y);
+    if ((sol.array() < 0).any()) continue;
+    const Eigen::VectorXd res = y - As * sol;
+    const double cost = res.dot(wt.asDiagonal() * res);
+    if (cost < best_cost) {
+      best_cost = cost;
+      best.setZero();
+      for (std::size_t k = 0; k < cols.size(); ++k) best[cols[k]] = sol[static_cast<Eigen::Index>(k)];
+    }
+  }
+  return std::sqrt(best[1]) / 0.664;
+}
+
+// Welch PSD with a Hann window over segments of 1024 bins (10 s at 0.01 s), half overlapping.
+void welch_psd(const Series& runs, double dt, ChannelNoise& ch) {
+  constexpr std::size_t L = 1024;
+  Eigen::FFT<double> fft;
+  std::vector<double> psd(L / 2 + 1, 0.0);
+  int segments = 0;
+  std::vector<double> w(L);
+  double w2 = 0;
+  for (std::size_t k = 0; k < L; ++k) {
+    w[k] = 0.5 - 0.5 * std::cos(2 * units::kPi * static_cast<double>(k) / static_cast<double>(L));
+    w2 += w[k] * w[k];
+  }
+  for (const std::vector<double>& y : runs) {
+    for (std::size_t s = 0; s + L <= y.size(); s += L / 2) {
+      double mean = 0;
+      for (std::size_t k = 0; k < L; ++k) mean += y[s + k];
+      mean /= static_cast<double>(L);
+      std::vector<double> x(L);
+      for (std::size_t k = 0; k < L; ++k) x[k] = (y[s + k] - mean) * w[k];
+      std::vector<std::complex<double>> X;
+      fft.fwd(X, x);
+      for (std::size_t k = 0; k <= L / 2; ++k) psd[k] += std::norm(X[k]) * 2.0 * dt / w2;
+      ++segments;
+    }
+  }
+  if (segments > 0)
+    for (std::size_t k = 1; k <= L / 2; ++k) {
+      ch.psd_freq_hz.push_back(static_cast<double>(k) / (static_cast<double>(L) * dt));
+      ch.psd.push_back(psd[k] / segments);
+    }
+}
+
+}  // namespace
+
 Result NoiseAnalyzer::finish() const {
   Result r;
   std::size_t longest = 0;
@@ -88,104 +203,16 @@ Result NoiseAnalyzer::finish() const {
   }
   r.longest_static_s = static_cast<double>(longest) * options_.bin_s;
   if (longest < 16) throw std::runtime_error("stage noise: no static interval long enough for noise analysis");
-  // Cluster sizes spaced about 8 per decade, up to a third of the longest run.
-  std::vector<long> m_list;
-  for (double m = 1; m <= static_cast<double>(longest) / 3.0; m *= 1.33) {
-    const long mi = std::lround(m);
-    if (m_list.empty() || mi != m_list.back()) m_list.push_back(mi);
-  }
+  const std::vector<long> m_list = cluster_sizes(longest);
   const double dt = options_.bin_s;
-  constexpr std::size_t L = 1024;  // Welch segment: 10 s at 0.01 s bins
-  Eigen::FFT<double> fft;
   for (std::size_t c = 0; c < 6; ++c) {
     ChannelNoise& ch = r.channel[c];
-    std::vector<double> sum(m_list.size(), 0.0), terms(m_list.size(), 0.0);
-    for (const Run& run : runs_) {
-      const auto& y = run.rate[c];
-      const std::vector<double> adev = overlapping_adev(y, dt, m_list);
-      for (std::size_t i = 0; i < m_list.size(); ++i) {
-        const double n_terms = static_cast<double>(y.size()) + 1.0 - 2.0 * static_cast<double>(m_list[i]);
-        if (n_terms <= 0) continue;
-        sum[i] += adev[i] * adev[i] * n_terms;
-        terms[i] += n_terms;
-      }
-    }
-    for (std::size_t i = 0; i < m_list.size(); ++i)
-      if (terms[i] > 0) {
-        ch.tau_s.push_back(static_cast<double>(m_list[i]) * dt);
-        ch.adev.push_back(std::sqrt(sum[i] / terms[i]));
-      }
-    // White noise: sigma(tau) sqrt(tau) where the curve still falls as 1/sqrt(tau) (tau <= 1 s).
-    std::vector<double> white;
-    for (std::size_t i = 0; i < ch.tau_s.size(); ++i)
-      if (ch.tau_s[i] <= 1.0) white.push_back(ch.adev[i] * std::sqrt(ch.tau_s[i]));
-    if (!white.empty()) {
-      std::nth_element(white.begin(), white.begin() + static_cast<long>(white.size() / 2), white.end());
-      ch.white = white[white.size() / 2];
-    }
-    // Bias instability: fit AVAR = a/tau + b + c tau (white, flicker floor, rate random walk) with
-    // non-negative terms, each point weighted by its relative precision (about sqrt(m/N)), and read
-    // the floor from b: a minimum of the curve would be pulled down by the scatter of the points.
-    if (r.longest_static_s >= options_.min_bias_instability_static_s) {
-      const auto n = static_cast<Eigen::Index>(ch.tau_s.size());
-      Eigen::MatrixXd A(n, 3);
-      Eigen::VectorXd y(n), wt(n);
-      for (Eigen::Index i = 0; i < n; ++i) {
-        const double tau = ch.tau_s[static_cast<std::size_t>(i)], av = ch.adev[static_cast<std::size_t>(i)];
-        A.row(i) << 1.0 / tau, 1.0, tau;
-        y(i) = av * av;
-        const double clusters = std::max(1.0, r.total_static_s / tau);
-        wt(i) = clusters / (y(i) * y(i));
-      }
-      double best_cost = 1e300;
-      Eigen::Vector3d best = Eigen::Vector3d::Zero();
-      for (int mask = 1; mask < 8; ++mask) {
-        std::vector<Eigen::Index> cols;
-        for (Eigen::Index k = 0; k < 3; ++k)
-          if (mask & (1 << k)) cols.push_back(k);
-        Eigen::MatrixXd As(n, static_cast<Eigen::Index>(cols.size()));
-        for (std::size_t k = 0; k < cols.size(); ++k) As.col(static_cast<Eigen::Index>(k)) = A.col(cols[k]);
-        const Eigen::MatrixXd N = As.transpose() * wt.asDiagonal() * As;
-        const Eigen::VectorXd sol = N.ldlt().solve(As.transpose() * wt.asDiagonal() * y);
-        if ((sol.array() < 0).any()) continue;
-        const Eigen::VectorXd res = y - As * sol;
-        const double cost = res.dot(wt.asDiagonal() * res);
-        if (cost < best_cost) {
-          best_cost = cost;
-          best.setZero();
-          for (std::size_t k = 0; k < cols.size(); ++k) best[cols[k]] = sol[static_cast<Eigen::Index>(k)];
-        }
-      }
-      ch.bias_instability = std::sqrt(best[1]) / 0.664;
-    }
-    // Welch PSD with a Hann window.
-    std::vector<double> psd(L / 2 + 1, 0.0);
-    int segments = 0;
-    std::vector<double> w(L);
-    double w2 = 0;
-    for (std::size_t k = 0; k < L; ++k) {
-      w[k] = 0.5 - 0.5 * std::cos(2 * units::kPi * static_cast<double>(k) / static_cast<double>(L));
-      w2 += w[k] * w[k];
-    }
-    for (const Run& run : runs_) {
-      const auto& y = run.rate[c];
-      for (std::size_t s = 0; s + L <= y.size(); s += L / 2) {
-        double mean = 0;
-        for (std::size_t k = 0; k < L; ++k) mean += y[s + k];
-        mean /= static_cast<double>(L);
-        std::vector<double> x(L);
-        for (std::size_t k = 0; k < L; ++k) x[k] = (y[s + k] - mean) * w[k];
-        std::vector<std::complex<double>> X;
-        fft.fwd(X, x);
-        for (std::size_t k = 0; k <= L / 2; ++k) psd[k] += std::norm(X[k]) * 2.0 * dt / w2;
-        ++segments;
-      }
-    }
-    if (segments > 0)
-      for (std::size_t k = 1; k <= L / 2; ++k) {
-        ch.psd_freq_hz.push_back(static_cast<double>(k) / (static_cast<double>(L) * dt));
-        ch.psd.push_back(psd[k] / segments);
-      }
+    Series runs;
+    for (const Run& run : runs_) runs.emplace_back(run.rate[c]);
+    allan_curve(runs, dt, m_list, ch);
+    white_noise(ch);
+    if (r.longest_static_s >= options_.min_bias_instability_static_s) ch.bias_instability = bias_instability(ch, r.total_static_s);
+    welch_psd(runs, dt, ch);
   }
   char buf[200];
   std::snprintf(buf, sizeof buf, "stage noise: %zu static runs, %.0f s in all, longest %.0f s%s", runs_.size(),
