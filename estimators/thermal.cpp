@@ -12,6 +12,7 @@
 #include "estimators/thermal.hpp"
 
 #include <algorithm>
+#include <optional>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -331,11 +332,9 @@ Solved solve(const std::vector<const Sample*>& rows, const std::vector<double>& 
   return s;
 }
 
-}  // namespace
-
-PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const FitOptions& o) {
-  const std::size_t n = samples.size();
-  if (n < 3) throw std::runtime_error("fit: " + std::to_string(n) + " cycles (need 3 at least)");
+// The design's scales: the largest distance from T_ref and the largest rate (not below 1e-3 C
+// and 1e-4 C/min), so that the columns are of order one.
+Design design_for(const std::vector<Sample>& samples, double T_ref_C) {
   Design d{T_ref_C, 0.0, 0.0};
   for (const Sample& s : samples) {
     d.T_scale = std::max(d.T_scale, std::abs(s.T_C - T_ref_C));
@@ -343,60 +342,93 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
   }
   d.T_scale = std::max(d.T_scale, 1e-3);
   d.rate_scale = std::max(d.rate_scale, 1e-4);
+  return d;
+}
+
+struct Candidate {
+  DegreeScore score;
+  held_back::Score held;  // held-back squared residuals, per sample
+};
+
+// The polynomial of degrees (nT, nR) fitted to every sample, and each sample predicted by the
+// fit of the folds that hold it back; none when a fit fails or a fold is too small.
+std::optional<Candidate> cross_validate(const std::vector<Sample>& samples, const std::vector<double>& w, const Design& d,
+                                        int nT, int nR, int folds) {
+  const std::size_t n = samples.size();
+  const int p = 1 + nT + nR;
+  std::vector<const Sample*> all;
+  for (const Sample& s : samples) all.push_back(&s);
+  const Solved full = solve(all, w, d, nT, nR);
+  if (!full.ok) return std::nullopt;
+  Candidate c{{nT, nR, 0.0, 0.0}, {p, std::vector<double>(n, 0.0)}};
+  double ss = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = samples[i].value - d.row(samples[i], nT, nR).dot(full.x);
+    ss += r * r;
+  }
+  c.score.fit_rms = std::sqrt(ss / static_cast<double>(n));
+  for (int f = 0; f < folds; ++f) {
+    std::vector<const Sample*> train;
+    std::vector<double> wt;
+    for (std::size_t i = 0; i < n; ++i)
+      if (static_cast<int>(i % static_cast<std::size_t>(folds)) != f) {
+        train.push_back(&samples[i]);
+        wt.push_back(w[i]);
+      }
+    if (static_cast<int>(train.size()) <= p) return std::nullopt;
+    const Solved part = solve(train, wt, d, nT, nR);
+    if (!part.ok) return std::nullopt;
+    for (std::size_t i = static_cast<std::size_t>(f); i < n; i += static_cast<std::size_t>(folds)) {
+      const double r = samples[i].value - d.row(samples[i], nT, nR).dot(part.x);
+      c.held.e2[i] = r * r;
+    }
+  }
+  c.score.cv_rms = std::sqrt(c.held.mean_e2());
+  return c;
+}
+
+// The chosen degrees fitted to every sample: the polynomial in physical units, and the constant's
+// sigma from (A'WA)^-1 scaled by the weighted residual variance.
+void fit_chosen(const std::vector<Sample>& samples, const std::vector<double>& w, const Design& d, PolyFit& out) {
+  const std::size_t n = samples.size();
+  std::vector<const Sample*> all;
+  for (const Sample& s : samples) all.push_back(&s);
+  const Solved full = solve(all, w, d, out.T_degree, out.rate_degree);
+  const int p = 1 + out.T_degree + out.rate_degree;
+  out.constant = full.x[0];
+  for (int k = 0; k < out.T_degree; ++k) out.poly.T.push_back(full.x[1 + k] / std::pow(d.T_scale, k + 1));
+  for (int k = 0; k < out.rate_degree; ++k)
+    out.poly.dTdt.push_back(full.x[1 + out.T_degree + k] / std::pow(d.rate_scale, k + 1));
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
+  double wrss = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::RowVectorXd r = d.row(samples[i], out.T_degree, out.rate_degree);
+    N += w[i] * r.transpose() * r;
+    const double e = samples[i].value - r.dot(full.x);
+    wrss += w[i] * e * e;
+  }
+  const double s0sq = static_cast<double>(n) > p ? wrss / (static_cast<double>(n) - p) : 0.0;
+  const Eigen::MatrixXd Ninv = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+  out.constant_sigma = std::sqrt(std::max(0.0, Ninv(0, 0) * s0sq));
+}
+
+}  // namespace
+
+PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const FitOptions& o) {
+  const std::size_t n = samples.size();
+  if (n < 3) throw std::runtime_error("fit: " + std::to_string(n) + " cycles (need 3 at least)");
+  const Design d = design_for(samples, T_ref_C);
   // Equal weights: the per-cycle sigmas of stage 1 grow with the drift inside a cycle while the
   // chamber ramps (its residuals are no longer noise), and those are the cycles that carry the
   // dT/dt information.
   const std::vector<double> w(n, 1.0);
-  std::vector<const Sample*> all;
-  for (const Sample& s : samples) all.push_back(&s);
-
-  struct Candidate {
-    DegreeScore score;
-    held_back::Score held;  // held-back squared residuals, per sample
-  };
   std::vector<Candidate> cands;
   const int folds = std::max(2, o.folds);
-  for (int nT = 0; nT <= o.max_T_degree; ++nT) {
+  for (int nT = 0; nT <= o.max_T_degree; ++nT)
     for (int nR = 0; nR <= o.max_rate_degree; ++nR) {
-      const int p = 1 + nT + nR;
-      if (static_cast<double>(n) < o.min_samples_per_parameter * p) continue;
-      const Solved full = solve(all, w, d, nT, nR);
-      if (!full.ok) continue;
-      Candidate c{{nT, nR, 0.0, 0.0}, {p, std::vector<double>(n, 0.0)}};
-      double ss = 0;
-      for (std::size_t i = 0; i < n; ++i) {
-        const double r = samples[i].value - d.row(samples[i], nT, nR).dot(full.x);
-        ss += r * r;
-      }
-      c.score.fit_rms = std::sqrt(ss / static_cast<double>(n));
-      bool ok = true;
-      for (int f = 0; f < folds && ok; ++f) {
-        std::vector<const Sample*> train;
-        std::vector<double> wt;
-        for (std::size_t i = 0; i < n; ++i)
-          if (static_cast<int>(i % static_cast<std::size_t>(folds)) != f) {
-            train.push_back(&samples[i]);
-            wt.push_back(w[i]);
-          }
-        if (static_cast<int>(train.size()) <= p) {
-          ok = false;
-          break;
-        }
-        const Solved part = solve(train, wt, d, nT, nR);
-        if (!part.ok) {
-          ok = false;
-          break;
-        }
-        for (std::size_t i = static_cast<std::size_t>(f); i < n; i += static_cast<std::size_t>(folds)) {
-          const double r = samples[i].value - d.row(samples[i], nT, nR).dot(part.x);
-          c.held.e2[i] = r * r;
-        }
-      }
-      if (!ok) continue;
-      c.score.cv_rms = std::sqrt(c.held.mean_e2());
-      cands.push_back(std::move(c));
+      if (static_cast<double>(n) < o.min_samples_per_parameter * (1 + nT + nR)) continue;
+      if (auto c = cross_validate(samples, w, d, nT, nR, folds)) cands.push_back(std::move(*c));
     }
-  }
   if (cands.empty()) throw std::runtime_error("fit: no polynomial could be fitted to " + std::to_string(n) + " cycles");
 
   // The simplest model that predicts held-back cycles as well as the best one, within the noise
@@ -412,24 +444,7 @@ PolyFit fit_polynomial(const std::vector<Sample>& samples, double T_ref_C, const
   out.cv_rms = chosen->score.cv_rms;
   out.samples = static_cast<int>(n);
   for (const Candidate& c : cands) out.scores.push_back(c.score);
-  const Solved full = solve(all, w, d, out.T_degree, out.rate_degree);
-  const int p = chosen->held.params;
-  out.constant = full.x[0];
-  for (int k = 0; k < out.T_degree; ++k) out.poly.T.push_back(full.x[1 + k] / std::pow(d.T_scale, k + 1));
-  for (int k = 0; k < out.rate_degree; ++k)
-    out.poly.dTdt.push_back(full.x[1 + out.T_degree + k] / std::pow(d.rate_scale, k + 1));
-  // Sigma of the constant: (A'WA)^-1 scaled by the weighted residual variance.
-  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
-  double wrss = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::RowVectorXd r = d.row(samples[i], out.T_degree, out.rate_degree);
-    N += w[i] * r.transpose() * r;
-    const double e = samples[i].value - r.dot(full.x);
-    wrss += w[i] * e * e;
-  }
-  const double s0sq = static_cast<double>(n) > p ? wrss / (static_cast<double>(n) - p) : 0.0;
-  const Eigen::MatrixXd Ninv = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
-  out.constant_sigma = std::sqrt(std::max(0.0, Ninv(0, 0) * s0sq));
+  fit_chosen(samples, w, d, out);
   return out;
 }
 

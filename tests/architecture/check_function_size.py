@@ -26,7 +26,6 @@ KNOWN = {
     "daemon/run/sequencer.cpp": {"Sequencer::run_campaign": 160, "Sequencer::finish_run": 96},
     "estimators/direct_calibration.cpp": {"DirectCalibrator::finish": 159},
     "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
-    "estimators/thermal.cpp": {"fit_polynomial": 99},
     "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
     "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
     "web/js/views/builder.mjs": {"mount": 936},
