@@ -109,7 +109,7 @@ std::vector<Row> rows(const std::int64_t model_run) {
   const auto analysis = [](const SweepRun& r) -> std::set<int> {
     if (r.busy()) return {409};
     if (!r.recorded()) return {404};
-    return {200, 202};  // 202 while computing; 200 {"available": false} when the run lacks what it needs
+    return {200, 202};  // 202 while computing (or writing the bundle); 200 the answer (or the bundle)
   };
   std::vector<Row> t = {
       {"POST", "/api/login", Access::open, always(200), fixed("/api/login"),
@@ -170,8 +170,7 @@ std::vector<Row> rows(const std::int64_t model_run) {
       {"GET", "/api/campaigns/{id}/progress", Access::viewer, always(200), sub("/progress")},
       {"GET", "/api/campaigns/{id}/truth", Access::viewer,
        [](const SweepRun& r) { return std::set<int>{r.has_model() ? 200 : 404}; }, sub("/truth")},
-      {"GET", "/api/campaigns/{id}/recording", Access::viewer,
-       [](const SweepRun& r) { return std::set<int>{r.busy() ? 409 : r.recorded() ? 200 : 404}; }, sub("/recording")},
+      {"GET", "/api/campaigns/{id}/recording", Access::viewer, analysis, sub("/recording")},
       {"GET", "/api/campaigns/{id}/allan", Access::viewer, analysis, sub("/allan")},
       {"GET", "/api/campaigns/{id}/thermal", Access::viewer, analysis, sub("/thermal")},
       {"GET", "/api/campaigns/{id}/evaluation", Access::viewer, analysis, sub("/evaluation")},
