@@ -31,8 +31,9 @@ using namespace imucal::daemontest;
 
 namespace {
 
-// The slowest reply the sweep accepts: generous for a loaded 2-core machine under ASan, where
-// the first download of `full`'s recording (a 45 MB bundle written on the request) is the slowest.
+// The slowest reply the sweep accepts: generous for a loaded 2-core machine under ASan. The
+// recording bundles are written by jobs (the first request answers 202 at once); a later caller
+// may download one (`full`'s is 45 MB).
 constexpr double kReplyBound_s = 30.0;
 
 struct SweepRun {

@@ -920,8 +920,7 @@ TEST_F(BundleTest, FaultedIntervalsGoIntoMetaJsonAndComeBackWithTheImport) {
 
   import_bundle(dir1, db2);
   const RunDb again = RunDb::open(db2);
-  ASSERT_TRUE(again.extra(kFaultedIntervalsKey).has_value());
-  EXPECT_EQ(nlohmann::json::parse(*again.extra(kFaultedIntervalsKey)), intervals);
+  EXPECT_EQ(nlohmann::json::parse(again.extra(kFaultedIntervalsKey).value_or("null")), intervals);
   export_bundle(again, dir2);
   EXPECT_EQ(nlohmann::json::parse(std::ifstream(dir2 + "/meta.json")).at(kFaultedIntervalsKey), intervals);
 

@@ -276,7 +276,9 @@ export function mount(root, ctx) {
     await optionalPlots(optional);
   }
 
-  // The bundle is built from the run file once the run has ended (GET .../recording, a tar).
+  // The bundle is written from the run file once the run has ended (GET .../recording, a tar), by
+  // a job on imucald: 202 with its progress until the file is there. A click asks until then,
+  // showing how far it is, and then lets the browser download the file itself.
   function enableRecording(link) {
     const d = detail;
     const url = `/api/campaigns/${id}/recording`;
@@ -285,10 +287,40 @@ export function mount(root, ctx) {
       link.setAttribute('download', `campaign-${id}-recording.tar`);
       link.removeAttribute('aria-disabled');
       link.title = 'imucal-recording/1 bundle (meta.json, frames.csv, program.json, truth.json) as one tar file; unpack and read it with "imucal import DIR"';
+      link.addEventListener('click', (event) => {
+        if (link.dataset.ready === 'true') return;  // the click below: the browser downloads
+        event.preventDefault();
+        if (link.dataset.preparing !== 'true') prepareRecording(link, url);
+      });
       return;
     }
     link.title = d.run_db ? 'Available when the run has ended.' : 'This campaign was never started: there is no recording.';
     link.classList.add('disabled');
+  }
+
+  async function prepareRecording(link, url) {
+    const label = link.textContent;
+    link.dataset.preparing = 'true';
+    try {
+      await get(url, { discardBody: true, onPending: (p) => {
+        if (stopped) return false;
+        link.dataset.progress = String(p?.progress ?? 0);
+        link.textContent = p?.state === 'queued' ? 'Recording bundle: queued behind other jobs…'
+          : `Recording bundle: writing… ${Math.round(100 * (p?.progress ?? 0))} %`;
+        return true;
+      } });
+      if (stopped) return;
+      link.textContent = label;
+      link.dataset.ready = 'true';
+      link.click();
+    } catch (e) {
+      if (stopped) return;
+      link.textContent = label;
+      pageError.textContent = `The recording bundle could not be written: ${e.message}`;
+    } finally {
+      delete link.dataset.preparing;
+      delete link.dataset.ready;
+    }
   }
 
   // Each panel asks imucald for its data; a run that cannot give it gets the daemon's reason
