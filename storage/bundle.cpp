@@ -245,17 +245,48 @@ nlohmann::ordered_json meta_to_bundle_json(const RecordingMeta& meta) {
   return root;
 }
 
+// meta.json as the export writes it: the run's meta, and its faulted intervals when it has any.
+nlohmann::ordered_json bundle_meta_json(const RunDb& run, const RecordingMeta& meta) {
+  nlohmann::ordered_json root = meta_to_bundle_json(meta);
+  if (const auto text = run.extra(kFaultedIntervalsKey)) {
+    try {
+      root[kFaultedIntervalsKey] = nlohmann::ordered_json::parse(*text);
+    } catch (const json::exception& e) {
+      throw StorageError("run database '" + run.path() + "': extra '" + kFaultedIntervalsKey + "' is damaged: " + e.what());
+    }
+  }
+  return root;
+}
+
+// What meta.json holds: the recording's meta, and the faulted intervals (kFaultedIntervalsKey) as
+// the JSON text to keep in the run, when it lists them.
+struct BundleMeta {
+  RecordingMeta meta;
+  std::optional<std::string> faulted_intervals;
+};
+
+// The faulted intervals of meta.json, when it lists them: an array of objects, kept verbatim.
+std::optional<std::string> read_faulted_intervals(ObjectReader& r) {
+  const json* intervals = r.get(kFaultedIntervalsKey);
+  if (intervals == nullptr) return std::nullopt;
+  const auto is_object = [](const json& item) { return item.is_object(); };
+  if (!intervals->is_array() || !std::all_of(intervals->begin(), intervals->end(), is_object))
+    r.fail(kFaultedIntervalsKey, "must be an array of objects");
+  return intervals->dump();
+}
+
 // meta.json through core's ObjectReader (path first: "site.height_m must be a number, not a
 // string"). Keys another writer added are ignored (formats.md lets the format be extended); a
 // near miss of a key of ours ("gravity_mps") is refused, or a typo would silently become normal
 // gravity.
-RecordingMeta read_meta(const json& root) {
+BundleMeta read_meta(const json& root) {
   const ObjectReader::ThrowAtFirst mode{};
   ObjectReader r(root, "", mode);
   const std::string format = r.required_string("format");
   if (format != kRecordingFormat) r.fail("unknown format '" + format + "' (this imucal reads " + kRecordingFormat + ")");
 
-  RecordingMeta meta;
+  BundleMeta bundle;
+  RecordingMeta& meta = bundle.meta;
   {
     ObjectReader site(r.required("site"), "site", mode);
     meta.site.latitude_deg = site.required_number_in("latitude_deg", -90.0, 90.0);
@@ -321,11 +352,12 @@ RecordingMeta read_meta(const json& root) {
     meta.table = table::read_table_certificate(tr);
     tr.finish_extensible();
   }
+  bundle.faulted_intervals = read_faulted_intervals(r);
   r.finish_extensible();
-  return meta;
+  return bundle;
 }
 
-RecordingMeta meta_from_bundle(const std::string& dir) {
+BundleMeta meta_from_bundle(const std::string& dir) {
   const std::string text = read_text_file(fs::path(dir) / "meta.json", dir);
   json root;
   try {
@@ -333,20 +365,20 @@ RecordingMeta meta_from_bundle(const std::string& dir) {
   } catch (const json::parse_error& e) {
     fail_bundle(dir, std::string("meta.json: ") + e.what());
   }
-  RecordingMeta meta;
+  BundleMeta bundle;
   try {
-    meta = read_meta(root);
+    bundle = read_meta(root);
   } catch (const std::invalid_argument& e) {
     fail_bundle(dir, std::string("meta.json: ") + e.what());
   }
 
   // Not part of the format: what a simulated run carries (see export_bundle).
-  for (auto [file, target] : {std::pair{"program.json", &meta.program_json},
-                              std::pair{"truth.json", &meta.truth_json}}) {
+  for (auto [file, target] : {std::pair{"program.json", &bundle.meta.program_json},
+                              std::pair{"truth.json", &bundle.meta.truth_json}}) {
     const fs::path path = fs::path(dir) / file;
     if (fs::exists(path)) *target = read_text_file(path, dir);
   }
-  return meta;
+  return bundle;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -710,7 +742,7 @@ json gaps_to_json(const std::vector<Gap>& gaps) {
 
 // -----------------------------------------------------------------------------------------------
 
-void export_bundle(const RunDb& run, const std::string& dir) {
+void export_bundle(const RunDb& run, const std::string& dir, const ExportProgress& progress) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) fail_bundle(dir, "cannot create the folder: " + ec.message());
@@ -761,7 +793,11 @@ void export_bundle(const RunDb& run, const std::string& dir) {
     // One line is at most 42 doubles of <= 24 chars plus a time: far below this margin.
     constexpr std::size_t kMaxLine = 2048;
     std::size_t temp_index = 0;
+    const double total_frames = static_cast<double>(std::max<std::int64_t>(1, run.frame_count()));
+    std::size_t written = 0;
     run.for_each_frame([&](const ImuFrame& frame) {
+      // Told once a chunk's worth of frames: often enough for a person, rare beside the formatting.
+      if (progress && written++ % RunDb::kFramesPerChunk == 0) progress(static_cast<double>(written) / total_frames);
       while (temp_index + 1 < temps.size() && temps[temp_index + 1].t_ns <= frame.t_ns) ++temp_index;
       const TempSample& temp = temps[temp_index];
       if (buffer.size() - used < kMaxLine) drain();
@@ -814,11 +850,13 @@ void export_bundle(const RunDb& run, const std::string& dir) {
     }
   }
   // Last, so that a folder with meta.json is complete.
-  write_text_file(fs::path(dir) / "meta.json", meta_to_bundle_json(meta).dump(1) + "\n", dir);
+  write_text_file(fs::path(dir) / "meta.json", bundle_meta_json(run, meta).dump(1) + "\n", dir);
+  if (progress) progress(1.0);
 }
 
 ImportReport import_bundle(const std::string& dir, const std::string& db_path) {
-  const RecordingMeta meta = meta_from_bundle(dir);
+  const BundleMeta bundle = meta_from_bundle(dir);
+  const RecordingMeta& meta = bundle.meta;
   std::error_code ec;
   if (fs::exists(db_path, ec)) fail_bundle(dir, "cannot import into '" + db_path + "': file already exists");
 
@@ -832,6 +870,7 @@ ImportReport import_bundle(const std::string& dir, const std::string& db_path) {
       RunDb run = RunDb::create(partial, meta);
       report = read_frames_csv(dir, meta.rate_hz, run);
       run.set_extra(kGapsExtraKey, gaps_to_json(report.gaps).dump());
+      if (bundle.faulted_intervals) run.set_extra(kFaultedIntervalsKey, *bundle.faulted_intervals);
       run.flush();
     }  // closed here: the last connection's close checkpoints and removes the -wal file
     if (fs::exists(partial + "-wal", ec)) {

@@ -5,10 +5,12 @@
 // the same temperatures at every frame. Beyond formats.md the export adds keys the format allows
 // (imu.gyro_lsb_rad, imu.accel_lsb_mps, and mount.r0_p_m when millimetres cannot carry the metre
 // value exactly) and the files program.json and truth.json (RecordingMeta::program_json and
-// truth_json, verbatim; the example bundle's truth.json is read the same way).
+// truth_json, verbatim; the example bundle's truth.json is read the same way), and the run's
+// faulted intervals (kFaultedIntervalsKey) when its writer recorded any.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -42,11 +44,20 @@ struct ImportReport {
 // The run's extra key holding the import gaps as JSON.
 inline constexpr const char* kGapsExtraKey = "gaps";
 
+// The run's extra key holding the intervals in which its recording was held by a fault (imucald's
+// suspensions and interruptions, docs/storage.md): a JSON array of objects its writer defines.
+// The export writes it into meta.json under the same key; the import keeps meta.json's back in
+// the run, verbatim, so that a bundle read and written again still lists them.
+inline constexpr const char* kFaultedIntervalsKey = "faulted_intervals";
+
+// The fraction of the frames written (0..1), every few thousand frames; it may throw to stop.
+using ExportProgress = std::function<void(double fraction)>;
+
 // Writes `dir`/meta.json and `dir`/frames.csv (the folder is created; files in it are replaced).
 // Temperatures are sample-and-hold: each frame gets the latest temperature sample at or before its
 // time, frames before the first sample get the first one (a run without any temperature samples
 // is written with TempSample's defaults).
-void export_bundle(const RunDb& run, const std::string& dir);
+void export_bundle(const RunDb& run, const std::string& dir, const ExportProgress& progress = {});
 
 // Reads a bundle into a new run file `db_path` (which must not exist). Rejects malformed input
 // with StorageError("... frames.csv line N: reason"); then no file is left at `db_path`.

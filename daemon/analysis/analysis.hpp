@@ -64,7 +64,8 @@ std::optional<ImuModel> truth_of_run(const std::string& run_path);
 std::string imu_serial_of_run(const std::string& run_path);
 
 // Writes the run as an imucal-recording/1 bundle into a POSIX tar file at `tar_path` (replaced
-// atomically), every file under the folder `top_dir`/.
-void write_recording_tar(const std::string& run_path, const std::string& tar_path, const std::string& top_dir);
+// atomically), every file under the folder `top_dir`/, telling `progress` how far it is.
+void write_recording_tar(const std::string& run_path, const std::string& tar_path, const std::string& top_dir,
+                         const AnalysisProgress& progress = {});
 
 }  // namespace imucal::daemon

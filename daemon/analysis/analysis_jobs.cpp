@@ -92,6 +92,14 @@ std::optional<AnalysisJobs::Answer> AnalysisJobs::find(const Key& key) const {
   return answer_of(*it->second);
 }
 
+void AnalysisJobs::forget(const Key& key) {
+  std::lock_guard lock(mutex_);
+  const auto it = jobs_.find(key);
+  if (it == jobs_.end() || it->second->state != Job::State::Done) return;
+  jobs_.erase(it);
+  finished_order_.erase(std::remove(finished_order_.begin(), finished_order_.end(), key), finished_order_.end());
+}
+
 AnalysisJobs::Answer AnalysisJobs::request(const Key& key, Compute compute) {
   std::shared_ptr<Job> job;
   Answer a;
@@ -105,7 +113,8 @@ AnalysisJobs::Answer AnalysisJobs::request(const Key& key, Compute compute) {
       a.ready = true;
       a.status = 429;
       a.body = json_text({{"error", "too many analyses under way (" + std::to_string(pending) +
-                                        "); ask again when one has finished"}});
+                                        " jobs of analyses, plans and recording exports queued or computing); "
+                                        "ask again when one has finished"}});
       return a;
     }
     job = std::make_shared<Job>();

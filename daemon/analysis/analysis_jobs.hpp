@@ -1,4 +1,5 @@
-// The results computed from a finished run (Allan deviation, thermal plots, Schuler test) as jobs:
+// The results computed from a finished run (Allan deviation, thermal plots, Schuler test, the
+// recording bundle, a recalibration) and a campaign's plan as jobs:
 // on threads of their own, never on the HTTP I/O threads (a 2 h run at 200 Hz takes seconds, and
 // every request and live socket of every operator would wait behind it). A request either finds
 // the answer ready, or starts the job (or joins the one already running for the same key) and
@@ -61,6 +62,10 @@ class AnalysisJobs {
   // kept); starts nothing. For a request whose preconditions its own answer changes (a
   // recalibration supersedes the certificate that called for it): asked again, it finds its answer.
   std::optional<Answer> find(const Key& key) const;
+  // Drops the finished answer kept for `key` (a job queued or running stays): for a job whose
+  // answer lives elsewhere (the recording bundle is a file), so that a failure is tried again
+  // at the next request rather than repeated from memory.
+  void forget(const Key& key);
 
  private:
   struct Job;

@@ -591,7 +591,7 @@ const std::vector<Api::Route>& Api::routes() {
       {"GET", "/api/campaigns/{id}/truth", A::viewer, [](Api& a, const Call& c) { return a.campaign_truth(c.id); }},
       {"GET", "/api/campaigns/{id}/progress", A::viewer, [](Api& a, const Call& c) { return a.campaign_progress(c.id); }},
       {"GET", "/api/campaigns/{id}/recording", A::viewer,
-       [](Api& a, const Call& c) { return a.campaign_recording(c.id, c.request.method == "HEAD"); }},
+       [](Api& a, const Call& c) { return a.campaign_recording(c.id); }},
       {"GET", "/api/campaigns/{id}/series", A::viewer,
        [](Api& a, const Call& c) { return a.campaign_series(c.id, c.target.query); }},
       {"GET", "/api/campaigns/{id}/allan", A::viewer, [](Api& a, const Call& c) { return a.campaign_analysis(c.id, "allan"); }},
@@ -1569,8 +1569,29 @@ std::optional<HttpReply> Api::no_recording(const CampaignRow& row, const std::st
   return std::nullopt;
 }
 
-HttpReply Api::campaign_recording(std::int64_t id, bool head) {
-  namespace fs = std::filesystem;
+namespace {
+// Where a run's recording bundle is written (DATA_DIR/exports/) and what it is made from.
+struct RecordingExport {
+  std::string name;  // the bundle's folder and the tar file's name without ".tar"
+  std::filesystem::path tar, run;
+  // Made, and not older than the run file (an interrupted run resumed since makes it stale).
+  bool fresh() const {
+    std::error_code ec;
+    const bool made = std::filesystem::exists(tar, ec);
+    return made && std::filesystem::last_write_time(tar, ec) >= std::filesystem::last_write_time(run, ec) && !ec;
+  }
+  HttpReply reply() const {
+    HttpReply r;
+    r.content_type = "application/x-tar";
+    r.file = tar.string();  // the server answers HEAD with the file's length and no body
+    r.headers.emplace_back("Cache-Control", "no-store");
+    r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + name + ".tar\"");
+    return r;
+  }
+};
+}  // namespace
+
+HttpReply Api::campaign_recording(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
   // Queued or active first: a queued run has no run file yet, but it will (409, not 404).
@@ -1579,28 +1600,31 @@ HttpReply Api::campaign_recording(std::int64_t id, bool head) {
                                 ": its recording can be downloaded when the run has ended",
                        {{"state", to_string(row->state)}});
   if (auto none = no_recording(*row)) return *none;
-  const std::string name = "campaign-" + std::to_string(id) + "-recording";
-  const fs::path dir = fs::path(config_.data_dir) / "exports";
-  const fs::path tar = dir / (name + ".tar");
-  const fs::path run = run_path(*row);
-  {
-    // Built once, and again when the run file is newer (an interrupted run resumed since).
-    std::lock_guard lock(export_mutex_);
-    std::error_code ec;
-    const bool fresh = fs::exists(tar, ec) && fs::last_write_time(tar, ec) >= fs::last_write_time(run, ec) && !ec;
-    if (!fresh) {
-      fs::create_directories(dir);
-      spdlog::info("campaign {}: exporting the recording bundle to {}", id, tar.string());
-      write_recording_tar(run.string(), tar.string(), name);
+  RecordingExport bundle;
+  bundle.name = "campaign-" + std::to_string(id) + "-recording";
+  bundle.tar = std::filesystem::path(config_.data_dir) / "exports" / (bundle.name + ".tar");
+  bundle.run = run_path(*row);
+  if (bundle.fresh()) return bundle.reply();
+  // Written as a job (minutes for a long run), never on the HTTP thread: 202 with its progress.
+  auto compute = [this, id, bundle](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
+    std::lock_guard lock(export_mutex_);  // one writer of DATA_DIR/exports/ at a time
+    if (!bundle.fresh()) {
+      std::filesystem::create_directories(bundle.tar.parent_path());
+      spdlog::info("campaign {}: exporting the recording bundle to {}", id, bundle.tar.string());
+      write_recording_tar(bundle.run.string(), bundle.tar.string(), bundle.name, progress);
     }
-  }
-  HttpReply r;
-  r.content_type = "application/x-tar";
-  r.file = tar.string();
-  r.headers.emplace_back("Cache-Control", "no-store");
-  r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + name + ".tar\"");
-  (void)head;  // the server answers HEAD with the file's length and no body
-  return r;
+    return {200, {{"campaign", id}, {"bytes", std::filesystem::file_size(bundle.tar)}}};
+  };
+  AnalysisJobs::Key key;
+  key.campaign = id;
+  key.analysis = "recording";
+  key.state = to_string(row->state);
+  const AnalysisJobs::Answer answer = jobs_->request(key, std::move(compute));
+  if (!answer.ready) return job_reply(answer);
+  // The bundle on the disk is the answer kept, not the job's: a failure is tried again at the
+  // next request, and a bundle deleted since is made again.
+  jobs_->forget(key);
+  return answer.status == 200 ? bundle.reply() : job_reply(answer);
 }
 
 HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {

@@ -112,8 +112,9 @@ class Api {
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_truth(std::int64_t id);
   HttpReply campaign_progress(std::int64_t id);
-  // The recording bundle as a tar file, built once per run under DATA_DIR/exports/.
-  HttpReply campaign_recording(std::int64_t id, bool head);
+  // The recording bundle as a tar file, built once per run under DATA_DIR/exports/ by a job
+  // (202 with its progress until it is there).
+  HttpReply campaign_recording(std::int64_t id);
   HttpReply campaign_series(std::int64_t id, const std::map<std::string, std::string>& query);
   // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
   HttpReply campaign_analysis(std::int64_t id, const std::string& what);

@@ -14,6 +14,8 @@
 #include "daemon/devices/wire_bench.hpp"
 #include "daemon/run/alarms.hpp"
 #include "daemon/run/estimator_worker.hpp"
+#include "daemon/run/faulted_intervals.hpp"
+#include "storage/bundle.hpp"
 #include "storage/recorder.hpp"
 #include "storage/run_db.hpp"
 #include "storage/sqlite.hpp"
@@ -421,12 +423,14 @@ void sync_run_record(DaemonDb& db, RunContext& run) {
   if (!run.recorder) return;
   json record = {{"campaign_id", run.id}, {"name", run.spec.name}, {"transitions", json::array()},
                  {"events", json::array()}};
-  for (const auto& t : db.transitions(run.id))
+  const std::vector<TransitionRow> transitions = db.transitions(run.id);
+  const std::vector<EventRow> events = db.events(run.id);
+  for (const auto& t : transitions)
     record["transitions"].push_back({{"t", iso8601_utc(t.t_ms)},
                                      {"from", t.from ? json(to_string(*t.from)) : json(nullptr)},
                                      {"to", to_string(t.to)},
                                      {"reason", t.reason}});
-  for (const auto& e : db.events(run.id))
+  for (const auto& e : events)
     record["events"].push_back({{"t", iso8601_utc(e.t_ms)},
                                 {"kind", e.kind},
                                 {"segment", e.segment ? json(*e.segment) : json(nullptr)},
@@ -436,8 +440,10 @@ void sync_run_record(DaemonDb& db, RunContext& run) {
   record["recorder"] = {{"queue_capacity_frames", rs.queue_capacity_frames},
                         {"queue_high_water_frames", rs.high_water_frames},
                         {"dropped_frames", rs.dropped_frames}};
-  // In the run file too, so that the run's own record tells every interruption.
+  // In the run file too, so that the run's own record tells every interruption; its faulted
+  // intervals as the exported bundle's meta.json lists them.
   run.recorder->set_extra("imucald_run", record.dump());
+  run.recorder->set_extra(storage::kFaultedIntervalsKey, faulted_intervals(transitions, events).dump());
 }
 }  // namespace
 

@@ -614,7 +614,11 @@ try {
   for (const name of ['frames.csv', 'meta.json'])
     assert.ok(tar.includes(`campaign-${id}-recording/${name}`), `the bundle holds ${name}`);
   assert.ok(tar.includes('imucal-recording/1'), 'in the imucal-recording/1 format');
-  log(`recording bundle downloaded (${bundle.suggestedFilename()}, ${tar.length} bytes)`);
+  // Written by a job on imucald: the click asked until it was there, showing its progress.
+  assert.ok(await page.getAttribute('#download-recording', 'data-progress') !== null,
+    'the bundle was shown in progress before it downloaded');
+  assert.equal(await page.textContent('#download-recording'), 'Recording bundle (tar)', 'the label is back');
+  log(`recording bundle downloaded (${bundle.suggestedFilename()}, ${tar.length} bytes) after its export job`);
   // direct-short has 10 s statics: enough for a short Allan curve; no thermal cycles, no tilts.
   await page.waitForSelector('#plot-allan .uplot');
   // The model's noise terms beside the Allan figures, and why they differ (issue 18, item 4).

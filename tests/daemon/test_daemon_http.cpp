@@ -367,7 +367,12 @@ TEST(Http, ResultsEndpointsServeTheRunsAnalyses) {
   ASSERT_EQ(done.at("state"), "done") << done.dump().substr(0, 2000);
   EXPECT_EQ(done.at("imu_serial").get<std::string>().rfind("SIM-", 0), 0u);  // the simulated IMU's serial
 
-  const auto tar = op.get(base + "/recording");
+  // Written as a job: 202 with its progress, then the file.
+  const auto started = op.get(base + "/recording");
+  ASSERT_EQ(started.status, 202) << started.body.substr(0, 500);
+  EXPECT_EQ(started.json_body().value("analysis", ""), "recording") << started.body;
+  EXPECT_TRUE(started.json_body().contains("progress")) << started.body;
+  const auto tar = op.get_computed(base + "/recording");
   ASSERT_EQ(tar.status, 200) << tar.body.substr(0, 500);
   EXPECT_EQ(tar.headers.at("content-type"), "application/x-tar");
   EXPECT_NE(tar.headers.at("content-disposition").find("attachment"), std::string::npos);

@@ -895,6 +895,51 @@ TEST_F(BundleTest, MetaKeysAnotherWriterAddedAreReadPastButANearMissIsRefused) {
   expect_rejected(dir, {"meta.json: table.geometry: unknown key", "wobble_arcsec"});
 }
 
+// The intervals a run's writer marked as held by a fault (imucald's suspensions): the export
+// lists them in meta.json, the import keeps them in the run, and its export lists them again.
+TEST_F(BundleTest, FaultedIntervalsGoIntoMetaJsonAndComeBackWithTheImport) {
+  const nlohmann::json intervals = nlohmann::json::parse(
+      R"([{"state": "suspended", "reason": "chamber out of band: 36.1 °C", "start": "2026-11-28T08:00:00.000Z",
+           "end": "2026-11-28T08:00:07.500Z", "program_time_s": 150.25}])");
+  const std::string db1 = temp_path("faulted.db"), dir1 = temp_path("faulted-bundle");
+  const std::string db2 = temp_path("faulted-again.db"), dir2 = temp_path("faulted-bundle-again");
+  std::vector<double> told;
+  {
+    RunDb run = RunDb::create(db1, simulated_meta());
+    run.append(simulated_frames(9000, 3));
+    run.set_extra(kFaultedIntervalsKey, intervals.dump());
+    run.flush();
+    export_bundle(run, dir1, [&](double fraction) { told.push_back(fraction); });
+  }
+  EXPECT_EQ(nlohmann::json::parse(std::ifstream(dir1 + "/meta.json")).at(kFaultedIntervalsKey), intervals);
+  // Progress: from the start to the end, never back.
+  ASSERT_GE(told.size(), 3U);
+  EXPECT_TRUE(std::is_sorted(told.begin(), told.end()));
+  EXPECT_LT(told.front(), 0.5);
+  EXPECT_EQ(told.back(), 1.0);
+
+  import_bundle(dir1, db2);
+  const RunDb again = RunDb::open(db2);
+  EXPECT_EQ(nlohmann::json::parse(again.extra(kFaultedIntervalsKey).value_or("null")), intervals);
+  export_bundle(again, dir2);
+  EXPECT_EQ(nlohmann::json::parse(std::ifstream(dir2 + "/meta.json")).at(kFaultedIntervalsKey), intervals);
+
+  // A run without any: no key. A key of ours that is not a list of intervals, or a near miss of
+  // it, is refused (a typo would silently drop them).
+  const std::string plain = write_bundle("unfaulted", kHeader + "\n" + csv_line("0.1") + csv_line("0.2"));
+  const std::string plain_db = temp_path("unfaulted.db");
+  import_bundle(plain, plain_db);
+  EXPECT_FALSE(RunDb::open(plain_db).extra(kFaultedIntervalsKey).has_value());
+  auto meta = nlohmann::json::parse(std::ifstream(plain + "/meta.json"));
+  meta[kFaultedIntervalsKey] = {1, 2};
+  std::ofstream(plain + "/meta.json") << meta.dump();
+  expect_rejected(plain, {"meta.json: faulted_intervals: must be an array of objects"});
+  meta.erase(kFaultedIntervalsKey);
+  meta["faulted_interval"] = intervals;
+  std::ofstream(plain + "/meta.json") << meta.dump();
+  expect_rejected(plain, {"unknown key \"faulted_interval\" (is it \"faulted_intervals\"?)"});
+}
+
 TEST_F(BundleTest, UnwrapsTableAngles) {
   // outer wraps at +-180 both ways, middle at 0/360 upwards, inner at 0/360 downwards.
   const std::string csv = kHeader + "\n" + csv_line("0.1", "170,350,2") + csv_line("0.2", "179.5,359,0.5") +

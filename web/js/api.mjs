@@ -28,8 +28,10 @@ export function setReauthenticate(fn) {
  * `onPending`: for a result computed as a job (202 while it computes, docs/api.md): called with
  * the job's state and progress, and the request is sent again a second later until the answer
  * is there.
+ * `discardBody`: the answer, once there, is a file the browser downloads itself (the recording
+ * bundle, hundreds of MB): its body is not read, and the request resolves with null.
  */
-export async function api(method, path, body, { auth = true, signal, onPending } = {}) {
+export async function api(method, path, body, { auth = true, signal, onPending, discardBody = false } = {}) {
   const headers = { Accept: 'application/json' };
   const init = { method, headers, credentials: 'same-origin', cache: 'no-store', signal };
   // Every change says it is JSON, body or not: imucald refuses a cookie-authenticated change of
@@ -43,6 +45,10 @@ export async function api(method, path, body, { auth = true, signal, onPending }
     if (e.name === 'AbortError') throw e;
     throw new ApiError(0, { error: `cannot reach imucald (${e.message}); is it running?` });
   }
+  if (discardBody && response.ok && response.status !== 202) {
+    await response.body?.cancel();
+    return null;
+  }
   const text = await response.text();
   let data = null;
   if (text) {
@@ -55,12 +61,12 @@ export async function api(method, path, body, { auth = true, signal, onPending }
   if (response.status === 401 && auth && reauthenticate) {
     if (!pendingReauth) pendingReauth = reauthenticate().finally(() => { pendingReauth = null; });
     await pendingReauth;
-    return api(method, path, body, { auth, signal, onPending });
+    return api(method, path, body, { auth, signal, onPending, discardBody });
   }
   if (response.status === 202 && onPending) {
     if (onPending(data) === false) throw new ApiError(202, { error: 'no longer wanted' });
     await new Promise((resolve) => setTimeout(resolve, 1000));
-    return api(method, path, body, { auth, signal, onPending });
+    return api(method, path, body, { auth, signal, onPending, discardBody });
   }
   if (!response.ok) throw new ApiError(response.status, data || { error: `${response.status} ${response.statusText}` });
   return data;

@@ -17,6 +17,52 @@ import { lineChart, COLORS } from '../plots.mjs';
 import { alarmTable } from '../alarm_panel.mjs';
 import { recordingPlots } from '../recording_plots.mjs';
 
+// The recording bundle's link (GET .../recording, a tar): written from the run file once the run
+// has ended, by a job on imucald (202 with its progress until the file is there). A click asks
+// until then, showing how far it is, and then lets the browser download the file itself.
+function recordingLink(link, id, detail, { isStopped, onError }) {
+  const url = `/api/campaigns/${id}/recording`;
+  if (!detail.run_db || !FINAL_STATES.has(detail.state)) {
+    link.title = detail.run_db ? 'Available when the run has ended.' : 'This campaign was never started: there is no recording.';
+    link.classList.add('disabled');
+    return;
+  }
+  link.href = url;
+  link.setAttribute('download', `campaign-${id}-recording.tar`);
+  link.removeAttribute('aria-disabled');
+  link.title = 'imucal-recording/1 bundle (meta.json, frames.csv, program.json, truth.json) as one tar file; unpack and read it with "imucal import DIR"';
+  link.addEventListener('click', (event) => {
+    if (link.dataset.ready === 'true') return;  // the click below: the browser downloads
+    event.preventDefault();
+    if (link.dataset.preparing !== 'true') prepareRecording(link, url, { isStopped, onError });
+  });
+}
+
+async function prepareRecording(link, url, { isStopped, onError }) {
+  const label = link.textContent;
+  link.dataset.preparing = 'true';
+  try {
+    await get(url, { discardBody: true, onPending: (p) => {
+      if (isStopped()) return false;
+      link.dataset.progress = String(p?.progress ?? 0);
+      link.textContent = p?.state === 'queued' ? 'Recording bundle: queued behind other jobs…'
+        : `Recording bundle: writing… ${Math.round(100 * (p?.progress ?? 0))} %`;
+      return true;
+    } });
+    if (isStopped()) return;
+    link.textContent = label;
+    link.dataset.ready = 'true';
+    link.click();
+  } catch (e) {
+    if (isStopped()) return;
+    link.textContent = label;
+    onError(`The recording bundle could not be written: ${e.message}`);
+  } finally {
+    delete link.dataset.preparing;
+    delete link.dataset.ready;
+  }
+}
+
 export function mount(root, ctx) {
   const id = ctx.params.id;
   let detail = null;
@@ -187,7 +233,7 @@ export function mount(root, ctx) {
       downloads.append(h('a', { class: 'button', id: 'test-report', href: `report.html?id=${id}`, target: '_blank', rel: 'noopener' }, 'Test report (print)'));
     downloads.append(bundle, h('button', { type: 'button', class: 'link', id: 'download-record', onclick: () => saveJson(`campaign-${id}.json`, detail) }, 'Campaign record (JSON)'));
     results.append(downloads);
-    enableRecording(bundle);
+    recordingLink(bundle, id, d, { isStopped: () => stopped, onError: (text) => { pageError.textContent = text; } });
 
     // Coefficients
     if (model && !model._error) {
@@ -274,21 +320,6 @@ export function mount(root, ctx) {
     const optional = h('div', { class: 'optional-plots', id: 'optional-plots' });
     results.append(h('h3', {}, 'Noise, thermal and navigation evaluation'), optional);
     await optionalPlots(optional);
-  }
-
-  // The bundle is built from the run file once the run has ended (GET .../recording, a tar).
-  function enableRecording(link) {
-    const d = detail;
-    const url = `/api/campaigns/${id}/recording`;
-    if (d.run_db && FINAL_STATES.has(d.state)) {
-      link.href = url;
-      link.setAttribute('download', `campaign-${id}-recording.tar`);
-      link.removeAttribute('aria-disabled');
-      link.title = 'imucal-recording/1 bundle (meta.json, frames.csv, program.json, truth.json) as one tar file; unpack and read it with "imucal import DIR"';
-      return;
-    }
-    link.title = d.run_db ? 'Available when the run has ended.' : 'This campaign was never started: there is no recording.';
-    link.classList.add('disabled');
   }
 
   // Each panel asks imucald for its data; a run that cannot give it gets the daemon's reason
