@@ -116,6 +116,34 @@ Recalibration calibrate_again(const std::string& run_path, const std::vector<std
   return {std::move(c.reports), std::move(c.model)};
 }
 
+int prune_exports(const std::string& dir, const std::string& keep, std::int64_t max_bytes) {
+  struct Bundle {
+    fs::path path;
+    fs::file_time_type written;
+    std::uintmax_t bytes;
+  };
+  std::vector<Bundle> bundles;
+  std::error_code ec;
+  std::uintmax_t total = 0;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+    if (e.path().extension() != ".tar" || !e.is_regular_file(ec)) continue;
+    const Bundle b{e.path(), e.last_write_time(ec), e.file_size(ec)};
+    if (ec) continue;
+    total += b.bytes;
+    if (!fs::equivalent(b.path, keep, ec)) bundles.push_back(b);
+  }
+  std::sort(bundles.begin(), bundles.end(), [](const Bundle& a, const Bundle& b) { return a.written < b.written; });
+  int removed = 0;
+  for (const Bundle& b : bundles) {
+    if (total <= static_cast<std::uintmax_t>(std::max<std::int64_t>(0, max_bytes))) break;
+    if (fs::remove(b.path, ec)) {
+      total -= b.bytes;
+      ++removed;
+    }
+  }
+  return removed;
+}
+
 json allan_from_run(const std::string& run_path, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
   // A stage that is done has its result.

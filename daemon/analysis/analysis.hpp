@@ -68,4 +68,9 @@ std::string imu_serial_of_run(const std::string& run_path);
 void write_recording_tar(const std::string& run_path, const std::string& tar_path, const std::string& top_dir,
                          const AnalysisProgress& progress = {});
 
+// Keeps the bundles (*.tar) of the exports folder `dir` within `max_bytes`: the least recently
+// written go first, never `keep` (the one just written, even alone over the bound). A bundle
+// removed is written again when asked. Returns how many were removed.
+int prune_exports(const std::string& dir, const std::string& keep, std::int64_t max_bytes);
+
 }  // namespace imucal::daemon

@@ -122,6 +122,7 @@ void read_http(const json& j, DaemonConfig& c, std::vector<std::string>& problem
   if (auto v = r.integer("live_queue", 1, 100000)) c.http.live_queue = *v;
   if (auto v = r.integer("max_connections_per_client", 1, 100000)) c.http.max_connections_per_client = *v;
   if (auto v = r.integer("max_analysis_jobs", 1, 10000)) c.http.max_analysis_jobs = *v;
+  if (auto v = r.integer("exports_max_bytes", 0, std::int64_t{1} << 50)) c.http.exports_max_bytes = *v;
   if (auto v = r.integer("threads", 1, 64)) c.http.threads = static_cast<int>(*v);
   if (auto v = r.string("web_dir")) c.http.web_dir = *v;
   if (const json* v = r.get("trusted_proxies")) {

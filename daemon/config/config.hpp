@@ -82,6 +82,9 @@ struct HttpConfig {
   std::int64_t max_connections_per_client = 64;
   // Analyses and plans waiting or computing at once (two compute, the rest wait); more are 429.
   std::int64_t max_analysis_jobs = 16;
+  // The recording bundles kept in DATA_DIR/exports/ (any viewer can have every run's written):
+  // past this many bytes the least recently written go, to be written again when asked.
+  std::int64_t exports_max_bytes = std::int64_t{10} << 30;
   int threads = 1;
   std::string web_dir;  // empty: ./web if it exists, else the source tree's web/
   // Reverse proxies whose X-Forwarded-For names the client (client_address.hpp); none by default.

@@ -1604,7 +1604,17 @@ HttpReply Api::campaign_recording(std::int64_t id) {
   bundle.name = "campaign-" + std::to_string(id) + "-recording";
   bundle.tar = std::filesystem::path(config_.data_dir) / "exports" / (bundle.name + ".tar");
   bundle.run = run_path(*row);
-  if (bundle.fresh()) return bundle.reply();
+  AnalysisJobs::Key key;
+  key.campaign = id;
+  key.analysis = "recording";
+  key.state = to_string(row->state);
+  // The bundle on the disk is the answer kept, not the job's: a failure is tried again at the
+  // next request, and a bundle removed since (http.exports_max_bytes) is written again.
+  if (bundle.fresh()) {
+    jobs_->forget(key);
+    return bundle.reply();
+  }
+  jobs_->forget(key);  // a finished job's answer, whose bundle is gone since
   // Written as a job (minutes for a long run), never on the HTTP thread: 202 with its progress.
   auto compute = [this, id, bundle](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
     std::lock_guard lock(export_mutex_);  // one writer of DATA_DIR/exports/ at a time
@@ -1612,17 +1622,14 @@ HttpReply Api::campaign_recording(std::int64_t id) {
       std::filesystem::create_directories(bundle.tar.parent_path());
       spdlog::info("campaign {}: exporting the recording bundle to {}", id, bundle.tar.string());
       write_recording_tar(bundle.run.string(), bundle.tar.string(), bundle.name, progress);
+      if (const int removed = prune_exports(bundle.tar.parent_path().string(), bundle.tar.string(),
+                                            config_.http.exports_max_bytes))
+        spdlog::info("exports: {} older recording bundle(s) removed to stay within http.exports_max_bytes", removed);
     }
     return {200, {{"campaign", id}, {"bytes", std::filesystem::file_size(bundle.tar)}}};
   };
-  AnalysisJobs::Key key;
-  key.campaign = id;
-  key.analysis = "recording";
-  key.state = to_string(row->state);
   const AnalysisJobs::Answer answer = jobs_->request(key, std::move(compute));
   if (!answer.ready) return job_reply(answer);
-  // The bundle on the disk is the answer kept, not the job's: a failure is tried again at the
-  // next request, and a bundle deleted since is made again.
   jobs_->forget(key);
   return answer.status == 200 ? bundle.reply() : job_reply(answer);
 }

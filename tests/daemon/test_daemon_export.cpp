@@ -186,3 +186,31 @@ TEST(RecordingExport, HealthAnswersAndTheJobBoundHoldsWhileALongRunsBundleIsWrit
   std::printf("recording bundle of 750,000 frames: %zu bytes; %d health requests answered while it was written\n",
               answer.body.size(), bracketed);
 }
+
+// The exports folder is bounded (http.exports_max_bytes): a viewer asking for every run's bundle
+// cannot fill the disk. Past the bound the least recently written bundle goes; asked again, it is
+// written again (202 first), and the one just written is never the one removed.
+TEST(RecordingExport, TheExportsFolderStaysWithinItsBoundAndARemovedBundleIsWrittenAgain) {
+  LocalDaemon d("export-bound", false, [](daemon::DaemonConfig& c) { c.http.exports_max_bytes = 1; });
+  std::vector<std::int64_t> ids;
+  for (const char* name : {"first", "second"}) {
+    const auto id = d.post_campaign({{"name", name}, {"program", "direct-short"}, {"rate_hz", 10}, {"seed", 5},
+                                     {"time_scale", 0}, {"estimators", json::array()}});
+    ASSERT_EQ(d.command(id, "start"), 200);
+    ASSERT_EQ(d.wait_final(id).at("state"), "done");
+    ids.push_back(id);
+  }
+  const auto target = [](std::int64_t id) { return "/api/campaigns/" + std::to_string(id) + "/recording"; };
+  const daemon::HttpReply first = d.get_computed(target(ids[0]));
+  ASSERT_EQ(first.status, 200) << first.body.substr(0, 300);
+  ASSERT_TRUE(std::filesystem::exists(first.file));
+  const daemon::HttpReply second = d.get_computed(target(ids[1]));
+  ASSERT_EQ(second.status, 200) << second.body.substr(0, 300);
+  EXPECT_TRUE(std::filesystem::exists(second.file)) << "the bundle just written stays, even alone over the bound";
+  EXPECT_FALSE(std::filesystem::exists(first.file)) << "the older bundle was not removed past the bound";
+  const daemon::HttpReply again = d.call("GET", target(ids[0]));
+  EXPECT_EQ(again.status, 202) << "a removed bundle is written again: " << again.body.substr(0, 300);
+  EXPECT_EQ(d.get_computed(target(ids[0])).status, 200);
+  EXPECT_TRUE(std::filesystem::exists(first.file));
+  EXPECT_FALSE(std::filesystem::exists(second.file));
+}
