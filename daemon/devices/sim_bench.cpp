@@ -326,23 +326,12 @@ void SimBench::log_temperatures_until(double t_s, FrameBatch& out) {
   }
 }
 
-// Every active fault of the kind counts the frame off (two overlapping faults both count it).
-bool SimBench::drop_fault_takes_frame() {
+// Every active fault with frames `left` counts the frame off (two overlapping faults both count it).
+bool SimBench::fault_takes_frame(std::int64_t ActiveFault::*left) {
   bool taken = false;
   for (auto& af : faults_) {
-    if (af.drop_left > 0) {
-      --af.drop_left;
-      taken = true;
-    }
-  }
-  return taken;
-}
-
-bool SimBench::corrupt_fault_takes_frame() {
-  bool taken = false;
-  for (auto& af : faults_) {
-    if (af.corrupt_left > 0) {
-      --af.corrupt_left;
+    if (af.*left > 0) {
+      --(af.*left);
       taken = true;
     }
   }
@@ -390,8 +379,8 @@ DeviceResult SimBench::read(FrameBatch& out, std::int64_t until_t_ns) {
       break;
     }
     if (fault_active(SimFault::Kind::ImuDropout)) continue;
-    if (drop_fault_takes_frame()) continue;  // lost on the way: a gap
-    if (corrupt_fault_takes_frame()) f.dtheta_rad.x() = std::numeric_limits<double>::quiet_NaN();
+    if (fault_takes_frame(&ActiveFault::drop_left)) continue;  // lost on the way: a gap
+    if (fault_takes_frame(&ActiveFault::corrupt_left)) f.dtheta_rad.x() = std::numeric_limits<double>::quiet_NaN();
     out.frames.push_back(f);
   }
   // The chamber and the pacing move by the batch's device time.

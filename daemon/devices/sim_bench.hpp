@@ -92,10 +92,9 @@ class SimBench final : public Bench {
   bool fault_active(SimFault::Kind kind, const char* device = nullptr) const;
   bool table_blocked() const;
   // read()'s steps: the temperature records up to program time t_s; whether a drop or corrupt
-  // fault takes this frame (each counts one frame off).
+  // fault (its frames `left`) takes this frame, counting it off.
   void log_temperatures_until(double t_s, FrameBatch& out);
-  bool drop_fault_takes_frame();
-  bool corrupt_fault_takes_frame();
+  bool fault_takes_frame(std::int64_t ActiveFault::*left);
   double chamber_offset_C() const;  // what active chamber_offset faults add to the chamber's reading  // disconnected or faulted: it cannot move
   void position_simulator(std::int64_t frame_index);
   std::int64_t frames_up_to(double t_s) const;
