@@ -1608,13 +1608,11 @@ HttpReply Api::campaign_recording(std::int64_t id) {
   key.campaign = id;
   key.analysis = "recording";
   key.state = to_string(row->state);
-  // The bundle on the disk is the answer kept, not the job's: a failure is tried again at the
-  // next request, and a bundle removed since (http.exports_max_bytes) is written again.
-  if (bundle.fresh()) {
-    jobs_->forget(key);
-    return bundle.reply();
-  }
-  jobs_->forget(key);  // a finished job's answer, whose bundle is gone since
+  // The bundle on the disk is the answer kept, not the job's (a finished job's is dropped): a
+  // failure is tried again at the next request, and a bundle removed since
+  // (http.exports_max_bytes) is written again.
+  jobs_->forget(key);
+  if (bundle.fresh()) return bundle.reply();
   // Written as a job (minutes for a long run), never on the HTTP thread: 202 with its progress.
   auto compute = [this, id, bundle](const AnalysisJobs::Progress& progress) -> std::pair<int, json> {
     std::lock_guard lock(export_mutex_);  // one writer of DATA_DIR/exports/ at a time
