@@ -896,17 +896,28 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
       out.status = Status::Failed;
       out.message = e.what();
     }
+    keep_last_progress(out);
     run_.reset();
     ++active_;
   }
   return true;
 }
 
+void Pipeline::keep_last_progress(Outcome& out) const {
+  if (!run_) return;
+  try {
+    out.last_progress = run_->progress();
+  } catch (const std::exception&) {
+    return;  // a run that failed may have nothing to say of itself
+  }
+  if (out.last_progress.is_object()) out.last_progress.erase("undetermined");  // its status is the outcome's
+}
+
 json Pipeline::progress(Stage stage) const {
   for (std::size_t i = 0; i < outcomes_.size(); ++i) {
     const Outcome& o = outcomes_[i];
     if (o.stage != stage) continue;
-    json p = i == active_ && run_ ? run_->progress() : json::object();
+    json p = i == active_ && run_ ? run_->progress() : o.last_progress.is_object() ? o.last_progress : json::object();
     p["status"] = to_string(o.status);
     p["program_time_s"] = o.program_time_s;
     p["source"] = o.source;

@@ -173,6 +173,9 @@ struct Outcome {
   std::vector<std::pair<std::string, std::string>> extras;  // run extras: key, JSON text
   std::int64_t frames = 0;
   double program_time_s = 0;  // of the last frame fed
+  // The stage's own progress figures as its run ended (stage 3's updates, rejections, restarts and
+  // last innovations): a finished stage still reports them, not only its estimates.
+  nlohmann::json last_progress;
   // {"status", "source", "notes", per-stage figures, "model"} (docs/api.md, results).
   nlohmann::json report() const;
 };
@@ -206,7 +209,8 @@ class Pipeline {
   const std::vector<Outcome>& outcomes() const { return outcomes_; }
   // The model after the last stage that finished (the start model before any).
   const ImuModel& model() const { return model_; }
-  // The live progress of stage `stage` ({"status", "program_time_s", ...}, docs/api.md).
+  // The live progress of stage `stage` ({"status", "program_time_s", ...}, docs/api.md); a finished
+  // stage keeps its run's last figures (stage 3's counts) beside its outcome.
   nlohmann::json progress(Stage stage) const;
 
   // One stage over its window (pipeline.cpp).
@@ -221,6 +225,8 @@ class Pipeline {
   std::size_t active_ = 0;
   std::unique_ptr<Run> run_;
   Feeder feeder_;
+
+  void keep_last_progress(Outcome& out) const;
 };
 
 // Convenience for a stored recording read to its end (the command line, the analyses).

@@ -24,7 +24,12 @@ using Clock = std::chrono::steady_clock;
 EstimatorWorker::EstimatorWorker(std::string run_db_path, Spec spec, std::optional<std::int64_t> committed_t_ns, Sink sink)
     : path_(std::move(run_db_path)), spec_(std::move(spec)), sink_(std::move(sink)) {
   if (committed_t_ns) target_t_ns_ = *committed_t_ns;
-  thread_ = std::thread([this] { run(); });
+  thread_ = std::thread([this] {
+    run();
+    std::lock_guard lock(mutex_);
+    done_ = true;
+    done_cv_.notify_all();
+  });
 }
 
 EstimatorWorker::~EstimatorWorker() { cancel(); }
@@ -50,15 +55,29 @@ void EstimatorWorker::committed(std::int64_t t_ns) {
   cv_.notify_one();
 }
 
-EstimatorWorker::Results EstimatorWorker::finish(std::optional<std::int64_t> final_t_ns) {
+EstimatorWorker::Results EstimatorWorker::finish(std::optional<std::int64_t> final_t_ns,
+                                                 const std::function<void()>& while_waiting) {
   {
-    std::lock_guard lock(mutex_);
+    std::unique_lock lock(mutex_);
     if (final_t_ns) target_t_ns_ = std::max(target_t_ns_, *final_t_ns);
     finishing_ = true;
+    cv_.notify_one();
+    while (!done_ && while_waiting) {
+      // The caller's wait is what it shows meanwhile (the sequencer: telemetry, so the page follows
+      // the estimators through the tail of a run they lag behind).
+      if (done_cv_.wait_for(lock, std::chrono::milliseconds(200), [&] { return done_; })) break;
+      lock.unlock();
+      while_waiting();
+      lock.lock();
+    }
   }
-  cv_.notify_one();
   if (thread_.joinable()) thread_.join();
   return results_;
+}
+
+bool EstimatorWorker::cancel_requested() {
+  std::lock_guard lock(mutex_);
+  return cancelled_;
 }
 
 void EstimatorWorker::cancel() {
@@ -71,6 +90,10 @@ void EstimatorWorker::cancel() {
 }
 
 namespace {
+
+// The worker's feeding steps (see `feed` in run()).
+constexpr std::int64_t kFeedStep_ns = 5'000'000'000;
+constexpr std::int64_t kMaxFeedSteps = 1000;
 
 bool listed(const std::vector<std::string>& names, const char* name) {
   return std::find(names.begin(), names.end(), name) != names.end();
@@ -180,10 +203,32 @@ void EstimatorWorker::run() {
       for (pipeline::Stage stage : stages) send(pipeline::names_of(stage).estimator, calibration->progress(stage));
     if (monitor) send("navigation", monitor->progress());
   };
+  // At most every 500 ms of wall time and 5 s of program time: each report is stored in the
+  // daemon's database (stage 3's holds every state: about 5 kB), so a real-time run of the
+  // navigation program stores about 1700, not 17 000.
+  auto report_now_and_then = [&] {
+    const double fed_s = fed_t_ns ? static_cast<double>(*fed_t_ns) / units::kNsPerS : 0.0;
+    if (Clock::now() - last_report < std::chrono::milliseconds(500) || fed_s - last_report_t_s < 5.0) return;
+    report();
+    last_report = Clock::now();
+    last_report_t_s = fed_s;
+  };
+  // Fed in steps of a few seconds of program time, reporting between them: a worker behind the run
+  // (a fast time scale, a resumed run's replay, the tail after the program ended) still shows its
+  // progress as it goes, not one jump at the end. The consumers see the same frames however they
+  // are split (pipeline::Feeder), so the results do not depend on the steps.
   auto feed = [&](std::int64_t upto_t_ns, bool final) {
-    if (calibration) calibration->advance(source, upto_t_ns, final);
-    if (monitor) monitor->feed(source, upto_t_ns);
-    fed_t_ns = upto_t_ns;
+    const std::int64_t from_t_ns = fed_t_ns.value_or(std::min<std::int64_t>(0, upto_t_ns));
+    const std::int64_t step_ns = std::max<std::int64_t>(kFeedStep_ns, (upto_t_ns - from_t_ns) / kMaxFeedSteps);
+    std::int64_t t_ns = from_t_ns;
+    do {
+      t_ns = upto_t_ns - t_ns > step_ns ? t_ns + step_ns : upto_t_ns;
+      if (calibration) calibration->advance(source, t_ns, final && t_ns == upto_t_ns);
+      if (monitor) monitor->feed(source, t_ns);
+      fed_t_ns = t_ns;
+      if (t_ns == upto_t_ns) return;
+      report_now_and_then();
+    } while (!cancel_requested());
   };
 
   try {
@@ -205,16 +250,10 @@ void EstimatorWorker::run() {
         break;
       }
       if (target != std::numeric_limits<std::int64_t>::min()) feed(target, false);
-      // At most every 500 ms of wall time and 5 s of program time: each report is stored in the
-      // daemon's database (stage 3's holds every state: about 5 kB), so a real-time run of the
-      // navigation program stores about 1700, not 17 000.
-      const double fed_s = static_cast<double>(target) / units::kNsPerS;
-      if (Clock::now() - last_report >= std::chrono::milliseconds(500) && fed_s - last_report_t_s >= 5.0) {
-        report();
-        last_report = Clock::now();
-        last_report_t_s = fed_s;
-      }
+      if (cancel_requested()) return;
+      report_now_and_then();
     }
+    if (cancel_requested()) return;
     // Final results: each stage's report (its model included) under its estimator's name.
     Results out;
     if (calibration) {

@@ -55,12 +55,14 @@ class EstimatorWorker {
   // The recorder committed frames up to t_ns (thread-safe, never blocks).
   void committed(std::int64_t t_ns);
   // Feeds everything committed up to `final_t_ns`, finishes every estimator and ends the thread.
-  Results finish(std::optional<std::int64_t> final_t_ns);
+  // `while_waiting`, when given, is called about every 200 ms until then (on the caller's thread).
+  Results finish(std::optional<std::int64_t> final_t_ns, const std::function<void()>& while_waiting = {});
   // Ends the thread without results (abort, shutdown).
   void cancel();
 
  private:
   void run();
+  bool cancel_requested();
 
   std::string path_;
   Spec spec_;
@@ -68,6 +70,8 @@ class EstimatorWorker {
 
   std::mutex mutex_;
   std::condition_variable cv_;
+  std::condition_variable done_cv_;  // done_ set: run() has returned
+  bool done_ = false;
   std::int64_t target_t_ns_ = std::numeric_limits<std::int64_t>::min();
   bool finishing_ = false, cancelled_ = false;
   Results results_;

@@ -53,6 +53,7 @@ struct RunContext {
   // The recorder's commit listener reaches the worker through this pointer. Declared in this
   // order so that the recorder (its thread) goes first and the worker outlives it.
   std::atomic<EstimatorWorker*> worker{nullptr};
+  bool estimators_finishing = false;  // the program has ended; the estimators work through its tail
   std::unique_ptr<EstimatorWorker> estimators;
   // Alarms raised by the recorder (on the pushing or the writer thread), taken by the sequencer.
   // Declared before the recorder, whose handler uses them until it is gone.
@@ -1181,6 +1182,35 @@ void Sequencer::safe_exit(RunContext& run) {
     note_event(run, "alarm", "safe exit: chamber to its safe set point: " + r.message);
 }
 
+// The estimators' final results, once the program has ended: they may lag behind it (a fast time
+// scale), so the page follows them through the tail with telemetry saying so.
+void Sequencer::store_estimator_results(RunContext& run) {
+  run.estimators_finishing = true;
+  try {
+    const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns, [&] { publish(run, false); });
+    run.estimators_finishing = false;
+    if (r.model)
+      write_db("campaign " + std::to_string(run.id) + "'s model",
+               [this, id = run.id, text = imu_model_to_json_text(*r.model)] { db_.set_model(id, text); });
+    write_db("campaign " + std::to_string(run.id) + "'s results",
+             [this, id = run.id, text = r.results.dump()] { db_.set_results(id, text); });
+    // A recorder that failed refuses these (the model stays in the daemon's database).
+    if (run.recorder) {
+      run.recorder->set_extra("imucald_results", r.results.dump());
+      if (r.model) run.recorder->set_extra("imucald_model", imu_model_to_json_text(*r.model));
+    }
+  } catch (const std::exception& e) {
+    run.estimators_finishing = false;
+    // A run ending on an error must still end: the error is kept with the run.
+    spdlog::error("campaign {}: the estimators could not finish: {}", run.id, e.what());
+    write_db("campaign " + std::to_string(run.id) + "'s results",
+             [this, id = run.id,
+              text = json{{"error", std::string("the estimators could not finish: ") + e.what()}}.dump()] {
+               db_.set_results(id, text);
+             });
+  }
+}
+
 void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& reason) {
   try {
     safe_exit(run);
@@ -1233,31 +1263,8 @@ void Sequencer::finish_run(RunContext& run, Outcome outcome, const std::string& 
     record_event(run.id, "error", static_cast<std::int64_t>(run.segment), run.program_time_s, why);
   }
   if (run.estimators) {
-    if (results && is_final(final_state)) {
-      try {
-        const EstimatorWorker::Results r = run.estimators->finish(run.last_t_ns);
-        if (r.model)
-          write_db("campaign " + std::to_string(run.id) + "'s model",
-                   [this, id = run.id, text = imu_model_to_json_text(*r.model)] { db_.set_model(id, text); });
-        write_db("campaign " + std::to_string(run.id) + "'s results",
-                 [this, id = run.id, text = r.results.dump()] { db_.set_results(id, text); });
-        // A recorder that failed refuses these (the model stays in the daemon's database).
-        if (run.recorder) {
-          run.recorder->set_extra("imucald_results", r.results.dump());
-          if (r.model) run.recorder->set_extra("imucald_model", imu_model_to_json_text(*r.model));
-        }
-      } catch (const std::exception& e) {
-        // A run ending on an error must still end: the error is kept with the run.
-        spdlog::error("campaign {}: the estimators could not finish: {}", run.id, e.what());
-        write_db("campaign " + std::to_string(run.id) + "'s results",
-                 [this, id = run.id,
-                  text = json{{"error", std::string("the estimators could not finish: ") + e.what()}}.dump()] {
-                   db_.set_results(id, text);
-                 });
-      }
-    } else {
-      run.estimators->cancel();
-    }
+    if (results && is_final(final_state)) store_estimator_results(run);
+    else run.estimators->cancel();
   }
   write_db("campaign " + std::to_string(run.id) + "'s counters",
            [this, id = run.id, t_s = run.program_time_s, frames = run.frames, lost = run.lost, bad = run.bad] {
@@ -1333,6 +1340,7 @@ void Sequencer::publish(RunContext& run, bool force) {
        {{"queue_frames", rs.queued_frames}, {"queue_high_water_frames", rs.high_water_frames},
         {"committed_frames", rs.stored_frames}, {"dropped_frames", rs.dropped_frames}}}};
   t["run"]["prompt"] = prompt_of(run.id);
+  t["run"]["estimators_finishing"] = run.estimators_finishing;
   {
     std::lock_guard lock(telemetry_mutex_);
     t["estimators"] = estimators_;

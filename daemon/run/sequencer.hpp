@@ -135,6 +135,7 @@ class Sequencer {
   void safe_hold(RunContext& run);
   void safe_exit(RunContext& run);
   void finish_run(RunContext& run, Outcome outcome, const std::string& reason);
+  void store_estimator_results(RunContext& run);
   void publish(RunContext& run, bool force);
   void emit(const nlohmann::json& event);
 

@@ -223,6 +223,11 @@ TEST(PipelinePaths, StageThreeShowsItsFilterWhileItRuns) {
   const json end = p.progress(pipeline::Stage::Navigation);
   EXPECT_EQ(end.at("status"), "done");
   EXPECT_TRUE(end.at("estimates").contains("gyro.delay_us.z"));
+  // Finished, it still says what its filter did (the live page ended on a third of the updates
+  // and no restarts: issue 36, item 4): its counts at the end, never fewer than before.
+  ASSERT_TRUE(end.contains("updates")) << end.dump().substr(0, 500);
+  EXPECT_GE(end.at("updates").get<int>(), late.at("updates").get<int>());
+  EXPECT_EQ(end.at("restarts"), late.at("restarts"));
 }
 
 // What fed a stage names each program once with its count (issue 36, item 7): a thermal run's

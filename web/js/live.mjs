@@ -211,6 +211,8 @@ export class LiveStore extends EventTarget {
         // The run ended: the page keeps it (its plots, convergence and last state, with a link to
         // its results) until another run starts; the idle bench is not drawn over it.
         this.finished = { id: previous, name: previousName, state: this.finishedState(previous) };
+        // Its estimators as stored, final ones included: what its results page shows.
+        this.loadProgress(previous, { final: true });
       } else {
         // One campaign's plots never carry another's: each run starts empty; the whole run
         // comes back from its recording (views/live.mjs).
@@ -283,14 +285,16 @@ export class LiveStore extends EventTarget {
 
   // The estimates before this page connected come from /progress, so the convergence plots start
   // at the beginning of the run, not at the moment the page was opened.
-  async loadProgress(id) {
+  // `final`: the run has ended and what is stored is the whole of it (its last entry included).
+  async loadProgress(id, { final = false } = {}) {
     try {
       const history = await get(`/api/campaigns/${id}/progress`);
-      if (this.runId !== id) return;
+      if (final ? this.finished?.id !== id : this.runId !== id) return;
       for (const [name, list] of Object.entries(history || {})) {
         if (!Array.isArray(list)) continue;
         const e = this.estimator(name);
-        const latest = e.latest;  // the live message is newer than any of the history
+        // While the run goes on, the live message is newer than any of the history.
+        const latest = final ? null : e.latest;
         const keep = { coefficients: e.coefficients, innovations: e.innovations };
         e.coefficients = new Map();
         e.innovations = new Map();

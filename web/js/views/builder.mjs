@@ -25,6 +25,14 @@ const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10
 
 // ---- the view ---------------------------------------------------------------------------------
 
+// A text field narrower than what it may hold ("lever-arm/static-x-up", "0, 54.735610317245346, 45")
+// keeps its whole value in its tooltip.
+function titled(input) {
+  input.title = input.value;
+  input.addEventListener('input', () => { input.title = input.value; });
+  return input;
+}
+
 export function mount(root, ctx) {
   let programs = [];
   let units = [];            // GET /api/imus: the serials already known, offered as you type
@@ -462,7 +470,7 @@ export function mount(root, ctx) {
   function segmentRow(seg, i) {
     const type = seg.type;
     const fields = SEGMENT_TYPES[type] || [];
-    const nameInput = h('input', { type: 'text', id: `seg-${i}-name`, value: seg.name || '', class: 'seg-name', 'aria-label': `segment ${i + 1} name` });
+    const nameInput = titled(h('input', { type: 'text', id: `seg-${i}-name`, value: seg.name || '', class: 'seg-name', 'aria-label': `segment ${i + 1} name` }));
     nameInput.addEventListener('input', () => {
       const v = nameInput.value.trim();
       const dup = v && draft.program.segments.some((s, j) => j !== i && s.name === v);
@@ -497,8 +505,8 @@ export function mount(root, ctx) {
         control = f.kind === 'vec3list'
           ? h('textarea', { id, 'aria-label': `segment ${i + 1} ${f.label}`, class: 'positions', spellcheck: 'false',
             rows: String(Math.min(12, Math.max(2, (seg[f.key] || []).length))), value: text })
-          : h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
-            class: f.kind === 'number' ? 'short' : '', spellcheck: 'false' });
+          : titled(h('input', { type: 'text', id, value: text, 'aria-label': `segment ${i + 1} ${f.label}`,
+            class: f.kind === 'number' ? 'short' : '', spellcheck: 'false' }));
         control.addEventListener('input', () => {
           const r = parseField(f, control.value);
           let err = r.error || null;

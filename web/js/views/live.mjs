@@ -16,6 +16,14 @@ import { equipmentWarnings } from '../equipment.mjs';
 
 const WINDOWS = [['60', '1 min'], ['600', '10 min'], ['3600', '1 h'], ['Infinity', 'whole run']];
 
+// Where the run is: its step, or, once the program has ended ahead of the estimators (a fast time
+// scale), that they are finishing the rest of the recording.
+function runStepText(run) {
+  const seg = run.segment || {};
+  return run.estimators_finishing ? 'The program has ended; the estimators are working through the rest of the recording, then its results are stored.'
+    : `step ${seg.index + 1} of ${seg.count}: ${seg.name} (${seg.kind})`;
+}
+
 export function mount(root, ctx) {
   const { store } = ctx;
   let windowS = Number(localStorage.getItem('imucal.live.window') || 600);
@@ -296,7 +304,7 @@ export function mount(root, ctx) {
         clear(runState).append(stateBadge(run.state));
       }
       const seg = run.segment || {};
-      set('run-step', `step ${seg.index + 1} of ${seg.count}: ${seg.name} (${seg.kind})`);
+      set('run-step', runStepText(run));
       set('run-time', `program ${duration(run.program_time_s)} of ${duration(run.duration_s)} · checkpoint ${duration(run.checkpoint_s)}`);
       const wallLeft = run.speed_factor > 0 ? run.time_left_s / run.speed_factor : null;
       set('run-left', `time left ${duration(run.time_left_s)}${wallLeft !== null && Math.abs(run.speed_factor - 1) > 0.05 ? ` (≈ ${duration(wallLeft)} wall)` : ''}`);
