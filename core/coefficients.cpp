@@ -1,5 +1,7 @@
 #include "core/coefficients.hpp"
 
+#include <stdexcept>
+
 #include "core/units.hpp"
 
 namespace imucal {
@@ -46,6 +48,77 @@ std::vector<Coefficient> model_coefficients(const ImuModel& model) {
   vec("accel.lever_arm_mm.y", a.lever_arm_y_m, sigma.accel.lever_arm_y_m, 1e3, true);
   vec("accel.lever_arm_mm.z", a.lever_arm_z_m, sigma.accel.lever_arm_z_m, 1e3, true);
   return out;
+}
+
+const std::vector<CoefficientQuantity>& coefficient_quantities() {
+  using S = KeyShape;
+  // The browser's tables show these titles and units as they are (GET /api/schema).
+  static const std::vector<CoefficientQuantity> table = {
+      {"gyro.bias_dph", "Gyro bias", "°/h", S::axis},
+      {"gyro.scale_pos_ppm", "Gyro scale factor (+ rates)", "ppm", S::axis},
+      {"gyro.scale_neg_ppm", "Gyro scale factor (− rates)", "ppm", S::axis},
+      {"gyro.misalignment_arcsec", "Gyro misalignment", "″", S::angle},
+      {"gyro.scale_nonlinear_ppm", "Gyro scale nonlinearity", "ppm", S::terms},
+      {"gyro.g_sensitivity_dph_per_g", "Gyro g-sensitivity", "°/h/g", S::coupling},
+      {"accel.bias_mps2", "Accelerometer bias", "m/s²", S::axis},
+      {"accel.scale_ppm", "Accelerometer scale factor", "ppm", S::axis},
+      {"accel.misalignment_arcsec", "Accelerometer misalignment", "″", S::angle},
+      {"accel.k2_ug_per_g2", "Accelerometer K2", "µg/g²", S::axis},
+      {"accel.k3_ug_per_g3", "Accelerometer K3", "µg/g³", S::axis},
+      // The lever-arm stage and stage 3 estimate these too.
+      {"gyro.delay_us", "Gyro delay", "µs", S::axis},
+      {"accel.delay_us", "Accelerometer delay", "µs", S::axis},
+      {"accel.lever_arm_mm", "Proof-mass offsets", "mm", S::proof_mass},
+  };
+  return table;
+}
+
+const CoefficientQuantity& quantity_of(const std::string& key) {
+  for (const CoefficientQuantity& q : coefficient_quantities()) {
+    const std::string prefix = std::string(q.key) + ".";
+    if (key.starts_with(prefix)) return q;
+  }
+  throw std::logic_error("no quantity of core/coefficients.cpp covers the coefficient '" + key + "'");
+}
+
+std::string coefficient_title(const std::string& key) {
+  const CoefficientQuantity& q = quantity_of(key);
+  const std::string rest = key.substr(std::string(q.key).size() + 1);  // "x", "xy", "y.x", "x.c2"
+  const std::string title = q.title;
+  const bool pair = rest.size() == 3 && rest[1] == '.';
+  switch (q.shape) {
+    case KeyShape::axis: return title + ", " + rest + " axis";
+    case KeyShape::angle:
+      if (rest.size() == 2) return title + ", sensor " + rest[0] + " about " + rest[1];
+      break;
+    case KeyShape::proof_mass:
+      if (pair) return std::string("Proof-mass offset of accelerometer ") + rest[0] + ", " + rest[2] + " component";
+      break;
+    case KeyShape::coupling:
+      if (pair) return title + " of gyro " + rest[0] + " to specific force along " + rest[2];
+      break;
+    case KeyShape::terms:
+      // q = |omega| / 100 deg/s: the gyro's scale nonlinearity (formats.md).
+      if (rest.size() == 4 && rest[2] == 'c')
+        return title + ", " + rest[0] + " axis, " + rest.substr(2) + " (of q^" + rest[3] + ", q = |ω| / 100 °/s)";
+      break;
+  }
+  return title + ", " + rest;
+}
+
+nlohmann::json coefficient_schema() {
+  nlohmann::json groups = nlohmann::json::array(), coefficients = nlohmann::json::array();
+  for (const CoefficientQuantity& q : coefficient_quantities())
+    groups.push_back({{"key", q.key}, {"title", q.title}, {"unit", q.unit}});
+  for (const Coefficient& c : model_coefficients(ImuModel{})) {
+    const CoefficientQuantity& q = quantity_of(c.key);
+    coefficients.push_back({{"key", c.key},
+                            {"group", q.key},
+                            {"title", coefficient_title(c.key)},
+                            {"unit", q.unit},
+                            {"optional", c.optional}});
+  }
+  return {{"groups", groups}, {"coefficients", coefficients}};
 }
 
 }  // namespace imucal

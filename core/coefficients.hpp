@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "core/imu_model.hpp"
 
 namespace imucal {
@@ -26,5 +28,37 @@ struct Coefficient {
 // All coefficients of `model` in one fixed order (the linear ones first), the same keys for every
 // model, whatever it holds.
 std::vector<Coefficient> model_coefficients(const ImuModel& model);
+
+// How the part of a key after its quantity reads: what a coefficient's title is made of.
+enum class KeyShape {
+  axis,         // ".x": one per sensor axis
+  angle,        // ".xy": sensor x about y
+  proof_mass,   // ".y.x": the proof mass of accelerometer y, its x component
+  coupling,     // ".x.y": gyro x to specific force along y
+  terms,        // ".x.c2": a polynomial's term on axis x
+};
+
+// A quantity of the model as people read it, the heading its coefficients are listed under (one
+// per name without its axis, and one for both proof-mass offsets), in the order the tables show
+// them (gyro first). Not Coefficient::group, which is what is estimated together.
+struct CoefficientQuantity {
+  const char* key;    // "gyro.bias_dph": every coefficient whose key starts "gyro.bias_dph."
+  const char* title;  // "Gyro bias"
+  const char* unit;   // "°/h": the unit the key names, as printed
+  KeyShape shape;
+};
+const std::vector<CoefficientQuantity>& coefficient_quantities();
+
+// The quantity a coefficient's key belongs to; throws std::logic_error for a key none covers (a
+// quantity model_coefficients gained without its row in the table).
+const CoefficientQuantity& quantity_of(const std::string& key);
+
+// A coefficient's name for people, without its unit: "Gyro bias, x axis".
+std::string coefficient_title(const std::string& key);
+
+// What a browser needs to name and group the coefficients without a copy of these tables
+// (GET /api/schema, docs/api.md): {"groups": [{key, title, unit}], "coefficients": [{key, group,
+// title, unit, optional}]}, both in order.
+nlohmann::json coefficient_schema();
 
 }  // namespace imucal

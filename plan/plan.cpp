@@ -134,6 +134,14 @@ bool has_noise(const ImuModel& m) {
 
 }  // namespace
 
+json stage3_states_json() {
+  json out = json::object();
+  for (const BlockName& b : block_names())
+    for (int i = 0; i < b.block.size; ++i)
+      out[std::string(b.prefix) + "." + b.axes[static_cast<std::size_t>(i)]] = json::array({b.block.name, i});
+  return out;
+}
+
 std::vector<Weak> nonlinear_shortfall(const ImuModel& tumble_model, const Targets& bias) {
   // A term's sigma at 1 g is a bias error of that size wherever the unit meets 1 g (CONVENTIONS.md,
   // "Nonlinear terms": K2 f^2/g, K3 f^3/g^2, G f/g): ug -> m/s^2, deg/h/g -> deg/h.

@@ -104,6 +104,10 @@ std::vector<Weak> nonlinear_shortfall(const ImuModel& tumble_model, const Target
 // --table-sigma-arcsec`): the question "what if my table were certified to this?".
 table::TableCertificate uniform_table_certificate(double sigma_arcsec);
 
+// Stage 3's states that are coefficients of the model: {"gyro.bias_dph.x": ["gyro_bias_radps", 0],
+// ...}, the block as a stage's `uncertainty_reduction` names it and the index in the block.
+nlohmann::json stage3_states_json();
+
 // `imu`: the unit's model, its `noise` section required (the prediction scales with it); for a
 // program without stage 1 (navigation alone) it is also the model stage 3 starts from.
 Prediction predict(const motion::Program& program, const ImuModel& imu, const Options& options = {});

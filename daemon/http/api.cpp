@@ -33,6 +33,7 @@
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
 #include "plan/plan.hpp"
+#include "plan/schema.hpp"
 #include "storage/run_db.hpp"
 
 #ifndef IMUCAL_VERSION
@@ -533,6 +534,9 @@ const std::vector<Api::Route>& Api::routes() {
        }},
       {"GET", "/api/status", A::viewer, [](Api& a, const Call&) { return json_reply(200, a.status()); }},
       {"GET", "/api/programs", A::viewer, [](Api& a, const Call&) { return json_reply(200, {{"programs", a.programs_}}); }},
+      // The coefficients' names, groups, units and the seed's targets, from the tables that own them
+      // (plan/schema.hpp): the browser keeps no copy.
+      {"GET", "/api/schema", A::viewer, [](Api&, const Call&) { return json_reply(200, plan::schema_json()); }},
       // The conditions that hold a run, with the daemon's settings (a campaign may set its own:
       // `suspenders` in its JSON).
       {"GET", "/api/suspenders", A::viewer,

@@ -8,6 +8,65 @@ import { parseField, SEGMENT_TYPES, mapProblems, compress } from '../../web/js/p
 import { flatten, coefficientRows, unitOf, labelOf } from '../../web/js/coefficients.mjs';
 import { alarmStatus, needsAttention, applyAlarm, alarmStatusText, alarmSummary } from '../../web/js/alarms.mjs';
 import { runOutcome } from '../../web/js/outcome.mjs';
+import { readFileSync } from 'node:fs';
+import { setSchema, schema, schemaLoaded, loadSchema } from '../../web/js/schema.mjs';
+
+// The coefficients' names, groups and targets as imucald serves them (GET /api/schema); the file
+// is checked against the service by test_daemon's Schema.TheBrowserTestsCopyIsWhatTheServiceServes.
+const SCHEMA_DOC = JSON.parse(readFileSync(new URL('./schema.json', import.meta.url), 'utf8'));
+
+test('the schema: an error before it is loaded, asked for once, then every name by its key', async () => {
+  assert.equal(schemaLoaded(), false);
+  assert.throws(() => schema(), /not loaded/);
+  let asked = 0;
+  const get = async (path) => { asked++; assert.equal(path, '/api/schema'); return SCHEMA_DOC; };
+  const [a, b] = await Promise.all([loadSchema(get), loadSchema(get)]);
+  assert.equal(asked, 1, 'one request for two callers');
+  assert.equal(a, b);
+  await loadSchema(get);
+  assert.equal(asked, 1, 'kept once loaded');
+  assert.equal(schema().byKey.get('gyro.bias_dph.x').group, 'gyro.bias_dph');
+  assert.equal(schema().groups[0].key, 'gyro.bias_dph', 'the groups in the order the tables show them');
+  assert.equal(schema().seedTargets['gyro.misalignment_arcsec'], 0.1);
+  assert.ok(Object.isFrozen(schema().seedTargets), 'a caller edits a copy (plan.mjs seedTargets())');
+});
+
+test("coefficients by imucald's schema: groups, order, names, the polynomial's terms", async () => {
+  const { groups, groupOf, orderOf, coefficientName } = await import('../../web/js/coefficients.mjs');
+  assert.deepEqual(groups(), SCHEMA_DOC.groups);
+  assert.equal(groupOf('accel.lever_arm_mm.z.y').title, 'Proof-mass offsets', 'both offsets are one group');
+  assert.equal(groupOf('gyro.noise.arw_deg_rth'), null);
+  assert.ok(orderOf('gyro.delay_us.x') > orderOf('accel.k3_ug_per_g3.x'), 'delays after the nonlinear terms, as the tables show');
+  assert.equal(orderOf('something.else'), groups().length);
+  // A name in a group that is no coefficient (a limit's key for part of a group).
+  assert.equal(coefficientName('gyro.scale_nonlinear_ppm.x'), 'Gyro scale nonlinearity, x axis');
+  assert.equal(coefficientName('gyro.g_sensitivity_dph_per_g.x'), 'Gyro g-sensitivity, x axis');
+  assert.equal(coefficientName('gyro.g_sensitivity_dph_per_g.q'), 'Gyro g-sensitivity, q');
+  assert.equal(coefficientName('nothing.known'), 'nothing.known');
+  // One to three terms per axis, named as imucald names them; a vector of three stays a vector.
+  const flat = flatten({ gyro: { scale_nonlinear_ppm: { x: [1, 2], y: [3, 4, 5] }, bias_dph: [1, 2, 3] } });
+  assert.deepEqual([...flat.keys()], ['gyro.scale_nonlinear_ppm.x.c1', 'gyro.scale_nonlinear_ppm.x.c2',
+    'gyro.scale_nonlinear_ppm.y.c1', 'gyro.scale_nonlinear_ppm.y.c2', 'gyro.scale_nonlinear_ppm.y.c3',
+    'gyro.bias_dph.x', 'gyro.bias_dph.y', 'gyro.bias_dph.z']);
+  for (const k of flat.keys()) assert.ok(schema().byKey.has(k), `${k} is one of imucald's coefficients`);
+});
+
+test('the limits form names its example key after imucald\'s first coefficient', async () => {
+  const { formToLimits } = await import('../../web/js/limits_form.mjs');
+  const { problems } = formToLimits({ parts: [{ partNumber: 'PN', rows: [{ key: 'bias', maxAbs: '1', maxSigma: '' }] }] });
+  const first = SCHEMA_DOC.coefficients[0];
+  assert.deepEqual(problems.map((p) => p.message),
+    [`A key is a coefficient's name such as ${first.key}, or a group such as ${first.group}.`]);
+});
+
+test('a failed request for the schema is asked again by the next caller', async () => {
+  const { loadSchema: load2 } = await import(`../../web/js/schema.mjs?again`);
+  let asked = 0;
+  const get = async () => { asked++; if (asked === 1) throw new Error('offline'); return SCHEMA_DOC; };
+  await assert.rejects(load2(get), /offline/);
+  await load2(get);
+  assert.equal(asked, 2);
+});
 
 test('a 12 h run at 10 Hz stays within the series bounds and covers the whole run', () => {
   const s = new Series(3, { recentCapacity: 6000, historyCapacity: 2000 });
@@ -201,7 +260,12 @@ test("each stage's contribution to the final model, with stage 3's uncertainty r
 });
 
 test('the builder\'s prediction: each coefficient from the last stage that has it, judged against its target', async () => {
-  const { predictionRows, summary, SEED_TARGETS, groupOfName } = await import('../../web/js/plan.mjs');
+  const { predictionRows, summary, seedTargets, groupOfName } = await import('../../web/js/plan.mjs');
+  const mine = seedTargets();
+  mine['gyro.bias_dph'] = 1;
+  assert.equal(seedTargets()['gyro.bias_dph'], 0.001, 'each caller has its own copy');
+  const SEED_TARGETS = seedTargets();
+  assert.deepEqual(Object.keys(SEED_TARGETS).slice(0, 2), ['gyro.bias_dph', 'gyro.scale_pos_ppm'], 'in the groups\' order');
   assert.equal(groupOfName('accel.lever_arm_mm.y.z'), 'accel.lever_arm_mm.y');
   const prediction = { stages: {
     direct: { estimates: { 'gyro.bias_dph.x': [0, 0.02], 'accel.scale_ppm.x': [0, 2], 'gyro.delay_us.x': [0, 0] } },

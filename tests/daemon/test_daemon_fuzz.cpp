@@ -66,6 +66,7 @@ class Fuzzer {
       {"GET", "/api/health", nullptr},
       {"GET", "/api/status", nullptr},
       {"GET", "/api/programs", nullptr},
+      {"GET", "/api/schema", nullptr},
       {"GET", "/api/suspenders", nullptr},
       {"POST", "/api/campaigns/validate",
        R"({"name": "f", "program": "direct-short", "rate_hz": 10, "time_scale": 0, "seed": 3, "truth": "ideal",

@@ -13,6 +13,7 @@ import {
 } from './certificate_rows.mjs';
 import { budgetTable, sourceName } from './budget.mjs';
 import { coefficientName, unitOf } from './coefficients.mjs';
+import { loadSchema } from './schema.mjs';
 
 const sheet = document.getElementById('certificate');
 const message = document.getElementById('toolbar-message');
@@ -39,6 +40,7 @@ async function load() {
     // The certificate as issued (docs/api.md "Certificates"): the page shows its frozen content
     // and nothing read today, so it prints the same as the day it was issued.
     record = await get(wantedNumber ? `/api/certificates/${encodeURIComponent(wantedNumber)}` : `/api/campaigns/${id}/certificate`);
+    await loadSchema(get);  // the coefficients' names (schema.mjs)
   } catch (e) {
     const text = e instanceof ApiError && e.status === 401
       ? 'Sign in to imucal first (in the main page), then reload this page.'

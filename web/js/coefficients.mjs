@@ -1,24 +1,17 @@
 // Coefficients of an imucal-imu-model/1 (formats.md) as the flat names the live estimates use
 // ("gyro.bias_dph.x", "accel.misalignment_arcsec.yz"), their groups, and their units, which the
-// API puts in every name (docs/api.md: "_dph", "_ppm", "_arcsec", ...).
+// API puts in every name (docs/api.md: "_dph", "_ppm", "_arcsec", ...). Which names exist, their
+// groups and their titles are imucald's (schema.mjs); the units follow from a name's suffix.
 
-export const GROUPS = [
-  { key: 'gyro.bias_dph', title: 'Gyro bias' },
-  { key: 'gyro.scale_pos_ppm', title: 'Gyro scale factor (+ rates)' },
-  { key: 'gyro.scale_neg_ppm', title: 'Gyro scale factor (− rates)' },
-  { key: 'gyro.misalignment_arcsec', title: 'Gyro misalignment' },
-  { key: 'gyro.scale_nonlinear_ppm', title: 'Gyro scale nonlinearity' },
-  { key: 'gyro.g_sensitivity_dph_per_g', title: 'Gyro g-sensitivity' },
-  { key: 'accel.bias_mps2', title: 'Accelerometer bias' },
-  { key: 'accel.scale_ppm', title: 'Accelerometer scale factor' },
-  { key: 'accel.misalignment_arcsec', title: 'Accelerometer misalignment' },
-  { key: 'accel.k2_ug_per_g2', title: 'Accelerometer K2' },
-  { key: 'accel.k3_ug_per_g3', title: 'Accelerometer K3' },
-  // The lever-arm stage and stage 3 estimate these too.
-  { key: 'gyro.delay_us', title: 'Gyro delay' },
-  { key: 'accel.delay_us', title: 'Accelerometer delay' },
-  { key: 'accel.lever_arm_mm', title: 'Proof-mass offsets' },
-];
+import { schema } from './schema.mjs';
+
+/**
+ * The groups the tables list coefficients under, in order ({key, title, unit}): imucald's
+ * (GET /api/schema). A coefficient is in the group whose key and a dot begin its name.
+ */
+export function groups() {
+  return schema().groups;
+}
 
 const UNITS = {
   dph: '°/h', ppm: 'ppm', arcsec: '″', mps2: 'm/s²', mm: 'mm', us: 'µs', m: 'm', s: 's', C: '°C',
@@ -51,7 +44,7 @@ export function labelOf(key) {
 }
 
 export function groupOf(name) {
-  return GROUPS.find((g) => name.startsWith(`${g.key}.`)) || null;
+  return groups().find((g) => name.startsWith(`${g.key}.`)) || null;
 }
 
 const AXES = ['x', 'y', 'z'];
@@ -63,10 +56,12 @@ const SKIP = new Set(['format', 'frame', 'sigma', 'thermal', 'status', 'body_to_
  */
 export function flatten(model) {
   const out = new Map();
+  const { byKey } = schema();
   const walk = (value, prefix) => {
     if (typeof value === 'number') out.set(prefix, value);
-    // A gyro's scale nonlinearity: one to three terms, c1 c2 c3 (formats.md).
-    else if (Array.isArray(value) && /\.scale_nonlinear_ppm\.[xyz]$/.test(prefix))
+    // A polynomial's terms (the gyro's scale nonlinearity: one to three, c1 c2 c3, formats.md):
+    // the names imucald gives them say which arrays these are.
+    else if (Array.isArray(value) && byKey.has(`${prefix}.c1`))
       value.forEach((v, i) => { if (typeof v === 'number') out.set(`${prefix}.c${i + 1}`, v); });
     // A 3x3 matrix (the g-sensitivity: rows gyro x y z, columns specific force along x y z).
     else if (Array.isArray(value) && value.length === 3 && value.every((r) => Array.isArray(r) && r.length === 3))
@@ -80,10 +75,11 @@ export function flatten(model) {
   return out;
 }
 
-/** Sort key: the groups above in order, then everything else by name. */
+/** Sort key: the groups in imucald's order, then everything else. */
 export function orderOf(name) {
-  const gi = GROUPS.findIndex((g) => name.startsWith(`${g.key}.`));
-  return gi >= 0 ? gi : GROUPS.length;
+  const all = groups();
+  const gi = all.findIndex((g) => name.startsWith(`${g.key}.`));
+  return gi >= 0 ? gi : all.length;
 }
 
 /**
@@ -118,7 +114,7 @@ export function coefficientRows(model, truth) {
   return rows;
 }
 
-// Names of the noise terms and of the proof-mass offsets, which GROUPS does not cover.
+// Names of the noise terms, which are not coefficients (no sigma) and so not in imucald's schema.
 const NOISE_NAMES = {
   arw_deg_rth: 'angle random walk', vrw_mps_rth: 'velocity random walk',
   bias_instability_dph: 'bias instability', bias_instability_mps2: 'bias instability',
@@ -127,30 +123,22 @@ const NOISE_NAMES = {
 const TRIADS = { gyro: 'Gyro', accel: 'Accelerometer' };
 
 /**
- * A coefficient's name for people, without its unit (unitOf gives that): "gyro.bias_dph.x" ->
- * "Gyro bias, x axis"; "gyro.misalignment_arcsec.xy" -> "Gyro misalignment, sensor x about y";
- * "accel.lever_arm_mm.y.z" -> "Proof-mass offset of accelerometer y, z component";
- * "gyro.noise.arw_deg_rth" -> "Gyro angle random walk". Unknown names come back as they are.
+ * A coefficient's name for people, without its unit (unitOf gives that): imucald's title
+ * ("gyro.bias_dph.x" -> "Gyro bias, x axis"); a noise term from its name ("gyro.noise.arw_deg_rth"
+ * -> "Gyro angle random walk"); another name in a group (a limit's key) from the group's title.
+ * Unknown names come back as they are.
  */
 export function coefficientName(key) {
+  const known = schema().byKey.get(key);
+  if (known) return known.title;
   const parts = key.split('.');
   const triad = TRIADS[parts[0]];
-  if (!triad) return key;
-  if (parts[1] === 'noise' && parts.length === 3)
+  if (triad && parts[1] === 'noise' && parts.length === 3)
     return `${triad} ${NOISE_NAMES[parts[2]] || labelOf(parts[2])}`;
   const group = groupOf(key);
   if (!group) return key;
-  const rest = key.slice(group.key.length + 1).split('.');
-  if (group.key === 'accel.lever_arm_mm' && rest.length === 2)
-    return `Proof-mass offset of accelerometer ${rest[0]}, ${rest[1]} component`;
-  if (group.key.endsWith('.misalignment_arcsec') && rest.length === 1 && rest[0].length === 2)
-    return `${group.title}, sensor ${rest[0][0]} about ${rest[0][1]}`;
-  if (rest.length === 1 && AXES.includes(rest[0])) return `${group.title}, ${rest[0]} axis`;
-  if (group.key === 'gyro.g_sensitivity_dph_per_g' && rest.length === 2)
-    return `${group.title} of gyro ${rest[0]} to specific force along ${rest[1]}`;
-  if (group.key === 'gyro.scale_nonlinear_ppm' && rest.length === 2 && AXES.includes(rest[0]))
-    return `${group.title}, ${rest[0]} axis, ${rest[1]} (of q^${rest[1].slice(1)}, q = |ω| / 100 °/s)`;
-  return `${group.title}, ${rest.join('.')}`;
+  const rest = key.slice(group.key.length + 1);
+  return AXES.includes(rest) ? `${group.title}, ${rest} axis` : `${group.title}, ${rest}`;
 }
 
 /**

@@ -3,33 +3,14 @@
 // stage 3's states how much the filter shrank their uncertainty (sqrt(P0/Pk), from the stage's
 // `uncertainty_reduction`). Pure: the models come in, rows go out (the results page draws them).
 import { flatten, groupOf, orderOf, unitOf } from './coefficients.mjs';
+import { schema } from './schema.mjs';
 
-// A flat coefficient name -> [block of stage 3's state, index in the block] (nav_filter.hpp).
-const AXIS = { x: 0, y: 1, z: 2 };
-const GYRO_ANGLES = ['xy', 'xz', 'yx', 'yz', 'zx', 'zy'];
-const ACCEL_ANGLES = ['yz', 'zx', 'zy'];  // x and the x-y plane are the body axes
-const BLOCKS = [
-  ['gyro.bias_dph.', 'gyro_bias_radps', AXIS],
-  ['gyro.scale_pos_ppm.', 'gyro_scale_pos', AXIS],
-  ['gyro.scale_neg_ppm.', 'gyro_scale_neg', AXIS],
-  ['gyro.misalignment_arcsec.', 'gyro_misalignment_rad', Object.fromEntries(GYRO_ANGLES.map((a, i) => [a, i]))],
-  ['gyro.delay_us.', 'gyro_delay_s', AXIS],
-  ['accel.bias_mps2.', 'accel_bias_mps2', AXIS],
-  ['accel.scale_ppm.', 'accel_scale', AXIS],
-  ['accel.misalignment_arcsec.', 'accel_misalignment_rad', Object.fromEntries(ACCEL_ANGLES.map((a, i) => [a, i]))],
-  ['accel.delay_us.', 'accel_delay_s', AXIS],
-  ['accel.lever_arm_mm.y.', 'accel_lever_arm_y_m', AXIS],
-  ['accel.lever_arm_mm.z.', 'accel_lever_arm_z_m', AXIS],
-];
-
-/** The state of stage 3 a coefficient is, as [block, index], or null. */
+/**
+ * The state of stage 3 a coefficient is, as [block, index] (the block as the stage's
+ * uncertainty_reduction names it), or null: imucald's (GET /api/schema, from its filter's blocks).
+ */
 export function stateOf(name) {
-  for (const [prefix, block, index] of BLOCKS) {
-    if (!name.startsWith(prefix)) continue;
-    const i = index[name.slice(prefix.length)];
-    return i === undefined ? null : [block, i];
-  }
-  return null;
+  return schema().byKey.get(name)?.stage3_state || null;
 }
 
 /**

@@ -3,7 +3,7 @@
 // by orders of magnitude), one group of coefficients at a time. Used by the live view (series
 // filled by the WebSocket) and the results page (series filled from /progress).
 import { h, clear, num } from './format.mjs';
-import { GROUPS, groupOf, unitOf } from './coefficients.mjs';
+import { groups, groupOf, unitOf } from './coefficients.mjs';
 import { lineChart, schedule, COLORS } from './plots.mjs';
 
 const AXIS_COLOR = { x: COLORS[0], y: COLORS[1], z: COLORS[2], xy: COLORS[0], xz: COLORS[3], yx: COLORS[1], yz: COLORS[4], zx: COLORS[2], zy: COLORS[5] };
@@ -18,14 +18,14 @@ export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 18
   const grid = h('div', { class: 'conv-grid', id: `${idPrefix}-grid` });
   const empty = h('p', { class: 'muted', id: `${idPrefix}-empty` }, 'No estimates yet: the estimator waits for enough static positions and rotations.');
   el.append(tabs, empty, grid);
-  let selected = localStorage.getItem(`imucal.${idPrefix}.group`) || GROUPS[0].key;
+  let selected = localStorage.getItem(`imucal.${idPrefix}.group`) || groups()[0]?.key;
   let charts = new Map();  // coefficient -> chart
   let shownGroups = '';
 
   function groupsWithData(series) {
     const present = new Set();
     for (const name of series.keys()) present.add(groupOf(name)?.key || 'other');
-    return [...GROUPS.map((g) => g.key), 'other'].filter((k) => present.has(k));
+    return [...groups().map((g) => g.key), 'other'].filter((k) => present.has(k));
   }
 
   function renderTabs(keys) {
@@ -34,7 +34,7 @@ export function convergencePanel(el, getSeries, { idPrefix = 'conv', height = 18
     shownGroups = sig;
     clear(tabs);
     for (const k of keys) {
-      const title = GROUPS.find((g) => g.key === k)?.title || 'Other';
+      const title = groups().find((g) => g.key === k)?.title || 'Other';
       tabs.append(h('button', { type: 'button', role: 'tab', dataset: { group: k }, 'aria-selected': String(k === selected),
         onclick: () => { selected = k; localStorage.setItem(`imucal.${idPrefix}.group`, k); rebuild(); } }, title));
     }

@@ -5,6 +5,7 @@
 // judge (its parser knows every name a model can carry), and its 400 names the part number and
 // key, which locateServerProblem() turns back into a row of the form.
 import { parseNumber } from './program_edit.mjs';
+import { schema } from './schema.mjs';
 
 /**
  * A noise term carries no sigma: a limit on it is max_abs only. imucald's parser refuses a sigma
@@ -32,6 +33,12 @@ export function limitsToForm(doc) {
     })),
   }));
   return { comment: doc?.comment, parts };
+}
+
+// The examples a refused key's message gives: imucald's first coefficient and its group.
+function badKeyMessage() {
+  const c = schema().coefficients[0];
+  return c ? `A key is a coefficient's name such as ${c.key}, or a group such as ${c.group}.` : 'A key is a coefficient\'s name or a group.';
 }
 
 /** An empty row to add to a part number (its key chosen by the operator). */
@@ -62,7 +69,7 @@ export function formToLimits(form) {
       const key = (r.key || '').trim();
       if (!key) at('key', 'Choose the coefficient (or group) this limit is for.');
       else if (!/^(gyro|accel)(\.[A-Za-z0-9_]+)*$/.test(key))
-        at('key', 'A key is a coefficient\'s name such as gyro.bias_dph.x, or a group such as gyro.bias_dph.');
+        at('key', badKeyMessage());
       else if (seenKeys.has(key)) at('key', `${key} has a limit already in this part number.`);
       seenKeys.add(key);
       const spec = {};

@@ -2,6 +2,7 @@
 // connection, the active run), and the one WebSocket the page keeps open. Views are modules with
 // mount(root, ctx) returning a cleanup function.
 import { get, ApiError } from './api.mjs';
+import { loadSchema, schemaLoaded } from './schema.mjs';
 import { session, checkSession, signOut, onSessionChange, isOperator } from './session.mjs';
 import { LiveClient, LiveStore } from './live.mjs';
 import { applyAlarm, alarmSummary } from './alarms.mjs';
@@ -69,6 +70,12 @@ function route() {
     location.replace('#/signin');
     return;
   }
+  // The pages name coefficients by imucald's schema (schema.mjs), readable once signed in: asked
+  // for before the first page that needs it, then the route taken again.
+  if (!found.public && !schemaLoaded()) {
+    waitForSchema();
+    return;
+  }
   if (unmount) {
     try { unmount(); } catch (e) { console.error(e); }
     unmount = null;
@@ -80,6 +87,20 @@ function route() {
   const local = { ...ctx, params, afterSignIn: () => afterSignIn };
   unmount = found.view.mount(viewRoot, local) || null;
   window.scrollTo(0, 0);
+}
+
+// One request at a time; when it answers, the route of the hash then current is taken.
+let schemaWaiting = false;
+function waitForSchema() {
+  if (schemaWaiting) return;
+  schemaWaiting = true;
+  loadSchema(get).then(() => {
+    schemaWaiting = false;
+    route();
+  }, (e) => {
+    clear(viewRoot).append(h('p', { class: 'form-error', id: 'schema-error' }, `Cannot load the coefficients' names from imucald: ${e.message} Retrying in 3 s…`));
+    setTimeout(() => { schemaWaiting = false; route(); }, 3000);
+  });
 }
 
 // ---- header -------------------------------------------------------------------------------------

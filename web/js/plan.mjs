@@ -1,21 +1,17 @@
 // The prediction of a campaign (POST /api/campaigns/plan, `imucal plan`, issue 16) as the builder
 // shows it: each coefficient's predicted 1-sigma after the last stage that determines it, against a
 // target. Pure: the daemon's answer and the targets come in, rows go out.
+import { schema } from './schema.mjs';
 
 /**
  * The seed's figures (method.md, stage 3): the default targets, by coefficient group (the name
- * without its axis). Groups without a target are shown without a verdict.
+ * without its axis), in imucald's order of the groups (GET /api/schema: plan::seed_targets()).
+ * A new object each time: the builder edits its copy. Groups without a target are shown without
+ * a verdict.
  */
-export const SEED_TARGETS = Object.freeze({
-  'gyro.bias_dph': 0.001,
-  'gyro.scale_pos_ppm': 0.5,
-  'gyro.scale_neg_ppm': 0.5,
-  'gyro.misalignment_arcsec': 0.1,
-  'gyro.delay_us': 1,
-  'accel.bias_mps2': 5e-6,
-  'accel.scale_ppm': 0.3,
-  'accel.misalignment_arcsec': 0.3,
-});
+export function seedTargets() {
+  return { ...schema().seedTargets };
+}
 
 // Later stages refine earlier ones: a coefficient's prediction is the last of these that has it.
 const STAGE_ORDER = ['direct', 'lever-arm', 'navigation'];
@@ -27,11 +23,11 @@ export function groupOfName(name) {
 
 /**
  * @param {object} prediction  the daemon's imucal-plan/1 answer
- * @param {object} targets     group -> 1-sigma target (SEED_TARGETS by default)
+ * @param {object} targets     group -> 1-sigma target (seedTargets() by default)
  * @returns {{name, group, stage, sigma, target: number|null, ratio: number|null, meets: boolean|null}[]}
  *   sorted by name; ratio = sigma / target.
  */
-export function predictionRows(prediction, targets = SEED_TARGETS) {
+export function predictionRows(prediction, targets = seedTargets()) {
   const best = new Map();
   for (const stage of STAGE_ORDER) {
     const estimates = prediction?.stages?.[stage]?.estimates;

@@ -8,6 +8,7 @@ import { api, ApiError } from './api.mjs';
 import { h, clear, fill, dateTime, duration, num } from './format.mjs';
 import { roundedNumbers, gravityStatement } from './certificate_rows.mjs';
 import { coefficientName, unitOf } from './coefficients.mjs';
+import { loadSchema } from './schema.mjs';
 
 const sheet = document.getElementById('report');
 const id = Number(new URLSearchParams(location.search).get('id'));
@@ -25,6 +26,7 @@ async function load() {
   let report;
   try {
     report = await api('GET', `/api/campaigns/${id}/report`, undefined, { auth: false });
+    await loadSchema((path) => api('GET', path, undefined, { auth: false }));  // the coefficients' names (schema.mjs)
   } catch (e) {
     const text = e instanceof ApiError && e.status === 401
       ? 'Sign in to imucal first (in the main page), then reload this page.'

@@ -9,7 +9,7 @@ import { h, clear, duration, num } from '../format.mjs';
 import { isOperator, onSessionChange } from '../session.mjs';
 import { confirmDialog, startCampaign } from '../dialogs.mjs';
 import { SEGMENT_TYPES, NEW_SEGMENT, AXIS_NAMES, parseNumber, parseField, formatValue, mapProblems, sourceIndex, compress, canonical, campaignFieldLabel, problemForPeople } from '../program_edit.mjs';
-import { SEED_TARGETS, predictionRows, summary, dominantSources, benchRequirements } from '../plan.mjs';
+import { seedTargets, predictionRows, summary, dominantSources, benchRequirements } from '../plan.mjs';
 import { sourceName } from '../budget.mjs';
 import { truthChoices, defaultTruth, parseTruthFile, truthLabel } from '../truths.mjs';
 
@@ -19,7 +19,8 @@ const UPLOAD = '__upload__';
 const DRAFT_KEY = 'imucal.builder.draft';
 // The prediction's unit noise and targets outlive a draft: they describe the lab's units.
 const PLAN_KEY = 'imucal.builder.plan';
-const PLAN_DEFAULTS = { arw_deg_rth: 0.0005, vrw_mps_rth: 0.002, targets: { ...SEED_TARGETS } };
+// The targets are imucald's (GET /api/schema), known once signed in: asked for when a page mounts.
+const planDefaults = () => ({ arw_deg_rth: 0.0005, vrw_mps_rth: 0.002, targets: seedTargets() });
 const FAULT_KINDS = ['chamber_offset', 'imu_dropout', 'imu_corrupt', 'imu_drop', 'disconnect', 'table_fault', 'disk_full'];
 const FAULT_EXTRA = { chamber_offset: { offset_C: 6 }, imu_corrupt: { frames: 10 }, imu_drop: { frames: 10 }, disconnect: { device: 'imu' } };
 
@@ -84,9 +85,9 @@ export function mount(root, ctx) {
     h('label', { for: 'plan-vrw' }, 'Accel VRW, m/s/√h'),
     h('input', { id: 'plan-vrw', inputmode: 'decimal', value: String(planSettings.vrw_mps_rth), onchange: planInputChanged }));
   const planTargets = h('div', { class: 'grid-form', id: 'plan-targets' },
-    ...Object.keys(SEED_TARGETS).flatMap((g) => [
+    ...Object.entries(seedTargets()).flatMap(([g, seed]) => [
       h('label', { for: targetId(g) }, g),
-      h('input', { id: targetId(g), inputmode: 'decimal', value: String(planSettings.targets[g] ?? SEED_TARGETS[g]), onchange: planInputChanged })]));
+      h('input', { id: targetId(g), inputmode: 'decimal', value: String(planSettings.targets[g] ?? seed), onchange: planInputChanged })]));
 
   root.append(
     h('div', { class: 'page-head' }, h('h1', {}, 'New campaign'),
@@ -710,9 +711,9 @@ export function mount(root, ctx) {
     try {
       const saved = JSON.parse(localStorage.getItem(PLAN_KEY) || 'null');
       if (saved && typeof saved === 'object')
-        return { ...PLAN_DEFAULTS, ...saved, targets: { ...PLAN_DEFAULTS.targets, ...(saved.targets || {}) } };
+        return { ...planDefaults(), ...saved, targets: { ...seedTargets(), ...(saved.targets || {}) } };
     } catch { /* unreadable: the defaults */ }
-    return { ...PLAN_DEFAULTS, targets: { ...PLAN_DEFAULTS.targets } };
+    return planDefaults();
   }
 
   // The noise inputs change the prediction (asked again); the targets only its verdicts.
@@ -720,7 +721,7 @@ export function mount(root, ctx) {
     const read = (id) => parseNumber(root.querySelector(`#${id}`).value);
     const arw = read('plan-arw'), vrw = read('plan-vrw');
     const targets = {};
-    for (const g of Object.keys(SEED_TARGETS)) {
+    for (const g of Object.keys(seedTargets())) {
       const t = read(targetId(g));
       if (Number.isFinite(t) && t > 0) targets[g] = t;
     }

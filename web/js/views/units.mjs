@@ -4,8 +4,14 @@
 // itself (imucal-limits/1, docs/api.md "Units") under "Advanced".
 import { api, get } from '../api.mjs';
 import { h, clear, dateTime } from '../format.mjs';
-import { GROUPS, coefficientName, unitOf } from '../coefficients.mjs';
+import { groups, coefficientName, unitOf } from '../coefficients.mjs';
+import { schema } from '../schema.mjs';
 import { limitsToForm, formToLimits, emptyRow, locateServerProblem } from '../limits_form.mjs';
+
+// The example the hint and an empty key show: imucald's first coefficient, and its group.
+function example() {
+  return schema().coefficients[0] || { key: '', group: '' };
+}
 
 export function verdictBadge(pass, title = '') {
   if (pass === null || pass === undefined) return h('span', { class: 'muted', title: 'No acceptance limits for this part number' }, 'no limits');
@@ -24,7 +30,7 @@ export function mount(root) {
   const useJson = h('button', { type: 'button', id: 'limits-json-apply' }, 'Put this JSON into the form');
   // Suggestions for a key: the coefficient groups the results name (coefficients.mjs), each also
   // a whole group; imucald judges any other name when the limits are saved.
-  const keyList = h('datalist', { id: 'limit-keys' }, ...GROUPS.map((g) => h('option', { value: g.key }, g.title)));
+  const keyList = h('datalist', { id: 'limit-keys' }, ...groups().map((g) => h('option', { value: g.key }, g.title)));
 
   let form = { parts: [] };
   let showAll = false;      // after a save was tried, every problem shows, not only edited rows'
@@ -39,7 +45,7 @@ export function mount(root) {
         body)),
     h('section', { class: 'card', id: 'limits-card' }, h('h2', {}, 'Acceptance limits'),
       h('p', { class: 'hint' },
-        'Per part number, for each coefficient (such as gyro.bias_dph.x) or group of them (gyro.bias_dph: every axis): ',
+        `Per part number, for each coefficient (such as ${example().key}) or group of them (${example().group}: every axis): `,
         'the largest |value| and the largest 1σ uncertainty, in the coefficient\'s unit; either may be left empty. ',
         'The most specific key applies. A run that did not determine a limited coefficient fails on it. ',
         'Operators may save; imucald checks the whole file before it replaces the old one.'),
@@ -89,7 +95,7 @@ export function mount(root) {
     const k = key.trim();
     if (!k) return '';
     const unit = unitOf(k);
-    const group = GROUPS.find((g) => g.key === k);
+    const group = groups().find((g) => g.key === k);
     const name = group ? `${group.title}, every axis` : coefficientName(k);
     return `${name === k ? '' : name}${unit ? `${name === k ? '' : ', '}in ${unit}` : ''}`;
   }
@@ -104,7 +110,7 @@ export function mount(root) {
       const rows = h('tbody', {});
       p.rows.forEach((r, ri) => {
         const id = `limits-${pi}-${ri}`;
-        const key = h('input', { type: 'text', id: `${id}-key`, value: r.key, list: 'limit-keys', class: 'limit-key', 'aria-label': 'coefficient or group', placeholder: 'e.g. gyro.bias_dph.x' });
+        const key = h('input', { type: 'text', id: `${id}-key`, value: r.key, list: 'limit-keys', class: 'limit-key', 'aria-label': 'coefficient or group', placeholder: `e.g. ${example().key}` });
         const name = h('span', { class: 'hint limit-name', id: `${id}-name` }, describeKey(r.key));
         const bound = (field, label) => {
           const el = h('input', { type: 'text', inputmode: 'decimal', id: `${id}-${field}`, value: r[field], class: 'short', 'aria-label': label });
