@@ -547,7 +547,8 @@ class NavigationRun final : public Pipeline::Run {
   // The filter as it runs: every calibration state's estimate and sigma, its status, its
   // restarts, and the last update's innovations against their gates (docs/api.md, progress).
   json progress() const override {
-    const navfilter::Progress p = filter_->progress();
+    navfilter::Progress p = filter_->progress();
+    if (result_) p.restart_times_s = result_->restart_times_s;  // the filter's finish() moved them there
     json out = {{"frames", frames_},
                 {"filter_status", p.status},
                 {"updates", p.updates},

@@ -228,6 +228,7 @@ TEST(PipelinePaths, StageThreeShowsItsFilterWhileItRuns) {
   ASSERT_TRUE(end.contains("updates")) << end.dump().substr(0, 500);
   EXPECT_GE(end.at("updates").get<int>(), late.at("updates").get<int>());
   EXPECT_EQ(end.at("restarts"), late.at("restarts"));
+  EXPECT_EQ(end.at("restart_times_s"), late.at("restart_times_s"));
 }
 
 // What fed a stage names each program once with its count (issue 36, item 7): a thermal run's
