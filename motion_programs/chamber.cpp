@@ -30,6 +30,53 @@ const ChamberStep* ChamberProfile::step_at(double t_s) const {
   return &*it;
 }
 
+bool ramps_within(const ChamberProfile& profile, double t0_s, double t1_s) {
+  return std::any_of(profile.steps.begin(), profile.steps.end(), [&](const ChamberStep& s) {
+    return s.kind == "ramp" && s.t1_s > s.t0_s && s.from_C != s.to_C && s.t0_s < t1_s && s.t1_s > t0_s;
+  });
+}
+
+ChamberProfile profile_of_changes(double start_C, const std::vector<SetpointChange>& changes, double end_s) {
+  ChamberProfile p;
+  p.name = "set-point changes";
+  p.start_C = start_C;
+  double t_s = 0.0, value_C = start_C;
+  auto push = [&](const char* kind, double t1_s, double to_C) {
+    if (t1_s <= t_s) return;
+    const bool set = std::string(kind) == "set";
+    p.steps.push_back({std::string(kind) + "-" + std::to_string(p.steps.size() + 1), kind, t_s, t1_s,
+                       set ? to_C : value_C, to_C});
+    t_s = t1_s;
+    value_C = to_C;
+  };
+  for (std::size_t i = 0; i < changes.size(); ++i) {
+    const SetpointChange& c = changes[i];
+    const double next_s = i + 1 < changes.size() ? changes[i + 1].at_s : std::max(end_s, c.at_s);
+    push("soak", c.at_s, value_C);  // what the change before reached holds until this one
+    if (c.ramp_C_per_min <= 0.0) {
+      // A step: the set point jumps (a change at the very end still sets what follows it).
+      if (next_s > c.at_s) push("set", next_s, c.setpoint_C);
+      else value_C = c.setpoint_C;
+      continue;
+    }
+    const double rate_C_per_s = c.ramp_C_per_min / 60.0;
+    const double ramp_s = std::min(next_s - c.at_s, std::abs(c.setpoint_C - value_C) / rate_C_per_s);
+    push("ramp", c.at_s + ramp_s, value_C + std::copysign(rate_C_per_s * ramp_s, c.setpoint_C - value_C));
+    push("soak", next_s, value_C);
+  }
+  return p;
+}
+
+std::vector<SetpointChange> changes_of(const ChamberProfile& profile) {
+  std::vector<SetpointChange> out;
+  for (const ChamberStep& s : profile.steps) {
+    if (s.kind == "soak") continue;  // holds what the step before reached
+    const double rate = s.kind == "ramp" && s.t1_s > s.t0_s ? std::abs(s.to_C - s.from_C) / (s.t1_s - s.t0_s) * 60.0 : 0.0;
+    out.push_back({s.t0_s, s.to_C, rate});
+  }
+  return out;
+}
+
 ChamberProfile compile_chamber_profile(const std::string& json_text) {
   json j;
   try {

@@ -40,6 +40,23 @@ class ChamberProfile {
   const ChamberStep* step_at(double t_s) const;
 };
 
+// Whether the set point moves (a ramp) somewhere inside (t0_s, t1_s): a program segment that
+// overlaps a ramp cannot be redone as it was (the chamber's history cannot be repeated).
+bool ramps_within(const ChamberProfile& profile, double t0_s, double t1_s);
+
+// A set-point change as a campaign's `chamber.steps` gives it (docs/api.md): at program time at_s
+// the set point goes to setpoint_C at ramp_C_per_min (0: at once), then holds until the next one.
+struct SetpointChange {
+  double at_s = 0.0;
+  double setpoint_C = 25.0;
+  double ramp_C_per_min = 0.0;
+};
+// The profile such changes make from start_C, held to end_s (the program's end); a ramp the next
+// change cuts short ends where it got to. The changes must be in time order.
+ChamberProfile profile_of_changes(double start_C, const std::vector<SetpointChange>& changes, double end_s);
+// A profile as its changes (holds and soaks implicit): the campaign's stored form of it.
+std::vector<SetpointChange> changes_of(const ChamberProfile& profile);
+
 // Compiles a profile from JSON. Throws std::invalid_argument naming the step and the key.
 ChamberProfile compile_chamber_profile(const std::string& json_text);
 // Every set point outside the limits and every ramp faster than the chamber, naming the step.

@@ -79,7 +79,7 @@ class ThermalModel final : public ThermalSource {
   // The truth's "thermal" section (if any) gives the coefficients' dependence.
   ThermalModel(const motion::ChamberProfile& profile, const ImuModel& truth, const ThermalConfig& config,
                double duration_s);
-  // The same for a set point given as a function (the daemon's campaign profiles).
+  // The same for a set point given as a function.
   ThermalModel(Setpoint setpoint_C, const ImuModel& truth, const ThermalConfig& config, double duration_s);
 
   bool temperatures(double t_s, TempSample& out) const override;

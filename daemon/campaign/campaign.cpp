@@ -31,41 +31,6 @@ constexpr std::array<pipeline::Stage, 7> kOnlineStages = {
     pipeline::Stage::Navigation, pipeline::Stage::WarmUp,    pipeline::Stage::Repeatability};
 }  // namespace
 
-// ------------------------------------------------------------------------------------------------
-// Chamber profile
-
-double ChamberProfile::setpoint_at(double program_time_s) const {
-  double value = setpoint_C;
-  for (std::size_t i = 0; i < steps.size(); ++i) {
-    const ChamberStep& s = steps[i];
-    if (program_time_s < s.at_s) break;
-    // `value` is the set point when this step begins; the step acts until the next one begins.
-    const double end_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
-    const double t = std::min(program_time_s, end_s);
-    if (s.ramp_C_per_min <= 0.0) {
-      value = s.setpoint_C;
-    } else {
-      const double max_change = s.ramp_C_per_min / 60.0 * (t - s.at_s);
-      const double delta = s.setpoint_C - value;
-      value += std::clamp(delta, -max_change, max_change);
-    }
-  }
-  return value;
-}
-
-bool ChamberProfile::ramps_within(double t0_s, double t1_s) const {
-  for (std::size_t i = 0; i < steps.size(); ++i) {
-    const ChamberStep& s = steps[i];
-    if (s.ramp_C_per_min <= 0.0) continue;
-    const double next_s = i + 1 < steps.size() ? steps[i + 1].at_s : std::numeric_limits<double>::infinity();
-    // At its own start time a ramp has not changed anything yet: this is the value it starts from.
-    const double start_C = setpoint_at(s.at_s);
-    const double ramp_end_s = std::min(next_s, s.at_s + std::abs(s.setpoint_C - start_C) / (s.ramp_C_per_min / 60.0));
-    if (ramp_end_s > s.at_s && s.at_s < t1_s && ramp_end_s > t0_s) return true;
-  }
-  return false;
-}
-
 const std::vector<std::string>& known_estimators() {
   static const std::vector<std::string> names = [] {
     std::vector<std::string> n;
@@ -226,118 +191,105 @@ void check_imu(const json& j, ImuIdentity& imu, std::vector<std::string>& proble
 // chamber's air lags a 1 C/min ramp by about 3 C (docs/daemon.md).
 constexpr double kProfileToleranceMin_C = 5.0;
 
-// A chamber profile in the format of motion_programs/chamber.hpp (soaks, ramps, sets; a built-in
-// name or an inline object) as the daemon's set-point steps.
-void profile_steps(const json& spec, const std::string& where, const DaemonConfig& config, ChamberProfile& profile,
-                   std::vector<std::string>& problems, bool& malformed) {
-  motion::ChamberProfile p;
+// A chamber profile in the format of motion_programs/chamber.hpp (soaks, ramps, sets): a built-in
+// name or an inline object. Sets `profile` and returns true, or names the problem.
+bool read_profile(const json& spec, const std::string& where, const DaemonConfig& config, motion::ChamberProfile& profile,
+                  std::vector<std::string>& problems, bool& malformed) {
+  std::string names;
+  for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
+  if (spec.is_string() && !config.campaign_file_paths && !motion::is_builtin_chamber(spec.get<std::string>())) {
+    const bool path = looks_like_path(spec.get<std::string>());
+    malformed = malformed || path;
+    problems.push_back(where + (path ? ": a path is not accepted" : ": no built-in profile \"" + spec.get<std::string>() + "\"") +
+                       "; name a built-in profile (" + names + ") or give the profile inline as an object (docs/thermal.md)");
+    return false;
+  }
+  if (!spec.is_string() && !spec.is_object()) {
+    problems.push_back(where + " must be a built-in chamber profile's name (" + names + ") or a profile object (docs/thermal.md)");
+    return false;
+  }
   try {
-    if (spec.is_string() && !config.campaign_file_paths && !motion::is_builtin_chamber(spec.get<std::string>())) {
-      std::string names;
-      for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
-      const bool path = looks_like_path(spec.get<std::string>());
-      malformed = malformed || path;
-      problems.push_back(where + (path ? ": a path is not accepted" : ": no built-in profile \"" + spec.get<std::string>() + "\"") +
-                         "; name a built-in profile (" + names + ") or give the profile inline as an object (docs/thermal.md)");
-      return;
-    }
-    if (spec.is_string()) {
-      p = motion::load_chamber_profile(spec.get<std::string>());
-    } else if (spec.is_object()) {
-      p = motion::compile_chamber_profile(spec.dump());
-    } else {
-      problems.push_back(where + " must be a built-in chamber profile's name (" + [] {
-        std::string names;
-        for (const auto& n : motion::builtin_chamber_names()) names += (names.empty() ? "" : ", ") + n;
-        return names;
-      }() + ") or a profile object (docs/thermal.md)");
-      return;
-    }
+    profile = spec.is_string() ? motion::load_chamber_profile(spec.get<std::string>())
+                               : motion::compile_chamber_profile(spec.dump());
+    return true;
   } catch (const std::exception& e) {
     problems.push_back(where + ": " + e.what());
-    return;
+    return false;
   }
-  profile.setpoint_C = p.start_C;
-  profile.steps.clear();
-  for (const motion::ChamberStep& s : p.steps) {
-    if (s.kind == "soak") continue;  // a soak holds what the step before reached
-    ChamberStep step;
-    step.at_s = s.t0_s;
-    step.setpoint_C = s.to_C;
-    if (s.kind == "ramp" && s.t1_s > s.t0_s) step.ramp_C_per_min = std::abs(s.to_C - s.from_C) / (s.t1_s - s.t0_s) * 60.0;
-    profile.steps.push_back(step);
+}
+
+// `chamber.steps`: set-point changes (motion::SetpointChange), each checked where it is written.
+std::vector<motion::SetpointChange> read_changes(const json& steps, const motion::ChamberLimits& lim, double duration_s,
+                                                 std::vector<std::string>& problems) {
+  std::vector<motion::SetpointChange> out;
+  if (!steps.is_array()) {
+    problems.push_back("campaign.chamber.steps must be an array");
+    return out;
   }
-  profile.tolerance_C = std::max(profile.tolerance_C, kProfileToleranceMin_C);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const std::string where = "campaign.chamber.steps[" + std::to_string(i) + "]";
+    ObjectReader sr(steps[i], where, problems);
+    const auto at = sr.number_in("at_s", 0, std::nullopt, true);
+    const auto sp = sr.number("setpoint_C", true);
+    const double ramp = sr.number_in("ramp_C_per_min", 0).value_or(0.0);
+    if (!at || !sp) continue;
+    if (*sp < lim.min_C || *sp > lim.max_C)
+      problems.push_back(where + ".setpoint_C: " + celsius_text(*sp) + " is outside the chamber's limits " +
+                         celsius_text(lim.min_C) + " .. " + celsius_text(lim.max_C));
+    if (ramp > lim.max_ramp_C_per_min)
+      problems.push_back(where + ".ramp_C_per_min: " + number_text(ramp) + " °C/min exceeds the chamber's limit " +
+                         number_text(lim.max_ramp_C_per_min) + " °C/min");
+    if (*at > duration_s)
+      problems.push_back(where + ".at_s: " + number_text(*at) + " s is after the program's end (" + number_text(duration_s) + " s)");
+    if (!out.empty() && *at <= out.back().at_s) problems.push_back(where + ".at_s must be later than the previous step's");
+    out.push_back({*at, *sp, ramp});
+  }
+  return out;
 }
 
 // `chamber`: {"setpoint_C", "tolerance_C", "steps": [...]} or {"profile": NAME|OBJECT,
-// "tolerance_C"}, or just the profile's name.
-void check_chamber(const json& j, const DaemonConfig& config, double duration_s, ChamberProfile& profile,
+// "tolerance_C"}, or just the profile's name. Either way one motion::ChamberProfile.
+void check_chamber(const json& j, const DaemonConfig& config, double duration_s, CampaignChamber& chamber,
                    std::vector<std::string>& problems, bool& malformed) {
   const motion::ChamberLimits& lim = config.chamber.limits;
-  auto in_limits = [&](double c, const std::string& where) {
-    if (c < lim.min_C || c > lim.max_C)
-      problems.push_back(where + ": " + celsius_text(c) + " is outside the chamber's limits " + celsius_text(lim.min_C) +
-                         " .. " + celsius_text(lim.max_C));
-  };
-  std::string where_steps = "campaign.chamber.steps";
-  if (j.is_string()) {
-    profile_steps(j, "campaign.chamber", config, profile, problems, malformed);
-    where_steps = "campaign.chamber (profile '" + j.get<std::string>() + "')";
-  } else {
+  const json* named = &j;
+  const json* steps = nullptr;
+  std::string where = "campaign.chamber";
+  std::optional<double> start_C;
+  if (!j.is_string()) {
     ObjectReader r(j, "campaign.chamber", problems);
-    const json* named = r.get("profile");
-    const json* steps = r.get("steps");
+    named = r.get("profile");
+    steps = r.get("steps");
+    where = "campaign.chamber.profile";
     if (named != nullptr && steps != nullptr) {
       problems.push_back("campaign.chamber: give either a profile or steps, not both");
       return;
     }
     if (named != nullptr && r.has("setpoint_C"))
       problems.push_back("campaign.chamber.setpoint_C: a profile starts at its own start_C");
-    if (named != nullptr) {
-      profile_steps(*named, "campaign.chamber.profile", config, profile, problems, malformed);
-      where_steps = "campaign.chamber.profile";
-    }
-    if (auto v = r.number("setpoint_C")) {
-      profile.setpoint_C = *v;
-      in_limits(*v, "campaign.chamber.setpoint_C");
-    }
-    if (auto v = r.number_in("tolerance_C", 0.01, 50)) profile.tolerance_C = *v;
-    if (steps != nullptr) {
-      if (!steps->is_array()) {
-        problems.push_back("campaign.chamber.steps must be an array");
-        return;
-      }
-      std::size_t i = 0;
-      for (const json& s : *steps) {
-        ObjectReader sr(s, "campaign.chamber.steps[" + std::to_string(i++) + "]", problems);
-        ChamberStep step;
-        const auto at = sr.number_in("at_s", 0, std::nullopt, true);
-        const auto sp = sr.number("setpoint_C", true);
-        const auto ramp = sr.number_in("ramp_C_per_min", 0);
-        if (!at || !sp) continue;
-        step.at_s = *at;
-        step.setpoint_C = *sp;
-        step.ramp_C_per_min = ramp.value_or(0.0);
-        profile.steps.push_back(step);
-      }
-    }
+    start_C = r.number("setpoint_C");
+    if (start_C && (*start_C < lim.min_C || *start_C > lim.max_C))
+      problems.push_back("campaign.chamber.setpoint_C: " + celsius_text(*start_C) + " is outside the chamber's limits " +
+                         celsius_text(lim.min_C) + " .. " + celsius_text(lim.max_C));
+    if (auto v = r.number_in("tolerance_C", 0.01, 50)) chamber.tolerance_C = *v;
+    else if (named != nullptr) chamber.tolerance_C = std::max(chamber.tolerance_C, kProfileToleranceMin_C);
+  } else {
+    chamber.tolerance_C = std::max(chamber.tolerance_C, kProfileToleranceMin_C);
   }
-  // The same checks for steps given and steps from a profile.
-  if (where_steps != "campaign.chamber.steps") in_limits(profile.setpoint_C, where_steps + " start_C");
-  for (std::size_t i = 0; i < profile.steps.size(); ++i) {
-    const ChamberStep& step = profile.steps[i];
-    const std::string where = where_steps + "[" + std::to_string(i) + "]";
-    in_limits(step.setpoint_C, where + ".setpoint_C");
-    if (step.ramp_C_per_min > lim.max_ramp_C_per_min)
-      problems.push_back(where + ".ramp_C_per_min: " + number_text(step.ramp_C_per_min) + " °C/min exceeds the chamber's limit " +
-                         number_text(lim.max_ramp_C_per_min) + " °C/min");
-    if (step.at_s > duration_s)
-      problems.push_back(where + ".at_s: " + number_text(step.at_s) + " s is after the program's end (" +
-                         number_text(duration_s) + " s)");
-    if (i > 0 && step.at_s <= profile.steps[i - 1].at_s)
-      problems.push_back(where + ".at_s must be later than the previous step's");
+  if (named != nullptr) {
+    motion::ChamberProfile p;
+    if (!read_profile(*named, where, config, p, problems, malformed)) return;
+    for (const std::string& problem : motion::validate_chamber_profile(p, lim)) problems.push_back(where + ": " + problem);
+    for (const motion::ChamberStep& s : p.steps)
+      if (s.t0_s > duration_s)
+        problems.push_back(where + ": step '" + s.name + "' starts at " + number_text(s.t0_s) + " s, after the program's end (" +
+                           number_text(duration_s) + " s)");
+    chamber.profile = std::move(p);
+    return;
   }
+  const double from_C = start_C.value_or(chamber.profile.start_C);
+  const auto changes = steps != nullptr ? read_changes(*steps, lim, duration_s, problems) : std::vector<motion::SetpointChange>{};
+  chamber.profile = motion::profile_of_changes(from_C, changes, duration_s);
 }
 
 void check_faults(const json& j, double duration_s, std::vector<SimFault>& faults, std::vector<std::string>& problems) {
@@ -410,7 +362,7 @@ CampaignSpec default_spec(const DaemonConfig& config) {
   spec.rate_hz = config.device_addresses ? config.device_addresses->imu.rate_hz : config.sim.rate_hz;
   spec.time_scale = config.sim.time_scale;
   spec.seed = config.sim.seed;
-  spec.chamber.setpoint_C = config.chamber.safe_setpoint_C;
+  spec.chamber.profile.start_C = config.chamber.safe_setpoint_C;
   spec.chamber.tolerance_C = config.chamber.tolerance_C;
   spec.suspenders = config.suspenders;
   return spec;
@@ -635,9 +587,9 @@ json normalized_campaign(const json& campaign, const CampaignSpec& spec, json no
   if (spec.start_model_campaign) normalized["model"] = *spec.start_model_campaign;
   if (spec.start_model) normalized["model"] = model_json(*spec.start_model);
   json steps = json::array();
-  for (const auto& s : spec.chamber.steps)
-    steps.push_back({{"at_s", s.at_s}, {"setpoint_C", s.setpoint_C}, {"ramp_C_per_min", s.ramp_C_per_min}});
-  normalized["chamber"] = {{"setpoint_C", spec.chamber.setpoint_C}, {"tolerance_C", spec.chamber.tolerance_C},
+  for (const motion::SetpointChange& c : motion::changes_of(spec.chamber.profile))
+    steps.push_back({{"at_s", c.at_s}, {"setpoint_C", c.setpoint_C}, {"ramp_C_per_min", c.ramp_C_per_min}});
+  normalized["chamber"] = {{"setpoint_C", spec.chamber.profile.start_C}, {"tolerance_C", spec.chamber.tolerance_C},
                            {"steps", steps}};
   normalized["suspenders"] = {{"settle_s", spec.suspenders.settle_s},
                               {"frame_timeout_s", spec.suspenders.frame_timeout_s},

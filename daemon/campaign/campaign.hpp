@@ -15,26 +15,21 @@
 #include "core/imu_model.hpp"
 #include "core/recording.hpp"
 #include "daemon/config/config.hpp"
+#include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
 
 namespace imucal::daemon {
 
-// A set-point change at program time at_s, reached at ramp_C_per_min (0: a step).
-struct ChamberStep {
-  double at_s = 0.0;
-  double setpoint_C = 25.0;
-  double ramp_C_per_min = 0.0;
-};
+// The chamber's part of a campaign: the set point over program time in the one profile model of
+// motion_programs/chamber.hpp (the simulator's, `imucal simulate`'s), and the suspender's band.
+struct CampaignChamber {
+  motion::ChamberProfile profile;  // no steps: a constant set point, start_C
+  double tolerance_C = 2.0;        // suspender band around the profile's set point
 
-struct ChamberProfile {
-  double setpoint_C = 25.0;   // from program time 0 (the configured safe set point by default)
-  double tolerance_C = 2.0;   // suspender band around the profile's set point
-  std::vector<ChamberStep> steps;  // sorted by at_s
-
-  double setpoint_at(double program_time_s) const;
+  double setpoint_at(double program_time_s) const { return profile.setpoint_C(program_time_s); }
   // Whether the set point changes gradually somewhere inside (t0_s, t1_s): a segment overlapping a
   // ramp cannot be redone as it was (the chamber's history cannot be repeated).
-  bool ramps_within(double t0_s, double t1_s) const;
+  bool ramps_within(double t0_s, double t1_s) const { return motion::ramps_within(profile, t0_s, t1_s); }
 };
 
 struct SimFault {
@@ -81,7 +76,7 @@ struct CampaignSpec {
   // run starts). Ideal by default.
   std::optional<ImuModel> start_model;
   std::optional<std::int64_t> start_model_campaign;
-  ChamberProfile chamber;
+  CampaignChamber chamber;
   SuspenderSettings suspenders;
   std::vector<SimFault> faults;
   nlohmann::json normalized;  // the stored form: defaults filled in, files resolved inline

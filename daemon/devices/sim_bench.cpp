@@ -17,9 +17,7 @@ constexpr double kTempPeriod_s = 1.0;
 
 std::shared_ptr<const sim::ThermalModel> campaign_thermal_model(const CampaignSpec& spec, double duration_s) {
   if (!thermal::thermal_of(spec.truth)) return nullptr;
-  const ChamberProfile profile = spec.chamber;
-  return std::make_shared<const sim::ThermalModel>([profile](double t_s) { return profile.setpoint_at(t_s); },
-                                                   spec.truth, sim::ThermalConfig{}, duration_s);
+  return std::make_shared<const sim::ThermalModel>(spec.chamber.profile, spec.truth, sim::ThermalConfig{}, duration_s);
 }
 
 // ------------------------------------------------------------------------------------------------

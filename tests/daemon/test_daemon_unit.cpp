@@ -389,10 +389,21 @@ TEST(Campaign, ProgramsRunOneAfterTheOther) {
   EXPECT_FALSE(bad.spec);
 }
 
+// One chamber model (issue 37, item 5): a profile, stored as a campaign's set-point changes and
+// read back, is the same set point at every instant, ramping at the same times.
+TEST(Campaign, AChamberProfileStoredAsItsChangesIsTheSameSetPointOverTime) {
+  for (const std::string& name : motion::builtin_chamber_names()) {
+    const motion::ChamberProfile built = motion::load_chamber_profile(name);
+    const motion::ChamberProfile again = motion::profile_of_changes(built.start_C, motion::changes_of(built), built.duration_s());
+    for (double t = 0; t <= built.duration_s() + 100; t += 7.3) ASSERT_NEAR(again.setpoint_C(t), built.setpoint_C(t), 1e-9) << name << " at " << t;
+    for (double t = 0; t < built.duration_s(); t += 60)
+      ASSERT_EQ(motion::ramps_within(again, t, t + 60), motion::ramps_within(built, t, t + 60)) << name << " at " << t;
+  }
+}
+
 TEST(Campaign, ChamberProfileAndRamps) {
-  ChamberProfile p;
-  p.setpoint_C = 25;
-  p.steps = {{100, 45, 1.0}, {2000, 30, 0.0}};
+  CampaignChamber p;
+  p.profile = motion::profile_of_changes(25, {{100, 45, 1.0}, {2000, 30, 0.0}}, 3000);
   EXPECT_DOUBLE_EQ(p.setpoint_at(50), 25.0);
   EXPECT_NEAR(p.setpoint_at(160), 26.0, 1e-12);  // 1 C/min for 60 s
   EXPECT_NEAR(p.setpoint_at(1300), 45.0, 1e-12);  // reached after 1200 s
