@@ -10,8 +10,7 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "daemon/campaign/campaign.hpp"
-#include "daemon/devices/sim_bench.hpp"
-#include "daemon/devices/wire_bench.hpp"
+#include "daemon/devices/bench_factory.hpp"
 #include "daemon/run/alarms.hpp"
 #include "daemon/run/estimator_worker.hpp"
 #include "daemon/run/faulted_intervals.hpp"
@@ -27,8 +26,6 @@ using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
 namespace {
-
-constexpr std::int64_t kNoTime = std::numeric_limits<std::int64_t>::min();
 
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -597,6 +594,80 @@ void Sequencer::runner() {
 // ------------------------------------------------------------------------------------------------
 // One run
 
+// The run file (created on the first start, reopened to resume), its recorder and the estimators
+// that tail it. Returns whether the run resumes an earlier one.
+bool Sequencer::open_run(RunContext& run) {
+  // The run file: created on the first start, reopened to resume.
+  const std::string relative = "runs/" + std::to_string(run.id) + ".db";
+  run.run_db_path = (fs::path(config_.data_dir) / relative).string();
+  fs::create_directories(fs::path(run.run_db_path).parent_path());
+  const bool resuming = fs::exists(run.run_db_path);
+  if (!resuming)
+    write_db("campaign " + std::to_string(run.id) + "'s run file", [this, id = run.id, relative] { db_.set_run_db(id, relative); });
+  open_recorder(run);
+  const auto committed_t = run.last_t_ns;
+  // A resumed run's faults up to what is committed fired in the process that recorded it.
+  if (committed_t) run.bench->resuming_after(static_cast<double>(*committed_t) / units::kNsPerS);
+  EstimatorWorker::Spec estimators = estimator_spec(run.spec, db_);
+  run.estimators = std::make_unique<EstimatorWorker>(
+      run.run_db_path, std::move(estimators), committed_t,
+      [this, id = run.id](const std::string& name, double t_s, const json& progress) { store_progress(id, name, t_s, progress); });
+  run.worker = run.estimators.get();
+  return resuming;
+}
+
+// An estimator's progress (on the worker thread): the live telemetry's and the database's.
+void Sequencer::store_progress(std::int64_t id, const std::string& name, double t_s, const json& progress) {
+  json all;
+  {
+    std::lock_guard lock(telemetry_mutex_);
+    estimators_[name] = progress;
+    all = estimators_;
+  }
+  try {
+    db_.add_progress(id, name, t_s, progress.dump());
+    db_.set_estimators(id, all.dump());
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: cannot store estimator progress: {}", id, e.what());
+  }
+}
+
+// The program from the run's checkpoint to its end (or to the command or fault that ends it):
+// segment after segment, pausing, holding and redoing as the state machine says.
+Sequencer::Outcome Sequencer::run_program(RunContext& run) {
+  Outcome outcome = prepare_devices(run);
+  for (;;) {
+    if (outcome == Outcome::Pause) {
+      outcome = paused(run);  // Redo on resume
+      continue;
+    }
+    if (outcome != Outcome::Completed && outcome != Outcome::Redo) break;
+    if (run.segment >= run.segments.size()) {
+      // The last frames are in the file before the run is done: a write that fails at the end
+      // (a full disk found only by the final commit on a loaded machine) suspends the run and
+      // redoes what was lost, as anywhere else in the program.
+      if (run.recorder && !commit_recording(run)) {
+        outcome = hold(run, run.recorder->write_problem().value_or(
+                                "recording failed: " + run.recorder->error().value_or("write failed")));
+        continue;
+      }
+      outcome = Outcome::Completed;
+      break;
+    }
+    write_db("campaign " + std::to_string(run.id) + "'s checkpoint",
+             [this, id = run.id, segment = static_cast<std::int64_t>(run.segment), t_s = run.checkpoint_s()] {
+               db_.set_checkpoint(id, segment, t_s);
+             });
+    if (run.segments[run.segment].kind == "power-cycle" && run.power_cycled_segment != run.segment) {
+      outcome = await_power_cycle(run);
+      if (outcome != Outcome::Completed) continue;
+    }
+    outcome = run_segment(run);
+    if (outcome == Outcome::Completed) ++run.segment;
+  }
+  return outcome;
+}
+
 void Sequencer::run_campaign(std::int64_t id) {
   RunContext run;
   run.id = id;
@@ -629,79 +700,10 @@ void Sequencer::run_campaign(std::int64_t id) {
     if (run.segments.empty()) throw std::runtime_error("the program has no segments");
     run.dt_ns = std::llround(units::kNsPerS / run.spec.rate_hz);
 
-    if (config_.devices == "sim") {
-      SimBenchSettings sb;
-      sb.sim.site = config_.site;
-      sb.sim.table = config_.table_certificate;  // the simulated table moves with the certificate's errors
-      sb.sim.rate_hz = run.spec.rate_hz;
-      sb.sim.seed = run.spec.seed;
-      sb.time_scale = run.spec.time_scale;
-      sb.chamber_tau_s = config_.sim.chamber_tau_s;
-      sb.chamber_start_C = config_.chamber.safe_setpoint_C;
-      sb.home_time_s = config_.sim.home_time_s;
-      sb.faults = run.spec.faults;
-      sb.thermal = campaign_thermal_model(run.spec, run.program.duration_s());
-      sb.disk = storage_disk_switch();
-      run.bench = std::make_unique<SimBench>(run.program, run.spec.truth, sb);
-    } else if (config_.devices == "sim-wire" || (config_.devices == "real" && config_.device_addresses)) {
-      WireBenchSettings wb;
-      wb.site = config_.site;
-      wb.rate_hz = run.spec.rate_hz;
-      wb.limits = config_.table_limits;
-      if (config_.devices == "real" && config_.device_addresses) {
-        // check_campaign refuses them already; a campaign stored under another configuration
-        // is checked again above, so this cannot be reached with faults.
-        wb.table = config_.table_certificate;  // the real table's certificate, into the run's meta
-        run.bench = std::make_unique<WireBench>(run.program, wb, *config_.device_addresses);
-      } else {
-        SimWireSettings sw;
-        sw.faults = run.spec.faults;
-        sw.seed = run.spec.seed;
-        sw.truth = run.spec.truth;
-        sw.chamber_tau_s = config_.sim.chamber_tau_s;
-        sw.chamber_start_C = config_.chamber.safe_setpoint_C;
-        sw.chamber_safe_setpoint_C = config_.chamber.safe_setpoint_C;
-        sw.imu_serial = run.spec.imu.serial;
-        sw.disk = storage_disk_switch();
-        sw.time_scale = config_.sim.wire_time_scale;
-        run.bench = std::make_unique<WireBench>(run.program, wb, sw);
-      }
-    } else {
-      throw std::runtime_error("devices '" + config_.devices + "' are not available in this build");
-    }
-
+    run.bench = make_bench(config_, run.spec, run.program, storage_disk_switch());
     check_unit(run);
 
-    // The run file: created on the first start, reopened to resume.
-    const std::string relative = "runs/" + std::to_string(id) + ".db";
-    run.run_db_path = (fs::path(config_.data_dir) / relative).string();
-    fs::create_directories(fs::path(run.run_db_path).parent_path());
-    const bool resuming = fs::exists(run.run_db_path);
-    if (!resuming)
-      write_db("campaign " + std::to_string(id) + "'s run file", [this, id, relative] { db_.set_run_db(id, relative); });
-    open_recorder(run);
-    const auto committed_t = run.last_t_ns;
-    // A resumed run's faults up to what is committed fired in the process that recorded it.
-    if (committed_t) run.bench->resuming_after(static_cast<double>(*committed_t) / units::kNsPerS);
-    EstimatorWorker::Spec estimators = estimator_spec(run.spec, db_);
-    run.estimators = std::make_unique<EstimatorWorker>(
-        run.run_db_path, std::move(estimators), committed_t,
-        [this, id](const std::string& name, double t_s, const json& progress) {
-          json all;
-          {
-            std::lock_guard lock(telemetry_mutex_);
-            estimators_[name] = progress;
-            all = estimators_;
-          }
-          try {
-            db_.add_progress(id, name, t_s, progress.dump());
-            db_.set_estimators(id, all.dump());
-          } catch (const std::exception& e) {
-            spdlog::error("campaign {}: cannot store estimator progress: {}", id, e.what());
-          }
-        });
-    run.worker = run.estimators.get();
-
+    const bool resuming = open_run(run);
     run.place_at_committed();
     note_event(run, "info", run.bench->describe() + "; " + std::to_string(run.segments.size()) + " segments, " +
                                 std::to_string(run.program.duration_s()) + " s");
@@ -714,37 +716,7 @@ void Sequencer::run_campaign(std::int64_t id) {
       note_event(run, "redo", text);
     }
 
-    Outcome outcome = prepare_devices(run);
-    for (;;) {
-      if (outcome == Outcome::Pause) {
-        outcome = paused(run);  // Redo on resume
-        continue;
-      }
-      if (outcome != Outcome::Completed && outcome != Outcome::Redo) break;
-      if (run.segment >= run.segments.size()) {
-        // The last frames are in the file before the run is done: a write that fails at the end
-        // (a full disk found only by the final commit on a loaded machine) suspends the run and
-        // redoes what was lost, as anywhere else in the program.
-        if (run.recorder && !commit_recording(run)) {
-          outcome = hold(run, run.recorder->write_problem().value_or(
-                                  "recording failed: " + run.recorder->error().value_or("write failed")));
-          continue;
-        }
-        outcome = Outcome::Completed;
-        break;
-      }
-      write_db("campaign " + std::to_string(id) + "'s checkpoint",
-               [this, id, segment = static_cast<std::int64_t>(run.segment), t_s = run.checkpoint_s()] {
-                 db_.set_checkpoint(id, segment, t_s);
-               });
-      if (run.segments[run.segment].kind == "power-cycle" && run.power_cycled_segment != run.segment) {
-        outcome = await_power_cycle(run);
-        if (outcome != Outcome::Completed) continue;
-      }
-      outcome = run_segment(run);
-      if (outcome == Outcome::Completed) ++run.segment;
-    }
-    finish_run(run, outcome, "");
+    finish_run(run, run_program(run), "");
   } catch (const std::exception& e) {
     const std::string why = e.what();
     spdlog::error("campaign {}: {}", id, why);

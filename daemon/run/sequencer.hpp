@@ -101,6 +101,9 @@ class Sequencer {
 
   void runner();
   void run_campaign(std::int64_t id);
+  bool open_run(RunContext& run);
+  Outcome run_program(RunContext& run);
+  void store_progress(std::int64_t id, const std::string& name, double t_s, const nlohmann::json& progress);
   bool transition(std::int64_t id, RunState to, const std::string& reason, std::optional<RunState> expected);
   void note_event(RunContext& run, const std::string& kind, const std::string& reason);
   // Stores a run event; an event of a serious kind also raises its alarm (alarms.hpp), broadcast.
