@@ -896,4 +896,11 @@ std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campai
   return rows;
 }
 
+bool is_database_failure(const std::exception& e, bool* damaged) {
+  const auto* sqlite = dynamic_cast<const storage::sql::SqliteError*>(&e);
+  if (sqlite == nullptr) return false;
+  if (damaged != nullptr) *damaged = sqlite->kind() == storage::sql::SqliteError::Kind::damaged;
+  return true;
+}
+
 }  // namespace imucal::daemon

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -273,5 +274,10 @@ class DaemonDb {
   std::mutex mutex_;
   storage::sql::Connection db_;
 };
+
+// Whether `e` is the daemon's database failing (full, locked too long, an I/O error, or damaged
+// when `damaged` is set): a request that met it may be repeated once the database takes writes
+// again, the service goes on. False for any other exception.
+bool is_database_failure(const std::exception& e, bool* damaged = nullptr);
 
 }  // namespace imucal::daemon

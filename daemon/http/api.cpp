@@ -18,6 +18,7 @@
 #include "core/number_text.hpp"
 #include "core/units.hpp"
 #include "daemon/analysis/analysis.hpp"
+#include "daemon/analysis/model_views.hpp"
 #include "daemon/analysis/run_series.hpp"
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/config/device_config.hpp"
@@ -27,14 +28,10 @@
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/run/alarms.hpp"
 #include "daemon/run/estimator_worker.hpp"
-#include "estimators/direct_calibration.hpp"
-#include "estimators/truth_comparison.hpp"
 #include "motion_programs/chamber.hpp"
 #include "motion_programs/program.hpp"
-#include "pipeline/pipeline.hpp"
 #include "plan/plan.hpp"
 #include "plan/schema.hpp"
-#include "storage/run_db.hpp"
 
 #ifndef IMUCAL_VERSION
 #define IMUCAL_VERSION "0.0.0"
@@ -61,27 +58,6 @@ HttpReply error_reply(int status, const std::string& message, json extra = json:
 }
 
 json opt_time(const std::optional<std::int64_t>& ms) { return ms ? json(iso8601_utc(*ms)) : json(nullptr); }
-
-// A stored model (its own frame) against a stored truth (instrument frame), in the model's frame.
-TruthComparison truth_comparison_of(const std::string& model_text, const std::string& truth_text) {
-  return compare_with_truth(imu_model_from_json_text(model_text, "stored model"),
-                            imu_model_from_json_text(truth_text, "the campaign's truth"));
-}
-
-// GET /api/campaigns/{id}/truth (docs/api.md).
-json truth_comparison_json(const TruthComparison& cmp) {
-  json rows = json::array();
-  json by_definition = json::array();
-  for (const TruthComparisonRow& r : cmp.rows) {
-    if (r.by_definition) by_definition.push_back(r.key);
-    rows.push_back({{"key", r.key}, {"estimate", r.estimate}, {"sigma", r.sigma}, {"truth", r.truth}, {"error", r.error},
-                    {"error_over_sigma", r.error_over_sigma ? json(*r.error_over_sigma) : json(nullptr)},
-                    {"by_definition", r.by_definition}});
-  }
-  return {{"frame", cmp.frame}, {"truth_frame", cmp.truth_frame}, {"converted", cmp.converted},
-          {"truth", json::parse(imu_model_to_json_text(cmp.truth))}, {"zero_by_definition", by_definition},
-          {"rows", rows}};
-}
 
 json parse_or_null(const std::optional<std::string>& text) {
   if (!text) return nullptr;
@@ -678,12 +654,6 @@ HttpReply Api::handle(const ApiRequest& request) {
       call.id = *id;
     }
     return route.handle(*this, call);
-  } catch (const storage::sql::SqliteError& e) {
-    // The daemon's database on a full disk (or failing, or locked too long): the request may be
-    // repeated once it is writable again; the service goes on.
-    spdlog::error("{} {}: {}", method, path, e.what());
-    if (e.kind() == storage::sql::SqliteError::Kind::damaged) return error_reply(500, std::string("internal error: ") + e.what());
-    return error_reply(503, std::string("the daemon's storage cannot take this now, try again later: ") + e.what());
   } catch (const json::exception& e) {
     // A value of the wrong type or range where a handler read the client's JSON: the client's
     // problem, whichever handler met it (one place, not a check in each).
@@ -694,6 +664,10 @@ HttpReply Api::handle(const ApiRequest& request) {
     return error_reply(400, std::string("malformed request: ") + e.what());
   } catch (const std::exception& e) {
     spdlog::error("{} {}: {}", method, path, e.what());
+    // The daemon's database on a full disk (or failing, or locked too long): the request may be
+    // repeated once it is writable again; the service goes on.
+    if (bool damaged = false; is_database_failure(e, &damaged) && !damaged)
+      return error_reply(503, std::string("the daemon's storage cannot take this now, try again later: ") + e.what());
     return error_reply(500, std::string("internal error: ") + e.what());
   }
 }
@@ -1074,8 +1048,7 @@ HttpReply Api::campaign_report(std::int64_t id, const std::map<std::string, std:
   TemperatureSummary temperatures;
   if (!row->run_db.empty() && std::filesystem::exists(run_path(*row))) {
     try {
-      const storage::RunDb db = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
-      temperatures = summarize_temperatures(db.temps());
+      temperatures = summarize_temperatures(run_temperatures(run_path(*row)));
     } catch (const std::exception& e) {
       spdlog::warn("campaign {}: the report goes without temperatures: {}", id, e.what());
     }
@@ -1361,8 +1334,7 @@ HttpReply Api::campaign_truth(std::int64_t id) {
   const json spec = json::parse(row->spec_json, nullptr, false);
   if (!spec.is_object() || !spec.contains("truth") || !spec.at("truth").is_object())
     return error_reply(404, "campaign " + std::to_string(id) + " has no simulated truth");
-  const TruthComparison cmp = truth_comparison_of(*row->model_json, spec.at("truth").dump());
-  return json_reply(200, truth_comparison_json(cmp));
+  return json_reply(200, truth_comparison_json(*row->model_json, spec.at("truth").dump()));
 }
 
 HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::string>& query) {
@@ -1371,26 +1343,14 @@ HttpReply Api::campaign_model(std::int64_t id, const std::map<std::string, std::
   if (!row->model_json)
     return error_reply(404, "campaign " + std::to_string(id) + " has no model (state " +
                                 std::string(to_string(row->state)) + ")");
-  std::string text = *row->model_json;
-  if (const auto stage = query.find("stage"); stage != query.end()) {
-    // One calibration stage's model, as the campaign kept it with its results.
-    const json results = row->results_json ? json::parse(*row->results_json, nullptr, false) : json::object();
-    if (!pipeline::stage_of_estimator(stage->second)) {
-      std::string names;
-      for (const pipeline::StageName& n : pipeline::stage_names()) names += (names.empty() ? "" : ", ") + std::string(n.estimator);
-      return error_reply(400, "stage must be one of " + names);
-    }
-    if (!results.is_object() || !results.contains(stage->second) || !results.at(stage->second).contains("model"))
-      return error_reply(404, "campaign " + std::to_string(id) + " has no model of stage " + stage->second);
-    text = results.at(stage->second).at("model").dump();
-  }
-  if (const auto it = query.find("frame"); it != query.end()) {
-    if (it->second == "body") {
-      text = imu_model_to_json_text(direct::to_body_frame(imu_model_from_json_text(text, "stored model")));
-    } else if (it->second != "instrument") {
-      return error_reply(400, "frame must be instrument or body");
-    }
-  }
+  const auto asked = [&](const char* key) {
+    const auto it = query.find(key);
+    return it == query.end() ? std::nullopt : std::optional<std::string>(it->second);
+  };
+  const ModelView view = stored_model_view(*row->model_json, row->results_json, asked("stage"), asked("frame"));
+  if (view.status == 404) return error_reply(404, "campaign " + std::to_string(id) + " has " + view.text);
+  if (view.status != 200) return error_reply(view.status, view.text);
+  const std::string& text = view.text;
   HttpReply r;
   r.body = text;
   r.content_type = "application/json";
@@ -1774,9 +1734,7 @@ HttpReply Api::campaign_series(std::int64_t id, const std::map<std::string, std:
     range.columns = static_cast<int>(*v);
   }
   try {
-    // Read-only beside a writer (WAL): a running campaign's recording so far.
-    const auto run = storage::RunDb::open(run_path(*row), storage::OpenMode::Read);
-    return json_reply(200, run_series_json(run, range));
+    return json_reply(200, run_series_of(run_path(*row), range));
   } catch (const std::invalid_argument& e) {
     return error_reply(400, e.what());
   }
@@ -1822,17 +1780,7 @@ HttpReply Api::campaign_analysis(std::int64_t id, const std::string& what) {
         variants.push_back({"uncalibrated", "no compensation (the nominal sensor)", ImuModel{}});
         // Each calibration stage's model when the campaign kept several (a `full` campaign: direct,
         // lever-arm, stage3), else its one model.
-        std::vector<Variant> stages;
-        if (row.results_json) {
-          const json results = json::parse(*row.results_json, nullptr, false);
-          for (const pipeline::StageName& n : pipeline::stage_names()) {
-            if (!results.is_object() || !results.contains(n.estimator)) continue;
-            const json& r = results.at(n.estimator);
-            if (!r.is_object() || !r.contains("model")) continue;
-            stages.push_back({std::string("stage ") + n.estimator, std::string("this campaign's model after stage ") + n.name,
-                              imu_model_from_json_text(r.at("model").dump(), std::string("the ") + n.estimator + " model")});
-          }
-        }
+        const std::vector<Variant> stages = stage_model_variants(row.results_json);
         if (stages.size() > 1) {
           variants.insert(variants.end(), stages.begin(), stages.end());
         } else if (model) {

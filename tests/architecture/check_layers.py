@@ -34,8 +34,11 @@ ALLOWED = {
     "daemon/run": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline",
                    "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices"},
     "daemon/analysis": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline"},
-    "daemon/http": BELOW_DAEMON | {SIGNING, "daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
-                                   "daemon/devices", "daemon/run", "daemon/analysis"},
+    # The HTTP layer translates (issue 37): the estimators, the pipeline and the recordings are
+    # reached through the rooms that decide (analysis, campaign, production, run), never directly.
+    "daemon/http": (BELOW_DAEMON - {"estimators", "pipeline", "storage"}) |
+                   {SIGNING, "daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
+                    "daemon/devices", "daemon/run", "daemon/analysis"},
     "daemon": BELOW_DAEMON | {SIGNING, "daemon/*"},
     "cli": BELOW_DAEMON | {SIGNING, "daemon", "daemon/*", "bench"},
     "bench": BELOW_DAEMON,
