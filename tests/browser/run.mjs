@@ -77,9 +77,10 @@ function passwordHash(password) {
 const dayText = (days) => new Date(Date.now() + days * 86400e3).toISOString().slice(0, 10);
 const tableDue = dayText(3);
 const viewerHash = passwordHash(VIEWER.password);
-const browserConfig = (tableCalibrationDue) => JSON.stringify({
+// `gravityMps2`: the site's surveyed g (absent: the normal gravity of the site's place).
+const browserConfig = (tableCalibrationDue, gravityMps2) => JSON.stringify({
   _comment: 'browser test: simulated devices, one viewer; the operator signs in with the generated token',
-  site: { name: 'browser test lab' },
+  site: { name: 'browser test lab', ...(gravityMps2 ? { gravity_mps2: gravityMps2 } : {}) },
   // Certificate numbers BROWSER-LAB-YYYY-NNNNNN, the sequence beside this file.
   certificates: { prefix: 'BROWSER-LAB' },
   reference_equipment: { table: { make: 'Acme Motion', model: 'ATS-3', serial: 'T-0815', calibration_due: tableCalibrationDue,
@@ -1340,8 +1341,9 @@ try {
   await waitText(page, '#verdict', /^Valid/);
   await page.waitForSelector('#live-indicator[data-state="open"]');
   daemonDownOnPurpose = true;
-  // Restarted with the table's calibration run out: a start is refused until an operator overrides it.
-  fs.writeFileSync(path.join(tmp, 'imucald.json'), browserConfig('2020-01-31'));
+  // Restarted with the table's calibration run out (a start is refused until an operator overrides
+  // it) and with the site's g surveyed (the certificates issued with the normal g are affected).
+  fs.writeFileSync(path.join(tmp, 'imucald.json'), browserConfig('2020-01-31', 9.8123));
   const code = await stopDaemon(daemon);
   assert.equal(code, 0, 'imucald stops cleanly on SIGTERM');
   await waitText(page, '#banner', /Live connection lost/);
@@ -1359,6 +1361,27 @@ try {
   assert.equal(await page.inputValue('#c-name'), 'typed before the restart');
   await shot(page, '12-connection-restored');
   log('WebSocket lost and restored with a banner; signed in again; the form kept its text');
+
+  // ---- a corrected site g: the unit page lists the affected certificates; one is calibrated again ----
+  await page.goto(`${base}/#/imus/FOG-BROWSER-1`);
+  await page.waitForSelector('#unit-gravity-corrected:not([hidden]) button.recalibrate');
+  const againCampaign = await page.getAttribute('#unit-gravity-corrected button.recalibrate', 'data-campaign');
+  const certsBefore = (await apiCall('GET', `/api/campaigns/${againCampaign}`)).body;
+  await page.click('#unit-gravity-corrected button.recalibrate');
+  await waitText(page, '#confirm-dialog[open] h2', new RegExp(`Calibrate campaign ${againCampaign} again with the corrected g`));
+  await page.fill('#confirm-reason', 'browser test: the site was surveyed, g = 9.8123 m/s²');
+  await shot(page, '12a-calibrate-again');
+  await page.click('#confirm-ok');
+  // The stages run again from the recording (a job; the button shows its progress), then the new
+  // certificate is linked; the old one stays, superseded.
+  await page.waitForSelector('#unit-gravity-corrected a[href^="certificate.html?number="]:not(:first-child)', { timeout: 120000 });
+  await waitText(page, '#unit-gravity-corrected', /→ certificate BROWSER-LAB-\d{4}-\d{6}/, 120000);
+  const recalibrated = (await apiCall('GET', '/api/audit?action=campaign.recalibrated')).body.entries;
+  assert.equal(recalibrated.length, 1, JSON.stringify(recalibrated));
+  assert.equal(recalibrated[0].details.reason, 'browser test: the site was surveyed, g = 9.8123 m/s²');
+  assert.deepEqual(await layoutProblems(page), [], 'the unit page after calibrating again lays out at 1366x768');
+  await shot(page, '12a2-calibrated-again');
+  log(`a corrected site g: campaign ${againCampaign} (${certsBefore.name}) calibrated again from the unit page, a superseding certificate linked, the reason audited`);
 
   // ---- an overdue table: Start asks why, the override starts it and the audit trail keeps it ----
   const overdue = await apiCall('POST', '/api/campaigns', { name: 'browser test: overdue table', program: 'direct-short', rate_hz: 10, time_scale: 0 });
