@@ -4,7 +4,7 @@
 // what the run would need for them), the downloads
 // (model JSON, recording bundle, printable certificate), and the record of what happened.
 import { get, post, ApiError } from '../api.mjs';
-import { verdictBadge } from './units.mjs';
+import { verdictBadge } from '../components/verdict_badge.mjs';
 import { h, clear, duration, dateTime, timeOfDay, num, stateBadge, outcomeBadge, FINAL_STATES } from '../format.mjs';
 import { pauseNote } from '../outcome.mjs';
 import { commandBar, confirmDialog } from '../dialogs.mjs';

@@ -7,15 +7,11 @@ import { h, clear, dateTime } from '../format.mjs';
 import { groups, coefficientName, unitOf } from '../coefficients.mjs';
 import { schema } from '../schema.mjs';
 import { limitsToForm, formToLimits, emptyRow, locateServerProblem } from '../limits_form.mjs';
+import { verdictBadge } from '../components/verdict_badge.mjs';
 
 // The example the hint and an empty key show: imucald's first coefficient, and its group.
 function example() {
   return schema().coefficients[0] || { key: '', group: '' };
-}
-
-export function verdictBadge(pass, title = '') {
-  if (pass === null || pass === undefined) return h('span', { class: 'muted', title: 'No acceptance limits for this part number' }, 'no limits');
-  return h('span', { class: pass ? 'result-ok verdict' : 'result-bad verdict', title }, pass ? 'PASS' : 'FAIL');
 }
 
 export function mount(root) {
