@@ -29,7 +29,6 @@ KNOWN = {
     "web/js/views/builder.mjs": {"mount": 936},
     "web/js/views/campaign.mjs": {"mount": 679},
     "web/js/views/live.mjs": {"mount": 427},
-    "web/js/views/units.mjs": {"mount": 194},
 }
 
 
