@@ -28,7 +28,6 @@ KNOWN = {
     "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
     "web/js/views/builder.mjs": {"mount": 936},
     "web/js/views/campaign.mjs": {"mount": 679},
-    "web/js/views/live.mjs": {"mount": 427},
 }
 
 
