@@ -27,7 +27,6 @@ KNOWN = {
     "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
     "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
     "web/js/views/builder.mjs": {"mount": 936},
-    "web/js/views/campaign.mjs": {"mount": 679},
 }
 
 
