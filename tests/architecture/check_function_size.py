@@ -26,7 +26,6 @@ KNOWN = {
     "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
     "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
     "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
-    "web/js/views/builder.mjs": {"mount": 936},
 }
 
 
