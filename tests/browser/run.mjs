@@ -889,6 +889,17 @@ try {
   // it, and the live page must follow the estimators to their end.
   await page.fill('#c-time-scale', '100000');
   await waitText(page, '#plan-status', /targets met/, 90000);
+  // A target the operator sets judges the same prediction again (no new one is asked for): a
+  // hundredth of a ppm on the accelerometers' scale is met by none of them.
+  await page.click('#plan-settings summary');
+  await page.fill('#target-accel-scale_ppm', '0.01');
+  await page.press('#target-accel-scale_ppm', 'Tab');
+  // (at 0.3 ppm the worst is about 7×; at 0.01 ppm some 200×)
+  await waitText(page, '#plan-status', /targets met; worst accel\.scale_ppm\.[xyz] at \d{3,}(\.\d+)?× its target/, 10000);
+  assert.doesNotMatch(await page.textContent('#plan-status'), /must be two positive numbers/);
+  await page.fill('#target-accel-scale_ppm', '0.3');
+  await page.press('#target-accel-scale_ppm', 'Tab');
+  await page.click('#plan-settings summary');
   log(`the builder predicts ${predicted.length} coefficients before launch: ${await page.textContent('#plan-status')}`);
   await page.click('#create-start');
   await page.waitForSelector('#confirm-dialog[open]');

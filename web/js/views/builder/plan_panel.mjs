@@ -57,7 +57,8 @@ export function planPanel(state, { body }) {
 
   // The noise inputs change the prediction (asked again); the targets only its verdicts.
   function planInputChanged() {
-    const read = (id) => parseNumber(settings.querySelector(`#${id}`).value);
+    // parseNumber answers {value} or {empty}/{error}: a field that is not a number reads as NaN.
+    const read = (id) => parseNumber(settings.querySelector(`#${id}`).value).value ?? NaN;
     const arw = read('plan-arw'), vrw = read('plan-vrw');
     const targets = {};
     for (const g of Object.keys(seedTargets())) {
