@@ -25,7 +25,6 @@ KNOWN = {
     "estimators/direct_calibration.cpp": {"DirectCalibrator::finish": 159},
     "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
     "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
-    "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
     "web/js/views/builder.mjs": {"mount": 936},
     "web/js/views/campaign.mjs": {"mount": 679},
     "web/js/views/campaigns.mjs": {"mount": 159},
