@@ -279,190 +279,210 @@ class TempSeries {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
-std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps, const CheckOptions& o) {
-  std::vector<TempProblem> out;
-  if (temps.empty()) {
-    out.push_back({"all", "no temperature samples at all", 0.0, 0.0, 0x3Fu});
-    return out;
-  }
-  const auto n = temps.size();
-  auto t_of = [&](std::size_t i) { return static_cast<double>(temps[i].t_ns) * 1e-9; };
-  auto val = [&](std::size_t i, int ch) {
-    if (ch < 3) return temps[i].gyro_C[ch];
-    if (ch < 6) return temps[i].accel_C[ch - 3];
-    return temps[i].chamber_C;
-  };
-  auto name = [](int ch) { return ch < kChannels ? std::string(channel_name(ch)) : std::string("temp_chamber_C"); };
-  auto mask = [](int ch) { return ch < kChannels ? 1u << ch : 0u; };
-  const double t_end = t_of(n - 1);
+namespace {
 
-  // Stuck: a reading unchanged for stuck_s while its witnesses moved. The witnesses are sensors of
-  // like time constant (a channel's own triad: the FOG coils are slow, the accelerometers fast; a
-  // coil sensor's the coil's other seven), never the chamber alone (a stabilised IMU holds still
-  // while the air moves). And never while the air held still: a sensor that has settled in a soak
-  // reads a constant exactly as a stuck one does and cannot be told from it, while slower sensors
-  // are still moving (the accelerometers settle long before the coils). Found first, so that the
-  // step when a sensor comes unstuck is not taken for a jump.
-  auto range_over = [](std::size_t i, std::size_t e, const auto& value) {
-    double lo = value(i), hi = lo;
-    for (std::size_t m = i; m <= e; ++m) {
-      lo = std::min(lo, value(m));
-      hi = std::max(hi, value(m));
-    }
-    return hi - lo;
-  };
-  auto air_range = [&](std::size_t i, std::size_t e) {
-    return range_over(i, e, [&](std::size_t m) { return val(m, kChamber); });
-  };
-  // The median of the witnesses' ranges over samples i..e (the upper one of two).
-  auto witnesses_moved = [&](std::size_t i, std::size_t e, std::size_t witnesses, const auto& witness_value) {
-    std::vector<double> change;
-    for (std::size_t w = 0; w < witnesses; ++w)
-      change.push_back(range_over(i, e, [&](std::size_t m) { return witness_value(w, m); }));
-    std::sort(change.begin(), change.end());
-    return change[change.size() / 2];
-  };
-  std::vector<std::vector<std::size_t>> stuck_end(kChannels + 1);
+// The samples as channels: 0..2 the FOG coil means x y z, 3..5 the accelerometers, kChamber the air.
+double time_s(const std::vector<TempSample>& temps, std::size_t i) { return static_cast<double>(temps[i].t_ns) * 1e-9; }
+double reading_C(const std::vector<TempSample>& temps, std::size_t i, int ch) {
+  if (ch < 3) return temps[i].gyro_C[ch];
+  if (ch < 6) return temps[i].accel_C[ch - 3];
+  return temps[i].chamber_C;
+}
+std::string channel_label(int ch) { return ch < kChannels ? std::string(channel_name(ch)) : std::string("temp_chamber_C"); }
+// The channel's bit of TempProblem::channel_mask: none for the chamber (no coefficient is on it).
+unsigned channel_bit(int ch) { return ch < kChannels ? 1u << ch : 0u; }
+
+// The range (C) of value(m) over samples i..e.
+template <class Value>
+double range_over(std::size_t i, std::size_t e, const Value& value) {
+  double lo = value(i), hi = lo;
+  for (std::size_t m = i; m <= e; ++m) {
+    lo = std::min(lo, value(m));
+    hi = std::max(hi, value(m));
+  }
+  return hi - lo;
+}
+double air_range_C(const std::vector<TempSample>& temps, std::size_t i, std::size_t e) {
+  return range_over(i, e, [&](std::size_t m) { return reading_C(temps, m, kChamber); });
+}
+// The median of the witnesses' ranges over samples i..e (the upper one of two), C.
+template <class WitnessValue>
+double witnesses_moved_C(std::size_t i, std::size_t e, std::size_t witnesses, const WitnessValue& witness_value) {
+  std::vector<double> change;
+  for (std::size_t w = 0; w < witnesses; ++w)
+    change.push_back(range_over(i, e, [&](std::size_t m) { return witness_value(w, m); }));
+  std::sort(change.begin(), change.end());
+  return change[change.size() / 2];
+}
+
+// Where a jump of `step` at sample i comes back: the first later step the other way by more than
+// half of it (`value(m)` the reading at m); n when it never does.
+template <class Value>
+std::size_t jump_back(std::size_t i, std::size_t n, double step, const Value& value) {
+  for (std::size_t m = i + 1; m < n; ++m) {
+    const double d = value(m) - value(m - 1);
+    if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) return m;
+  }
+  return n;
+}
+std::string jump_text(const std::vector<TempSample>& temps, std::size_t i, std::size_t back, double step) {
+  std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", time_s(temps, i)) + " s";
+  what += back < temps.size() ? " and back at t=" + fmt("%.1f", time_s(temps, back)) + " s" : " and never came back";
+  return what;
+}
+
+// Stuck: a reading unchanged for stuck_s while its witnesses moved. The witnesses are sensors of
+// like time constant (a channel's own triad: the FOG coils are slow, the accelerometers fast; a
+// coil sensor's the coil's other seven), never the chamber alone (a stabilised IMU holds still
+// while the air moves). And never while the air held still: a sensor that has settled in a soak
+// reads a constant exactly as a stuck one does and cannot be told from it, while slower sensors
+// are still moving (the accelerometers settle long before the coils). Found first, so that the
+// step when a sensor comes unstuck is not taken for a jump: each channel's stuck runs end at the
+// samples `stuck_end` lists.
+void find_stuck_channels(const std::vector<TempSample>& temps, const CheckOptions& o, std::vector<TempProblem>& out,
+                         std::vector<std::vector<std::size_t>>& stuck_end) {
+  const auto n = temps.size();
+  auto val = [&](std::size_t i, int ch) { return reading_C(temps, i, ch); };
   for (int ch = 0; ch < kChannels; ++ch) {
     const int triad = ch / 3 * 3;  // the channel's triad: gyros 0..2, accelerometers 3..5
     for (std::size_t i = 0; i < n;) {
       std::size_t k = i;
       while (k + 1 < n && val(k + 1, ch) == val(i, ch)) ++k;
-      const double t0 = t_of(i), t1 = t_of(k);
+      const double t0 = time_s(temps, i), t1 = time_s(temps, k);
       if (t1 - t0 >= o.stuck_s) {
-        const double air = air_range(i, k);
-        const double others = witnesses_moved(i, k, 2, [&](std::size_t w, std::size_t m) {
+        const double air = air_range_C(temps, i, k);
+        const double others = witnesses_moved_C(i, k, 2, [&](std::size_t w, std::size_t m) {
           const int other = triad + (ch - triad + 1 + static_cast<int>(w)) % 3;
           return val(m, other);
         });
         if (others >= o.stuck_others_change_C && air >= o.air_still_C) {
-          out.push_back({name(ch),
+          out.push_back({channel_label(ch),
                          "stuck at " + fmt("%.3f", val(i, ch)) + " C for " + fmt("%.0f", t1 - t0) +
                              " s while the chamber moved by " + fmt("%.2f", air) + " C and the other " +
                              (ch < 3 ? "coils" : "accelerometers") + " by " + fmt("%.2f", others) + " C",
-                         t0, k + 1 < n ? t_of(k + 1) : t1, mask(ch)});
+                         t0, k + 1 < n ? time_s(temps, k + 1) : t1, channel_bit(ch)});
           stuck_end[static_cast<std::size_t>(ch)].push_back(k);
         }
       }
       i = k + 1;
     }
   }
-  // The eight sensors of each coil, when every sample carries them: the same stuck and jump rules
-  // per sensor, the coil's other seven the witnesses that the temperature moved, so that the
-  // report names the sensor that broke (a problem of the coil mean below says what it did to the
-  // channel the models use). A sensor coming unstuck moves the mean by a step that is no jump.
-  const bool with_coil_sensors =
-      std::all_of(temps.begin(), temps.end(), [](const TempSample& s) { return s.coil_sensors_C.has_value(); });
-  for (std::size_t c = 0; c < 3 && with_coil_sensors; ++c) {
-    for (std::size_t k = 0; k < 8; ++k) {
-      auto sensor = [&](std::size_t i, std::size_t which) { return (*temps[i].coil_sensors_C)[c][which]; };
-      const std::string nm = std::string("temp_g") + "xyz"[c] + "_" + std::to_string(k + 1) + "_C";
-      const unsigned coil_mask = 1u << c;
-      std::vector<std::size_t> unstuck;  // ends of long unchanged runs (all eight stuck: the mean says so)
-      for (std::size_t i = 0; i < n;) {
-        std::size_t e = i;
-        while (e + 1 < n && sensor(e + 1, k) == sensor(i, k)) ++e;
-        if (t_of(e) - t_of(i) >= o.stuck_s) {
-          unstuck.push_back(e);
-          const double others = witnesses_moved(i, e, 7, [&](std::size_t w, std::size_t m) {
-            return sensor(m, w < k ? w : w + 1);  // the coil's other seven
-          });
-          if (others >= o.stuck_others_change_C && air_range(i, e) >= o.air_still_C) {
-            out.push_back({nm,
-                           "stuck at " + fmt("%.3f", sensor(i, k)) + " C for " + fmt("%.0f", t_of(e) - t_of(i)) +
-                               " s while the coil's other sensors moved by " + fmt("%.2f", others) + " C",
-                           t_of(i), e + 1 < n ? t_of(e + 1) : t_of(e), coil_mask});
-            stuck_end[c].push_back(e);
-          }
-        }
-        i = e + 1;
-      }
-      for (std::size_t i = 1; i < n; ++i) {
-        const double a = sensor(i - 1, k), b = sensor(i, k);
-        if (!std::isfinite(a) || !std::isfinite(b)) {
-          out.push_back({nm, "no valid reading", t_of(i - 1), t_of(i), coil_mask});
-          continue;
-        }
-        if (std::find(unstuck.begin(), unstuck.end(), i - 1) != unstuck.end()) continue;  // coming unstuck
-        const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
-        const double step = b - a;
-        if (std::abs(step) <= allowed) continue;
-        std::size_t back = n;
-        for (std::size_t m = i + 1; m < n; ++m) {
-          const double d = sensor(m, k) - sensor(m - 1, k);
-          if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
-            back = m;
-            break;
-          }
-        }
-        std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
-        what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
-        out.push_back({nm, what + " (one of coil " + "xyz"[c] + "'s eight sensors)", t_of(i - 1),
-                       back < n ? t_of(back) : t_end, coil_mask});
-        i = back < n ? back : n;
-      }
-    }
-  }
-  for (int ch = 0; ch <= kChamber; ++ch) {
-    // Missing or implausible readings (a broken sensor reads NaN, its maximum or nothing).
-    for (std::size_t i = 0; i < n;) {
-      const double v = val(i, ch);
-      if (std::isfinite(v) && v >= o.plausible_lo_C && v <= o.plausible_hi_C) {
-        ++i;
-        continue;
-      }
-      std::size_t k = i;
-      while (k + 1 < n && !(std::isfinite(val(k + 1, ch)) && val(k + 1, ch) >= o.plausible_lo_C &&
-                            val(k + 1, ch) <= o.plausible_hi_C))
-        ++k;
-      out.push_back({name(ch), "no valid reading (" + fmt("%g", v) + " C)", t_of(i), k + 1 < n ? t_of(k + 1) : t_end,
-                     mask(ch)});
-      i = k + 1;
-    }
-    // Jumps: a step no physical temperature makes; the channel is suspect until it steps back.
-    const std::vector<std::size_t>& ends = stuck_end[static_cast<std::size_t>(ch)];
-    for (std::size_t i = 1; i < n; ++i) {
-      const double a = val(i - 1, ch), b = val(i, ch);
-      if (!std::isfinite(a) || !std::isfinite(b)) continue;
-      if (std::find(ends.begin(), ends.end(), i - 1) != ends.end()) continue;  // coming unstuck
-      const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (t_of(i) - t_of(i - 1));
-      if (std::abs(b - a) <= allowed) continue;
-      const double step = b - a;
-      std::size_t back = n;
-      for (std::size_t k = i + 1; k < n; ++k) {
-        const double d = val(k, ch) - val(k - 1, ch);
-        if (std::isfinite(d) && d * step < 0 && std::abs(d) > 0.5 * std::abs(step)) {
-          back = k;
-          break;
-        }
-      }
-      std::string what = "jumped by " + fmt("%+.3f", step) + " C at t=" + fmt("%.1f", t_of(i)) + " s";
-      what += back < n ? " and back at t=" + fmt("%.1f", t_of(back)) + " s" : " and never came back";
-      out.push_back({name(ch), what, t_of(i - 1), back < n ? t_of(back) : t_end, mask(ch)});
-      i = back < n ? back : n;
-    }
-  }
-  // Gaps: no samples while the temperatures moved (a run-length store may skip unchanged ones).
-  for (std::size_t i = 1; i < n; ++i) {
-    const double dt = t_of(i) - t_of(i - 1);
-    if (dt <= o.gap_s) continue;
-    double moved = 0;
-    for (int ch = 0; ch <= kChamber; ++ch) moved = std::max(moved, std::abs(val(i, ch) - val(i - 1, ch)));
-    if (moved > 0.05)
-      out.push_back({"all", "no temperature samples for " + fmt("%.0f", dt) + " s while they moved by " +
-                                fmt("%.2f", moved) + " C",
-                     t_of(i - 1), t_of(i), 0x3Fu});
-  }
-  // The chamber at the end of each soak long enough to judge.
+}
+
+// Sensor k of coil c (every sample carries the coil sensors): its stuck runs, the coil's other
+// seven the witnesses, then its jumps (not where it comes unstuck) and invalid readings.
+void check_coil_sensor(const std::vector<TempSample>& temps, std::size_t c, std::size_t k, const CheckOptions& o,
+                       std::vector<TempProblem>& out, std::vector<std::size_t>& coil_stuck_end) {
+  const auto n = temps.size();
+  auto sensor = [&](std::size_t i, std::size_t which) { return (*temps[i].coil_sensors_C)[c][which]; };
+  const std::string nm = std::string("temp_g") + "xyz"[c] + "_" + std::to_string(k + 1) + "_C";
+  const unsigned coil_mask = 1u << c;
+  std::vector<std::size_t> unstuck;  // ends of long unchanged runs (all eight stuck: the mean says so)
   for (std::size_t i = 0; i < n;) {
-    if (!temps[i].chamber_setpoint_C) {
+    std::size_t e = i;
+    while (e + 1 < n && sensor(e + 1, k) == sensor(i, k)) ++e;
+    if (time_s(temps, e) - time_s(temps, i) >= o.stuck_s) {
+      unstuck.push_back(e);
+      const double others = witnesses_moved_C(i, e, 7, [&](std::size_t w, std::size_t m) {
+        return sensor(m, w < k ? w : w + 1);  // the coil's other seven
+      });
+      if (others >= o.stuck_others_change_C && air_range_C(temps, i, e) >= o.air_still_C) {
+        out.push_back({nm,
+                       "stuck at " + fmt("%.3f", sensor(i, k)) + " C for " + fmt("%.0f", time_s(temps, e) - time_s(temps, i)) +
+                           " s while the coil's other sensors moved by " + fmt("%.2f", others) + " C",
+                       time_s(temps, i), e + 1 < n ? time_s(temps, e + 1) : time_s(temps, e), coil_mask});
+        coil_stuck_end.push_back(e);
+      }
+    }
+    i = e + 1;
+  }
+  for (std::size_t i = 1; i < n; ++i) {
+    const double a = sensor(i - 1, k), b = sensor(i, k);
+    if (!std::isfinite(a) || !std::isfinite(b)) {
+      out.push_back({nm, "no valid reading", time_s(temps, i - 1), time_s(temps, i), coil_mask});
+      continue;
+    }
+    if (std::find(unstuck.begin(), unstuck.end(), i - 1) != unstuck.end()) continue;  // coming unstuck
+    const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (time_s(temps, i) - time_s(temps, i - 1));
+    const double step = b - a;
+    if (std::abs(step) <= allowed) continue;
+    const std::size_t back = jump_back(i, n, step, [&](std::size_t m) { return sensor(m, k); });
+    out.push_back({nm, jump_text(temps, i, back, step) + " (one of coil " + "xyz"[c] + "'s eight sensors)",
+                   time_s(temps, i - 1), back < n ? time_s(temps, back) : time_s(temps, n - 1), coil_mask});
+    i = back < n ? back : n;
+  }
+}
+
+// Missing or implausible readings of a channel (a broken sensor reads NaN, its maximum or nothing).
+void find_invalid_readings(const std::vector<TempSample>& temps, int ch, const CheckOptions& o,
+                           std::vector<TempProblem>& out) {
+  const auto n = temps.size();
+  auto valid = [&](double v) { return std::isfinite(v) && v >= o.plausible_lo_C && v <= o.plausible_hi_C; };
+  for (std::size_t i = 0; i < n;) {
+    const double v = reading_C(temps, i, ch);
+    if (valid(v)) {
       ++i;
       continue;
     }
-    const double sp = *temps[i].chamber_setpoint_C;
     std::size_t k = i;
-    while (k + 1 < n && temps[k + 1].chamber_setpoint_C && *temps[k + 1].chamber_setpoint_C == sp) ++k;
-    const double t0 = t_of(i), t1 = t_of(k);
+    while (k + 1 < n && !valid(reading_C(temps, k + 1, ch))) ++k;
+    out.push_back({channel_label(ch), "no valid reading (" + fmt("%g", v) + " C)", time_s(temps, i),
+                   k + 1 < n ? time_s(temps, k + 1) : time_s(temps, n - 1), channel_bit(ch)});
+    i = k + 1;
+  }
+}
+
+// Jumps: a step no physical temperature makes; the channel is suspect until it steps back. A step
+// where a stuck run ends (stuck_ends) is the sensor coming unstuck.
+void find_jumps(const std::vector<TempSample>& temps, int ch, const std::vector<std::size_t>& stuck_ends,
+                const CheckOptions& o, std::vector<TempProblem>& out) {
+  const auto n = temps.size();
+  for (std::size_t i = 1; i < n; ++i) {
+    const double a = reading_C(temps, i - 1, ch), b = reading_C(temps, i, ch);
+    if (!std::isfinite(a) || !std::isfinite(b)) continue;
+    if (std::find(stuck_ends.begin(), stuck_ends.end(), i - 1) != stuck_ends.end()) continue;  // coming unstuck
+    const double allowed = o.jump_C + o.max_rate_C_per_min / 60.0 * (time_s(temps, i) - time_s(temps, i - 1));
+    if (std::abs(b - a) <= allowed) continue;
+    const double step = b - a;
+    const std::size_t back = jump_back(i, n, step, [&](std::size_t m) { return reading_C(temps, m, ch); });
+    out.push_back({channel_label(ch), jump_text(temps, i, back, step), time_s(temps, i - 1),
+                   back < n ? time_s(temps, back) : time_s(temps, n - 1), channel_bit(ch)});
+    i = back < n ? back : n;
+  }
+}
+
+// Gaps: no samples while the temperatures moved (a run-length store may skip unchanged ones).
+void find_gaps(const std::vector<TempSample>& temps, const CheckOptions& o, std::vector<TempProblem>& out) {
+  for (std::size_t i = 1; i < temps.size(); ++i) {
+    const double dt = time_s(temps, i) - time_s(temps, i - 1);
+    if (dt <= o.gap_s) continue;
+    double moved = 0;
+    for (int ch = 0; ch <= kChamber; ++ch)
+      moved = std::max(moved, std::abs(reading_C(temps, i, ch) - reading_C(temps, i - 1, ch)));
+    if (moved > 0.05)
+      out.push_back({"all", "no temperature samples for " + fmt("%.0f", dt) + " s while they moved by " +
+                                fmt("%.2f", moved) + " C",
+                     time_s(temps, i - 1), time_s(temps, i), 0x3Fu});
+  }
+}
+
+// The chamber at the end of each soak long enough to judge: within its tolerance of the set point.
+void find_missed_setpoints(const std::vector<TempSample>& temps, const CheckOptions& o, std::vector<TempProblem>& out) {
+  const auto n = temps.size();
+  for (std::size_t i = 0; i < n;) {
+    const std::optional<double>& setpoint_C = temps[i].chamber_setpoint_C;
+    if (!setpoint_C) {
+      ++i;
+      continue;
+    }
+    const double sp = *setpoint_C;
+    std::size_t k = i;
+    // The soak: the samples after i with the same set point.
+    for (; k + 1 < n; ++k) {
+      const std::optional<double>& next_C = temps[k + 1].chamber_setpoint_C;
+      if (!next_C || *next_C != sp) break;
+    }
+    const double t0 = time_s(temps, i), t1 = time_s(temps, k);
     if (t1 - t0 >= o.setpoint_settle_s && std::abs(temps[k].chamber_C - sp) > o.setpoint_tolerance_C)
       out.push_back({"temp_chamber_C",
                      "never reached the set point " + fmt("%.2f", sp) + " C (air " + fmt("%.2f", temps[k].chamber_C) +
@@ -470,6 +490,32 @@ std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps
                      t0, t1, 0x3Fu});
     i = k + 1;
   }
+}
+
+}  // namespace
+
+std::vector<TempProblem> check_temperatures(const std::vector<TempSample>& temps, const CheckOptions& o) {
+  std::vector<TempProblem> out;
+  if (temps.empty()) {
+    out.push_back({"all", "no temperature samples at all", 0.0, 0.0, 0x3Fu});
+    return out;
+  }
+  std::vector<std::vector<std::size_t>> stuck_end(kChannels + 1);
+  find_stuck_channels(temps, o, out, stuck_end);
+  // The eight sensors of each coil, when every sample carries them: the same stuck and jump rules
+  // per sensor, the coil's other seven the witnesses that the temperature moved, so that the
+  // report names the sensor that broke (a problem of the coil mean below says what it did to the
+  // channel the models use). A sensor coming unstuck moves the mean by a step that is no jump.
+  const bool with_coil_sensors =
+      std::all_of(temps.begin(), temps.end(), [](const TempSample& s) { return s.coil_sensors_C.has_value(); });
+  for (std::size_t c = 0; c < 3 && with_coil_sensors; ++c)
+    for (std::size_t k = 0; k < 8; ++k) check_coil_sensor(temps, c, k, o, out, stuck_end[c]);
+  for (int ch = 0; ch <= kChamber; ++ch) {
+    find_invalid_readings(temps, ch, o, out);
+    find_jumps(temps, ch, stuck_end[static_cast<std::size_t>(ch)], o, out);
+  }
+  find_gaps(temps, o, out);
+  find_missed_setpoints(temps, o, out);
   std::sort(out.begin(), out.end(), [](const TempProblem& a, const TempProblem& b) { return a.t0_s < b.t0_s; });
   return out;
 }
