@@ -456,21 +456,14 @@ std::map<std::string, ImuErrorSet> uncertainty_budget(const std::vector<Interval
   return budget;
 }
 
-Result DirectCalibrator::finish(const ImuModel& seed) const {
-  if (seed.frame != "instrument")
-    throw std::invalid_argument("stage direct: give the seed model in the instrument frame");
-  Result res;
-  res.model = seed;
-  ImuErrorSet sigma = seed.sigma.value_or(ImuErrorSet{});
+namespace {
 
-  Selection sel = select_intervals(intervals_, options_);
-  res.notes = std::move(sel.notes);
+// What the selected intervals cannot determine, each said with the motion that would: the
+// accelerometers need statics with each axis up and down, the gyros rotations of both signs about
+// each axis and statics for their biases. Empty when the recording determines every coefficient.
+std::vector<std::string> undetermined_by_motion(const Selection& sel, double g_mps2) {
   const std::vector<const Interval*>& statics = sel.statics;
   const std::vector<const Interval*>& rotations = sel.rotations;
-  res.statics = static_cast<int>(statics.size());
-  res.rotations = static_cast<int>(rotations.size());
-  for (const Interval* s : statics) res.static_time_s += s->T_s;
-
   std::vector<std::string> missing;
   // ---------------- accelerometers: multi-position in the gravity field
   const auto ns = static_cast<Eigen::Index>(statics.size());
@@ -482,7 +475,7 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
       fmax = std::max(fmax, s->f_o_mps2[j]);
       fmin = std::min(fmin, s->f_o_mps2[j]);
     }
-    if (fmax < 0.5 * g_mps2_ || fmin > -0.5 * g_mps2_)
+    if (fmax < 0.5 * g_mps2 || fmin > -0.5 * g_mps2)
       missing.push_back(std::string("accelerometer ") + kAxis[j] + " bias_mps2 and scale_ppm: the " + kAxis[j] +
                         " axis was never pointed both up and down (add static positions with it vertical, both ways)");
   }
@@ -502,16 +495,18 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                         " axis (add a single-axis rate run with negative rate about it)");
   }
   if (statics.empty()) missing.push_back("gyro biases: no static interval");
-  if (!missing.empty()) {
-    std::string msg = "stage direct: the recording cannot determine:";
-    for (const auto& m : missing) msg += "\n  - " + m;
-    throw UndeterminedError(msg);
-  }
+  return missing;
+}
 
-  // ---------------- white noise from the statics: per-sample variance about each static's mean.
-  // It gives the ARW and VRW, and the variance per unit weight the fits' sigmas are scaled with
-  // while their residuals agree with it (least_squares::variance_factor): a static's mean specific
-  // force has variance VRW^2 / T (weight T), an interval's summed angle ARW^2 T (weight 1/T).
+// The white noise of the statics: per-sample variance about each static's mean, as a density.
+// It gives the ARW and VRW, and the variance per unit weight the fits' sigmas are scaled with
+// while their residuals agree with it (least_squares::variance_factor): a static's mean specific
+// force has variance VRW^2 / T (weight T), an interval's summed angle ARW^2 T (weight 1/T).
+struct WhiteNoise {
+  Vector3d arw_sq_rad2_per_s;  // per gyro, (rad/sqrt(s))^2
+  Vector3d vrw_sq_m2_per_s3;  // per accelerometer, (m/s/sqrt(s))^2
+};
+WhiteNoise white_noise_of_statics(const std::vector<const Interval*>& statics) {
   Vector3d var_g = Vector3d::Zero(), var_a = Vector3d::Zero();
   double n_used = 0, T_used = 0;
   for (const Interval* s : statics) {
@@ -525,8 +520,15 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
   const double dt = n_used > 0 ? T_used / n_used : 0.0;
   const Vector3d arw_sq = dt > 0 ? Vector3d((var_g / n_used / dt).cwiseMax(0)) : Vector3d::Zero();
   const Vector3d vrw_sq = dt > 0 ? Vector3d((var_a / n_used / dt).cwiseMax(0)) : Vector3d::Zero();
+  return {arw_sq, vrw_sq};
+}
 
-  AccelErrors& acc = res.model.accel;
+// The accelerometers' bias, scale and angles from the statics, from zero: four passes, each
+// design linearised about the previous pass's errors (the angles' columns carry the scale). Their
+// type A sigma into `sigma_accel`; returns the residual variance per unit weight, the mean of the
+// three accelerometers' ((m/s^2)^2 s).
+double fit_accelerometers(const Selection& sel, const Vector3d& vrw_sq_m2_per_s3, AccelErrors& acc,
+                          AccelErrors& sigma_accel) {
   acc.bias_mps2.setZero();
   acc.scale.setZero();
   acc.misalignment_rad = {};
@@ -541,11 +543,11 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                                 ": bias, scale and angles are not separable with these positions (add positions with "
                                 "each of the other axes vertical)");
       const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
-      const double s0sq = least_squares::variance_factor(fit, vrw_sq[j]);
+      const double s0sq = least_squares::variance_factor(fit, vrw_sq_m2_per_s3[j]);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.accel, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
+        coefficient(sigma_accel, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
       }
       acc_rms_sq += fit.s0sq / 3.0;
     }
@@ -553,11 +555,14 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     acc.scale = next.scale;
     acc.misalignment_rad = next.misalignment_rad;
   }
-  // rms per unit weight is in (m/s^2) sqrt(s): report it for a 1 s average
-  res.accel_residual_rms_mps2 = std::sqrt(acc_rms_sq);
+  return acc_rms_sq;
+}
 
-  // ---------------- gyros: statics against the Earth rate, rotations against the table
-  GyroErrors& gy = res.model.gyro;
+// The gyros' bias, scale factor per sign and angles: statics against the Earth rate, rotations
+// against the table; four passes from zero as for the accelerometers. Their type A sigma into
+// `sigma_gyro`; returns the residual variance per unit weight, the mean of the three gyros'
+// (rad^2 / s).
+double fit_gyros(const Selection& sel, const Vector3d& arw_sq_rad2_per_s, GyroErrors& gy, GyroErrors& sigma_gyro) {
   gy.bias_radps.setZero();
   gy.scale_pos.setZero();
   gy.scale_neg.setZero();
@@ -573,11 +578,11 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                                 ": bias, scale factors and angles are not separable (add statics and single-axis "
                                 "rotations of both signs about every axis)");
       const least_squares::Fit fit = least_squares::solve(d.A, d.b, d.w);
-      const double s0sq = least_squares::variance_factor(fit, arw_sq[j]);
+      const double s0sq = least_squares::variance_factor(fit, arw_sq_rad2_per_s[j]);
       for (std::size_t c = 0; c < d.columns.size(); ++c) {
         const auto i = static_cast<Eigen::Index>(c);
         coefficient(next, d.columns[c], j) = fit.x[i];
-        coefficient(sigma.gyro, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
+        coefficient(sigma_gyro, d.columns[c], j) = std::sqrt(fit.normal_inverse(i, i) * s0sq);
       }
       gyro_rms_sq += fit.s0sq / 3.0;
     }
@@ -586,10 +591,53 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
     gy.scale_neg = next.scale_neg;
     gy.misalignment_rad = next.misalignment_rad;
   }
-  res.gyro_residual_rms_rad = std::sqrt(gyro_rms_sq);
+  return gyro_rms_sq;
+}
 
-  gy.noise.arw_rad_rts = arw_sq.cwiseSqrt().mean();
-  acc.noise.vrw_mps_rts = vrw_sq.cwiseSqrt().mean();
+// The terms stage 1 takes from the start model (a rate-steps or tumble model), not estimating
+// them: said, so that nobody reads their sigma as this run's. Empty when there are none.
+std::string start_model_terms_note(const GyroErrors& gy, const AccelErrors& acc) {
+  std::vector<std::string> fixed;
+  if (!gy.scale_nonlinear.isZero(0.0)) fixed.emplace_back("gyro scale_nonlinear_ppm");
+  if (!gy.g_sensitivity_radps_per_g.isZero(0.0)) fixed.emplace_back("gyro g_sensitivity_dph_per_g");
+  if (!acc.k2_per_g.isZero(0.0)) fixed.emplace_back("accel k2_ug_per_g2");
+  if (!acc.k3_per_g2.isZero(0.0)) fixed.emplace_back("accel k3_ug_per_g3");
+  if (fixed.empty()) return {};
+  std::string text = "stage direct: taken from the start model and removed from the measurements (not estimated here): ";
+  for (std::size_t i = 0; i < fixed.size(); ++i) text += (i ? ", " : "") + fixed[i];
+  return text;
+}
+
+}  // namespace
+
+Result DirectCalibrator::finish(const ImuModel& seed) const {
+  if (seed.frame != "instrument")
+    throw std::invalid_argument("stage direct: give the seed model in the instrument frame");
+  Result res;
+  res.model = seed;
+  ImuErrorSet sigma = seed.sigma.value_or(ImuErrorSet{});
+
+  Selection sel = select_intervals(intervals_, options_);
+  res.notes = std::move(sel.notes);
+  res.statics = static_cast<int>(sel.statics.size());
+  res.rotations = static_cast<int>(sel.rotations.size());
+  for (const Interval* s : sel.statics) res.static_time_s += s->T_s;
+
+  if (const std::vector<std::string> missing = undetermined_by_motion(sel, g_mps2_); !missing.empty()) {
+    std::string msg = "stage direct: the recording cannot determine:";
+    for (const auto& m : missing) msg += "\n  - " + m;
+    throw UndeterminedError(msg);
+  }
+
+  const WhiteNoise noise = white_noise_of_statics(sel.statics);
+  AccelErrors& acc = res.model.accel;
+  // rms per unit weight is in (m/s^2) sqrt(s): report it for a 1 s average
+  res.accel_residual_rms_mps2 = std::sqrt(fit_accelerometers(sel, noise.vrw_sq_m2_per_s3, acc, sigma.accel));
+  GyroErrors& gy = res.model.gyro;
+  res.gyro_residual_rms_rad = std::sqrt(fit_gyros(sel, noise.arw_sq_rad2_per_s, gy, sigma.gyro));
+
+  gy.noise.arw_rad_rts = noise.arw_sq_rad2_per_s.cwiseSqrt().mean();
+  acc.noise.vrw_mps_rts = noise.vrw_sq_m2_per_s3.cwiseSqrt().mean();
 
   // ---------------- the uncertainty budget: sigma so far is the fit's own (type A)
   const ImuErrorSet start_sigma = options_.type_b ? seed.sigma.value_or(ImuErrorSet{}) : ImuErrorSet{};
@@ -597,18 +645,7 @@ Result DirectCalibrator::finish(const ImuModel& seed) const {
                                         seed.budget);
   res.model.sigma = sigma;
   res.model.frame = "instrument";
-  // The terms stage 1 takes from the start model (a rate-steps or tumble model), not estimating
-  // them: said, so that nobody reads their sigma as this run's.
-  std::vector<std::string> fixed;
-  if (!gy.scale_nonlinear.isZero(0.0)) fixed.emplace_back("gyro scale_nonlinear_ppm");
-  if (!gy.g_sensitivity_radps_per_g.isZero(0.0)) fixed.emplace_back("gyro g_sensitivity_dph_per_g");
-  if (!acc.k2_per_g.isZero(0.0)) fixed.emplace_back("accel k2_ug_per_g2");
-  if (!acc.k3_per_g2.isZero(0.0)) fixed.emplace_back("accel k3_ug_per_g3");
-  if (!fixed.empty()) {
-    std::string text = "stage direct: taken from the start model and removed from the measurements (not estimated here): ";
-    for (std::size_t i = 0; i < fixed.size(); ++i) text += (i ? ", " : "") + fixed[i];
-    res.notes.push_back(text);
-  }
+  if (std::string note = start_model_terms_note(gy, acc); !note.empty()) res.notes.push_back(std::move(note));
   char buf[200];
   std::snprintf(buf, sizeof buf, "stage direct: %d statics (%.0f s), %d rotations used", res.statics, res.static_time_s,
                 res.rotations);

@@ -58,6 +58,201 @@ Eigen::Matrix3d gyro_prior_sigma(const ImuModel& prior) {
   return out;
 }
 
+// The statics a fit may use: two frames or more, and none with a gap in its frames (the mean over
+// a gap is not the mean over the static). The ones left out for a gap are counted for the note.
+struct UsableStatics {
+  std::vector<const Static*> rows;
+  int left_out_for_gap = 0;
+};
+UsableStatics usable_statics(const std::vector<Static>& statics) {
+  UsableStatics out;
+  for (const Static& s : statics) {
+    if (s.frames < 2) continue;
+    if (s.gap) {
+      ++out.left_out_for_gap;
+      continue;
+    }
+    out.rows.push_back(&s);
+  }
+  return out;
+}
+
+// Each static's weight: its duration, as a mean's variance falls as 1/T.
+VectorXd weights_by_duration(const std::vector<const Static*>& rows) {
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  VectorXd w(n);
+  for (Eigen::Index i = 0; i < n; ++i) w[i] = rows[static_cast<std::size_t>(i)]->T_s;
+  return w;
+}
+
+// Accelerometer j's least squares: its terms (x: bias, scale, K2, K3, then the angles of `angles`
+// in their order) and its residual at each static, m/s^2.
+struct AccelRowFit {
+  std::vector<AngleColumn> angles;
+  least_squares::Fit fit;
+  VectorXd residual_mps2;
+};
+AccelRowFit fit_accelerometer_row(int j, const std::vector<const Static*>& rows, const VectorXd& w) {
+  constexpr double g = units::kStandardGravity_mps2;
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  // Accelerometer j's mean output against the reference specific force.
+  AccelRowFit out;
+  out.angles = angles_of_row(j);
+  const std::vector<AngleColumn>& angles = out.angles;
+  MatrixXd A(n, 4 + static_cast<Eigen::Index>(angles.size()));
+  VectorXd b(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Static& s = *rows[static_cast<std::size_t>(i)];
+    const double fj = s.f_o_mps2[j];
+    A(i, 0) = 1.0;                  // bias
+    A(i, 1) = fj;                   // scale
+    A(i, 2) = fj * fj / g;          // K2: the scale error gains k2 a, a = f_j / g
+    A(i, 3) = fj * fj * fj / (g * g);  // K3: the scale error gains k3 a^2
+    for (std::size_t c = 0; c < angles.size(); ++c) A(i, 4 + static_cast<Eigen::Index>(c)) = angles[c].row_per_rad.dot(s.f_o_mps2);
+    b[i] = s.sum_dv_mps[j] / s.T_s - fj;
+  }
+  if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "tumble: the statics do not determine accelerometer %s's bias, scale, K2, K3 and angles (it must "
+                  "turn through a whole vertical circle: run the tumble or tumble-short program)",
+                  kAxis[j]);
+    throw std::runtime_error(buf);
+  }
+  out.fit = least_squares::solve(A, b, w);
+  out.residual_mps2 = b - A * out.fit.x;
+  return out;
+}
+
+// Accelerometer j's terms and sigmas into the model, its residuals into the positions.
+void store_accelerometer_row(int j, const AccelRowFit& row, Result& out, ImuErrorSet& sigma) {
+  const least_squares::Fit& fit = row.fit;
+  AccelErrors& a = out.model.accel;
+  a.bias_mps2[j] = fit.x[0];
+  a.scale[j] = fit.x[1];
+  a.k2_per_g[j] = fit.x[2];
+  a.k3_per_g2[j] = fit.x[3];
+  sigma.accel.bias_mps2[j] = std::sqrt(fit.covariance(0, 0));
+  sigma.accel.scale[j] = std::sqrt(fit.covariance(1, 1));
+  sigma.accel.k2_per_g[j] = std::sqrt(fit.covariance(2, 2));
+  sigma.accel.k3_per_g2[j] = std::sqrt(fit.covariance(3, 3));
+  for (std::size_t c = 0; c < row.angles.size(); ++c) {
+    const auto k = static_cast<Eigen::Index>(4 + c);
+    a.misalignment_rad.*(row.angles[c].key->member) = fit.x[k];
+    sigma.accel.misalignment_rad.*(row.angles[c].key->member) = std::sqrt(fit.covariance(k, k));
+  }
+  const VectorXd& r = row.residual_mps2;
+  const auto n = r.size();
+  for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].accel_residual_mps2[j] = r[i];
+  out.accel_residual_rms_mps2[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
+}
+
+// The prior's gyro scale factors and misalignments alone: what takes the Earth rate out of each
+// gyro's mean at rest (its bias and g-sensitivity are what the tumble fits).
+GyroErrors earth_rate_model(const ImuModel& prior) {
+  GyroErrors earth_model = prior.gyro;
+  earth_model.bias_radps.setZero();
+  earth_model.g_sensitivity_radps_per_g.setZero();
+  return earth_model;
+}
+
+// The Earth rate's vertical part turns with the specific force through the whole tumble (both are
+// fixed in the local level frame), so an error in the prior's D S (the gyros' misalignments and
+// scale factors that take the Earth rate out) is exactly a g-sensitivity: element (j, k) of D S
+// off by e puts e times the vertical Earth rate into g-sensitivity (j, k), per g. Its sigma
+// carries the prior's uncertainty so; a prior without gyro terms or sigma is said to confound
+// them.
+bool gyro_terms_confounded(const ImuModel& prior) {
+  return !prior.sigma && prior.gyro.scale_pos.isZero(0.0) && prior.gyro.scale_neg.isZero(0.0) &&
+         (misalignment_matrix(prior.gyro.misalignment_rad) - Eigen::Matrix3d::Identity()).isZero(0.0);
+}
+std::string confounded_gyro_note(double earth_vertical_radps) {
+  char confounded[400];
+  std::snprintf(confounded, sizeof confounded,
+                "tumble: no stage-1 model given: the gyro g-sensitivity holds the gyros' misalignments and scale "
+                "errors times the vertical Earth rate (%.2f deg/h here: every 10 arcsec of misalignment is %.5f "
+                "deg/h/g), which its sigma does not include; give the tumble a stage-1 start model",
+                earth_vertical_radps * units::kRadpsToDph,
+                10.0 * units::kArcsecToRad * earth_vertical_radps * units::kRadpsToDph);
+  return confounded;
+}
+
+// Gyro j's least squares at rest: what it measured beyond the Earth rate (through the prior's
+// scale factors and misalignments, `earth_model`) against the specific force at its origin, in g.
+// x: bias, then the g-sensitivity row; the residual at each static in rad/s.
+struct GyroRowFit {
+  least_squares::Fit fit;
+  VectorXd residual_radps;
+};
+GyroRowFit fit_gyro_row(int j, const std::vector<const Static*>& rows, const VectorXd& w, const GyroErrors& earth_model) {
+  constexpr double g = units::kStandardGravity_mps2;
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  MatrixXd A(n, 4);
+  VectorXd b(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Static& s = *rows[static_cast<std::size_t>(i)];
+    A(i, 0) = 1.0;
+    A.block(i, 1, 1, 3) = s.f_o_mps2.transpose() / g;
+    const Vector3d earth_out = apply_gyro_scale_misalignment(earth_model, s.earth_rad / s.T_s);
+    b[i] = s.sum_dtheta_rad[j] / s.T_s - earth_out[j];
+  }
+  if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "tumble: the statics do not determine gyro %s's g-sensitivity (the specific force must point "
+                  "along every axis of the IMU: run the tumble or tumble-short program)",
+                  kAxis[j]);
+    throw std::runtime_error(buf);
+  }
+  GyroRowFit out;
+  out.fit = least_squares::solve(A, b, w);
+  out.residual_radps = b - A * out.fit.x;
+  return out;
+}
+
+// Gyro j's bias and g-sensitivity row with their sigmas into the model, its residuals into the
+// positions.
+void store_gyro_row(int j, const GyroRowFit& row, const Eigen::Matrix3d& prior_DS_sigma, double earth_vertical_radps,
+                    Result& out, ImuErrorSet& sigma) {
+  const least_squares::Fit& fit = row.fit;
+  out.model.gyro.bias_radps[j] = fit.x[0];
+  sigma.gyro.bias_radps[j] = std::sqrt(fit.covariance(0, 0));
+  for (int k = 0; k < 3; ++k) {
+    out.model.gyro.g_sensitivity_radps_per_g(j, k) = fit.x[1 + k];
+    // Type B: the prior's uncertainty in element (j, k) of D S moves this term by as much times
+    // the Earth rate's vertical component (see gyro_prior_sigma).
+    const double prior_part = prior_DS_sigma(j, k) * earth_vertical_radps;
+    sigma.gyro.g_sensitivity_radps_per_g(j, k) = std::sqrt(fit.covariance(1 + k, 1 + k) + prior_part * prior_part);
+  }
+  const VectorXd& r = row.residual_radps;
+  const auto n = r.size();
+  for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].gyro_residual_radps[j] = r[i];
+  out.gyro_residual_rms_radps[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
+}
+
+// What each position was: its static, its duration, the reference and the accelerometers' mean.
+void describe_positions(const std::vector<const Static*>& rows, std::vector<Position>& positions) {
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Static& s = *rows[i];
+    Position& p = positions[i];
+    p.segment = s.name;
+    p.duration_s = s.T_s;
+    p.f_o_mps2 = s.f_o_mps2;
+    p.accel_mps2 = s.sum_dv_mps / s.T_s;
+  }
+}
+
+std::string summary_note(const Result& r, Eigen::Index statics) {
+  constexpr double g = units::kStandardGravity_mps2;
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "tumble: %lld statics; accelerometer residual rms %.2f %.2f %.2f ug, gyro %.4f %.4f %.4f deg/h",
+                static_cast<long long>(statics), r.accel_residual_rms_mps2[0] / g * 1e6, r.accel_residual_rms_mps2[1] / g * 1e6,
+                r.accel_residual_rms_mps2[2] / g * 1e6, r.gyro_residual_rms_radps[0] * units::kRadpsToDph,
+                r.gyro_residual_rms_radps[1] * units::kRadpsToDph, r.gyro_residual_rms_radps[2] * units::kRadpsToDph);
+  return buf;
+}
+
 }  // namespace
 
 struct TumbleEstimator::Impl {
@@ -112,20 +307,11 @@ Result TumbleEstimator::finish(const ImuModel& prior) const {
   out.model.frame = "instrument";
   if (!out.model.sigma) out.model.sigma = ImuErrorSet{};
   ImuErrorSet& sigma = *out.model.sigma;
-  constexpr double g = units::kStandardGravity_mps2;
-  char buf[256];
 
-  std::vector<const Static*> rows;
-  int gaps = 0;
-  for (const Static& s : impl_->statics) {
-    if (s.frames < 2) continue;
-    if (s.gap) {
-      ++gaps;
-      continue;
-    }
-    rows.push_back(&s);
-  }
-  if (gaps) out.notes.push_back(std::to_string(gaps) + " static(s) left out: a gap in the frames");
+  const UsableStatics usable = usable_statics(impl_->statics);
+  if (usable.left_out_for_gap)
+    out.notes.push_back(std::to_string(usable.left_out_for_gap) + " static(s) left out: a gap in the frames");
+  const std::vector<const Static*>& rows = usable.rows;
   const auto n = static_cast<Eigen::Index>(rows.size());
   // Each accelerometer: bias, scale, K2, K3, two angles. Each gyro: bias and a g-sensitivity row.
   if (n < 12)
@@ -133,119 +319,19 @@ Result TumbleEstimator::finish(const ImuModel& prior) const {
                              " statics; the tumble needs 12 at least, at many angles of a whole turn in two vertical "
                              "planes (run the tumble or tumble-short program)");
   out.positions.resize(static_cast<std::size_t>(n));
-  VectorXd w(n);
-  for (Eigen::Index i = 0; i < n; ++i) w[i] = rows[static_cast<std::size_t>(i)]->T_s;  // a mean's variance falls as 1/T
+  const VectorXd w = weights_by_duration(rows);
 
-  for (int j = 0; j < 3; ++j) {
-    // Accelerometer j's mean output against the reference specific force.
-    const std::vector<AngleColumn> angles = angles_of_row(j);
-    MatrixXd A(n, 4 + static_cast<Eigen::Index>(angles.size()));
-    VectorXd b(n);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const Static& s = *rows[static_cast<std::size_t>(i)];
-      const double fj = s.f_o_mps2[j];
-      A(i, 0) = 1.0;                  // bias
-      A(i, 1) = fj;                   // scale
-      A(i, 2) = fj * fj / g;          // K2: the scale error gains k2 a, a = f_j / g
-      A(i, 3) = fj * fj * fj / (g * g);  // K3: the scale error gains k3 a^2
-      for (std::size_t c = 0; c < angles.size(); ++c) A(i, 4 + static_cast<Eigen::Index>(c)) = angles[c].row_per_rad.dot(s.f_o_mps2);
-      b[i] = s.sum_dv_mps[j] / s.T_s - fj;
-    }
-    if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
-      std::snprintf(buf, sizeof buf,
-                    "tumble: the statics do not determine accelerometer %s's bias, scale, K2, K3 and angles (it must "
-                    "turn through a whole vertical circle: run the tumble or tumble-short program)",
-                    kAxis[j]);
-      throw std::runtime_error(buf);
-    }
-    const least_squares::Fit fit = least_squares::solve(A, b, w);
-    AccelErrors& a = out.model.accel;
-    a.bias_mps2[j] = fit.x[0];
-    a.scale[j] = fit.x[1];
-    a.k2_per_g[j] = fit.x[2];
-    a.k3_per_g2[j] = fit.x[3];
-    sigma.accel.bias_mps2[j] = std::sqrt(fit.covariance(0, 0));
-    sigma.accel.scale[j] = std::sqrt(fit.covariance(1, 1));
-    sigma.accel.k2_per_g[j] = std::sqrt(fit.covariance(2, 2));
-    sigma.accel.k3_per_g2[j] = std::sqrt(fit.covariance(3, 3));
-    for (std::size_t c = 0; c < angles.size(); ++c) {
-      const auto k = static_cast<Eigen::Index>(4 + c);
-      a.misalignment_rad.*(angles[c].key->member) = fit.x[k];
-      sigma.accel.misalignment_rad.*(angles[c].key->member) = std::sqrt(fit.covariance(k, k));
-    }
-    const VectorXd r = b - A * fit.x;
-    for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].accel_residual_mps2[j] = r[i];
-    out.accel_residual_rms_mps2[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
-  }
+  for (int j = 0; j < 3; ++j) store_accelerometer_row(j, fit_accelerometer_row(j, rows, w), out, sigma);
 
-  // Each gyro at rest: what it measured beyond the Earth rate (through the prior's scale factors
-  // and misalignments) against the specific force at its origin, in g.
-  GyroErrors earth_model = prior.gyro;
-  earth_model.bias_radps.setZero();
-  earth_model.g_sensitivity_radps_per_g.setZero();
-  // The Earth rate's vertical part turns with the specific force through the whole tumble (both are
-  // fixed in the local level frame), so an error in the prior's D S (the gyros' misalignments and
-  // scale factors that take the Earth rate out) is exactly a g-sensitivity: element (j, k) of D S
-  // off by e puts e times the vertical Earth rate into g-sensitivity (j, k), per g. Its sigma
-  // carries the prior's uncertainty so; a prior without gyro terms or sigma is said to confound
-  // them.
+  if (gyro_terms_confounded(prior))
+    out.notes.push_back(confounded_gyro_note(impl_->earth_vertical_radps));
+  const GyroErrors earth_model = earth_rate_model(prior);
   const Eigen::Matrix3d prior_DS_sigma = gyro_prior_sigma(prior);
-  if (!prior.sigma && prior.gyro.scale_pos.isZero(0.0) && prior.gyro.scale_neg.isZero(0.0) &&
-      (misalignment_matrix(prior.gyro.misalignment_rad) - Eigen::Matrix3d::Identity()).isZero(0.0)) {
-    char confounded[400];
-    std::snprintf(confounded, sizeof confounded,
-                  "tumble: no stage-1 model given: the gyro g-sensitivity holds the gyros' misalignments and scale "
-                  "errors times the vertical Earth rate (%.2f deg/h here: every 10 arcsec of misalignment is %.5f "
-                  "deg/h/g), which its sigma does not include; give the tumble a stage-1 start model",
-                  impl_->earth_vertical_radps * units::kRadpsToDph,
-                  10.0 * units::kArcsecToRad * impl_->earth_vertical_radps * units::kRadpsToDph);
-    out.notes.push_back(confounded);
-  }
-  for (int j = 0; j < 3; ++j) {
-    MatrixXd A(n, 4);
-    VectorXd b(n);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const Static& s = *rows[static_cast<std::size_t>(i)];
-      A(i, 0) = 1.0;
-      A.block(i, 1, 1, 3) = s.f_o_mps2.transpose() / g;
-      const Vector3d earth_out = apply_gyro_scale_misalignment(earth_model, s.earth_rad / s.T_s);
-      b[i] = s.sum_dtheta_rad[j] / s.T_s - earth_out[j];
-    }
-    if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
-      std::snprintf(buf, sizeof buf,
-                    "tumble: the statics do not determine gyro %s's g-sensitivity (the specific force must point "
-                    "along every axis of the IMU: run the tumble or tumble-short program)",
-                    kAxis[j]);
-      throw std::runtime_error(buf);
-    }
-    const least_squares::Fit fit = least_squares::solve(A, b, w);
-    out.model.gyro.bias_radps[j] = fit.x[0];
-    sigma.gyro.bias_radps[j] = std::sqrt(fit.covariance(0, 0));
-    for (int k = 0; k < 3; ++k) {
-      out.model.gyro.g_sensitivity_radps_per_g(j, k) = fit.x[1 + k];
-      // Type B: the prior's uncertainty in element (j, k) of D S moves this term by as much times
-      // the Earth rate's vertical component (see gyro_prior_sigma below).
-      const double prior_part = prior_DS_sigma(j, k) * impl_->earth_vertical_radps;
-      sigma.gyro.g_sensitivity_radps_per_g(j, k) = std::sqrt(fit.covariance(1 + k, 1 + k) + prior_part * prior_part);
-    }
-    const VectorXd r = b - A * fit.x;
-    for (Eigen::Index i = 0; i < n; ++i) out.positions[static_cast<std::size_t>(i)].gyro_residual_radps[j] = r[i];
-    out.gyro_residual_rms_radps[j] = std::sqrt(r.squaredNorm() / static_cast<double>(n));
-  }
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const Static& s = *rows[static_cast<std::size_t>(i)];
-    Position& p = out.positions[static_cast<std::size_t>(i)];
-    p.segment = s.name;
-    p.duration_s = s.T_s;
-    p.f_o_mps2 = s.f_o_mps2;
-    p.accel_mps2 = s.sum_dv_mps / s.T_s;
-  }
-  std::snprintf(buf, sizeof buf,
-                "tumble: %lld statics; accelerometer residual rms %.2f %.2f %.2f ug, gyro %.4f %.4f %.4f deg/h",
-                static_cast<long long>(n), out.accel_residual_rms_mps2[0] / g * 1e6, out.accel_residual_rms_mps2[1] / g * 1e6,
-                out.accel_residual_rms_mps2[2] / g * 1e6, out.gyro_residual_rms_radps[0] * units::kRadpsToDph,
-                out.gyro_residual_rms_radps[1] * units::kRadpsToDph, out.gyro_residual_rms_radps[2] * units::kRadpsToDph);
-  out.notes.push_back(buf);
+  for (int j = 0; j < 3; ++j)
+    store_gyro_row(j, fit_gyro_row(j, rows, w, earth_model), prior_DS_sigma, impl_->earth_vertical_radps, out, sigma);
+
+  describe_positions(rows, out.positions);
+  out.notes.push_back(summary_note(out, n));
   return out;
 }
 

@@ -20,13 +20,8 @@ WEB_DIR = os.path.join("web", "js")
 WEB_LIMIT = 150
 MARKER = "function-size: a table of data"
 
-# file: {function: lines}. Shrinks as issue 37 splits them.
-KNOWN = {
-    "estimators/direct_calibration.cpp": {"DirectCalibrator::finish": 159},
-    "estimators/rate_steps.cpp": {"RateStepsEstimator::finish": 209},
-    "estimators/thermal_run.cpp": {"check_temperatures": 194, "run_stage": 328},
-    "estimators/tumble.cpp": {"TumbleEstimator::finish": 142},
-}
+# file: {function: lines}: the debt issue 37 found, paid off; a function over its limit now fails.
+KNOWN = {}
 
 
 def blank_comments_and_strings(text, js):
