@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <string>
 
 #include "core/earth.hpp"
 #include "core/units.hpp"
@@ -92,6 +93,13 @@ struct AccelRowFit {
   least_squares::Fit fit;
   VectorXd residual_mps2;
 };
+// Throws, naming `what` the statics leave undetermined and the program that determines it, when
+// the fit's columns are (nearly) dependent.
+void require_determined(const MatrixXd& A, const VectorXd& w, const std::string& what) {
+  if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10)
+    throw std::runtime_error("tumble: the statics do not determine " + what + ": run the tumble or tumble-short program)");
+}
+
 AccelRowFit fit_accelerometer_row(int j, const std::vector<const Static*>& rows, const VectorXd& w) {
   constexpr double g = units::kStandardGravity_mps2;
   const auto n = static_cast<Eigen::Index>(rows.size());
@@ -111,14 +119,8 @@ AccelRowFit fit_accelerometer_row(int j, const std::vector<const Static*>& rows,
     for (std::size_t c = 0; c < angles.size(); ++c) A(i, 4 + static_cast<Eigen::Index>(c)) = angles[c].row_per_rad.dot(s.f_o_mps2);
     b[i] = s.sum_dv_mps[j] / s.T_s - fj;
   }
-  if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
-    char buf[256];
-    std::snprintf(buf, sizeof buf,
-                  "tumble: the statics do not determine accelerometer %s's bias, scale, K2, K3 and angles (it must "
-                  "turn through a whole vertical circle: run the tumble or tumble-short program)",
-                  kAxis[j]);
-    throw std::runtime_error(buf);
-  }
+  require_determined(A, w, std::string("accelerometer ") + kAxis[j] +
+                               "'s bias, scale, K2, K3 and angles (it must turn through a whole vertical circle");
   out.fit = least_squares::solve(A, b, w);
   out.residual_mps2 = b - A * out.fit.x;
   return out;
@@ -196,14 +198,8 @@ GyroRowFit fit_gyro_row(int j, const std::vector<const Static*>& rows, const Vec
     const Vector3d earth_out = apply_gyro_scale_misalignment(earth_model, s.earth_rad / s.T_s);
     b[i] = s.sum_dtheta_rad[j] / s.T_s - earth_out[j];
   }
-  if (least_squares::min_scaled_eigenvalue(A, w) < 1e-10) {
-    char buf[256];
-    std::snprintf(buf, sizeof buf,
-                  "tumble: the statics do not determine gyro %s's g-sensitivity (the specific force must point "
-                  "along every axis of the IMU: run the tumble or tumble-short program)",
-                  kAxis[j]);
-    throw std::runtime_error(buf);
-  }
+  require_determined(A, w, std::string("gyro ") + kAxis[j] +
+                               "'s g-sensitivity (the specific force must point along every axis of the IMU");
   GyroRowFit out;
   out.fit = least_squares::solve(A, b, w);
   out.residual_radps = b - A * out.fit.x;
