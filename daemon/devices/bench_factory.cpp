@@ -32,7 +32,7 @@ std::unique_ptr<Bench> over_the_wire(const DaemonConfig& config, const CampaignS
   wb.site = config.site;
   wb.rate_hz = spec.rate_hz;
   wb.limits = config.table_limits;
-  if (config.devices == "real") {
+  if (config.devices == "real" && config.device_addresses) {
     // check_campaign refuses faults on real devices; a campaign stored under another
     // configuration is checked again before its run, so none reaches here.
     wb.table = config.table_certificate;  // the real table's certificate, into the run's meta
