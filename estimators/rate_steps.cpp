@@ -11,6 +11,7 @@
 #include "estimators/held_back.hpp"
 #include "estimators/least_squares.hpp"
 #include "estimators/rate_moments.hpp"
+#include "estimators/stage_model.hpp"
 #include "estimators/table_reference.hpp"
 
 namespace imucal::rate_steps {
@@ -424,10 +425,8 @@ bool test_gyro(int j, const Ladder& ladder, const Eigen::Matrix3d& D, int max_de
 
 Result RateStepsEstimator::finish(const ImuModel& prior) const {
   Result out;
-  out.model = prior;
-  out.model.frame = "instrument";
-  if (!out.model.sigma) out.model.sigma = ImuErrorSet{};
-  ImuErrorSet& sigma = *out.model.sigma;
+  out.model = stage_model_from(prior);
+  ImuErrorSet& sigma = sigma_to_fill(out.model);
   const Eigen::Matrix3d D = misalignment_matrix(prior.gyro.misalignment_rad);
 
   Ladder ladder = select_ladder(impl_->segments, impl_->options.min_rotation_deg);

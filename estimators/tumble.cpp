@@ -9,6 +9,7 @@
 #include "core/earth.hpp"
 #include "core/units.hpp"
 #include "estimators/least_squares.hpp"
+#include "estimators/stage_model.hpp"
 #include "estimators/table_reference.hpp"
 
 namespace imucal::tumble {
@@ -299,10 +300,8 @@ int TumbleEstimator::statics_seen() const {
 
 Result TumbleEstimator::finish(const ImuModel& prior) const {
   Result out;
-  out.model = prior;
-  out.model.frame = "instrument";
-  if (!out.model.sigma) out.model.sigma = ImuErrorSet{};
-  ImuErrorSet& sigma = *out.model.sigma;
+  out.model = stage_model_from(prior);
+  ImuErrorSet& sigma = sigma_to_fill(out.model);
 
   const UsableStatics usable = usable_statics(impl_->statics);
   if (usable.left_out_for_gap)
