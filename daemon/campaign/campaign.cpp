@@ -218,6 +218,14 @@ bool read_profile(const json& spec, const std::string& where, const DaemonConfig
   }
 }
 
+// A set point the chamber cannot hold, named by where it is written.
+void check_setpoint(double setpoint_C, const std::string& where, const motion::ChamberLimits& lim,
+                    std::vector<std::string>& problems) {
+  if (setpoint_C < lim.min_C || setpoint_C > lim.max_C)
+    problems.push_back(where + ": " + celsius_text(setpoint_C) + " is outside the chamber's limits " + celsius_text(lim.min_C) +
+                       " .. " + celsius_text(lim.max_C));
+}
+
 // `chamber.steps`: set-point changes (motion::SetpointChange), each checked where it is written.
 std::vector<motion::SetpointChange> read_changes(const json& steps, const motion::ChamberLimits& lim, double duration_s,
                                                  std::vector<std::string>& problems) {
@@ -233,9 +241,7 @@ std::vector<motion::SetpointChange> read_changes(const json& steps, const motion
     const auto sp = sr.number("setpoint_C", true);
     const double ramp = sr.number_in("ramp_C_per_min", 0).value_or(0.0);
     if (!at || !sp) continue;
-    if (*sp < lim.min_C || *sp > lim.max_C)
-      problems.push_back(where + ".setpoint_C: " + celsius_text(*sp) + " is outside the chamber's limits " +
-                         celsius_text(lim.min_C) + " .. " + celsius_text(lim.max_C));
+    check_setpoint(*sp, where + ".setpoint_C", lim, problems);
     if (ramp > lim.max_ramp_C_per_min)
       problems.push_back(where + ".ramp_C_per_min: " + number_text(ramp) + " °C/min exceeds the chamber's limit " +
                          number_text(lim.max_ramp_C_per_min) + " °C/min");
@@ -255,7 +261,7 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
   const json* named = &j;
   const json* steps = nullptr;
   std::string where = "campaign.chamber";
-  std::optional<double> start_C;
+  std::optional<double> start_C, tolerance_C;
   if (!j.is_string()) {
     ObjectReader r(j, "campaign.chamber", problems);
     named = r.get("profile");
@@ -268,14 +274,11 @@ void check_chamber(const json& j, const DaemonConfig& config, double duration_s,
     if (named != nullptr && r.has("setpoint_C"))
       problems.push_back("campaign.chamber.setpoint_C: a profile starts at its own start_C");
     start_C = r.number("setpoint_C");
-    if (start_C && (*start_C < lim.min_C || *start_C > lim.max_C))
-      problems.push_back("campaign.chamber.setpoint_C: " + celsius_text(*start_C) + " is outside the chamber's limits " +
-                         celsius_text(lim.min_C) + " .. " + celsius_text(lim.max_C));
-    if (auto v = r.number_in("tolerance_C", 0.01, 50)) chamber.tolerance_C = *v;
-    else if (named != nullptr) chamber.tolerance_C = std::max(chamber.tolerance_C, kProfileToleranceMin_C);
-  } else {
-    chamber.tolerance_C = std::max(chamber.tolerance_C, kProfileToleranceMin_C);
+    if (start_C) check_setpoint(*start_C, "campaign.chamber.setpoint_C", lim, problems);
+    tolerance_C = r.number_in("tolerance_C", 0.01, 50);
   }
+  if (tolerance_C) chamber.tolerance_C = *tolerance_C;
+  else if (named != nullptr) chamber.tolerance_C = std::max(chamber.tolerance_C, kProfileToleranceMin_C);
   if (named != nullptr) {
     motion::ChamberProfile p;
     if (!read_profile(*named, where, config, p, problems, malformed)) return;
