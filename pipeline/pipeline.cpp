@@ -547,8 +547,7 @@ class NavigationRun final : public Pipeline::Run {
   // The filter as it runs: every calibration state's estimate and sigma, its status, its
   // restarts, and the last update's innovations against their gates (docs/api.md, progress).
   json progress() const override {
-    navfilter::Progress p = filter_->progress();
-    if (result_) p.restart_times_s = result_->restart_times_s;  // the filter's finish() moved them there
+    const navfilter::Progress p = filter_->progress();
     json out = {{"frames", frames_},
                 {"filter_status", p.status},
                 {"updates", p.updates},
@@ -883,6 +882,8 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
             ++out.frames;
           });
       if (!final && !feeder_.complete(available_t_ns)) return false;  // the window is not complete yet
+      // Before the run finishes: a filter's finish() hands its running figures over to its result.
+      keep_last_progress(out);
       if (run_->another_pass()) {
         feeder_.rewind();
         continue;
@@ -897,7 +898,7 @@ bool Pipeline::advance(const FrameSource& source, std::int64_t available_t_ns, b
       out.status = Status::Failed;
       out.message = e.what();
     }
-    keep_last_progress(out);
+    if (out.last_progress.is_null()) keep_last_progress(out);  // a run that failed while fed
     run_.reset();
     ++active_;
   }

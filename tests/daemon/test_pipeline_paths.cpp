@@ -229,6 +229,7 @@ TEST(PipelinePaths, StageThreeShowsItsFilterWhileItRuns) {
   EXPECT_GE(end.at("updates").get<int>(), late.at("updates").get<int>());
   EXPECT_EQ(end.at("restarts"), late.at("restarts"));
   EXPECT_EQ(end.at("restart_times_s"), late.at("restart_times_s"));
+  EXPECT_TRUE(end.contains("innovations")) << "the last update's innovations, as the filter ended";
 }
 
 // What fed a stage names each program once with its count (issue 36, item 7): a thermal run's
