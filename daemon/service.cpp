@@ -12,7 +12,7 @@
 
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
-#include "daemon/run/alarms.hpp"
+#include "daemon/subscribers/alarms.hpp"
 #include "daemon/source_web_dir.hpp"
 
 namespace imucal::daemon {

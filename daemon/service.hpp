@@ -14,7 +14,7 @@
 #include "daemon/http/api.hpp"
 #include "daemon/http/auth.hpp"
 #include "daemon/http/static_files.hpp"
-#include "daemon/run/sequencer.hpp"
+#include "daemon/sequencer/sequencer.hpp"
 
 namespace imucal::daemon {
 

@@ -24,7 +24,7 @@
 #include "daemon/production/certificates.hpp"
 #include "daemon/production/limits_file.hpp"
 #include "daemon/production/reference_equipment.hpp"
-#include "daemon/run/sequencer.hpp"
+#include "daemon/sequencer/sequencer.hpp"
 #include "signing/signing.hpp"
 
 namespace imucal::daemon {

@@ -31,14 +31,20 @@ ALLOWED = {
     "daemon/campaign": {SIGNING, "core", "motion_programs", "pipeline", "daemon/config", "daemon/db"},
     "daemon/production": {SIGNING, "core", "daemon/config", "daemon/db"},
     "daemon/devices": {SIGNING, "core", "motion_programs", "drivers", "sim", "daemon/config", "daemon/campaign"},
-    "daemon/run": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline",
-                   "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices"},
+    # The run engine's loop (issue 37) emits documents and stores nothing: no storage, no
+    # estimators or pipeline, and of the service database only the run's state machine
+    # (RUN_LOOP_FROM_DB below); its subscribers store, alarm, show and estimate.
+    "daemon/run": {"core", "motion_programs", "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices"},
+    "daemon/subscribers": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline", "daemon/config",
+                           "daemon/db", "daemon/campaign", "daemon/devices", "daemon/run"},
+    "daemon/sequencer": {"core", "daemon/config", "daemon/db", "daemon/campaign", "daemon/devices", "daemon/run",
+                         "daemon/subscribers"},
     "daemon/analysis": {SIGNING, "core", "motion_programs", "estimators", "storage", "pipeline"},
     # The HTTP layer translates (issue 37): the estimators, the pipeline and the recordings are
     # reached through the rooms that decide (analysis, campaign, production, run), never directly.
     "daemon/http": (BELOW_DAEMON - {"estimators", "pipeline", "storage"}) |
                    {SIGNING, "daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
-                    "daemon/devices", "daemon/run", "daemon/analysis"},
+                    "daemon/devices", "daemon/run", "daemon/subscribers", "daemon/sequencer", "daemon/analysis"},
     "daemon": BELOW_DAEMON | {SIGNING, "daemon/*"},
     "cli": BELOW_DAEMON | {SIGNING, "daemon", "daemon/*", "bench"},
     "bench": BELOW_DAEMON,
@@ -49,9 +55,11 @@ TARGETS = {
     "imucal_pipeline": "pipeline", "imucal_plan": "plan", "imucal_daemon": "daemon",
     "imucal_bench_storage": "bench",
 }
-for sub in ("config", "db", "campaign", "production", "devices", "run", "analysis", "http"):
+for sub in ("config", "db", "campaign", "production", "devices", "run", "subscribers", "sequencer", "analysis", "http"):
     TARGETS[f"imucal_daemon_{sub}"] = f"daemon/{sub}"
 SQLITE_LAYER = {"storage/sqlite.hpp", "storage/sqlite.cpp"}
+RUN_LOOP = "daemon/run"
+RUN_LOOP_FROM_DB = {"daemon/db/run_state.hpp"}
 
 
 def unit_of(path):
@@ -65,6 +73,48 @@ def unit_of(path):
 def allows(frm, to):
     allowed = ALLOWED[frm]
     return to == frm or to in allowed or (to.startswith("daemon/") and "daemon/*" in allowed)
+
+
+def source_problems(rel, text):
+    """The forbidden arrows of one source file `rel` (its path under the root) with text `text`."""
+    folder = unit_of(rel)
+    problems = []
+    for n, line in enumerate(text.splitlines(), 1):
+        m = re.match(r'\s*#include "([\w./]+)"', line)
+        if m and "/" in m.group(1):
+            to = unit_of(m.group(1))
+            if folder == RUN_LOOP and to in {"storage", "estimators", "pipeline"}:
+                problems.append(f"{rel}:{n}: the run loop includes {m.group(1)} ({folder} -> {to}): it emits "
+                                "documents, a subscriber (daemon/subscribers) stores and estimates")
+            elif folder == RUN_LOOP and to == "daemon/db" and m.group(1) not in RUN_LOOP_FROM_DB:
+                problems.append(f"{rel}:{n}: the run loop includes the service database {m.group(1)}: it emits "
+                                "documents, a subscriber (daemon/subscribers) stores them")
+            elif to in ALLOWED and not allows(folder, to):
+                problems.append(f"{rel}:{n}: includes {m.group(1)} ({folder} -> {to})")
+        if rel not in SQLITE_LAYER and ("sqlite3_" in line or "<sqlite3.h>" in line):
+            problems.append(f"{rel}:{n}: calls SQLite outside the SQLite layer (storage/sqlite.hpp)")
+    return problems
+
+
+def self_test():
+    """The check must find what it is for: a run-loop file that includes storage or the service
+    database, and a daemon/http file that includes the pipeline; and pass what is allowed."""
+    bad = {
+        "daemon/run/engine.cpp": '#include "storage/recorder.hpp"',
+        "daemon/run/x.hpp": '#include "daemon/db/daemon_db.hpp"',
+        "daemon/run/y.cpp": '#include "pipeline/pipeline.hpp"',
+        "daemon/http/api.cpp": '#include "pipeline/pipeline.hpp"',
+    }
+    good = {
+        "daemon/run/engine.cpp": '#include "daemon/db/run_state.hpp"\n#include "daemon/devices/devices.hpp"',
+        "daemon/subscribers/run_file.cpp": '#include "storage/recorder.hpp"',
+    }
+    failures = [f"not found: {rel}: {text}" for rel, text in bad.items() if not source_problems(rel, text)]
+    failures += [f"found wrongly: {p}" for rel, text in good.items() for p in source_problems(rel, text)]
+    for f in failures:
+        print(f)
+    print("self test: " + ("FAILED" if failures else f"{len(bad)} forbidden and {len(good)} allowed examples judged right"))
+    return 1 if failures else 0
 
 
 def main(root):
@@ -90,15 +140,7 @@ def main(root):
                 continue
             if not name.endswith((".cpp", ".hpp")):
                 continue
-            text = open(path, encoding="utf-8").read()
-            for n, line in enumerate(text.splitlines(), 1):
-                m = re.match(r'\s*#include "([\w./]+)"', line)
-                if m and "/" in m.group(1):
-                    to = unit_of(m.group(1))
-                    if to in ALLOWED and not allows(folder, to):
-                        problems.append(f"{rel}:{n}: includes {m.group(1)} ({folder} -> {to})")
-                if rel not in SQLITE_LAYER and ("sqlite3_" in line or "<sqlite3.h>" in line):
-                    problems.append(f"{rel}:{n}: calls SQLite outside the SQLite layer (storage/sqlite.hpp)")
+            problems += source_problems(rel, open(path, encoding="utf-8").read())
     for p in problems:
         print(p)
     if problems:
@@ -109,4 +151,4 @@ def main(root):
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1]))
+    sys.exit(self_test() if sys.argv[1] == "--self-test" else main(sys.argv[1]))

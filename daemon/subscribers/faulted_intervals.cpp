@@ -1,4 +1,4 @@
-#include "daemon/run/faulted_intervals.hpp"
+#include "daemon/subscribers/faulted_intervals.hpp"
 
 #include <cstdint>
 #include <limits>

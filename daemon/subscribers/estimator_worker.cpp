@@ -1,4 +1,4 @@
-#include "daemon/run/estimator_worker.hpp"
+#include "daemon/subscribers/estimator_worker.hpp"
 
 #include <chrono>
 #include <algorithm>

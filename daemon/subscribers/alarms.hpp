@@ -1,7 +1,7 @@
 // Alarms an operator acknowledges (issue 18, docs/api.md "Alarms"): which of a run's events and
 // state changes raise an alarm, how serious it is, what clears it, and the run's log as CSV. Pure
-// functions of the rows; the sequencer stores and broadcasts what they decide (sequencer.cpp),
-// the API serves them (api.cpp).
+// functions of the rows; their subscriber (AlarmsSubscriber, below) stores and broadcasts what they
+// decide for a run's documents, the API serves them (api.cpp).
 //
 // Severities, a small fixed set:
 //   major  the run was held, failed or interrupted (a suspension, an error, an interruption);
@@ -11,6 +11,7 @@
 // operator has acknowledged it.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -21,6 +22,8 @@
 #include "daemon/db/csv.hpp"
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/db/run_state.hpp"
+#include "daemon/db/write_queue.hpp"
+#include "daemon/run/documents.hpp"
 
 namespace imucal::daemon {
 
@@ -60,5 +63,22 @@ nlohmann::json alarm_json(const AlarmRow& alarm);
 // cleared_reason, acknowledged_by, acknowledged (the last six for alarms only).
 std::string run_log_csv(const std::vector<TransitionRow>& transitions, const std::vector<EventRow>& events,
                         const std::vector<AlarmRow>& alarms);
+
+// A run's alarms from its documents: a serious event raises one, a state change clears and raises
+// what it implies; each change stored (through the WriteQueue: with a full disk, shown once the
+// disk takes it again; the event and the run's state say it meanwhile) and then told to the live
+// view through `tell`. An alarm that cannot be stored does not stop the run: it is in the log.
+class AlarmsSubscriber final : public RunSubscriber {
+ public:
+  using Tell = std::function<void(const nlohmann::json&)>;
+  AlarmsSubscriber(DaemonDb& db, WriteQueue& writes, Tell tell) : db_(db), writes_(writes), tell_(std::move(tell)) {}
+  void transition(const Transition& transition) override;
+  void event(const RunEvent& event) override;
+
+ private:
+  DaemonDb& db_;
+  WriteQueue& writes_;
+  Tell tell_;
+};
 
 }  // namespace imucal::daemon

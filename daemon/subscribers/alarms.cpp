@@ -1,10 +1,11 @@
-#include "daemon/run/alarms.hpp"
+#include "daemon/subscribers/alarms.hpp"
 
 #include <algorithm>
 #include <cstdio>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
 
 namespace imucal::daemon {
 
@@ -127,6 +128,34 @@ std::string run_log_csv(const std::vector<TransitionRow>& transitions, const std
     out += "\r\n";
   }
   return out;
+}
+
+void AlarmsSubscriber::transition(const Transition& t) {
+  try {
+    writes_.write("the alarms of campaign " + std::to_string(t.campaign) + "'s " + std::string(to_string(t.from)) +
+                      " -> " + std::string(to_string(t.to)),
+                  [this, t] {
+                    for (const nlohmann::json& message : apply_transition_alarms(db_, t.campaign, t.from, t.to, t.reason))
+                      tell_(message);
+                  });
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: alarms of {} -> {} not stored: {}", t.campaign, to_string(t.from), to_string(t.to),
+                  e.what());
+  }
+}
+
+void AlarmsSubscriber::event(const RunEvent& e) {
+  const auto severity = alarm_severity_of_event(e.kind);
+  if (!severity) return;
+  try {
+    writes_.write("campaign " + std::to_string(e.campaign) + "'s alarm '" + e.reason + "'",
+                  [this, severity = *severity, e] {
+                    tell_(alarm_message("raised", db_.raise_alarm(e.campaign, severity, e.kind, e.reason, e.segment,
+                                                                  e.program_time_s)));
+                  });
+  } catch (const std::exception& failure) {
+    spdlog::error("campaign {}: alarm '{}' not stored: {}", e.campaign, e.reason, failure.what());
+  }
 }
 
 }  // namespace imucal::daemon
