@@ -153,13 +153,18 @@ class RunSubscriber {
 class Documents {
  public:
   void subscribe(RunSubscriber& subscriber) { subscribers_.push_back(&subscriber); }
+  // A subscriber that emits documents while it takes one (the estimators: their results during
+  // RunEnding) is given each document after every other subscriber, so that all of them see the
+  // documents in the order they were made.
+  void subscribe_emitter(RunSubscriber& subscriber) { emitters_.push_back(&subscriber); }
   template <typename Document>
   void emit(void (RunSubscriber::*deliver)(const Document&), const Document& document) const {
     for (RunSubscriber* s : subscribers_) (s->*deliver)(document);
+    for (RunSubscriber* s : emitters_) (s->*deliver)(document);
   }
 
  private:
-  std::vector<RunSubscriber*> subscribers_;
+  std::vector<RunSubscriber*> subscribers_, emitters_;
 };
 
 }  // namespace imucal::daemon

@@ -1,6 +1,7 @@
 #include "daemon/sequencer/sequencer.hpp"
 
 #include <chrono>
+#include <stdexcept>
 #include <vector>
 
 #include <spdlog/spdlog.h>
@@ -23,7 +24,7 @@ Sequencer::Sequencer(const DaemonConfig& config, DaemonDb& db)
   documents_.subscribe(alarms_);
   documents_.subscribe(live_);
   documents_.subscribe(run_files_);
-  documents_.subscribe(estimators_);
+  documents_.subscribe_emitter(estimators_);  // after any subscriber added later
 }
 
 Sequencer::~Sequencer() { shutdown(); }
@@ -43,6 +44,13 @@ void Sequencer::shutdown() {
   // What a full disk kept back is stored now if it can be; what cannot is named in the log (the
   // next start's crash recovery makes an unstored running state interrupted).
   if (!writes_.retry()) writes_.give_up();
+}
+
+void Sequencer::subscribe(RunSubscriber& subscriber) {
+  std::lock_guard lock(mutex_);
+  std::lock_guard order(order_mutex_);  // no transition is being delivered
+  if (active_id_) throw std::logic_error("a subscriber is added only while no run is active");
+  documents_.subscribe(subscriber);
 }
 
 std::optional<std::int64_t> Sequencer::active_id() const {

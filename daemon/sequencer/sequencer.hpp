@@ -43,6 +43,9 @@ class Sequencer final : private RunControl {
   Sequencer& operator=(const Sequencer&) = delete;
 
   void set_event_listener(EventListener listener) { live_.set_listener(std::move(listener)); }
+  // One more subscriber of every run's documents, after the sequencer's own (documents.hpp);
+  // refused (std::logic_error) while a run is active.
+  void subscribe(RunSubscriber& subscriber);
 
   // Seams for tests that need a slow or a full disk under a run; none in service.
   using RecorderHooks = RunFiles::Hooks;

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "daemon/db/daemon_db.hpp"
-#include "daemon/run/alarms.hpp"
+#include "daemon/subscribers/alarms.hpp"
 #include "service_fixture.hpp"
 
 using namespace imucal;

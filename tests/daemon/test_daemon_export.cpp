@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "daemon/run/faulted_intervals.hpp"
+#include "daemon/subscribers/faulted_intervals.hpp"
 #include "service_fixture.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"

@@ -5,7 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "../estimators/test_thermal_fixture.hpp"
-#include "daemon/run/estimator_worker.hpp"
+#include "daemon/subscribers/estimator_worker.hpp"
 #include "storage/run_db.hpp"
 #include "tests/test_paths.hpp"
 

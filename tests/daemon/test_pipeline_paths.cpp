@@ -13,7 +13,7 @@
 
 #include "../estimators/test_thermal_fixture.hpp"
 #include "core/turn_on.hpp"
-#include "daemon/run/estimator_worker.hpp"
+#include "daemon/subscribers/estimator_worker.hpp"
 #include "motion_programs/program.hpp"
 #include "pipeline/pipeline.hpp"
 #include "sim/simulator.hpp"
