@@ -4,7 +4,9 @@
 // same as what the service database stored.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <mutex>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -77,6 +79,12 @@ TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
   ASSERT_EQ(d.command(id, "start"), 200);
   const json c = d.wait_final(id);
   ASSERT_EQ(c.at("state"), "done") << c.dump();
+  // Stored first (the service database is the first subscriber): the run has given its last
+  // document only when the sequencer has no active run any more.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (d.service->sequencer().active_id() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_FALSE(d.service->sequencer().active_id().has_value());
   const auto entries = journal.entries();
   ASSERT_FALSE(entries.empty());
 
