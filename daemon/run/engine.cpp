@@ -182,11 +182,6 @@ bool RunEngine::commit_recording(RunContext& run) {
   return false;
 }
 
-bool RunEngine::transition(RunContext& run, RunState to, const std::string& reason, std::optional<RunState> expected) {
-  (void)run;
-  return control_.transition(to, reason, expected);
-}
-
 void RunEngine::note_event(RunContext& run, const std::string& kind, const std::string& reason) {
   if (kind == "alarm" || kind == "error") {
     spdlog::warn("campaign {}: {}: {}", run.id, kind, reason);
@@ -545,7 +540,7 @@ RunEngine::Outcome RunEngine::run_segment(RunContext& run) {
 // run waits until every condition is clear for the settle time, then redoes the segment.
 RunEngine::Outcome RunEngine::hold(RunContext& run, const std::string& reason) {
   publish(run, true);  // the counters as they are when the condition is found
-  if (!transition(run, RunState::Suspended, reason, RunState::Running)) {
+  if (!control_.transition(RunState::Suspended, reason, RunState::Running)) {
     // An operator command arrived meanwhile; it takes precedence.
     if (auto r = run.bench->table().stop(); !r.ok) note_event(run, "alarm", "stopping the table: " + r.message);
     if (auto c = pending_command()) return *c;
@@ -597,7 +592,7 @@ RunEngine::Outcome RunEngine::hold(RunContext& run, const std::string& reason) {
                   : "");
   }
   // The transition says what cleared; the UI says "resumed" itself.
-  if (!transition(run, RunState::Running, reason + " cleared", RunState::Suspended)) {
+  if (!control_.transition(RunState::Running, reason + " cleared", RunState::Suspended)) {
     if (auto c = pending_command()) return *c;
   }
   note_event(run, "resumed", text);
@@ -610,7 +605,7 @@ RunEngine::Outcome RunEngine::paused(RunContext& run) {
   if (run.recorder) (void)commit_recording(run);  // a failed file is reopened on resume
   // The counters first: whoever sees "paused" must see where the run holds.
   publish(run, true);
-  if (!transition(run, RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
+  if (!control_.transition(RunState::Paused, "table stopped, recording committed", RunState::Pausing)) {
     if (auto c = pending_command()) return *c;
   }
   note_event(run, "paused", "paused in segment " + std::to_string(run.segment) + " '" +
@@ -780,7 +775,7 @@ void RunEngine::finish_run(RunContext& run, Outcome outcome, const std::string& 
   RunStop stop{run.id, {run.program_time_s, run.frames, run.lost, run.bad}, std::nullopt};
   if (is_final(end.state)) stop.complete = outcome == Outcome::Completed && end.state == RunState::Done;
   documents_.emit(&RunSubscriber::stop, stop);
-  transition(run, end.state, end.why, std::nullopt);
+  control_.transition(end.state, end.why, std::nullopt);
   publish(run, true);
   if (run.recorder) (void)run.recorder->close();  // a failure was reported above
   run.recorder.reset();

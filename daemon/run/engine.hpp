@@ -49,7 +49,6 @@ class RunEngine {
 
   bool open_run(RunContext& run);
   Outcome run_program(RunContext& run);
-  bool transition(RunContext& run, RunState to, const std::string& reason, std::optional<RunState> expected);
   void note_event(RunContext& run, const std::string& kind, const std::string& reason);
   void fail_early(std::int64_t id, const std::string& why);
   std::optional<Outcome> pending_command();
@@ -63,7 +62,6 @@ class RunEngine {
   Outcome prepare_devices(RunContext& run);
   Outcome run_segment(RunContext& run);
   Outcome hold(RunContext& run, const std::string& reason);
-  bool reopen_recording(RunContext& run);
   Outcome paused(RunContext& run);
   // Before a power-cycle segment: the table safe, the operator asked to switch the IMU off and on;
   // waits for the answer (or a command).
