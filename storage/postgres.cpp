@@ -146,32 +146,41 @@ Connection::~Connection() {
 }
 
 Connection::Connection(Connection&& other) noexcept
-    : conn_(std::exchange(other.conn_, nullptr)), label_(std::move(other.label_)) {}
+    : conn_(std::exchange(other.conn_, nullptr)), label_(std::move(other.label_)), broken_(other.broken_) {}
 
 Connection& Connection::operator=(Connection&& other) noexcept {
   if (this != &other) {
     if (conn_ != nullptr) PQfinish(conn_);
     conn_ = std::exchange(other.conn_, nullptr);
     label_ = std::move(other.label_);
+    broken_ = other.broken_;
   }
   return *this;
 }
 
-void Connection::fail(const std::string& statement, pg_result* result) const {
+void Connection::fail(const std::string& statement, pg_result* result) {
   const char* state = result != nullptr ? PQresultErrorField(result, PG_DIAG_SQLSTATE) : nullptr;
   std::string message = trimmed(result != nullptr ? PQresultErrorMessage(result) : nullptr);
   if (message.empty()) message = trimmed(PQerrorMessage(conn_));
-  const bool lost = PQstatus(conn_) != CONNECTION_OK;
+  // Lost: libpq says so, or the error is libpq's own (no SQLSTATE: the server closed the
+  // connection), a connection exception (class 08) or the server shutting down (57P01..57P03).
+  const std::string code = state != nullptr ? state : "";
+  const bool lost = PQstatus(conn_) != CONNECTION_OK || code.empty() || code.rfind("08", 0) == 0 ||
+                    code == "57P01" || code == "57P02" || code == "57P03";
+  if (lost) broken_ = true;
   std::string what = label_ + ": '" + statement_name(statement) + "' failed: " + message;
   if (lost) what += " (the connection to the server was lost; nothing of the open transaction was committed)";
-  throw PgError(what, state != nullptr ? state : "", lost);
+  throw PgError(what, code, lost);
 }
 
 Result Connection::exec(const std::string& sql, const std::vector<Param>& params) {
   if (conn_ == nullptr) throw PgError(label_ + ": '" + statement_name(sql) + "': the connection is closed", "", true);
   std::vector<const char*> values;
   values.reserve(params.size());
-  for (const Param& p : params) values.push_back(p.text() ? p.text()->c_str() : nullptr);
+  for (const Param& p : params) {
+    const std::optional<std::string>& text = p.text();
+    values.push_back(text.has_value() ? text->c_str() : nullptr);  // none: SQL NULL
+  }
   std::shared_ptr<pg_result> result(
       PQexecParams(conn_, sql.c_str(), static_cast<int>(values.size()), nullptr, values.data(), nullptr, nullptr, 0),
       Result::Clear{});
@@ -191,7 +200,7 @@ bool Connection::in_transaction() const noexcept {
   return conn_ != nullptr && PQtransactionStatus(conn_) != PQTRANS_IDLE;
 }
 
-bool Connection::ok() const noexcept { return conn_ != nullptr && PQstatus(conn_) == CONNECTION_OK; }
+bool Connection::ok() const noexcept { return conn_ != nullptr && !broken_ && PQstatus(conn_) == CONNECTION_OK; }
 
 // ---------------------------------------------------------------------------------------------
 // Transaction

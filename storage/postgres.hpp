@@ -99,15 +99,17 @@ class Connection {
   // Several statements without parameters or rows (a schema).
   void exec_script(const std::string& sql);
   bool in_transaction() const noexcept;
-  // Whether the connection is still up (false after the server went away).
+  // Whether the connection is still up (false once a statement found the server gone: a new
+  // Connection is then needed).
   bool ok() const noexcept;
   const std::string& label() const noexcept { return label_; }
 
  private:
   friend class Transaction;
-  [[noreturn]] void fail(const std::string& statement, pg_result* result) const;
+  [[noreturn]] void fail(const std::string& statement, pg_result* result);
   pg_conn* conn_ = nullptr;
   std::string label_;
+  bool broken_ = false;  // a failure said the connection was lost
 };
 
 // BEGIN .. commit(); rolled back when left without commit(), also by an exception. `serializable`:

@@ -39,6 +39,11 @@ class PostgresServer {
   const std::string& socket_dir() const { return dir_; }
   const std::string& run_as() const { return user_; }  // empty: the test's own user
 
+  // Stops the server at once (as a crash would) and starts it again: its connections break.
+  bool restart() {
+    if (!running_) return false;
+    return run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -l '" + dir_ + "/server.log' -m immediate -w -t 60 -o '" + options() + "' restart");
+  }
   // A connection string to database `name` of this server.
   std::string conninfo(const std::string& name) const {
     return "host=" + dir_ + " port=" + std::to_string(kPort) + " user=imucal dbname=" + name;
@@ -130,14 +135,16 @@ class PostgresServer {
       error_ = "initdb failed in " + dir_ + ":\n" + log_tail();
       return;
     }
-    const std::string options = "-k " + dir_ + " -c listen_addresses= -F -p " + std::to_string(kPort);
-    if (!run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -l '" + dir_ + "/server.log' -w -t 60 -o '" + options +
+    if (!run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -l '" + dir_ + "/server.log' -w -t 60 -o '" + options() +
              "' start")) {
       error_ = "pg_ctl start failed in " + dir_ + ":\n" + log_tail();
       return;
     }
     running_ = true;
   }
+
+  // The server's options: its socket in dir_ only (no TCP), no fsync (a test's data is scratch).
+  std::string options() const { return "-k " + dir_ + " -c listen_addresses= -F -p " + std::to_string(kPort); }
 
   void stop() {
     if (running_) run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -m immediate -w stop");

@@ -117,35 +117,42 @@ std::vector<AuditEntry> audit_rows(const Result& r) {
 }  // namespace
 
 PostgresRegistry::PostgresRegistry(const std::string& conninfo, std::string stand)
-    : stand_(std::move(stand)), db_(conninfo, "registry") {
+    : conninfo_(conninfo), stand_(std::move(stand)), db_(conninfo, "registry") {
   migrate();
+}
+
+// After the server went away (a restart, a network break), the next call connects again; the call
+// that met the break failed with PgError::connection_lost.
+storage::pg::Connection& PostgresRegistry::db() {
+  if (!db_.ok()) db_ = storage::pg::Connection(conninfo_, "registry");
+  return db_;
 }
 
 void PostgresRegistry::migrate() {
   std::lock_guard lock(mutex_);
-  Transaction txn(db_);
-  db_.exec("SELECT pg_advisory_xact_lock($1)", {kMigrationLock});
-  db_.exec("CREATE TABLE IF NOT EXISTS registry_schema(version INTEGER NOT NULL)");
-  const auto version = static_cast<int>(db_.exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0));
+  Transaction txn(db());
+  db().exec("SELECT pg_advisory_xact_lock($1)", {kMigrationLock});
+  db().exec("CREATE TABLE IF NOT EXISTS registry_schema(version INTEGER NOT NULL)");
+  const auto version = static_cast<int>(db().exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0));
   if (version > kSchemaVersion)
     throw DbError("registry: the PostgreSQL server's registry has schema version " + std::to_string(version) +
                   ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
-  for (int v = version + 1; v <= kSchemaVersion; ++v) db_.exec_script(kMigrations[v - 1]);
+  for (int v = version + 1; v <= kSchemaVersion; ++v) db().exec_script(kMigrations[v - 1]);
   if (version != kSchemaVersion) {
-    db_.exec("DELETE FROM registry_schema");
-    db_.exec("INSERT INTO registry_schema(version) VALUES ($1)", {kSchemaVersion});
+    db().exec("DELETE FROM registry_schema");
+    db().exec("INSERT INTO registry_schema(version) VALUES ($1)", {kSchemaVersion});
   }
   txn.commit();
 }
 
 int PostgresRegistry::schema_version() {
   std::lock_guard lock(mutex_);
-  return static_cast<int>(db_.exec("SELECT MAX(version) FROM registry_schema").int64(0, 0));
+  return static_cast<int>(db().exec("SELECT MAX(version) FROM registry_schema").int64(0, 0));
 }
 
 std::int64_t PostgresRegistry::next_certificate_sequence() {
   std::lock_guard lock(mutex_);
-  return db_.exec("SELECT nextval('certificate_sequence')").int64(0, 0);
+  return db().exec("SELECT nextval('certificate_sequence')").int64(0, 0);
 }
 
 std::int64_t PostgresRegistry::max_certificate_sequence() {
@@ -158,7 +165,7 @@ std::int64_t PostgresRegistry::max_certificate_sequence() {
 
 std::optional<CertificateRow> PostgresRegistry::certificate(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec(
+  const Result r = db().exec(
       "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE stand = $1 AND campaign_id = $2",
       {stand_, campaign_id});
   if (r.rows() == 0) return std::nullopt;
@@ -167,33 +174,33 @@ std::optional<CertificateRow> PostgresRegistry::certificate(std::int64_t campaig
 
 void PostgresRegistry::insert_certificate(const CertificateRow& row) {
   std::lock_guard lock(mutex_);
-  db_.exec("INSERT INTO certificate(stand, campaign_id, number, sequence, issued_ms, bench_json) "
+  db().exec("INSERT INTO certificate(stand, campaign_id, number, sequence, issued_ms, bench_json) "
            "VALUES ($1, $2, $3, $4, $5, $6)",
            {stand_, row.campaign_id, row.number, row.sequence, row.issued_ms, row.bench_json});
 }
 
 void PostgresRegistry::insert_issued(const IssuedCertificateRow& row) {
   std::lock_guard lock(mutex_);
-  Transaction txn(db_);
-  db_.exec("INSERT INTO issued_certificate(sequence, number, stand, campaign_id, issued_ms, content_json, "
+  Transaction txn(db());
+  db().exec("INSERT INTO issued_certificate(sequence, number, stand, campaign_id, issued_ms, content_json, "
            "content_sha256, signed_json, supersedes, reason) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
            {row.sequence, row.number, stand_, row.campaign_id, row.issued_ms, row.content_json, row.content_sha256,
             row.signed_json, row.supersedes, row.reason});
   if (row.supersedes)
-    db_.exec("UPDATE issued_certificate SET superseded_by = $1 WHERE number = $2", {row.number, *row.supersedes});
+    db().exec("UPDATE issued_certificate SET superseded_by = $1 WHERE number = $2", {row.number, *row.supersedes});
   txn.commit();
 }
 
 std::optional<IssuedCertificateRow> PostgresRegistry::issued(const std::string& number) {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec(IMUCAL_PG_ISSUED_SELECT "WHERE number = $1", {number});
+  const Result r = db().exec(IMUCAL_PG_ISSUED_SELECT "WHERE number = $1", {number});
   if (r.rows() == 0) return std::nullopt;
   return issued_row(r, 0);
 }
 
 std::optional<IssuedCertificateRow> PostgresRegistry::current_issued(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec(IMUCAL_PG_ISSUED_SELECT
+  const Result r = db().exec(IMUCAL_PG_ISSUED_SELECT
                             "WHERE stand = $1 AND campaign_id = $2 AND superseded_by IS NULL "
                             "ORDER BY sequence DESC LIMIT 1",
                             {stand_, campaign_id});
@@ -204,12 +211,12 @@ std::optional<IssuedCertificateRow> PostgresRegistry::current_issued(std::int64_
 std::vector<IssuedCertificateRow> PostgresRegistry::issued_history(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
   return issued_rows(
-      db_.exec(IMUCAL_PG_ISSUED_SELECT "WHERE stand = $1 AND campaign_id = $2 ORDER BY sequence", {stand_, campaign_id}));
+      db().exec(IMUCAL_PG_ISSUED_SELECT "WHERE stand = $1 AND campaign_id = $2 ORDER BY sequence", {stand_, campaign_id}));
 }
 
 std::vector<std::int64_t> PostgresRegistry::campaigns_with_issued() {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec(
+  const Result r = db().exec(
       "SELECT DISTINCT campaign_id FROM issued_certificate WHERE stand = $1 AND superseded_by IS NULL "
       "ORDER BY campaign_id",
       {stand_});
@@ -231,7 +238,7 @@ bool PostgresRegistry::insert_issued_page(const IssuedPageRow& row) {
 std::optional<IssuedPageRow> PostgresRegistry::issued_page(const std::string& number, bool with_html) {
   std::lock_guard lock(mutex_);
   const Result r =
-      db_.exec(with_html ? "SELECT number, html, sha256, stored_ms, stored_by FROM issued_page WHERE number = $1"
+      db().exec(with_html ? "SELECT number, html, sha256, stored_ms, stored_by FROM issued_page WHERE number = $1"
                          : "SELECT number, '', sha256, stored_ms, stored_by FROM issued_page WHERE number = $1",
                {number});
   if (r.rows() == 0) return std::nullopt;
@@ -240,19 +247,19 @@ std::optional<IssuedPageRow> PostgresRegistry::issued_page(const std::string& nu
 
 void PostgresRegistry::insert_overdue_override(const OverdueOverrideRow& row) {
   std::lock_guard lock(mutex_);
-  db_.exec("INSERT INTO overdue_override(stand, campaign_id, t_ms, overridden_by, reason, instruments_json, text) "
+  db().exec("INSERT INTO overdue_override(stand, campaign_id, t_ms, overridden_by, reason, instruments_json, text) "
            "VALUES ($1, $2, $3, $4, $5, $6, $7)",
            {stand_, row.campaign_id, row.t_ms, row.by, row.reason, row.instruments_json, row.text});
 }
 
 void PostgresRegistry::remove_overdue_override(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  db_.exec("DELETE FROM overdue_override WHERE stand = $1 AND campaign_id = $2", {stand_, campaign_id});
+  db().exec("DELETE FROM overdue_override WHERE stand = $1 AND campaign_id = $2", {stand_, campaign_id});
 }
 
 std::optional<OverdueOverrideRow> PostgresRegistry::overdue_override(std::int64_t campaign_id) {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec(
+  const Result r = db().exec(
       "SELECT campaign_id, t_ms, overridden_by, reason, instruments_json, text FROM overdue_override "
       "WHERE stand = $1 AND campaign_id = $2",
       {stand_, campaign_id});
@@ -264,11 +271,11 @@ AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::s
                                           const std::string& subject, const std::string& details_json,
                                           std::optional<std::int64_t> t_ms) {
   std::lock_guard lock(mutex_);
-  Transaction txn(db_);
-  db_.exec("SELECT pg_advisory_xact_lock($1)", {kAuditLock});  // one link at a time, from every stand
+  Transaction txn(db());
+  db().exec("SELECT pg_advisory_xact_lock($1)", {kAuditLock});  // one link at a time, from every stand
   AuditEntry e;
   e.prev_sha256 = kAuditGenesis;
-  const Result last = db_.exec("SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
+  const Result last = db().exec("SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
   if (last.rows() == 1) {
     e.seq = last.int64(0, 0);
     e.prev_sha256 = last.text(0, 1);
@@ -280,10 +287,10 @@ AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::s
   e.subject = subject;
   e.details_json = details_json;
   e.sha256 = audit_entry_sha256(e);
-  db_.exec("INSERT INTO audit(seq, stand, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
+  db().exec("INSERT INTO audit(seq, stand, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
            "VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
            {e.seq, stand_, e.t_ms, e.actor, e.action, e.subject, e.details_json, e.prev_sha256, e.sha256});
-  db_.exec("INSERT INTO setting(key, value) VALUES ($1, $2) ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+  db().exec("INSERT INTO setting(key, value) VALUES ($1, $2) ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
            {kAuditHeadKey, std::to_string(e.seq) + " " + e.sha256});
   txn.commit();
   return e;
@@ -291,7 +298,7 @@ AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::s
 
 std::vector<AuditEntry> PostgresRegistry::audit_entries(const AuditQuery& q) {
   std::lock_guard lock(mutex_);
-  return audit_rows(db_.exec(IMUCAL_PG_AUDIT_SELECT
+  return audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT
                              "WHERE ($1::BIGINT IS NULL OR t_ms >= $1::BIGINT) AND ($2::BIGINT IS NULL OR t_ms <= $2::BIGINT) "
                              "AND ($3::TEXT = '' OR actor = $3::TEXT) "
                              "AND ($4::TEXT = '' OR starts_with(action, $4::TEXT)) "
@@ -301,12 +308,12 @@ std::vector<AuditEntry> PostgresRegistry::audit_entries(const AuditQuery& q) {
 
 std::vector<AuditEntry> PostgresRegistry::audit_trail() {
   std::lock_guard lock(mutex_);
-  return audit_rows(db_.exec(IMUCAL_PG_AUDIT_SELECT "ORDER BY seq"));
+  return audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT "ORDER BY seq"));
 }
 
 std::optional<std::pair<std::int64_t, std::string>> PostgresRegistry::audit_head() {
   std::lock_guard lock(mutex_);
-  const Result r = db_.exec("SELECT value FROM setting WHERE key = $1", {kAuditHeadKey});
+  const Result r = db().exec("SELECT value FROM setting WHERE key = $1", {kAuditHeadKey});
   if (r.rows() == 0) return std::nullopt;
   const std::string text = r.text(0, 0);
   // "SEQ SHA256"; a damaged value gives seq -1, which no trail matches (as the SQLite registry reads it).

@@ -3,7 +3,7 @@
 // connects, under an advisory lock so that stands starting together migrate once. Certificate
 // numbers come from the sequence certificate_sequence: two stands taking numbers at once never
 // share one. Campaigns are named by the stand that ran them and their id there. One connection
-// behind a mutex; each call is short.
+// behind a mutex, connected again after the server went away; each call is short.
 #pragma once
 
 #include <mutex>
@@ -50,6 +50,8 @@ class PostgresRegistry final : public Registry {
 
  private:
   void migrate();
+  storage::pg::Connection& db();  // under mutex_
+  std::string conninfo_;
   std::string stand_;
   std::mutex mutex_;
   storage::pg::Connection db_;

@@ -25,7 +25,7 @@ using namespace imucal::daemon;
 
 namespace {
 
-constexpr int kCampaigns = 5;  // campaigns 1..5 exist in every store
+constexpr std::size_t kCampaigns = 5;  // campaigns 1..5 exist in every store
 
 // The daemon's database in a fresh directory; each connect() is another connection to it (another
 // DaemonDb on the same file, as another process would open it) with the same sequence file.
@@ -37,7 +37,7 @@ class SqliteStore {
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
     DaemonDb db(dir_ + "/imucald.db");
-    for (int i = 1; i <= kCampaigns; ++i) db.insert_campaign("c" + std::to_string(i), "{}", "test", 1.0, "test");
+    for (std::size_t i = 1; i <= kCampaigns; ++i) db.insert_campaign("c" + std::to_string(i), "{}", "test", 1.0, "test");
     return "";
   }
   ~SqliteStore() {
@@ -142,11 +142,10 @@ TYPED_TEST(RegistryTest, ALaterCertificateSupersedesTheOneInForceOnce) {
   auto& reg = *this->registry_;
   const auto first = issued(1, 1);
   reg.insert_issued(first);
-  ASSERT_TRUE(reg.current_issued(1));
-  EXPECT_EQ(reg.current_issued(1)->number, first.number);
+  EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, first.number);
   const auto second = issued(2, 1, first.number);
   reg.insert_issued(second);
-  EXPECT_EQ(reg.current_issued(1)->number, second.number);
+  EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, second.number);
   const auto history = reg.issued_history(1);
   ASSERT_EQ(history.size(), 2U);
   EXPECT_EQ(history[0].superseded_by, second.number);
@@ -234,19 +233,19 @@ TYPED_TEST(RegistryTest, TheAuditTrailIsAChainAndAnsweredByQuery) {
 // Issue 38's acceptance: three stands (connections) issuing 20 certificates each at the same time
 // get 60 distinct numbers, each stand's in the order it issued them, none lost.
 TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
-  constexpr int kConnections = 3;
-  constexpr int kEach = 20;
+  constexpr std::size_t kConnections = 3;
+  constexpr std::size_t kEach = 20;
   std::vector<std::unique_ptr<Registry>> connections;
-  for (int i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
+  for (std::size_t i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
   std::vector<std::vector<std::int64_t>> taken(kConnections);
   std::vector<std::string> errors(kConnections);
   std::vector<std::thread> threads;
-  for (int i = 0; i < kConnections; ++i) {
+  for (std::size_t i = 0; i < kConnections; ++i) {
     threads.emplace_back([&, i] {
       try {
-        for (int k = 0; k < kEach; ++k) {
+        for (std::size_t k = 0; k < kEach; ++k) {
           const std::int64_t sequence = connections[i]->next_certificate_sequence();
-          connections[i]->insert_issued(issued(sequence, 1 + (k % kCampaigns)));
+          connections[i]->insert_issued(issued(sequence, 1 + static_cast<std::int64_t>(k % kCampaigns)));
           taken[i].push_back(sequence);
         }
       } catch (const std::exception& e) {
@@ -256,26 +255,26 @@ TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
   }
   for (auto& t : threads) t.join();
   std::set<std::int64_t> all;
-  for (int i = 0; i < kConnections; ++i) {
+  for (std::size_t i = 0; i < kConnections; ++i) {
     EXPECT_EQ(errors[i], "");
     EXPECT_TRUE(std::is_sorted(taken[i].begin(), taken[i].end())) << "connection " << i;
     all.insert(taken[i].begin(), taken[i].end());
   }
-  ASSERT_EQ(all.size(), static_cast<std::size_t>(kConnections * kEach));
+  ASSERT_EQ(all.size(), kConnections * kEach);
   EXPECT_EQ(*all.begin(), 1);
-  EXPECT_EQ(*all.rbegin(), kConnections * kEach);
+  EXPECT_EQ(*all.rbegin(), static_cast<std::int64_t>(kConnections * kEach));
   for (const std::int64_t s : all) EXPECT_TRUE(this->registry_->issued(issued(s, 1).number)) << s;
-  EXPECT_EQ(this->registry_->max_certificate_sequence(), kConnections * kEach);
+  EXPECT_EQ(this->registry_->max_certificate_sequence(), static_cast<std::int64_t>(kConnections * kEach));
 }
 
 // One chain for every writer: three connections appending at once leave a trail without gaps.
 TYPED_TEST(RegistryTest, ThreeConnectionsAppendingAuditEntriesAtOnceKeepOneChain) {
-  constexpr int kConnections = 3;
+  constexpr std::size_t kConnections = 3;
   std::vector<std::unique_ptr<Registry>> connections;
-  for (int i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
+  for (std::size_t i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
   std::vector<std::thread> threads;
   std::vector<std::string> errors(kConnections);
-  for (int i = 0; i < kConnections; ++i) {
+  for (std::size_t i = 0; i < kConnections; ++i) {
     threads.emplace_back([&, i] {
       try {
         for (int k = 0; k < 10; ++k)
@@ -333,10 +332,25 @@ TEST_F(PostgresRegistrySchema, EachStandSeesItsOwnCampaigns) {
   PostgresRegistry b(store_.conninfo(), "stand-b");
   a.insert_issued(issued(a.next_certificate_sequence(), 1));
   b.insert_issued(issued(b.next_certificate_sequence(), 1));
-  EXPECT_EQ(a.current_issued(1)->sequence, 1);
-  EXPECT_EQ(b.current_issued(1)->sequence, 2);
+  EXPECT_EQ(a.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 1);
+  EXPECT_EQ(b.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 2);
   EXPECT_EQ(a.issued_history(1).size(), 1U);
   EXPECT_TRUE(a.issued(issued(2, 1).number));  // a number is the lab's: found from any stand
+}
+
+// The server restarted (a crash, a network break): the call that met the break fails as a database
+// failure (is_database_failure: the request may be repeated), the next one connects again.
+TEST_F(PostgresRegistrySchema, ConnectsAgainAfterTheServerWentAway) {
+  PostgresRegistry registry(store_.conninfo(), "stand-a");
+  registry.append_audit("ada", "a", "s", "{}", 1);
+  ASSERT_TRUE(postgres_server().restart());
+  try {
+    registry.audit_trail();
+  } catch (const imucal::storage::StorageError& e) {
+    EXPECT_TRUE(is_database_failure(e)) << e.what();
+  }
+  EXPECT_EQ(registry.audit_trail().size(), 1U);
+  EXPECT_EQ(registry.append_audit("ada", "b", "s", "{}", 2).seq, 2);
 }
 
 }  // namespace
