@@ -330,8 +330,10 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer
     spdlog::info("certificates and test reports are signed with the key {} ({})", key,
                  signing::fingerprint(signing_key_->public_key));
   }
-  // Without a configuration file the sequence can only live in the data directory.
-  if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
+  // Without a configuration file the sequence can only live in the data directory (a PostgreSQL
+  // registry numbers from its own sequence).
+  if (config.registry.postgresql.empty() && config.config_dir.empty() &&
+      !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
                  "again from 1; name certificates.sequence_file in a configuration file (--config)", certificate_sequence_path(config));
   // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
