@@ -12,6 +12,8 @@
 
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
+#include "daemon/registry/postgres_registry.hpp"
+#include "daemon/registry/sqlite_registry.hpp"
 #include "daemon/subscribers/alarms.hpp"
 #include "daemon/source_web_dir.hpp"
 
@@ -28,6 +30,18 @@ std::string find_web_dir(const std::string& configured) {
   const std::string built_from = source_web_dir();
   if (!built_from.empty() && fs::is_directory(built_from, ec)) return built_from;
   return {};
+}
+
+// The registry the configuration names: the lab's PostgreSQL server (registry.postgresql), else
+// the daemon's own database numbering from the site's sequence file, as before issue 38.
+std::unique_ptr<Registry> make_registry(const DaemonConfig& config, DaemonDb& db, CertificateSequence& sequence) {
+  if (config.registry.postgresql.empty())
+    return std::make_unique<SqliteRegistry>(db, [&sequence](std::int64_t floor) { return sequence.next(floor); });
+  auto registry = std::make_unique<PostgresRegistry>(config.registry.postgresql, registry_stand(config));
+  // The connection string is not logged: it may hold a password.
+  spdlog::info("registry: on the PostgreSQL server of registry.postgresql (schema version {}), as stand '{}'",
+               registry->schema_version(), registry->stand());
+  return registry;
 }
 
 }  // namespace
@@ -91,9 +105,11 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
     const auto& last = transitions.back();
     if (last.from) (void)apply_transition_alarms(*db_, id, *last.from, last.to, last.reason);
   }
+  certificate_sequence_ = std::make_unique<CertificateSequence>(certificate_sequence_path(config_));
+  registry_ = make_registry(config_, *db_, *certificate_sequence_);
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
-  api_ = std::make_unique<Api>(config_, *db_, *sequencer_, *auth_);
+  api_ = std::make_unique<Api>(config_, *db_, *registry_, *sequencer_, *auth_);
   // The audit trail: the configuration and the users this start loaded, then what recovery did.
   nlohmann::json users = nlohmann::json::array();
   for (const auto& u : config_.users) users.push_back({{"name", u.name}, {"role", to_string(u.role)}});

@@ -14,6 +14,8 @@
 #include "daemon/http/api.hpp"
 #include "daemon/http/auth.hpp"
 #include "daemon/http/static_files.hpp"
+#include "daemon/production/certificates.hpp"
+#include "daemon/registry/registry.hpp"
 #include "daemon/sequencer/sequencer.hpp"
 
 namespace imucal::daemon {
@@ -53,6 +55,9 @@ class Service {
   int lock_fd_ = -1;
   std::string web_dir_;
   std::unique_ptr<DaemonDb> db_;
+  // The site's certificate sequence file (the SQLite registry numbers from it) and the registry.
+  std::unique_ptr<CertificateSequence> certificate_sequence_;
+  std::unique_ptr<Registry> registry_;
   std::unique_ptr<Auth> auth_;
   std::unique_ptr<Sequencer> sequencer_;
   std::unique_ptr<Api> api_;

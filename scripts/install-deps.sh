@@ -27,6 +27,11 @@ packages+=(clang-tidy-16 clang-tools-16 clang-16)
 # The soak tests (tests/daemon/test_daemon_chaos.cpp) take the stacks of an imucald whose run
 # stopped moving, so a hang seen once in CI says where it waits.
 packages+=(gdb)
+# The registry on PostgreSQL (issue 38, storage/postgres.hpp): libpq to build against, and Debian's
+# server (initdb, pg_ctl in /usr/lib/postgresql/15/bin) for the tests, which start a private server
+# of their own in a temporary directory (tests/storage/postgres_server.hpp); the cluster Debian
+# creates and starts with the package is not used.
+packages+=(libpq-dev postgresql)
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 

@@ -1,5 +1,7 @@
 #include "daemon/config/config.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
@@ -247,6 +249,18 @@ void read_certificates(const json& j, DaemonConfig& c, std::vector<std::string>&
   }
 }
 
+void read_registry(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
+  ObjectReader r(j, "config.registry", problems);
+  if (auto v = r.string("postgresql")) {
+    if (v->empty()) problems.push_back(r.at("postgresql") + " must be a PostgreSQL connection string (libpq's), or be left out");
+    else c.registry.postgresql = *v;
+  }
+  if (auto v = r.string("stand")) {
+    if (v->empty()) problems.push_back(r.at("stand") + " must name this stand, or be left out (the host's name)");
+    else c.registry.stand = *v;
+  }
+}
+
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
   if (!j.is_array()) {
     problems.push_back("config.users must be an array of {name, role, password_hash, token}");
@@ -364,6 +378,7 @@ DaemonConfig parse_config(const std::string& json_text, const std::string& sourc
     if (const json* v = r.get("users")) read_users(*v, c, problems);
     if (const json* v = r.get("reference_equipment")) read_reference_equipment(*v, c, problems);
     if (const json* v = r.get("certificates")) read_certificates(*v, c, problems);
+    if (const json* v = r.get("registry")) read_registry(*v, c, problems);
   }
   // A survey measures a g: without the measured value the site's g is normal gravity's.
   if (c.reference_equipment.gravity && !c.site.gravity_mps2)
@@ -433,6 +448,13 @@ std::string certificate_prefix(const DaemonConfig& config) {
   if (out.size() > 20) out.resize(20);
   while (!out.empty() && out.back() == '-') out.pop_back();
   return out.empty() ? "IMUCAL" : out;
+}
+
+std::string registry_stand(const DaemonConfig& config) {
+  if (!config.registry.stand.empty()) return config.registry.stand;
+  char host[256] = {};
+  if (gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "imucald";
+  return host;
 }
 
 std::string certificate_sequence_path(const DaemonConfig& config) {

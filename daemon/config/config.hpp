@@ -141,6 +141,14 @@ struct CertificateConfig {
   std::string signing_key_file;
 };
 
+// The lab's registry (`registry`, issue 38; daemon/registry/registry.hpp): certificates and their
+// numbers, overdue overrides and the audit trail, in the daemon's own database (no `postgresql`)
+// or on a lab's PostgreSQL server the stands of a production line share.
+struct RegistryConfig {
+  std::string postgresql;  // a libpq connection string ("host=db.lab dbname=imucal"); empty: SQLite
+  std::string stand;       // this stand's name in a shared registry; empty: the host's name (registry_stand)
+};
+
 struct DaemonConfig {
   std::string site_name = "simulated lab";
   // The directory of the configuration file this came from (empty: none was read); relative
@@ -171,6 +179,7 @@ struct DaemonConfig {
   bool queue_autostart = true;  // run queued campaigns after a restart without an operator
   ReferenceEquipment reference_equipment;
   CertificateConfig certificates;
+  RegistryConfig registry;
   // Filled by resolve_named_models (daemon/campaign/campaign.hpp) before any campaign is checked:
   // the models of truths_dir by name and the default truth, read once so that no request reads a
   // file (a client names a model, never a path on the daemon's machine).
@@ -190,6 +199,9 @@ DaemonConfig load_config_file(const std::string& path);
 std::optional<std::int64_t> date_day_number(const std::string& text);
 // The inverse: "YYYY-MM-DD" of a day number since 1970-01-01 (proleptic Gregorian calendar).
 std::string date_text(std::int64_t day_number);
+
+// The name this stand's campaigns go by in a shared registry: `registry.stand`, else the host's name.
+std::string registry_stand(const DaemonConfig& config);
 
 // The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
 // every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most

@@ -1,10 +1,11 @@
 #include "daemon/db/daemon_db.hpp"
 
-
 #include <chrono>
 #include <cstdio>
 #include <ctime>
 #include <stdexcept>
+
+#include "storage/postgres.hpp"
 
 namespace imucal::daemon {
 
@@ -897,6 +898,12 @@ std::vector<AlarmRow> DaemonDb::alarms(const std::optional<std::int64_t>& campai
 }
 
 bool is_database_failure(const std::exception& e, bool* damaged) {
+  // The registry's PostgreSQL server out of reach (storage/postgres.hpp): the request may be
+  // repeated once it is back; a refusal of the server (a constraint) is no such failure.
+  if (const auto* pg = dynamic_cast<const storage::pg::PgError*>(&e)) {
+    if (damaged != nullptr) *damaged = false;
+    return pg->connection_lost();
+  }
   const auto* sqlite = dynamic_cast<const storage::sql::SqliteError*>(&e);
   if (sqlite == nullptr) return false;
   if (damaged != nullptr) *damaged = sqlite->kind() == storage::sql::SqliteError::Kind::damaged;

@@ -276,8 +276,8 @@ class DaemonDb {
 };
 
 // Whether `e` is the daemon's database failing (full, locked too long, an I/O error, or damaged
-// when `damaged` is set): a request that met it may be repeated once the database takes writes
-// again, the service goes on. False for any other exception.
+// when `damaged` is set), or the registry's PostgreSQL server out of reach: a request that met it
+// may be repeated once the database takes writes again, the service goes on. False for any other exception.
 bool is_database_failure(const std::exception& e, bool* damaged = nullptr);
 
 }  // namespace imucal::daemon

@@ -110,10 +110,10 @@ json gravity_correction(const json& content, const DaemonConfig& config) {
 }
 
 // The certificates in force of `rows`' campaigns that state another g than the configured one.
-json gravity_corrected_certificates(DaemonDb& db, const DaemonConfig& config, const std::vector<CampaignRow>& rows) {
+json gravity_corrected_certificates(Registry& registry, const DaemonConfig& config, const std::vector<CampaignRow>& rows) {
   json out = json::array();
   for (const CampaignRow& row : rows) {
-    const auto issued = db.current_issued(row.id);
+    const auto issued = registry.current_issued(row.id);
     if (!issued) continue;
     const json correction = gravity_correction(parse_or_null(issued->content_json), config);
     if (correction.is_null()) continue;
@@ -303,15 +303,15 @@ json table_dialect_json(const DaemonConfig& config) {
 
 }  // namespace
 
-Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth)
+Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth)
     : config_(config),
       db_(db),
+      registry_(registry),
       sequencer_(sequencer),
       auth_(auth),
       limits_(std::filesystem::path(config.limits_file).is_absolute()
                   ? config.limits_file
                   : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
-      certificate_sequence_(certificate_sequence_path(config)),
       programs_(json::array()),
       started_ms_(now_unix_ms()),
       started_(std::chrono::steady_clock::now()) {
@@ -331,8 +331,10 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& a
     spdlog::info("certificates and test reports are signed with the key {} ({})", key,
                  signing::fingerprint(signing_key_->public_key));
   }
-  // Without a configuration file the sequence can only live in the data directory.
-  if (config.config_dir.empty() && !std::filesystem::path(config.certificates.sequence_file).is_absolute())
+  // Without a configuration file the sequence can only live in the data directory (a PostgreSQL
+  // registry numbers from its own sequence).
+  if (config.registry.postgresql.empty() && config.config_dir.empty() &&
+      !std::filesystem::path(config.certificates.sequence_file).is_absolute())
     spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
                  "again from 1; name certificates.sequence_file in a configuration file (--config)", certificate_sequence_path(config));
   // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
@@ -551,7 +553,7 @@ const std::vector<Api::Route>& Api::routes() {
          const auto rows = a.db_.unit_campaigns(c.args[0]);
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
          json out = unit_detail_json(c.args[0], rows, a.limits_.current());
-         out["gravity_corrected"] = gravity_corrected_certificates(a.db_, a.config_, rows);
+         out["gravity_corrected"] = gravity_corrected_certificates(a.registry_, a.config_, rows);
          return json_reply(200, out);
        }},
       {"GET", "/api/imus/{serial}/history.csv", A::viewer,
@@ -787,7 +789,7 @@ HttpReply Api::campaign_recalibrate(std::int64_t id, const ApiRequest& request, 
   const std::string name = "campaign " + std::to_string(id);
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no " + name);
-  const auto current = db_.current_issued(id);
+  const auto current = registry_.current_issued(id);
   if (!current) return error_reply(409, name + " has no certificate to supersede");
   const json correction = gravity_correction(parse_or_null(current->content_json), config_);
   if (correction.is_null())
@@ -831,7 +833,7 @@ json Api::recalibrated(std::int64_t id, const std::string& who, const std::strin
                        double g_before_mps2) {
   std::lock_guard lock(certificate_mutex_);
   const std::string name = "campaign " + std::to_string(id);
-  const IssuedCertificateRow current = expect_value(db_.current_issued(id), "the certificate a recalibration supersedes");
+  const IssuedCertificateRow current = expect_value(registry_.current_issued(id), "the certificate a recalibration supersedes");
   const CampaignRow before = expect_value(db_.campaign(id), "the campaign calibrated again");
   // The stages calibrated again replace their results; the others (the navigation display) stay.
   json results = parse_or_null(before.results_json);
@@ -913,7 +915,7 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   // A certificate states its verdict: one that the new limits change is superseded. Only units of
   // the part numbers whose limits changed can have a new verdict (this runs on an HTTP thread).
   const std::set<std::string> changed = changed_part_numbers(before, limits_.document());
-  for (const std::int64_t id : db_.campaigns_with_issued()) {
+  for (const std::int64_t id : registry_.campaigns_with_issued()) {
     const auto row = db_.campaign(id);
     if (!row || !row->imu_part_number || !changed.contains(*row->imu_part_number)) continue;
     try {
@@ -1131,9 +1133,9 @@ std::optional<IssuedCertificateRow> Api::issue_certificate(std::int64_t id, cons
   const auto row = db_.campaign(id);
   if (!row) return std::nullopt;
   const CampaignRow& r = *row;
-  if (!no_certificate_because(r).empty()) return db_.current_issued(id);
-  if (const auto current = db_.current_issued(id)) return reissue(r, *current, reason);
-  if (const auto legacy = db_.certificate(id)) return freeze_legacy(r, *legacy);
+  if (!no_certificate_because(r).empty()) return registry_.current_issued(id);
+  if (const auto current = registry_.current_issued(id)) return reissue(r, *current, reason);
+  if (const auto legacy = registry_.certificate(id)) return freeze_legacy(r, *legacy);
   IssuedCertificateRow c = numbered(r.id, reason);
   return store_issued(c, certificate_content(r, certificate_bench_json(config_, r.ended_ms.value_or(0)).dump()));
 }
@@ -1176,7 +1178,7 @@ IssuedCertificateRow Api::freeze_legacy(const CampaignRow& row, const Certificat
 IssuedCertificateRow Api::numbered(std::int64_t campaign_id, const std::string& reason) {
   IssuedCertificateRow c;
   c.campaign_id = campaign_id;
-  c.sequence = certificate_sequence_.next(db_.max_certificate_sequence());
+  c.sequence = registry_.next_certificate_sequence();
   c.issued_ms = now_unix_ms();
   c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
   c.reason = reason;
@@ -1195,7 +1197,7 @@ IssuedCertificateRow Api::store_issued(IssuedCertificateRow c, json content) {
   c.content_json = signing::canonical_json(content);
   c.content_sha256 = signing::sha256_hex(c.content_json);
   if (signing_key_) c.signed_json = signing::sign_document(content, signing::kCertificate, *signing_key_).dump();
-  db_.insert_issued(c);
+  registry_.insert_issued(c);
   audit("imucald", "certificate.issued", c.number,
         {{"campaign", c.campaign_id}, {"reason", c.reason}, {"supersedes", supersedes}, {"content_sha256", c.content_sha256}});
   if (supersedes.is_string())
@@ -1221,13 +1223,13 @@ json Api::issued_json(const IssuedCertificateRow& c) {
   // The bench's keys at the top too, as before certificates were frozen.
   if (content.is_object() && content.value("bench", json()).is_object()) out.update(content.at("bench"));
   json history = json::array();
-  for (const auto& h : db_.issued_history(c.campaign_id))
+  for (const auto& h : registry_.issued_history(c.campaign_id))
     history.push_back({{"number", h.number},
                        {"issued", iso8601_utc(h.issued_ms)},
                        {"reason", h.reason},
                        {"superseded_by", text_or_null(h.superseded_by)}});
   out["history"] = history;
-  const auto page = db_.issued_page(c.number, false);
+  const auto page = registry_.issued_page(c.number, false);
   out["page"] = page ? page_json(*page) : json(nullptr);
   // Said on reading, never written into the issued content: the content stays as issued.
   out["gravity_corrected"] = gravity_correction(content, config_);
@@ -1237,7 +1239,7 @@ json Api::issued_json(const IssuedCertificateRow& c) {
 HttpReply Api::campaign_certificate(std::int64_t id) {
   const auto row = db_.campaign(id);
   if (!row) return error_reply(404, "no campaign " + std::to_string(id));
-  if (const auto current = db_.current_issued(id)) return json_reply(200, issued_json(*current));
+  if (const auto current = registry_.current_issued(id)) return json_reply(200, issued_json(*current));
   if (const std::string why = no_certificate_because(*row); !why.empty()) return error_reply(409, why);
   try {
     // A run that ended before certificates were issued at the end, or whose issue failed then.
@@ -1253,7 +1255,7 @@ HttpReply Api::campaign_certificate(std::int64_t id) {
 // the self-contained HTML once; it must state the certificate's number and content hash, the two
 // things that tie it to the signed record.
 HttpReply Api::store_certificate_page(const std::string& number, const ApiRequest& request, const Principal& who) {
-  const auto c = db_.issued(number);
+  const auto c = registry_.issued(number);
   if (!c) return error_reply(404, "no certificate numbered '" + number + "' was issued here");
   json body;
   if (auto bad = parse_body(request, body)) return *bad;
@@ -1265,8 +1267,8 @@ HttpReply Api::store_certificate_page(const std::string& number, const ApiReques
                                 "'s page: it must state the certificate's number and its content SHA-256");
   IssuedPageRow page{number, std::move(html), "", now_unix_ms(), who.user};
   page.sha256 = signing::sha256_hex(page.html);
-  if (!db_.insert_issued_page(page)) {
-    const IssuedPageRow stored = expect_value(db_.issued_page(number, false), "the page stored before");
+  if (!registry_.insert_issued_page(page)) {
+    const IssuedPageRow stored = expect_value(registry_.issued_page(number, false), "the page stored before");
     return error_reply(409, "certificate " + number + "'s page was stored on " + iso8601_utc(stored.stored_ms) + " by " +
                                 stored.stored_by + " (SHA-256 " + stored.sha256 + "); a stored page never changes");
   }
@@ -1275,9 +1277,9 @@ HttpReply Api::store_certificate_page(const std::string& number, const ApiReques
 }
 
 HttpReply Api::certificate_page(const std::string& number) {
-  const auto page = db_.issued_page(number, true);
+  const auto page = registry_.issued_page(number, true);
   if (!page)
-    return error_reply(404, db_.issued(number) ? "certificate " + number + "'s page has not been stored (an operator's first opening of it stores it)"
+    return error_reply(404, registry_.issued(number) ? "certificate " + number + "'s page has not been stored (an operator's first opening of it stores it)"
                                                : "no certificate numbered '" + number + "' was issued here");
   HttpReply r;
   r.body = page->html;
@@ -1288,7 +1290,7 @@ HttpReply Api::certificate_page(const std::string& number) {
 }
 
 HttpReply Api::certificate_by_number(const std::string& number) {
-  const auto c = db_.issued(number);
+  const auto c = registry_.issued(number);
   if (!c) return error_reply(404, "no certificate numbered '" + number + "' was issued here");
   return json_reply(200, issued_json(*c));
 }
@@ -1300,7 +1302,7 @@ void Api::audit(const std::string& actor, const std::string& action, const std::
   try {
     sequencer_.write_db("audit entry " + action + " " + subject + " by " + actor,
                         [this, actor, action, subject, text = details.dump(), t_ms] {
-                          db_.append_audit(actor, action, subject, text, t_ms);
+                          registry_.append_audit(actor, action, subject, text, t_ms);
                         });
   } catch (const std::exception& e) {
     // The change itself is made; a trail that could not take it is said loudly, in the log.
@@ -1410,7 +1412,7 @@ std::vector<InstrumentDue> Api::overdue_for_start(std::int64_t id) {
 }
 
 json Api::overdue_override_json(std::int64_t id) {
-  const auto o = db_.overdue_override(id);
+  const auto o = registry_.overdue_override(id);
   if (!o) return nullptr;
   return {{"by", o->by}, {"at", iso8601_utc(o->t_ms)}, {"reason", o->reason},
           {"instruments", parse_or_null(o->instruments_json)}, {"text", o->text}};
@@ -1455,11 +1457,11 @@ Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const
   if (!overdue.empty()) {
     stored_reason += (request.reason.empty() ? "" : "; ") + std::string("overdue reference equipment overridden (") +
                      overdue_words + "): " + override_reason;
-    db_.insert_overdue_override({id, now_unix_ms(), request.user, override_reason, overdue_kept.dump(), overdue_words});
+    registry_.insert_overdue_override({id, now_unix_ms(), request.user, override_reason, overdue_kept.dump(), overdue_words});
   }
   const auto outcome = sequencer_.command(id, command, request.user, stored_reason);
   if (outcome.http_status != 200) {
-    if (!overdue.empty()) db_.remove_overdue_override(id);
+    if (!overdue.empty()) registry_.remove_overdue_override(id);
     json extra = json::object();
     if (outcome.state) extra["state"] = to_string(*outcome.state);
     return {outcome.http_status, outcome.error, extra, {}};
@@ -1662,7 +1664,7 @@ HttpReply Api::list_audit(const std::map<std::string, std::string>& query) {
   const auto format_it = query.find("format");
   const std::string format = format_it == query.end() ? std::string("json") : format_it->second;
   if (format != "json" && format != "csv") return error_reply(400, "format must be json or csv, not '" + format + "'");
-  const auto entries = db_.audit_entries(q);
+  const auto entries = registry_.audit_entries(q);
   if (format == "csv") return audit_csv(entries);
   json list = json::array();
   for (const auto& e : entries)
@@ -1673,7 +1675,7 @@ HttpReply Api::list_audit(const std::map<std::string, std::string>& query) {
                     {"subject", e.subject},
                     {"details", parse_or_null(e.details_json)},
                     {"sha256", e.sha256}});
-  const AuditCheck check = check_audit_chain(db_.audit_trail(), db_.audit_head());
+  const AuditCheck check = check_audit_chain(registry_.audit_trail(), registry_.audit_head());
   return json_reply(200, {{"entries", list}, {"intact", check.ok()}, {"check", check.message}});
 }
 

@@ -24,6 +24,7 @@
 #include "daemon/production/certificates.hpp"
 #include "daemon/production/limits_file.hpp"
 #include "daemon/production/reference_equipment.hpp"
+#include "daemon/registry/registry.hpp"
 #include "daemon/sequencer/sequencer.hpp"
 #include "signing/signing.hpp"
 
@@ -51,7 +52,9 @@ inline constexpr const char* kSessionCookie = "imucal_session";
 
 class Api {
  public:
-  Api(const DaemonConfig& config, DaemonDb& db, Sequencer& sequencer, Auth& auth);
+  // `registry`: where certificates, their numbers, overrides and the audit trail are kept (the
+  // daemon's database or the lab's PostgreSQL server, daemon/registry/registry.hpp).
+  Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth);
   struct Route;  // one endpoint: method, path pattern, access, handler (api.cpp)
 
   // Any /api/ request except the WebSocket.
@@ -92,7 +95,7 @@ class Api {
   // The sequencer's events (Sequencer::EventListener): a run that ends `done` is issued its
   // certificate here.
   void on_run_event(const nlohmann::json& event);
-  // Appends to the audit trail (daemon_db.hpp); a failure is logged, never thrown at the caller.
+  // Appends to the audit trail (the registry's); a failure is logged, never thrown at the caller.
   void audit(const std::string& actor, const std::string& action, const std::string& subject,
              const nlohmann::json& details);
 
@@ -180,10 +183,10 @@ class Api {
 
   const DaemonConfig& config_;
   DaemonDb& db_;
+  Registry& registry_;
   Sequencer& sequencer_;
   Auth& auth_;
   LimitsFile limits_;
-  CertificateSequence certificate_sequence_;
   std::mutex certificate_mutex_;  // a campaign's certificate is looked up and issued as one step
   // A start is judged, its override recorded and the sequencer asked as one step: two starts of
   // one campaign never both record an override.

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The arrows allowed between imucal's folders (docs/ARCHITECTURE.md), checked on every #include
-and every target_link_libraries of the libraries; and the rule that only the SQLite layer
-(storage/sqlite.*) calls SQLite. Prints each forbidden arrow with where it is; exit 1 if any.
+and every target_link_libraries of the libraries; and the rules that only the SQLite layer
+(storage/sqlite.*) calls SQLite and only the PostgreSQL layer (storage/postgres.*) calls libpq. Prints each forbidden arrow with where it is; exit 1 if any.
 
 Usage: check_layers.py SOURCE_DIR
 """
@@ -28,8 +28,11 @@ ALLOWED = {
     "plan": {"core", "motion_programs", "estimators", "pipeline", "sim"},
     "daemon/config": {SIGNING, "core", "motion_programs", "drivers"},
     "daemon/db": {SIGNING, "core", "storage"},
+    # The lab's registry (issue 38): its row types are the daemon database's; PostgreSQL through
+    # storage's layer.
+    "daemon/registry": {"core", "storage", "daemon/db"},
     "daemon/campaign": {SIGNING, "core", "motion_programs", "pipeline", "daemon/config", "daemon/db"},
-    "daemon/production": {SIGNING, "core", "daemon/config", "daemon/db"},
+    "daemon/production": {SIGNING, "core", "daemon/config", "daemon/db", "daemon/registry"},
     "daemon/devices": {SIGNING, "core", "motion_programs", "drivers", "sim", "daemon/config", "daemon/campaign"},
     # The run engine's loop (issue 37) emits documents and stores nothing: no storage, no
     # estimators or pipeline, and of the service database only the run's state machine
@@ -43,7 +46,7 @@ ALLOWED = {
     # The HTTP layer translates (issue 37): the estimators, the pipeline and the recordings are
     # reached through the rooms that decide (analysis, campaign, production, run), never directly.
     "daemon/http": (BELOW_DAEMON - {"estimators", "pipeline", "storage"}) |
-                   {SIGNING, "daemon/config", "daemon/db", "daemon/campaign", "daemon/production",
+                   {SIGNING, "daemon/config", "daemon/db", "daemon/registry", "daemon/campaign", "daemon/production",
                     "daemon/devices", "daemon/run", "daemon/subscribers", "daemon/sequencer", "daemon/analysis"},
     "daemon": BELOW_DAEMON | {SIGNING, "daemon/*"},
     "cli": BELOW_DAEMON | {SIGNING, "daemon", "daemon/*", "bench"},
@@ -55,11 +58,14 @@ TARGETS = {
     "imucal_pipeline": "pipeline", "imucal_plan": "plan", "imucal_daemon": "daemon",
     "imucal_bench_storage": "bench",
 }
-for sub in ("config", "db", "campaign", "production", "devices", "run", "subscribers", "sequencer", "analysis", "http"):
+for sub in ("config", "db", "registry", "campaign", "production", "devices", "run", "subscribers", "sequencer", "analysis", "http"):
     TARGETS[f"imucal_daemon_{sub}"] = f"daemon/{sub}"
 SQLITE_LAYER = {"storage/sqlite.hpp", "storage/sqlite.cpp"}
 RUN_LOOP = "daemon/run"
 RUN_LOOP_FROM_DB = {"daemon/db/run_state.hpp"}
+POSTGRES_LAYER = {"storage/postgres.hpp", "storage/postgres.cpp"}
+# libpq's functions (PQexec, PQconnectdb, ...) and its header.
+LIBPQ_CALL = re.compile(r"\bPQ[a-z]\w*\s*\(|<libpq-fe\.h>|<postgresql/libpq-fe\.h>")
 
 
 def unit_of(path):
@@ -93,6 +99,8 @@ def source_problems(rel, text):
                 problems.append(f"{rel}:{n}: includes {m.group(1)} ({folder} -> {to})")
         if rel not in SQLITE_LAYER and ("sqlite3_" in line or "<sqlite3.h>" in line):
             problems.append(f"{rel}:{n}: calls SQLite outside the SQLite layer (storage/sqlite.hpp)")
+        if rel not in POSTGRES_LAYER and LIBPQ_CALL.search(line):
+            problems.append(f"{rel}:{n}: calls libpq outside the PostgreSQL layer (storage/postgres.hpp)")
     return problems
 
 

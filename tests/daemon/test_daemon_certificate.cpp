@@ -19,9 +19,11 @@
 #include "core/expect_value.hpp"
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/postgres_registry.hpp"
 #include "service_fixture.hpp"
 #include "signing/signing.hpp"
 #include "storage/sqlite.hpp"
+#include "tests/postgres_server.hpp"
 #include "tests/test_paths.hpp"
 
 using namespace imucal;
@@ -913,4 +915,49 @@ TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
   EXPECT_EQ(tail_status, 1) << tail;
   EXPECT_NE(tail.find("entries at the end were deleted"), std::string::npos) << tail;
   EXPECT_NE(audit_verify(scratch_dir("audit-empty")).second.find("no imucald database"), std::string::npos);
+}
+
+// Issue 38: two stands' imucald on one PostgreSQL registry (a private server, tests/postgres_server.hpp)
+// number their certificates from its sequence, one after the other, and write one audit trail;
+// each stand's own SQLite database keeps none of it.
+TEST(Registry, TwoStandsOnOnePostgresRegistryShareTheNumberingAndTheAuditTrail) {
+  static imucaltest::PostgresServer server;
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("stands"));
+  const auto on_registry = [&](const std::string& stand) {
+    return [&, stand](daemon::DaemonConfig& c) {
+      configure(c, scratch_dir("registry-unused-" + stand) + "/sequence.json");
+      c.registry.postgresql = conninfo;
+      c.registry.stand = stand;
+    };
+  };
+  LocalDaemon a("registry-stand-a", false, on_registry("stand-a"));
+  LocalDaemon b("registry-stand-b", false, on_registry("stand-b"));
+  const auto id_a = run_campaign(a, "on a", "FOG-A");
+  const auto id_b = run_campaign(b, "on b", "FOG-B");
+  const json ca = a.get(certificate_target(id_a));
+  const json cb = b.get(certificate_target(id_b));
+  EXPECT_EQ(ca.at("sequence"), 1) << ca.dump();
+  EXPECT_EQ(cb.at("sequence"), 2) << cb.dump();
+  // A number is the lab's: stand b finds stand a's certificate by it.
+  EXPECT_EQ(b.call("GET", "/api/certificates/" + ca.at("number").get<std::string>()).status, 200);
+  // Campaign ids are each stand's own: both ran campaign 1, each sees its own certificate.
+  EXPECT_EQ(id_a, id_b);
+  EXPECT_EQ(a.get(certificate_target(id_a)).at("number"), ca.at("number"));
+
+  daemon::PostgresRegistry registry(conninfo, "test");
+  EXPECT_EQ(registry.max_certificate_sequence(), 2);
+  const auto trail = registry.audit_trail();
+  EXPECT_TRUE(daemon::check_audit_chain(trail, registry.audit_head()).ok());
+  const auto started = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
+    return e.action == "service.started";
+  });
+  EXPECT_EQ(started, 2);
+  const json listed = a.get("/api/audit");
+  EXPECT_TRUE(listed.at("intact").get<bool>()) << listed.dump();
+  // The stand's own database holds no certificate of its own.
+  daemon::DaemonDb own(a.config.data_dir + "/imucald.db");
+  EXPECT_EQ(own.max_certificate_sequence(), 0);
+  EXPECT_TRUE(own.audit_trail().empty());
 }

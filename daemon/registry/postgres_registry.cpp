@@ -1,0 +1,328 @@
+#include "daemon/registry/postgres_registry.hpp"
+
+#include <utility>
+
+namespace imucal::daemon {
+
+namespace {
+
+using storage::pg::Result;
+using storage::pg::Transaction;
+
+// Advisory locks of the registry (pg_advisory_xact_lock): one migration at a time, one audit
+// append at a time (the chain is one line for every stand).
+constexpr std::int64_t kMigrationLock = 380001;
+constexpr std::int64_t kAuditLock = 380002;
+
+// Version 1. The rules the SQLite database's triggers keep (an issued certificate, a page and the
+// audit trail never change and are never deleted; superseded once) are kept by triggers here too.
+constexpr const char* kSchema1 = R"sql(
+CREATE SEQUENCE certificate_sequence AS BIGINT START 1;
+CREATE TABLE setting(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE certificate(
+  stand TEXT NOT NULL,
+  campaign_id BIGINT NOT NULL,
+  number TEXT NOT NULL UNIQUE,
+  sequence BIGINT NOT NULL,
+  issued_ms BIGINT NOT NULL,
+  bench_json TEXT NOT NULL,
+  PRIMARY KEY (stand, campaign_id));
+CREATE TABLE issued_certificate(
+  sequence BIGINT PRIMARY KEY,
+  number TEXT NOT NULL UNIQUE,
+  stand TEXT NOT NULL,
+  campaign_id BIGINT NOT NULL,
+  issued_ms BIGINT NOT NULL,
+  content_json TEXT NOT NULL,
+  content_sha256 TEXT NOT NULL,
+  signed_json TEXT,
+  supersedes TEXT,
+  superseded_by TEXT,
+  reason TEXT NOT NULL);
+CREATE INDEX issued_certificate_campaign ON issued_certificate(stand, campaign_id);
+CREATE TABLE issued_page(
+  number TEXT PRIMARY KEY REFERENCES issued_certificate(number),
+  html TEXT NOT NULL,
+  sha256 TEXT NOT NULL,
+  stored_ms BIGINT NOT NULL,
+  stored_by TEXT NOT NULL);
+CREATE TABLE overdue_override(
+  stand TEXT NOT NULL,
+  campaign_id BIGINT NOT NULL,
+  t_ms BIGINT NOT NULL,
+  overridden_by TEXT NOT NULL,
+  reason TEXT NOT NULL,
+  instruments_json TEXT NOT NULL,
+  text TEXT NOT NULL,
+  PRIMARY KEY (stand, campaign_id));
+CREATE TABLE audit(
+  seq BIGINT PRIMARY KEY,
+  stand TEXT NOT NULL,
+  t_ms BIGINT NOT NULL,
+  actor TEXT NOT NULL,
+  action TEXT NOT NULL,
+  subject TEXT NOT NULL,
+  details_json TEXT NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  sha256 TEXT NOT NULL);
+CREATE FUNCTION imucal_refuse() RETURNS trigger LANGUAGE plpgsql AS
+  $$ BEGIN RAISE EXCEPTION '%', TG_ARGV[0]; END $$;
+CREATE TRIGGER issued_certificate_frozen
+  BEFORE UPDATE OF sequence, number, stand, campaign_id, issued_ms, content_json, content_sha256, signed_json,
+                   supersedes, reason ON issued_certificate
+  FOR EACH ROW EXECUTE FUNCTION imucal_refuse('an issued certificate never changes: issue a new one that supersedes it');
+CREATE TRIGGER issued_certificate_superseded_once
+  BEFORE UPDATE OF superseded_by ON issued_certificate FOR EACH ROW WHEN (OLD.superseded_by IS NOT NULL)
+  EXECUTE FUNCTION imucal_refuse('an issued certificate is superseded once');
+CREATE TRIGGER issued_certificate_kept BEFORE DELETE ON issued_certificate
+  FOR EACH ROW EXECUTE FUNCTION imucal_refuse('an issued certificate is never deleted');
+CREATE TRIGGER issued_page_frozen BEFORE UPDATE OR DELETE ON issued_page
+  FOR EACH ROW EXECUTE FUNCTION imucal_refuse('a stored certificate page never changes and is never deleted');
+CREATE TRIGGER audit_append_only BEFORE UPDATE OR DELETE ON audit
+  FOR EACH ROW EXECUTE FUNCTION imucal_refuse('the audit trail is appended only');
+)sql";
+
+// The migrations in order: kMigrations[v - 1] takes a registry from version v - 1 to v.
+constexpr const char* kMigrations[] = {kSchema1};
+static_assert(std::size(kMigrations) == PostgresRegistry::kSchemaVersion);
+
+constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry, as in SQLite
+
+#define IMUCAL_PG_ISSUED_SELECT                                                                            \
+  "SELECT sequence, number, campaign_id, issued_ms, content_json, content_sha256, signed_json, supersedes, " \
+  "superseded_by, reason FROM issued_certificate "
+#define IMUCAL_PG_AUDIT_SELECT "SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256 FROM audit "
+
+IssuedCertificateRow issued_row(const Result& r, int i) {
+  return IssuedCertificateRow{r.int64(i, 0),         r.text(i, 1),          r.int64(i, 2),
+                              r.int64(i, 3),         r.text(i, 4),          r.text(i, 5),
+                              r.optional_text(i, 6), r.optional_text(i, 7), r.optional_text(i, 8),
+                              r.text(i, 9)};
+}
+
+std::vector<IssuedCertificateRow> issued_rows(const Result& r) {
+  std::vector<IssuedCertificateRow> out;
+  for (int i = 0; i < r.rows(); ++i) out.push_back(issued_row(r, i));
+  return out;
+}
+
+std::vector<AuditEntry> audit_rows(const Result& r) {
+  std::vector<AuditEntry> out;
+  for (int i = 0; i < r.rows(); ++i)
+    out.push_back(AuditEntry{r.int64(i, 0), r.int64(i, 1), r.text(i, 2), r.text(i, 3), r.text(i, 4), r.text(i, 5),
+                             r.text(i, 6), r.text(i, 7)});
+  return out;
+}
+
+}  // namespace
+
+PostgresRegistry::PostgresRegistry(const std::string& conninfo, std::string stand)
+    : conninfo_(conninfo), stand_(std::move(stand)), db_(conninfo, "registry") {
+  migrate();
+}
+
+// After the server went away (a restart, a network break), the next call connects again; the call
+// that met the break failed with PgError::connection_lost.
+storage::pg::Connection& PostgresRegistry::db() {
+  if (!db_.ok()) db_ = storage::pg::Connection(conninfo_, "registry");
+  return db_;
+}
+
+void PostgresRegistry::migrate() {
+  std::lock_guard lock(mutex_);
+  Transaction txn(db());
+  db().exec("SELECT pg_advisory_xact_lock($1)", {kMigrationLock});
+  db().exec("CREATE TABLE IF NOT EXISTS registry_schema(version INTEGER NOT NULL)");
+  const auto version = static_cast<int>(db().exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0));
+  if (version > kSchemaVersion)
+    throw DbError("registry: the PostgreSQL server's registry has schema version " + std::to_string(version) +
+                  ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
+  for (int v = version + 1; v <= kSchemaVersion; ++v) db().exec_script(kMigrations[v - 1]);
+  if (version != kSchemaVersion) {
+    db().exec("DELETE FROM registry_schema");
+    db().exec("INSERT INTO registry_schema(version) VALUES ($1)", {kSchemaVersion});
+  }
+  txn.commit();
+}
+
+int PostgresRegistry::schema_version() {
+  std::lock_guard lock(mutex_);
+  return static_cast<int>(db().exec("SELECT MAX(version) FROM registry_schema").int64(0, 0));
+}
+
+std::int64_t PostgresRegistry::next_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  return db().exec("SELECT nextval('certificate_sequence')").int64(0, 0);
+}
+
+std::int64_t PostgresRegistry::max_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  return db_
+      .exec("SELECT GREATEST(COALESCE((SELECT MAX(sequence) FROM certificate), 0), "
+            "COALESCE((SELECT MAX(sequence) FROM issued_certificate), 0))")
+      .int64(0, 0);
+}
+
+std::optional<CertificateRow> PostgresRegistry::certificate(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(
+      "SELECT campaign_id, number, sequence, issued_ms, bench_json FROM certificate WHERE stand = $1 AND campaign_id = $2",
+      {stand_, campaign_id});
+  if (r.rows() == 0) return std::nullopt;
+  return CertificateRow{r.int64(0, 0), r.text(0, 1), r.int64(0, 2), r.int64(0, 3), r.text(0, 4)};
+}
+
+void PostgresRegistry::insert_certificate(const CertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO certificate(stand, campaign_id, number, sequence, issued_ms, bench_json) "
+           "VALUES ($1, $2, $3, $4, $5, $6)",
+           {stand_, row.campaign_id, row.number, row.sequence, row.issued_ms, row.bench_json});
+}
+
+void PostgresRegistry::insert_issued(const IssuedCertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  Transaction txn(db());
+  db().exec("INSERT INTO issued_certificate(sequence, number, stand, campaign_id, issued_ms, content_json, "
+           "content_sha256, signed_json, supersedes, reason) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
+           {row.sequence, row.number, stand_, row.campaign_id, row.issued_ms, row.content_json, row.content_sha256,
+            row.signed_json, row.supersedes, row.reason});
+  if (row.supersedes)
+    db().exec("UPDATE issued_certificate SET superseded_by = $1 WHERE number = $2", {row.number, *row.supersedes});
+  txn.commit();
+}
+
+std::optional<IssuedCertificateRow> PostgresRegistry::issued(const std::string& number) {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(IMUCAL_PG_ISSUED_SELECT "WHERE number = $1", {number});
+  if (r.rows() == 0) return std::nullopt;
+  return issued_row(r, 0);
+}
+
+std::optional<IssuedCertificateRow> PostgresRegistry::current_issued(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(IMUCAL_PG_ISSUED_SELECT
+                            "WHERE stand = $1 AND campaign_id = $2 AND superseded_by IS NULL "
+                            "ORDER BY sequence DESC LIMIT 1",
+                            {stand_, campaign_id});
+  if (r.rows() == 0) return std::nullopt;
+  return issued_row(r, 0);
+}
+
+std::vector<IssuedCertificateRow> PostgresRegistry::issued_history(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  return issued_rows(
+      db().exec(IMUCAL_PG_ISSUED_SELECT "WHERE stand = $1 AND campaign_id = $2 ORDER BY sequence", {stand_, campaign_id}));
+}
+
+std::vector<std::int64_t> PostgresRegistry::campaigns_with_issued() {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(
+      "SELECT DISTINCT campaign_id FROM issued_certificate WHERE stand = $1 AND superseded_by IS NULL "
+      "ORDER BY campaign_id",
+      {stand_});
+  std::vector<std::int64_t> out;
+  for (int i = 0; i < r.rows(); ++i) out.push_back(r.int64(i, 0));
+  return out;
+}
+
+bool PostgresRegistry::insert_issued_page(const IssuedPageRow& row) {
+  std::lock_guard lock(mutex_);
+  // Two stands storing the same page at once: the first is kept, the second told so.
+  return db_
+             .exec("INSERT INTO issued_page(number, html, sha256, stored_ms, stored_by) VALUES ($1, $2, $3, $4, $5) "
+                   "ON CONFLICT (number) DO NOTHING",
+                   {row.number, row.html, row.sha256, row.stored_ms, row.stored_by})
+             .affected() == 1;
+}
+
+std::optional<IssuedPageRow> PostgresRegistry::issued_page(const std::string& number, bool with_html) {
+  std::lock_guard lock(mutex_);
+  const Result r =
+      db().exec(with_html ? "SELECT number, html, sha256, stored_ms, stored_by FROM issued_page WHERE number = $1"
+                         : "SELECT number, '', sha256, stored_ms, stored_by FROM issued_page WHERE number = $1",
+               {number});
+  if (r.rows() == 0) return std::nullopt;
+  return IssuedPageRow{r.text(0, 0), r.text(0, 1), r.text(0, 2), r.int64(0, 3), r.text(0, 4)};
+}
+
+void PostgresRegistry::insert_overdue_override(const OverdueOverrideRow& row) {
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO overdue_override(stand, campaign_id, t_ms, overridden_by, reason, instruments_json, text) "
+           "VALUES ($1, $2, $3, $4, $5, $6, $7)",
+           {stand_, row.campaign_id, row.t_ms, row.by, row.reason, row.instruments_json, row.text});
+}
+
+void PostgresRegistry::remove_overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  db().exec("DELETE FROM overdue_override WHERE stand = $1 AND campaign_id = $2", {stand_, campaign_id});
+}
+
+std::optional<OverdueOverrideRow> PostgresRegistry::overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(
+      "SELECT campaign_id, t_ms, overridden_by, reason, instruments_json, text FROM overdue_override "
+      "WHERE stand = $1 AND campaign_id = $2",
+      {stand_, campaign_id});
+  if (r.rows() == 0) return std::nullopt;
+  return OverdueOverrideRow{r.int64(0, 0), r.int64(0, 1), r.text(0, 2), r.text(0, 3), r.text(0, 4), r.text(0, 5)};
+}
+
+AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::string& action,
+                                          const std::string& subject, const std::string& details_json,
+                                          std::optional<std::int64_t> t_ms) {
+  std::lock_guard lock(mutex_);
+  Transaction txn(db());
+  db().exec("SELECT pg_advisory_xact_lock($1)", {kAuditLock});  // one link at a time, from every stand
+  AuditEntry e;
+  e.prev_sha256 = kAuditGenesis;
+  const Result last = db().exec("SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
+  if (last.rows() == 1) {
+    e.seq = last.int64(0, 0);
+    e.prev_sha256 = last.text(0, 1);
+  }
+  e.seq += 1;
+  e.t_ms = t_ms.value_or(now_unix_ms());
+  e.actor = actor;
+  e.action = action;
+  e.subject = subject;
+  e.details_json = details_json;
+  e.sha256 = audit_entry_sha256(e);
+  db().exec("INSERT INTO audit(seq, stand, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
+           "VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
+           {e.seq, stand_, e.t_ms, e.actor, e.action, e.subject, e.details_json, e.prev_sha256, e.sha256});
+  db().exec("INSERT INTO setting(key, value) VALUES ($1, $2) ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+           {kAuditHeadKey, std::to_string(e.seq) + " " + e.sha256});
+  txn.commit();
+  return e;
+}
+
+std::vector<AuditEntry> PostgresRegistry::audit_entries(const AuditQuery& q) {
+  std::lock_guard lock(mutex_);
+  return audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT
+                             "WHERE ($1::BIGINT IS NULL OR t_ms >= $1::BIGINT) AND ($2::BIGINT IS NULL OR t_ms <= $2::BIGINT) "
+                             "AND ($3::TEXT = '' OR actor = $3::TEXT) "
+                             "AND ($4::TEXT = '' OR starts_with(action, $4::TEXT)) "
+                             "AND ($5::TEXT = '' OR subject = $5::TEXT) ORDER BY seq DESC LIMIT $6",
+                             {q.from_ms, q.to_ms, q.actor, q.action_prefix, q.subject, q.limit}));
+}
+
+std::vector<AuditEntry> PostgresRegistry::audit_trail() {
+  std::lock_guard lock(mutex_);
+  return audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT "ORDER BY seq"));
+}
+
+std::optional<std::pair<std::int64_t, std::string>> PostgresRegistry::audit_head() {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec("SELECT value FROM setting WHERE key = $1", {kAuditHeadKey});
+  if (r.rows() == 0) return std::nullopt;
+  const std::string text = r.text(0, 0);
+  // "SEQ SHA256"; a damaged value gives seq -1, which no trail matches (as the SQLite registry reads it).
+  const auto space = text.find(' ');
+  try {
+    if (space != std::string::npos) return std::make_pair(static_cast<std::int64_t>(std::stoll(text.substr(0, space))), text.substr(space + 1));
+  } catch (const std::exception&) {
+  }
+  return std::make_pair(std::int64_t{-1}, text);
+}
+
+}  // namespace imucal::daemon

@@ -1,0 +1,60 @@
+// The registry on a lab's PostgreSQL server (registry.hpp; issue 38): the stands of a production
+// line share one. Its schema is versioned (table registry_schema) and migrated when a registry
+// connects, under an advisory lock so that stands starting together migrate once. Certificate
+// numbers come from the sequence certificate_sequence: two stands taking numbers at once never
+// share one. Campaigns are named by the stand that ran them and their id there. One connection
+// behind a mutex, connected again after the server went away; each call is short.
+#pragma once
+
+#include <mutex>
+#include <string>
+
+#include "daemon/registry/registry.hpp"
+#include "storage/postgres.hpp"
+
+namespace imucal::daemon {
+
+class PostgresRegistry final : public Registry {
+ public:
+  // 1: certificates (numbers, issued ones, pages), overdue overrides, the audit trail.
+  static constexpr int kSchemaVersion = 1;
+  // `conninfo`: registry.postgresql of the configuration (a libpq connection string). `stand`:
+  // the name of the stand whose campaigns this registry records. Throws storage::pg::PgError when
+  // the server cannot be reached, DbError when its schema is newer than this imucald knows.
+  PostgresRegistry(const std::string& conninfo, std::string stand);
+
+  std::string backend() const override { return "postgresql"; }
+  const std::string& stand() const { return stand_; }
+  std::int64_t next_certificate_sequence() override;
+  std::int64_t max_certificate_sequence() override;
+  std::optional<CertificateRow> certificate(std::int64_t campaign_id) override;
+  void insert_certificate(const CertificateRow& row) override;
+  void insert_issued(const IssuedCertificateRow& row) override;
+  std::optional<IssuedCertificateRow> issued(const std::string& number) override;
+  std::optional<IssuedCertificateRow> current_issued(std::int64_t campaign_id) override;
+  std::vector<IssuedCertificateRow> issued_history(std::int64_t campaign_id) override;
+  std::vector<std::int64_t> campaigns_with_issued() override;
+  bool insert_issued_page(const IssuedPageRow& row) override;
+  std::optional<IssuedPageRow> issued_page(const std::string& number, bool with_html) override;
+  void insert_overdue_override(const OverdueOverrideRow& row) override;
+  void remove_overdue_override(std::int64_t campaign_id) override;
+  std::optional<OverdueOverrideRow> overdue_override(std::int64_t campaign_id) override;
+  AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
+                          const std::string& details_json, std::optional<std::int64_t> t_ms) override;
+  std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
+  std::vector<AuditEntry> audit_trail() override;
+  std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+
+  // The schema version the server's registry has (after the migration of the constructor).
+  int schema_version();
+
+ private:
+  void migrate();
+  storage::pg::Connection& db();  // under mutex_
+  std::string conninfo_;
+  std::string stand_;
+  std::mutex mutex_;
+  storage::pg::Connection db_;
+};
+
+}  // namespace imucal::daemon

@@ -1,0 +1,70 @@
+// The lab's registry (issue 38): what outlives a stand's runs and is shared by the stands of a
+// production line: certificate numbers and the certificates issued, their printed pages, the
+// starts made with reference equipment past its due date, and the audit trail with its hash chain.
+// One interface, two implementations: the daemon's own SQLite database (SqliteRegistry, a stand
+// alone, as before) and a lab's PostgreSQL server (PostgresRegistry, registry.postgresql in the
+// configuration). The same suite runs against both (tests/daemon/test_registry.cpp).
+//
+// Each call is short and thread-safe; a failure of the store is a storage::StorageError.
+// A campaign is named by its id on the stand that ran it (the stand's own database numbers them).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "daemon/db/audit_chain.hpp"
+#include "daemon/db/daemon_db.hpp"
+
+namespace imucal::daemon {
+
+class Registry {
+ public:
+  using AuditQuery = DaemonDb::AuditQuery;
+  virtual ~Registry() = default;
+  Registry() = default;
+  Registry(const Registry&) = delete;
+  Registry& operator=(const Registry&) = delete;
+
+  // "sqlite" or "postgresql": what the daemon logs and GET /api/status may state.
+  virtual std::string backend() const = 0;
+
+  // Certificate numbering: the next site-wide sequence number, never one taken before (two
+  // stands, or two threads, taking numbers at the same time never share one). A number taken and
+  // not recorded (a crash, a failed issue) leaves a gap, never a repeat.
+  virtual std::int64_t next_certificate_sequence() = 0;
+  // The highest sequence number recorded (0: none), issued certificates and older numbers alike.
+  virtual std::int64_t max_certificate_sequence() = 0;
+
+  // A campaign's certificate number of before issue 35 (kept as it was issued).
+  virtual std::optional<CertificateRow> certificate(std::int64_t campaign_id) = 0;
+  virtual void insert_certificate(const CertificateRow& row) = 0;
+
+  // Issued certificates (frozen at issue; only superseded_by is set, once, by the certificate that
+  // supersedes it, in the same transaction as that one's insertion).
+  virtual void insert_issued(const IssuedCertificateRow& row) = 0;
+  virtual std::optional<IssuedCertificateRow> issued(const std::string& number) = 0;
+  virtual std::optional<IssuedCertificateRow> current_issued(std::int64_t campaign_id) = 0;
+  virtual std::vector<IssuedCertificateRow> issued_history(std::int64_t campaign_id) = 0;
+  virtual std::vector<std::int64_t> campaigns_with_issued() = 0;
+  // A certificate's printed page, stored once (false when one is stored already: it is kept).
+  virtual bool insert_issued_page(const IssuedPageRow& row) = 0;
+  virtual std::optional<IssuedPageRow> issued_page(const std::string& number, bool with_html) = 0;
+
+  // The reference equipment's overdue overrides of campaigns' starts (one per campaign).
+  virtual void insert_overdue_override(const OverdueOverrideRow& row) = 0;
+  virtual void remove_overdue_override(std::int64_t campaign_id) = 0;
+  virtual std::optional<OverdueOverrideRow> overdue_override(std::int64_t campaign_id) = 0;
+
+  // The audit trail (audit_chain.hpp): appended with its link to the entry before and the head
+  // recorded in one transaction, one chain for every writer of the store.
+  virtual AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
+                                  const std::string& details_json, std::optional<std::int64_t> t_ms) = 0;
+  virtual std::vector<AuditEntry> audit_entries(const AuditQuery& query) = 0;
+  virtual std::vector<AuditEntry> audit_trail() = 0;
+  virtual std::optional<std::pair<std::int64_t, std::string>> audit_head() = 0;
+};
+
+}  // namespace imucal::daemon

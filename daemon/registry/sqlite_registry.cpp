@@ -1,0 +1,49 @@
+#include "daemon/registry/sqlite_registry.hpp"
+
+#include <utility>
+
+namespace imucal::daemon {
+
+SqliteRegistry::SqliteRegistry(DaemonDb& db, TakeNumber take_number)
+    : db_(db), take_number_(std::move(take_number)) {}
+
+// The floor is the database's highest: a sequence file restored from an old backup cannot hand
+// out a number again.
+std::int64_t SqliteRegistry::next_certificate_sequence() { return take_number_(db_.max_certificate_sequence()); }
+std::int64_t SqliteRegistry::max_certificate_sequence() { return db_.max_certificate_sequence(); }
+
+std::optional<CertificateRow> SqliteRegistry::certificate(std::int64_t campaign_id) {
+  return db_.certificate(campaign_id);
+}
+void SqliteRegistry::insert_certificate(const CertificateRow& row) { db_.insert_certificate(row); }
+
+void SqliteRegistry::insert_issued(const IssuedCertificateRow& row) { db_.insert_issued(row); }
+std::optional<IssuedCertificateRow> SqliteRegistry::issued(const std::string& number) { return db_.issued(number); }
+std::optional<IssuedCertificateRow> SqliteRegistry::current_issued(std::int64_t campaign_id) {
+  return db_.current_issued(campaign_id);
+}
+std::vector<IssuedCertificateRow> SqliteRegistry::issued_history(std::int64_t campaign_id) {
+  return db_.issued_history(campaign_id);
+}
+std::vector<std::int64_t> SqliteRegistry::campaigns_with_issued() { return db_.campaigns_with_issued(); }
+bool SqliteRegistry::insert_issued_page(const IssuedPageRow& row) { return db_.insert_issued_page(row); }
+std::optional<IssuedPageRow> SqliteRegistry::issued_page(const std::string& number, bool with_html) {
+  return db_.issued_page(number, with_html);
+}
+
+void SqliteRegistry::insert_overdue_override(const OverdueOverrideRow& row) { db_.insert_overdue_override(row); }
+void SqliteRegistry::remove_overdue_override(std::int64_t campaign_id) { db_.remove_overdue_override(campaign_id); }
+std::optional<OverdueOverrideRow> SqliteRegistry::overdue_override(std::int64_t campaign_id) {
+  return db_.overdue_override(campaign_id);
+}
+
+AuditEntry SqliteRegistry::append_audit(const std::string& actor, const std::string& action,
+                                        const std::string& subject, const std::string& details_json,
+                                        std::optional<std::int64_t> t_ms) {
+  return db_.append_audit(actor, action, subject, details_json, t_ms);
+}
+std::vector<AuditEntry> SqliteRegistry::audit_entries(const AuditQuery& query) { return db_.audit_entries(query); }
+std::vector<AuditEntry> SqliteRegistry::audit_trail() { return db_.audit_trail(); }
+std::optional<std::pair<std::int64_t, std::string>> SqliteRegistry::audit_head() { return db_.audit_head(); }
+
+}  // namespace imucal::daemon

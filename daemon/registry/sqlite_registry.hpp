@@ -1,0 +1,45 @@
+// The registry in the daemon's own SQLite database (registry.hpp): a stand alone, as before issue
+// 38. The tables are DaemonDb's; certificate numbers come from the site's sequence file
+// (production/certificates.hpp CertificateSequence), given here as the function that takes one
+// above a floor, so that the numbering rule stays where it is.
+#pragma once
+
+#include <functional>
+
+#include "daemon/registry/registry.hpp"
+
+namespace imucal::daemon {
+
+class SqliteRegistry final : public Registry {
+ public:
+  // `take_number(floor)`: the next number of the site's sequence above `floor`.
+  using TakeNumber = std::function<std::int64_t(std::int64_t floor)>;
+  SqliteRegistry(DaemonDb& db, TakeNumber take_number);
+
+  std::string backend() const override { return "sqlite"; }
+  std::int64_t next_certificate_sequence() override;
+  std::int64_t max_certificate_sequence() override;
+  std::optional<CertificateRow> certificate(std::int64_t campaign_id) override;
+  void insert_certificate(const CertificateRow& row) override;
+  void insert_issued(const IssuedCertificateRow& row) override;
+  std::optional<IssuedCertificateRow> issued(const std::string& number) override;
+  std::optional<IssuedCertificateRow> current_issued(std::int64_t campaign_id) override;
+  std::vector<IssuedCertificateRow> issued_history(std::int64_t campaign_id) override;
+  std::vector<std::int64_t> campaigns_with_issued() override;
+  bool insert_issued_page(const IssuedPageRow& row) override;
+  std::optional<IssuedPageRow> issued_page(const std::string& number, bool with_html) override;
+  void insert_overdue_override(const OverdueOverrideRow& row) override;
+  void remove_overdue_override(std::int64_t campaign_id) override;
+  std::optional<OverdueOverrideRow> overdue_override(std::int64_t campaign_id) override;
+  AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
+                          const std::string& details_json, std::optional<std::int64_t> t_ms) override;
+  std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
+  std::vector<AuditEntry> audit_trail() override;
+  std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+
+ private:
+  DaemonDb& db_;
+  TakeNumber take_number_;
+};
+
+}  // namespace imucal::daemon

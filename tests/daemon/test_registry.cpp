@@ -1,0 +1,356 @@
+// The lab's registry (daemon/registry/registry.hpp, issue 38): one suite, run against both
+// implementations: the daemon's SQLite database (with the site's sequence file) and a PostgreSQL
+// server (a private one, tests/postgres_server.hpp; skipped, saying what is missing, without it).
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/db/daemon_db.hpp"
+#include "daemon/production/certificates.hpp"
+#include "daemon/registry/postgres_registry.hpp"
+#include "daemon/registry/sqlite_registry.hpp"
+#include "tests/postgres_server.hpp"
+#include "tests/test_paths.hpp"
+
+using namespace imucal::daemon;
+
+namespace {
+
+constexpr std::size_t kCampaigns = 5;  // campaigns 1..5 exist in every store
+
+// The daemon's database in a fresh directory; each connect() is another connection to it (another
+// DaemonDb on the same file, as another process would open it) with the same sequence file.
+class SqliteStore {
+ public:
+  std::string open() {
+    static int n = 0;
+    dir_ = imucaltest::test_tmp_dir() + "/registry-" + std::to_string(getpid()) + "-" + std::to_string(++n);
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+    DaemonDb db(dir_ + "/imucald.db");
+    for (std::size_t i = 1; i <= kCampaigns; ++i) db.insert_campaign("c" + std::to_string(i), "{}", "test", 1.0, "test");
+    return "";
+  }
+  ~SqliteStore() {
+    dbs_.clear();
+    std::error_code ignored;
+    if (!dir_.empty()) std::filesystem::remove_all(dir_, ignored);
+  }
+  // The databases and the sequence live as long as the store (the registries refer to them).
+  std::unique_ptr<Registry> connect() {
+    std::lock_guard lock(mutex_);
+    dbs_.push_back(std::make_unique<DaemonDb>(dir_ + "/imucald.db"));
+    auto sequence = std::make_shared<CertificateSequence>(dir_ + "/sequence");
+    return std::make_unique<SqliteRegistry>(*dbs_.back(),
+                                            [sequence](std::int64_t floor) { return sequence->next(floor); });
+  }
+
+ private:
+  std::string dir_;
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<DaemonDb>> dbs_;
+};
+
+imucaltest::PostgresServer& postgres_server() {
+  static imucaltest::PostgresServer server;
+  return server;
+}
+
+// A fresh database on the private server; each connect() is another connection (another stand's
+// imucald would hold one).
+class PostgresStore {
+ public:
+  std::string open() {
+    auto& server = postgres_server();
+    if (!server.skip_reason().empty()) return "skip: " + server.skip_reason();
+    if (!server.running()) return server.error();
+    conninfo_ = server.create_database(imucaltest::PostgresServer::unique_name("registry"));
+    return "";
+  }
+  std::unique_ptr<Registry> connect() { return std::make_unique<PostgresRegistry>(conninfo_, "stand-a"); }
+  const std::string& conninfo() const { return conninfo_; }
+
+ private:
+  std::string conninfo_;
+};
+
+template <class Store>
+class RegistryTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string problem = store_.open();
+    if (problem.rfind("skip: ", 0) == 0) GTEST_SKIP() << problem.substr(6);
+    ASSERT_EQ(problem, "");
+    registry_ = store_.connect();
+  }
+  Store store_;
+  std::unique_ptr<Registry> registry_;
+};
+
+class StoreNames {
+ public:
+  template <class T>
+  static std::string GetName(int) {
+    return std::is_same_v<T, SqliteStore> ? "Sqlite" : "Postgres";
+  }
+};
+using Stores = ::testing::Types<SqliteStore, PostgresStore>;
+TYPED_TEST_SUITE(RegistryTest, Stores, StoreNames);
+
+IssuedCertificateRow issued(std::int64_t sequence, std::int64_t campaign,
+                            std::optional<std::string> supersedes = std::nullopt) {
+  IssuedCertificateRow r;
+  r.sequence = sequence;
+  r.number = "LAB-2026-" + std::to_string(1000000 + sequence).substr(1);
+  r.campaign_id = campaign;
+  r.issued_ms = 1700000000000 + sequence;
+  r.content_json = R"({"n":)" + std::to_string(sequence) + "}";
+  r.content_sha256 = "sha-" + std::to_string(sequence);
+  r.supersedes = std::move(supersedes);
+  r.reason = "the run ended";
+  return r;
+}
+
+TYPED_TEST(RegistryTest, CertificateNumbersFollowOneAnotherAndTheHighestIsKnown) {
+  auto& reg = *this->registry_;
+  EXPECT_EQ(reg.max_certificate_sequence(), 0);
+  const std::int64_t a = reg.next_certificate_sequence();
+  const std::int64_t b = reg.next_certificate_sequence();
+  EXPECT_EQ(a, 1);
+  EXPECT_EQ(b, 2);
+  reg.insert_issued(issued(b, 1));
+  EXPECT_EQ(reg.max_certificate_sequence(), 2);
+  reg.insert_certificate({2, "LAB-2025-000007", 7, 1600000000000, R"({"devices":"sim"})"});
+  EXPECT_EQ(reg.max_certificate_sequence(), 7);
+  const auto legacy = reg.certificate(2);
+  ASSERT_TRUE(legacy);
+  EXPECT_EQ(legacy->number, "LAB-2025-000007");
+  EXPECT_EQ(legacy->bench_json, R"({"devices":"sim"})");
+  EXPECT_FALSE(reg.certificate(3));
+}
+
+TYPED_TEST(RegistryTest, ALaterCertificateSupersedesTheOneInForceOnce) {
+  auto& reg = *this->registry_;
+  const auto first = issued(1, 1);
+  reg.insert_issued(first);
+  EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, first.number);
+  const auto second = issued(2, 1, first.number);
+  reg.insert_issued(second);
+  EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, second.number);
+  const auto history = reg.issued_history(1);
+  ASSERT_EQ(history.size(), 2U);
+  EXPECT_EQ(history[0].superseded_by, second.number);
+  EXPECT_EQ(history[1].supersedes, first.number);
+  EXPECT_EQ(history[1].content_json, second.content_json);
+  EXPECT_EQ(history[1].signed_json, std::nullopt);
+  EXPECT_EQ(reg.campaigns_with_issued(), std::vector<std::int64_t>{1});
+  EXPECT_FALSE(reg.issued("LAB-2026-999999"));
+  EXPECT_FALSE(reg.current_issued(2));
+  // Superseded once: a third one naming the first again is refused, and nothing of it is kept.
+  EXPECT_THROW(reg.insert_issued(issued(3, 1, first.number)), imucal::storage::StorageError);
+  EXPECT_FALSE(reg.issued(issued(3, 1).number));
+  // A number is never issued twice.
+  EXPECT_THROW(reg.insert_issued(issued(2, 2)), imucal::storage::StorageError);
+}
+
+TYPED_TEST(RegistryTest, APrintedPageIsStoredOnceAndKept) {
+  auto& reg = *this->registry_;
+  const auto c = issued(1, 1);
+  reg.insert_issued(c);
+  EXPECT_TRUE(reg.insert_issued_page({c.number, "<html>1</html>", "h1", 5, "ada"}));
+  EXPECT_FALSE(reg.insert_issued_page({c.number, "<html>2</html>", "h2", 6, "bob"}));
+  const auto with = reg.issued_page(c.number, true);
+  ASSERT_TRUE(with);
+  EXPECT_EQ(with->html, "<html>1</html>");
+  EXPECT_EQ(with->stored_by, "ada");
+  const auto without = reg.issued_page(c.number, false);
+  ASSERT_TRUE(without);
+  EXPECT_EQ(without->html, "");
+  EXPECT_EQ(without->sha256, "h1");
+  EXPECT_FALSE(reg.issued_page("LAB-2026-999999", true));
+}
+
+TYPED_TEST(RegistryTest, AnOverdueOverrideIsKeptWithItsCampaignUntilRemoved) {
+  auto& reg = *this->registry_;
+  EXPECT_FALSE(reg.overdue_override(3));
+  reg.insert_overdue_override({3, 42, "ada", "customer waits", R"([{"instrument":"table"}])", "the rate table ..."});
+  const auto o = reg.overdue_override(3);
+  ASSERT_TRUE(o);
+  EXPECT_EQ(o->by, "ada");
+  EXPECT_EQ(o->t_ms, 42);
+  EXPECT_EQ(o->instruments_json, R"([{"instrument":"table"}])");
+  EXPECT_THROW(reg.insert_overdue_override({3, 43, "bob", "again", "[]", ""}), imucal::storage::StorageError);
+  reg.remove_overdue_override(3);
+  EXPECT_FALSE(reg.overdue_override(3));
+}
+
+TYPED_TEST(RegistryTest, TheAuditTrailIsAChainAndAnsweredByQuery) {
+  auto& reg = *this->registry_;
+  EXPECT_FALSE(reg.audit_head());
+  reg.append_audit("ada", "campaign.created", "campaign 1", R"({"name":"c1"})", 1000);
+  reg.append_audit("bob", "limits.replaced", "limits", R"({})", 2000);
+  const AuditEntry last = reg.append_audit("ada", "campaign.command", "campaign 1", R"({"command":"start"})", 3000);
+  EXPECT_EQ(last.seq, 3);
+  const auto trail = reg.audit_trail();
+  ASSERT_EQ(trail.size(), 3U);
+  EXPECT_EQ(trail[0].prev_sha256, kAuditGenesis);
+  EXPECT_EQ(trail[2].sha256, last.sha256);
+  const auto head = reg.audit_head();
+  ASSERT_TRUE(head);
+  EXPECT_EQ(head->first, 3);
+  EXPECT_EQ(head->second, last.sha256);
+  EXPECT_TRUE(check_audit_chain(trail, head).ok());
+
+  Registry::AuditQuery q;
+  q.actor = "ada";
+  auto found = reg.audit_entries(q);
+  ASSERT_EQ(found.size(), 2U);
+  EXPECT_EQ(found[0].seq, 3);  // newest first
+  q = {};
+  q.action_prefix = "campaign.";
+  q.from_ms = 2000;
+  found = reg.audit_entries(q);
+  ASSERT_EQ(found.size(), 1U);
+  EXPECT_EQ(found[0].action, "campaign.command");
+  q = {};
+  q.subject = "limits";
+  EXPECT_EQ(reg.audit_entries(q).size(), 1U);
+  q = {};
+  q.limit = 2;
+  q.to_ms = 3000;
+  EXPECT_EQ(reg.audit_entries(q).size(), 2U);
+}
+
+// Issue 38's acceptance: three stands (connections) issuing 20 certificates each at the same time
+// get 60 distinct numbers, each stand's in the order it issued them, none lost.
+TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
+  constexpr std::size_t kConnections = 3;
+  constexpr std::size_t kEach = 20;
+  std::vector<std::unique_ptr<Registry>> connections;
+  for (std::size_t i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
+  std::vector<std::vector<std::int64_t>> taken(kConnections);
+  std::vector<std::string> errors(kConnections);
+  std::vector<std::thread> threads;
+  for (std::size_t i = 0; i < kConnections; ++i) {
+    threads.emplace_back([&, i] {
+      try {
+        for (std::size_t k = 0; k < kEach; ++k) {
+          const std::int64_t sequence = connections[i]->next_certificate_sequence();
+          connections[i]->insert_issued(issued(sequence, 1 + static_cast<std::int64_t>(k % kCampaigns)));
+          taken[i].push_back(sequence);
+        }
+      } catch (const std::exception& e) {
+        errors[i] = e.what();
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  std::set<std::int64_t> all;
+  for (std::size_t i = 0; i < kConnections; ++i) {
+    EXPECT_EQ(errors[i], "");
+    EXPECT_TRUE(std::is_sorted(taken[i].begin(), taken[i].end())) << "connection " << i;
+    all.insert(taken[i].begin(), taken[i].end());
+  }
+  ASSERT_EQ(all.size(), kConnections * kEach);
+  EXPECT_EQ(*all.begin(), 1);
+  EXPECT_EQ(*all.rbegin(), static_cast<std::int64_t>(kConnections * kEach));
+  for (const std::int64_t s : all) EXPECT_TRUE(this->registry_->issued(issued(s, 1).number)) << s;
+  EXPECT_EQ(this->registry_->max_certificate_sequence(), static_cast<std::int64_t>(kConnections * kEach));
+}
+
+// One chain for every writer: three connections appending at once leave a trail without gaps.
+TYPED_TEST(RegistryTest, ThreeConnectionsAppendingAuditEntriesAtOnceKeepOneChain) {
+  constexpr std::size_t kConnections = 3;
+  std::vector<std::unique_ptr<Registry>> connections;
+  for (std::size_t i = 0; i < kConnections; ++i) connections.push_back(this->store_.connect());
+  std::vector<std::thread> threads;
+  std::vector<std::string> errors(kConnections);
+  for (std::size_t i = 0; i < kConnections; ++i) {
+    threads.emplace_back([&, i] {
+      try {
+        for (int k = 0; k < 10; ++k)
+          connections[i]->append_audit("stand" + std::to_string(i), "test.append", "s", "{}", std::nullopt);
+      } catch (const std::exception& e) {
+        errors[i] = e.what();
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  for (const auto& e : errors) EXPECT_EQ(e, "");
+  const auto trail = this->registry_->audit_trail();
+  EXPECT_EQ(trail.size(), 30U);
+  const AuditCheck check = check_audit_chain(trail, this->registry_->audit_head());
+  EXPECT_TRUE(check.ok()) << check.message;
+}
+
+// PostgreSQL's own: the schema is versioned and migrated once; a newer one is refused.
+class PostgresRegistrySchema : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string problem = store_.open();
+    if (problem.rfind("skip: ", 0) == 0) GTEST_SKIP() << problem.substr(6);
+    ASSERT_EQ(problem, "");
+  }
+  PostgresStore store_;
+};
+
+TEST_F(PostgresRegistrySchema, IsMigratedOnceAndANewerOneIsRefused) {
+  {
+    PostgresRegistry first(store_.conninfo(), "stand-a");
+    EXPECT_EQ(first.schema_version(), PostgresRegistry::kSchemaVersion);
+    first.append_audit("ada", "a", "s", "{}", 1);
+  }
+  {
+    PostgresRegistry again(store_.conninfo(), "stand-b");  // nothing migrated twice, nothing lost
+    EXPECT_EQ(again.schema_version(), PostgresRegistry::kSchemaVersion);
+    EXPECT_EQ(again.audit_trail().size(), 1U);
+  }
+  {
+    imucal::storage::pg::Connection raw(store_.conninfo(), "test");
+    raw.exec("UPDATE registry_schema SET version = $1", {99});
+  }
+  try {
+    PostgresRegistry newer(store_.conninfo(), "stand-a");
+    FAIL() << "a newer schema was accepted";
+  } catch (const DbError& e) {
+    EXPECT_NE(std::string(e.what()).find("schema version 99"), std::string::npos) << e.what();
+  }
+}
+
+// The certificates a stand sees are its own campaigns' (campaign ids are numbered per stand).
+TEST_F(PostgresRegistrySchema, EachStandSeesItsOwnCampaigns) {
+  PostgresRegistry a(store_.conninfo(), "stand-a");
+  PostgresRegistry b(store_.conninfo(), "stand-b");
+  a.insert_issued(issued(a.next_certificate_sequence(), 1));
+  b.insert_issued(issued(b.next_certificate_sequence(), 1));
+  EXPECT_EQ(a.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 1);
+  EXPECT_EQ(b.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 2);
+  EXPECT_EQ(a.issued_history(1).size(), 1U);
+  EXPECT_TRUE(a.issued(issued(2, 1).number));  // a number is the lab's: found from any stand
+}
+
+// The server restarted (a crash, a network break): the call that met the break fails as a database
+// failure (is_database_failure: the request may be repeated), the next one connects again.
+TEST_F(PostgresRegistrySchema, ConnectsAgainAfterTheServerWentAway) {
+  PostgresRegistry registry(store_.conninfo(), "stand-a");
+  registry.append_audit("ada", "a", "s", "{}", 1);
+  ASSERT_TRUE(postgres_server().restart());
+  try {
+    registry.audit_trail();
+  } catch (const imucal::storage::StorageError& e) {
+    EXPECT_TRUE(is_database_failure(e)) << e.what();
+  }
+  EXPECT_EQ(registry.audit_trail().size(), 1U);
+  EXPECT_EQ(registry.append_audit("ada", "b", "s", "{}", 2).seq, 2);
+}
+
+}  // namespace
