@@ -2,6 +2,7 @@
 
 #include <utility>
 
+#include "core/expect_value.hpp"
 #include "core/imu_model.hpp"
 #include "estimators/tumble.hpp"
 #include "pipeline/stage.hpp"
@@ -72,7 +73,7 @@ void print(const Outcome& o, std::FILE* out) {
   if (result) {
     // Every coefficient the tumble gives, with its sigma, in the units of the model file.
     const ImuModel& m = result->model;
-    const ImuErrorSet& s = *m.sigma;
+    const ImuErrorSet& s = expect_value(m.sigma, "the tumble's sigmas");  // the tumble gives every sigma it prints
     static const char* const kAxes[3] = {"x", "y", "z"};
     constexpr double ug = 1e6 / units::kStandardGravity_mps2;
     std::fprintf(out, "  %-6s %22s %18s %18s %18s %26s\n", "accel", "bias ug", "scale ppm", "K2 ug/g^2", "K3 ug/g^3", "residual rms ug");
