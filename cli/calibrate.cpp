@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -13,10 +15,7 @@
 
 #include "core/expect_value.hpp"
 #include "core/imu_model.hpp"
-#include "core/units.hpp"
 #include "estimators/direct_calibration.hpp"
-#include "estimators/nav_filter.hpp"
-#include "estimators/thermal.hpp"
 #include "pipeline/pipeline.hpp"
 #include "storage/bundle.hpp"
 #include "storage/run_db.hpp"
@@ -26,98 +25,22 @@ namespace imucal::cli {
 
 namespace {
 
-// What each stage of the pipeline says, on stdout: its notes and its own figures.
+// What each stage of the pipeline says, on stdout: its notes, then its own figures as its folder
+// prints them (pipeline/stages/<stage>/).
 void print_outcome(const pipeline::Outcome& o) {
   for (const auto& note : o.notes) std::printf("%s\n", note.c_str());
-  if (o.thermal) {
-    const thermal::Result& r = *o.thermal;
-    const auto report = nlohmann::json::parse(r.report_json);
-    std::printf("stage thermal: %d of %d cycles used, T_ref %.1f C; largest deviation over the run (%s):\n",
-                r.cycles_used, r.cycles_total, report.at("T_ref_C").get<double>(),
-                report.at("residual_source").get<std::string>().c_str());
-    std::printf("  %-28s %14s %14s\n", "coefficient", "before", "compensated");
-    for (const char* g : thermal::groups())
-      std::printf("  %-28s %14.6g %14.6g\n", g, report.at("before").value(g, 0.0), report.at("residual").value(g, 0.0));
-  }
-  if (o.rate_steps) {
-    static const char* const kAxes[3] = {"x", "y", "z"};
-    for (const rate_steps::Axis& a : o.rate_steps->axes) {
-      if (!a.tested) continue;
-      std::printf("gyro %s: scale + %.3f +- %.3f ppm, - %.3f +- %.3f ppm, asymmetry %.3f +- %.3f ppm; IEEE 952 "
-                  "nonlinearity %.3f +- %.3f ppm of %.0f deg/s (at %+.0f deg/s); nonlinear degree %d",
-                  kAxes[a.axis], a.scale_pos_ppm, a.scale_pos_sigma_ppm, a.scale_neg_ppm, a.scale_neg_sigma_ppm,
-                  a.asymmetry_ppm, a.asymmetry_sigma_ppm, a.nonlinearity_ppm_fs, a.nonlinearity_sigma_ppm_fs,
-                  a.full_scale_dps, a.nonlinearity_at_dps, a.degree);
-      for (int k = 0; k < a.degree; ++k)
-        std::printf("%s c%d %.3f +- %.3f", k == 0 ? ":" : ",", k + 1, a.nonlinear_ppm[static_cast<std::size_t>(k)],
-                    a.nonlinear_sigma_ppm[static_cast<std::size_t>(k)]);
-      std::printf("\n  %10s %12s %9s %12s %10s\n", "rate deg/s", "scale ppm", "sigma", "model ppm", "resid ppm");
-      for (const rate_steps::Step& st : a.steps)
-        std::printf("  %+10.2f %12.3f %9.3f %12.3f %10.3f\n", st.rate_dps, st.scale_ppm, st.sigma_ppm,
-                    a.scale_ppm_at(st.rate_dps), st.fit_residual_ppm);
-    }
-  }
-  if (o.tumble) {
-    // Every coefficient the tumble gives, with its sigma, in the units of the model file.
-    const ImuModel& m = o.tumble->model;
-    const ImuErrorSet& s = *m.sigma;
-    static const char* const kAxes[3] = {"x", "y", "z"};
-    constexpr double ug = 1e6 / units::kStandardGravity_mps2;
-    std::printf("  %-6s %22s %18s %18s %18s %26s\n", "accel", "bias ug", "scale ppm", "K2 ug/g^2", "K3 ug/g^3", "residual rms ug");
-    for (int j = 0; j < 3; ++j)
-      std::printf("  %-6s %12.3f +- %6.3f %9.3f +- %5.3f %9.3f +- %5.3f %9.3f +- %5.3f %26.3f\n", kAxes[j], m.accel.bias_mps2[j] * ug,
-                  s.accel.bias_mps2[j] * ug, m.accel.scale[j] * 1e6, s.accel.scale[j] * 1e6, m.accel.k2_per_g[j] * 1e6,
-                  s.accel.k2_per_g[j] * 1e6, m.accel.k3_per_g2[j] * 1e6, s.accel.k3_per_g2[j] * 1e6,
-                  o.tumble->accel_residual_rms_mps2[j] * ug);
-    std::printf("  %-6s %22s   g-sensitivity deg/h/g along o x, y, z\n", "gyro", "bias deg/h");
-    for (int j = 0; j < 3; ++j) {
-      std::printf("  %-6s %12.5f +- %7.5f", kAxes[j], m.gyro.bias_radps[j] * units::kRadpsToDph, s.gyro.bias_radps[j] * units::kRadpsToDph);
-      for (int k = 0; k < 3; ++k)
-        std::printf(" %9.5f +- %7.5f", m.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph,
-                    s.gyro.g_sensitivity_radps_per_g(j, k) * units::kRadpsToDph);
-      std::printf("\n");
-    }
-  }
-  if (o.warm_up) {
-    // Each channel's transient from power-on, in deg/h and ug.
-    std::printf("warm-up over %.0f s from power-on:\n  %-8s %24s %22s %22s %10s\n", o.warm_up->duration_s, "channel",
-                "amplitude", "time constant s", "settle time s", "band");
-    for (const warm_up::Channel& ch : o.warm_up->channels) {
-      const double k = ch.gyro ? units::kRadpsToDph : 1e6 / units::kStandardGravity_mps2;
-      const char* unit = ch.gyro ? "deg/h" : "ug";
-      std::printf("  %-6s %c %11.5f +- %7.5f %-5s", ch.gyro ? "gyro" : "accel", "xyz"[ch.axis], ch.amplitude * k,
-                  ch.amplitude_sigma * k, unit);
-      if (ch.detected)
-        std::printf(" %9.0f +- %7.0f %11.0f +- %7.0f %7.4g %s\n", ch.time_constant_s, ch.time_constant_sigma_s,
-                    ch.settle_time_s, ch.settle_time_sigma_s, ch.band * k, unit);
-      else
-        std::printf(" no transient above the noise\n");
-    }
-  }
-  if (o.repeatability) {
-    const repeatability::Result& r = *o.repeatability;
-    std::printf("turn-on to turn-on repeatability over %zu power-ons:\n  %-8s %24s %12s %12s\n", r.turn_ons.size(),
-                "channel", "repeatability (1 sigma)", "spread", "noise");
-    for (const repeatability::Channel& ch : r.channels) {
-      const double k = ch.gyro ? units::kRadpsToDph : 1e6 / units::kStandardGravity_mps2;
-      std::printf("  %-6s %c %11.5f +- %7.5f %-5s %12.5f %12.5f\n", ch.gyro ? "gyro" : "accel", "xyz"[ch.axis],
-                  ch.repeatability * k, ch.repeatability_sigma * k, ch.gyro ? "deg/h" : "ug", ch.spread * k, ch.noise * k);
-    }
-  }
-  if (o.navigation) {
-    const navfilter::Result& r = *o.navigation;
-    std::printf("  uncertainty reduction sqrt(P0/Pk) per state (1 = the data said nothing):\n");
-    for (const navfilter::Block& b : navfilter::state::kAll) {
-      std::printf("    %-24s", b.name);
-      for (int i = 0; i < b.size; ++i) {
-        const double s0 = r.sigma0[b.index + i], s1 = r.sigma_final[b.index + i];
-        std::printf(" %8.1f", s1 > 0 ? s0 / s1 : 0.0);
-      }
-      std::printf("\n");
-    }
-    std::printf("  relative gyro delays: tau_yx %.3f us (sigma %.3f), tau_zx %.3f us (sigma %.3f)\n", r.tau_yx_s * 1e6,
-                r.sigma_tau_yx_s * 1e6, r.tau_zx_s * 1e6, r.sigma_tau_zx_s * 1e6);
-  }
+  if (const auto print = pipeline::names_of(o.stage).print) print(o, stdout);
+}
+
+// `--report FILE`: the stage's own report, for the stages that write one.
+void write_report(const pipeline::Outcome& o, const std::string& path) {
+  const auto report_file = pipeline::names_of(o.stage).report_file;
+  if (path.empty() || !report_file) return;
+  const std::optional<nlohmann::json> report = report_file(o);
+  if (!report) return;
+  std::ofstream out(path);
+  if (!out) throw std::runtime_error(path + ": cannot write");
+  out << report->dump(1) << "\n";
 }
 
 }  // namespace
@@ -130,7 +53,7 @@ int run_calibrate(const CalibrateArgs& a) {
   const bool all = a.stage == "all";
   std::vector<pipeline::Stage> stages;
   if (all) {
-    for (const pipeline::StageName& n : pipeline::stage_names()) stages.push_back(n.stage);
+    for (const pipeline::StageDescriptor& n : pipeline::stage_registry()) stages.push_back(n.stage);
   } else {
     // The command line admits only the stages' names and "all" (main.cpp: CLI::IsMember).
     stages.push_back(expect_value(pipeline::stage_named(a.stage), "the stage the command line named"));
@@ -155,11 +78,7 @@ int run_calibrate(const CalibrateArgs& a) {
     const std::string name = pipeline::names_of(o.stage).name;
     print_outcome(o);
     for (const auto& [key, text] : o.extras) db.set_extra(key, text);
-    if ((o.thermal || o.rate_steps || o.warm_up || o.repeatability) && !a.report.empty()) {
-      std::ofstream out(a.report);
-      if (!out) throw std::runtime_error(a.report + ": cannot write");
-      out << (o.thermal ? nlohmann::json::parse(o.thermal->report_json) : o.report().at(o.rate_steps ? "rate_steps" : o.warm_up ? "warm_up" : "repeatability")).dump(1) << "\n";
-    }
+    write_report(o, a.report);
     if (o.status == pipeline::Status::Done) {
       ran.push_back(name + " on " + o.source);
     } else if (all) {

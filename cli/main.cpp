@@ -77,7 +77,7 @@ int main(int argc, char** argv) {
   // The stages as the pipeline names them, in its order: one list for the check and the help.
   std::vector<std::string> stage_choices;
   std::string stage_help;
-  for (const pipeline::StageName& n : pipeline::stage_names()) {
+  for (const pipeline::StageDescriptor& n : pipeline::stage_registry()) {
     stage_choices.emplace_back(n.name);
     stage_help += std::string(n.name) + ", ";
   }

@@ -16,7 +16,10 @@
 // recording, as the estimator alone would; with `--stage all` it is skipped with the reason.
 #pragma once
 
+#include <any>
 #include <array>
+#include <cstdio>
+#include <deque>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -47,17 +50,13 @@ class RunDb;
 
 namespace imucal::pipeline {
 
-enum class Stage { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise, WarmUp, Repeatability };
+// A stage's id: its row in the registry (stage_registry(), pipeline/stages/registry.cpp). The named
+// values are the built-in stages, for code that names one; a stage registered later
+// (register_stage) takes the next id, so the enum holds ids beyond its names.
+enum class Stage : int { Direct, RateSteps, Tumble, LeverArm, Thermal, Navigation, Noise, WarmUp, Repeatability };
 
-struct StageName {
-  Stage stage;
-  const char* name;       // `imucal calibrate --stage NAME`, reports
-  const char* estimator;  // the campaign's estimator that runs it online in imucald
-  const char* program;    // the built-in program made for it (docs/programs.md)
-};
-// In pipeline order: each stage starts from the model of the stages before it.
-const std::array<StageName, 9>& stage_names();
-const StageName& names_of(Stage stage);
+struct StageDescriptor;  // below, after what a stage is given and leaves
+const StageDescriptor& names_of(Stage stage);
 std::optional<Stage> stage_named(std::string_view name);
 std::optional<Stage> stage_of_estimator(std::string_view estimator);
 
@@ -161,15 +160,13 @@ struct Outcome {
   std::string message;  // skipped or failed: why
   std::vector<std::string> notes;
   std::optional<ImuModel> model;  // Done (and a navigation pass that did not converge: its estimates)
-  std::optional<direct::Result> direct;
-  std::optional<rate_steps::Result> rate_steps;
-  std::optional<tumble::Result> tumble;
-  std::optional<lever::Result> lever_arm;
-  std::optional<thermal::Result> thermal;
-  std::optional<navfilter::Result> navigation;
-  std::optional<noise::Result> noise;
-  std::optional<warm_up::Result> warm_up;
-  std::optional<repeatability::Result> repeatability;
+  // The stage's estimator's own result (direct::Result, thermal::Result, ...), when it gave one:
+  // one slot whatever the stage, so that a new stage adds no field here. Read it with result_as.
+  std::any result;
+  template <class Result>
+  const Result* result_as() const {
+    return std::any_cast<Result>(&result);
+  }
   std::vector<std::pair<std::string, std::string>> extras;  // run extras: key, JSON text
   std::int64_t frames = 0;
   double program_time_s = 0;  // of the last frame fed
@@ -179,6 +176,44 @@ struct Outcome {
   // {"status", "source", "notes", per-stage figures, "model"} (docs/api.md, results).
   nlohmann::json report() const;
 };
+
+// What a stage's runner is given when its window opens: the recording, what feeds it, the model it
+// starts from and the pipeline's settings (all outlive the runner).
+struct StageContext {
+  const RecordingMeta& meta;
+  const Feed& feed;
+  const ImuModel& start;
+  const Settings& settings;
+};
+class StageRun;  // pipeline/stage.hpp
+
+// A stage as one unit (pipeline/stages/<stage>/): its names, what it needs, its runner, its report
+// and its printer. The built-in stages are one table in pipeline order (pipeline/stages/registry.cpp).
+struct StageDescriptor {
+  Stage stage;
+  const char* name;           // `imucal calibrate --stage NAME`, reports
+  const char* estimator;      // the campaign's estimator that runs it online in imucald
+  const char* program;        // the built-in program made for it (docs/programs.md)
+  const char* short_program;  // its short form, or nullptr
+  // May start from a body-frame model: the stage needs no instrument-frame axes (stage 3 works in
+  // the body frame; noise, warm-up and repeatability only carry the model over).
+  bool any_frame_start;
+  // Why these segments cannot feed the stage (naming the program that would), or nothing.
+  std::optional<std::string> (*requirement)(const std::vector<SegmentInfo>& segments, const Settings& settings);
+  std::unique_ptr<StageRun> (*make_run)(const StageContext& context);
+  // Adds the stage's own figures to its outcome's report (when it has its result).
+  void (*report)(const Outcome& outcome, nlohmann::json& report);
+  // `imucal calibrate`'s lines for the stage's own figures (after its notes).
+  void (*print)(const Outcome& outcome, std::FILE* out);
+  // What `imucal calibrate --report FILE` writes for it (nothing without its result); nullptr: none.
+  std::optional<nlohmann::json> (*report_file)(const Outcome& outcome);
+};
+// Every stage, in pipeline order: each starts from the model of the stages before it. A deque:
+// a registration keeps the references names_of() gave out.
+const std::deque<StageDescriptor>& stage_registry();
+// Adds a stage after the built-in ones (a test's stage); returns its id (`descriptor.stage` is
+// ignored). Register before any pipeline runs: the registry is not guarded against threads.
+Stage register_stage(StageDescriptor descriptor);
 
 // What a calibration leaves the daemon: each stage's report under its estimator's name, and the
 // model of the last stage done (none when no stage was). One rule for a run's online estimators
@@ -213,9 +248,6 @@ class Pipeline {
   // stage keeps its run's last figures (stage 3's counts) beside its outcome.
   nlohmann::json progress(Stage stage) const;
 
-  // One stage over its window (pipeline.cpp).
-  class Run;
-
  private:
   RecordingMeta meta_;
   Settings settings_;
@@ -223,7 +255,7 @@ class Pipeline {
   std::vector<Outcome> outcomes_;
   ImuModel model_;
   std::size_t active_ = 0;
-  std::unique_ptr<Run> run_;
+  std::unique_ptr<StageRun> run_;  // the active stage over its window
   Feeder feeder_;
 
   void keep_last_progress(Outcome& out) const;

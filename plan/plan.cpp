@@ -326,8 +326,8 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
       const std::vector<Weak> shortfall = nonlinear_shortfall(*o.model, seed_bias_targets());
       p.short_of_needs.insert(p.short_of_needs.end(), shortfall.begin(), shortfall.end());
     }
-    if (o.navigation) {
-      const navfilter::Result& r = *o.navigation;
+    if (const auto* navigation = o.result_as<navfilter::Result>()) {
+      const navfilter::Result& r = *navigation;
       json t = json::array(), sig = json::object();
       for (const navfilter::HistoryRecord& h : r.history) {
         t.push_back(h.t_s);

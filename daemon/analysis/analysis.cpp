@@ -8,12 +8,13 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <archive.h>
 #include <archive_entry.h>
 
-#include "core/expect_value.hpp"
 #include "core/units.hpp"
 #include "estimators/evaluate.hpp"
 #include "estimators/noise.hpp"
@@ -98,6 +99,14 @@ pipeline::Outcome stage_on_run(const storage::RunDb& db, pipeline::Stage stage, 
   return o;
 }
 
+// A stage that is done has its estimator's result; its absence is an internal error naming it.
+template <class Result>
+const Result& expect_result(const pipeline::Outcome& o, const char* what) {
+  const Result* r = o.result_as<Result>();
+  if (!r) throw std::logic_error(std::string("internal error: ") + what + " is missing");
+  return *r;
+}
+
 }  // namespace
 
 Recalibration calibrate_again(const std::string& run_path, const std::vector<std::string>& estimators,
@@ -146,9 +155,8 @@ int prune_exports(const std::string& dir, const std::string& keep, std::int64_t 
 
 json allan_from_run(const std::string& run_path, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
-  // A stage that is done has its result.
-  const noise::Result r = expect_value(
-      stage_on_run(db, pipeline::Stage::Noise, ImuModel{}, "the Allan deviation: ", progress).noise, "the noise stage's result");
+  const pipeline::Outcome o = stage_on_run(db, pipeline::Stage::Noise, ImuModel{}, "the Allan deviation: ", progress);
+  const noise::Result& r = expect_result<noise::Result>(o, "the noise stage's result");
   json out = json::parse(r.curves_json());
   for (const char* c : {"gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"}) {
     out[c].erase("psd");  // the PSD is not plotted; keep the answer small
@@ -174,9 +182,8 @@ json allan_from_run(const std::string& run_path, const AnalysisProgress& progres
 
 json thermal_from_run(const std::string& run_path, const ImuModel& input, const AnalysisProgress& progress) {
   const storage::RunDb db = open_run(run_path);
-  const thermal::Result r =
-      expect_value(stage_on_run(db, pipeline::Stage::Thermal, input, "the thermal plots: ", progress).thermal,
-                   "the thermal stage's result");
+  const pipeline::Outcome o = stage_on_run(db, pipeline::Stage::Thermal, input, "the thermal plots: ", progress);
+  const thermal::Result& r = expect_result<thermal::Result>(o, "the thermal stage's result");
   const json report = json::parse(r.report_json);
   // report.plots: {"columns": [...], "series": {coefficient: [[row], ...]}} (docs/thermal.md).
   const json& plots = report.at("plots");

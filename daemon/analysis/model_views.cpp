@@ -31,7 +31,7 @@ ModelView stored_model_view(const std::string& model_text, const std::optional<s
   if (stage) {
     if (!pipeline::stage_of_estimator(*stage)) {
       std::string names;
-      for (const pipeline::StageName& n : pipeline::stage_names()) names += (names.empty() ? "" : ", ") + std::string(n.estimator);
+      for (const pipeline::StageDescriptor& n : pipeline::stage_registry()) names += (names.empty() ? "" : ", ") + std::string(n.estimator);
       return {400, "stage must be one of " + names};
     }
     const json results = results_text ? json::parse(*results_text, nullptr, false) : json::object();
@@ -51,7 +51,7 @@ std::vector<Variant> stage_model_variants(const std::optional<std::string>& resu
   std::vector<Variant> stages;
   if (!results_text) return stages;
   const json results = json::parse(*results_text, nullptr, false);
-  for (const pipeline::StageName& n : pipeline::stage_names()) {
+  for (const pipeline::StageDescriptor& n : pipeline::stage_registry()) {
     if (!results.is_object() || !results.contains(n.estimator)) continue;
     const json& r = results.at(n.estimator);
     if (!r.is_object() || !r.contains("model")) continue;

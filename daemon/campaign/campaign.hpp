@@ -92,7 +92,7 @@ struct CampaignCheck {
   std::vector<SegmentInfo> segments;
 };
 
-// The calibration stages that run online (pipeline::StageName::estimator: direct, lever-arm,
+// The calibration stages that run online (pipeline::StageDescriptor::estimator: direct, lever-arm,
 // stage3) and the free-inertial display `navigation`.
 const std::vector<std::string>& known_estimators();
 
