@@ -161,6 +161,19 @@ void RunDbSource::frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::func
 
 std::vector<TempSample> RunDbSource::temps(std::int64_t t0_ns, std::int64_t t1_ns) const { return db_.temps(t0_ns, t1_ns); }
 
+void MemorySource::frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const {
+  auto it = std::lower_bound(frames_.begin(), frames_.end(), t0_ns,
+                             [](const ImuFrame& f, std::int64_t t) { return f.t_ns < t; });
+  for (; it != frames_.end() && it->t_ns <= t1_ns; ++it) fn(*it);
+}
+
+std::vector<TempSample> MemorySource::temps(std::int64_t t0_ns, std::int64_t t1_ns) const {
+  std::vector<TempSample> out;
+  for (const TempSample& t : temps_)
+    if (t.t_ns >= t0_ns && t.t_ns <= t1_ns) out.push_back(t);
+  return out;
+}
+
 const char* to_string(Status status) {
   switch (status) {
     case Status::Pending: return "waiting";

@@ -116,6 +116,19 @@ class RunDbSource final : public FrameSource {
   const storage::RunDb& db_;
 };
 
+// A recording held in memory (frames in time order): a simulation fed straight to the pipeline.
+class MemorySource final : public FrameSource {
+ public:
+  MemorySource(std::vector<ImuFrame> frames, std::vector<TempSample> temps = {})
+      : frames_(std::move(frames)), temps_(std::move(temps)) {}
+  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override;
+  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override;
+
+ private:
+  std::vector<ImuFrame> frames_;
+  std::vector<TempSample> temps_;
+};
+
 // Feeds the frames of a window of a source in steps, as they become available, each temperature
 // before the frames after it (all temperatures from the recording's start: a compensation's
 // rate looks back). Fed in any number of steps, a consumer sees the same sequence.

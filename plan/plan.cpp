@@ -19,27 +19,6 @@ using nlohmann::json;
 
 namespace {
 
-// The simulated frames of the program, as a recording the pipeline reads.
-class MemorySource final : public pipeline::FrameSource {
- public:
-  MemorySource(std::vector<ImuFrame> frames, std::vector<TempSample> temps)
-      : frames_(std::move(frames)), temps_(std::move(temps)) {}
-  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override {
-    auto it = std::lower_bound(frames_.begin(), frames_.end(), t0_ns,
-                               [](const ImuFrame& f, std::int64_t t) { return f.t_ns < t; });
-    for (; it != frames_.end() && it->t_ns <= t1_ns; ++it) fn(*it);
-  }
-  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override {
-    std::vector<TempSample> out;
-    for (const TempSample& t : temps_)
-      if (t.t_ns >= t0_ns && t.t_ns <= t1_ns) out.push_back(t);
-    return out;
-  }
-
- private:
-  std::vector<ImuFrame> frames_;
-  std::vector<TempSample> temps_;
-};
 
 // A stage-3 state block as the model's coefficients: name prefix, unit scale, the axes' labels,
 // and the motion that makes it observable (method.md, stage 3; docs/programs.md).
@@ -220,7 +199,7 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
   RecordingMeta meta;
   std::vector<TempSample> temps;
   std::vector<ImuFrame> frames = simulate(program, imu, options, options.seed, meta, temps);
-  const MemorySource source(std::move(frames), std::move(temps));
+  const pipeline::MemorySource source(std::move(frames), std::move(temps));
 
   std::vector<pipeline::Stage> stages;
   for (const pipeline::Stage s : pipeline::stages_for_parts(meta))
@@ -274,7 +253,7 @@ Prediction predict(const motion::Program& program, const ImuModel& imu, const Op
     RecordingMeta m;
     std::vector<TempSample> t;
     std::vector<ImuFrame> f = simulate(program, imu, options, options.seed + static_cast<std::uint64_t>(run), m, t);
-    const MemorySource again(std::move(f), std::move(t));
+    const pipeline::MemorySource again(std::move(f), std::move(t));
     const pipeline::ProgressSource reported(again, end_s, report, share * run, share);
     for (const pipeline::Outcome& o : pipeline::run_to_end(m, reported, residual_stages, false, start, options.settings))
       for (std::size_t i = 0; i < outcomes.size(); ++i)

@@ -52,4 +52,17 @@ AuditCheck check_audit_chain(const std::vector<AuditEntry>& entries,
   return out;
 }
 
+AuditEntry next_audit_entry(const std::optional<std::pair<std::int64_t, std::string>>& last, AuditFields fields) {
+  AuditEntry e;
+  e.seq = last ? last->first + 1 : 1;
+  e.prev_sha256 = last ? last->second : std::string(kAuditGenesis);
+  e.t_ms = fields.t_ms;
+  e.actor = std::move(fields.actor);
+  e.action = std::move(fields.action);
+  e.subject = std::move(fields.subject);
+  e.details_json = std::move(fields.details_json);
+  e.sha256 = audit_entry_sha256(e);
+  return e;
+}
+
 }  // namespace imucal::daemon

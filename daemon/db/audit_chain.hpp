@@ -31,6 +31,14 @@ inline constexpr const char* kAuditGenesis = "0000000000000000000000000000000000
 // subject, the parsed details and prev_sha256): what sha256 must be.
 std::string audit_entry_sha256(const AuditEntry& entry);
 
+// The entry after the last one (`last`: its seq and sha256; none for the first entry), linked to it
+// and hashed: the one rule for appending, whichever database stores the chain.
+struct AuditFields {
+  std::int64_t t_ms = 0;
+  std::string actor, action, subject, details_json;
+};
+AuditEntry next_audit_entry(const std::optional<std::pair<std::int64_t, std::string>>& last, AuditFields fields);
+
 struct AuditCheck {
   std::int64_t entries = 0;               // how many were read
   std::optional<std::int64_t> first_bad;  // the first entry that does not hold (its seq)

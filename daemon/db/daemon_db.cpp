@@ -702,22 +702,12 @@ AuditEntry DaemonDb::append_audit(const std::string& actor, const std::string& a
                                   const std::string& details_json, std::optional<std::int64_t> t_ms) {
   std::lock_guard lock(mutex_);
   storage::sql::Transaction txn(db_);
-  AuditEntry e;
-  e.prev_sha256 = kAuditGenesis;
+  std::optional<std::pair<std::int64_t, std::string>> previous;
   {
     Statement last(db_, "SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
-    if (last.step()) {
-      e.seq = last.column_int64(0);
-      e.prev_sha256 = last.column_text(1);
-    }
+    if (last.step()) previous.emplace(last.column_int64(0), last.column_text(1));
   }
-  e.seq += 1;
-  e.t_ms = t_ms.value_or(now_unix_ms());
-  e.actor = actor;
-  e.action = action;
-  e.subject = subject;
-  e.details_json = details_json;
-  e.sha256 = audit_entry_sha256(e);
+  const AuditEntry e = next_audit_entry(previous, {t_ms.value_or(now_unix_ms()), actor, action, subject, details_json});
   {
     Statement s(db_, "INSERT INTO audit(seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
                      "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)");

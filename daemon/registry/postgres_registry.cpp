@@ -273,20 +273,10 @@ AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::s
   std::lock_guard lock(mutex_);
   Transaction txn(db());
   db().exec("SELECT pg_advisory_xact_lock($1)", {kAuditLock});  // one link at a time, from every stand
-  AuditEntry e;
-  e.prev_sha256 = kAuditGenesis;
+  std::optional<std::pair<std::int64_t, std::string>> previous;
   const Result last = db().exec("SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");
-  if (last.rows() == 1) {
-    e.seq = last.int64(0, 0);
-    e.prev_sha256 = last.text(0, 1);
-  }
-  e.seq += 1;
-  e.t_ms = t_ms.value_or(now_unix_ms());
-  e.actor = actor;
-  e.action = action;
-  e.subject = subject;
-  e.details_json = details_json;
-  e.sha256 = audit_entry_sha256(e);
+  if (last.rows() == 1) previous.emplace(last.int64(0, 0), last.text(0, 1));
+  const AuditEntry e = next_audit_entry(previous, {t_ms.value_or(now_unix_ms()), actor, action, subject, details_json});
   db().exec("INSERT INTO audit(seq, stand, t_ms, actor, action, subject, details_json, prev_sha256, sha256) "
            "VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
            {e.seq, stand_, e.t_ms, e.actor, e.action, e.subject, e.details_json, e.prev_sha256, e.sha256});

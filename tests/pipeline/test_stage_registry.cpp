@@ -29,26 +29,6 @@ namespace mf = imucaltest::mean_force_stage;
 const pipeline::Stage kMeanForce = pipeline::register_stage(
     {{}, "mean-force", "mean-force", "mean-force", nullptr, true, mf::requirement, mf::make_run, mf::report, mf::print, nullptr});
 
-// A recording held in memory.
-class MemorySource final : public pipeline::FrameSource {
- public:
-  MemorySource(std::vector<ImuFrame> frames, std::vector<TempSample> temps)
-      : frames_(std::move(frames)), temps_(std::move(temps)) {}
-  void frames(std::int64_t t0_ns, std::int64_t t1_ns, const std::function<void(const ImuFrame&)>& fn) const override {
-    for (const ImuFrame& f : frames_)
-      if (f.t_ns >= t0_ns && f.t_ns <= t1_ns) fn(f);
-  }
-  std::vector<TempSample> temps(std::int64_t t0_ns, std::int64_t t1_ns) const override {
-    std::vector<TempSample> out;
-    for (const TempSample& t : temps_)
-      if (t.t_ns >= t0_ns && t.t_ns <= t1_ns) out.push_back(t);
-    return out;
-  }
-
- private:
-  std::vector<ImuFrame> frames_;
-  std::vector<TempSample> temps_;
-};
 
 // The first 30 s of the noise program (the table holds still) at 100 Hz from an ideal IMU.
 struct Simulated {
@@ -89,7 +69,7 @@ TEST(StageRegistry, BuiltInStagesKeepTheirOrderAndTheTestStageComesAfter) {
 
 TEST(StageRegistry, ATestStageRunsThroughThePipelineAndReportsUnderItsName) {
   const Simulated rec = simulate_still();
-  const MemorySource source(rec.frames, rec.temps);
+  const pipeline::MemorySource source(rec.frames, rec.temps);
   pipeline::Pipeline p(rec.meta, {kMeanForce}, true);
   EXPECT_TRUE(p.advance(source, rec.frames.back().t_ns, true));
   ASSERT_EQ(p.outcomes().size(), 1u);
@@ -122,7 +102,7 @@ TEST(StageRegistry, ATestStageRunsThroughThePipelineAndReportsUnderItsName) {
 TEST(StageRegistry, ATestStageTheRecordingCannotFeedIsSkippedWithItsReason) {
   RecordingMeta meta;
   meta.segments = {{"swing", "sine", 0.0, 10.0}};
-  const MemorySource source({}, {});
+  const pipeline::MemorySource source({}, {});
   pipeline::Pipeline p(meta, {kMeanForce}, false);
   p.advance(source, 0, true);
   EXPECT_EQ(p.outcomes().front().status, pipeline::Status::Skipped);

@@ -52,18 +52,6 @@ namespace {
 
 ImuModel nav_grade() { return read_imu_model_file(imucaltest::source_dir() + "/examples/truth-nav-grade.json"); }
 
-class MemorySource final : public pipeline::FrameSource {
- public:
-  explicit MemorySource(std::vector<ImuFrame> f) : frames_(std::move(f)) {}
-  void frames(std::int64_t t0, std::int64_t t1, const std::function<void(const ImuFrame&)>& fn) const override {
-    for (const ImuFrame& f : frames_)
-      if (f.t_ns >= t0 && f.t_ns <= t1) fn(f);
-  }
-  std::vector<TempSample> temps(std::int64_t, std::int64_t) const override { return {}; }
-
- private:
-  std::vector<ImuFrame> frames_;
-};
 
 // One calibration of `program` on data simulated with `seed`: the stage's model (with its sigma).
 ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeline::Stage stage, double rate_hz,
@@ -75,7 +63,7 @@ ImuModel calibrate(const motion::Program& program, const ImuModel& truth, pipeli
   std::vector<ImuFrame> frames;
   ImuFrame f;
   while (sim.next(f)) frames.push_back(f);
-  const auto outcomes = pipeline::run_to_end(sim.meta(), MemorySource(std::move(frames)), {stage}, true, start, settings);
+  const auto outcomes = pipeline::run_to_end(sim.meta(), pipeline::MemorySource(std::move(frames)), {stage}, true, start, settings);
   EXPECT_EQ(outcomes.front().status, pipeline::Status::Done) << outcomes.front().message;
   return outcomes.front().model.value_or(ImuModel{});
 }
