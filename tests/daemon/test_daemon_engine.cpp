@@ -69,60 +69,58 @@ class Journal final : public daemon::RunSubscriber {
 
 }  // namespace
 
-TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
-  LocalDaemon d("engine-documents");
-  const json campaign = {{"name", "documents"}, {"program", "direct-short"}, {"rate_hz", 100}, {"seed", 3},
-                         {"time_scale", 0}, {"truth", noisy_truth()}, {"estimators", {"direct"}}};
-  const auto id = d.post_campaign(campaign);
-  Journal journal(id);
-  d.service->sequencer().subscribe(journal);
-  ASSERT_EQ(d.command(id, "start"), 200);
-  const json c = d.wait_final(id);
-  ASSERT_EQ(c.at("state"), "done") << c.dump();
-  // Stored first (the service database is the first subscriber): the run has given its last
-  // document only when the sequencer has no active run any more.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (d.service->sequencer().active_id() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  ASSERT_FALSE(d.service->sequencer().active_id().has_value());
-  const auto entries = journal.entries();
-  ASSERT_FALSE(entries.empty());
+namespace {
 
-  // The operator's start and the claim are stored by the sequencer before they are told; the run's
-  // own changes are the service database subscriber's to store.
+// Written as small pieces: clang 16's optional-access analysis (the static check) costs minutes on
+// one function that loops and branches over many checks.
+
+// Stored first (the service database is the first subscriber): the run has given its last
+// document only when the sequencer has no active run any more.
+bool wait_until_idle(LocalDaemon& d) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (d.service->sequencer().active_id().has_value() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  return !d.service->sequencer().active_id().has_value();
+}
+
+// The operator's start and the claim are stored by the sequencer before they are told; the run's
+// own changes are the service database subscriber's to store. The run's last transition comes
+// last but for the telemetry of the parked bench and the run file's closing commit.
+void expect_transitions(const std::vector<Journal::Entry>& entries) {
+  ASSERT_GE(entries.size(), 2u);
   EXPECT_EQ(entries.front().kind, "transition");
   EXPECT_EQ(entries.front().detail, (json{{"from", "created"}, {"to", "queued"}, {"stored", true}}));
   EXPECT_EQ(entries.at(1).detail, (json{{"from", "queued"}, {"to", "running"}, {"stored", true}}));
-  // The run's last transition, then only the telemetry of the parked bench and the run file's
-  // closing commit.
-  for (auto e = entries.rbegin(); e != entries.rend() && e->kind != "transition"; ++e)
-    EXPECT_TRUE(e->kind == "snapshot" || e->kind == "committed") << e->kind;
-  for (auto e = entries.rbegin(); e != entries.rend(); ++e) {
-    if (e->kind != "transition") continue;
-    EXPECT_EQ(e->detail, (json{{"from", "running"}, {"to", "done"}, {"stored", false}}));
-    break;
-  }
+  std::size_t last = entries.size();
+  for (std::size_t k = 0; k < entries.size(); ++k)
+    if (entries[k].kind == "transition") last = k;
+  ASSERT_LT(last, entries.size());
+  EXPECT_EQ(entries[last].detail, (json{{"from", "running"}, {"to", "done"}, {"stored", false}}));
+  for (std::size_t k = last + 1; k < entries.size(); ++k)
+    EXPECT_TRUE(entries[k].kind == "snapshot" || entries[k].kind == "committed") << entries[k].kind;
+}
 
-  // Start, then the segments' checkpoints in order, then the ending, the results and the stop
-  // (snapshots, commits, progress and events come in between).
+// Start, then the segments' checkpoints in order, then the ending, the results and the stop
+// (snapshots, commits, progress and events come in between).
+void expect_milestones(const std::vector<Journal::Entry>& entries, std::size_t segment_count) {
   std::vector<std::string> milestones;
   std::vector<std::int64_t> segments;
   double last_checkpoint_s = -1.0;
   for (const auto& e : entries) {
     if (e.kind == "start" || e.kind == "ending" || e.kind == "results" || e.kind == "stop") milestones.push_back(e.kind);
-    if (e.kind == "checkpoint") {
-      if (milestones.size() == 1) milestones.push_back("checkpoints");
-      segments.push_back(e.detail.at("segment").get<std::int64_t>());
-      EXPECT_GT(e.detail.at("t_s").get<double>(), last_checkpoint_s);
-      last_checkpoint_s = e.detail.at("t_s").get<double>();
-    }
+    if (e.kind != "checkpoint") continue;
+    if (milestones.size() == 1) milestones.push_back("checkpoints");
+    segments.push_back(e.detail.at("segment").get<std::int64_t>());
+    EXPECT_GT(e.detail.at("t_s").get<double>(), last_checkpoint_s);
+    last_checkpoint_s = e.detail.at("t_s").get<double>();
   }
   EXPECT_EQ(milestones, (std::vector<std::string>{"start", "checkpoints", "ending", "results", "stop"}));
-  const std::size_t segment_count = c.at("segments").size();
   ASSERT_EQ(segments.size(), segment_count);
   for (std::size_t k = 0; k < segments.size(); ++k) EXPECT_EQ(segments[k], static_cast<std::int64_t>(k));
+}
 
-  // What the documents carry is what was stored.
+// What the documents carry is what was stored.
+void expect_carried(const std::vector<Journal::Entry>& entries, std::int64_t id, const json& campaign) {
   for (const auto& e : entries) {
     if (e.kind == "start") {
       EXPECT_EQ(e.detail, (json{{"resuming", false}, {"run_file", "runs/" + std::to_string(id) + ".db"}}));
@@ -131,11 +129,15 @@ TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
     } else if (e.kind == "results") {
       EXPECT_EQ(e.detail, (json{{"failed", false}, {"model", true}}));
     } else if (e.kind == "stop") {
-      EXPECT_EQ(e.detail, (json{{"frames", c.at("frames")}, {"complete", true}}));
+      EXPECT_EQ(e.detail, (json{{"frames", campaign.at("frames")}, {"complete", true}}));
     }
     EXPECT_NE(e.kind, "error");
   }
-  // The run file's commits only go forward, up to the last frame; the estimators reported.
+}
+
+// The run file's commits only go forward, up to its last frame; the estimators reported; the
+// moments that must be seen were snapshots of their own.
+void expect_commits_progress_snapshots(const std::vector<Journal::Entry>& entries, std::int64_t last_frame_t_ns) {
   std::int64_t committed_t_ns = -1;
   int progress = 0, forced = 0;
   for (const auto& e : entries) {
@@ -146,11 +148,31 @@ TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
     progress += e.kind == "progress";
     forced += e.kind == "snapshot" && e.detail.at("force").get<bool>();
   }
-  const auto frames = run_frames(d.run_path(c));
-  ASSERT_FALSE(frames.empty());
-  EXPECT_EQ(committed_t_ns, frames.back().t_ns);
+  EXPECT_EQ(committed_t_ns, last_frame_t_ns);
   EXPECT_GE(progress, 1);
   EXPECT_GE(forced, 2);  // the parked table before the end is seen, and the final state
+}
+
+}  // namespace
+
+TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
+  LocalDaemon d("engine-documents");
+  const json campaign = {{"name", "documents"}, {"program", "direct-short"}, {"rate_hz", 100}, {"seed", 3},
+                         {"time_scale", 0}, {"truth", noisy_truth()}, {"estimators", {"direct"}}};
+  const auto id = d.post_campaign(campaign);
+  Journal journal(id);
+  d.service->sequencer().subscribe(journal);
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json c = d.wait_final(id);
+  ASSERT_EQ(c.at("state"), "done") << c.dump();
+  ASSERT_TRUE(wait_until_idle(d));
+  const auto entries = journal.entries();
+  expect_transitions(entries);
+  expect_milestones(entries, c.at("segments").size());
+  expect_carried(entries, id, c);
+  const auto frames = run_frames(d.run_path(c));
+  ASSERT_FALSE(frames.empty());
+  expect_commits_progress_snapshots(entries, frames.back().t_ns);
 }
 
 TEST(RunEngine, ASubscriberIsRefusedWhileARunIsActive) {
