@@ -11,8 +11,7 @@ namespace imucal::daemon {
 using nlohmann::json;
 
 Sequencer::Sequencer(const DaemonConfig& config, DaemonDb& db)
-    : config_(config),
-      db_(db),
+    : db_(db),
       service_db_(db, writes_),
       alarms_(db, writes_, [this](const json& message) { live_.tell(message); }),
       run_files_(config, db),
@@ -126,6 +125,10 @@ Sequencer::CommandOutcome Sequencer::answer_prompt(std::int64_t id, const std::s
 
 json Sequencer::prompt_of(std::int64_t id) const {
   std::lock_guard lock(mutex_);
+  return prompt_json(id);
+}
+
+json Sequencer::prompt_json(std::int64_t id) const {
   if (!prompt_ || prompt_->campaign != id || prompt_->answered_by) return nullptr;
   return {{"text", prompt_->text}, {"since", prompt_->since}, {"segment", prompt_->segment}};
 }
@@ -185,8 +188,7 @@ void Sequencer::withdraw_prompt() {
 
 json Sequencer::prompt() const {
   std::lock_guard lock(mutex_);
-  if (!prompt_ || !active_id_ || prompt_->campaign != *active_id_ || prompt_->answered_by) return nullptr;
-  return {{"text", prompt_->text}, {"since", prompt_->since}, {"segment", prompt_->segment}};
+  return active_id_ ? prompt_json(*active_id_) : json(nullptr);
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 // The sequencer: runs the queued campaigns one after another on the bench, each through the run
 // engine (daemon/run/engine.hpp), whose documents go to the run's subscribers, in this order: the
-// service database, alarms, the run file's record, the live feed, the online estimators
-// (docs/ARCHITECTURE.md "The run engine"). It owns the operator's commands and the active run's
+// service database, alarms, the live feed, the run file's record, then any added by subscribe(),
+// and last the online estimators, which emit documents of their own (docs/ARCHITECTURE.md "The run
+// engine"). It owns the operator's commands and the active run's
 // state (RunControl), the campaigns' queue, and the service's WriteQueue.
 #pragma once
 
@@ -101,8 +102,9 @@ class Sequencer final : private RunControl {
   // once the ordering lock is taken, so that subscribers run without it.
   void emit_transition(std::unique_lock<std::mutex>& lock, const Transition& transition);
   void fail_active(std::int64_t id, const std::string& why);
+  // Campaign `id`'s prompt while unanswered, else null; with mutex_ held.
+  nlohmann::json prompt_json(std::int64_t id) const;
 
-  const DaemonConfig& config_;
   DaemonDb& db_;
   WriteQueue writes_;
   // The subscribers, in the order they are given the documents.
