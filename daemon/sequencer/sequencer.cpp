@@ -46,10 +46,18 @@ void Sequencer::shutdown() {
 }
 
 void Sequencer::subscribe(RunSubscriber& subscriber) {
-  std::lock_guard lock(mutex_);
-  std::lock_guard order(order_mutex_);  // no transition is being delivered
-  if (active_id_) throw std::logic_error("a subscriber is added only while no run is active");
-  documents_.subscribe(subscriber);
+  for (;;) {
+    std::unique_lock lock(mutex_);
+    if (active_id_) throw std::logic_error("a subscriber is added only while no run is active");
+    const std::uint64_t issued = next_ticket_;
+    std::unique_lock order(order_mutex_);
+    if (served_ == issued) {  // no transition is being delivered nor waits
+      documents_.subscribe(subscriber);
+      return;
+    }
+    lock.unlock();  // never wait for the order with mutex_ held (emit_transition)
+    order_cv_.wait(order, [&] { return served_ >= issued; });
+  }
 }
 
 std::optional<std::int64_t> Sequencer::active_id() const {
@@ -58,9 +66,23 @@ std::optional<std::int64_t> Sequencer::active_id() const {
 }
 
 void Sequencer::emit_transition(std::unique_lock<std::mutex>& lock, const Transition& transition) {
-  std::lock_guard order(order_mutex_);
+  const std::uint64_t ticket = next_ticket_++;
   lock.unlock();
   cv_.notify_all();
+  std::unique_lock order(order_mutex_);
+  order_cv_.wait(order, [&] { return served_ == ticket; });
+  order.unlock();
+  // The next in line is served even when a subscriber throws.
+  struct Served {
+    Sequencer& s;
+    ~Served() {
+      {
+        std::lock_guard order(s.order_mutex_);
+        ++s.served_;
+      }
+      s.order_cv_.notify_all();
+    }
+  } served{*this};
   documents_.emit(&RunSubscriber::transition, transition);
 }
 

@@ -98,8 +98,11 @@ class Sequencer final : private RunControl {
   void runner();
   // The next queued campaign, now running (stored); nothing when none may start.
   std::optional<RunEngine::Request> claim_next(std::unique_lock<std::mutex>& lock);
-  // Emits a state change, in order: called with `lock` (the sequencer's) held, which it releases
-  // once the ordering lock is taken, so that subscribers run without it.
+  // Emits a state change, in order: called with `lock` (the sequencer's) held, where the change
+  // takes its place in line (a ticket); the lock is released before it waits for its turn, so a
+  // subscriber may call the sequencer's getters (the certificate reads the prompt) while another
+  // thread's change waits. A subscriber must not change a run's state itself: it would wait for
+  // its own turn.
   void emit_transition(std::unique_lock<std::mutex>& lock, const Transition& transition);
   void fail_active(std::int64_t id, const std::string& why);
   // Campaign `id`'s prompt while unanswered, else null; with mutex_ held.
@@ -117,8 +120,13 @@ class Sequencer final : private RunControl {
   RunEngine engine_;
 
   mutable std::mutex mutex_;  // guards the members below and every state change
-  std::mutex order_mutex_;    // held while a transition is delivered: the subscribers see them in order
   std::condition_variable cv_;
+  // The transitions' order: each takes the next ticket under mutex_ and is delivered when
+  // served_ reaches it (under order_mutex_, never held with mutex_ nor while delivering).
+  std::uint64_t next_ticket_ = 0;
+  std::mutex order_mutex_;
+  std::condition_variable order_cv_;
+  std::uint64_t served_ = 0;
   std::optional<std::int64_t> active_id_;
   RunState active_state_ = RunState::Created;
   bool shutdown_ = false;

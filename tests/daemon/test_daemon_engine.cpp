@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <future>
 #include <mutex>
 #include <thread>
 #include <string>
@@ -186,4 +189,58 @@ TEST(RunEngine, ASubscriberIsRefusedWhileARunIsActive) {
   EXPECT_THROW(d.service->sequencer().subscribe(late), std::logic_error);
   ASSERT_EQ(d.command(id, "abort"), 200);
   EXPECT_EQ(d.wait_final(id).at("state"), "aborted");
+}
+
+namespace {
+
+// Reads the sequencer while it is given a transition, slowly, as the certificate of a run that
+// ends reads the campaign's prompt.
+class SlowReader final : public daemon::RunSubscriber {
+ public:
+  explicit SlowReader(daemon::Sequencer& sequencer) : sequencer_(sequencer) {}
+  void transition(const daemon::Transition& d) override {
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    (void)sequencer_.prompt_of(d.campaign);
+    std::lock_guard lock(mutex_);
+    order_.push_back(d.campaign);
+  }
+  std::vector<std::int64_t> order() const {
+    std::lock_guard lock(mutex_);
+    return order_;
+  }
+
+ private:
+  daemon::Sequencer& sequencer_;
+  mutable std::mutex mutex_;
+  std::vector<std::int64_t> order_;
+};
+
+}  // namespace
+
+// Two commands at once: the second's change waits for the first to be delivered, and must not
+// hold what the first's subscriber reads meanwhile (CI hung on this: the certificate at the end
+// of a run read the prompt while an operator's command waited its turn).
+TEST(RunEngine, ASubscriberReadsTheSequencerWhileAnotherChangeWaitsItsTurn) {
+  LocalDaemon d("engine-reader");
+  SlowReader reader(d.service->sequencer());
+  d.service->sequencer().subscribe(reader);
+  const json campaign = {{"name", "idle"}, {"program", "direct-short"}, {"rate_hz", 100}, {"seed", 5},
+                         {"time_scale", 0}, {"truth", noisy_truth()}, {"estimators", json::array()}};
+  const auto first = d.post_campaign(campaign);
+  const auto second = d.post_campaign(campaign);
+  auto both = std::async(std::launch::async, [&] {
+    std::thread other([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));  // while the first is delivered
+      EXPECT_EQ(d.command(second, "abort"), 200);
+    });
+    EXPECT_EQ(d.command(first, "abort"), 200);
+    other.join();
+  });
+  if (both.wait_for(std::chrono::seconds(120)) != std::future_status::ready) {
+    std::fprintf(stderr, "deadlock: two commands and a subscriber reading the sequencer never finished\n");
+    std::_Exit(1);  // the threads cannot be joined: fail now rather than at ctest's timeout
+  }
+  EXPECT_EQ(reader.order().size(), 2u);
+  EXPECT_EQ(d.campaign(first).at("state"), "aborted");
+  EXPECT_EQ(d.campaign(second).at("state"), "aborted");
 }
