@@ -64,6 +64,11 @@ auto seg(V& v, const Block& b) {
 
 using ConsiderMatrix = Eigen::Matrix<double, kSize, Eigen::Dynamic>;
 
+// The navigation error's states: the only rows of F that are not zero (propagate()).
+constexpr int kNav = kFirstCalibration;
+static_assert(kAttitude.index == 0 && kVelocity.index == 3 && kPosition.index + kPosition.size == kNav);
+using NavRows = Eigen::Matrix<double, kNav, kSize>;
+
 }  // namespace
 
 StateVector model_to_state(const ImuModel& m) {
@@ -389,12 +394,23 @@ struct NavCalibrationFilter::Impl {
 
   // The covariance over one covariance step: P = Phi P Phi^T (and the consider parameters'
   // cross terms), the process noise, then the step's sums cleared for the next.
+  //
+  // Only the navigation error moves: F's rows below the first kNav are zero (the coefficients are
+  // constants, their drift is process noise), so Phi = [[A, B], [0, I]] and only P's first kNav
+  // rows and columns change. Computed so, a step costs kNav N^2 instead of 3 N^3 (a tenth of the
+  // filter's time at 100 Hz before); the result is Phi P Phi^T to rounding.
   void propagate() {
     const double T = S_dt;
     const StateMatrix Fdt = transition_dt(T);
-    const StateMatrix Phi = StateMatrix::Identity() + Fdt + 0.5 * Fdt * Fdt;
-    P = Phi * P * Phi.transpose();
-    if (consider.size() > 0) propagate_consider(Phi, T);
+    const NavRows F_top = Fdt.topRows<kNav>();
+    NavRows Phi_top = F_top + 0.5 * F_top.leftCols<kNav>() * F_top;  // (F + F^2 / 2)'s rows: F^2 = F_nav F
+    Phi_top.leftCols<kNav>() += Eigen::Matrix<double, kNav, kNav>::Identity();
+    const NavRows PhiP_top = Phi_top * P;  // the rest of Phi P is P's own rows
+    const Eigen::Matrix<double, kNav, kNav> nav_nav = PhiP_top * Phi_top.transpose();
+    P.topRows<kNav>() = PhiP_top;
+    P.topLeftCorner<kNav, kNav>() = nav_nav;
+    P.bottomLeftCorner<state::kSize - kNav, kNav>() = PhiP_top.rightCols<state::kSize - kNav>().transpose();
+    if (consider.size() > 0) propagate_consider(Phi_top, T);
     add_process_noise(T);
     ++result.covariance_steps;
     clear_step_sums();
@@ -432,7 +448,7 @@ struct NavCalibrationFilter::Impl {
   }
 
   // x' = Phi x + Gamma p: the consider parameters' part of the step (Schmidt).
-  void propagate_consider(const StateMatrix& Phi, double T) {
+  void propagate_consider(const NavRows& Phi_top, double T) {
     ConsiderMatrix Gamma = ConsiderMatrix::Zero(kSize, consider.size());
     // The site's g, if wrong by its sigma, accelerates the vertical channel.
     if (consider.gravity >= 0) Gamma(kVelocity.index + 2, consider.gravity) = consider.gravity_sigma_mps2 * T;
@@ -449,7 +465,8 @@ struct NavCalibrationFilter::Impl {
         case Term::kAccelK3: vel = S_Ca.col(3 + t.j) * t.sigma; break;
       }
     }
-    const ConsiderMatrix PhiPxp = Phi * consider.Pxp;
+    ConsiderMatrix PhiPxp = consider.Pxp;  // Phi's rows below kNav are the identity's
+    PhiPxp.topRows<kNav>() = Phi_top * consider.Pxp;
     const StateMatrix cross = PhiPxp * Gamma.transpose();
     P += cross + cross.transpose() + Gamma * Gamma.transpose();
     consider.Pxp = PhiPxp + Gamma;
