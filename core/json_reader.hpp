@@ -24,6 +24,17 @@ inline std::string json_text(const nlohmann::json& value) {
   return value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
+// A stored JSON text as JSON: null when there is none, or when it does not parse (a column
+// written by an older daemon is shown as missing, never fails the reply that reads it).
+inline nlohmann::json parse_or_null(const std::optional<std::string>& text) {
+  if (!text) return nullptr;
+  try {
+    return nlohmann::json::parse(*text);
+  } catch (const nlohmann::json::exception&) {
+    return nullptr;
+  }
+}
+
 class ObjectReader {
  public:
   // Throw std::invalid_argument(prefix + problem) at the first problem.

@@ -109,16 +109,38 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   registry_ = make_registry(config_, *db_, *certificate_sequence_);
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
-  api_ = std::make_unique<Api>(config_, *db_, *registry_, *sequencer_, *auth_);
+  assemble_certificates();
+  api_ = std::make_unique<Api>(config_, *db_, *registry_, *sequencer_, *auth_, *audit_, *certificates_);
   // The audit trail: the configuration and the users this start loaded, then what recovery did.
   nlohmann::json users = nlohmann::json::array();
   for (const auto& u : config_.users) users.push_back({{"name", u.name}, {"role", to_string(u.role)}});
-  api_->audit("imucald", "service.started", "imucald",
+  audit_->append("imucald", "service.started", "imucald",
               {{"version", api_->status().at("version")}, {"devices", config_.devices}, {"data_dir", config_.data_dir},
                {"config_dir", config_.config_dir}, {"site", config_.site_name}, {"users", users},
                {"signing_key", signing_key_path(config_)}, {"interrupted_at_start", recovered}});
   web_dir_ = find_web_dir(config_.http.web_dir);
   files_ = std::make_unique<StaticFiles>(web_dir_);
+}
+
+// The audit trail through the sequencer's ordered writes, the certificates' issuer, and the run
+// subscriber that audits each transition and issues a run's certificate at its end (subscribed
+// here, before the sequencer starts: no run is active yet).
+void Service::assemble_certificates() {
+  Sequencer* sequencer = sequencer_.get();
+  audit_ = std::make_unique<AuditTrail>(*registry_, [sequencer](const std::string& what, std::function<void()> write) {
+    sequencer->write_db(what, std::move(write));
+  });
+  // A certificate states the campaign as the API shows it, which the API builds (api_ exists by
+  // the time anything is issued: no run starts before start()).
+  certificates_ = std::make_unique<CertificateIssuer>(config_, *db_, *registry_, *audit_,
+                                                      [this](const CampaignRow& row) { return api_->detail_json(row); });
+  AuditTrail* audit = audit_.get();
+  CertificateIssuer* certificates = certificates_.get();
+  certificates_subscriber_ = std::make_unique<CertificatesSubscriber>(
+      [audit](const std::string& actor, const std::string& action, const std::string& subject,
+              const nlohmann::json& details) { audit->append(actor, action, subject, details); },
+      [certificates](std::int64_t id, const std::string& reason) { (void)certificates->issue(id, reason); });
+  sequencer_->subscribe(*certificates_subscriber_);
 }
 
 Service::~Service() {
@@ -134,13 +156,8 @@ void Service::start(bool http) {
     api_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
     server_->start(config_.http.host, config_.http.port);
   }
-  // The run's events to their subscribers: the certificates (a run that ends is issued its own),
-  // then the live view.
-  Api* api = api_.get();
-  sequencer_->set_event_listener([api, server](const nlohmann::json& event) {
-    api->on_run_event(event);
-    if (server) server->broadcast_event(event);
-  });
+  // The run's events to the live view.
+  if (server) sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
   sequencer_->start();
 }
 

@@ -14,9 +14,12 @@
 #include "daemon/http/api.hpp"
 #include "daemon/http/auth.hpp"
 #include "daemon/http/static_files.hpp"
+#include "daemon/production/certificate_issuer.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/audit_trail.hpp"
 #include "daemon/registry/registry.hpp"
 #include "daemon/sequencer/sequencer.hpp"
+#include "daemon/subscribers/certificates.hpp"
 
 namespace imucal::daemon {
 
@@ -51,6 +54,8 @@ class Service {
   const std::string& web_dir() const { return web_dir_; }
 
  private:
+  void assemble_certificates();
+
   DaemonConfig config_;
   int lock_fd_ = -1;
   std::string web_dir_;
@@ -59,6 +64,11 @@ class Service {
   std::unique_ptr<CertificateSequence> certificate_sequence_;
   std::unique_ptr<Registry> registry_;
   std::unique_ptr<Auth> auth_;
+  // The audit trail's rule, the certificates' issuing and their run subscriber: declared before the
+  // sequencer, which holds the subscriber, so that they outlive it.
+  std::unique_ptr<AuditTrail> audit_;
+  std::unique_ptr<CertificateIssuer> certificates_;
+  std::unique_ptr<CertificatesSubscriber> certificates_subscriber_;
   std::unique_ptr<Sequencer> sequencer_;
   std::unique_ptr<Api> api_;
   std::unique_ptr<StaticFiles> files_;

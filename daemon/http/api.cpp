@@ -1,7 +1,6 @@
 #include "daemon/http/api.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cctype>
 #include <cmath>
 #include <filesystem>
@@ -23,6 +22,7 @@
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/config/device_config.hpp"
 #include "daemon/db/csv.hpp"
+#include "daemon/production/certificates.hpp"
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/unit_registry.hpp"
@@ -33,6 +33,7 @@
 #include "motion_programs/program.hpp"
 #include "plan/plan.hpp"
 #include "plan/schema.hpp"
+#include "signing/signing.hpp"
 
 #ifndef IMUCAL_VERSION
 #define IMUCAL_VERSION "0.0.0"
@@ -59,15 +60,6 @@ HttpReply error_reply(int status, const std::string& message, json extra = json:
 }
 
 json opt_time(const std::optional<std::int64_t>& ms) { return ms ? json(iso8601_utc(*ms)) : json(nullptr); }
-
-json parse_or_null(const std::optional<std::string>& text) {
-  if (!text) return nullptr;
-  try {
-    return json::parse(*text);
-  } catch (const json::exception&) {
-    return nullptr;
-  }
-}
 
 std::optional<std::int64_t> parse_id(const std::string& text) {
   if (text.empty() || text.size() > 18) return std::nullopt;
@@ -303,12 +295,15 @@ json table_dialect_json(const DaemonConfig& config) {
 
 }  // namespace
 
-Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth)
+Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth,
+         const AuditTrail& audit, CertificateIssuer& certificates)
     : config_(config),
       db_(db),
       registry_(registry),
       sequencer_(sequencer),
       auth_(auth),
+      audit_(audit),
+      certificates_(certificates),
       limits_(std::filesystem::path(config.limits_file).is_absolute()
                   ? config.limits_file
                   : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
@@ -326,17 +321,6 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer
   truths_ = json::array();
   for (const NamedTruth& t : named_truths(config))
     truths_.push_back({{"name", t.name}, {"description", t.description}, {"builtin", t.builtin}});
-  if (const std::string key = signing_key_path(config); !key.empty()) {
-    signing_key_ = signing::read_key_file(key);
-    spdlog::info("certificates and test reports are signed with the key {} ({})", key,
-                 signing::fingerprint(signing_key_->public_key));
-  }
-  // Without a configuration file the sequence can only live in the data directory (a PostgreSQL
-  // registry numbers from its own sequence).
-  if (config.registry.postgresql.empty() && config.config_dir.empty() &&
-      !std::filesystem::path(config.certificates.sequence_file).is_absolute())
-    spdlog::warn("certificate numbers are counted in {} (no configuration file): a new data directory would count "
-                 "again from 1; name certificates.sequence_file in a configuration file (--config)", certificate_sequence_path(config));
   // Each built-in program, and the built-in campaign `full`, as the campaign check sees it: its
   // joined program, duration, segments, and the estimators a campaign of it runs by default (the
   // builder offers those, so the rule lives in one place: check_campaign).
@@ -382,13 +366,6 @@ std::optional<Principal> Api::authenticate(const ApiRequest& request, bool allow
   return std::nullopt;
 }
 
-// The site as the configuration states it: GET /api/status says it, a certificate states it.
-json Api::site_json() const {
-  return {{"name", config_.site_name}, {"latitude_deg", config_.site.latitude_deg},
-          {"longitude_deg", config_.site.longitude_deg}, {"height_m", config_.site.height_m},
-          {"middle_axis_azimuth_deg", config_.site.middle_axis_azimuth_deg}};
-}
-
 json Api::status() {
   json limits_table = json::object();
   for (std::size_t a = 0; a < 3; ++a) {
@@ -414,7 +391,7 @@ json Api::status() {
           {"started", iso8601_utc(started_ms_)},
           {"uptime_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count()},
           {"devices", config_.devices},
-          {"site", site_json()},
+          {"site", site_json(config_)},
           {"active", active},
           {"queue", db_.queue()},
           // Judged today (UTC): the live page warns of an instrument due within a week or overdue.
@@ -767,9 +744,9 @@ HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const
     return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
   db_.accept(id, reason, who.user);
   spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, reason);
-  audit(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", reason}, {"state", to_string(row->state)}});
+  audit_.append(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", reason}, {"state", to_string(row->state)}});
   try {
-    issue_certificate(id, "partial run accepted by " + who.user + ": " + reason);
+    certificates_.issue(id, "partial run accepted by " + who.user + ": " + reason);
   } catch (const std::exception& e) {
     spdlog::error("campaign {}: accepted, but no certificate yet: {}", id, e.what());
   }
@@ -831,26 +808,28 @@ HttpReply Api::campaign_recalibrate(std::int64_t id, const ApiRequest& request, 
 
 json Api::recalibrated(std::int64_t id, const std::string& who, const std::string& reason, const Recalibration& r,
                        double g_before_mps2) {
-  std::lock_guard lock(certificate_mutex_);
   const std::string name = "campaign " + std::to_string(id);
-  const IssuedCertificateRow current = expect_value(registry_.current_issued(id), "the certificate a recalibration supersedes");
-  const CampaignRow before = expect_value(db_.campaign(id), "the campaign calibrated again");
-  // The stages calibrated again replace their results; the others (the navigation display) stay.
-  json results = parse_or_null(before.results_json);
-  if (!results.is_object()) results = json::object();
-  for (const auto& [estimator, report] : r.results.items()) results[estimator] = report;
   const double g_now = earth::site_gravity_mps2(config_.site);
-  db_.set_model(id, imu_model_to_json_text(expect_value(r.model, "the recalibrated model")));
-  db_.set_results(id, results.dump());
-  audit(who, "campaign.recalibrated", name,
-        {{"reason", reason}, {"gravity_before_mps2", g_before_mps2}, {"gravity_after_mps2", g_now},
-         {"certificate", current.number}});
-  const std::string why = "calibrated again from its recording by " + who + " with the corrected site g = " +
-                          number_text(g_now, 9) + " m/s^2 (was " + number_text(g_before_mps2, 9) + "): " + reason;
-  const IssuedCertificateRow c = reissue(expect_value(db_.campaign(id), "the campaign calibrated again"), current, why, true);
+  std::string superseded;
+  // Stored under the issuer's lock: no other issue reads the run half stored.
+  const IssuedCertificateRow c = certificates_.reissue_recalibrated(id, [&](const IssuedCertificateRow& current) {
+    superseded = current.number;
+    const CampaignRow before = expect_value(db_.campaign(id), "the campaign calibrated again");
+    // The stages calibrated again replace their results; the others (the navigation display) stay.
+    json results = parse_or_null(before.results_json);
+    if (!results.is_object()) results = json::object();
+    for (const auto& [estimator, report] : r.results.items()) results[estimator] = report;
+    db_.set_model(id, imu_model_to_json_text(expect_value(r.model, "the recalibrated model")));
+    db_.set_results(id, results.dump());
+    audit_.append(who, "campaign.recalibrated", name,
+                  {{"reason", reason}, {"gravity_before_mps2", g_before_mps2}, {"gravity_after_mps2", g_now},
+                   {"certificate", current.number}});
+    return "calibrated again from its recording by " + who + " with the corrected site g = " + number_text(g_now, 9) +
+           " m/s^2 (was " + number_text(g_before_mps2, 9) + "): " + reason;
+  });
   spdlog::info("{}: calibrated again with g = {} m/s^2 by {}; certificate {} supersedes {}", name, number_text(g_now, 9),
-               who, c.number, current.number);
-  return {{"campaign", id}, {"certificate", issued_json(c)}, {"superseded", current.number}};
+               who, c.number, superseded);
+  return {{"campaign", id}, {"certificate", issued_json(c)}, {"superseded", superseded}};
 }
 
 HttpReply Api::list_campaigns(const std::map<std::string, std::string>& query) {
@@ -890,7 +869,7 @@ HttpReply Api::create_campaign(const ApiRequest& request) {
   const auto who = authenticate(request, false);
   const std::int64_t id = store_campaign(db_, check, "posted by " + (who ? who->user : std::string("?")));
   spdlog::info("campaign {} '{}' posted ({}, {:.1f} s)", id, spec.name, spec.program_label, check.duration_s);
-  audit(who ? who->user : std::string("?"), "campaign.created", "campaign " + std::to_string(id),
+  audit_.append(who ? who->user : std::string("?"), "campaign.created", "campaign " + std::to_string(id),
         {{"name", spec.name}, {"program", spec.program_label}, {"duration_s", check.duration_s}});
   HttpReply r = json_reply(201, {{"id", id}, {"state", "created"}, {"duration_s", check.duration_s}});
   r.headers.emplace_back("Location", "/api/campaigns/" + std::to_string(id));
@@ -911,7 +890,7 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
     return error_reply(500, std::string("the limits were not saved: ") + e.what());
   }
   spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
-  audit(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
+  audit_.append(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
   // A certificate states its verdict: one that the new limits change is superseded. Only units of
   // the part numbers whose limits changed can have a new verdict (this runs on an HTTP thread).
   const std::set<std::string> changed = changed_part_numbers(before, limits_.document());
@@ -919,7 +898,7 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
     const auto row = db_.campaign(id);
     if (!row || !row->imu_part_number || !changed.contains(*row->imu_part_number)) continue;
     try {
-      issue_certificate(id, "acceptance limits changed by " + who.user);
+      certificates_.issue(id, "acceptance limits changed by " + who.user);
     } catch (const std::exception& e) {
       spdlog::error("campaign {}: its certificate could not be reissued under the new limits: {}", id, e.what());
     }
@@ -1059,49 +1038,17 @@ HttpReply Api::campaign_report(std::int64_t id, const std::map<std::string, std:
   json report = test_report_json(detail_json(*row), certificate_bench_json(config_, row->ended_ms.value_or(0)), temperatures);
   // ?signed=1: the report in the lab's signed envelope (imucal-signed/1, kind test-report), the
   // file `imucal verify` checks; signed as it reads now (a report is not frozen as a certificate is).
+  const auto& key = certificates_.signing_key();
   if (const auto it = query.find("signed"); it != query.end() && it->second != "0") {
-    if (!signing_key_)
+    if (!key)
       return error_reply(409, "the lab has no signing key (certificates.signing_key_file in the configuration): nothing is signed");
-    return json_reply(200, signing::sign_document(report, signing::kTestReport, *signing_key_));
+    return json_reply(200, signing::sign_document(report, signing::kTestReport, *key));
   }
-  report["signed_by"] = signing_key_ ? json(signing::fingerprint(signing_key_->public_key)) : json(nullptr);
+  report["signed_by"] = key ? json(signing::fingerprint(key->public_key)) : json(nullptr);
   return json_reply(200, report);
 }
 
-// What a certificate states (docs/api.md "Certificates"): the campaign as it ended, with its
-// verdict under the limits in force and its acceptance; the model; the site; the software; the
-// bench as configured. Frozen in the issued record: the page is rendered from this and nothing else.
-json Api::certificate_content(const CampaignRow& row, const std::string& bench_json) {
-  const json detail = detail_json(row);
-  json campaign = json::object();
-  for (const char* key : {"id", "name", "state", "program", "started", "ended", "error", "frames", "lost_frames",
-                          "bad_frames", "complete", "accepted", "verdict", "imu", "imu_serial", "progress", "transitions"})
-    campaign[key] = detail.value(key, json(nullptr));
-  // A run started under an override of overdue reference equipment states it (who, which, why).
-  // Only such a run: the content of every other certificate stays as issued before overrides
-  // were stated, so that a reissue, which compares contents, does not supersede them for nothing.
-  if (const json o = detail.value("override_overdue", json()); !o.is_null()) campaign["override_overdue"] = o;
-  const json& spec = detail.at("spec");
-  campaign["spec"] = {{"chamber", spec.is_object() ? spec.value("chamber", json(nullptr)) : json(nullptr)},
-                      {"estimators", spec.is_object() ? spec.value("estimators", json::array()) : json::array()}};
-  return {{"format", "imucal-certificate/1"},
-          {"campaign", campaign},
-          {"model", parse_or_null(row.model_json)},
-          {"site", site_json()},
-          {"software", {{"imucald", IMUCAL_VERSION}}},
-          {"bench", parse_or_null(bench_json)}};
-}
-
 namespace {
-
-// The keys of an issued certificate's content that name the issue itself (the software that
-// issued it among them), not what it states: two contents that differ only in these state the same.
-constexpr std::array<const char*, 6> kIssueKeys = {"number", "sequence", "issued", "supersedes", "reason", "software"};
-
-json statement_of(json content) {
-  for (const char* key : kIssueKeys) content.erase(key);
-  return content;
-}
 
 json text_or_null(const std::optional<std::string>& text) { return text ? json(*text) : json(nullptr); }
 
@@ -1109,104 +1056,7 @@ json page_json(const IssuedPageRow& p) {
   return {{"number", p.number}, {"sha256", p.sha256}, {"stored", iso8601_utc(p.stored_ms)}, {"stored_by", p.stored_by}};
 }
 
-// Why the run has no certificate (409's text), or empty when it may have one: ended, with a
-// model, counting as its unit's calibration.
-std::string no_certificate_because(const CampaignRow& row) {
-  const std::string id = std::to_string(row.id);
-  // A run still going (or interrupted, which can resume) could change after its certificate was issued.
-  if (!is_final(row.state) || !row.ended_ms.has_value())
-    return "campaign " + id + " has not ended (state " + std::string(to_string(row.state)) +
-           "): a certificate is issued only for an ended run with a model";
-  if (!row.model_json.has_value()) return "campaign " + id + " ended without a model: there is nothing to certify";
-  if (!counts_as_calibration(row))
-    return "campaign " + id + " is a partial run (" + std::string(to_string(row.state)) +
-           "): a certificate is issued once an operator accepts it (POST /api/campaigns/" + id + "/accept with a reason)";
-  return {};
-}
-
 }  // namespace
-
-// Written as small pieces, each with an optional or two: clang 16's optional-access analysis (the
-// static check) costs minutes on one function that branches on several.
-std::optional<IssuedCertificateRow> Api::issue_certificate(std::int64_t id, const std::string& reason) {
-  std::lock_guard lock(certificate_mutex_);
-  const auto row = db_.campaign(id);
-  if (!row) return std::nullopt;
-  const CampaignRow& r = *row;
-  if (!no_certificate_because(r).empty()) return registry_.current_issued(id);
-  if (const auto current = registry_.current_issued(id)) return reissue(r, *current, reason);
-  if (const auto legacy = registry_.certificate(id)) return freeze_legacy(r, *legacy);
-  IssuedCertificateRow c = numbered(r.id, reason);
-  return store_issued(c, certificate_content(r, certificate_bench_json(config_, r.ended_ms.value_or(0)).dump()));
-}
-
-// The certificate in force, or a new one superseding it when what it states is no longer true.
-IssuedCertificateRow Api::reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason,
-                                  bool g_corrected) {
-  // The bench and the site the run used, from the certificate in force (a table replaced since did
-  // not calibrate this unit); what changes is what is true of the run today (its verdict, acceptance).
-  const json stated = parse_or_null(current.content_json);
-  json bench = stated.value("bench", json());
-  if (g_corrected && bench.is_object()) {
-    // Calibrated again with the corrected g: the g and the survey it now stands on.
-    const json now = certificate_bench_json(config_, row.ended_ms.value_or(0));
-    bench["gravity"] = now.at("gravity");
-    if (bench.value("reference_equipment", json()).is_object())
-      bench["reference_equipment"]["gravity"] = now.at("reference_equipment").at("gravity");
-  }
-  json content = certificate_content(row, bench.dump());
-  content["site"] = stated.value("site", content.at("site"));
-  if (statement_of(stated) == statement_of(content)) return current;
-  IssuedCertificateRow c = numbered(row.id, reason);
-  c.supersedes = current.number;
-  return store_issued(c, std::move(content));
-}
-
-// A number given before certificates were frozen keeps its number and date; what it states is
-// frozen now, at its first reading since, with the bench kept with the number.
-IssuedCertificateRow Api::freeze_legacy(const CampaignRow& row, const CertificateRow& legacy) {
-  IssuedCertificateRow c;
-  c.campaign_id = row.id;
-  c.sequence = legacy.sequence;
-  c.number = legacy.number;
-  c.issued_ms = legacy.issued_ms;
-  c.reason = "numbered before certificates were frozen; frozen at its first reading since";
-  return store_issued(c, certificate_content(row, legacy.bench_json));
-}
-
-// A new number from the site's sequence (throws when it cannot be taken).
-IssuedCertificateRow Api::numbered(std::int64_t campaign_id, const std::string& reason) {
-  IssuedCertificateRow c;
-  c.campaign_id = campaign_id;
-  c.sequence = registry_.next_certificate_sequence();
-  c.issued_ms = now_unix_ms();
-  c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
-  c.reason = reason;
-  return c;
-}
-
-// Completes the content with the issue's own keys, hashes it, signs it with the lab's key, stores
-// it (superseding the old one in the same transaction) and writes the audit trail.
-IssuedCertificateRow Api::store_issued(IssuedCertificateRow c, json content) {
-  const json supersedes = text_or_null(c.supersedes);
-  content["number"] = c.number;
-  content["sequence"] = c.sequence;
-  content["issued"] = iso8601_utc(c.issued_ms);
-  content["supersedes"] = supersedes;
-  content["reason"] = c.reason;
-  c.content_json = signing::canonical_json(content);
-  c.content_sha256 = signing::sha256_hex(c.content_json);
-  if (signing_key_) c.signed_json = signing::sign_document(content, signing::kCertificate, *signing_key_).dump();
-  registry_.insert_issued(c);
-  audit("imucald", "certificate.issued", c.number,
-        {{"campaign", c.campaign_id}, {"reason", c.reason}, {"supersedes", supersedes}, {"content_sha256", c.content_sha256}});
-  if (supersedes.is_string())
-    audit("imucald", "certificate.superseded", supersedes.get<std::string>(),
-          {{"campaign", c.campaign_id}, {"superseded_by", c.number}});
-  spdlog::info("campaign {}: certificate {} issued ({}){}", c.campaign_id, c.number, c.reason,
-               supersedes.is_string() ? ", superseding " + supersedes.get<std::string>() : std::string());
-  return c;
-}
 
 json Api::issued_json(const IssuedCertificateRow& c) {
   const json content = parse_or_null(c.content_json);
@@ -1243,7 +1093,7 @@ HttpReply Api::campaign_certificate(std::int64_t id) {
   if (const std::string why = no_certificate_because(*row); !why.empty()) return error_reply(409, why);
   try {
     // A run that ended before certificates were issued at the end, or whose issue failed then.
-    if (const auto issued = issue_certificate(id, "issued at its first request")) return json_reply(200, issued_json(*issued));
+    if (const auto issued = certificates_.issue(id, "issued at its first request")) return json_reply(200, issued_json(*issued));
   } catch (const std::exception& e) {
     spdlog::error("campaign {}: no certificate: {}", id, e.what());
     return error_reply(503, std::string("no certificate number can be issued: ") + e.what());
@@ -1272,7 +1122,7 @@ HttpReply Api::store_certificate_page(const std::string& number, const ApiReques
     return error_reply(409, "certificate " + number + "'s page was stored on " + iso8601_utc(stored.stored_ms) + " by " +
                                 stored.stored_by + " (SHA-256 " + stored.sha256 + "); a stored page never changes");
   }
-  audit(who.user, "certificate.page_stored", number, {{"sha256", page.sha256}, {"bytes", page.html.size()}});
+  audit_.append(who.user, "certificate.page_stored", number, {{"sha256", page.sha256}, {"bytes", page.html.size()}});
   return json_reply(201, page_json(page));
 }
 
@@ -1293,37 +1143,6 @@ HttpReply Api::certificate_by_number(const std::string& number) {
   const auto c = registry_.issued(number);
   if (!c) return error_reply(404, "no certificate numbered '" + number + "' was issued here");
   return json_reply(200, issued_json(*c));
-}
-
-void Api::audit(const std::string& actor, const std::string& action, const std::string& subject, const json& details) {
-  // Through the sequencer's ordered writes: on a full disk the entry waits in memory, with the
-  // time it happened, behind the run's own deferred writes, and is chained when space returns.
-  const std::int64_t t_ms = now_unix_ms();
-  try {
-    sequencer_.write_db("audit entry " + action + " " + subject + " by " + actor,
-                        [this, actor, action, subject, text = details.dump(), t_ms] {
-                          registry_.append_audit(actor, action, subject, text, t_ms);
-                        });
-  } catch (const std::exception& e) {
-    // The change itself is made; a trail that could not take it is said loudly, in the log.
-    spdlog::error("audit trail: cannot append {} {} by {}: {}", action, subject, actor, e.what());
-  }
-}
-
-void Api::on_run_event(const json& event) {
-  if (event.value("kind", "") != "transition") return;
-  const json& campaign = event.value("campaign", json());
-  if (!campaign.is_number_integer()) return;
-  const std::int64_t id = campaign.get<std::int64_t>();
-  audit("imucald", "campaign.transition", "campaign " + std::to_string(id),
-        {{"from", event.value("from", json())}, {"to", event.value("to", json())}, {"reason", event.value("reason", json())}});
-  if (event.value("to", "") != "done") return;
-  try {
-    issue_certificate(id, "the run ended");
-  } catch (const std::exception& e) {
-    // Issued at its first request instead (campaign_certificate); the run itself is unharmed.
-    spdlog::error("campaign {}: no certificate at the end of the run: {}", id, e.what());
-  }
 }
 
 // The campaign's model against its simulation's truth, the truth turned into the model's frame
@@ -1470,12 +1289,12 @@ Api::CommandAnswer Api::command_campaign(std::int64_t id, Command command, const
   if (!overdue.empty()) {
     spdlog::warn("campaign {}: started by {} with overdue reference equipment ({}): {}", id, request.user, overdue_words,
                  override_reason);
-    audit(request.user, "campaign.override_overdue", "campaign " + std::to_string(id),
+    audit_.append(request.user, "campaign.override_overdue", "campaign " + std::to_string(id),
           {{"command", name}, {"instruments", overdue_kept}, {"reason", override_reason}});
   }
   // A command that succeeded has moved the campaign to its new state.
   const std::string state(to_string(expect_value(outcome.state, "the state after a command that succeeded")));
-  audit(request.user, "campaign.command", "campaign " + std::to_string(id),
+  audit_.append(request.user, "campaign.command", "campaign " + std::to_string(id),
         {{"command", name}, {"reason", request.reason}, {"state", state}});
   return {200, {}, json::object(), state};
 }
@@ -1516,7 +1335,7 @@ HttpReply Api::campaign_prompt(std::int64_t id, const ApiRequest& request, const
   if (!db_.campaign(id)) return error_reply(404, "no campaign " + std::to_string(id));
   const auto outcome = sequencer_.answer_prompt(id, who.user);
   if (outcome.http_status != 200) return error_reply(outcome.http_status, outcome.error);
-  audit(who.user, "campaign.prompt_answered", "campaign " + std::to_string(id), {{"answer", "done"}});
+  audit_.append(who.user, "campaign.prompt_answered", "campaign " + std::to_string(id), {{"answer", "done"}});
   return json_reply(200, {{"id", id}, {"answered", "done"}});
 }
 
@@ -1694,7 +1513,7 @@ HttpReply Api::acknowledge_alarm(const std::string& id_text, const Principal& wh
   spdlog::info("campaign {}: alarm {} ({}: {}) acknowledged by {}", row.campaign_id, row.id, row.severity,
                row.message, who.user);
   broadcast(alarm_message("acknowledged", row));
-  audit(who.user, "alarm.acknowledged", "alarm " + std::to_string(row.id),
+  audit_.append(who.user, "alarm.acknowledged", "alarm " + std::to_string(row.id),
         {{"campaign", row.campaign_id}, {"severity", row.severity}, {"message", row.message}});
   return json_reply(200, alarm_json(row));
 }

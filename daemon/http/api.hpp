@@ -21,12 +21,12 @@
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/http/auth.hpp"
 #include "daemon/http/static_files.hpp"
-#include "daemon/production/certificates.hpp"
+#include "daemon/production/certificate_issuer.hpp"
 #include "daemon/production/limits_file.hpp"
 #include "daemon/production/reference_equipment.hpp"
+#include "daemon/registry/audit_trail.hpp"
 #include "daemon/registry/registry.hpp"
 #include "daemon/sequencer/sequencer.hpp"
-#include "signing/signing.hpp"
 
 namespace imucal::daemon {
 
@@ -53,8 +53,11 @@ inline constexpr const char* kSessionCookie = "imucal_session";
 class Api {
  public:
   // `registry`: where certificates, their numbers, overrides and the audit trail are kept (the
-  // daemon's database or the lab's PostgreSQL server, daemon/registry/registry.hpp).
-  Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth);
+  // daemon's database or the lab's PostgreSQL server, daemon/registry/registry.hpp). `audit`: how
+  // every change is written to the trail; `certificates`: where they are issued (the service owns
+  // both: the run's subscribers use them too).
+  Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer& sequencer, Auth& auth,
+      const AuditTrail& audit, CertificateIssuer& certificates);
   struct Route;  // one endpoint: method, path pattern, access, handler (api.cpp)
 
   // Any /api/ request except the WebSocket.
@@ -62,7 +65,6 @@ class Api {
   // Who is asking: bearer token, session cookie, or (WebSocket only) ?token= in the query.
   std::optional<Principal> authenticate(const ApiRequest& request, bool allow_query_token);
   nlohmann::json status();
-  nlohmann::json site_json() const;
   // For the live WebSocket: has the session that opened it ended (sign-out, idle timeout)?
   bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
   // From now on every change is refused with 503.
@@ -92,12 +94,8 @@ class Api {
   // The override of overdue reference equipment a campaign was started under (docs/api.md
   // "Campaigns": override_overdue), or null.
   nlohmann::json overdue_override_json(std::int64_t id);
-  // The sequencer's events (Sequencer::EventListener): a run that ends `done` is issued its
-  // certificate here.
-  void on_run_event(const nlohmann::json& event);
-  // Appends to the audit trail (the registry's); a failure is logged, never thrown at the caller.
-  void audit(const std::string& actor, const std::string& action, const std::string& subject,
-             const nlohmann::json& details);
+  // GET /api/campaigns/{id}'s body, which the test report and the certificates are also made from.
+  nlohmann::json detail_json(const CampaignRow& row);
 
  private:
   static const std::vector<Route>& routes();
@@ -110,8 +108,6 @@ class Api {
   // An analysis job's answer when ready, else 202 with its progress.
   static HttpReply job_reply(const AnalysisJobs::Answer& answer);
   HttpReply campaign_detail(std::int64_t id);
-  // GET /api/campaigns/{id}'s body, which the test report is also made from.
-  nlohmann::json detail_json(const CampaignRow& row);
   HttpReply campaign_model(std::int64_t id, const std::map<std::string, std::string>& query);
   HttpReply campaign_truth(std::int64_t id);
   HttpReply campaign_progress(std::int64_t id);
@@ -152,23 +148,7 @@ class Api {
   // GET: those bytes.
   HttpReply store_certificate_page(const std::string& number, const ApiRequest& request, const Principal& who);
   HttpReply certificate_page(const std::string& number);
-  // Issues the campaign's certificate when it counts as a calibration (complete, or accepted) and
-  // has a model: a first one, or one superseding the certificate in force when what that states
-  // (the verdict under today's limits, the acceptance, the bench) is no longer what is true. Returns
-  // the certificate in force afterwards (none when the run does not count), or throws
-  // std::runtime_error when no number can be taken.
-  std::optional<IssuedCertificateRow> issue_certificate(std::int64_t id, const std::string& reason);
-  // The certificate's canonical content (imucal-certificate/1) for the run as it stands now.
-  nlohmann::json certificate_content(const CampaignRow& row, const std::string& bench_json);
   nlohmann::json issued_json(const IssuedCertificateRow& c);
-  // issue_certificate's pieces (api.cpp says why they are pieces).
-  // `g_corrected`: the run was calibrated again with the site's g configured now, which its
-  // certificate then states (the other statements of the bench stay as issued).
-  IssuedCertificateRow reissue(const CampaignRow& row, const IssuedCertificateRow& current, const std::string& reason,
-                               bool g_corrected = false);
-  IssuedCertificateRow freeze_legacy(const CampaignRow& row, const CertificateRow& legacy);
-  IssuedCertificateRow numbered(std::int64_t campaign_id, const std::string& reason);
-  IssuedCertificateRow store_issued(IssuedCertificateRow c, nlohmann::json content);
   // GET /api/alarms: those still needing someone (or all with ?all=1), of every campaign (or of
   // ?campaign=ID), newest first.
   HttpReply list_alarms(const std::map<std::string, std::string>& query);
@@ -186,14 +166,12 @@ class Api {
   Registry& registry_;
   Sequencer& sequencer_;
   Auth& auth_;
+  const AuditTrail& audit_;
+  CertificateIssuer& certificates_;
   LimitsFile limits_;
-  std::mutex certificate_mutex_;  // a campaign's certificate is looked up and issued as one step
   // A start is judged, its override recorded and the sequencer asked as one step: two starts of
   // one campaign never both record an override.
   std::mutex start_mutex_;
-  // The lab's key (config certificates.signing_key_file), read when the service starts: a key file
-  // others can read stops the start (signing::read_key_file says why and how to mend it).
-  std::optional<signing::KeyPair> signing_key_;
   nlohmann::json programs_;  // built once: the built-in programs do not change
   nlohmann::json chamber_map_;  // built once: the configured register map does not change
   nlohmann::json table_dialect_;  // built once, as the chamber map

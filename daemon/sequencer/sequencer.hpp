@@ -1,8 +1,9 @@
 // The sequencer: runs the queued campaigns one after another on the bench, each through the run
 // engine (daemon/run/engine.hpp), whose documents go to the run's subscribers, in this order: the
-// service database, alarms, the live feed, the run file's record, then any added by subscribe(),
-// and last the online estimators, which emit documents of their own (docs/ARCHITECTURE.md "The run
-// engine"). It owns the operator's commands and the active run's
+// service database, alarms, the live feed, the run file's record, then any added by subscribe()
+// (the service adds the certificates': the transitions' audit trail and a run's certificate at its
+// end), and last the online estimators, which emit documents of their own (docs/ARCHITECTURE.md
+// "The run engine"). It owns the operator's commands and the active run's
 // state (RunControl), the campaigns' queue, and the service's WriteQueue.
 #pragma once
 

@@ -741,6 +741,26 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_EQ(ca.at("reason"), "the run ended");
   EXPECT_TRUE(ca.at("supersedes").is_null());
   EXPECT_TRUE(ca.at("superseded_by").is_null());
+  // Both from the certificates' run subscriber (this daemon has no HTTP server: no live feed is
+  // listened to): each transition of the run in the audit trail, in order from created to done,
+  // then the certificate issued at the end.
+  auto trail = d.get("/api/audit?limit=1000").at("entries").get<std::vector<json>>();
+  std::sort(trail.begin(), trail.end(), [](const json& x, const json& y) { return x.at("seq") < y.at("seq"); });
+  std::string state = "created";
+  bool issued_after_done = false;
+  for (const json& e : trail) {
+    if (e.at("action") == "campaign.transition" && e.at("subject") == "campaign " + std::to_string(a)) {
+      EXPECT_EQ(e.at("actor"), "imucald");
+      EXPECT_EQ(e.at("details").at("from"), state) << e.dump();
+      state = e.at("details").at("to");
+    } else if (e.at("action") == "certificate.issued" && e.at("subject") == ca.at("number")) {
+      EXPECT_EQ(state, "done") << "issued before the run's transition to done";
+      EXPECT_EQ(e.at("details").at("reason"), "the run ended");
+      issued_after_done = state == "done";
+    }
+  }
+  EXPECT_EQ(state, "done");
+  EXPECT_TRUE(issued_after_done);
   // What it states, frozen: no limits for PN-100 yet; signed over the content, with the lab's key.
   EXPECT_TRUE(ca.at("content").at("campaign").at("verdict").is_null()) << ca.at("content").at("campaign").dump();
   EXPECT_EQ(ca.at("content").at("number"), ca.at("number"));
