@@ -97,11 +97,18 @@ struct LocalDaemon {
   json wait_state(std::int64_t id, const std::string& state, double timeout_s = 120.0) {
     return wait_for(id, [&](const json& c) { return c.value("state", "") == state; }, timeout_s);
   }
+  // The campaign's final state, once its run has given its last document to every subscriber
+  // (the state is stored by the first; the certificate of a run that ended is issued by a later one).
   json wait_final(std::int64_t id, double timeout_s = 120.0) {
-    return wait_for(id, [&](const json& c) {
+    json last = wait_for(id, [&](const json& c) {
       const auto s = c.value("state", "");
       return s == "done" || s == "failed" || s == "aborted" || s == "interrupted";
     }, timeout_s);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    while (service->sequencer().active_id() == id && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (service->sequencer().active_id() == id) ADD_FAILURE() << "campaign " << id << "'s run never ended after its state";
+    return last;
   }
   std::string run_path(const json& campaign) { return config.data_dir + "/" + campaign.at("run_db").get<std::string>(); }
 
