@@ -409,6 +409,9 @@ json Api::status() {
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
           {"storage", storage},
+          // A lab's registry server away: its writes wait on this stand's disk (journaled_registry.hpp).
+          {"registry", {{"backend", registry_.backend()}, {"reachable", registry_.reachable()},
+                        {"pending_writes", registry_.pending_writes()}}},
           {"chamber_map", chamber_map_},
           {"table_dialect", table_dialect_},
           {"started", iso8601_utc(started_ms_)},
