@@ -189,6 +189,16 @@ class RegistryJournal {
     sync_directory_of(path_);
   }
 
+  // trim() whose failure is no caller's: the writes are applied (the server has them and their
+  // keys), and a file not trimmed is only replayed again, with nothing applied twice.
+  void trim_or_say_why() noexcept {
+    try {
+      trim();
+    } catch (const std::exception& e) {
+      spdlog::error("registry: the journal's applied writes stay in it for now: {}", e.what());
+    }
+  }
+
   // A write the server refused at replay (or a line that is no write): kept for the operator.
   void set_aside(const json& entry, const std::string& why) {
     spdlog::error("registry: journaled write refused by the PostgreSQL server, kept in {}: {}: {}", refused_path(),
@@ -333,11 +343,11 @@ bool JournaledRegistry::replay() {
     journal_->pop_front();
     pending_ = journal_->size();
     if (++since_trim == kTrimEvery) {
-      journal_->trim();
+      journal_->trim_or_say_why();
       since_trim = 0;
     }
   }
-  journal_->trim();
+  journal_->trim_or_say_why();
   if (complete) spdlog::info("registry: the {} journaled writes are replayed on the PostgreSQL server", waiting);
   return complete;
 }
