@@ -1083,7 +1083,11 @@ json Api::certificate_content(const CampaignRow& row, const std::string& bench_j
   // A run started under an override of overdue reference equipment states it (who, which, why).
   // Only such a run: the content of every other certificate stays as issued before overrides
   // were stated, so that a reissue, which compares contents, does not supersede them for nothing.
-  if (const json o = detail.value("override_overdue", json()); !o.is_null()) campaign["override_overdue"] = o;
+  if (const json o = detail.value("override_overdue", json()); !o.is_null()) {
+    // The registry's server away (overdue_override_json): no certificate states what was not read.
+    if (o.contains("unavailable")) throw std::runtime_error(o.at("unavailable").get<std::string>());
+    campaign["override_overdue"] = o;
+  }
   const json& spec = detail.at("spec");
   campaign["spec"] = {{"chamber", spec.is_object() ? spec.value("chamber", json(nullptr)) : json(nullptr)},
                       {"estimators", spec.is_object() ? spec.value("estimators", json::array()) : json::array()}};
@@ -1415,7 +1419,14 @@ std::vector<InstrumentDue> Api::overdue_for_start(std::int64_t id) {
 }
 
 json Api::overdue_override_json(std::int64_t id) {
-  const auto o = registry_.overdue_override(id);
+  std::optional<OverdueOverrideRow> o;
+  try {
+    o = registry_.overdue_override(id);
+  } catch (const std::exception& e) {
+    // The registry's server away: the campaign's page is still shown (its run goes on), saying so.
+    if (!is_database_failure(e)) throw;
+    return {{"unavailable", e.what()}};
+  }
   if (!o) return nullptr;
   return {{"by", o->by}, {"at", iso8601_utc(o->t_ms)}, {"reason", o->reason},
           {"instruments", parse_or_null(o->instruments_json)}, {"text", o->text}};
