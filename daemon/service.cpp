@@ -12,6 +12,7 @@
 
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
+#include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
 #include "daemon/subscribers/alarms.hpp"
@@ -33,15 +34,24 @@ std::string find_web_dir(const std::string& configured) {
 }
 
 // The registry the configuration names: the lab's PostgreSQL server (registry.postgresql), else
-// the daemon's own database numbering from the site's sequence file, as before issue 38.
+// the daemon's own database numbering from the site's sequence file, as before issue 38. The
+// server's writes wait in a journal in the data directory while it is away (journaled_registry.hpp),
+// tried again every few seconds by the registry's own thread: a stand idle between runs calls it
+// for nothing, and the journal should not wait for its next run.
 std::unique_ptr<Registry> make_registry(const DaemonConfig& config, DaemonDb& db, CertificateSequence& sequence) {
   if (config.registry.postgresql.empty())
     return std::make_unique<SqliteRegistry>(db, [&sequence](std::int64_t floor) { return sequence.next(floor); });
-  auto registry = std::make_unique<PostgresRegistry>(config.registry.postgresql, registry_stand(config));
-  // The connection string is not logged: it may hold a password.
-  spdlog::info("registry: on the PostgreSQL server of registry.postgresql (schema version {}), as stand '{}'",
-               registry->schema_version(), registry->stand());
-  return registry;
+  auto connect = [conninfo = config.registry.postgresql, stand = registry_stand(config)] {
+    auto registry = std::make_unique<PostgresRegistry>(conninfo, stand);
+    // The connection string is not logged: it may hold a password.
+    spdlog::info("registry: on the PostgreSQL server of registry.postgresql (schema version {}), as stand '{}'",
+                 registry->schema_version(), registry->stand());
+    return registry;
+  };
+  JournaledRegistry::Options options;
+  options.retry_every = std::chrono::seconds(10);
+  return std::make_unique<JournaledRegistry>(connect, (fs::path(config.data_dir) / "registry-journal.jsonl").string(),
+                                             options);
 }
 
 }  // namespace

@@ -44,6 +44,19 @@ class PostgresServer {
     if (!running_) return false;
     return run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -l '" + dir_ + "/server.log' -m immediate -w -t 60 -o '" + options() + "' restart");
   }
+  // Stops the server (a lab's server going away) until start_again(): its connections break and
+  // new ones are refused.
+  bool stop_for_a_while() {
+    if (!running_) return false;
+    running_ = !run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -m fast -w -t 60 stop");
+    return !running_;
+  }
+  bool start_again() {
+    if (running_) return true;
+    running_ = run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -l '" + dir_ + "/server.log' -w -t 60 -o '" +
+                   options() + "' start");
+    return running_;
+  }
   // A connection string to database `name` of this server.
   std::string conninfo(const std::string& name) const {
     return "host=" + dir_ + " port=" + std::to_string(kPort) + " user=imucal dbname=" + name;

@@ -386,6 +386,9 @@ json Api::status() {
   return {{"service", "imucald"},
           {"version", IMUCAL_VERSION},
           {"storage", storage},
+          // A lab's registry server away: its writes wait on this stand's disk (journaled_registry.hpp).
+          {"registry", {{"backend", registry_.backend()}, {"reachable", registry_.reachable()},
+                        {"pending_writes", registry_.pending_writes()}}},
           {"chamber_map", chamber_map_},
           {"table_dialect", table_dialect_},
           {"started", iso8601_utc(started_ms_)},
@@ -1231,7 +1234,14 @@ std::vector<InstrumentDue> Api::overdue_for_start(std::int64_t id) {
 }
 
 json Api::overdue_override_json(std::int64_t id) {
-  const auto o = registry_.overdue_override(id);
+  std::optional<OverdueOverrideRow> o;
+  try {
+    o = registry_.overdue_override(id);
+  } catch (const std::exception& e) {
+    // The registry's server away: the campaign's page is still shown (its run goes on), saying so.
+    if (!is_database_failure(e)) throw;
+    return {{"unavailable", e.what()}};
+  }
   if (!o) return nullptr;
   return {{"by", o->by}, {"at", iso8601_utc(o->t_ms)}, {"reason", o->reason},
           {"instruments", parse_or_null(o->instruments_json)}, {"text", o->text}};

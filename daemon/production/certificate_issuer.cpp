@@ -1,5 +1,6 @@
 #include "daemon/production/certificate_issuer.hpp"
 
+#include <stdexcept>
 #include <array>
 #include <filesystem>
 
@@ -168,7 +169,11 @@ json CertificateIssuer::content(const CampaignRow& row, const std::string& bench
   // A run started under an override of overdue reference equipment states it (who, which, why).
   // Only such a run: the content of every other certificate stays as issued before overrides
   // were stated, so that a reissue, which compares contents, does not supersede them for nothing.
-  if (const json o = detail.value("override_overdue", json()); !o.is_null()) campaign["override_overdue"] = o;
+  if (const json o = detail.value("override_overdue", json()); !o.is_null()) {
+    // The registry's server away (Api's overdue_override_json): no certificate states what was not read.
+    if (o.contains("unavailable")) throw std::runtime_error(o.at("unavailable").get<std::string>());
+    campaign["override_overdue"] = o;
+  }
   const json& spec = detail.at("spec");
   campaign["spec"] = {{"chamber", spec.is_object() ? spec.value("chamber", json(nullptr)) : json(nullptr)},
                       {"estimators", spec.is_object() ? spec.value("estimators", json::array()) : json::array()}};

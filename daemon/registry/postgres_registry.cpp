@@ -82,8 +82,20 @@ CREATE TRIGGER audit_append_only BEFORE UPDATE OR DELETE ON audit
   FOR EACH ROW EXECUTE FUNCTION imucal_refuse('the audit trail is appended only');
 )sql";
 
+// Version 2: the journaled writes each stand applied (journaled_registry.hpp), keyed by the
+// stand, its journal (a journal started again after its file was lost numbers from 1 again) and
+// the write's number in it.
+constexpr const char* kSchema2 = R"sql(
+CREATE TABLE registry_journal_applied(
+  stand TEXT NOT NULL,
+  journal TEXT NOT NULL,
+  seq BIGINT NOT NULL,
+  applied_ms BIGINT NOT NULL,
+  PRIMARY KEY (stand, journal, seq));
+)sql";
+
 // The migrations in order: kMigrations[v - 1] takes a registry from version v - 1 to v.
-constexpr const char* kMigrations[] = {kSchema1};
+constexpr const char* kMigrations[] = {kSchema1, kSchema2};
 static_assert(std::size(kMigrations) == PostgresRegistry::kSchemaVersion);
 
 constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry, as in SQLite
@@ -105,6 +117,21 @@ std::vector<IssuedCertificateRow> issued_rows(const Result& r) {
   for (int i = 0; i < r.rows(); ++i) out.push_back(issued_row(r, i));
   return out;
 }
+
+// A write's own transaction, or none inside the one apply_once opened (its key and the write
+// commit together).
+class WriteScope {
+ public:
+  explicit WriteScope(storage::pg::Connection& connection) {
+    if (!connection.in_transaction()) own_.emplace(connection);
+  }
+  void commit() {
+    if (own_) own_->commit();
+  }
+
+ private:
+  std::optional<Transaction> own_;
+};
 
 std::vector<AuditEntry> audit_rows(const Result& r) {
   std::vector<AuditEntry> out;
@@ -150,6 +177,21 @@ int PostgresRegistry::schema_version() {
   return static_cast<int>(db().exec("SELECT MAX(version) FROM registry_schema").int64(0, 0));
 }
 
+bool PostgresRegistry::apply_once(const std::string& journal, std::int64_t seq, const std::function<void()>& write) {
+  std::lock_guard lock(mutex_);
+  Transaction txn(db());
+  // A key recorded already (by a replay that stopped before its journal was trimmed) leaves the
+  // transaction with nothing in it; ON CONFLICT also waits for another transaction holding it.
+  if (db().exec("INSERT INTO registry_journal_applied(stand, journal, seq, applied_ms) VALUES ($1, $2, $3, $4) "
+                "ON CONFLICT DO NOTHING",
+                {stand_, journal, seq, now_unix_ms()})
+          .affected() == 0)
+    return false;
+  write();
+  txn.commit();
+  return true;
+}
+
 std::int64_t PostgresRegistry::next_certificate_sequence() {
   std::lock_guard lock(mutex_);
   return db().exec("SELECT nextval('certificate_sequence')").int64(0, 0);
@@ -157,7 +199,7 @@ std::int64_t PostgresRegistry::next_certificate_sequence() {
 
 std::int64_t PostgresRegistry::max_certificate_sequence() {
   std::lock_guard lock(mutex_);
-  return db_
+  return db()
       .exec("SELECT GREATEST(COALESCE((SELECT MAX(sequence) FROM certificate), 0), "
             "COALESCE((SELECT MAX(sequence) FROM issued_certificate), 0))")
       .int64(0, 0);
@@ -181,7 +223,7 @@ void PostgresRegistry::insert_certificate(const CertificateRow& row) {
 
 void PostgresRegistry::insert_issued(const IssuedCertificateRow& row) {
   std::lock_guard lock(mutex_);
-  Transaction txn(db());
+  WriteScope txn(db());
   db().exec("INSERT INTO issued_certificate(sequence, number, stand, campaign_id, issued_ms, content_json, "
            "content_sha256, signed_json, supersedes, reason) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
            {row.sequence, row.number, stand_, row.campaign_id, row.issued_ms, row.content_json, row.content_sha256,
@@ -228,7 +270,7 @@ std::vector<std::int64_t> PostgresRegistry::campaigns_with_issued() {
 bool PostgresRegistry::insert_issued_page(const IssuedPageRow& row) {
   std::lock_guard lock(mutex_);
   // Two stands storing the same page at once: the first is kept, the second told so.
-  return db_
+  return db()
              .exec("INSERT INTO issued_page(number, html, sha256, stored_ms, stored_by) VALUES ($1, $2, $3, $4, $5) "
                    "ON CONFLICT (number) DO NOTHING",
                    {row.number, row.html, row.sha256, row.stored_ms, row.stored_by})
@@ -271,7 +313,7 @@ AuditEntry PostgresRegistry::append_audit(const std::string& actor, const std::s
                                           const std::string& subject, const std::string& details_json,
                                           std::optional<std::int64_t> t_ms) {
   std::lock_guard lock(mutex_);
-  Transaction txn(db());
+  WriteScope txn(db());
   db().exec("SELECT pg_advisory_xact_lock($1)", {kAuditLock});  // one link at a time, from every stand
   std::optional<std::pair<std::int64_t, std::string>> previous;
   const Result last = db().exec("SELECT seq, sha256 FROM audit ORDER BY seq DESC LIMIT 1");

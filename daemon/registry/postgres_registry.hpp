@@ -6,6 +6,7 @@
 // behind a mutex, connected again after the server went away; each call is short.
 #pragma once
 
+#include <functional>
 #include <mutex>
 #include <string>
 
@@ -17,7 +18,8 @@ namespace imucal::daemon {
 class PostgresRegistry final : public Registry {
  public:
   // 1: certificates (numbers, issued ones, pages), overdue overrides, the audit trail.
-  static constexpr int kSchemaVersion = 1;
+  // 2: registry_journal_applied, the writes a stand replayed from its journal (apply_once).
+  static constexpr int kSchemaVersion = 2;
   // `conninfo`: registry.postgresql of the configuration (a libpq connection string). `stand`:
   // the name of the stand whose campaigns this registry records. Throws storage::pg::PgError when
   // the server cannot be reached, DbError when its schema is newer than this imucald knows.
@@ -48,12 +50,19 @@ class PostgresRegistry final : public Registry {
   // The schema version the server's registry has (after the migration of the constructor).
   int schema_version();
 
+  // A write a stand journaled while the server was away (journaled_registry.hpp), applied with
+  // its key: `write` (calls of this registry, on this thread) and the key (this stand, `journal`,
+  // `seq`) are committed in one transaction, so a replay repeated after a crash applies nothing
+  // twice. False, and nothing applied, when the key was recorded before.
+  bool apply_once(const std::string& journal, std::int64_t seq, const std::function<void()>& write);
+
  private:
   void migrate();
   storage::pg::Connection& db();  // under mutex_
   std::string conninfo_;
   std::string stand_;
-  std::mutex mutex_;
+  // Recursive: apply_once's write calls this registry's own methods inside its transaction.
+  std::recursive_mutex mutex_;
   storage::pg::Connection db_;
 };
 

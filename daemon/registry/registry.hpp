@@ -65,6 +65,12 @@ class Registry {
   virtual std::vector<AuditEntry> audit_entries(const AuditQuery& query) = 0;
   virtual std::vector<AuditEntry> audit_trail() = 0;
   virtual std::optional<std::pair<std::int64_t, std::string>> audit_head() = 0;
+
+  // Whether the store answered when last asked, and how many writes wait on this stand's disk
+  // for it (journaled_registry.hpp: a lab's server away); GET /api/status shows both. The
+  // daemon's own database is always at hand.
+  virtual bool reachable() const { return true; }
+  virtual std::int64_t pending_writes() const { return 0; }
 };
 
 }  // namespace imucal::daemon

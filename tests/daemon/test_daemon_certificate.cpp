@@ -937,6 +937,54 @@ TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
   EXPECT_NE(audit_verify(scratch_dir("audit-empty")).second.find("no imucald database"), std::string::npos);
 }
 
+// Issue 38, "the database away": a stand whose registry server stops runs its campaign on (the
+// start's override and the audit entries wait in its journal, the status says so, the certificate
+// answers 503); when the server is back the journal is replayed and the certificate issued at its
+// first request. Asked until it answers, with a generous bound: no clock to beat on a loaded machine.
+TEST(Registry, AStandWhoseRegistryServerIsAwayRunsOnAndCatchesUpWhenItReturns) {
+  static imucaltest::PostgresServer server;
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("away"));
+  LocalDaemon d("registry-away", false, [&](daemon::DaemonConfig& c) {
+    configure(c, scratch_dir("registry-away-unused") + "/sequence.json");
+    c.registry.postgresql = conninfo;
+    c.registry.stand = "stand-away";
+  });
+  ASSERT_TRUE(server.stop_for_a_while());
+  const auto id = run_campaign(d, "away", "FOG-A");
+  const json away = d.get("/api/status").at("registry");
+  EXPECT_EQ(away.at("backend"), "postgresql");
+  EXPECT_FALSE(away.at("reachable").get<bool>()) << away.dump();
+  EXPECT_GT(away.at("pending_writes").get<std::int64_t>(), 0) << away.dump();
+  const auto refused = d.call("GET", certificate_target(id));
+  EXPECT_EQ(refused.status, 503) << refused.body;
+  EXPECT_NE(refused.body.find("unreachable"), std::string::npos) << refused.body;
+
+  ASSERT_TRUE(server.start_again());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  auto reply = d.call("GET", certificate_target(id));
+  while (reply.status != 200 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    reply = d.call("GET", certificate_target(id));
+  }
+  ASSERT_EQ(reply.status, 200) << reply.body;
+  EXPECT_EQ(json::parse(reply.body).at("sequence"), 1);
+  const json back = d.get("/api/status").at("registry");
+  EXPECT_TRUE(back.at("reachable").get<bool>()) << back.dump();
+  EXPECT_EQ(back.at("pending_writes"), 0) << back.dump();
+
+  daemon::PostgresRegistry registry(conninfo, "stand-away");
+  EXPECT_TRUE(registry.overdue_override(id).has_value());
+  const auto trail = registry.audit_trail();
+  EXPECT_TRUE(daemon::check_audit_chain(trail, registry.audit_head()).ok());
+  const auto transitions = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
+    return e.action == "campaign.transition";
+  });
+  EXPECT_GE(transitions, 2);  // the run's, journaled while the server was away
+  EXPECT_TRUE(d.get("/api/audit").at("intact").get<bool>());
+}
+
 // Issue 38: two stands' imucald on one PostgreSQL registry (a private server, tests/postgres_server.hpp)
 // number their certificates from its sequence, one after the other, and write one audit trail;
 // each stand's own SQLite database keeps none of it.

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -16,6 +17,7 @@
 
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
 #include "tests/postgres_server.hpp"
@@ -351,6 +353,177 @@ TEST_F(PostgresRegistrySchema, ConnectsAgainAfterTheServerWentAway) {
   }
   EXPECT_EQ(registry.audit_trail().size(), 1U);
   EXPECT_EQ(registry.append_audit("ada", "b", "s", "{}", 2).seq, 2);
+}
+
+// Issue 38's "the database away": the PostgreSQL server stopped under a stand (pg_ctl stop) and
+// started again. Each call tries the server (call_retry_interval 0): no test waits on a clock.
+class RegistryAway : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string problem = store_.open();
+    if (problem.rfind("skip: ", 0) == 0) GTEST_SKIP() << problem.substr(6);
+    ASSERT_EQ(problem, "");
+    dir_ = imucaltest::test_tmp_dir() + "/registry-away-" + std::to_string(getpid()) + "-" +
+           imucaltest::PostgresServer::unique_name("j");
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+    journal_ = dir_ + "/registry-journal.jsonl";
+  }
+  void TearDown() override {
+    // The server is shared by the executable's tests: never left stopped by a failed one.
+    if (dir_.empty()) return;  // skipped
+    EXPECT_TRUE(postgres_server().start_again());
+    std::error_code ignored;
+    std::filesystem::remove_all(dir_, ignored);
+  }
+  std::unique_ptr<JournaledRegistry> journaled() {
+    JournaledRegistry::Options options;
+    options.call_retry_interval = std::chrono::milliseconds(0);
+    return std::make_unique<JournaledRegistry>(
+        [conninfo = store_.conninfo()] { return std::make_unique<PostgresRegistry>(conninfo, "stand-a"); }, journal_,
+        options);
+  }
+  // What the server holds, read past the journal.
+  std::unique_ptr<PostgresRegistry> direct() { return std::make_unique<PostgresRegistry>(store_.conninfo(), "stand-a"); }
+  static std::size_t lines_of(const std::string& path) {
+    std::ifstream in(path);
+    std::size_t n = 0;
+    for (std::string line; std::getline(in, line);) ++n;
+    return n;
+  }
+  static void expect_unreachable(const std::function<void()>& read, std::int64_t waiting) {
+    try {
+      read();
+      ADD_FAILURE() << "a read answered with the server away";
+    } catch (const imucal::storage::StorageError& e) {
+      const std::string what = e.what();
+      EXPECT_TRUE(is_database_failure(e)) << what;  // HTTP 503: to be repeated later
+      EXPECT_NE(what.find("PostgreSQL server"), std::string::npos) << what;
+      EXPECT_NE(what.find("unreachable"), std::string::npos) << what;
+      EXPECT_NE(what.find(std::to_string(waiting) + " writes"), std::string::npos) << what;
+    }
+  }
+  PostgresStore store_;
+  std::string dir_;
+  std::string journal_;
+};
+
+TEST_F(RegistryAway, WritesWaitInTheJournalAndArriveOnceInOrderWhenTheServerReturns) {
+  auto reg = journaled();
+  EXPECT_TRUE(reg->reachable());
+  EXPECT_EQ(reg->append_audit("ada", "before", "s", "{}", 1000).seq, 1);
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+
+  const AuditEntry waiting = reg->append_audit("ada", "away.1", "campaign 1", R"({"n":1})", 2000);
+  EXPECT_EQ(waiting.seq, 0);  // not chained yet: the head is on the server
+  EXPECT_EQ(waiting.t_ms, 2000);
+  EXPECT_EQ(waiting.sha256, "");
+  const auto certificate = issued(1, 1);
+  reg->insert_issued(certificate);
+  reg->insert_overdue_override({3, 42, "ada", "customer waits", "[]", "the rate table ..."});
+  EXPECT_TRUE(reg->insert_issued_page({certificate.number, "<html>1</html>", "h1", 5, "ada"}));
+  reg->append_audit("bob", "away.2", "campaign 1", "{}", 3000);
+  EXPECT_FALSE(reg->reachable());
+  EXPECT_EQ(reg->pending_writes(), 5);
+  EXPECT_EQ(lines_of(journal_), 6U);  // the header and the five writes
+  expect_unreachable([&] { reg->audit_trail(); }, 5);
+  expect_unreachable([&] { reg->issued(certificate.number); }, 5);
+  expect_unreachable([&] { reg->next_certificate_sequence(); }, 5);
+
+  ASSERT_TRUE(postgres_server().start_again());
+  EXPECT_TRUE(reg->retry());
+  EXPECT_TRUE(reg->reachable());
+  EXPECT_EQ(reg->pending_writes(), 0);
+  EXPECT_EQ(lines_of(journal_), 1U);
+  EXPECT_TRUE(reg->retry());  // nothing again
+  const auto trail = reg->audit_trail();
+  ASSERT_EQ(trail.size(), 3U);
+  EXPECT_EQ(trail[1].action, "away.1");
+  EXPECT_EQ(trail[1].t_ms, 2000);  // the time it happened, not of its replay
+  EXPECT_EQ(trail[2].action, "away.2");
+  EXPECT_EQ(trail[2].t_ms, 3000);
+  const AuditCheck check = check_audit_chain(trail, reg->audit_head());
+  EXPECT_TRUE(check.ok()) << check.message;
+  EXPECT_EQ(reg->issued_history(1).size(), 1U);
+  EXPECT_EQ(reg->overdue_override(3).value_or(OverdueOverrideRow{}).by, "ada");
+  EXPECT_EQ(reg->issued_page(certificate.number, true).value_or(IssuedPageRow{}).html, "<html>1</html>");
+  EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 4000).seq, 4);
+}
+
+// A crash after some writes were applied and before the journal was trimmed: the journal as it
+// was before the replay, put back, replayed by a new registry; and a write journaled behind them.
+TEST_F(RegistryAway, AReplayRepeatedAfterACrashAppliesNothingTwice) {
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  {
+    auto reg = journaled();  // the server away from the start: no error
+    EXPECT_FALSE(reg->reachable());
+    reg->append_audit("ada", "away.1", "s", "{}", 1000);
+    reg->insert_issued(issued(1, 1));
+    reg->append_audit("ada", "away.2", "s", "{}", 2000);
+    std::filesystem::copy_file(journal_, journal_ + ".before-replay");
+    ASSERT_TRUE(postgres_server().start_again());
+    EXPECT_TRUE(reg->retry());
+    EXPECT_EQ(reg->audit_trail().size(), 2U);
+  }
+  std::filesystem::rename(journal_ + ".before-replay", journal_);
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  {
+    auto reg = journaled();
+    EXPECT_EQ(reg->pending_writes(), 3);
+    reg->append_audit("bob", "away.3", "s", "{}", 3000);  // numbered after the three
+    ASSERT_TRUE(postgres_server().start_again());
+    EXPECT_TRUE(reg->retry());
+    EXPECT_EQ(reg->pending_writes(), 0);
+  }
+  const auto server = direct();
+  const auto trail = server->audit_trail();
+  ASSERT_EQ(trail.size(), 3U);
+  EXPECT_EQ(trail[0].action, "away.1");
+  EXPECT_EQ(trail[1].action, "away.2");
+  EXPECT_EQ(trail[2].action, "away.3");
+  EXPECT_TRUE(check_audit_chain(trail, server->audit_head()).ok());
+  EXPECT_EQ(server->issued_history(1).size(), 1U);
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/registry-journal-refused.jsonl"));  // no duplicate refused
+}
+
+// A stand stopped with writes waiting: the next imucald replays them once the server answers
+// (at once when it answers at the start).
+TEST_F(RegistryAway, AJournalLeftAtShutdownIsReplayedByTheNextStart) {
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  {
+    auto reg = journaled();
+    reg->append_audit("ada", "away.1", "s", "{}", 1000);
+    reg->insert_certificate({2, "LAB-2025-000007", 7, 1600000000000, "{}"});
+  }
+  {
+    auto reg = journaled();  // started again, the server still away
+    EXPECT_EQ(reg->pending_writes(), 2);
+    EXPECT_FALSE(reg->reachable());
+  }
+  ASSERT_TRUE(postgres_server().start_again());
+  auto reg = journaled();
+  EXPECT_EQ(reg->pending_writes(), 0);
+  EXPECT_TRUE(reg->reachable());
+  EXPECT_EQ(reg->audit_trail().size(), 1U);
+  EXPECT_EQ(reg->certificate(2).value_or(CertificateRow{}).number, "LAB-2025-000007");
+  EXPECT_EQ(reg->max_certificate_sequence(), 7);
+}
+
+// A refusal of the server is the caller's when it answers; one met at replay is kept beside the
+// journal for the operator and does not hold the writes behind it.
+TEST_F(RegistryAway, ARefusedWriteIsTheCallersOrSetAsideAtReplay) {
+  auto reg = journaled();
+  reg->insert_issued(issued(1, 1));
+  EXPECT_THROW(reg->insert_issued(issued(1, 2)), imucal::storage::StorageError);  // the number is taken
+  EXPECT_EQ(reg->pending_writes(), 0);
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  reg->insert_issued(issued(1, 3));  // the same number again: refused at replay
+  reg->append_audit("ada", "away", "s", "{}", 1000);
+  ASSERT_TRUE(postgres_server().start_again());
+  EXPECT_TRUE(reg->retry());
+  EXPECT_EQ(reg->audit_trail().size(), 1U);
+  EXPECT_EQ(reg->issued(issued(1, 1).number).value_or(IssuedCertificateRow{}).campaign_id, 1);
+  EXPECT_EQ(lines_of(dir_ + "/registry-journal-refused.jsonl"), 1U);
 }
 
 }  // namespace

@@ -1,0 +1,539 @@
+#include "daemon/registry/journaled_registry.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "daemon/registry/postgres_registry.hpp"
+
+namespace imucal::daemon {
+
+namespace {
+
+using nlohmann::json;
+using storage::pg::PgError;
+
+// A failure of the journal's disk. Connection lost, as the server's absence it stands in for: a
+// caller that keeps writes to repeat them (the sequencer's WriteQueue) keeps this one too.
+[[noreturn]] void journal_failure(const std::string& path, const std::string& doing, int error) {
+  throw PgError("registry: the PostgreSQL server is unreachable and its journal " + path + " cannot be " + doing +
+                    ": " + std::strerror(error),
+                "", true);
+}
+
+// A file descriptor closed when it goes.
+class OpenFile {
+ public:
+  OpenFile(const std::string& path, int flags) : fd_(::open(path.c_str(), flags | O_CLOEXEC, 0600)) {}
+  ~OpenFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  OpenFile(const OpenFile&) = delete;
+  OpenFile& operator=(const OpenFile&) = delete;
+  int fd() const { return fd_; }
+
+ private:
+  int fd_;
+};
+
+// All of `text` written, then fsynced: on the disk before the caller goes on. On a failure the
+// file is cut back to where it was, so that no half line stays in front of the next one.
+void write_durably(const OpenFile& file, const std::string& text, const std::string& path) {
+  if (file.fd() < 0) journal_failure(path, "opened", errno);
+  struct stat before {};
+  const bool sized = ::fstat(file.fd(), &before) == 0;
+  std::size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(file.fd(), text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int error = errno;
+      if (sized && ::ftruncate(file.fd(), before.st_size) != 0) spdlog::error("registry: {} cannot be cut back", path);
+      journal_failure(path, "written", error);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(file.fd()) != 0) journal_failure(path, "synced to disk", errno);
+}
+
+// The rename of a replaced file on the disk too.
+void sync_directory_of(const std::string& path) {
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  const OpenFile directory(dir.empty() ? "." : dir, O_RDONLY | O_DIRECTORY);
+  if (directory.fd() >= 0) (void)::fsync(directory.fd());
+}
+
+// A journal's id: a journal whose file was lost starts numbering again under another id, and its
+// keys never meet the ones the server recorded for the first.
+std::string new_journal_id() {
+  std::random_device random;
+  std::mt19937_64 bits((static_cast<std::uint64_t>(random()) << 32U) ^ random() ^
+                       static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count()));
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(bits()));
+  return text;
+}
+
+json optional_json(const std::optional<std::string>& value) { return value ? json(*value) : json(nullptr); }
+
+std::optional<std::string> optional_text(const json& value) {
+  if (value.is_null()) return std::nullopt;
+  return value.get<std::string>();
+}
+
+json issued_json(const IssuedCertificateRow& r) {
+  return {{"write", "issued"},           {"sequence", r.sequence},
+          {"number", r.number},          {"campaign_id", r.campaign_id},
+          {"issued_ms", r.issued_ms},    {"content_json", r.content_json},
+          {"content_sha256", r.content_sha256}, {"signed_json", optional_json(r.signed_json)},
+          {"supersedes", optional_json(r.supersedes)}, {"reason", r.reason}};
+}
+
+IssuedCertificateRow issued_from(const json& j) {
+  IssuedCertificateRow r;
+  r.sequence = j.at("sequence").get<std::int64_t>();
+  r.number = j.at("number").get<std::string>();
+  r.campaign_id = j.at("campaign_id").get<std::int64_t>();
+  r.issued_ms = j.at("issued_ms").get<std::int64_t>();
+  r.content_json = j.at("content_json").get<std::string>();
+  r.content_sha256 = j.at("content_sha256").get<std::string>();
+  r.signed_json = optional_text(j.at("signed_json"));
+  r.supersedes = optional_text(j.at("supersedes"));
+  r.reason = j.at("reason").get<std::string>();
+  return r;
+}
+
+// One journaled write applied to the server, as the call that journaled it would have.
+void apply_journaled(PostgresRegistry& server, const json& j) {
+  const std::string write = j.at("write").get<std::string>();
+  if (write == "certificate") {
+    server.insert_certificate({j.at("campaign_id").get<std::int64_t>(), j.at("number").get<std::string>(),
+                               j.at("sequence").get<std::int64_t>(), j.at("issued_ms").get<std::int64_t>(),
+                               j.at("bench_json").get<std::string>()});
+  } else if (write == "issued") {
+    server.insert_issued(issued_from(j));
+  } else if (write == "issued_page") {
+    (void)server.insert_issued_page({j.at("number").get<std::string>(), j.at("html").get<std::string>(),
+                                     j.at("sha256").get<std::string>(), j.at("stored_ms").get<std::int64_t>(),
+                                     j.at("stored_by").get<std::string>()});
+  } else if (write == "overdue_override") {
+    server.insert_overdue_override({j.at("campaign_id").get<std::int64_t>(), j.at("t_ms").get<std::int64_t>(),
+                                    j.at("by").get<std::string>(), j.at("reason").get<std::string>(),
+                                    j.at("instruments_json").get<std::string>(), j.at("text").get<std::string>()});
+  } else if (write == "overdue_override_removed") {
+    server.remove_overdue_override(j.at("campaign_id").get<std::int64_t>());
+  } else if (write == "audit") {
+    // Chained now, after the entries before it, with the time it happened.
+    (void)server.append_audit(j.at("actor").get<std::string>(), j.at("action").get<std::string>(),
+                              j.at("subject").get<std::string>(), j.at("details_json").get<std::string>(),
+                              j.at("t_ms").get<std::int64_t>());
+  } else {
+    throw std::invalid_argument("unknown journaled write '" + write + "'");
+  }
+}
+
+// Entries replayed between two rewrites of the journal: a crash replays at most these again (and
+// their keys skip them), while a long journal is not rewritten once per entry.
+constexpr std::size_t kTrimEvery = 64;
+
+}  // namespace
+
+// The journal's file and the writes waiting in it (journaled_registry.hpp says its format).
+class RegistryJournal {
+ public:
+  explicit RegistryJournal(std::string path) : path_(std::move(path)) {
+    if (std::filesystem::exists(path_)) {
+      load();
+    } else {
+      id_ = new_journal_id();
+      trim();
+    }
+  }
+
+  const std::string& id() const { return id_; }
+  bool empty() const { return entries_.empty(); }
+  std::int64_t size() const { return static_cast<std::int64_t>(entries_.size()); }
+  const json& front() const { return entries_.front(); }
+  void pop_front() { entries_.pop_front(); }
+
+  // Numbers `entry`, adds it at the end and on the disk; its number.
+  std::int64_t append(json entry) {
+    entry["seq"] = next_seq_;
+    const OpenFile file(path_, O_WRONLY | O_APPEND | O_CREAT);
+    write_durably(file, entry.dump() + "\n", path_);
+    entries_.push_back(std::move(entry));
+    return next_seq_++;
+  }
+
+  // The file rewritten with the writes still waiting (a crash leaves the old file or the new).
+  void trim() {
+    std::string text = json{{"imucal_registry_journal", 1}, {"id", id_}, {"next_seq", next_seq_}}.dump() + "\n";
+    for (const json& entry : entries_) text += entry.dump() + "\n";
+    const std::string temporary = path_ + ".tmp";
+    {
+      const OpenFile file(temporary, O_WRONLY | O_CREAT | O_TRUNC);
+      write_durably(file, text, temporary);
+    }
+    if (std::rename(temporary.c_str(), path_.c_str()) != 0) journal_failure(path_, "replaced", errno);
+    sync_directory_of(path_);
+  }
+
+  // trim() whose failure is no caller's: the writes are applied (the server has them and their
+  // keys), and a file not trimmed is only replayed again, with nothing applied twice.
+  void trim_or_say_why() noexcept {
+    try {
+      trim();
+    } catch (const std::exception& e) {
+      spdlog::error("registry: the journal's applied writes stay in it for now: {}", e.what());
+    }
+  }
+
+  // A write the server refused at replay (or a line that is no write): kept for the operator.
+  void set_aside(const json& entry, const std::string& why) {
+    spdlog::error("registry: journaled write refused by the PostgreSQL server, kept in {}: {}: {}", refused_path(),
+                  entry.dump(), why);
+    const OpenFile file(refused_path(), O_WRONLY | O_APPEND | O_CREAT);
+    write_durably(file, json{{"entry", entry}, {"refused", why}}.dump() + "\n", refused_path());
+  }
+
+ private:
+  std::string refused_path() const {
+    const std::filesystem::path p(path_);
+    return (p.parent_path() / (p.stem().string() + "-refused.jsonl")).string();
+  }
+
+  void load() {
+    std::ifstream in(path_);
+    std::string line;
+    json header;
+    if (std::getline(in, line)) header = json::parse(line, nullptr, false);
+    if (!header.is_object() || !header.contains("id") || !header.contains("next_seq"))
+      throw storage::StorageError("registry: the journal " + path_ +
+                                  " has no readable header (its first line): move it aside after reading it");
+    id_ = header.at("id").get<std::string>();
+    next_seq_ = header.at("next_seq").get<std::int64_t>();
+    while (std::getline(in, line)) {
+      if (line.empty()) continue;
+      json entry = json::parse(line, nullptr, false);
+      // A line a crash cut short was never acknowledged to its caller.
+      if (!entry.is_object() || !entry.contains("seq") || !entry.at("seq").is_number_integer()) {
+        set_aside(json(line), "not a journaled write (a line cut short by a crash?)");
+        continue;
+      }
+      next_seq_ = std::max(next_seq_, entry.at("seq").get<std::int64_t>() + 1);
+      entries_.push_back(std::move(entry));
+    }
+  }
+
+  std::string path_;
+  std::string id_;
+  std::int64_t next_seq_ = 1;
+  std::deque<json> entries_;
+};
+
+JournaledRegistry::JournaledRegistry(Connect connect, std::string journal_path, Options options)
+    : connect_(std::move(connect)),
+      journal_path_(std::move(journal_path)),
+      options_(options),
+      journal_(std::make_unique<RegistryJournal>(journal_path_)) {
+  pending_ = journal_->size();
+  if (pending_ > 0)
+    spdlog::warn("registry: {} writes wait in {} from before; they are replayed once the PostgreSQL server answers",
+                 pending_.load(), journal_path_);
+  (void)retry();  // the server asked now: GET /api/status says at once whether it answers
+  if (options_.retry_every.count() > 0) retry_thread_ = std::thread([this] { retry_loop(); });
+}
+
+JournaledRegistry::~JournaledRegistry() {
+  {
+    std::lock_guard lock(stop_mutex_);
+    stopping_ = true;
+  }
+  stop_cv_.notify_all();
+  if (retry_thread_.joinable()) retry_thread_.join();
+}
+
+void JournaledRegistry::retry_loop() {
+  std::unique_lock lock(stop_mutex_);
+  while (!stop_cv_.wait_for(lock, options_.retry_every, [this] { return stopping_; })) {
+    if (reachable_ && pending_ == 0) continue;
+    lock.unlock();
+    try {
+      (void)retry();
+    } catch (const std::exception& e) {
+      spdlog::error("registry: retrying the PostgreSQL server: {}", e.what());
+    }
+    lock.lock();
+  }
+}
+
+bool JournaledRegistry::retry() {
+  std::lock_guard lock(mutex_);
+  if (!ready(true)) return false;
+  if (reachable_) return true;
+  // Nothing was replayed, so nothing has asked the server yet: a question it must answer.
+  try {
+    (void)server_->schema_version();
+    answered();
+    return true;
+  } catch (const PgError& e) {
+    if (!e.connection_lost()) throw;
+    went_away(e.what());
+    return false;
+  }
+}
+
+void JournaledRegistry::went_away(const std::string& why) {
+  if (reachable_ || last_failure_.empty())
+    spdlog::warn("registry: the PostgreSQL server is unreachable ({}); the registry's writes wait in {} until it answers",
+                 why, journal_path_);
+  reachable_ = false;
+  last_failure_ = why;
+  last_attempt_ = std::chrono::steady_clock::now();
+}
+
+void JournaledRegistry::answered() {
+  if (!reachable_) spdlog::info("registry: the PostgreSQL server answers");
+  reachable_ = true;
+}
+
+PostgresRegistry* JournaledRegistry::connected() {
+  if (server_) return server_.get();
+  try {
+    server_ = connect_();
+  } catch (const PgError& e) {
+    if (!e.connection_lost()) throw;
+    went_away(e.what());
+    return nullptr;
+  }
+  return server_.get();
+}
+
+// Whether the server may be asked now: connected, and every journaled write before replayed.
+// While it is away it is tried again no more often than call_retry_interval (unless `force`).
+bool JournaledRegistry::ready(bool force) {
+  const auto now = std::chrono::steady_clock::now();
+  if (!force && !reachable_ && now - last_attempt_ < options_.call_retry_interval) return false;
+  last_attempt_ = now;
+  if (connected() == nullptr) return false;
+  return replay();
+}
+
+bool JournaledRegistry::replay() {
+  if (journal_->empty()) return true;
+  const std::int64_t waiting = journal_->size();
+  std::size_t since_trim = 0;
+  bool complete = true;
+  while (!journal_->empty()) {
+    if (!replay_one(journal_->front())) {
+      complete = false;
+      break;
+    }
+    journal_->pop_front();
+    pending_ = journal_->size();
+    if (++since_trim == kTrimEvery) {
+      journal_->trim_or_say_why();
+      since_trim = 0;
+    }
+  }
+  journal_->trim_or_say_why();
+  if (complete) spdlog::info("registry: the {} journaled writes are replayed on the PostgreSQL server", waiting);
+  return complete;
+}
+
+// False when the server went away (the write stays first in the journal).
+bool JournaledRegistry::replay_one(const json& entry) {
+  try {
+    const std::int64_t seq = entry.at("seq").get<std::int64_t>();
+    if (!server_->apply_once(journal_->id(), seq, [this, &entry] { apply_journaled(*server_, entry); }))
+      spdlog::info("registry: journaled write {} was applied before its replay was interrupted: not again", seq);
+    answered();
+  } catch (const PgError& e) {
+    if (e.connection_lost()) {
+      went_away(e.what());
+      return false;
+    }
+    journal_->set_aside(entry, e.what());
+  } catch (const std::exception& e) {  // a malformed entry: no write to apply
+    journal_->set_aside(entry, e.what());
+  }
+  return true;
+}
+
+void JournaledRegistry::write(const json& entry, const Call& apply) {
+  if (ready(false)) {
+    try {
+      apply(*server_);
+      answered();
+      return;
+    } catch (const PgError& e) {
+      if (!e.connection_lost()) throw;
+      went_away(e.what());
+    }
+  }
+  const std::int64_t seq = journal_->append(entry);
+  pending_ = journal_->size();
+  spdlog::info("registry: {} journaled as write {} ({} waiting for the PostgreSQL server)",
+               entry.at("write").get<std::string>(), seq, pending_.load());
+}
+
+void JournaledRegistry::read(const char* what, const Call& query) {
+  if (ready(false)) {
+    try {
+      query(*server_);
+      answered();
+      return;
+    } catch (const PgError& e) {
+      if (!e.connection_lost()) throw;
+      went_away(e.what());
+    }
+  }
+  throw PgError("registry: " + std::string(what) +
+                    " needs the lab's PostgreSQL server (registry.postgresql), which is unreachable (" + last_failure_ +
+                    "); " + std::to_string(pending_.load()) + " writes of this stand wait in " + journal_path_ +
+                    " to be replayed when it answers",
+                "", true);
+}
+
+std::int64_t JournaledRegistry::next_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  std::int64_t out = 0;
+  read("a certificate number", [&](PostgresRegistry& r) { out = r.next_certificate_sequence(); });
+  return out;
+}
+
+std::int64_t JournaledRegistry::max_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  std::int64_t out = 0;
+  read("the highest certificate number", [&](PostgresRegistry& r) { out = r.max_certificate_sequence(); });
+  return out;
+}
+
+std::optional<CertificateRow> JournaledRegistry::certificate(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  std::optional<CertificateRow> out;
+  read("a campaign's certificate number", [&](PostgresRegistry& r) { out = r.certificate(campaign_id); });
+  return out;
+}
+
+void JournaledRegistry::insert_certificate(const CertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "certificate"}, {"campaign_id", row.campaign_id}, {"number", row.number},
+         {"sequence", row.sequence}, {"issued_ms", row.issued_ms}, {"bench_json", row.bench_json}},
+        [&](PostgresRegistry& r) { r.insert_certificate(row); });
+}
+
+void JournaledRegistry::insert_issued(const IssuedCertificateRow& row) {
+  std::lock_guard lock(mutex_);
+  write(issued_json(row), [&](PostgresRegistry& r) { r.insert_issued(row); });
+}
+
+std::optional<IssuedCertificateRow> JournaledRegistry::issued(const std::string& number) {
+  std::lock_guard lock(mutex_);
+  std::optional<IssuedCertificateRow> out;
+  read("an issued certificate", [&](PostgresRegistry& r) { out = r.issued(number); });
+  return out;
+}
+
+std::optional<IssuedCertificateRow> JournaledRegistry::current_issued(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  std::optional<IssuedCertificateRow> out;
+  read("a campaign's certificate", [&](PostgresRegistry& r) { out = r.current_issued(campaign_id); });
+  return out;
+}
+
+std::vector<IssuedCertificateRow> JournaledRegistry::issued_history(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  std::vector<IssuedCertificateRow> out;
+  read("a campaign's certificates", [&](PostgresRegistry& r) { out = r.issued_history(campaign_id); });
+  return out;
+}
+
+std::vector<std::int64_t> JournaledRegistry::campaigns_with_issued() {
+  std::lock_guard lock(mutex_);
+  std::vector<std::int64_t> out;
+  read("the campaigns with certificates", [&](PostgresRegistry& r) { out = r.campaigns_with_issued(); });
+  return out;
+}
+
+bool JournaledRegistry::insert_issued_page(const IssuedPageRow& row) {
+  std::lock_guard lock(mutex_);
+  bool stored = true;
+  write({{"write", "issued_page"}, {"number", row.number}, {"html", row.html}, {"sha256", row.sha256},
+         {"stored_ms", row.stored_ms}, {"stored_by", row.stored_by}},
+        [&](PostgresRegistry& r) { stored = r.insert_issued_page(row); });
+  return stored;
+}
+
+std::optional<IssuedPageRow> JournaledRegistry::issued_page(const std::string& number, bool with_html) {
+  std::lock_guard lock(mutex_);
+  std::optional<IssuedPageRow> out;
+  read("a certificate's page", [&](PostgresRegistry& r) { out = r.issued_page(number, with_html); });
+  return out;
+}
+
+void JournaledRegistry::insert_overdue_override(const OverdueOverrideRow& row) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "overdue_override"}, {"campaign_id", row.campaign_id}, {"t_ms", row.t_ms}, {"by", row.by},
+         {"reason", row.reason}, {"instruments_json", row.instruments_json}, {"text", row.text}},
+        [&](PostgresRegistry& r) { r.insert_overdue_override(row); });
+}
+
+void JournaledRegistry::remove_overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "overdue_override_removed"}, {"campaign_id", campaign_id}},
+        [&](PostgresRegistry& r) { r.remove_overdue_override(campaign_id); });
+}
+
+std::optional<OverdueOverrideRow> JournaledRegistry::overdue_override(std::int64_t campaign_id) {
+  std::lock_guard lock(mutex_);
+  std::optional<OverdueOverrideRow> out;
+  read("a campaign's overdue override", [&](PostgresRegistry& r) { out = r.overdue_override(campaign_id); });
+  return out;
+}
+
+AuditEntry JournaledRegistry::append_audit(const std::string& actor, const std::string& action,
+                                           const std::string& subject, const std::string& details_json,
+                                           std::optional<std::int64_t> t_ms) {
+  std::lock_guard lock(mutex_);
+  // The time is taken now: a journaled entry keeps the time it happened, not the time of its replay.
+  AuditEntry out{0, t_ms.value_or(now_unix_ms()), actor, action, subject, details_json, "", ""};
+  write({{"write", "audit"}, {"t_ms", out.t_ms}, {"actor", actor}, {"action", action}, {"subject", subject},
+         {"details_json", details_json}},
+        [&](PostgresRegistry& r) { out = r.append_audit(actor, action, subject, details_json, out.t_ms); });
+  return out;
+}
+
+std::vector<AuditEntry> JournaledRegistry::audit_entries(const AuditQuery& query) {
+  std::lock_guard lock(mutex_);
+  std::vector<AuditEntry> out;
+  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_entries(query); });
+  return out;
+}
+
+std::vector<AuditEntry> JournaledRegistry::audit_trail() {
+  std::lock_guard lock(mutex_);
+  std::vector<AuditEntry> out;
+  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_trail(); });
+  return out;
+}
+
+std::optional<std::pair<std::int64_t, std::string>> JournaledRegistry::audit_head() {
+  std::lock_guard lock(mutex_);
+  std::optional<std::pair<std::int64_t, std::string>> out;
+  read("the audit trail's head", [&](PostgresRegistry& r) { out = r.audit_head(); });
+  return out;
+}
+
+}  // namespace imucal::daemon
