@@ -1,8 +1,8 @@
 #include "daemon/production/certificate_issuer.hpp"
 
-#include <stdexcept>
 #include <array>
 #include <filesystem>
+#include <stdexcept>
 
 #include <spdlog/spdlog.h>
 

@@ -170,6 +170,9 @@ TEST(RunEngine, AWholeRunEmitsEveryDocumentInItsOrder) {
   ASSERT_EQ(c.at("state"), "done") << c.dump();
   ASSERT_TRUE(wait_until_idle(d));
   const auto entries = journal.entries();
+  std::string kinds;  // what a failure shows: the documents in the order they came
+  for (const auto& e : entries) kinds += (e.kind == "transition" ? e.detail.dump() : e.kind) + " ";
+  SCOPED_TRACE("documents: " + kinds);
   expect_transitions(entries);
   expect_milestones(entries, c.at("segments").size());
   expect_carried(entries, id, c);
