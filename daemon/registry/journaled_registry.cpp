@@ -283,8 +283,12 @@ bool JournaledRegistry::retry() {
   if (!ready(true)) return false;
   if (reachable_) return true;
   // Nothing was replayed, so nothing has asked the server yet: a question it must answer.
+  return asked([](PostgresRegistry& server) { (void)server.schema_version(); });
+}
+
+bool JournaledRegistry::asked(const Call& call) {
   try {
-    (void)server_->schema_version();
+    call(*server_);
     answered();
     return true;
   } catch (const PgError& e) {
@@ -372,16 +376,7 @@ bool JournaledRegistry::replay_one(const json& entry) {
 }
 
 void JournaledRegistry::write(const json& entry, const Call& apply) {
-  if (ready(false)) {
-    try {
-      apply(*server_);
-      answered();
-      return;
-    } catch (const PgError& e) {
-      if (!e.connection_lost()) throw;
-      went_away(e.what());
-    }
-  }
+  if (ready(false) && asked(apply)) return;
   const std::int64_t seq = journal_->append(entry);
   pending_ = journal_->size();
   spdlog::info("registry: {} journaled as write {} ({} waiting for the PostgreSQL server)",
@@ -389,16 +384,7 @@ void JournaledRegistry::write(const json& entry, const Call& apply) {
 }
 
 void JournaledRegistry::read(const char* what, const Call& query) {
-  if (ready(false)) {
-    try {
-      query(*server_);
-      answered();
-      return;
-    } catch (const PgError& e) {
-      if (!e.connection_lost()) throw;
-      went_away(e.what());
-    }
-  }
+  if (ready(false) && asked(query)) return;
   throw PgError("registry: " + std::string(what) +
                     " needs the lab's PostgreSQL server (registry.postgresql), which is unreachable (" + last_failure_ +
                     "); " + std::to_string(pending_.load()) + " writes of this stand wait in " + journal_path_ +

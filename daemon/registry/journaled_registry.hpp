@@ -100,6 +100,9 @@ class JournaledRegistry final : public Registry {
   bool replay_one(const nlohmann::json& entry);
   void went_away(const std::string& why);
   void answered();
+  // `call` on the server: true when it answered; false when the connection was lost (noted by
+  // went_away); any other failure propagates.
+  bool asked(const Call& call);
   void retry_loop();
 
   Connect connect_;
