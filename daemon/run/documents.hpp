@@ -8,8 +8,9 @@
 // run's thread (RunResults too: the estimators finish during RunEnding); FramesCommitted from the
 // recording's writer thread; EstimatorProgress from the estimators' worker thread; a Transition
 // from the thread that changed the state (an operator's request), in the order the changes were
-// made (the sequencer hands its lock to an ordering lock before it emits one). A subscriber must
-// be quick (RunEnding excepted) and must not change a run's state.
+// made (each change takes a ticket under the sequencer's lock and is delivered in its turn, the
+// lock released). A subscriber must be quick (RunEnding excepted) and must not change a run's
+// state; it may read the sequencer.
 #pragma once
 
 #include <cstdint>
