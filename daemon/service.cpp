@@ -12,6 +12,7 @@
 
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
+#include "daemon/production/lab.hpp"
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
@@ -169,11 +170,28 @@ void Service::start(bool http) {
   // The run's events to the live view.
   if (server) sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
   sequencer_->start();
+  start_heartbeat();
+}
+
+// This stand in the lab's registry: registered now, its state reported every registry.heartbeat_s
+// from its own database (what it runs, its alarms), on the heartbeat's own thread.
+void Service::start_heartbeat() {
+  StandRow identity;
+  identity.name = registry_stand(config_);
+  identity.bench = config_.devices;
+  identity.url = stand_url(config_, server_ ? server_->port() : config_.http.port);
+  identity.version = api_->status().at("version").get<std::string>();
+  const auto period = std::chrono::milliseconds(std::max<std::int64_t>(
+      1, static_cast<std::int64_t>(config_.registry.heartbeat_s * 1000.0)));
+  heartbeat_ = std::make_unique<StandHeartbeat>(*registry_, identity, period, [this] {
+    return stand_state_json(*db_, sequencer_->active_id());
+  });
 }
 
 void Service::stop() {
   if (stopped_) return;
   stopped_ = true;
+  if (heartbeat_) heartbeat_->stop();  // before what its state is read from stops
   if (api_) {
     api_->set_shutting_down();
     api_->set_event_listener({});  // the analyses' progress no longer reaches the server

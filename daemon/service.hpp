@@ -18,6 +18,7 @@
 #include "daemon/production/certificates.hpp"
 #include "daemon/registry/audit_trail.hpp"
 #include "daemon/registry/registry.hpp"
+#include "daemon/registry/stand_heartbeat.hpp"
 #include "daemon/sequencer/sequencer.hpp"
 #include "daemon/subscribers/certificates.hpp"
 
@@ -55,6 +56,7 @@ class Service {
 
  private:
   void assemble_certificates();
+  void start_heartbeat();
 
   DaemonConfig config_;
   int lock_fd_ = -1;
@@ -73,6 +75,10 @@ class Service {
   std::unique_ptr<Api> api_;
   std::unique_ptr<StaticFiles> files_;
   std::unique_ptr<HttpServer> server_;
+  // This stand's registration and state reports to the registry (issue 38, the lab overview):
+  // started by start() once the port is known, stopped first by stop(), declared last so that it
+  // goes before the sequencer and the database its state is read from.
+  std::unique_ptr<StandHeartbeat> heartbeat_;
   bool stopped_ = false;
 };
 

@@ -259,6 +259,12 @@ void read_registry(const json& j, DaemonConfig& c, std::vector<std::string>& pro
     if (v->empty()) problems.push_back(r.at("stand") + " must name this stand, or be left out (the host's name)");
     else c.registry.stand = *v;
   }
+  if (auto v = r.string("url")) {
+    if (!v->starts_with("http://") && !v->starts_with("https://"))
+      problems.push_back(r.at("url") + " must be this stand's address as a browser reaches it (http://... or https://...)");
+    else c.registry.url = *v;
+  }
+  if (auto v = r.number_in("heartbeat_s", 0.05, 600)) c.registry.heartbeat_s = *v;
 }
 
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
@@ -455,6 +461,17 @@ std::string registry_stand(const DaemonConfig& config) {
   char host[256] = {};
   if (gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "imucald";
   return host;
+}
+
+std::string stand_url(const DaemonConfig& config, std::uint16_t port) {
+  if (!config.registry.url.empty()) return config.registry.url;
+  std::string host = config.http.host;
+  if (host.empty() || host == "0.0.0.0" || host == "::") {
+    char name[256] = {};
+    host = gethostname(name, sizeof name - 1) == 0 && name[0] != '\0' ? name : "localhost";
+  }
+  if (host.find(':') != std::string::npos) host = "[" + host + "]";  // an IPv6 address
+  return "http://" + host + ":" + std::to_string(port);
 }
 
 std::string certificate_sequence_path(const DaemonConfig& config) {

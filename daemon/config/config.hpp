@@ -147,6 +147,10 @@ struct CertificateConfig {
 struct RegistryConfig {
   std::string postgresql;  // a libpq connection string ("host=db.lab dbname=imucal"); empty: SQLite
   std::string stand;       // this stand's name in a shared registry; empty: the host's name (registry_stand)
+  // The lab overview (GET /api/lab): this stand's page as other stands' browsers reach it (empty:
+  // stand_url's default), and how often it reports its state to the registry.
+  std::string url;
+  double heartbeat_s = 5.0;
 };
 
 struct DaemonConfig {
@@ -202,6 +206,10 @@ std::string date_text(std::int64_t day_number);
 
 // The name this stand's campaigns go by in a shared registry: `registry.stand`, else the host's name.
 std::string registry_stand(const DaemonConfig& config);
+// This stand's address in the lab overview: registry.url, else http://HOST:PORT with the HTTP
+// server's host (the host's name when it listens on every address, 0.0.0.0 or ::) and `port`,
+// the port it listens on (the configured one may be 0: any).
+std::string stand_url(const DaemonConfig& config, std::uint16_t port);
 
 // The certificate prefix in use: `certificates.prefix`, else the site's name in capitals with
 // every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most

@@ -171,6 +171,19 @@ CREATE TABLE IF NOT EXISTS overdue_override(
   instruments_json TEXT NOT NULL,
   text TEXT NOT NULL
 );
+-- This stand as the lab's registry knows it (issue 38, registry.hpp register_stand): one row,
+-- itself, with the state its heartbeat last reported. Created where missing, without a migration,
+-- as the certificate table; volatile, rewritten at each start.
+CREATE TABLE IF NOT EXISTS stand(
+  name TEXT PRIMARY KEY,
+  bench TEXT NOT NULL,
+  url TEXT NOT NULL,
+  version TEXT NOT NULL,
+  heartbeat_ms INTEGER NOT NULL,
+  registered_ms INTEGER NOT NULL,
+  last_seen_ms INTEGER NOT NULL,
+  state_json TEXT NOT NULL
+);
 )sql";
 
 using storage::sql::Statement;
@@ -626,6 +639,44 @@ std::optional<OverdueOverrideRow> DaemonDb::overdue_override(std::int64_t campai
   if (!s.step()) return std::nullopt;
   return OverdueOverrideRow{s.column_int64(0), s.column_int64(1), s.column_text(2),
                             s.column_text(3), s.column_text(4),  s.column_text(5)};
+}
+
+void DaemonDb::register_stand(const StandRow& row) {
+  std::lock_guard lock(mutex_);
+  storage::sql::Transaction txn(db_);
+  {
+    Statement others(db_, "DELETE FROM stand WHERE name <> ?1");
+    others.bind(1, row.name);
+    others.run();
+  }
+  Statement s(db_, "INSERT INTO stand(name, bench, url, version, heartbeat_ms, registered_ms, last_seen_ms, state_json) "
+                   "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8) ON CONFLICT(name) DO UPDATE SET bench = excluded.bench, "
+                   "url = excluded.url, version = excluded.version, heartbeat_ms = excluded.heartbeat_ms, "
+                   "registered_ms = excluded.registered_ms, last_seen_ms = excluded.last_seen_ms, "
+                   "state_json = excluded.state_json");
+  s.bind(1, row.name).bind(2, row.bench).bind(3, row.url).bind(4, row.version).bind(5, row.heartbeat_ms);
+  s.bind(6, row.registered_ms).bind(7, row.last_seen_ms).bind(8, row.state_json);
+  s.run();
+  txn.commit();
+}
+
+bool DaemonDb::report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE stand SET state_json = ?2, last_seen_ms = ?3 WHERE name = ?1");
+  s.bind(1, name).bind(2, state_json).bind(3, t_ms);
+  s.run();
+  return db_.query_int("SELECT changes()") > 0;
+}
+
+std::vector<StandRow> DaemonDb::stands() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT name, bench, url, version, heartbeat_ms, registered_ms, last_seen_ms, state_json FROM stand "
+                   "ORDER BY name");
+  std::vector<StandRow> out;
+  while (s.step())
+    out.push_back(StandRow{s.column_text(0), s.column_text(1), s.column_text(2), s.column_text(3), s.column_int64(4),
+                           s.column_int64(5), s.column_int64(6), s.column_text(7)});
+  return out;
 }
 
 bool DaemonDb::insert_issued_page(const IssuedPageRow& row) {

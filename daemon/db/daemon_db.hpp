@@ -135,6 +135,19 @@ struct AlarmRow {
   std::optional<std::int64_t> acknowledged_ms;
 };
 
+// A stand of the lab (issue 38, registry.hpp): who it is, set when its imucald starts, and the
+// state its heartbeat last reported (daemon/registry/stand_heartbeat.hpp).
+struct StandRow {
+  std::string name;                // registry_stand(config)
+  std::string bench;               // the devices it drives (the configuration's `devices`)
+  std::string url;                 // its own page, as other stands' browsers reach it
+  std::string version;             // its imucald's
+  std::int64_t heartbeat_ms = 0;   // how often it reports: GET /api/lab judges it online by this
+  std::int64_t registered_ms = 0;  // its imucald's start
+  std::int64_t last_seen_ms = 0;   // its last report (its own clock)
+  std::string state_json = "{}";   // what it runs, its progress, its alarms (production/lab.hpp)
+};
+
 struct ProgressRow {
   std::string estimator;
   std::int64_t t_ms = 0;
@@ -264,6 +277,12 @@ class DaemonDb {
   // The whole trail in order, and the head recorded beside it, for check_audit_chain.
   std::vector<AuditEntry> audit_trail();
   std::optional<std::pair<std::int64_t, std::string>> audit_head();
+
+  // The stand table (issue 38): this daemon alone, the SQLite registry's (registry.hpp says what
+  // each does). register_stand replaces any other row (a stand renamed is no other stand).
+  void register_stand(const StandRow& row);
+  bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms);
+  std::vector<StandRow> stands();
 
   std::optional<std::string> setting(const std::string& key);
   void set_setting(const std::string& key, const std::string& value);

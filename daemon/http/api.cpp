@@ -25,6 +25,7 @@
 #include "daemon/production/certificates.hpp"
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/test_report.hpp"
+#include "daemon/production/lab.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/subscribers/alarms.hpp"
 #include "daemon/run/suspenders.hpp"
@@ -492,6 +493,11 @@ const std::vector<Api::Route>& Api::routes() {
          return json_reply(200, {{"user", c.who->user}, {"role", to_string(c.who->role)}, {"via", c.who->via}});
        }},
       {"GET", "/api/status", A::viewer, [](Api& a, const Call&) { return json_reply(200, a.status()); }},
+      // The lab overview (issue 38): every stand of the registry, what it runs, its alarms.
+      {"GET", "/api/lab", A::viewer,
+       [](Api& a, const Call&) {
+         return json_reply(200, lab_json(a.registry_.stands(), now_unix_ms(), registry_stand(a.config_)));
+       }},
       {"GET", "/api/programs", A::viewer, [](Api& a, const Call&) { return json_reply(200, {{"programs", a.programs_}}); }},
       // The coefficients' names, groups, units and the seed's targets, from the tables that own them
       // (plan/schema.hpp): the browser keeps no copy.

@@ -114,6 +114,21 @@ IssuedCertificateRow issued_from(const json& j) {
   return r;
 }
 
+json stand_json(const StandRow& r) {
+  return {{"write", "stand"},          {"name", r.name},
+          {"bench", r.bench},          {"url", r.url},
+          {"version", r.version},      {"heartbeat_ms", r.heartbeat_ms},
+          {"registered_ms", r.registered_ms}, {"last_seen_ms", r.last_seen_ms},
+          {"state_json", r.state_json}};
+}
+
+StandRow stand_from(const json& j) {
+  return StandRow{j.at("name").get<std::string>(),          j.at("bench").get<std::string>(),
+                  j.at("url").get<std::string>(),           j.at("version").get<std::string>(),
+                  j.at("heartbeat_ms").get<std::int64_t>(), j.at("registered_ms").get<std::int64_t>(),
+                  j.at("last_seen_ms").get<std::int64_t>(), j.at("state_json").get<std::string>()};
+}
+
 // One journaled write applied to the server, as the call that journaled it would have.
 void apply_journaled(PostgresRegistry& server, const json& j) {
   const std::string write = j.at("write").get<std::string>();
@@ -138,6 +153,8 @@ void apply_journaled(PostgresRegistry& server, const json& j) {
     (void)server.append_audit(j.at("actor").get<std::string>(), j.at("action").get<std::string>(),
                               j.at("subject").get<std::string>(), j.at("details_json").get<std::string>(),
                               j.at("t_ms").get<std::int64_t>());
+  } else if (write == "stand") {
+    server.register_stand(stand_from(j));
   } else {
     throw std::invalid_argument("unknown journaled write '" + write + "'");
   }
@@ -519,6 +536,30 @@ std::optional<std::pair<std::int64_t, std::string>> JournaledRegistry::audit_hea
   std::lock_guard lock(mutex_);
   std::optional<std::pair<std::int64_t, std::string>> out;
   read("the audit trail's head", [&](PostgresRegistry& r) { out = r.audit_head(); });
+  return out;
+}
+
+// ---- Stands (issue 38, the lab overview) ----
+
+void JournaledRegistry::register_stand(const StandRow& row) {
+  std::lock_guard lock(mutex_);
+  write(stand_json(row), [&](PostgresRegistry& r) { r.register_stand(row); });
+}
+
+// Not journaled (journaled_registry.hpp): with the server away the state is dropped, and true
+// said, as the stand's registration waits in the journal and arrives before the next state.
+bool JournaledRegistry::report_stand_state(const std::string& name, const std::string& state_json,
+                                           std::int64_t t_ms) {
+  std::lock_guard lock(mutex_);
+  bool known = true;
+  if (ready(false)) (void)asked([&](PostgresRegistry& r) { known = r.report_stand_state(name, state_json, t_ms); });
+  return known;
+}
+
+std::vector<StandRow> JournaledRegistry::stands() {
+  std::lock_guard lock(mutex_);
+  std::vector<StandRow> out;
+  read("the lab's stands", [&](PostgresRegistry& r) { out = r.stands(); });
   return out;
 }
 

@@ -81,6 +81,14 @@ class JournaledRegistry final : public Registry {
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
 
+  // Stands. A registration is journaled as any write (it arrives when the server returns); a
+  // heartbeat's state is not: it is volatile, only the latest matters, and the first heartbeat
+  // after the server returns brings it (a journal of states would replay minutes of stale ones).
+  // stands() needs the server, as the other reads.
+  void register_stand(const StandRow& row) override;
+  bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
+  std::vector<StandRow> stands() override;
+
   bool reachable() const override { return reachable_; }
   std::int64_t pending_writes() const override { return pending_; }
 

@@ -94,8 +94,22 @@ CREATE TABLE registry_journal_applied(
   PRIMARY KEY (stand, journal, seq));
 )sql";
 
+// Version 3: the lab's stands (registry.hpp register_stand), one row each, keyed by name; its
+// state is the heartbeat's last (volatile: replaced at each report).
+constexpr const char* kSchemaStands = R"sql(
+CREATE TABLE stand(
+  name TEXT PRIMARY KEY,
+  bench TEXT NOT NULL,
+  url TEXT NOT NULL,
+  version TEXT NOT NULL,
+  heartbeat_ms BIGINT NOT NULL,
+  registered_ms BIGINT NOT NULL,
+  last_seen_ms BIGINT NOT NULL,
+  state_json TEXT NOT NULL);
+)sql";
+
 // The migrations in order: kMigrations[v - 1] takes a registry from version v - 1 to v.
-constexpr const char* kMigrations[] = {kSchema1, kSchema2};
+constexpr const char* kMigrations[] = {kSchema1, kSchema2, kSchemaStands};
 static_assert(std::size(kMigrations) == PostgresRegistry::kSchemaVersion);
 
 constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry, as in SQLite
@@ -355,6 +369,36 @@ std::optional<std::pair<std::int64_t, std::string>> PostgresRegistry::audit_head
   } catch (const std::exception&) {
   }
   return std::make_pair(std::int64_t{-1}, text);
+}
+
+// ---- Stands (issue 38, the lab overview) ----
+
+void PostgresRegistry::register_stand(const StandRow& row) {
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO stand(name, bench, url, version, heartbeat_ms, registered_ms, last_seen_ms, state_json) "
+            "VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT (name) DO UPDATE SET bench = EXCLUDED.bench, "
+            "url = EXCLUDED.url, version = EXCLUDED.version, heartbeat_ms = EXCLUDED.heartbeat_ms, "
+            "registered_ms = EXCLUDED.registered_ms, last_seen_ms = EXCLUDED.last_seen_ms, "
+            "state_json = EXCLUDED.state_json",
+            {row.name, row.bench, row.url, row.version, row.heartbeat_ms, row.registered_ms, row.last_seen_ms,
+             row.state_json});
+}
+
+bool PostgresRegistry::report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) {
+  std::lock_guard lock(mutex_);
+  return db().exec("UPDATE stand SET state_json = $2, last_seen_ms = $3 WHERE name = $1", {name, state_json, t_ms})
+             .affected() > 0;
+}
+
+std::vector<StandRow> PostgresRegistry::stands() {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(
+      "SELECT name, bench, url, version, heartbeat_ms, registered_ms, last_seen_ms, state_json FROM stand ORDER BY name");
+  std::vector<StandRow> out;
+  for (int i = 0; i < r.rows(); ++i)
+    out.push_back(StandRow{r.text(i, 0), r.text(i, 1), r.text(i, 2), r.text(i, 3), r.int64(i, 4), r.int64(i, 5),
+                           r.int64(i, 6), r.text(i, 7)});
+  return out;
 }
 
 }  // namespace imucal::daemon

@@ -19,7 +19,8 @@ class PostgresRegistry final : public Registry {
  public:
   // 1: certificates (numbers, issued ones, pages), overdue overrides, the audit trail.
   // 2: registry_journal_applied, the writes a stand replayed from its journal (apply_once).
-  static constexpr int kSchemaVersion = 2;
+  // 3: stand, the lab's stands and their last reported state (issue 38, the lab overview).
+  static constexpr int kSchemaVersion = 3;
   // `conninfo`: registry.postgresql of the configuration (a libpq connection string). `stand`:
   // the name of the stand whose campaigns this registry records. Throws storage::pg::PgError when
   // the server cannot be reached, DbError when its schema is newer than this imucald knows.
@@ -46,6 +47,11 @@ class PostgresRegistry final : public Registry {
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+
+  // Stands: every stand of the lab, keyed by name (an upsert).
+  void register_stand(const StandRow& row) override;
+  bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
+  std::vector<StandRow> stands() override;
 
   // The schema version the server's registry has (after the migration of the constructor).
   int schema_version();

@@ -71,6 +71,18 @@ class Registry {
   // daemon's own database is always at hand.
   virtual bool reachable() const { return true; }
   virtual std::int64_t pending_writes() const { return 0; }
+
+  // ---- Stands (issue 38, deliverable 2: the lab overview, GET /api/lab) ----------------------
+  // Each imucald registers itself at its start (stand_heartbeat.hpp) and reports its state every
+  // few seconds. A stand is keyed by its name: registering again replaces its row (a restart, a
+  // new version, a new address). The SQLite registry knows one stand, itself.
+  virtual void register_stand(const StandRow& row) = 0;
+  // The stand's state (a JSON object's text) as of `t_ms`; false when no stand of that name is
+  // registered (the lab's database was replaced under it: the caller registers again).
+  virtual bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) = 0;
+  // Every registered stand, by name.
+  virtual std::vector<StandRow> stands() = 0;
+  // ---- end of stands ---------------------------------------------------------------------------
 };
 
 }  // namespace imucal::daemon

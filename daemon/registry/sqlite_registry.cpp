@@ -46,4 +46,10 @@ std::vector<AuditEntry> SqliteRegistry::audit_entries(const AuditQuery& query) {
 std::vector<AuditEntry> SqliteRegistry::audit_trail() { return db_.audit_trail(); }
 std::optional<std::pair<std::int64_t, std::string>> SqliteRegistry::audit_head() { return db_.audit_head(); }
 
+void SqliteRegistry::register_stand(const StandRow& row) { db_.register_stand(row); }
+bool SqliteRegistry::report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) {
+  return db_.report_stand_state(name, state_json, t_ms);
+}
+std::vector<StandRow> SqliteRegistry::stands() { return db_.stands(); }
+
 }  // namespace imucal::daemon

@@ -37,6 +37,11 @@ class SqliteRegistry final : public Registry {
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
 
+  // Stands: this stand alone (the daemon's own database).
+  void register_stand(const StandRow& row) override;
+  bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
+  std::vector<StandRow> stands() override;
+
  private:
   DaemonDb& db_;
   TakeNumber take_number_;

@@ -294,6 +294,66 @@ TYPED_TEST(RegistryTest, ThreeConnectionsAppendingAuditEntriesAtOnceKeepOneChain
   EXPECT_TRUE(check.ok()) << check.message;
 }
 
+// ---- Stands (issue 38, the lab overview) ----
+
+StandRow stand(const std::string& name, std::int64_t t_ms) {
+  return StandRow{name, "sim", "http://" + name + ":8080", "1.2.3", 5000, t_ms, t_ms, R"({"run":null})"};
+}
+
+TYPED_TEST(RegistryTest, AStandRegistersAndItsHeartbeatReplacesItsState) {
+  auto& reg = *this->registry_;
+  EXPECT_TRUE(reg.stands().empty());
+  EXPECT_FALSE(reg.report_stand_state("stand-a", "{}", 1000));  // not registered yet: the caller registers
+  reg.register_stand(stand("stand-a", 1000));
+  ASSERT_EQ(reg.stands().size(), 1U);
+  EXPECT_TRUE(reg.report_stand_state("stand-a", R"({"run":{"id":3}})", 6000));
+  EXPECT_TRUE(reg.report_stand_state("stand-a", R"({"run":{"id":4}})", 11000));
+  const auto stands = reg.stands();
+  ASSERT_EQ(stands.size(), 1U);
+  const StandRow& s = stands[0];
+  EXPECT_EQ(s.name, "stand-a");
+  EXPECT_EQ(s.bench, "sim");
+  EXPECT_EQ(s.url, "http://stand-a:8080");
+  EXPECT_EQ(s.version, "1.2.3");
+  EXPECT_EQ(s.heartbeat_ms, 5000);
+  EXPECT_EQ(s.registered_ms, 1000);
+  EXPECT_EQ(s.last_seen_ms, 11000);
+  EXPECT_EQ(s.state_json, R"({"run":{"id":4}})");  // only the latest
+
+  // Started again (a new version, another address): one row, registered anew.
+  StandRow again = stand("stand-a", 20000);
+  again.version = "1.2.4";
+  reg.register_stand(again);
+  const auto after = reg.stands();
+  ASSERT_EQ(after.size(), 1U);
+  EXPECT_EQ(after[0].version, "1.2.4");
+  EXPECT_EQ(after[0].registered_ms, 20000);
+  EXPECT_EQ(after[0].state_json, R"({"run":null})");
+}
+
+// A lab: every stand's row, by name, each with its own state (PostgreSQL; the SQLite registry
+// knows its own stand only, and a stand renamed replaces it).
+TYPED_TEST(RegistryTest, StandsAreListedByName) {
+  auto& reg = *this->registry_;
+  reg.register_stand(stand("stand-b", 1000));
+  reg.register_stand(stand("stand-a", 2000));
+  auto other = this->store_.connect();  // another stand's connection
+  EXPECT_TRUE(other->report_stand_state("stand-a", R"({"queue":2})", 3000));
+  const auto stands = reg.stands();
+  if constexpr (std::is_same_v<TypeParam, SqliteStore>) {
+    ASSERT_EQ(stands.size(), 1U);
+    EXPECT_EQ(stands[0].name, "stand-a");
+    EXPECT_FALSE(reg.report_stand_state("stand-b", "{}", 4000));
+  } else {
+    ASSERT_EQ(stands.size(), 2U);
+    EXPECT_EQ(stands[0].name, "stand-a");
+    EXPECT_EQ(stands[0].state_json, R"({"queue":2})");
+    EXPECT_EQ(stands[1].name, "stand-b");
+    EXPECT_EQ(stands[1].last_seen_ms, 1000);
+    EXPECT_TRUE(reg.report_stand_state("stand-b", "{}", 4000));
+  }
+}
+
 // PostgreSQL's own: the schema is versioned and migrated once; a newer one is refused.
 class PostgresRegistrySchema : public ::testing::Test {
  protected:
@@ -524,6 +584,30 @@ TEST_F(RegistryAway, ARefusedWriteIsTheCallersOrSetAsideAtReplay) {
   EXPECT_EQ(reg->audit_trail().size(), 1U);
   EXPECT_EQ(reg->issued(issued(1, 1).number).value_or(IssuedCertificateRow{}).campaign_id, 1);
   EXPECT_EQ(lines_of(dir_ + "/registry-journal-refused.jsonl"), 1U);
+}
+
+// A stand registered while the server is away: its registration waits in the journal and arrives
+// when the server returns; its heartbeats meanwhile are dropped (volatile), never journaled.
+TEST_F(RegistryAway, AStandRegisteredWhileTheServerIsAwayArrivesWhenItReturns) {
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  auto reg = journaled();
+  reg->register_stand(stand("stand-a", 1000));
+  EXPECT_EQ(reg->pending_writes(), 1);
+  EXPECT_TRUE(reg->report_stand_state("stand-a", R"({"run":{"id":1}})", 6000));
+  EXPECT_TRUE(reg->report_stand_state("stand-a", R"({"run":{"id":1}})", 11000));
+  EXPECT_EQ(reg->pending_writes(), 1);  // the heartbeats are not journaled
+  expect_unreachable([&] { reg->stands(); }, 1);
+  ASSERT_TRUE(postgres_server().start_again());
+  EXPECT_TRUE(reg->retry());
+  EXPECT_EQ(reg->pending_writes(), 0);
+  auto stands = reg->stands();
+  ASSERT_EQ(stands.size(), 1U);
+  EXPECT_EQ(stands[0].last_seen_ms, 1000);  // as registered: the dropped states never arrive
+  EXPECT_TRUE(reg->report_stand_state("stand-a", R"({"run":{"id":2}})", 16000));
+  stands = direct()->stands();
+  ASSERT_EQ(stands.size(), 1U);
+  EXPECT_EQ(stands[0].last_seen_ms, 16000);
+  EXPECT_EQ(stands[0].state_json, R"({"run":{"id":2}})");
 }
 
 }  // namespace

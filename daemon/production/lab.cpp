@@ -1,0 +1,81 @@
+#include "daemon/production/lab.hpp"
+
+#include <algorithm>
+
+namespace imucal::daemon {
+
+namespace {
+
+using nlohmann::json;
+
+// Periods a stand may miss before it shows offline (a report delayed by a busy disk or network).
+constexpr std::int64_t kMissedPeriods = 3;
+
+json run_json(const CampaignRow& row) {
+  const double progress = row.duration_s > 0 ? std::clamp(row.program_time_s / row.duration_s, 0.0, 1.0) : 0.0;
+  json imu = nullptr;
+  if (row.imu_serial) imu = {{"serial", *row.imu_serial}, {"part_number", row.imu_part_number.value_or("")}};
+  return {{"id", row.id},
+          {"name", row.name},
+          {"state", to_string(row.state)},
+          {"program", row.program_label},
+          {"progress", progress},
+          {"program_time_s", row.program_time_s},
+          {"duration_s", row.duration_s},
+          {"imu", imu}};
+}
+
+json alarms_json(DaemonDb& db) {
+  const std::vector<AlarmRow> open = db.alarms(std::nullopt, false);  // oldest first
+  std::int64_t active = 0;
+  json list = json::array();
+  for (auto it = open.rbegin(); it != open.rend(); ++it) {
+    if (!it->cleared_ms) ++active;
+    if (list.size() < kStandAlarmsListed)
+      list.push_back({{"id", it->id},
+                      {"campaign", it->campaign_id},
+                      {"campaign_name", it->campaign_name},
+                      {"severity", it->severity},
+                      {"message", it->message},
+                      {"raised", iso8601_utc(it->raised_ms)},
+                      {"active", !it->cleared_ms.has_value()},
+                      {"acknowledged", it->acknowledged_ms.has_value()}});
+  }
+  const auto unacknowledged = std::count_if(open.begin(), open.end(), [](const AlarmRow& a) { return !a.acknowledged_ms; });
+  return {{"active", active}, {"unacknowledged", unacknowledged}, {"list", list}};
+}
+
+}  // namespace
+
+json stand_state_json(DaemonDb& db, std::optional<std::int64_t> active_id) {
+  json run = nullptr;
+  if (active_id) {
+    if (const auto row = db.campaign(*active_id)) run = run_json(*row);
+  }
+  return {{"run", run}, {"queue", db.queue().size()}, {"alarms", alarms_json(db)}};
+}
+
+json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const std::string& this_stand) {
+  json out = json::array();
+  for (const StandRow& s : stands) {
+    // A state that does not parse (another imucal's, damaged) shows the stand without one.
+    const json state = json::parse(s.state_json, nullptr, false);
+    const bool readable = state.is_object();
+    const std::int64_t period_ms = std::max<std::int64_t>(s.heartbeat_ms, 1);
+    out.push_back({{"name", s.name},
+                   {"bench", s.bench},
+                   {"url", s.url},
+                   {"version", s.version},
+                   {"registered_at", iso8601_utc(s.registered_ms)},
+                   {"last_seen", iso8601_utc(s.last_seen_ms)},
+                   {"heartbeat_s", static_cast<double>(s.heartbeat_ms) / 1000.0},
+                   {"online", now_ms - s.last_seen_ms <= kMissedPeriods * period_ms},
+                   {"this", s.name == this_stand},
+                   {"run", readable ? state.value("run", json()) : json()},
+                   {"queue", readable ? state.value("queue", json(0)) : json(0)},
+                   {"alarms", readable ? state.value("alarms", json()) : json()}});
+  }
+  return {{"stand", this_stand}, {"now", iso8601_utc(now_ms)}, {"stands", out}};
+}
+
+}  // namespace imucal::daemon
