@@ -65,6 +65,7 @@ class Fuzzer {
       {"GET", "/api/me", nullptr},
       {"GET", "/api/health", nullptr},
       {"GET", "/api/status", nullptr},
+      {"GET", "/api/lab", nullptr},
       {"GET", "/api/programs", nullptr},
       {"GET", "/api/schema", nullptr},
       {"GET", "/api/suspenders", nullptr},

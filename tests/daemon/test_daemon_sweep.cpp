@@ -121,6 +121,7 @@ std::vector<Row> rows(const std::int64_t model_run) {
       {"GET", "/api/me", Access::viewer, always(200), fixed("/api/me")},
       {"GET", "/api/health", Access::open, always(200), fixed("/api/health")},
       {"GET", "/api/status", Access::viewer, always(200), fixed("/api/status")},
+      {"GET", "/api/lab", Access::viewer, always(200), fixed("/api/lab")},
       {"GET", "/api/programs", Access::viewer, always(200), fixed("/api/programs")},
       {"GET", "/api/schema", Access::viewer, always(200), fixed("/api/schema")},
       {"GET", "/api/suspenders", Access::viewer, always(200), fixed("/api/suspenders")},

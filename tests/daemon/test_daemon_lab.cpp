@@ -1,0 +1,142 @@
+// The lab overview (issue 38, deliverable 2): a started imucald registers itself in its registry
+// (here its own database) and reports its state every registry.heartbeat_s; GET /api/lab lists it
+// online, with the run it runs and its progress, and the run gone once it ended. The heartbeat's
+// own parts (registration again, shutdown at once) on a registry of the test's.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <functional>
+#include <string>
+
+#include "daemon/production/lab.hpp"
+#include "daemon/registry/sqlite_registry.hpp"
+#include "daemon/registry/stand_heartbeat.hpp"
+#include "service_fixture.hpp"
+
+using namespace imucal;
+using namespace imucal::daemontest;
+
+namespace {
+
+// Polls GET /api/lab until this stand's entry satisfies `pred` (a generous deadline: the machine
+// may be loaded); the last entry seen.
+json wait_for_stand(LocalDaemon& d, const std::function<bool(const json&)>& pred, double timeout_s = 60.0) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  json last;
+  while (std::chrono::steady_clock::now() < deadline) {
+    const auto r = d.call("GET", "/api/lab", "", kViewerToken);
+    EXPECT_EQ(r.status, 200) << r.body;
+    last = json::parse(r.body);
+    for (const json& s : last.at("stands"))
+      if (s.value("this", false) && pred(s)) return s;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ADD_FAILURE() << "timed out waiting on this stand in GET /api/lab: " << last.dump().substr(0, 3000);
+  return {};
+}
+
+}  // namespace
+
+TEST(Lab, AStartedStandIsOnlineAndShowsWhatItRunsAndItsProgress) {
+  LocalDaemon d("lab", false, [](daemon::DaemonConfig& c) {
+    c.registry.stand = "stand-7";
+    c.registry.url = "http://stand-7.lab.example:8080";
+    c.registry.heartbeat_s = 0.1;
+  });
+  const json idle = wait_for_stand(d, [](const json& s) { return s.at("online").get<bool>(); });
+  EXPECT_EQ(idle.at("name"), "stand-7");
+  EXPECT_EQ(idle.at("url"), "http://stand-7.lab.example:8080");
+  EXPECT_EQ(idle.at("bench"), d.config.devices);
+  EXPECT_EQ(idle.at("version"), d.get("/api/status").at("version"));
+  EXPECT_DOUBLE_EQ(idle.at("heartbeat_s").get<double>(), 0.1);
+  EXPECT_TRUE(idle.at("run").is_null()) << idle.dump();
+  EXPECT_EQ(idle.at("alarms").at("active"), 0);
+  EXPECT_LE(idle.at("registered_at").get<std::string>(), idle.at("last_seen").get<std::string>());
+  // The heartbeat goes on: last_seen moves.
+  const std::string first_seen = idle.at("last_seen");
+  wait_for_stand(d, [&](const json& s) { return s.at("last_seen").get<std::string>() > first_seen; });
+
+  // Real time: the noise program's hours stay running while the lab is asked.
+  const auto id = d.post_campaign({{"name", "lab run"},
+                                   {"program", "noise"},
+                                   {"rate_hz", 10},
+                                   {"time_scale", 1},
+                                   {"imu", {{"serial", "LAB-1"}, {"part_number", "P-1"}}}});
+  ASSERT_EQ(d.command(id, "start"), 200);
+  const json running = wait_for_stand(d, [&](const json& s) {
+    return s.at("run").is_object() && s.at("run").at("id") == id && s.at("run").at("progress").get<double>() > 0.0;
+  });
+  ASSERT_TRUE(running.at("run").is_object()) << running.dump();
+  EXPECT_EQ(running.at("run").at("name"), "lab run");
+  EXPECT_EQ(running.at("run").at("state"), "running");
+  EXPECT_EQ(running.at("run").at("imu").at("serial"), "LAB-1");
+  EXPECT_LT(running.at("run").at("progress").get<double>(), 1.0);
+  EXPECT_GT(running.at("run").at("program_time_s").get<double>(), 0.0);
+  EXPECT_TRUE(running.at("online").get<bool>());
+
+  ASSERT_EQ(d.command(id, "abort"), 200);
+  ASSERT_EQ(d.wait_final(id).at("state"), "aborted");
+  const json after = wait_for_stand(d, [](const json& s) { return s.at("run").is_null(); });
+  EXPECT_TRUE(after.at("online").get<bool>());
+}
+
+// A stand not seen for three of its periods shows offline; a state that does not parse shows the
+// stand without one.
+TEST(Lab, AStandNotSeenForThreePeriodsIsOffline) {
+  const std::int64_t now = 1'800'000'000'000;
+  const std::vector<daemon::StandRow> stands = {
+      {"a", "sim", "http://a:8080", "1", 1000, now - 60000, now - 3000, R"({"run":{"id":1},"queue":2})"},
+      {"b", "wire", "http://b:8080", "1", 1000, now - 60000, now - 3001, "not json"}};
+  const json lab = daemon::lab_json(stands, now, "b");
+  ASSERT_EQ(lab.at("stands").size(), 2U);
+  const json& a = lab.at("stands")[0];
+  const json& b = lab.at("stands")[1];
+  EXPECT_TRUE(a.at("online").get<bool>());
+  EXPECT_FALSE(a.at("this").get<bool>());
+  EXPECT_EQ(a.at("run").at("id"), 1);
+  EXPECT_EQ(a.at("queue"), 2);
+  EXPECT_FALSE(b.at("online").get<bool>());
+  EXPECT_TRUE(b.at("this").get<bool>());
+  EXPECT_TRUE(b.at("run").is_null());
+  EXPECT_EQ(lab.at("stand"), "b");
+}
+
+namespace {
+
+bool poll(const std::function<bool()>& done, double timeout_s = 60.0) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+}  // namespace
+
+// The SQLite registry knows one stand: another registered in its place makes this one's reports
+// unknown, and its heartbeat registers it again. A stop does not wait for the period.
+TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
+  const std::string dir = scratch_dir("lab-heartbeat");
+  daemon::DaemonDb db(dir + "/imucald.db");
+  daemon::SqliteRegistry registry(db, [](std::int64_t floor) { return floor + 1; });
+  const daemon::StandRow identity{"s", "sim", "http://s:1", "v", 0, 0, 0, "{}"};
+  const auto has = [&](const std::string& name, const std::string& state) {
+    const auto stands = registry.stands();
+    return stands.size() == 1 && stands[0].name == name && stands[0].state_json == state;
+  };
+  auto heartbeat = std::make_unique<daemon::StandHeartbeat>(registry, identity, std::chrono::hours(1),
+                                                            [] { return json{{"run", nullptr}}; });
+  ASSERT_TRUE(poll([&] { return has("s", R"({"run":null})"); }));
+  EXPECT_EQ(registry.stands()[0].heartbeat_ms, 3600000);
+  const auto t0 = std::chrono::steady_clock::now();
+  heartbeat.reset();  // the hour is not waited for
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(30));
+
+  heartbeat = std::make_unique<daemon::StandHeartbeat>(registry, identity, std::chrono::milliseconds(10),
+                                                       [] { return json{{"queue", 0}}; });
+  ASSERT_TRUE(poll([&] { return has("s", R"({"queue":0})"); }));
+  db.register_stand({"other", "sim", "http://o:1", "v", 10, 1, 1, "{}"});  // "s" forgotten
+  ASSERT_TRUE(poll([&] { return has("s", R"({"queue":0})"); })) << registry.stands().size();
+  heartbeat.reset();
+}
