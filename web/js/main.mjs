@@ -16,6 +16,7 @@ import * as campaignView from './views/campaign.mjs';
 import * as unitView from './views/unit.mjs';
 import * as unitsView from './views/units.mjs';
 import * as auditView from './views/audit.mjs';
+import * as labView from './views/lab.mjs';
 
 const viewRoot = document.getElementById('view');
 const banner = document.getElementById('banner');
@@ -49,6 +50,7 @@ const routes = [
   { re: /^#\/imus\/?$/, view: unitsView, nav: 'units' },
   { re: /^#\/imus\/([^/]+)$/, view: unitView, nav: 'units', params: (m) => ({ serial: decodeURIComponent(m[1]) }) },
   { re: /^#\/audit\/?$/, view: auditView, nav: 'audit' },
+  { re: /^#\/lab\/?$/, view: labView, nav: 'lab' },
 ];
 
 let unmount = null;
