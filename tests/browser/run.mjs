@@ -1432,6 +1432,14 @@ try {
   assert.deepEqual(await layoutProblems(page), [], 'the audit page lays out at 1366x768');
   await gallery(page, 'audit');
 
+  // The lab overview (issue 38): this stand, online, its name a link to its own page.
+  await page.goto(`${base}/#/lab`);
+  await page.waitForSelector('#lab-rows tr[data-online="true"] a.stand-link');
+  assert.match(await page.textContent('#lab-rows tr[data-online="true"]'), /\(this stand\).*online/s);
+  assert.equal(await page.getAttribute('#lab-rows tr[data-online="true"] a.stand-link', 'href'), base);
+  assert.deepEqual(await layoutProblems(page), [], 'the lab page lays out at 1366x768');
+  log('lab page: this stand online, linked to its own page');
+
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {
     const { Series } = await import('/js/series.mjs');
