@@ -12,6 +12,7 @@
 #include "daemon/registry/sqlite_registry.hpp"
 #include "daemon/registry/stand_heartbeat.hpp"
 #include "service_fixture.hpp"
+#include "tests/postgres_server.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -139,4 +140,72 @@ TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
   db.register_stand({"other", "sim", "http://o:1", "v", 10, 1, 1, "{}"});  // "s" forgotten
   ASSERT_TRUE(poll([&] { return has("s", R"({"queue":0})"); })) << registry.stands().size();
   heartbeat.reset();
+}
+
+// Issue 38's lab: two stands on one PostgreSQL registry each list both; a stand stopped shows
+// offline on the other's page once three of its heartbeats are missed.
+TEST(Lab, TwoStandsOnOnePostgresRegistrySeeEachOther) {
+  static imucaltest::PostgresServer server;
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("lab"));
+  const auto on_registry = [&](const std::string& stand) {
+    return [&, stand](daemon::DaemonConfig& c) {
+      c.registry.postgresql = conninfo;
+      c.registry.stand = stand;
+      c.registry.heartbeat_s = 0.1;
+    };
+  };
+  LocalDaemon a("lab-stand-a", false, on_registry("stand-a"));
+  auto b = std::make_unique<LocalDaemon>("lab-stand-b", false, on_registry("stand-b"));
+  const auto both_online = [&](LocalDaemon& d) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    json lab;
+    while (std::chrono::steady_clock::now() < deadline) {
+      lab = d.get("/api/lab");
+      const json& s = lab.at("stands");
+      if (s.size() == 2 && s[0].at("online").get<bool>() && s[1].at("online").get<bool>()) return lab;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ADD_FAILURE() << "not both online: " << lab.dump();
+    return lab;
+  };
+  const json seen_by_a = both_online(a);
+  EXPECT_EQ(seen_by_a.at("stand"), "stand-a");
+  EXPECT_EQ(seen_by_a.at("stands")[0].at("name"), "stand-a");
+  EXPECT_TRUE(seen_by_a.at("stands")[0].at("this").get<bool>());
+  EXPECT_EQ(seen_by_a.at("stands")[1].at("name"), "stand-b");
+  EXPECT_FALSE(seen_by_a.at("stands")[1].at("this").get<bool>());
+  EXPECT_TRUE(both_online(*b).at("stands")[1].at("this").get<bool>());
+
+  b.reset();  // stand b stops: it is no longer heard from
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  json lab;
+  while (std::chrono::steady_clock::now() < deadline) {
+    lab = a.get("/api/lab");
+    if (!lab.at("stands")[1].at("online").get<bool>()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_FALSE(lab.at("stands")[1].at("online").get<bool>()) << lab.dump();
+  EXPECT_TRUE(lab.at("stands")[0].at("online").get<bool>()) << lab.dump();
+}
+
+TEST(Lab, TheStandsAddressIsConfiguredOrItsHttpServers) {
+  daemon::DaemonConfig c = daemon::parse_config(R"({"registry": {"url": "https://stand-3.lab", "heartbeat_s": 2}})", "test");
+  EXPECT_EQ(daemon::stand_url(c, 1234), "https://stand-3.lab");
+  EXPECT_DOUBLE_EQ(c.registry.heartbeat_s, 2.0);
+  c.registry.url.clear();
+  c.http.host = "10.0.0.7";
+  EXPECT_EQ(daemon::stand_url(c, 8081), "http://10.0.0.7:8081");
+  c.http.host = "::1";
+  EXPECT_EQ(daemon::stand_url(c, 8081), "http://[::1]:8081");
+  c.http.host = "0.0.0.0";
+  EXPECT_NE(daemon::stand_url(c, 8081).find(":8081"), std::string::npos);
+  EXPECT_EQ(daemon::stand_url(c, 8081).find("0.0.0.0"), std::string::npos);  // a name others reach
+  try {
+    (void)daemon::parse_config(R"({"registry": {"url": "stand-3.lab"}})", "test");
+    ADD_FAILURE() << "an address without its scheme was taken";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("registry.url"), std::string::npos) << e.what();
+  }
 }
