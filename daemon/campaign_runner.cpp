@@ -130,7 +130,7 @@ CampaignRunResult run_campaign_file(const std::string& campaign_file, const Camp
     // The progress line and the summary say what a person needs; warnings (alarms) still show.
     if (options.progress) spdlog::set_level(spdlog::level::warn);
     Service service(config);
-    service.start(false);
+    service.start(false, false);  // no HTTP, and no stand of the lab
     out.id = store_campaign(service.db(), check, "imucal campaign run " + campaign_file);
     const auto t0 = Clock::now();
     // Started as imucald starts a campaign: the reference equipment judged by the same code.

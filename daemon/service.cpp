@@ -159,7 +159,7 @@ Service::~Service() {
   if (lock_fd_ >= 0) ::close(lock_fd_);
 }
 
-void Service::start(bool http) {
+void Service::start(bool http, bool in_lab) {
   HttpServer* server = nullptr;
   if (http) {
     server_ = std::make_unique<HttpServer>(config_.http, *api_, *sequencer_, *files_);
@@ -170,7 +170,7 @@ void Service::start(bool http) {
   // The run's events to the live view.
   if (server) sequencer_->set_event_listener([server](const nlohmann::json& event) { server->broadcast_event(event); });
   sequencer_->start();
-  start_heartbeat();
+  if (in_lab) start_heartbeat();
 }
 
 // This stand in the lab's registry: registered now, its state reported every registry.heartbeat_s

@@ -41,8 +41,10 @@ class Service {
   Service(const Service&) = delete;
   Service& operator=(const Service&) = delete;
 
-  // Starts the sequencer and, when `http`, the HTTP server on the configured address.
-  void start(bool http = true);
+  // Starts the sequencer and, when `http`, the HTTP server on the configured address; when
+  // `in_lab`, this stand's registration and heartbeat (an in-process `imucal campaign run` is no
+  // stand of the lab: it has no page to link to, and would replace the stand's row of its name).
+  void start(bool http = true, bool in_lab = true);
   // Clean shutdown: refuse changes, park the active run (interrupted), close the server.
   void stop();
 
