@@ -33,6 +33,12 @@ bool has_nonlinear_terms(const AccelErrors& a) { return !a.k2_per_g.isZero(0.0) 
 // without them gives the same numbers, bit for bit, as before they existed.
 Eigen::Vector3d gyro_scale_errors(const GyroErrors& g, const Eigen::Vector3d& w) {
   Eigen::Vector3d s;
+  if (g.scale_nonlinear.isZero(0.0)) {
+    // The polynomial adds exactly 0 then: skipped, for the simulator, which asks at every
+    // quadrature node (its divisions were a tenth of the simulation's time).
+    for (int j = 0; j < 3; ++j) s[j] = w[j] >= 0 ? g.scale_pos[j] : g.scale_neg[j];
+    return s;
+  }
   for (int j = 0; j < 3; ++j) {
     const double q = std::abs(w[j]) / kGyroNonlinearityRate_radps;
     const Eigen::RowVector3d c = g.scale_nonlinear.row(j);

@@ -9,19 +9,42 @@ namespace imucal::table {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
-Matrix3d Rx(double a_rad) {
-  const double c = std::cos(a_rad), s = std::sin(a_rad);
+namespace {
+
+// The elementary rotations from their angle's cosine and sine.
+Matrix3d Rx_cs(double c, double s) {
   Matrix3d r;
   r << 1, 0, 0, 0, c, -s, 0, s, c;
   return r;
 }
 
-Matrix3d Rz(double a_rad) {
-  const double c = std::cos(a_rad), s = std::sin(a_rad);
+Matrix3d Rz_cs(double c, double s) {
   Matrix3d r;
   r << c, -s, 0, s, c, 0, 0, 0, 1;
   return r;
 }
+
+}  // namespace
+
+Matrix3d Rx(double a_rad) { return Rx_cs(std::cos(a_rad), std::sin(a_rad)); }
+
+Matrix3d Rz(double a_rad) { return Rz_cs(std::cos(a_rad), std::sin(a_rad)); }
+
+// The rotations by minus an angle use cos(-a) = cos(a) and sin(-a) = -sin(a), which the C
+// library's sine and cosine keep exactly (they reduce |a| and restore the sign).
+struct TableKinematics::AngleTrig {
+  explicit AngleTrig(const Vector3d& angle_rad) {
+    for (int j = 0; j < 3; ++j) {
+      c[j] = std::cos(angle_rad[j]);
+      s[j] = std::sin(angle_rad[j]);
+    }
+  }
+  std::array<double, 3> c{}, s{};
+  Matrix3d Rz(int axis) const { return Rz_cs(c[axis], s[axis]); }
+  Matrix3d Rx(int axis) const { return Rx_cs(c[axis], s[axis]); }
+  Matrix3d Rz_minus(int axis) const { return Rz_cs(c[axis], -s[axis]); }
+  Matrix3d Rx_minus(int axis) const { return Rx_cs(c[axis], -s[axis]); }
+};
 
 Matrix3d skew(const Vector3d& v) {
   Matrix3d m;
@@ -119,9 +142,11 @@ AxisState TableKinematics::true_axes(const AxisState& encoder) const {
   return out;
 }
 
-Matrix3d TableKinematics::C_p_n(const Vector3d& true_rad) const {
-  if (ideal_) return ideal_C_p_n(true_rad, C_p0_n_);
-  return E_t_ * Rz(true_rad[0]) * C_p0_n_ * E_m_ * Rx(true_rad[1]) * E_k_ * Rz(true_rad[2]);
+Matrix3d TableKinematics::C_p_n(const Vector3d& true_rad) const { return C_p_n(AngleTrig(true_rad)); }
+
+Matrix3d TableKinematics::C_p_n(const AngleTrig& trig) const {
+  if (ideal_) return trig.Rz(0) * C_p0_n_ * trig.Rx(1) * trig.Rz(2);
+  return E_t_ * trig.Rz(0) * C_p0_n_ * E_m_ * trig.Rx(1) * E_k_ * trig.Rz(2);
 }
 
 // The outer gimbal turns about E(t) Up, which is Up in its own frame: the tilt leans the platform
@@ -145,12 +170,21 @@ Matrix3d TableKinematics::gimbal_axes_p(const Vector3d& true_rad) const {
 }
 
 PlatformRates TableKinematics::platform_rates(const AxisState& axes) const {
+  return platform_rates(axes, AngleTrig(axes.angle_rad));
+}
+
+TableKinematics::Pose TableKinematics::pose(const AxisState& true_axes) const {
+  const AngleTrig trig(true_axes.angle_rad);
+  return {C_p_n(trig), platform_rates(true_axes, trig)};
+}
+
+PlatformRates TableKinematics::platform_rates(const AxisState& axes, const AngleTrig& trig) const {
   const Vector3d e1 = Vector3d::UnitX(), e3 = Vector3d::UnitZ();
-  const Matrix3d A = Rz(-axes.angle_rad[2]);
+  const Matrix3d A = trig.Rz_minus(2);
   // B_e3: the outer axis in the middle gimbal's frame after its rotation; k_e1: the middle axis in
   // the inner gimbal's frame; both turn with the gimbals inside them.
   const Vector3d Em_e3 = ideal_ ? e3 : Vector3d(E_m_.transpose() * e3);
-  const Vector3d B_e3 = Rx(-axes.angle_rad[1]) * Em_e3;
+  const Vector3d B_e3 = trig.Rx_minus(1) * Em_e3;
   const Matrix3d Ek_T = E_k_.transpose();
   const Vector3d a_o = ideal_ ? Vector3d(A * B_e3) : Vector3d(A * (Ek_T * B_e3));
   const Vector3d a_m = ideal_ ? Vector3d(A * e1) : Vector3d(A * (Ek_T * e1));

@@ -96,6 +96,14 @@ class TableKinematics {
   Eigen::Matrix3d gimbal_axes_p(const Eigen::Vector3d& true_rad) const;
   // Rate and its derivative from true angles, rates and accelerations.
   PlatformRates platform_rates(const AxisState& true_axes) const;
+  // Both of the above at once: the simulator needs them at every quadrature node, and the
+  // angles' sines and cosines, the most of their cost, are then taken once. The same numbers,
+  // bit for bit, as C_p_n and platform_rates called apart.
+  struct Pose {
+    Eigen::Matrix3d C_p_n;
+    PlatformRates rates;
+  };
+  Pose pose(const AxisState& true_axes) const;
 
   const Eigen::Matrix3d& C_p0_n() const { return C_p0_n_; }
   bool ideal() const { return ideal_; }
@@ -103,6 +111,10 @@ class TableKinematics {
   static Eigen::Matrix3d ideal_C_p_n(const Eigen::Vector3d& angle_rad, const Eigen::Matrix3d& C_p0_n);
 
  private:
+  struct AngleTrig;  // the three angles' cosines and sines
+  Eigen::Matrix3d C_p_n(const AngleTrig& trig) const;
+  PlatformRates platform_rates(const AxisState& true_axes, const AngleTrig& trig) const;
+
   Eigen::Matrix3d C_p0_n_;
   Eigen::Matrix3d E_t_, E_m_, E_k_;  // the small rotations of the geometry (identity when ideal)
   std::array<std::vector<EncoderHarmonic>, 3> encoder_error_;

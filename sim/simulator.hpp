@@ -97,9 +97,12 @@ class Simulator {
   // Integral over [a, b] of the sensor outputs of the channels in `mask` (bit j: gyro j,
   // bit 3+j: accel j), split at the program's breakpoints, Gauss-Legendre inside each part.
   void integrate(double a, double b, unsigned mask, Eigen::Vector3d& gyro, Eigen::Vector3d& accel) const;
-  void sensor_outputs(double t, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel) const;
+  // The outputs at t of the gyros and the accelerometers of `mask`'s triads (a triad outside it
+  // is left zero: the channels of another delay group, which integrate() drops anyway).
+  void sensor_outputs(double t, unsigned mask, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel) const;
   static void outputs(const TrueKinematics& k, const GyroErrors& gyro, const AccelErrors& accel,
-                      const Eigen::Matrix3d& D_accel, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel);
+                      const Eigen::Matrix3d& D_accel, unsigned mask, Eigen::Vector3d& u_gyro,
+                      Eigen::Vector3d& u_accel);
 
   const motion::Program& program_;
   ImuModel truth_;

@@ -399,7 +399,7 @@ std::vector<PlannedFault> wire_faults(std::mt19937_64& rng, double scale) {
 }
 
 // A soak's two runs on one daemon: the disturbed campaign with its kills, then the reference
-// undisturbed. The caller checks that both ended `done`.
+// undisturbed (none when reference_spec is null). The caller checks that both ended `done`.
 struct SoakRuns {
   json disturbed, undisturbed;
   std::vector<double> killed_at_s;
@@ -413,7 +413,7 @@ SoakRuns run_soak(Imucald& d, const json& disturbed_spec, const json& reference_
   r.disturbed = run_with_kills(d, id, kill_at_s, 1800.0, r.killed_at_s, after_kill);
   r.disturbed_wall_s = since(t0);
   if (!r.disturbed.is_object()) r.disturbed = json::object();  // a crash or a hang, said already
-  if (r.disturbed.value("state", "") != "done" || d.p.port == 0) return r;
+  if (r.disturbed.value("state", "") != "done" || d.p.port == 0 || reference_spec.is_null()) return r;
   const auto t1 = Clock::now();
   const auto id2 = post_and_start(d.client(), reference_spec);
   r.undisturbed = wait_watching(d, id2, 1800.0);
@@ -704,8 +704,9 @@ TEST(Chaos, TheWireLevelDevicesSurviveTheirFaultsAndAKill) {
 // between and the samples the host stamps all depend on the scheduler; at 200x a millisecond of
 // host time is 0.2 s of program. So the recording is checked against the program's grid (every
 // instant once: none lost, none doubled) and the frames committed before each kill against the
-// recording at the end (unchanged). The model is compared with the undisturbed run's and the
-// difference reported, not held to 0.1 sigma: two undisturbed runs at 200x already differ by
+// recording at the end (unchanged). The model could only be compared with an undisturbed run's,
+// with the difference reported, not held to 0.1 sigma; that run doubles the soak's time, so it is
+// made only when asked (IMUCAL_CHAOS_WIRE_REFERENCE=1): two undisturbed runs at 200x already differ by
 // thousands of sigma in the lever arms (the lever-arm program's 2 s oscillations last 10 ms of
 // host time, a few table reads apart, so the frames' interpolated angles differ run to run) and by
 // tens in stage 1's gyro scale; at 50x direct-short's two runs differ by up to 2 sigma. Stage 1
@@ -738,10 +739,37 @@ std::vector<std::uint64_t> digests(const std::vector<ImuFrame>& frames) {
 
 }  // namespace
 
+namespace {
+
+// Part C's reference, when asked for: the undisturbed run's grid, how many frames the disturbed
+// run shares with it bit for bit (none expected through sockets), and the models' difference in
+// sigma, measured and reported only (see the comment above Part C).
+void report_reference(const std::string& dir, const json& disturbed, const json& undisturbed,
+                      const std::vector<ImuFrame>& frames, double duration_s, double rate_hz, double wall_s) {
+  const auto reference = run_frames(dir + "/data/" + undisturbed.at("run_db").get<std::string>());
+  const GridCheck grid = check_grid(reference, duration_s, rate_hz);
+  std::size_t bit_identical = 0;
+  for (std::size_t i = 0; i < std::min(frames.size(), reference.size()); ++i)
+    bit_identical += same_frame(frames[i], reference[i]);
+  const ModelDifference model = compare_models(disturbed, undisturbed, std::numeric_limits<double>::infinity());
+  std::printf("  reference (undisturbed, wall %.0f s): lost %zu, duplicated %zu, off the grid %zu; bit-identical to it "
+              "%zu; worst model difference %.3g sigma (%s) over %d coefficients, stages without a model %zu\n",
+              wall_s, grid.lost, grid.duplicated, grid.off_grid, bit_identical, model.worst_sigma,
+              model.worst_name.c_str(), model.compared, model.without_model.size());
+  for (const std::string& stage : model.without_model)
+    std::printf("  no estimates of %s: %s\n", stage.c_str(),
+                disturbed.at("results").value(stage, json()).value("message", "").substr(0, 200).c_str());
+}
+
+}  // namespace
+
 TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFullDisk) {
   const std::uint64_t seed = chaos_seed(33);
   SCOPED_TRACE("IMUCAL_CHAOS_SEED=" + std::to_string(seed));
   const double scale = env_number("IMUCAL_CHAOS_WIRE_SCALE", 200.0);
+  // The undisturbed reference run only measures (the comment above): it doubles the soak's time,
+  // so it runs when asked (IMUCAL_CHAOS_WIRE_REFERENCE=1), not in every CI run.
+  const bool with_reference = env_number("IMUCAL_CHAOS_WIRE_REFERENCE", 0.0) != 0.0;
   constexpr double kRateHz = 100.0;
   std::mt19937_64 rng(seed);
 
@@ -798,7 +826,7 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   auto compare_committed = [&](const std::vector<std::uint64_t>& now) {
     for (std::size_t i = 0; i < committed.size(); ++i) committed_changed += i >= now.size() || now[i] != committed[i];
   };
-  const SoakRuns runs = run_soak(d, disturbed_spec, campaign, kill_at, [&](const json& before) {
+  const SoakRuns runs = run_soak(d, disturbed_spec, with_reference ? campaign : json(), kill_at, [&](const json& before) {
     run_path = dir + "/data/" + before.at("run_db").get<std::string>();
     const auto now = digests(run_frames(run_path));
     compare_committed(now);
@@ -809,7 +837,9 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   const std::vector<double>& killed_at = runs.killed_at_s;
   ASSERT_EQ(disturbed.value("state", ""), "done") << disturbed.dump().substr(0, 4000) << "\nsee " << d.log;
   ASSERT_EQ(killed_at.size(), kKills);
-  ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
+  if (with_reference) {
+    ASSERT_EQ(undisturbed.value("state", ""), "done") << undisturbed.dump().substr(0, 3000);
+  }
   EXPECT_GT(committed.size(), 0u);
 
   // Marked: each fault a suspension naming it, each kill a redo from the last commit.
@@ -824,37 +854,25 @@ TEST(Chaos, TheOvernightCampaignThroughTheWireSurvivesEveryFaultThreeKillsAndAFu
   }
   EXPECT_EQ(events_of(disturbed, "redo").size(), kKills);
 
-  // The recording: every instant of the program once, as the undisturbed run's; what was
-  // committed before the kills unchanged.
+  // The recording: every instant of the program once; what was committed before the kills unchanged.
   const auto frames = run_frames(run_path);
   const GridCheck g = check_grid(frames, duration_s, kRateHz);
-  const auto reference = run_frames(dir + "/data/" + undisturbed.at("run_db").get<std::string>());
-  const GridCheck reference_grid = check_grid(reference, duration_s, kRateHz);
   compare_committed(digests(frames));
   EXPECT_EQ(committed_changed, 0u) << "frames committed before a kill changed or went missing";
-  std::size_t bit_identical = 0;
-  for (std::size_t i = 0; i < std::min(frames.size(), reference.size()); ++i)
-    bit_identical += same_frame(frames[i], reference[i]);
-
-  // Not within 0.1 sigma: measured and reported only (see the comment above Part C).
-  const ModelDifference model = compare_models(disturbed, undisturbed, std::numeric_limits<double>::infinity());
 
   std::printf(
       "chaos soak C (sim-wire at %gx, %.0f s of program at %g Hz, %zu grid frames): faults injected %zu + kill -9 %zu "
       "(at %.0f, %.0f, %.0f s), survived %zu + %zu (%zu marked by a suspension); suspensions %zu; frames lost %zu, "
-      "duplicated %zu, off the grid %zu (reference: %zu, %zu, %zu); committed before the kills and changed %zu of %zu; "
-      "bit-identical to the reference %zu (not expected through sockets); delivery gaps counted %lld frames, bad "
-      "frames %lld; worst model difference %.3g sigma (%s) over %d coefficients, stages without a model %zu; wall "
-      "%.0f s disturbed, %.0f s undisturbed\n",
+      "duplicated %zu, off the grid %zu; committed before the kills and changed %zu of %zu; delivery gaps counted "
+      "%lld frames, bad frames %lld; wall %.0f s\n",
       scale, duration_s, kRateHz, g.grid, faults.size(), kKills, killed_at[0], killed_at[1], killed_at[2],
-      faults.size(), killed_at.size(), marked, suspensions.size(), g.lost, g.duplicated, g.off_grid,
-      reference_grid.lost, reference_grid.duplicated, reference_grid.off_grid, committed_changed, committed.size(),
-      bit_identical, static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
-      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), model.worst_sigma,
-      model.worst_name.c_str(), model.compared, model.without_model.size(), runs.disturbed_wall_s,
-      runs.undisturbed_wall_s);
-  for (const std::string& stage : model.without_model)
-    std::printf("  no estimates of %s: %s\n", stage.c_str(),
-                disturbed.at("results").value(stage, json()).value("message", "").substr(0, 200).c_str());
+      faults.size(), killed_at.size(), marked, suspensions.size(), g.lost, g.duplicated, g.off_grid, committed_changed,
+      committed.size(), static_cast<long long>(disturbed.at("lost_frames").get<std::int64_t>()),
+      static_cast<long long>(disturbed.at("bad_frames").get<std::int64_t>()), runs.disturbed_wall_s);
+  if (with_reference) {
+    report_reference(dir, disturbed, undisturbed, frames, duration_s, kRateHz, runs.undisturbed_wall_s);
+  } else {
+    std::printf("  no reference run (IMUCAL_CHAOS_WIRE_REFERENCE=1 runs one and reports the models' difference)\n");
+  }
   print_faults(faults, matched, suspensions);
 }
