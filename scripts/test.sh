@@ -23,7 +23,9 @@ cmake --build --preset release -j "$jobs"
 # tests run beside them at the lowest priority: they take the idle time and little else (nice
 # works among the processes of this one session). With a warm ccache the sanitizer build takes a
 # few minutes, and its tests end before the release tests do instead of 5 min after them. Their
-# output goes to a log, shown when they fail.
+# output goes to a log, shown when they fail. The release tests run three at a time (the preset)
+# on two cores for the same reason: a third of their time is waiting (devices in real time,
+# kill -9 loops), and the suite is to pass on a loaded machine anyway.
 cmake --preset asan
 asan_log=build/asan.log
 set -m  # each background job in a process group of its own, so that a failure here stops all of it
