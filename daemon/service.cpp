@@ -12,6 +12,7 @@
 
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
+#include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
@@ -39,8 +40,12 @@ std::string find_web_dir(const std::string& configured) {
 // tried again every few seconds by the registry's own thread: a stand idle between runs calls it
 // for nothing, and the journal should not wait for its next run.
 std::unique_ptr<Registry> make_registry(const DaemonConfig& config, DaemonDb& db, CertificateSequence& sequence) {
-  if (config.registry.postgresql.empty())
-    return std::make_unique<SqliteRegistry>(db, [&sequence](std::int64_t floor) { return sequence.next(floor); });
+  if (config.registry.postgresql.empty()) {
+    const fs::path limits = fs::path(config.limits_file).is_absolute() ? fs::path(config.limits_file)
+                                                                        : fs::path(config.data_dir) / config.limits_file;
+    return std::make_unique<SqliteRegistry>(
+        db, [&sequence](std::int64_t floor) { return sequence.next(floor); }, registry_stand(config), limits.string());
+  }
   auto connect = [conninfo = config.registry.postgresql, stand = registry_stand(config)] {
     auto registry = std::make_unique<PostgresRegistry>(conninfo, stand);
     // The connection string is not logged: it may hold a password.
@@ -151,6 +156,14 @@ void Service::assemble_certificates() {
               const nlohmann::json& details) { audit->append(actor, action, subject, details); },
       [certificates](std::int64_t id, const std::string& reason) { (void)certificates->issue(id, reason); });
   sequencer_->subscribe(*certificates_subscriber_);
+  // Through the sequencer's ordered writes, as the audit trail: behind the writes that wait.
+  DaemonDb* db = db_.get();
+  Registry* registry = registry_.get();
+  calibrations_subscriber_ = std::make_unique<CalibrationsSubscriber>([sequencer, db, registry](std::int64_t id) {
+    sequencer->write_db("campaign " + std::to_string(id) + "'s calibration in the registry",
+                        [db, registry, id] { (void)record_unit_calibration(*db, *registry, id); });
+  });
+  sequencer_->subscribe(*calibrations_subscriber_);
 }
 
 Service::~Service() {
