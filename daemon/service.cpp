@@ -122,6 +122,15 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   }
   certificate_sequence_ = std::make_unique<CertificateSequence>(certificate_sequence_path(config_));
   registry_ = make_registry(config_, *db_, *certificate_sequence_);
+  // The runs recovery interrupted, in the units' history as they now are (no run subscriber saw
+  // that change); a registry that cannot take them now has them at their next transition.
+  for (const auto id : recovered) {
+    try {
+      (void)record_unit_calibration(*db_, *registry_, id);
+    } catch (const std::exception& e) {
+      spdlog::error("campaign {}: its interruption could not be recorded in the registry: {}", id, e.what());
+    }
+  }
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   assemble_certificates();
