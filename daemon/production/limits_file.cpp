@@ -41,7 +41,8 @@ void LimitsFile::refresh(bool at_start) const {
   } catch (const std::exception& e) {
     const std::string why = "acceptance limits " + source_ + ": " + e.what();
     if (at_start) throw std::runtime_error(why);
-    spdlog::error("{}; the limits last read apply", why);
+    if (text != misread_) spdlog::error("{}; the limits last read apply", why);  // once per document
+    misread_ = std::move(text);
     return;
   }
   text_ = std::move(text);

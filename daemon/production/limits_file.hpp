@@ -44,6 +44,7 @@ class LimitsFile {
   mutable std::optional<std::string> text_;  // the document last read (none: none stored)
   mutable AcceptanceLimits limits_;
   mutable bool unreadable_ = false;  // the registry could not be read when last asked
+  mutable std::optional<std::string> misread_;  // the last document refused (said once in the log)
 };
 
 }  // namespace imucal::daemon

@@ -326,6 +326,28 @@ TYPED_TEST(RegistryTest, TheLimitsAreTheLastDocumentPut) {
   EXPECT_EQ(this->store_.connect()->limits_document(), std::optional<std::string>(second));
 }
 
+// The limits are read from the store at each asking: one put through another connection (another
+// stand) judges at once; a document this imucald cannot read stops a start, naming it, and later
+// keeps the limits last read.
+TYPED_TEST(RegistryTest, LimitsAreReadAgainAndAMisreadDocumentKeepsTheLastOnes) {
+  LimitsFile here(*this->registry_, "limits.json");
+  EXPECT_TRUE(here.current().parts.empty());
+  const auto other = this->store_.connect();
+  LimitsFile elsewhere(*other, "limits.json");
+  here.replace({{"format", "imucal-limits/1"}, {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}},
+               "ada");
+  EXPECT_EQ(elsewhere.current().parts.size(), 1U);
+  this->registry_->put_limits_document("{not json", "a hand edit");
+  EXPECT_EQ(elsewhere.current().parts.size(), 1U);
+  EXPECT_EQ(elsewhere.current().source, "limits.json");
+  try {
+    LimitsFile at_start(*other, "limits.json");
+    ADD_FAILURE() << "limits misread at a start were accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("acceptance limits limits.json: not valid JSON"), std::string::npos) << e.what();
+  }
+}
+
 // Issue 38's acceptance: three stands (connections) issuing 20 certificates each at the same time
 // get 60 distinct numbers, each stand's in the order it issued them, none lost.
 TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
