@@ -13,6 +13,7 @@
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
 #include "daemon/production/lab.hpp"
+#include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
@@ -40,8 +41,12 @@ std::string find_web_dir(const std::string& configured) {
 // tried again every few seconds by the registry's own thread: a stand idle between runs calls it
 // for nothing, and the journal should not wait for its next run.
 std::unique_ptr<Registry> make_registry(const DaemonConfig& config, DaemonDb& db, CertificateSequence& sequence) {
-  if (config.registry.postgresql.empty())
-    return std::make_unique<SqliteRegistry>(db, [&sequence](std::int64_t floor) { return sequence.next(floor); });
+  if (config.registry.postgresql.empty()) {
+    const fs::path limits = fs::path(config.limits_file).is_absolute() ? fs::path(config.limits_file)
+                                                                        : fs::path(config.data_dir) / config.limits_file;
+    return std::make_unique<SqliteRegistry>(
+        db, [&sequence](std::int64_t floor) { return sequence.next(floor); }, registry_stand(config), limits.string());
+  }
   auto connect = [conninfo = config.registry.postgresql, stand = registry_stand(config)] {
     auto registry = std::make_unique<PostgresRegistry>(conninfo, stand);
     // The connection string is not logged: it may hold a password.
@@ -118,6 +123,15 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   }
   certificate_sequence_ = std::make_unique<CertificateSequence>(certificate_sequence_path(config_));
   registry_ = make_registry(config_, *db_, *certificate_sequence_);
+  // The runs recovery interrupted, in the units' history as they now are (no run subscriber saw
+  // that change); a registry that cannot take them now has them at their next transition.
+  for (const auto id : recovered) {
+    try {
+      (void)record_unit_calibration(*db_, *registry_, id);
+    } catch (const std::exception& e) {
+      spdlog::error("campaign {}: its interruption could not be recorded in the registry: {}", id, e.what());
+    }
+  }
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   assemble_certificates();
@@ -152,6 +166,14 @@ void Service::assemble_certificates() {
               const nlohmann::json& details) { audit->append(actor, action, subject, details); },
       [certificates](std::int64_t id, const std::string& reason) { (void)certificates->issue(id, reason); });
   sequencer_->subscribe(*certificates_subscriber_);
+  // Through the sequencer's ordered writes, as the audit trail: behind the writes that wait.
+  DaemonDb* db = db_.get();
+  Registry* registry = registry_.get();
+  calibrations_subscriber_ = std::make_unique<CalibrationsSubscriber>([sequencer, db, registry](std::int64_t id) {
+    sequencer->write_db("campaign " + std::to_string(id) + "'s calibration in the registry",
+                        [db, registry, id] { (void)record_unit_calibration(*db, *registry, id); });
+  });
+  sequencer_->subscribe(*calibrations_subscriber_);
 }
 
 Service::~Service() {

@@ -20,6 +20,7 @@
 #include "daemon/registry/registry.hpp"
 #include "daemon/registry/stand_heartbeat.hpp"
 #include "daemon/sequencer/sequencer.hpp"
+#include "daemon/subscribers/calibrations.hpp"
 #include "daemon/subscribers/certificates.hpp"
 
 namespace imucal::daemon {
@@ -73,6 +74,8 @@ class Service {
   std::unique_ptr<AuditTrail> audit_;
   std::unique_ptr<CertificateIssuer> certificates_;
   std::unique_ptr<CertificatesSubscriber> certificates_subscriber_;
+  // The units' calibrations recorded in the registry at each transition (same lifetime rule).
+  std::unique_ptr<CalibrationsSubscriber> calibrations_subscriber_;
   std::unique_ptr<Sequencer> sequencer_;
   std::unique_ptr<Api> api_;
   std::unique_ptr<StaticFiles> files_;

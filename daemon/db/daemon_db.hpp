@@ -50,6 +50,10 @@ struct CampaignRow {
   std::optional<bool> complete;
   std::optional<std::string> accepted_reason, accepted_by;
   std::optional<std::int64_t> accepted_ms;
+  // The stand that ran it (the lab's registry, issue 38: a unit's history gathers the stands'
+  // calibrations, and campaign ids are numbered per stand). Empty as read from this stand's own
+  // database: Registry::unit_campaigns names it.
+  std::string stand;
 };
 
 // What identifies a campaign's unit in the registry (GET /api/imus).

@@ -27,6 +27,7 @@
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/lab.hpp"
 #include "daemon/production/unit_registry.hpp"
+#include "daemon/registry/calibrations.hpp"
 #include "daemon/subscribers/alarms.hpp"
 #include "daemon/run/suspenders.hpp"
 #include "daemon/subscribers/estimator_worker.hpp"
@@ -105,7 +106,11 @@ json gravity_correction(const json& content, const DaemonConfig& config) {
 // The certificates in force of `rows`' campaigns that state another g than the configured one.
 json gravity_corrected_certificates(Registry& registry, const DaemonConfig& config, const std::vector<CampaignRow>& rows) {
   json out = json::array();
+  const std::string stand = registry_stand(config);
   for (const CampaignRow& row : rows) {
+    // Certificates are found by this stand's campaign ids: another stand's calibration is that
+    // stand's to correct.
+    if (row.stand != stand) continue;
     const auto issued = registry.current_issued(row.id);
     if (!issued) continue;
     const json correction = gravity_correction(parse_or_null(issued->content_json), config);
@@ -305,9 +310,9 @@ Api::Api(const DaemonConfig& config, DaemonDb& db, Registry& registry, Sequencer
       auth_(auth),
       audit_(audit),
       certificates_(certificates),
-      limits_(std::filesystem::path(config.limits_file).is_absolute()
-                  ? config.limits_file
-                  : (std::filesystem::path(config.data_dir) / config.limits_file).string()),
+      // The limits go by their file's name on a stand alone, by the lab's registry on PostgreSQL.
+      limits_(registry, registry.backend() == "sqlite" ? std::filesystem::path(config.limits_file).filename().string()
+                                                       : std::string("the lab's registry")),
       programs_(json::array()),
       started_ms_(now_unix_ms()),
       started_(std::chrono::steady_clock::now()) {
@@ -532,11 +537,11 @@ const std::vector<Api::Route>& Api::routes() {
        [](Api& a, const Call& c) { return a.acknowledge_alarm(c.args[0], *c.who); }},
       {"GET", "/api/imus", A::viewer,
        [](Api& a, const Call&) {
-         return json_reply(200, unit_list_json(a.db_.unit_campaigns(std::nullopt), a.limits_.current()));
+         return json_reply(200, unit_list_json(a.registry_.unit_campaigns(std::nullopt), a.limits_.current()));
        }},
       {"GET", "/api/imus/{serial}", A::viewer,
        [](Api& a, const Call& c) {
-         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         const auto rows = a.registry_.unit_campaigns(c.args[0]);
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
          json out = unit_detail_json(c.args[0], rows, a.limits_.current());
          out["gravity_corrected"] = gravity_corrected_certificates(a.registry_, a.config_, rows);
@@ -544,7 +549,7 @@ const std::vector<Api::Route>& Api::routes() {
        }},
       {"GET", "/api/imus/{serial}/history.csv", A::viewer,
        [](Api& a, const Call& c) {
-         const auto rows = a.db_.unit_campaigns(c.args[0]);
+         const auto rows = a.registry_.unit_campaigns(c.args[0]);
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
          HttpReply r;
          r.body = unit_history_csv(rows);
@@ -744,6 +749,16 @@ std::optional<HttpReply> read_reason(const ApiRequest& request, const std::strin
 
 }  // namespace
 
+void Api::record_calibration(std::int64_t id) {
+  // The change is made and audited: a registry that cannot take the row now is logged, and the
+  // row is recorded again at the campaign's next change.
+  try {
+    (void)record_unit_calibration(db_, registry_, id);
+  } catch (const std::exception& e) {
+    spdlog::error("campaign {}: its calibration could not be recorded in the registry: {}", id, e.what());
+  }
+}
+
 HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who) {
   std::string reason;
   if (auto bad = read_reason(request, "why the partial run is accepted", reason)) return *bad;
@@ -753,6 +768,7 @@ HttpReply Api::campaign_accept(std::int64_t id, const ApiRequest& request, const
     return error_reply(409, "campaign " + std::to_string(id) + " cannot be accepted: " + why);
   db_.accept(id, reason, who.user);
   spdlog::info("campaign {}: partial run accepted by {}: {}", id, who.user, reason);
+  record_calibration(id);
   audit_.append(who.user, "campaign.accepted", "campaign " + std::to_string(id), {{"reason", reason}, {"state", to_string(row->state)}});
   try {
     certificates_.issue(id, "partial run accepted by " + who.user + ": " + reason);
@@ -838,6 +854,7 @@ json Api::recalibrated(std::int64_t id, const std::string& who, const std::strin
   });
   spdlog::info("{}: calibrated again with g = {} m/s^2 by {}; certificate {} supersedes {}", name, number_text(g_now, 9),
                who, c.number, superseded);
+  record_calibration(id);  // its new model in the unit's history
   return {{"campaign", id}, {"certificate", issued_json(c)}, {"superseded", superseded}};
 }
 
@@ -892,7 +909,7 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
   const json before = limits_.document();
   try {
-    limits_.replace(body);
+    limits_.replace(body, who.user);
   } catch (const std::invalid_argument& e) {
     return error_reply(400, e.what());
   } catch (const std::exception& e) {

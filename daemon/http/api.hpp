@@ -128,6 +128,9 @@ class Api {
   // another state: the sequencer answers that start itself).
   std::vector<InstrumentDue> overdue_for_start(std::int64_t id);
   nlohmann::json summary(const CampaignRow& row);
+  // Campaign `id`'s row in the registry's units' calibrations after this API changed it (an
+  // acceptance, a recalibration); a failure is logged.
+  void record_calibration(std::int64_t id);
   // An operator's acceptance of a partial run as its unit's calibration.
   HttpReply campaign_accept(std::int64_t id, const ApiRequest& request, const Principal& who);
   // POST /api/campaigns/{id}/recalibrate: the run calibrated again from its recording with the

@@ -1,75 +1,69 @@
 #include "daemon/production/limits_file.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstring>
-#include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/db/daemon_db.hpp"
 
 namespace imucal::daemon {
 
 using nlohmann::json;
-namespace fs = std::filesystem;
 
-namespace {
-
-void write_durably(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw std::runtime_error("cannot write " + tmp + ": " + std::strerror(errno));
-  std::size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) {
-      const std::string why = std::strerror(errno);
-      ::close(fd);
-      throw std::runtime_error("cannot write " + tmp + ": " + why);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  const bool synced = ::fsync(fd) == 0;
-  ::close(fd);
-  if (!synced) throw std::runtime_error("cannot write " + tmp + ": fsync failed");
-  fs::rename(tmp, path);
+LimitsFile::LimitsFile(Registry& registry, std::string source) : registry_(registry), source_(std::move(source)) {
+  limits_.source = source_;
+  std::lock_guard lock(mutex_);
+  refresh(true);
 }
 
-}  // namespace
-
-LimitsFile::LimitsFile(std::string path) : path_(std::move(path)) {
-  limits_.source = fs::path(path_).filename().string();
-  std::ifstream in(path_);
-  if (!in) return;
-  std::stringstream text;
-  text << in.rdbuf();
-  const json j = json::parse(text.str(), nullptr, false);
-  if (j.is_discarded()) throw std::runtime_error("acceptance limits " + path_ + ": not valid JSON");
+void LimitsFile::refresh(bool at_start) const {
+  std::optional<std::string> text;
   try {
-    limits_.parts = limits_from_json(j);
-  } catch (const std::invalid_argument& e) {
-    throw std::runtime_error("acceptance limits " + path_ + ": " + e.what());
+    text = registry_.limits_document();
+  } catch (const std::exception& e) {
+    if (!is_database_failure(e)) throw;
+    // The lab's server away: the limits last read still judge (none yet at a start without it).
+    // Said once per absence: every verdict asks.
+    if (!unreadable_)
+      spdlog::warn("acceptance limits: {} cannot be read now, the limits last read apply: {}", source_, e.what());
+    unreadable_ = true;
+    return;
   }
+  unreadable_ = false;
+  if (text == text_) return;  // unchanged: parsed already
+  std::map<std::string, PartLimits> parts;
+  try {
+    if (text) {
+      const json j = json::parse(*text, nullptr, false);
+      if (j.is_discarded()) throw std::invalid_argument("not valid JSON");
+      parts = limits_from_json(j);
+    }
+  } catch (const std::exception& e) {
+    const std::string why = "acceptance limits " + source_ + ": " + e.what();
+    if (at_start) throw std::runtime_error(why);
+    if (text != misread_) spdlog::error("{}; the limits last read apply", why);  // once per document
+    misread_ = std::move(text);
+    return;
+  }
+  text_ = std::move(text);
+  limits_.parts = std::move(parts);
 }
 
 AcceptanceLimits LimitsFile::current() const {
   std::lock_guard lock(mutex_);
+  refresh(false);
   return limits_;
 }
 
-json LimitsFile::document() const {
-  std::lock_guard lock(mutex_);
-  return limits_to_json(limits_.parts);
-}
+json LimitsFile::document() const { return limits_to_json(current().parts); }
 
-void LimitsFile::replace(const json& document) {
+void LimitsFile::replace(const json& document, const std::string& actor) {
   auto parts = limits_from_json(document);  // throws before anything changes
+  std::string text = limits_to_json(parts).dump(2) + "\n";
   std::lock_guard lock(mutex_);
-  if (const fs::path dir = fs::path(path_).parent_path(); !dir.empty()) fs::create_directories(dir);
-  write_durably(path_, limits_to_json(parts).dump(2) + "\n");
+  registry_.put_limits_document(text, actor);
+  // Read back as put (a journaled put is not readable from the lab's server until replayed).
+  text_ = std::move(text);
   limits_.parts = std::move(parts);
 }
 

@@ -68,6 +68,7 @@ json unit_entry_json(const std::string& serial, const UnitTally& u, const Accept
     const json verdict = run_verdict(*u.last, limits);
     if (!verdict.is_null()) pass = verdict.at("pass");
     last = {{"campaign_id", u.last->id},
+            {"stand", u.last->stand},
             {"program", u.last->program_label},
             {"date", iso8601_utc(u.last->ended_ms.value_or(u.last->created_ms))},
             {"verdict", verdict}};
@@ -112,10 +113,11 @@ json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>&
   for (const CampaignRow& row : rows) {
     if (row.imu_part_number && !row.imu_part_number->empty()) part_number = *row.imu_part_number;
     if (!ended(row)) {
-      pending.push_back({{"campaign_id", row.id}, {"state", to_string(row.state)}});
+      pending.push_back({{"campaign_id", row.id}, {"stand", row.stand}, {"state", to_string(row.state)}});
       continue;
     }
     json c = {{"campaign_id", row.id},
+              {"stand", row.stand},
               {"name", row.name},
               {"program", row.program_label},
               {"state", to_string(row.state)},
@@ -136,7 +138,10 @@ json unit_detail_json(const std::string& serial, const std::vector<CampaignRow>&
         in_sigmas[r.at("key").get<std::string>()] = r.at("in_sigmas");
         if (r.at("significant").get<bool>()) significant.push_back(r.at("key").get<std::string>());
       }
-      change = {{"since_campaign_id", previous->id}, {"in_sigmas", in_sigmas}, {"significant", significant}};
+      change = {{"since_campaign_id", previous->id},
+                {"since_stand", previous->stand},
+                {"in_sigmas", in_sigmas},
+                {"significant", significant}};
     }
     c["change"] = change;
     if (c.at("counts").get<bool>()) {
@@ -175,12 +180,12 @@ std::string unit_history_csv(const std::vector<CampaignRow>& rows) {
       for (const auto& [name, v] : flat_coefficients(model.at("sigma"))) line.sigmas[name] = v;
     lines.push_back(std::move(line));
   }
-  std::string out = "campaign_id,name,program,date,state,complete,counts";
+  std::string out = "campaign_id,stand,name,program,date,state,complete,counts";
   for (const auto& c : columns) out += "," + csv_field(c) + "," + csv_field(c + ".sigma");
   out += "\n";
   for (const Line& l : lines) {
     const CampaignRow& r = *l.row;
-    out += std::to_string(r.id) + "," + csv_field(r.name) + "," + csv_field(r.program_label) + "," +
+    out += std::to_string(r.id) + "," + csv_field(r.stand) + "," + csv_field(r.name) + "," + csv_field(r.program_label) + "," +
            iso8601_utc(r.ended_ms.value_or(r.created_ms)) + "," + std::string(to_string(r.state)) + "," +
            (r.complete.value_or(false) ? "true" : "false") + "," + (counts_as_calibration(r) ? "true" : "false");
     for (const auto& c : columns) {

@@ -1,6 +1,7 @@
-// The registry of units (GET /api/imus, docs/api.md "Units"): what the daemon's database holds
-// about each IMU a campaign named (campaign.imu), as JSON and as a CSV history. Pure functions of
-// campaign rows, so the rules of what counts as a calibration live here once.
+// The registry of units (GET /api/imus, docs/api.md "Units"): what the registry holds about each
+// IMU a campaign named (campaign.imu; Registry::unit_campaigns, every stand's of a lab), as JSON
+// and as a CSV history, each calibration naming its stand. Pure functions of campaign rows, so the
+// rules of what counts as a calibration live here once.
 #pragma once
 
 #include <string>

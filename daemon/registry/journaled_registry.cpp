@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 
 namespace imucal::daemon {
@@ -148,6 +149,10 @@ void apply_journaled(PostgresRegistry& server, const json& j) {
                                     j.at("instruments_json").get<std::string>(), j.at("text").get<std::string>()});
   } else if (write == "overdue_override_removed") {
     server.remove_overdue_override(j.at("campaign_id").get<std::int64_t>());
+  } else if (write == "calibration") {
+    server.record_calibration(campaign_row_from_json(j.at("row").get<std::string>()));
+  } else if (write == "limits") {
+    server.put_limits_document(j.at("document_json").get<std::string>(), j.at("actor").get<std::string>());
   } else if (write == "audit") {
     // Chained now, after the entries before it, with the time it happened.
     (void)server.append_audit(j.at("actor").get<std::string>(), j.at("action").get<std::string>(),
@@ -561,6 +566,32 @@ std::vector<StandRow> JournaledRegistry::stands() {
   std::vector<StandRow> out;
   read("the lab's stands", [&](PostgresRegistry& r) { out = r.stands(); });
   return out;
+}
+
+void JournaledRegistry::record_calibration(const CampaignRow& row) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "calibration"}, {"campaign_id", row.id}, {"row", campaign_row_json(row)}},
+        [&](PostgresRegistry& r) { r.record_calibration(row); });
+}
+
+std::vector<CampaignRow> JournaledRegistry::unit_campaigns(const std::optional<std::string>& serial) {
+  std::lock_guard lock(mutex_);
+  std::vector<CampaignRow> out;
+  read("the units' calibrations", [&](PostgresRegistry& r) { out = r.unit_campaigns(serial); });
+  return out;
+}
+
+std::optional<std::string> JournaledRegistry::limits_document() {
+  std::lock_guard lock(mutex_);
+  std::optional<std::string> out;
+  read("the acceptance limits", [&](PostgresRegistry& r) { out = r.limits_document(); });
+  return out;
+}
+
+void JournaledRegistry::put_limits_document(const std::string& document_json, const std::string& actor) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "limits"}, {"document_json", document_json}, {"actor", actor}},
+        [&](PostgresRegistry& r) { r.put_limits_document(document_json, actor); });
 }
 
 }  // namespace imucal::daemon

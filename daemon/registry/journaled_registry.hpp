@@ -80,6 +80,12 @@ class JournaledRegistry final : public Registry {
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+  // Journaled as the row was when recorded: its replay replaces what the server has of it, in
+  // the order the records were made.
+  void record_calibration(const CampaignRow& row) override;
+  std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial) override;
+  std::optional<std::string> limits_document() override;
+  void put_limits_document(const std::string& document_json, const std::string& actor) override;
 
   // Stands. A registration is journaled as any write (it arrives when the server returns); a
   // heartbeat's state is not: it is volatile, only the latest matters, and the first heartbeat

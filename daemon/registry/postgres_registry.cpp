@@ -1,6 +1,9 @@
 #include "daemon/registry/postgres_registry.hpp"
 
+#include <stdexcept>
 #include <utility>
+
+#include "daemon/registry/calibrations.hpp"
 
 namespace imucal::daemon {
 
@@ -94,7 +97,30 @@ CREATE TABLE registry_journal_applied(
   PRIMARY KEY (stand, journal, seq));
 )sql";
 
-// Version 3: the lab's stands (registry.hpp register_stand), one row each, keyed by name; its
+// Version 3: the units' calibrations, one row per (stand, campaign) replaced as it changes, its
+// serial and creation time beside the row's JSON (calibrations.hpp) so that a unit's history is
+// one indexed query in order; and the limits documents, appended (the newest is current).
+constexpr const char* kSchema3 = R"sql(
+CREATE TABLE calibration(
+  stand TEXT NOT NULL,
+  campaign_id BIGINT NOT NULL,
+  serial TEXT NOT NULL,
+  created_ms BIGINT NOT NULL,
+  row_json TEXT NOT NULL,
+  recorded_ms BIGINT NOT NULL,
+  PRIMARY KEY (stand, campaign_id));
+CREATE INDEX calibration_serial ON calibration(serial, created_ms);
+CREATE TABLE limits(
+  id BIGSERIAL PRIMARY KEY,
+  document_json TEXT NOT NULL,
+  stand TEXT NOT NULL,
+  put_by TEXT NOT NULL,
+  put_ms BIGINT NOT NULL);
+CREATE TRIGGER limits_kept BEFORE UPDATE OR DELETE ON limits
+  FOR EACH ROW EXECUTE FUNCTION imucal_refuse('a limits document is never changed: put a new one');
+)sql";
+
+// Version 4: the lab's stands (registry.hpp register_stand), one row each, keyed by name; its
 // state is the heartbeat's last (volatile: replaced at each report).
 constexpr const char* kSchemaStands = R"sql(
 CREATE TABLE stand(
@@ -109,7 +135,7 @@ CREATE TABLE stand(
 )sql";
 
 // The migrations in order: kMigrations[v - 1] takes a registry from version v - 1 to v.
-constexpr const char* kMigrations[] = {kSchema1, kSchema2, kSchemaStands};
+constexpr const char* kMigrations[] = {kSchema1, kSchema2, kSchema3, kSchemaStands};
 static_assert(std::size(kMigrations) == PostgresRegistry::kSchemaVersion);
 
 constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry, as in SQLite
@@ -399,6 +425,49 @@ std::vector<StandRow> PostgresRegistry::stands() {
     out.push_back(StandRow{r.text(i, 0), r.text(i, 1), r.text(i, 2), r.text(i, 3), r.int64(i, 4), r.int64(i, 5),
                            r.int64(i, 6), r.text(i, 7)});
   return out;
+}
+
+void PostgresRegistry::record_calibration(const CampaignRow& row) {
+  if (!row.imu_serial) throw std::invalid_argument("campaign " + std::to_string(row.id) + " names no unit: no calibration");
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO calibration(stand, campaign_id, serial, created_ms, row_json, recorded_ms) "
+            "VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (stand, campaign_id) DO UPDATE SET serial = EXCLUDED.serial, "
+            "created_ms = EXCLUDED.created_ms, row_json = EXCLUDED.row_json, recorded_ms = EXCLUDED.recorded_ms",
+            {stand_, row.id, *row.imu_serial, row.created_ms, campaign_row_json(row), now_unix_ms()});
+}
+
+// Oldest first as the SQLite registry orders them (creation, then the id), then by stand: two
+// stands' campaigns created in the same millisecond keep one order.
+std::vector<CampaignRow> PostgresRegistry::unit_campaigns(const std::optional<std::string>& serial) {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec(
+      "SELECT stand, row_json FROM calibration WHERE ($1::TEXT IS NULL OR serial = $1::TEXT) "
+      "ORDER BY created_ms, stand, campaign_id",
+      {serial});
+  std::vector<CampaignRow> out;
+  for (int i = 0; i < r.rows(); ++i) {
+    try {
+      out.push_back(campaign_row_from_json(r.text(i, 1)));
+    } catch (const std::exception& e) {
+      throw DbError("registry: stand '" + r.text(i, 0) + "' recorded a calibration this imucald cannot read: " +
+                    e.what());
+    }
+    out.back().stand = r.text(i, 0);
+  }
+  return out;
+}
+
+std::optional<std::string> PostgresRegistry::limits_document() {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec("SELECT document_json FROM limits ORDER BY id DESC LIMIT 1");
+  if (r.rows() == 0) return std::nullopt;
+  return r.text(0, 0);
+}
+
+void PostgresRegistry::put_limits_document(const std::string& document_json, const std::string& actor) {
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO limits(document_json, stand, put_by, put_ms) VALUES ($1, $2, $3, $4)",
+            {document_json, stand_, actor, now_unix_ms()});
 }
 
 }  // namespace imucal::daemon

@@ -19,8 +19,10 @@ class PostgresRegistry final : public Registry {
  public:
   // 1: certificates (numbers, issued ones, pages), overdue overrides, the audit trail.
   // 2: registry_journal_applied, the writes a stand replayed from its journal (apply_once).
-  // 3: stand, the lab's stands and their last reported state (issue 38, the lab overview).
-  static constexpr int kSchemaVersion = 3;
+  // 3: calibration (each stand's campaigns that name a unit, the row as JSON) and limits (the
+  // acceptance limits documents, the newest current; the older ones kept as their history).
+  // 4: stand, the lab's stands and their last reported state (issue 38, the lab overview).
+  static constexpr int kSchemaVersion = 4;
   // `conninfo`: registry.postgresql of the configuration (a libpq connection string). `stand`:
   // the name of the stand whose campaigns this registry records. Throws storage::pg::PgError when
   // the server cannot be reached, DbError when its schema is newer than this imucald knows.
@@ -47,6 +49,10 @@ class PostgresRegistry final : public Registry {
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+  void record_calibration(const CampaignRow& row) override;
+  std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial) override;
+  std::optional<std::string> limits_document() override;
+  void put_limits_document(const std::string& document_json, const std::string& actor) override;
 
   // Stands: every stand of the lab, keyed by name (an upsert).
   void register_stand(const StandRow& row) override;

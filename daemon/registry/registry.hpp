@@ -1,6 +1,7 @@
 // The lab's registry (issue 38): what outlives a stand's runs and is shared by the stands of a
 // production line: certificate numbers and the certificates issued, their printed pages, the
-// starts made with reference equipment past its due date, and the audit trail with its hash chain.
+// starts made with reference equipment past its due date, the audit trail with its hash chain, the
+// units' calibrations and the acceptance limits.
 // One interface, two implementations: the daemon's own SQLite database (SqliteRegistry, a stand
 // alone, as before) and a lab's PostgreSQL server (PostgresRegistry, registry.postgresql in the
 // configuration). The same suite runs against both (tests/daemon/test_registry.cpp).
@@ -65,6 +66,19 @@ class Registry {
   virtual std::vector<AuditEntry> audit_entries(const AuditQuery& query) = 0;
   virtual std::vector<AuditEntry> audit_trail() = 0;
   virtual std::optional<std::pair<std::int64_t, std::string>> audit_head() = 0;
+
+  // The units' calibrations (production/unit_registry.hpp reads them): a campaign's row as this
+  // stand last recorded it (its end, an operator's acceptance, a recalibration), keyed by (stand,
+  // campaign id): a later record of the same campaign replaces it. unit_campaigns: the rows that
+  // name a unit (`serial`: that unit's only), every stand's, oldest first, each naming its stand.
+  virtual void record_calibration(const CampaignRow& row) = 0;
+  virtual std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial) = 0;
+
+  // The acceptance limits (imucal-limits/1 as JSON text) the stands judge runs by: the current
+  // document (none: no limits set yet), and a new one put by `actor` (validated by the caller,
+  // production/limits_file.hpp). One document for every stand of the store.
+  virtual std::optional<std::string> limits_document() = 0;
+  virtual void put_limits_document(const std::string& document_json, const std::string& actor) = 0;
 
   // Whether the store answered when last asked, and how many writes wait on this stand's disk
   // for it (journaled_registry.hpp: a lab's server away); GET /api/status shows both. The

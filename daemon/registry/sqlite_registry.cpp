@@ -1,11 +1,47 @@
 #include "daemon/registry/sqlite_registry.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <utility>
 
 namespace imucal::daemon {
 
-SqliteRegistry::SqliteRegistry(DaemonDb& db, TakeNumber take_number)
-    : db_(db), take_number_(std::move(take_number)) {}
+namespace fs = std::filesystem;
+
+namespace {
+
+// Temporary file, fsync, rename: a crash leaves the old file or the new one, never half of one.
+void write_durably(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw storage::StorageError("cannot write " + tmp + ": " + std::strerror(errno));
+  std::size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const std::string why = std::strerror(errno);
+      ::close(fd);
+      throw storage::StorageError("cannot write " + tmp + ": " + why);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  const bool synced = ::fsync(fd) == 0;
+  ::close(fd);
+  if (!synced) throw storage::StorageError("cannot write " + tmp + ": fsync failed");
+  fs::rename(tmp, path);
+}
+
+}  // namespace
+
+SqliteRegistry::SqliteRegistry(DaemonDb& db, TakeNumber take_number, std::string stand, std::string limits_path)
+    : db_(db), take_number_(std::move(take_number)), stand_(std::move(stand)), limits_path_(std::move(limits_path)) {}
 
 // The floor is the database's highest: a sequence file restored from an old backup cannot hand
 // out a number again.
@@ -51,5 +87,28 @@ bool SqliteRegistry::report_stand_state(const std::string& name, const std::stri
   return db_.report_stand_state(name, state_json, t_ms);
 }
 std::vector<StandRow> SqliteRegistry::stands() { return db_.stands(); }
+
+// The database's campaign rows are the calibrations, stored as they change: nothing to add.
+void SqliteRegistry::record_calibration(const CampaignRow&) {}
+
+std::vector<CampaignRow> SqliteRegistry::unit_campaigns(const std::optional<std::string>& serial) {
+  auto rows = db_.unit_campaigns(serial);
+  for (CampaignRow& row : rows) row.stand = stand_;
+  return rows;
+}
+
+std::optional<std::string> SqliteRegistry::limits_document() {
+  std::ifstream in(limits_path_);
+  if (!in) return std::nullopt;  // no file: no limits
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// The file is the stand's; who replaced it is in the audit trail (PUT /api/limits).
+void SqliteRegistry::put_limits_document(const std::string& document_json, const std::string&) {
+  if (const fs::path dir = fs::path(limits_path_).parent_path(); !dir.empty()) fs::create_directories(dir);
+  write_durably(limits_path_, document_json);
+}
 
 }  // namespace imucal::daemon

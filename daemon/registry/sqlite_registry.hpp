@@ -1,10 +1,13 @@
 // The registry in the daemon's own SQLite database (registry.hpp): a stand alone, as before issue
 // 38. The tables are DaemonDb's; certificate numbers come from the site's sequence file
 // (production/certificates.hpp CertificateSequence), given here as the function that takes one
-// above a floor, so that the numbering rule stays where it is.
+// above a floor, so that the numbering rule stays where it is. The units' calibrations are the
+// database's campaigns (named with this stand's name); the limits are the stand's limits file
+// (config.limits_file), replaced whole.
 #pragma once
 
 #include <functional>
+#include <string>
 
 #include "daemon/registry/registry.hpp"
 
@@ -14,7 +17,9 @@ class SqliteRegistry final : public Registry {
  public:
   // `take_number(floor)`: the next number of the site's sequence above `floor`.
   using TakeNumber = std::function<std::int64_t(std::int64_t floor)>;
-  SqliteRegistry(DaemonDb& db, TakeNumber take_number);
+  // `stand`: this stand's name (registry_stand), named by each calibration; `limits_path`: the
+  // acceptance limits file.
+  SqliteRegistry(DaemonDb& db, TakeNumber take_number, std::string stand, std::string limits_path);
 
   std::string backend() const override { return "sqlite"; }
   std::int64_t next_certificate_sequence() override;
@@ -36,6 +41,10 @@ class SqliteRegistry final : public Registry {
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
   std::vector<AuditEntry> audit_trail() override;
   std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+  void record_calibration(const CampaignRow& row) override;
+  std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial) override;
+  std::optional<std::string> limits_document() override;
+  void put_limits_document(const std::string& document_json, const std::string& actor) override;
 
   // Stands: this stand alone (the daemon's own database).
   void register_stand(const StandRow& row) override;
@@ -45,6 +54,8 @@ class SqliteRegistry final : public Registry {
  private:
   DaemonDb& db_;
   TakeNumber take_number_;
+  std::string stand_;
+  std::string limits_path_;
 };
 
 }  // namespace imucal::daemon

@@ -973,6 +973,12 @@ TEST(Registry, AStandWhoseRegistryServerIsAwayRunsOnAndCatchesUpWhenItReturns) {
   const json back = d.get("/api/status").at("registry");
   EXPECT_TRUE(back.at("reachable").get<bool>()) << back.dump();
   EXPECT_EQ(back.at("pending_writes"), 0) << back.dump();
+  // The run's calibration, recorded at its end while the server was away, is in the unit's history.
+  const json unit = d.get("/api/imus/FOG-A");
+  ASSERT_EQ(unit.at("calibrations").size(), 1U) << unit.dump();
+  EXPECT_EQ(unit.at("calibrations")[0].at("stand"), "stand-away");
+  EXPECT_EQ(unit.at("calibrations")[0].at("state"), "done");
+  EXPECT_EQ(unit.at("calibrations_counted"), 1) << unit.dump();
 
   daemon::PostgresRegistry registry(conninfo, "stand-away");
   EXPECT_TRUE(registry.overdue_override(id).has_value());
@@ -1024,6 +1030,27 @@ TEST(Registry, TwoStandsOnOnePostgresRegistryShareTheNumberingAndTheAuditTrail) 
   EXPECT_EQ(started, 2);
   const json listed = a.get("/api/audit");
   EXPECT_TRUE(listed.at("intact").get<bool>()) << listed.dump();
+
+  // One unit calibrated on both stands: one history, each calibration naming its stand, read
+  // from either stand.
+  const auto again_b = run_campaign(b, "FOG-A again on b", "FOG-A");
+  for (LocalDaemon* stand : {&a, &b}) {
+    const json unit = stand->get("/api/imus/FOG-A");
+    ASSERT_EQ(unit.at("calibrations").size(), 2U) << unit.dump();
+    EXPECT_EQ(unit.at("calibrations")[0].at("stand"), "stand-a");
+    EXPECT_EQ(unit.at("calibrations")[0].at("campaign_id"), id_a);
+    EXPECT_EQ(unit.at("calibrations")[1].at("stand"), "stand-b");
+    EXPECT_EQ(unit.at("calibrations")[1].at("campaign_id"), again_b);
+    EXPECT_EQ(unit.at("calibrations_counted"), 2) << unit.dump();
+  }
+  // Limits put on one stand are the other's at once (its next run judged by them).
+  const json limits = {{"format", "imucal-limits/1"},
+                       {"part_numbers", {{"PN-LAB", {{"gyro.bias_dph", {{"max_abs", 5.0}}}}}}}};
+  ASSERT_EQ(a.call("PUT", "/api/limits", limits.dump()).status, 200);
+  const json on_b = b.get("/api/limits");
+  EXPECT_TRUE(on_b.at("part_numbers").contains("PN-LAB")) << on_b.dump();
+  EXPECT_EQ(on_b.at("source"), "the lab's registry");
+
   // The stand's own database holds no certificate of its own.
   daemon::DaemonDb own(a.config.data_dir + "/imucald.db");
   EXPECT_EQ(own.max_certificate_sequence(), 0);

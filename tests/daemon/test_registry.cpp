@@ -17,6 +17,9 @@
 
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/production/limits_file.hpp"
+#include "daemon/production/unit_registry.hpp"
+#include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
@@ -52,14 +55,22 @@ class SqliteStore {
     std::lock_guard lock(mutex_);
     dbs_.push_back(std::make_unique<DaemonDb>(dir_ + "/imucald.db"));
     auto sequence = std::make_shared<CertificateSequence>(dir_ + "/sequence");
-    return std::make_unique<SqliteRegistry>(*dbs_.back(),
-                                            [sequence](std::int64_t floor) { return sequence->next(floor); });
+    return std::make_unique<SqliteRegistry>(
+        *dbs_.back(), [sequence](std::int64_t floor) { return sequence->next(floor); }, "stand-a",
+        dir_ + "/limits.json");
+  }
+  // The stand's own database, whose campaigns the registry records.
+  DaemonDb& stand_db() {
+    std::lock_guard lock(mutex_);
+    if (!own_) own_ = std::make_unique<DaemonDb>(dir_ + "/imucald.db");
+    return *own_;
   }
 
  private:
   std::string dir_;
   std::mutex mutex_;
   std::vector<std::unique_ptr<DaemonDb>> dbs_;
+  std::unique_ptr<DaemonDb> own_;
 };
 
 imucaltest::PostgresServer& postgres_server() {
@@ -80,9 +91,27 @@ class PostgresStore {
   }
   std::unique_ptr<Registry> connect() { return std::make_unique<PostgresRegistry>(conninfo_, "stand-a"); }
   const std::string& conninfo() const { return conninfo_; }
+  // The stand's own database (a fresh one), whose campaigns the registry records.
+  DaemonDb& stand_db() {
+    if (!own_) {
+      dir_ = imucaltest::test_tmp_dir() + "/registry-stand-" + std::to_string(getpid()) + "-" +
+             imucaltest::PostgresServer::unique_name("s");
+      std::filesystem::remove_all(dir_);
+      std::filesystem::create_directories(dir_);
+      own_ = std::make_unique<DaemonDb>(dir_ + "/imucald.db");
+    }
+    return *own_;
+  }
+  ~PostgresStore() {
+    own_.reset();
+    std::error_code ignored;
+    if (!dir_.empty()) std::filesystem::remove_all(dir_, ignored);
+  }
 
  private:
   std::string conninfo_;
+  std::string dir_;
+  std::unique_ptr<DaemonDb> own_;
 };
 
 template <class Store>
@@ -230,6 +259,93 @@ TYPED_TEST(RegistryTest, TheAuditTrailIsAChainAndAnsweredByQuery) {
   q.limit = 2;
   q.to_ms = 3000;
   EXPECT_EQ(reg.audit_entries(q).size(), 2U);
+}
+
+// A campaign of the stand's own database that names `serial` and ended done with `model_json`,
+// having run its whole program (`complete`) or stopped early with results, as a run leaves it.
+std::int64_t unit_run(DaemonDb& db, const std::string& serial, bool complete, const std::string& model_json) {
+  const std::int64_t id = db.insert_campaign("run of " + serial, "{}", "test", 10.0, "created", CampaignUnit{serial, "FOG-3A"});
+  EXPECT_TRUE(db.set_state(id, RunState::Queued, "queued"));
+  EXPECT_TRUE(db.set_state(id, RunState::Running, "started"));
+  db.set_model(id, model_json);
+  db.set_complete(id, complete);
+  EXPECT_TRUE(db.set_state(id, RunState::Done, "ended"));
+  return id;
+}
+
+TYPED_TEST(RegistryTest, AUnitsCalibrationsAreReadOldestFirstEachNamingItsStand) {
+  auto& reg = *this->registry_;
+  DaemonDb& db = this->store_.stand_db();
+  EXPECT_TRUE(reg.unit_campaigns(std::nullopt).empty());
+  const std::int64_t a = unit_run(db, "FOG-7", true, R"({"k":1})");
+  const std::int64_t b = unit_run(db, "FOG-8", true, R"({"k":2})");
+  const std::int64_t c = unit_run(db, "FOG-7", false, R"({"k":3})");
+  for (const std::int64_t id : {a, b, c}) EXPECT_TRUE(record_unit_calibration(db, reg, id));
+  const std::int64_t no_unit = db.insert_campaign("no unit", "{}", "test", 1.0, "created");
+  EXPECT_FALSE(record_unit_calibration(db, reg, no_unit));  // nothing recorded
+
+  auto fog7 = reg.unit_campaigns("FOG-7");
+  ASSERT_EQ(fog7.size(), 2U);
+  EXPECT_EQ(fog7[0].id, a);
+  EXPECT_EQ(fog7[1].id, c);
+  EXPECT_EQ(fog7[0].stand, "stand-a");
+  EXPECT_EQ(fog7[1].stand, "stand-a");
+  EXPECT_EQ(fog7[0].complete, std::optional<bool>(true));
+  EXPECT_EQ(fog7[1].state, RunState::Done);
+  EXPECT_EQ(fog7[1].complete, std::optional<bool>(false));
+  EXPECT_FALSE(counts_as_calibration(fog7[1]));  // partial: not a calibration until accepted
+  EXPECT_EQ(fog7[1].model_json, std::optional<std::string>(R"({"k":3})"));
+  EXPECT_EQ(fog7[1].imu_part_number, std::optional<std::string>("FOG-3A"));
+  EXPECT_TRUE(fog7[1].ended_ms.has_value());
+  EXPECT_FALSE(fog7[1].accepted_reason);
+  const auto all = reg.unit_campaigns(std::nullopt);
+  ASSERT_EQ(all.size(), 3U);
+  EXPECT_EQ(all[1].id, b);
+  EXPECT_TRUE(reg.unit_campaigns("FOG-9").empty());
+
+  // An operator's acceptance recorded again replaces the row: still two calibrations of FOG-7.
+  db.accept(c, "enough positions", "ada");
+  EXPECT_TRUE(record_unit_calibration(db, reg, c));
+  fog7 = reg.unit_campaigns("FOG-7");
+  ASSERT_EQ(fog7.size(), 2U);
+  EXPECT_EQ(fog7[1].accepted_reason, std::optional<std::string>("enough positions"));
+  EXPECT_EQ(fog7[1].accepted_by, std::optional<std::string>("ada"));
+  EXPECT_TRUE(counts_as_calibration(fog7[1]));
+}
+
+// The limits are one document of the store: the last put, read by every connection.
+TYPED_TEST(RegistryTest, TheLimitsAreTheLastDocumentPut) {
+  auto& reg = *this->registry_;
+  EXPECT_FALSE(reg.limits_document());
+  const std::string first = R"({"format": "imucal-limits/1", "parts": {}})";
+  const std::string second = R"({"format": "imucal-limits/1", "parts": {"FOG-3A": {}}})";
+  reg.put_limits_document(first, "ada");
+  EXPECT_EQ(reg.limits_document(), std::optional<std::string>(first));
+  reg.put_limits_document(second, "bob");
+  EXPECT_EQ(reg.limits_document(), std::optional<std::string>(second));
+  EXPECT_EQ(this->store_.connect()->limits_document(), std::optional<std::string>(second));
+}
+
+// The limits are read from the store at each asking: one put through another connection (another
+// stand) judges at once; a document this imucald cannot read stops a start, naming it, and later
+// keeps the limits last read.
+TYPED_TEST(RegistryTest, LimitsAreReadAgainAndAMisreadDocumentKeepsTheLastOnes) {
+  LimitsFile here(*this->registry_, "limits.json");
+  EXPECT_TRUE(here.current().parts.empty());
+  const auto other = this->store_.connect();
+  LimitsFile elsewhere(*other, "limits.json");
+  here.replace({{"format", "imucal-limits/1"}, {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}},
+               "ada");
+  EXPECT_EQ(elsewhere.current().parts.size(), 1U);
+  this->registry_->put_limits_document("{not json", "a hand edit");
+  EXPECT_EQ(elsewhere.current().parts.size(), 1U);
+  EXPECT_EQ(elsewhere.current().source, "limits.json");
+  try {
+    LimitsFile at_start(*other, "limits.json");
+    ADD_FAILURE() << "limits misread at a start were accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("acceptance limits limits.json: not valid JSON"), std::string::npos) << e.what();
+  }
 }
 
 // Issue 38's acceptance: three stands (connections) issuing 20 certificates each at the same time
@@ -400,6 +516,82 @@ TEST_F(PostgresRegistrySchema, EachStandSeesItsOwnCampaigns) {
   EXPECT_TRUE(a.issued(issued(2, 1).number));  // a number is the lab's: found from any stand
 }
 
+// A registry of version 2 (before the units' calibrations and the limits, and the stands) is
+// migrated to the current version by the next imucald that connects, keeping what it held.
+TEST_F(PostgresRegistrySchema, AVersion2RegistryGainsTheCalibrationsAndTheLimits) {
+  {
+    PostgresRegistry first(store_.conninfo(), "stand-a");
+    first.append_audit("ada", "a", "s", "{}", 1);
+  }
+  {
+    imucal::storage::pg::Connection raw(store_.conninfo(), "test");
+    raw.exec_script("DROP TABLE calibration; DROP TABLE limits; DROP TABLE stand; UPDATE registry_schema SET version = 2;");
+  }
+  PostgresRegistry again(store_.conninfo(), "stand-a");
+  EXPECT_EQ(again.schema_version(), PostgresRegistry::kSchemaVersion);
+  EXPECT_TRUE(again.stands().empty());
+  EXPECT_EQ(again.audit_trail().size(), 1U);
+  EXPECT_TRUE(again.unit_campaigns(std::nullopt).empty());
+  EXPECT_FALSE(again.limits_document());
+}
+
+// A row of a campaign `id` of a stand that names `serial`, ended done with a model.
+CampaignRow calibration_row(std::int64_t id, const std::string& serial, std::int64_t created_ms, const std::string& model) {
+  CampaignRow r;
+  r.id = id;
+  r.name = "run " + std::to_string(id);
+  r.spec_json = "{}";
+  r.program_label = "direct";
+  r.duration_s = 10.0;
+  r.state = RunState::Done;
+  r.created_ms = created_ms;
+  r.ended_ms = created_ms + 10000;
+  r.program_time_s = 10.0;
+  r.model_json = model;
+  r.imu_serial = serial;
+  r.imu_part_number = "FOG-3A";
+  r.complete = true;
+  return r;
+}
+
+// Issue 38: a unit calibrated on two stands has one history, each calibration naming its stand
+// (both stands' campaign 1); limits put through one stand judge the other's next run.
+TEST_F(PostgresRegistrySchema, TwoStandsShareAUnitsHistoryAndTheLimits) {
+  PostgresRegistry a(store_.conninfo(), "stand-a");
+  PostgresRegistry b(store_.conninfo(), "stand-b");
+  LimitsFile limits_b(b, "the lab's registry");
+  EXPECT_TRUE(limits_b.current().parts.empty());
+
+  a.record_calibration(calibration_row(1, "FOG-7", 1000, R"({"k":1})"));
+  b.record_calibration(calibration_row(1, "FOG-7", 2000, R"({"k":2})"));
+  b.record_calibration(calibration_row(2, "FOG-8", 3000, R"({"k":3})"));
+  for (Registry* stand : {static_cast<Registry*>(&a), static_cast<Registry*>(&b)}) {
+    const auto history = stand->unit_campaigns("FOG-7");
+    ASSERT_EQ(history.size(), 2U);
+    EXPECT_EQ(history[0].stand, "stand-a");
+    EXPECT_EQ(history[0].model_json, std::optional<std::string>(R"({"k":1})"));
+    EXPECT_EQ(history[1].stand, "stand-b");
+    EXPECT_EQ(history[1].model_json, std::optional<std::string>(R"({"k":2})"));
+  }
+  const nlohmann::json detail = unit_detail_json("FOG-7", a.unit_campaigns("FOG-7"), AcceptanceLimits{});
+  ASSERT_EQ(detail.at("calibrations").size(), 2U);
+  EXPECT_EQ(detail.at("calibrations")[0].at("stand"), "stand-a");
+  EXPECT_EQ(detail.at("calibrations")[1].at("stand"), "stand-b");
+  EXPECT_EQ(detail.at("calibrations_counted"), 2);
+  EXPECT_EQ(unit_list_json(a.unit_campaigns(std::nullopt), AcceptanceLimits{}).at("imus").size(), 2U);
+
+  LimitsFile limits_a(a, "the lab's registry");
+  const nlohmann::json doc = {{"format", "imucal-limits/1"},
+                              {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+  limits_a.replace(doc, "ada");
+  const AcceptanceLimits seen_by_b = limits_b.current();
+  ASSERT_EQ(seen_by_b.parts.size(), 1U);
+  EXPECT_TRUE(seen_by_b.parts.contains("FOG-3A"));
+  EXPECT_EQ(limits_b.document(), limits_a.document());
+  EXPECT_THROW(limits_a.replace({{"format", "imucal-limits/0"}}, "ada"), std::invalid_argument);
+  EXPECT_EQ(limits_b.current().parts.size(), 1U);  // a refused document changes nothing
+}
+
 // The server restarted (a crash, a network break): the call that met the break fails as a database
 // failure (is_database_failure: the request may be repeated), the next one connects again.
 TEST_F(PostgresRegistrySchema, ConnectsAgainAfterTheServerWentAway) {
@@ -508,6 +700,40 @@ TEST_F(RegistryAway, WritesWaitInTheJournalAndArriveOnceInOrderWhenTheServerRetu
   EXPECT_EQ(reg->overdue_override(3).value_or(OverdueOverrideRow{}).by, "ada");
   EXPECT_EQ(reg->issued_page(certificate.number, true).value_or(IssuedPageRow{}).html, "<html>1</html>");
   EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 4000).seq, 4);
+}
+
+// A unit's calibration recorded twice while the server is away (the run's end, then an
+// operator's acceptance) and the limits put meanwhile arrive once, in order: the server has the
+// later row. The limits last read judge meanwhile.
+TEST_F(RegistryAway, CalibrationsAndLimitsWaitInTheJournalAndArriveInOrder) {
+  auto reg = journaled();
+  LimitsFile limits(*reg, "the lab's registry");
+  const nlohmann::json doc = {{"format", "imucal-limits/1"},
+                              {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+  limits.replace(doc, "ada");
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  CampaignRow row = calibration_row(4, "FOG-7", 1000, R"({"k":1})");
+  row.complete = false;  // stopped early: partial
+  reg->record_calibration(row);
+  row.accepted_reason = "enough positions";
+  row.accepted_by = "ada";
+  reg->record_calibration(row);
+  const nlohmann::json looser = {{"format", "imucal-limits/1"},
+                                 {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 2.0}}}}}}}};
+  limits.replace(looser, "bob");
+  EXPECT_EQ(reg->pending_writes(), 3);
+  expect_unreachable([&] { reg->unit_campaigns("FOG-7"); }, 3);
+  EXPECT_EQ(limits.document(), limits_to_json(limits_from_json(looser)));  // as put, while away
+
+  ASSERT_TRUE(postgres_server().start_again());
+  EXPECT_TRUE(reg->retry());
+  const auto server = direct();
+  const auto history = server->unit_campaigns("FOG-7");
+  ASSERT_EQ(history.size(), 1U);
+  EXPECT_EQ(history[0].accepted_reason, std::optional<std::string>("enough positions"));
+  EXPECT_EQ(history[0].stand, "stand-a");
+  LimitsFile on_server(*server, "the lab's registry");
+  EXPECT_EQ(on_server.document(), limits_to_json(limits_from_json(looser)));
 }
 
 // A crash after some writes were applied and before the journal was trimmed: the journal as it

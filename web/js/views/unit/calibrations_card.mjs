@@ -1,6 +1,7 @@
-// A unit's calibrations (issue 17): each ended campaign that named it, partial runs marked as
-// such, whether it counts as a calibration, its verdict against its part number's limits and its
-// change since the previous calibration in sigmas.
+// A unit's calibrations (issue 17): each ended campaign that named it, with the stand that ran
+// it (issue 38: a lab's registry gathers every stand's), partial runs marked as such, whether it
+// counts as a calibration, its verdict against its part number's limits and its change since the
+// previous calibration in sigmas.
 import { h, clear, dateTime, outcomeBadge, num } from '../../format.mjs';
 import { verdictBadge } from '../../components/verdict_badge.mjs';
 
@@ -9,13 +10,13 @@ export function calibrationsCard() {
   const body = h('tbody', { id: 'unit-calibrations' });
   const element = h('section', { class: 'card' }, h('h2', {}, 'Calibrations'),
     h('table', { class: 'list', id: 'unit-table' },
-      h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'Name'), h('th', {}, 'Program'),
+      h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'Stand'), h('th', {}, 'Name'), h('th', {}, 'Program'),
         h('th', {}, 'Ended'), h('th', {}, 'State'), h('th', {}, 'Counts as a calibration'), h('th', {}, 'Verdict'),
         h('th', {}, 'Change since the previous'))),
       body));
   const show = (calibrations) => clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
     h('td', { class: 'num' }, h('a', { href: `#/campaigns/${c.campaign_id}` }, c.campaign_id)),
-    h('td', {}, c.name), h('td', {}, c.program), h('td', {}, dateTime(c.date)),
+    h('td', {}, c.stand || ''), h('td', {}, c.name), h('td', {}, c.program), h('td', {}, dateTime(c.date)),
     h('td', {}, outcomeBadge(c)),
     h('td', {}, counts(c)), h('td', {}, verdictCell(c.verdict)), h('td', {}, changeCell(c.change)))));
   return { element, show };
