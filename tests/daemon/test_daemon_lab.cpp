@@ -120,7 +120,7 @@ bool poll(const std::function<bool()>& done, double timeout_s = 60.0) {
 TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
   const std::string dir = scratch_dir("lab-heartbeat");
   daemon::DaemonDb db(dir + "/imucald.db");
-  daemon::SqliteRegistry registry(db, [](std::int64_t floor) { return floor + 1; });
+  daemon::SqliteRegistry registry(db, [](std::int64_t floor) { return floor + 1; }, "s", dir + "/limits.json");
   const daemon::StandRow identity{"s", "sim", "http://s:1", "v", 0, 0, 0, "{}"};
   const auto has = [&](const std::string& name, const std::string& state) {
     const auto stands = registry.stands();
