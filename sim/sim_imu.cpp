@@ -49,7 +49,11 @@ struct SimImu::Impl {
   std::mutex garbage_mutex;
   std::vector<std::uint8_t> garbage;
   std::vector<std::uint8_t> command_bytes;  // a byte stream's input, searched for commands
-  std::atomic<std::int64_t> pause_until_ns{0};
+  // A pause is asked for (its length) and begun by this thread when it next sends: a loaded machine
+  // that holds the thread up meanwhile then cannot shorten it (the frames held up were sent late
+  // inside the pause, and the driver saw no stall).
+  std::atomic<std::int64_t> pause_request_ns{0};
+  std::atomic<std::int64_t> pause_until_ns{0}, pause_began_ns{0};
   std::atomic<double> temperature_C;
 
   // Physics: a Simulator over the table motion from shortly before the frame it must produce.
@@ -331,7 +335,12 @@ struct SimImu::Impl {
       const std::int64_t now = host_time_ns();
       v.latency_ns = static_cast<double>(std::max<std::int64_t>(0, (now - sample_host_ns) / 1000) * 1000);
       std::vector<std::uint8_t> bytes = link::encode(cfg.link, sample, v);
-      bool skip_it = now < pause_until_ns.load();
+      if (const std::int64_t asked = pause_request_ns.exchange(0); asked > 0) {
+        pause_began_ns = now;
+        pause_until_ns = now + asked;
+      }
+      // Lost: what is due before the pause ends, the frames held up until it began included.
+      bool skip_it = send_at < pause_until_ns.load();
       if (!skip_it && drop.load() > 0) {
         --drop;
         skip_it = true;
@@ -416,8 +425,9 @@ void SimImu::send_garbage(std::vector<std::uint8_t> bytes) {
   impl_->garbage.insert(impl_->garbage.end(), bytes.begin(), bytes.end());
 }
 void SimImu::pause(std::chrono::milliseconds duration) {
-  impl_->pause_until_ns = host_time_ns() + std::chrono::duration_cast<std::chrono::nanoseconds>(duration).count();
+  impl_->pause_request_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(duration).count();
 }
+std::int64_t SimImu::pause_began_ns() const { return impl_->pause_began_ns.load(); }
 void SimImu::close_link() { impl_->close_requested = true; }
 void SimImu::set_temperature(double celsius) { impl_->temperature_C = celsius; }
 
