@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -27,5 +28,29 @@ nlohmann::json stand_state_json(DaemonDb& db, std::optional<std::int64_t> active
 // "registered_at", "last_seen", "heartbeat_s", "online", "this", "run", "queue", "alarms"}]}.
 // Online: seen within three heartbeat periods of `now_ms` (a stand misses two and is still so).
 nlohmann::json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const std::string& this_stand);
+
+// ---- The lab's shared archive of recordings (`registry.archive_dir`) -----------------------------
+// Each stand writes the bundle of every run that ended with a recording there (the service, through
+// subscribers/archive.hpp), so that a unit's history on any stand can fetch a recording whose
+// stand is away (GET /api/archive/{stand}/{campaign}/recording).
+
+// The folder of a stand's bundles under the archive, and the stand's segment in the archive's
+// URLs: its name with every byte outside [A-Za-z0-9._-] written %XX (a stand's name is free text:
+// its folder must not climb out, nor two names share one); "." and ".." are written %2E, %2E%2E.
+std::string archive_folder(const std::string& stand);
+// Where the archive keeps campaign `campaign` of `stand` (whether or not it is there).
+std::filesystem::path archived_recording(const std::string& archive_dir, const std::string& stand, std::int64_t campaign);
+
+// Where a calibration in a unit's history (GET /api/imus/{serial}) is shown and its recording
+// fetched, from this stand's page: {"campaign_page": a link or null, "recording": a link or null,
+// "recording_from": "this stand" | "archive" | "stand NAME" | null, "note": why there is no link}.
+// This stand's own runs from itself; another stand's recording from the archive when `archived`,
+// else from that stand's address as registered (`stands`); its page at that address.
+nlohmann::json calibration_links(const std::string& stand, std::int64_t campaign, const std::string& this_stand,
+                                 const std::vector<StandRow>& stands, bool archived);
+// Each calibration of a unit's history (unit_registry.hpp unit_detail_json) given its "links";
+// `archive_dir` empty: no archive is configured.
+void add_calibration_links(nlohmann::json& unit_detail, const std::string& this_stand,
+                           const std::vector<StandRow>& stands, const std::string& archive_dir);
 
 }  // namespace imucal::daemon
