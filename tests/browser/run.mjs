@@ -1008,6 +1008,10 @@ try {
   await page.waitForSelector(`#unit-calibrations tr[data-id="${id}"]`);
   await page.waitForSelector('#unit-trend .uplot');
   assert.match(await page.textContent('#unit-info'), /Part number PN-BROWSER/);
+  // This stand's own run: its recording from here (issue 38's links).
+  assert.equal(await page.getAttribute(`#unit-calibrations tr[data-id="${id}"] a.recording-link`, 'href'),
+    `/api/campaigns/${id}/recording`);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${id}"] a.recording-link`), /this stand/);
   await shot(page, '09b-unit-page');
   assert.deepEqual(await layoutProblems(page), [], 'the unit page lays out at 1366x768');
   log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');

@@ -37,6 +37,23 @@ json wait_for_stand(LocalDaemon& d, const std::function<bool(const json&)>& pred
   return {};
 }
 
+// The lab's PostgreSQL server, one for this file's tests (each takes a database of its own).
+imucaltest::PostgresServer& lab_server() {
+  static imucaltest::PostgresServer server;
+  return server;
+}
+
+// How a stand joins the registry `conninfo` as `stand`, heartbeats every 0.1 s, then `more`.
+std::function<void(daemon::DaemonConfig&)> joins(const std::string& conninfo, const std::string& stand,
+                                                 std::function<void(daemon::DaemonConfig&)> more = {}) {
+  return [conninfo, stand, more](daemon::DaemonConfig& c) {
+    c.registry.postgresql = conninfo;
+    c.registry.stand = stand;
+    c.registry.heartbeat_s = 0.1;
+    if (more) more(c);
+  };
+}
+
 }  // namespace
 
 TEST(Lab, AStartedStandIsOnlineAndShowsWhatItRunsAndItsProgress) {
@@ -146,17 +163,11 @@ TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
 // Issue 38's lab: two stands on one PostgreSQL registry each list both; a stand stopped shows
 // offline on the other's page once three of its heartbeats are missed.
 TEST(Lab, TwoStandsOnOnePostgresRegistrySeeEachOther) {
-  static imucaltest::PostgresServer server;
+  imucaltest::PostgresServer& server = lab_server();
   if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
   ASSERT_TRUE(server.running()) << server.error();
   const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("lab"));
-  const auto on_registry = [&](const std::string& stand) {
-    return [&, stand](daemon::DaemonConfig& c) {
-      c.registry.postgresql = conninfo;
-      c.registry.stand = stand;
-      c.registry.heartbeat_s = 0.1;
-    };
-  };
+  const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
   LocalDaemon a("lab-stand-a", false, on_registry("stand-a"));
   auto b = std::make_unique<LocalDaemon>("lab-stand-b", false, on_registry("stand-b"));
   const auto both_online = [&](LocalDaemon& d) {
@@ -227,19 +238,16 @@ TEST(Lab, AStandsArchiveFolderStaysInsideTheArchive) {
 // archive (each stand writes its ended runs' bundles there), and without it from the stand that
 // holds it, at its registered address; that stand's campaign opens on that stand's page.
 TEST(Lab, AnotherStandsRecordingIsFetchedFromTheArchiveElseFromThatStand) {
-  static imucaltest::PostgresServer server;
+  imucaltest::PostgresServer& server = lab_server();
   if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
   ASSERT_TRUE(server.running()) << server.error();
   const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("archive"));
   const std::string archive = scratch_dir("lab-archive");
   const auto on_registry = [&](const std::string& stand) {
-    return [&, stand](daemon::DaemonConfig& c) {
-      c.registry.postgresql = conninfo;
-      c.registry.stand = stand;
+    return joins(conninfo, stand, [archive, stand](daemon::DaemonConfig& c) {
       c.registry.url = "http://" + stand + ".lab:8080";
-      c.registry.heartbeat_s = 0.1;
       c.registry.archive_dir = archive;
-    };
+    });
   };
   LocalDaemon a("lab-archive-a", false, on_registry("stand-a"));
   LocalDaemon b("lab-archive-b", false, on_registry("stand-b"));
@@ -290,17 +298,11 @@ TEST(Lab, AnotherStandsRecordingIsFetchedFromTheArchiveElseFromThatStand) {
 // verdict they change, at a's next heartbeat (b has none of a's to supersede); a's number comes
 // from the lab's sequence.
 TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
-  static imucaltest::PostgresServer server;
+  imucaltest::PostgresServer& server = lab_server();
   if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
   ASSERT_TRUE(server.running()) << server.error();
   const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("limits"));
-  const auto on_registry = [&](const std::string& stand) {
-    return [&, stand](daemon::DaemonConfig& c) {
-      c.registry.postgresql = conninfo;
-      c.registry.stand = stand;
-      c.registry.heartbeat_s = 0.1;
-    };
-  };
+  const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
   LocalDaemon a("lab-limits-a", false, on_registry("stand-a"));
   LocalDaemon b("lab-limits-b", false, on_registry("stand-b"));
   const auto id = a.post_campaign({{"name", "judged"}, {"program", "direct-short"}, {"rate_hz", 10}, {"time_scale", 0},
