@@ -233,7 +233,7 @@ void Service::start_heartbeat() {
   // when another stand put new ones.
   heartbeat_ = std::make_unique<StandHeartbeat>(*registry_, identity, period, [this] {
     limits_follower_->follow();
-    return stand_state_json(*db_, sequencer_->active_id());
+    return stand_state_json(*db_, config_, sequencer_->active_id(), now_unix_ms());
   });
 }
 

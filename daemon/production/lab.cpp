@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "daemon/production/reference_equipment.hpp"
+
 namespace imucal::daemon {
 
 namespace {
@@ -48,12 +50,16 @@ json alarms_json(DaemonDb& db) {
 
 }  // namespace
 
-json stand_state_json(DaemonDb& db, std::optional<std::int64_t> active_id) {
+json stand_state_json(DaemonDb& db, const DaemonConfig& config, std::optional<std::int64_t> active_id,
+                      std::int64_t now_ms) {
   json run = nullptr;
   if (active_id) {
     if (const auto row = db.campaign(*active_id)) run = run_json(*row);
   }
-  return {{"run", run}, {"queue", db.queue().size()}, {"alarms", alarms_json(db)}};
+  return {{"run", run},
+          {"queue", db.queue().size()},
+          {"alarms", alarms_json(db)},
+          {"equipment", reference_equipment_json(config, utc_day(now_ms), true)}};
 }
 
 json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const std::string& this_stand) {
@@ -74,7 +80,8 @@ json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const st
                    {"this", s.name == this_stand},
                    {"run", readable ? state.value("run", json()) : json()},
                    {"queue", readable ? state.value("queue", json(0)) : json(0)},
-                   {"alarms", readable ? state.value("alarms", json()) : json()}});
+                   {"alarms", readable ? state.value("alarms", json()) : json()},
+                   {"equipment", readable ? state.value("equipment", json()) : json()}});
   }
   return {{"stand", this_stand}, {"now", iso8601_utc(now_ms)}, {"stands", out}};
 }

@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/config/config.hpp"
 #include "daemon/db/daemon_db.hpp"
 
 namespace imucal::daemon {
@@ -21,11 +22,16 @@ inline constexpr std::size_t kStandAlarmsListed = 10;
 // A stand's state, from its database: {"run": null | {"id", "name", "state", "program", "progress"
 // (0..1 of the program's time), "program_time_s", "duration_s", "imu"}, "queue": waiting
 // campaigns, "alarms": {"active", "unacknowledged", "list": [newest first, at most
-// kStandAlarmsListed]}}. `active_id`: the sequencer's active run.
-nlohmann::json stand_state_json(DaemonDb& db, std::optional<std::int64_t> active_id);
+// kStandAlarmsListed]}, "equipment"}. `active_id`: the sequencer's active run.
+// "equipment": the stand's reference equipment judged today (reference_equipment_json with its
+// days: each instrument's due date, overdue or due soon, the banner), so that the lab's registry
+// knows every stand's instruments and the lab page shows which is due.
+nlohmann::json stand_state_json(DaemonDb& db, const DaemonConfig& config, std::optional<std::int64_t> active_id,
+                                std::int64_t now_ms);
 
 // GET /api/lab: {"stand": this stand's name, "now", "stands": [{"name", "bench", "url", "version",
-// "registered_at", "last_seen", "heartbeat_s", "online", "this", "run", "queue", "alarms"}]}.
+// "registered_at", "last_seen", "heartbeat_s", "online", "this", "run", "queue", "alarms",
+// "equipment"}]}.
 // Online: seen within three heartbeat periods of `now_ms` (a stand misses two and is still so).
 nlohmann::json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const std::string& this_stand);
 

@@ -1441,8 +1441,11 @@ try {
   await page.waitForSelector('#lab-rows tr[data-online="true"] a.stand-link');
   assert.match(await page.textContent('#lab-rows tr[data-online="true"]'), /\(this stand\).*online/s);
   assert.equal(await page.getAttribute('#lab-rows tr[data-online="true"] a.stand-link', 'href'), base);
+  // Its reference equipment as its heartbeat judged it: the rate table of the configuration.
+  await page.waitForSelector('#lab-rows tr[data-online="true"] .stand-equipment li[data-instrument="table"]');
+  assert.match(await page.textContent('#lab-rows tr[data-online="true"] .stand-equipment'), /rate table \(Acme Motion ATS-3/);
   assert.deepEqual(await layoutProblems(page), [], 'the lab page lays out at 1366x768');
-  log('lab page: this stand online, linked to its own page');
+  log('lab page: this stand online, linked to its own page, its reference equipment judged');
 
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {

@@ -340,3 +340,39 @@ TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   EXPECT_EQ(certificate().at("number"), now.at("number"));
 }
+
+// Issue 38: each stand's reference equipment is in the lab's registry with its heartbeat: a stand
+// sees another stand's overdue rate table (and its own chamber in date) on GET /api/lab.
+TEST(Lab, EveryStandsReferenceEquipmentIsJudgedOnTheLabPage) {
+  imucaltest::PostgresServer& server = lab_server();
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("equipment"));
+  LocalDaemon a("lab-equipment-a", false, joins(conninfo, "stand-a", [](daemon::DaemonConfig& c) {
+    c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", "", ""};
+  }));
+  LocalDaemon b("lab-equipment-b", false, joins(conninfo, "stand-b", [](daemon::DaemonConfig& c) {
+    c.reference_equipment.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123", ""};
+  }));
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  json lab;
+  const auto reported = [&] {
+    const json& s = lab.at("stands");
+    return s.size() == 2 && s[0].at("equipment").is_object() && s[1].at("equipment").is_object();
+  };
+  while (std::chrono::steady_clock::now() < deadline) {
+    lab = a.get("/api/lab");
+    if (reported()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(reported()) << lab.dump();
+  const json& own = lab.at("stands")[0].at("equipment");
+  const json& other = lab.at("stands")[1].at("equipment");
+  EXPECT_TRUE(own.at("table").is_null());
+  EXPECT_FALSE(own.at("chamber").at("overdue").get<bool>());
+  EXPECT_TRUE(other.at("chamber").is_null());
+  EXPECT_EQ(other.at("table").at("serial"), "T-0815");
+  EXPECT_TRUE(other.at("table").at("overdue").get<bool>()) << other.dump();
+  EXPECT_NE(other.at("table").at("text").get<std::string>().find("was due for calibration on 2020-01-31"), std::string::npos)
+      << other.dump();
+}
