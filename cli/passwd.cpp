@@ -41,7 +41,9 @@ std::string read_secret(const char* prompt) {
 // `imucal passwd`: the hash for a user's "password_hash" in imucald's configuration.
 int run_passwd() {
   const std::string password = read_secret("password: ");
-  if (password.size() < 8) throw std::runtime_error("the password must have at least 8 characters");
+  if (password.size() < daemon::kMinPasswordLength)
+    throw std::runtime_error("the password must have at least " + std::to_string(daemon::kMinPasswordLength) +
+                             " characters");
   if (::isatty(STDIN_FILENO) != 0 && read_secret("again: ") != password) throw std::runtime_error("the two do not match");
   std::printf("%s\n", imucal::daemon::hash_password(password).c_str());
   std::fprintf(stderr, "put it in imucald's configuration as a user's \"password_hash\" (docs/daemon.md)\n");

@@ -14,6 +14,7 @@
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
 #include "daemon/production/lab.hpp"
+#include "daemon/production/lab_users.hpp"
 #include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
@@ -134,6 +135,8 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
     }
   }
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
+  // The lab's accounts sign in here too (production/lab_users.hpp).
+  auth_->set_lab_users([registry = registry_.get()] { return lab_user_entries(registry->users()); });
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   assemble_certificates();
   assemble_archive();

@@ -3,10 +3,14 @@
 // plain-text password there is refused (config.cpp).
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 
 namespace imucal::daemon {
+
+// The shortest password taken (`imucal passwd`, the lab's accounts).
+inline constexpr std::size_t kMinPasswordLength = 8;
 
 // A new hash of `password` ("$argon2id$v=19$m=...,t=...,p=1$salt$hash"). Throws when libsodium
 // cannot work (no memory).

@@ -184,6 +184,14 @@ CREATE TABLE IF NOT EXISTS stand(
   last_seen_ms INTEGER NOT NULL,
   state_json TEXT NOT NULL
 );
+-- The lab's accounts (issue 38, registry.hpp put_user), created where missing, without a migration.
+CREATE TABLE IF NOT EXISTS lab_user(
+  name TEXT PRIMARY KEY,
+  role TEXT NOT NULL CHECK (role IN ('viewer', 'operator')),
+  password_hash TEXT NOT NULL,
+  changed_ms INTEGER NOT NULL,
+  changed_by TEXT NOT NULL
+);
 )sql";
 
 using storage::sql::Statement;
@@ -676,6 +684,31 @@ std::vector<StandRow> DaemonDb::stands() {
   while (s.step())
     out.push_back(StandRow{s.column_text(0), s.column_text(1), s.column_text(2), s.column_text(3), s.column_int64(4),
                            s.column_int64(5), s.column_int64(6), s.column_text(7)});
+  return out;
+}
+
+void DaemonDb::put_user(const UserRow& row) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "INSERT INTO lab_user(name, role, password_hash, changed_ms, changed_by) VALUES (?1, ?2, ?3, ?4, ?5) "
+                   "ON CONFLICT(name) DO UPDATE SET role = excluded.role, password_hash = excluded.password_hash, "
+                   "changed_ms = excluded.changed_ms, changed_by = excluded.changed_by");
+  s.bind(1, row.name).bind(2, row.role).bind(3, row.password_hash).bind(4, row.changed_ms).bind(5, row.changed_by);
+  s.run();
+}
+
+bool DaemonDb::remove_user(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "DELETE FROM lab_user WHERE name = ?1");
+  s.bind(1, name);
+  s.run();
+  return db_.query_int("SELECT changes()") > 0;
+}
+
+std::vector<UserRow> DaemonDb::users() {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "SELECT name, role, password_hash, changed_ms, changed_by FROM lab_user ORDER BY name");
+  std::vector<UserRow> out;
+  while (s.step()) out.push_back(UserRow{s.column_text(0), s.column_text(1), s.column_text(2), s.column_int64(3), s.column_text(4)});
   return out;
 }
 

@@ -139,6 +139,16 @@ struct AlarmRow {
   std::optional<std::int64_t> acknowledged_ms;
 };
 
+// A lab account (issue 38, registry.hpp put_user): it signs in with its password on every stand of
+// the lab. Tokens stay in each stand's configuration (a script's token is a stand's).
+struct UserRow {
+  std::string name;
+  std::string role;           // "viewer" or "operator"
+  std::string password_hash;  // Argon2id as `imucal passwd` makes it (config/password_hash.hpp)
+  std::int64_t changed_ms = 0;
+  std::string changed_by;
+};
+
 // A stand of the lab (issue 38, registry.hpp): who it is, set when its imucald starts, and the
 // state its heartbeat last reported (daemon/registry/stand_heartbeat.hpp).
 struct StandRow {
@@ -287,6 +297,10 @@ class DaemonDb {
   void register_stand(const StandRow& row);
   bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms);
   std::vector<StandRow> stands();
+  // The lab's accounts kept by the SQLite registry (registry.hpp says what each does).
+  void put_user(const UserRow& row);
+  bool remove_user(const std::string& name);
+  std::vector<UserRow> users();
 
   std::optional<std::string> setting(const std::string& key);
   void set_setting(const std::string& key, const std::string& value);

@@ -26,6 +26,7 @@
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/lab.hpp"
+#include "daemon/production/lab_users.hpp"
 #include "daemon/production/limits_follower.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/registry/calibrations.hpp"
@@ -531,6 +532,12 @@ const std::vector<Api::Route>& Api::routes() {
          return json_reply(200, doc);
        }},
       {"PUT", "/api/limits", A::operator_, [](Api& a, const Call& c) { return a.replace_limits(c.request, *c.who); }},
+      {"GET", "/api/users", A::operator_,
+       [](Api& a, const Call&) { return json_reply(200, users_json(a.config_.users, a.registry_.users())); }},
+      {"PUT", "/api/users/{user}", A::operator_,
+       [](Api& a, const Call& c) { return a.put_lab_user(c.args[0], c.request, *c.who); }},
+      {"DELETE", "/api/users/{user}", A::operator_,
+       [](Api& a, const Call& c) { return a.remove_lab_user(c.args[0], *c.who); }},
       {"GET", "/api/compare", A::viewer, [](Api& a, const Call& c) { return a.compare_campaigns(c.target.query); }},
       {"GET", "/api/alarms", A::viewer, [](Api& a, const Call& c) { return a.list_alarms(c.target.query); }},
       {"GET", "/api/audit", A::viewer, [](Api& a, const Call& c) { return a.list_audit(c.target.query); }},
@@ -634,8 +641,10 @@ HttpReply Api::handle(const ApiRequest& request) {
       allow += (allow.empty() ? "" : ", ") + std::string(m.route->method);
       if (method == m.route->method || (method == "HEAD" && std::string_view(m.route->method) == "GET")) chosen = &m;
     }
-    // Every other method changes something: an operator's, and not while shutting down.
-    const bool reads = method == "GET" || method == "HEAD" || (chosen && chosen->route->access != Route::Access::operator_);
+    // Every other method changes something: an operator's, and not while shutting down. A read
+    // marked the operator's (the lab's accounts) is one too.
+    const bool operators_route = chosen && chosen->route->access == Route::Access::operator_;
+    const bool reads = (method == "GET" || method == "HEAD") ? !operators_route : chosen && !operators_route;
     if (!open && !reads && (!who || who->role != Role::Operator)) return error_reply(403, "operator role required");
     if (!open && !reads && shutting_down_) return error_reply(503, "the daemon is shutting down");
     if (!chosen) {
@@ -929,6 +938,31 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   json doc = limits_.document();
   doc["source"] = limits_.current().source;
   return json_reply(200, doc);
+}
+
+// The lab's accounts (production/lab_users.hpp): put in the registry, every stand signs them in.
+HttpReply Api::put_lab_user(const std::string& name, const ApiRequest& request, const Principal& who) {
+  json body;
+  if (auto bad = parse_body(request, body)) return *bad;
+  if (std::any_of(config_.users.begin(), config_.users.end(), [&](const UserEntry& u) { return u.name == name; }))
+    return error_reply(409, "'" + name + "' is a user of this stand's configuration, which wins over a lab account; "
+                            "choose another name or remove it from the configuration");
+  UserRow row;
+  try {
+    row = lab_user_from_request(name, body, who.user, now_unix_ms());
+  } catch (const std::invalid_argument& e) {
+    return error_reply(400, e.what());
+  }
+  registry_.put_user(row);
+  audit_.append(who.user, "user.put", "user " + name, {{"role", row.role}});
+  return json_reply(200, {{"name", row.name}, {"role", row.role}, {"changed", iso8601_utc(row.changed_ms)},
+                          {"changed_by", row.changed_by}});
+}
+
+HttpReply Api::remove_lab_user(const std::string& name, const Principal& who) {
+  if (!registry_.remove_user(name)) return error_reply(404, "the lab's registry has no account '" + name + "'");
+  audit_.append(who.user, "user.removed", "user " + name, json::object());
+  return json_reply(200, {{"removed", name}});
 }
 
 namespace {

@@ -166,6 +166,9 @@ class Api {
   void broadcast(const nlohmann::json& message);
   // PUT /api/limits: the whole limits file replaced by an operator.
   HttpReply replace_limits(const ApiRequest& request, const Principal& who);
+  // PUT and DELETE /api/users/{user}: the lab's accounts in the registry.
+  HttpReply put_lab_user(const std::string& name, const ApiRequest& request, const Principal& who);
+  HttpReply remove_lab_user(const std::string& name, const Principal& who);
 
   const DaemonConfig& config_;
   DaemonDb& db_;

@@ -1,12 +1,14 @@
 #include "daemon/http/auth.hpp"
 
-#include "daemon/config/password_hash.hpp"
-
 #include <sys/stat.h>
 
 #include <filesystem>
 #include <fstream>
 #include <random>
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/config/password_hash.hpp"
 
 namespace imucal::daemon {
 
@@ -159,16 +161,41 @@ const std::string& unknown_user_hash() {
 }
 }  // namespace
 
+void Auth::set_lab_users(LabUsers source) {
+  std::lock_guard lock(lab_mutex_);
+  lab_users_ = std::move(source);
+  lab_users_at_.reset();
+}
+
+std::vector<UserEntry> Auth::password_candidates(const std::string& user) {
+  std::vector<UserEntry> out;
+  for (const UserEntry& u : users_)  // fixed at start: read without a lock
+    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
+  if (!out.empty()) return out;  // the configuration wins
+  std::lock_guard lock(lab_mutex_);
+  if (!lab_users_) return out;
+  const auto now = Clock::now();
+  if (!lab_users_at_ || now - *lab_users_at_ >= kLabUsersFresh) {
+    lab_users_at_ = now;
+    try {
+      lab_users_read_ = lab_users_();
+    } catch (const std::exception& e) {
+      spdlog::warn("sign-in: the lab's accounts could not be read ({}); the ones read before are used", e.what());
+    }
+  }
+  for (const UserEntry& u : lab_users_read_)
+    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
+  return out;
+}
+
 Auth::Login Auth::login_password(const std::string& user, const std::string& password, const std::string& client) {
   const std::vector<std::pair<std::string, int>> keys = {{"client " + client, kMaxFailuresPerClientPerMinute},
                                                          {"user " + user, kMaxFailuresPerUserPerMinute}};
-  std::vector<UserEntry> candidates;
   {
     std::lock_guard lock(mutex_);
     if (throttled(keys)) return {429, "too many failed sign-ins; wait a minute", {}, {}};
-    for (const UserEntry& u : users_)
-      if (!u.password_hash.empty() && constant_time_equal(u.name, user)) candidates.push_back(u);
   }
+  const std::vector<UserEntry> candidates = password_candidates(user);
   // Outside the lock: a hash takes a fraction of a second by design, other requests go on.
   // An unknown user costs a hash too, so the time does not tell which users exist.
   const UserEntry* match = nullptr;

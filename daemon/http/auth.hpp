@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -58,7 +59,17 @@ class Auth {
   bool session_alive(std::string_view session_id);
   double idle_timeout_s() const { return idle_timeout_s_; }
 
+  // The lab's accounts (registry.hpp users, issue 38): they sign in with a password as the
+  // configured users do; a configured user of the same name wins. Read at a sign-in, at most
+  // every kLabUsersFresh (an account put on another stand signs in here within it); a source that
+  // fails keeps the accounts last read, and the configured users sign in whatever it does.
+  using LabUsers = std::function<std::vector<UserEntry>()>;
+  static constexpr std::chrono::seconds kLabUsersFresh{5};
+  void set_lab_users(LabUsers source);
+
  private:
+  // The configured users and the lab's accounts that may sign in as `user` with a password.
+  std::vector<UserEntry> password_candidates(const std::string& user);
   struct Session {
     Principal principal;
     std::chrono::steady_clock::time_point last_use;
@@ -75,6 +86,10 @@ class Auth {
   };
   std::vector<TokenEntry> tokens_;
   std::vector<UserEntry> users_;
+  LabUsers lab_users_;
+  std::vector<UserEntry> lab_users_read_;  // under lab_mutex_
+  std::optional<std::chrono::steady_clock::time_point> lab_users_at_;
+  std::mutex lab_mutex_;  // apart from mutex_: reading the registry must not hold up the sessions
   std::string generated_token_, token_file_;
   double idle_timeout_s_;
 

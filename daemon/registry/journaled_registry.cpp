@@ -123,6 +123,12 @@ void apply_journaled(PostgresRegistry& server, const json& j) {
                               j.at("t_ms").get<std::int64_t>());
   } else if (write == "stand") {
     server.register_stand(stand_from(j));
+  } else if (write == "user") {
+    server.put_user({j.at("name").get<std::string>(), j.at("role").get<std::string>(),
+                     j.at("password_hash").get<std::string>(), j.at("changed_ms").get<std::int64_t>(),
+                     j.at("changed_by").get<std::string>()});
+  } else if (write == "user_removed") {
+    (void)server.remove_user(j.at("name").get<std::string>());
   } else {
     throw std::invalid_argument("unknown journaled write '" + write + "'");
   }
@@ -537,6 +543,27 @@ std::vector<StandRow> JournaledRegistry::stands() {
   std::lock_guard lock(mutex_);
   std::vector<StandRow> out;
   read("the lab's stands", [&](PostgresRegistry& r) { out = r.stands(); });
+  return out;
+}
+
+void JournaledRegistry::put_user(const UserRow& row) {
+  std::lock_guard lock(mutex_);
+  write({{"write", "user"}, {"name", row.name}, {"role", row.role}, {"password_hash", row.password_hash},
+         {"changed_ms", row.changed_ms}, {"changed_by", row.changed_by}},
+        [&](PostgresRegistry& r) { r.put_user(row); });
+}
+
+bool JournaledRegistry::remove_user(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  bool removed = true;
+  write({{"write", "user_removed"}, {"name", name}}, [&](PostgresRegistry& r) { removed = r.remove_user(name); });
+  return removed;
+}
+
+std::vector<UserRow> JournaledRegistry::users() {
+  std::lock_guard lock(mutex_);
+  std::vector<UserRow> out;
+  read("the lab's accounts", [&](PostgresRegistry& r) { out = r.users(); });
   return out;
 }
 

@@ -97,6 +97,10 @@ class JournaledRegistry final : public Registry {
   void register_stand(const StandRow& row) override;
   bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
   std::vector<StandRow> stands() override;
+  // Journaled as any write; remove_user then says true (whether there was one is known at replay).
+  void put_user(const UserRow& row) override;
+  bool remove_user(const std::string& name) override;
+  std::vector<UserRow> users() override;
 
   bool reachable() const override { return reachable_; }
   std::int64_t pending_writes() const override { return pending_; }

@@ -134,8 +134,18 @@ CREATE TABLE stand(
   state_json TEXT NOT NULL);
 )sql";
 
+// Version 5: the lab's accounts (registry.hpp put_user), one row each, keyed by name.
+constexpr const char* kSchemaUsers = R"sql(
+CREATE TABLE lab_user(
+  name TEXT PRIMARY KEY,
+  role TEXT NOT NULL CHECK (role IN ('viewer', 'operator')),
+  password_hash TEXT NOT NULL,
+  changed_ms BIGINT NOT NULL,
+  changed_by TEXT NOT NULL);
+)sql";
+
 // The migrations in order: kMigrations[v - 1] takes a registry from version v - 1 to v.
-constexpr const char* kMigrations[] = {kSchema1, kSchema2, kSchema3, kSchemaStands};
+constexpr const char* kMigrations[] = {kSchema1, kSchema2, kSchema3, kSchemaStands, kSchemaUsers};
 static_assert(std::size(kMigrations) == PostgresRegistry::kSchemaVersion);
 
 constexpr const char* kAuditHeadKey = "audit_head";  // setting: "SEQ SHA256" of the last entry, as in SQLite
@@ -424,6 +434,28 @@ std::vector<StandRow> PostgresRegistry::stands() {
   for (int i = 0; i < r.rows(); ++i)
     out.push_back(StandRow{r.text(i, 0), r.text(i, 1), r.text(i, 2), r.text(i, 3), r.int64(i, 4), r.int64(i, 5),
                            r.int64(i, 6), r.text(i, 7)});
+  return out;
+}
+
+void PostgresRegistry::put_user(const UserRow& row) {
+  std::lock_guard lock(mutex_);
+  db().exec("INSERT INTO lab_user(name, role, password_hash, changed_ms, changed_by) VALUES ($1, $2, $3, $4, $5) "
+            "ON CONFLICT (name) DO UPDATE SET role = EXCLUDED.role, password_hash = EXCLUDED.password_hash, "
+            "changed_ms = EXCLUDED.changed_ms, changed_by = EXCLUDED.changed_by",
+            {row.name, row.role, row.password_hash, row.changed_ms, row.changed_by});
+}
+
+bool PostgresRegistry::remove_user(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  return db().exec("DELETE FROM lab_user WHERE name = $1", {name}).affected() > 0;
+}
+
+std::vector<UserRow> PostgresRegistry::users() {
+  std::lock_guard lock(mutex_);
+  const Result r = db().exec("SELECT name, role, password_hash, changed_ms, changed_by FROM lab_user ORDER BY name");
+  std::vector<UserRow> out;
+  for (int i = 0; i < r.rows(); ++i)
+    out.push_back(UserRow{r.text(i, 0), r.text(i, 1), r.text(i, 2), r.int64(i, 3), r.text(i, 4)});
   return out;
 }
 

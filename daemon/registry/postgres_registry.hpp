@@ -22,7 +22,7 @@ class PostgresRegistry final : public Registry {
   // 3: calibration (each stand's campaigns that name a unit, the row as JSON) and limits (the
   // acceptance limits documents, the newest current; the older ones kept as their history).
   // 4: stand, the lab's stands and their last reported state (issue 38, the lab overview).
-  static constexpr int kSchemaVersion = 4;
+  static constexpr int kSchemaVersion = 5;
   // `conninfo`: registry.postgresql of the configuration (a libpq connection string). `stand`:
   // the name of the stand whose campaigns this registry records. Throws storage::pg::PgError when
   // the server cannot be reached, DbError when its schema is newer than this imucald knows.
@@ -58,6 +58,9 @@ class PostgresRegistry final : public Registry {
   void register_stand(const StandRow& row) override;
   bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
   std::vector<StandRow> stands() override;
+  void put_user(const UserRow& row) override;
+  bool remove_user(const std::string& name) override;
+  std::vector<UserRow> users() override;
 
   // The schema version the server's registry has (after the migration of the constructor).
   int schema_version();

@@ -97,6 +97,14 @@ class Registry {
   // Every registered stand, by name.
   virtual std::vector<StandRow> stands() = 0;
   // ---- end of stands ---------------------------------------------------------------------------
+
+  // ---- The lab's accounts (issue 38, deliverable 1) ----------------------------------------------
+  // Accounts that sign in with a password on every stand of the store (a stand's own configured
+  // users besides; the configuration wins on a name both have: http/auth.hpp). put_user inserts or
+  // replaces the account of that name; remove_user: false when there was none.
+  virtual void put_user(const UserRow& row) = 0;
+  virtual bool remove_user(const std::string& name) = 0;
+  virtual std::vector<UserRow> users() = 0;
 };
 
 }  // namespace imucal::daemon

@@ -58,6 +58,9 @@ bool SqliteRegistry::report_stand_state(const std::string& name, const std::stri
   return db_.report_stand_state(name, state_json, t_ms);
 }
 std::vector<StandRow> SqliteRegistry::stands() { return db_.stands(); }
+void SqliteRegistry::put_user(const UserRow& row) { db_.put_user(row); }
+bool SqliteRegistry::remove_user(const std::string& name) { return db_.remove_user(name); }
+std::vector<UserRow> SqliteRegistry::users() { return db_.users(); }
 
 // The database's campaign rows are the calibrations, stored as they change: nothing to add.
 void SqliteRegistry::record_calibration(const CampaignRow&) {}

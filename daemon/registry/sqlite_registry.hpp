@@ -50,6 +50,9 @@ class SqliteRegistry final : public Registry {
   void register_stand(const StandRow& row) override;
   bool report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) override;
   std::vector<StandRow> stands() override;
+  void put_user(const UserRow& row) override;
+  bool remove_user(const std::string& name) override;
+  std::vector<UserRow> users() override;
 
  private:
   DaemonDb& db_;

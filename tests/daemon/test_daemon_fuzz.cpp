@@ -108,6 +108,9 @@ class Fuzzer {
       {"GET", "/api/imus/{serial}", nullptr},
       {"GET", "/api/imus/{serial}/history.csv", nullptr},
       {"GET", "/api/archive/{stand}/{campaign}/recording", nullptr},
+      {"GET", "/api/users", nullptr},
+      {"PUT", "/api/users/{user}", R"({"role": "viewer", "password": "fuzz-password"})"},
+      {"DELETE", "/api/users/{user}", nullptr},
       {"GET", "/api/compare", nullptr},
       {"GET", "/api/limits", nullptr},
       {"PUT", "/api/limits", R"({"format": "imucal-limits/1", "part_numbers": {"P": {"gyro.bias_dph": {"max_abs": 1, "max_sigma": 0.1}}}})"},
@@ -218,7 +221,7 @@ class Fuzzer {
       const auto close = pattern.find('}', open);
       t += pattern.substr(pos, open - pos);
       const std::string slot = pattern.substr(open, close - open + 1);
-      t += slot == "{serial}" || slot == "{stand}" ? pick_of<std::string>({"F-1", "SIM-1", "%ff", "..", "a%2Fb", "x", "%2E%2E"}) : id();
+      t += slot == "{serial}" || slot == "{stand}" || slot == "{user}" ? pick_of<std::string>({"F-1", "SIM-1", "%ff", "..", "a%2Fb", "x", "%2E%2E"}) : id();
       pos = close + 1;
     }
     if (chance(0.1)) t += pick_of<std::string>({"/", "//", "/extra", "%00", "/..", std::string(3000, 'a')});

@@ -191,6 +191,11 @@ std::vector<Row> rows(const std::int64_t model_run) {
        [](const SweepRun& r) { return r.has_model() ? std::set<int>{200, 409} : std::set<int>{409}; },
        [model_run](const SweepRun& r) { return "/api/compare?a=" + std::to_string(r.id) + "&b=" + std::to_string(model_run); }},
       {"GET", "/api/limits", Access::viewer, always(200), fixed("/api/limits")},
+      {"GET", "/api/users", Access::operator_, always(200), fixed("/api/users")},
+      {"PUT", "/api/users/{user}", Access::operator_, always(200), fixed("/api/users/sweep-user"),
+       [](const SweepRun&) { return R"({"role": "viewer", "password": "sweep-password"})"; }},
+      {"DELETE", "/api/users/{user}", Access::operator_, [](const SweepRun&) { return std::set<int>{200, 404}; },
+       fixed("/api/users/sweep-user")},
       {"PUT", "/api/limits", Access::operator_, always(200), fixed("/api/limits"),
        [](const SweepRun&) { return R"({"format": "imucal-limits/1", "part_numbers": {"SWEEP": {"gyro.bias_dph": {"max_abs": 1}}}})"; }},
   };

@@ -471,6 +471,29 @@ TYPED_TEST(RegistryTest, StandsAreListedByName) {
   }
 }
 
+// The lab's accounts: put (replacing one of the same name), listed by name, removed once; another
+// stand's connection sees them (on SQLite the stand's own database is the only one).
+TYPED_TEST(RegistryTest, AccountsArePutReplacedListedAndRemoved) {
+  auto& reg = *this->registry_;
+  EXPECT_TRUE(reg.users().empty());
+  reg.put_user({"grace", "viewer", "$argon2id$hash-1", 1000, "ada"});
+  reg.put_user({"alan", "operator", "$argon2id$hash-2", 2000, "ada"});
+  reg.put_user({"grace", "operator", "$argon2id$hash-3", 3000, "alan"});  // replaced
+  auto other = this->store_.connect();
+  const auto users = other->users();
+  ASSERT_EQ(users.size(), 2U);
+  EXPECT_EQ(users[0].name, "alan");
+  EXPECT_EQ(users[1].name, "grace");
+  EXPECT_EQ(users[1].role, "operator");
+  EXPECT_EQ(users[1].password_hash, "$argon2id$hash-3");
+  EXPECT_EQ(users[1].changed_ms, 3000);
+  EXPECT_EQ(users[1].changed_by, "alan");
+  EXPECT_TRUE(reg.remove_user("grace"));
+  EXPECT_FALSE(reg.remove_user("grace"));
+  ASSERT_EQ(reg.users().size(), 1U);
+  EXPECT_ANY_THROW(reg.put_user({"eve", "admin", "$argon2id$h", 4000, "ada"}));  // no such role
+}
+
 // PostgreSQL's own: the schema is versioned and migrated once; a newer one is refused.
 class PostgresRegistrySchema : public ::testing::Test {
  protected:
