@@ -302,14 +302,14 @@ TEST_F(RegistryMigration, TheLabsLastEntriesDeletedAreFound) {
 
 // ---- The command line end to end ---------------------------------------------------------------
 
-struct Run {
+struct CliResult {
   int status = -1;
   std::string output;  // stdout and stderr
 };
 
-Run run_imucal(const std::string& args) {
+CliResult run_imucal(const std::string& args) {
   const std::string cmd = imucaltest::program("imucal") + " " + args + " 2>&1";
-  Run r;
+  CliResult r;
   FILE* p = popen(cmd.c_str(), "r");
   if (p == nullptr) return r;
   std::array<char, 4096> buf{};
@@ -319,13 +319,13 @@ Run run_imucal(const std::string& args) {
   return r;
 }
 
-std::string quoted(const std::string& s) { return "'" + s + "'"; }
+std::string shell_quoted(const std::string& s) { return "'" + s + "'"; }
 
 TEST_F(RegistryMigration, TheCommandLineMovesAStandInOnceAndVerifiesTheLabsChain) {
   stand_.close();
-  const std::string dir = quoted(stand_.dir());
-  const std::string to = " --to " + quoted(conninfo_) + " --stand stand-a --operator tester";
-  Run r = run_imucal("registry migrate " + dir + to + " --dry-run");
+  const std::string dir = shell_quoted(stand_.dir());
+  const std::string to = " --to " + shell_quoted(conninfo_) + " --stand stand-a --operator tester";
+  CliResult r = run_imucal("registry migrate " + dir + to + " --dry-run");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("dry run, nothing is written"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("issued certificates: 3 would be copied"), std::string::npos) << r.output;
@@ -342,7 +342,7 @@ TEST_F(RegistryMigration, TheCommandLineMovesAStandInOnceAndVerifiesTheLabsChain
   EXPECT_NE(r.output.find("nothing to copy"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("issued certificates: 0 copied, 3 skipped"), std::string::npos) << r.output;
 
-  r = run_imucal("audit verify --postgresql " + quoted(conninfo_));
+  r = run_imucal("audit verify --postgresql " + shell_quoted(conninfo_));
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("OK: the lab's audit trail intact: 6 entries"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("OK: stand 'stand-a''s own chain, as migrated into the lab's: audit trail intact: 5 entries"),
@@ -353,7 +353,7 @@ TEST_F(RegistryMigration, TheCommandLineMovesAStandInOnceAndVerifiesTheLabsChain
     superuser.exec_script("ALTER TABLE audit DISABLE TRIGGER audit_append_only; "
                           "UPDATE audit SET details_json = '{}' WHERE seq = 2");
   }
-  r = run_imucal("audit verify --postgresql " + quoted(conninfo_));
+  r = run_imucal("audit verify --postgresql " + shell_quoted(conninfo_));
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("FAILED: the lab's audit entry 2: changed after it was written"), std::string::npos)
       << r.output;
@@ -362,9 +362,9 @@ TEST_F(RegistryMigration, TheCommandLineMovesAStandInOnceAndVerifiesTheLabsChain
 
 TEST_F(RegistryMigration, TheCommandLineNamesWhatIsWrong) {
   stand_.close();
-  const std::string dir = quoted(stand_.dir());
+  const std::string dir = shell_quoted(stand_.dir());
   // A server away, a connection string that is none: named as --to's, nothing else said.
-  Run r = run_imucal("registry migrate " + dir + " --to 'host=/nonexistent/socket dbname=x' --stand s");
+  CliResult r = run_imucal("registry migrate " + dir + " --to 'host=/nonexistent/socket dbname=x' --stand s");
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("the lab's registry (--to): registry: cannot connect to the PostgreSQL server"),
             std::string::npos)
@@ -378,20 +378,20 @@ TEST_F(RegistryMigration, TheCommandLineNamesWhatIsWrong) {
     imucal::storage::pg::Connection raw(conninfo_, "test");
     raw.exec("UPDATE registry_schema SET version = $1", {99});
   }
-  r = run_imucal("registry migrate " + dir + " --to " + quoted(conninfo_) + " --stand s");
+  r = run_imucal("registry migrate " + dir + " --to " + shell_quoted(conninfo_) + " --stand s");
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("schema version 99, newer than this imucald supports"), std::string::npos) << r.output;
-  r = run_imucal("audit verify --postgresql " + quoted(conninfo_));
+  r = run_imucal("audit verify --postgresql " + shell_quoted(conninfo_));
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("schema version 99"), std::string::npos) << r.output;
   // No data directory; an imucald running on it; neither DATA_DIR nor --postgresql.
-  r = run_imucal("registry migrate /no/such/dir --to " + quoted(conninfo_));
+  r = run_imucal("registry migrate /no/such/dir --to " + shell_quoted(conninfo_));
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("no imucald database in '/no/such/dir'"), std::string::npos) << r.output;
   const int fd = ::open((stand_.dir() + "/imucald.lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
   ASSERT_GE(fd, 0);
   ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
-  r = run_imucal("registry migrate " + dir + " --to " + quoted(conninfo_) + " --stand s");
+  r = run_imucal("registry migrate " + dir + " --to " + shell_quoted(conninfo_) + " --stand s");
   ::close(fd);
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("an imucald is running on the data directory"), std::string::npos) << r.output;
@@ -431,12 +431,12 @@ TEST_F(RegistryMigration, TheOwnerMigratesTheSchemaAndTheStandsRoleWritesRowsOnl
   } catch (const DbError& e) {
     EXPECT_NE(std::string(e.what()).find("imucal registry init"), std::string::npos) << e.what();
   }
-  Run r = run_imucal("registry init --to " + quoted(as(owner)));
+  CliResult r = run_imucal("registry init --to " + shell_quoted(as(owner)));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("schema version " + std::to_string(PostgresRegistry::kSchemaVersion)), std::string::npos)
       << r.output;
   stand_.close();
-  r = run_imucal("registry migrate " + quoted(stand_.dir()) + " --to " + quoted(as(owner)) + " --stand stand-a");
+  r = run_imucal("registry migrate " + shell_quoted(stand_.dir()) + " --to " + shell_quoted(as(owner)) + " --stand stand-a");
   ASSERT_EQ(r.status, 0) << r.output;
 
   // A stand's every write, as its role.
@@ -460,7 +460,7 @@ TEST_F(RegistryMigration, TheOwnerMigratesTheSchemaAndTheStandsRoleWritesRowsOnl
   imucal::storage::pg::Connection stand_connection(as(stand_role), "test");
   EXPECT_THROW(stand_connection.exec("ALTER TABLE audit DISABLE TRIGGER audit_append_only"),
                imucal::storage::pg::PgError);
-  r = run_imucal("audit verify --postgresql " + quoted(as(stand_role)));
+  r = run_imucal("audit verify --postgresql " + shell_quoted(as(stand_role)));
   EXPECT_EQ(r.status, 0) << r.output;
 }
 
