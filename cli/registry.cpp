@@ -142,6 +142,11 @@ int run_registry_migrate(const RegistryMigrateArgs& a) {
   }
   for (const std::string& line : report.lines()) std::printf("  %s\n", line.c_str());
   if (!source.limits_json) std::printf("  note: no limits file at %s: no limits to move\n", settings.limits.string().c_str());
+  // A stand that ran on a lab's server already: what its journal holds is its imucald's to replay.
+  if (fs::exists(data_dir / "registry-journal.jsonl", ec))
+    std::printf("  note: %s holds registry-journal.jsonl: this stand wrote to a lab's registry already; the writes "
+                "waiting there are replayed by its imucald, not by this command\n",
+                a.data_dir.c_str());
   if (report.copied() == 0)
     std::printf("nothing to copy: the lab's registry holds all of it (%lld rows skipped)\n",
                 static_cast<long long>(report.skipped()));
