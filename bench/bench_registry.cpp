@@ -21,8 +21,8 @@
 
 #include "daemon/db/audit_chain.hpp"
 #include "daemon/db/daemon_db.hpp"
-#include "daemon/production/certificates.hpp"
 #include "daemon/registry/calibrations.hpp"
+#include "daemon/registry/certificate_sequence.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
 #include "tests/postgres_server.hpp"

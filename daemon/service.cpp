@@ -10,6 +10,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/analysis/analysis.hpp"
 #include "daemon/campaign/campaign.hpp"
 #include "daemon/http/http_server.hpp"
 #include "daemon/production/lab.hpp"
@@ -135,6 +136,7 @@ Service::Service(DaemonConfig config) : config_(std::move(config)) {
   auth_ = std::make_unique<Auth>(config_, config_.data_dir);
   sequencer_ = std::make_unique<Sequencer>(config_, *db_);
   assemble_certificates();
+  assemble_archive();
   api_ = std::make_unique<Api>(config_, *db_, *registry_, *sequencer_, *auth_, *audit_, *certificates_);
   // The audit trail: the configuration and the users this start loaded, then what recovery did.
   nlohmann::json users = nlohmann::json::array();
@@ -176,6 +178,26 @@ void Service::assemble_certificates() {
   sequencer_->subscribe(*calibrations_subscriber_);
 }
 
+// With registry.archive_dir: each run that ended leaves its bundle in the lab's shared archive
+// (production/lab.hpp names its places), for the stands whose unit pages link to it.
+void Service::assemble_archive() {
+  if (config_.registry.archive_dir.empty()) return;
+  archive_subscriber_ = std::make_unique<ArchiveSubscriber>(
+      [db = db_.get(), data_dir = config_.data_dir, archive = archive_dir_path(config_),
+       stand = registry_stand(config_)](std::int64_t id) {
+        const auto row = db->campaign(id);
+        if (!row || row->run_db.empty()) return;  // never started: nothing recorded
+        const auto run = std::filesystem::path(data_dir) / row->run_db;
+        if (!std::filesystem::exists(run)) return;
+        // The bundle of GET /api/campaigns/{id}/recording, under the same top folder, replaced whole.
+        const std::filesystem::path tar = archived_recording(archive, stand, id);
+        std::filesystem::create_directories(tar.parent_path());
+        write_recording_tar(run.string(), tar.string(), "campaign-" + std::to_string(id) + "-recording");
+        spdlog::info("campaign {}: its recording is archived as {}", id, tar.string());
+      });
+  sequencer_->subscribe(*archive_subscriber_);
+}
+
 Service::~Service() {
   stop();
   if (lock_fd_ >= 0) ::close(lock_fd_);
@@ -205,8 +227,13 @@ void Service::start_heartbeat() {
   identity.version = api_->status().at("version").get<std::string>();
   const auto period = std::chrono::milliseconds(std::max<std::int64_t>(
       1, static_cast<std::int64_t>(config_.registry.heartbeat_s * 1000.0)));
+  limits_follower_ = std::make_unique<LimitsFollower>(*registry_, *db_, *certificates_,
+                                                      [api = api_.get()] { return api->limits().document(); });
+  // Each beat also follows the lab's limits (limits_follower.hpp): one query, and reissues only
+  // when another stand put new ones.
   heartbeat_ = std::make_unique<StandHeartbeat>(*registry_, identity, period, [this] {
-    return stand_state_json(*db_, sequencer_->active_id());
+    limits_follower_->follow();
+    return stand_state_json(*db_, config_, sequencer_->active_id(), now_unix_ms());
   });
 }
 

@@ -16,10 +16,13 @@
 #include "daemon/http/static_files.hpp"
 #include "daemon/production/certificate_issuer.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/certificate_sequence.hpp"
+#include "daemon/production/limits_follower.hpp"
 #include "daemon/registry/audit_trail.hpp"
 #include "daemon/registry/registry.hpp"
 #include "daemon/registry/stand_heartbeat.hpp"
 #include "daemon/sequencer/sequencer.hpp"
+#include "daemon/subscribers/archive.hpp"
 #include "daemon/subscribers/calibrations.hpp"
 #include "daemon/subscribers/certificates.hpp"
 
@@ -59,6 +62,7 @@ class Service {
 
  private:
   void assemble_certificates();
+  void assemble_archive();
   void start_heartbeat();
 
   DaemonConfig config_;
@@ -76,6 +80,9 @@ class Service {
   std::unique_ptr<CertificatesSubscriber> certificates_subscriber_;
   // The units' calibrations recorded in the registry at each transition (same lifetime rule).
   std::unique_ptr<CalibrationsSubscriber> calibrations_subscriber_;
+  // The ended runs' bundles written to the lab's shared archive (registry.archive_dir; none
+  // without). Its thread reads the database: declared after it, so it goes first.
+  std::unique_ptr<ArchiveSubscriber> archive_subscriber_;
   std::unique_ptr<Sequencer> sequencer_;
   std::unique_ptr<Api> api_;
   std::unique_ptr<StaticFiles> files_;
@@ -83,6 +90,9 @@ class Service {
   // This stand's registration and state reports to the registry (issue 38, the lab overview):
   // started by start() once the port is known, stopped first by stop(), declared last so that it
   // goes before the sequencer and the database its state is read from.
+  // A lab's limits put on another stand: this stand's certificates follow them at its heartbeat
+  // (declared before it, so that it outlives the heartbeat's thread).
+  std::unique_ptr<LimitsFollower> limits_follower_;
   std::unique_ptr<StandHeartbeat> heartbeat_;
   bool stopped_ = false;
 };

@@ -50,8 +50,8 @@ struct SimImu::Impl {
   std::vector<std::uint8_t> garbage;
   std::vector<std::uint8_t> command_bytes;  // a byte stream's input, searched for commands
   // A pause is asked for (its length) and begun by this thread when it next sends: a loaded machine
-  // that holds the thread up meanwhile then cannot shorten it (the frames held up were sent late
-  // inside the pause, and the driver saw no stall).
+  // that holds the thread up meanwhile then cannot shorten the silence (the frames held up were
+  // sent late inside it, and the driver saw no stall).
   std::atomic<std::int64_t> pause_request_ns{0};
   std::atomic<std::int64_t> pause_until_ns{0}, pause_began_ns{0};
   std::atomic<double> temperature_C;
@@ -339,8 +339,9 @@ struct SimImu::Impl {
         pause_began_ns = now;
         pause_until_ns = now + asked;
       }
-      // Lost: what is due before the pause ends, the frames held up until it began included.
-      bool skip_it = send_at < pause_until_ns.load();
+      // Lost: what is due while it lasts. Frames held up until it began (a loaded machine) are
+      // still sent, late, before the silence.
+      bool skip_it = send_at >= pause_began_ns.load() && send_at < pause_until_ns.load();
       if (!skip_it && drop.load() > 0) {
         --drop;
         skip_it = true;

@@ -94,7 +94,8 @@ class SimImu {
   void drop_byte_of_next_sample();        // one byte of the next frame never leaves (streams)
   void drop_byte_of_next_samples(int count);  // the same for each of the next `count` frames
   void send_garbage(std::vector<std::uint8_t> bytes);  // written before the next frame
-  // Nothing sent for `duration` from the next frame on; samples due until then are lost.
+  // Nothing sent for `duration` from the next frame on (frames already due are sent first); the
+  // samples due meanwhile are lost.
   void pause(std::chrono::milliseconds duration);
   std::int64_t pause_began_ns() const;  // host time the last pause began; 0 before any
   void close_link();

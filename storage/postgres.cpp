@@ -130,7 +130,14 @@ std::int64_t Result::affected() const {
 // Connection
 
 Connection::Connection(const std::string& conninfo, std::string label) : label_(std::move(label)) {
-  conn_ = PQconnectdb(conninfo.c_str());
+  // Bounds a server that does not answer at all (a host switched off, a network black hole): libpq
+  // waits on the TCP stack's minutes otherwise, at connect and on a half-open connection. The
+  // connection string's own values win (libpq takes the last of a repeated keyword, and the string
+  // is expanded where `dbname` stands, after these).
+  static const char* const keywords[] = {"connect_timeout", "keepalives_idle", "keepalives_interval", "keepalives_count",
+                                         "tcp_user_timeout", "dbname", nullptr};
+  const char* const values[] = {"10", "10", "5", "3", "30000", conninfo.c_str(), nullptr};
+  conn_ = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
   if (conn_ == nullptr) throw PgError(label_ + ": cannot connect (out of memory)", "", true);
   if (PQstatus(conn_) != CONNECTION_OK) {
     const std::string message = trimmed(PQerrorMessage(conn_));

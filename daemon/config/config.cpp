@@ -265,6 +265,10 @@ void read_registry(const json& j, DaemonConfig& c, std::vector<std::string>& pro
     else c.registry.url = *v;
   }
   if (auto v = r.number_in("heartbeat_s", 0.05, 600)) c.registry.heartbeat_s = *v;
+  if (auto v = r.string("archive_dir")) {
+    if (v->empty()) problems.push_back(r.at("archive_dir") + " must name the lab's shared archive directory, or be left out");
+    else c.registry.archive_dir = *v;
+  }
 }
 
 void read_users(const json& j, DaemonConfig& c, std::vector<std::string>& problems) {
@@ -474,17 +478,19 @@ std::string stand_url(const DaemonConfig& config, std::uint16_t port) {
   return "http://" + host + ":" + std::to_string(port);
 }
 
-std::string certificate_sequence_path(const DaemonConfig& config) {
-  const std::filesystem::path file = config.certificates.sequence_file.empty() ? CertificateConfig::kDefaultSequenceFile
-                                                                               : config.certificates.sequence_file;
-  if (file.is_absolute()) return file.string();
-  return (std::filesystem::path(config.config_dir.empty() ? config.data_dir : config.config_dir) / file).string();
-}
-
-std::string signing_key_path(const DaemonConfig& config) {
-  const std::filesystem::path file = config.certificates.signing_key_file;
+std::string site_path(const DaemonConfig& config, const std::string& path) {
+  const std::filesystem::path file = path;
   if (file.empty() || file.is_absolute()) return file.string();
   return (std::filesystem::path(config.config_dir.empty() ? config.data_dir : config.config_dir) / file).string();
 }
+
+std::string certificate_sequence_path(const DaemonConfig& config) {
+  return site_path(config, config.certificates.sequence_file.empty() ? CertificateConfig::kDefaultSequenceFile
+                                                                     : config.certificates.sequence_file);
+}
+
+std::string signing_key_path(const DaemonConfig& config) { return site_path(config, config.certificates.signing_key_file); }
+
+std::string archive_dir_path(const DaemonConfig& config) { return site_path(config, config.registry.archive_dir); }
 
 }  // namespace imucal::daemon

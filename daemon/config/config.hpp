@@ -151,6 +151,10 @@ struct RegistryConfig {
   // stand_url's default), and how often it reports its state to the registry.
   std::string url;
   double heartbeat_s = 5.0;
+  // The lab's shared archive of recordings (a directory every stand mounts; empty: none): each
+  // ended run's bundle is written there, and a unit's history fetches another stand's recording
+  // from it (production/lab.hpp, subscribers/archive.hpp). Relative: to the configuration file's directory.
+  std::string archive_dir;
 };
 
 struct DaemonConfig {
@@ -215,12 +219,18 @@ std::string stand_url(const DaemonConfig& config, std::uint16_t port);
 // every run of other characters made one '-' ("simulated lab" -> "SIMULATED-LAB"), at most
 // 20 characters, else "IMUCAL".
 std::string certificate_prefix(const DaemonConfig& config);
+// A path that belongs to the site rather than to one data directory, as configured: resolved
+// against the configuration file's directory, or the data directory when the daemon runs without
+// a configuration file; an absolute or empty one as it is.
+std::string site_path(const DaemonConfig& config, const std::string& path);
 // The certificate sequence file: `certificates.sequence_file` (default kDefaultSequenceFile)
 // resolved against the configuration file's directory, or the data directory when the daemon
 // runs without a configuration file.
 std::string certificate_sequence_path(const DaemonConfig& config);
 // The signing key's path as configured, resolved as the sequence file's (empty: none configured).
 std::string signing_key_path(const DaemonConfig& config);
+// The lab's shared archive of recordings (`registry.archive_dir`), resolved the same way (empty: none).
+std::string archive_dir_path(const DaemonConfig& config);
 
 // "HOST:PORT" (port 0: any free port). Throws ConfigError.
 void parse_listen(const std::string& text, std::string& host, std::uint16_t& port);

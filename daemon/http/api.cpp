@@ -26,6 +26,7 @@
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/test_report.hpp"
 #include "daemon/production/lab.hpp"
+#include "daemon/production/limits_follower.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/registry/calibrations.hpp"
 #include "daemon/subscribers/alarms.hpp"
@@ -545,8 +546,11 @@ const std::vector<Api::Route>& Api::routes() {
          if (rows.empty()) return error_reply(404, "no campaign names the unit '" + c.args[0] + "'");
          json out = unit_detail_json(c.args[0], rows, a.limits_.current());
          out["gravity_corrected"] = gravity_corrected_certificates(a.registry_, a.config_, rows);
+         add_calibration_links(out, registry_stand(a.config_), a.registry_.stands(), archive_dir_path(a.config_));
          return json_reply(200, out);
        }},
+      {"GET", "/api/archive/{stand}/{campaign}/recording", A::viewer,
+       [](Api& a, const Call& c) { return a.archived_recording_reply(c.args[0], c.args[1]); }},
       {"GET", "/api/imus/{serial}/history.csv", A::viewer,
        [](Api& a, const Call& c) {
          const auto rows = a.registry_.unit_campaigns(c.args[0]);
@@ -919,16 +923,9 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   audit_.append(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
   // A certificate states its verdict: one that the new limits change is superseded. Only units of
   // the part numbers whose limits changed can have a new verdict (this runs on an HTTP thread).
-  const std::set<std::string> changed = changed_part_numbers(before, limits_.document());
-  for (const std::int64_t id : registry_.campaigns_with_issued()) {
-    const auto row = db_.campaign(id);
-    if (!row || !row->imu_part_number || !changed.contains(*row->imu_part_number)) continue;
-    try {
-      certificates_.issue(id, "acceptance limits changed by " + who.user);
-    } catch (const std::exception& e) {
-      spdlog::error("campaign {}: its certificate could not be reissued under the new limits: {}", id, e.what());
-    }
-  }
+  // (The lab's other stands reissue theirs when they see the new limits: production/limits_follower.hpp.)
+  reissue_under_new_limits(registry_, db_, certificates_, changed_part_numbers(before, limits_.document()),
+                           "acceptance limits changed by " + who.user);
   json doc = limits_.document();
   doc["source"] = limits_.current().source;
   return json_reply(200, doc);
@@ -1449,6 +1446,23 @@ HttpReply Api::campaign_recording(std::int64_t id) {
   if (!answer.ready) return job_reply(answer);
   jobs_->forget(key);
   return answer.status == 200 ? bundle.reply() : job_reply(answer);
+}
+
+// A bundle of the lab's shared archive (registry.archive_dir): any stand's run that ended, served
+// by this stand, so that a unit's history can fetch a recording whose stand is away.
+HttpReply Api::archived_recording_reply(const std::string& stand, const std::string& campaign) {
+  const std::string archive = archive_dir_path(config_);
+  if (archive.empty()) return error_reply(404, "this stand has no shared archive of recordings (registry.archive_dir)");
+  const auto id = parse_id(campaign);
+  if (!id) return error_reply(400, "the campaign must be a campaign id, not '" + campaign + "'");
+  RecordingExport bundle;
+  bundle.name = "campaign-" + std::to_string(*id) + "-recording";
+  bundle.tar = archived_recording(archive, stand, *id);
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(bundle.tar, ec))
+    return error_reply(404, "the lab's archive holds no recording of campaign " + std::to_string(*id) + " of stand '" +
+                                stand + "'");
+  return bundle.reply();
 }
 
 HttpReply Api::list_alarms(const std::map<std::string, std::string>& query) {

@@ -69,6 +69,8 @@ class Api {
   bool session_alive(const std::string& session_id) { return auth_.session_alive(session_id); }
   // From now on every change is refused with 503.
   void set_shutting_down() { shutting_down_ = true; }
+  // The acceptance limits in force (read from the registry at each call).
+  const LimitsFile& limits() const { return limits_; }
   // Where the analyses' progress is published ({"type": "analysis", ...}, docs/api.md).
   void set_event_listener(std::function<void(const nlohmann::json&)> listener);
   // A command to a campaign as a person gives it, through the API or `imucal campaign run`
@@ -118,6 +120,7 @@ class Api {
   // allan, thermal, evaluation: computed from the run file once the run has ended, then cached.
   HttpReply campaign_analysis(std::int64_t id, const std::string& what);
   std::string run_path(const CampaignRow& row) const;
+  HttpReply archived_recording_reply(const std::string& stand, const std::string& campaign);
   // 404 naming why when the campaign has no run file (never started, or not written yet).
   std::optional<HttpReply> no_recording(const CampaignRow& row, const std::string& prefix = "") const;
   HttpReply campaign_prompt(std::int64_t id, const ApiRequest& request, const Principal& who);

@@ -3,14 +3,11 @@
 // campaign (its reference equipment, the site's gravity and how it was obtained).
 //
 // A number is PREFIX-YYYY-NNNNNN: the site's prefix (configuration), the year of issue and a
-// site-wide sequence that never restarts (not even with the year). The sequence lives in a small
-// file of its own, outside the data directory: a lab that starts a new data directory keeps
-// counting. The file is replaced atomically (temporary file, fsync, rename) under an exclusive
-// lock, so two daemons sharing it never take the same number.
+// site-wide sequence that never restarts (not even with the year): the registry's
+// (registry/certificate_sequence.hpp for a stand alone, a database sequence in a lab's).
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -18,27 +15,6 @@
 #include "daemon/config/config.hpp"
 
 namespace imucal::daemon {
-
-class CertificateSequence {
- public:
-  // `path`: the sequence file (certificate_sequence_path). Nothing is read until next().
-  explicit CertificateSequence(std::string path);
-
-  // Takes the next number: one more than the larger of the file's last number and `floor` (the
-  // highest this daemon's database has issued, so that a sequence file restored from an old
-  // backup cannot hand out a number again). Throws std::runtime_error naming the file when it
-  // cannot be read or written: a certificate without a safe number is not issued. A crash
-  // between taking a number and recording it leaves a gap, never a repeat.
-  std::int64_t next(std::int64_t floor);
-  // The last number taken (0 when the file does not exist yet).
-  std::int64_t last() const;
-  const std::string& path() const { return path_; }
-
- private:
-  std::int64_t read_last() const;
-  std::string path_;
-  mutable std::mutex mutex_;  // one taker at a time in this process; the file lock for the rest
-};
 
 // "LAB-2026-000123" (at least six digits).
 std::string certificate_number(const std::string& prefix, int year, std::int64_t sequence);

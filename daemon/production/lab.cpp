@@ -1,6 +1,9 @@
 #include "daemon/production/lab.hpp"
 
 #include <algorithm>
+#include <cstdio>
+
+#include "daemon/production/reference_equipment.hpp"
 
 namespace imucal::daemon {
 
@@ -47,12 +50,16 @@ json alarms_json(DaemonDb& db) {
 
 }  // namespace
 
-json stand_state_json(DaemonDb& db, std::optional<std::int64_t> active_id) {
+json stand_state_json(DaemonDb& db, const DaemonConfig& config, std::optional<std::int64_t> active_id,
+                      std::int64_t now_ms) {
   json run = nullptr;
   if (active_id) {
     if (const auto row = db.campaign(*active_id)) run = run_json(*row);
   }
-  return {{"run", run}, {"queue", db.queue().size()}, {"alarms", alarms_json(db)}};
+  return {{"run", run},
+          {"queue", db.queue().size()},
+          {"alarms", alarms_json(db)},
+          {"equipment", reference_equipment_json(config, utc_day(now_ms), true)}};
 }
 
 json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const std::string& this_stand) {
@@ -73,9 +80,69 @@ json lab_json(const std::vector<StandRow>& stands, std::int64_t now_ms, const st
                    {"this", s.name == this_stand},
                    {"run", readable ? state.value("run", json()) : json()},
                    {"queue", readable ? state.value("queue", json(0)) : json(0)},
-                   {"alarms", readable ? state.value("alarms", json()) : json()}});
+                   {"alarms", readable ? state.value("alarms", json()) : json()},
+                   {"equipment", readable ? state.value("equipment", json()) : json()}});
   }
   return {{"stand", this_stand}, {"now", iso8601_utc(now_ms)}, {"stands", out}};
+}
+
+std::string archive_folder(const std::string& stand) {
+  if (stand == ".") return "%2E";
+  if (stand == "..") return "%2E%2E";
+  std::string out;
+  for (const char ch : stand) {
+    const auto c = static_cast<unsigned char>(ch);
+    const bool plain = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
+                       c == '_' || c == '-';
+    if (plain) {
+      out.push_back(ch);
+    } else {
+      char hex[4];
+      std::snprintf(hex, sizeof hex, "%%%02X", c);
+      out += hex;
+    }
+  }
+  return out.empty() ? std::string("%00") : out;  // an empty name has no folder of its own either
+}
+
+std::filesystem::path archived_recording(const std::string& archive_dir, const std::string& stand, std::int64_t campaign) {
+  return std::filesystem::path(archive_dir) / archive_folder(stand) /
+         ("campaign-" + std::to_string(campaign) + "-recording.tar");
+}
+
+json calibration_links(const std::string& stand, std::int64_t campaign, const std::string& this_stand,
+                       const std::vector<StandRow>& stands, bool archived) {
+  const std::string id = std::to_string(campaign);
+  if (stand == this_stand)
+    return {{"campaign_page", "#/campaigns/" + id}, {"recording", "/api/campaigns/" + id + "/recording"},
+            {"recording_from", "this stand"}, {"note", nullptr}};
+  const auto it = std::find_if(stands.begin(), stands.end(), [&](const StandRow& s) { return s.name == stand; });
+  std::string url = it == stands.end() ? std::string() : it->url;
+  while (!url.empty() && url.back() == '/') url.pop_back();
+  json out = {{"campaign_page", url.empty() ? json(nullptr) : json(url + "/#/campaigns/" + id)}, {"note", nullptr}};
+  if (archived) {
+    out["recording"] = "/api/archive/" + archive_folder(stand) + "/" + id + "/recording";
+    out["recording_from"] = "archive";
+  } else if (!url.empty()) {
+    out["recording"] = url + "/api/campaigns/" + id + "/recording";
+    out["recording_from"] = "stand " + stand;
+  } else {
+    out["recording"] = nullptr;
+    out["recording_from"] = nullptr;
+    out["note"] = "stand '" + stand + "' has no address in the registry and the lab's archive does not hold the recording";
+  }
+  return out;
+}
+
+void add_calibration_links(json& unit_detail, const std::string& this_stand, const std::vector<StandRow>& stands,
+                           const std::string& archive_dir) {
+  for (json& c : unit_detail.at("calibrations")) {
+    const std::string stand = c.value("stand", "");
+    const auto id = c.at("campaign_id").get<std::int64_t>();
+    std::error_code ec;
+    const bool archived = !archive_dir.empty() && std::filesystem::exists(archived_recording(archive_dir, stand, id), ec);
+    c["links"] = calibration_links(stand, id, this_stand, stands, archived);
+  }
 }
 
 }  // namespace imucal::daemon

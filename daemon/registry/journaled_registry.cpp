@@ -1,10 +1,5 @@
 #include "daemon/registry/journaled_registry.hpp"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <cstring>
 #include <deque>
 #include <filesystem>
@@ -17,6 +12,7 @@
 
 #include "daemon/registry/calibrations.hpp"
 #include "daemon/registry/postgres_registry.hpp"
+#include "storage/durable_file.hpp"
 
 namespace imucal::daemon {
 
@@ -33,46 +29,13 @@ using storage::pg::PgError;
                 "", true);
 }
 
-// A file descriptor closed when it goes.
-class OpenFile {
- public:
-  OpenFile(const std::string& path, int flags) : fd_(::open(path.c_str(), flags | O_CLOEXEC, 0600)) {}
-  ~OpenFile() {
-    if (fd_ >= 0) ::close(fd_);
+// A write of the journal's file (storage/durable_file.hpp), its failure the server's absence's.
+void durably(const std::string& path, const char* doing, const std::function<void()>& write) {
+  try {
+    write();
+  } catch (const storage::FileError& e) {
+    journal_failure(path, doing, e.error());
   }
-  OpenFile(const OpenFile&) = delete;
-  OpenFile& operator=(const OpenFile&) = delete;
-  int fd() const { return fd_; }
-
- private:
-  int fd_;
-};
-
-// All of `text` written, then fsynced: on the disk before the caller goes on. On a failure the
-// file is cut back to where it was, so that no half line stays in front of the next one.
-void write_durably(const OpenFile& file, const std::string& text, const std::string& path) {
-  if (file.fd() < 0) journal_failure(path, "opened", errno);
-  struct stat before {};
-  const bool sized = ::fstat(file.fd(), &before) == 0;
-  std::size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(file.fd(), text.data() + done, text.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) {
-      const int error = errno;
-      if (sized && ::ftruncate(file.fd(), before.st_size) != 0) spdlog::error("registry: {} cannot be cut back", path);
-      journal_failure(path, "written", error);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  if (::fsync(file.fd()) != 0) journal_failure(path, "synced to disk", errno);
-}
-
-// The rename of a replaced file on the disk too.
-void sync_directory_of(const std::string& path) {
-  const std::string dir = std::filesystem::path(path).parent_path().string();
-  const OpenFile directory(dir.empty() ? "." : dir, O_RDONLY | O_DIRECTORY);
-  if (directory.fd() >= 0) (void)::fsync(directory.fd());
 }
 
 // A journal's id: a journal whose file was lost starts numbering again under another id, and its
@@ -192,8 +155,7 @@ class RegistryJournal {
   // Numbers `entry`, adds it at the end and on the disk; its number.
   std::int64_t append(json entry) {
     entry["seq"] = next_seq_;
-    const OpenFile file(path_, O_WRONLY | O_APPEND | O_CREAT);
-    write_durably(file, entry.dump() + "\n", path_);
+    durably(path_, "written", [&] { storage::append_durably(path_, entry.dump() + "\n"); });
     entries_.push_back(std::move(entry));
     return next_seq_++;
   }
@@ -202,13 +164,7 @@ class RegistryJournal {
   void trim() {
     std::string text = json{{"imucal_registry_journal", 1}, {"id", id_}, {"next_seq", next_seq_}}.dump() + "\n";
     for (const json& entry : entries_) text += entry.dump() + "\n";
-    const std::string temporary = path_ + ".tmp";
-    {
-      const OpenFile file(temporary, O_WRONLY | O_CREAT | O_TRUNC);
-      write_durably(file, text, temporary);
-    }
-    if (std::rename(temporary.c_str(), path_.c_str()) != 0) journal_failure(path_, "replaced", errno);
-    sync_directory_of(path_);
+    durably(path_, "replaced", [&] { storage::replace_file_durably(path_, text, /*owner_only=*/true); });
   }
 
   // trim() whose failure is no caller's: the writes are applied (the server has them and their
@@ -225,8 +181,8 @@ class RegistryJournal {
   void set_aside(const json& entry, const std::string& why) {
     spdlog::error("registry: journaled write refused by the PostgreSQL server, kept in {}: {}: {}", refused_path(),
                   entry.dump(), why);
-    const OpenFile file(refused_path(), O_WRONLY | O_APPEND | O_CREAT);
-    write_durably(file, json{{"entry", entry}, {"refused", why}}.dump() + "\n", refused_path());
+    const std::string path = refused_path();
+    durably(path, "written", [&] { storage::append_durably(path, json{{"entry", entry}, {"refused", why}}.dump() + "\n"); });
   }
 
  private:
@@ -267,8 +223,9 @@ class RegistryJournal {
 JournaledRegistry::JournaledRegistry(Connect connect, std::string journal_path, Options options)
     : connect_(std::move(connect)),
       journal_path_(std::move(journal_path)),
-      options_(options),
-      journal_(std::make_unique<RegistryJournal>(journal_path_)) {
+      options_(std::move(options)),
+      journal_(std::make_unique<RegistryJournal>(journal_path_)),
+      direct_journal_(journal_->id() + "/direct/" + new_journal_id()) {
   pending_ = journal_->size();
   if (pending_ > 0)
     spdlog::warn("registry: {} writes wait in {} from before; they are replayed once the PostgreSQL server answers",
@@ -382,8 +339,12 @@ bool JournaledRegistry::replay() {
 bool JournaledRegistry::replay_one(const json& entry) {
   try {
     const std::int64_t seq = entry.at("seq").get<std::int64_t>();
-    if (!server_->apply_once(journal_->id(), seq, [this, &entry] { apply_journaled(*server_, entry); }))
-      spdlog::info("registry: journaled write {} was applied before its replay was interrupted: not again", seq);
+    // A write tried at once carries the key it was tried with (write()); the others their number here.
+    const json key = entry.value("key", json{{"journal", journal_->id()}, {"seq", seq}});
+    if (!server_->apply_once(key.at("journal").get<std::string>(), key.at("seq").get<std::int64_t>(),
+                             [this, &entry] { apply_journaled(*server_, entry); }))
+      spdlog::info("registry: journaled write {} was applied before (its replay interrupted, or its reply lost): not again",
+                   seq);
     answered();
   } catch (const PgError& e) {
     if (e.connection_lost()) {
@@ -398,8 +359,19 @@ bool JournaledRegistry::replay_one(const json& entry) {
 }
 
 void JournaledRegistry::write(const json& entry, const Call& apply) {
-  if (ready(false) && asked(apply)) return;
-  const std::int64_t seq = journal_->append(entry);
+  // Tried at once with a key of its own, committed with it (apply_once): when the connection
+  // breaks after the server committed and before its reply arrived, the write goes to the journal
+  // with that key, and its replay finds it applied (before, such a write was applied twice: an
+  // audit entry doubled). The keys' journal is this process's own, so a number is never reused.
+  const std::int64_t key_seq = ++direct_writes_;
+  const auto keyed = [&](PostgresRegistry& r) {
+    (void)r.apply_once(direct_journal_, key_seq, [&] { apply(r); });
+    if (options_.after_direct_write) options_.after_direct_write();
+  };
+  if (ready(false) && asked(keyed)) return;
+  json journaled = entry;
+  journaled["key"] = {{"journal", direct_journal_}, {"seq", key_seq}};
+  const std::int64_t seq = journal_->append(journaled);
   pending_ = journal_->size();
   spdlog::info("registry: {} journaled as write {} ({} waiting for the PostgreSQL server)",
                entry.at("write").get<std::string>(), seq, pending_.load());

@@ -48,6 +48,9 @@ class JournaledRegistry final : public Registry {
     // A thread of its own calls retry() this often (zero: none, the owner calls retry()): a
     // stand idle between runs makes no calls, and its journal would wait for the next one.
     std::chrono::milliseconds retry_every{0};
+    // The tests' seam for a reply lost on its way back: called after a write the server committed,
+    // before it is taken as answered; a PgError (connection lost) from it is such a loss.
+    std::function<void()> after_direct_write;
   };
 
   // Opens (or starts) the journal at `journal_path` and connects; a server away now is no error:
@@ -129,6 +132,10 @@ class JournaledRegistry final : public Registry {
   std::chrono::steady_clock::time_point last_attempt_{};
   std::atomic<bool> reachable_{false};
   std::atomic<std::int64_t> pending_{0};
+  // The keys of the writes tried at once: this process's own journal name (the journal's id and a
+  // random part: a restart never reuses a key), numbered from 1.
+  std::string direct_journal_;
+  std::int64_t direct_writes_ = 0;
   // retry_every's thread.
   std::mutex stop_mutex_;
   std::condition_variable stop_cv_;

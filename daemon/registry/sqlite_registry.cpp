@@ -1,44 +1,15 @@
 #include "daemon/registry/sqlite_registry.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <utility>
 
+#include "storage/durable_file.hpp"
+
 namespace imucal::daemon {
 
 namespace fs = std::filesystem;
-
-namespace {
-
-// Temporary file, fsync, rename: a crash leaves the old file or the new one, never half of one.
-void write_durably(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw storage::StorageError("cannot write " + tmp + ": " + std::strerror(errno));
-  std::size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) {
-      const std::string why = std::strerror(errno);
-      ::close(fd);
-      throw storage::StorageError("cannot write " + tmp + ": " + why);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  const bool synced = ::fsync(fd) == 0;
-  ::close(fd);
-  if (!synced) throw storage::StorageError("cannot write " + tmp + ": fsync failed");
-  fs::rename(tmp, path);
-}
-
-}  // namespace
 
 SqliteRegistry::SqliteRegistry(DaemonDb& db, TakeNumber take_number, std::string stand, std::string limits_path)
     : db_(db), take_number_(std::move(take_number)), stand_(std::move(stand)), limits_path_(std::move(limits_path)) {}
@@ -108,7 +79,7 @@ std::optional<std::string> SqliteRegistry::limits_document() {
 // The file is the stand's; who replaced it is in the audit trail (PUT /api/limits).
 void SqliteRegistry::put_limits_document(const std::string& document_json, const std::string&) {
   if (const fs::path dir = fs::path(limits_path_).parent_path(); !dir.empty()) fs::create_directories(dir);
-  write_durably(limits_path_, document_json);
+  storage::replace_file_durably(limits_path_, document_json);
 }
 
 }  // namespace imucal::daemon

@@ -1,6 +1,6 @@
 // The registry in the daemon's own SQLite database (registry.hpp): a stand alone, as before issue
 // 38. The tables are DaemonDb's; certificate numbers come from the site's sequence file
-// (production/certificates.hpp CertificateSequence), given here as the function that takes one
+// (registry/certificate_sequence.hpp CertificateSequence), given here as the function that takes one
 // above a floor, so that the numbering rule stays where it is. The units' calibrations are the
 // database's campaigns (named with this stand's name); the limits are the stand's limits file
 // (config.limits_file), replaced whole.

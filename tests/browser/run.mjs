@@ -1008,6 +1008,10 @@ try {
   await page.waitForSelector(`#unit-calibrations tr[data-id="${id}"]`);
   await page.waitForSelector('#unit-trend .uplot');
   assert.match(await page.textContent('#unit-info'), /Part number PN-BROWSER/);
+  // This stand's own run: its recording from here (issue 38's links).
+  assert.equal(await page.getAttribute(`#unit-calibrations tr[data-id="${id}"] a.recording-link`, 'href'),
+    `/api/campaigns/${id}/recording`);
+  assert.match(await page.textContent(`#unit-calibrations tr[data-id="${id}"] a.recording-link`), /this stand/);
   await shot(page, '09b-unit-page');
   assert.deepEqual(await layoutProblems(page), [], 'the unit page lays out at 1366x768');
   log('unit page of FOG-BROWSER-1: its calibrations and a coefficient\'s trend with its sigma');
@@ -1437,8 +1441,11 @@ try {
   await page.waitForSelector('#lab-rows tr[data-online="true"] a.stand-link');
   assert.match(await page.textContent('#lab-rows tr[data-online="true"]'), /\(this stand\).*online/s);
   assert.equal(await page.getAttribute('#lab-rows tr[data-online="true"] a.stand-link', 'href'), base);
+  // Its reference equipment as its heartbeat judged it: the rate table of the configuration.
+  await page.waitForSelector('#lab-rows tr[data-online="true"] .stand-equipment li[data-instrument="table"]');
+  assert.match(await page.textContent('#lab-rows tr[data-online="true"] .stand-equipment'), /rate table \(Acme Motion ATS-3/);
   assert.deepEqual(await layoutProblems(page), [], 'the lab page lays out at 1366x768');
-  log('lab page: this stand online, linked to its own page');
+  log('lab page: this stand online, linked to its own page, its reference equipment judged');
 
   // ---- 12 h of telemetry stays bounded ----
   const bounded = await page.evaluate(async () => {

@@ -19,6 +19,7 @@
 #include "core/expect_value.hpp"
 #include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/certificate_sequence.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "service_fixture.hpp"
 #include "signing/signing.hpp"

@@ -107,6 +107,7 @@ class Fuzzer {
       {"GET", "/api/imus", nullptr},
       {"GET", "/api/imus/{serial}", nullptr},
       {"GET", "/api/imus/{serial}/history.csv", nullptr},
+      {"GET", "/api/archive/{stand}/{campaign}/recording", nullptr},
       {"GET", "/api/compare", nullptr},
       {"GET", "/api/limits", nullptr},
       {"PUT", "/api/limits", R"({"format": "imucal-limits/1", "part_numbers": {"P": {"gyro.bias_dph": {"max_abs": 1, "max_sigma": 0.1}}}})"},
@@ -216,7 +217,8 @@ class Fuzzer {
       }
       const auto close = pattern.find('}', open);
       t += pattern.substr(pos, open - pos);
-      t += pattern.compare(open, close - open + 1, "{serial}") == 0 ? pick_of<std::string>({"F-1", "SIM-1", "%ff", "..", "a%2Fb", "x"}) : id();
+      const std::string slot = pattern.substr(open, close - open + 1);
+      t += slot == "{serial}" || slot == "{stand}" ? pick_of<std::string>({"F-1", "SIM-1", "%ff", "..", "a%2Fb", "x", "%2E%2E"}) : id();
       pos = close + 1;
     }
     if (chance(0.1)) t += pick_of<std::string>({"/", "//", "/extra", "%00", "/..", std::string(3000, 'a')});
@@ -269,6 +271,7 @@ TEST(Fuzz, EveryRequestIsA2xxOrA4xxNamingTheProblem) {
   LocalDaemon d("fuzz", true, [](daemon::DaemonConfig& c) {
     c.campaign.max_duration_s = 800;
     c.campaign.max_rate_hz = 20;
+    c.registry.archive_dir = c.data_dir + "-archive";  // GET /api/archive/... finds bundles, never outside it
   });
   const auto done = d.post_campaign({{"name", "fuzz: done"}, {"program", "direct-short"}, {"rate_hz", 10}, {"time_scale", 0},
                                      {"imu", {{"serial", "F-1"}}}, {"truth", noisy_truth()}});

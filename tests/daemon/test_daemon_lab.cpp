@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <filesystem>
 #include <functional>
 #include <string>
 
@@ -34,6 +35,23 @@ json wait_for_stand(LocalDaemon& d, const std::function<bool(const json&)>& pred
   }
   ADD_FAILURE() << "timed out waiting on this stand in GET /api/lab: " << last.dump().substr(0, 3000);
   return {};
+}
+
+// The lab's PostgreSQL server, one for this file's tests (each takes a database of its own).
+imucaltest::PostgresServer& lab_server() {
+  static imucaltest::PostgresServer server;
+  return server;
+}
+
+// How a stand joins the registry `conninfo` as `stand`, heartbeats every 0.1 s, then `more`.
+std::function<void(daemon::DaemonConfig&)> joins(const std::string& conninfo, const std::string& stand,
+                                                 std::function<void(daemon::DaemonConfig&)> more = {}) {
+  return [conninfo, stand, more](daemon::DaemonConfig& c) {
+    c.registry.postgresql = conninfo;
+    c.registry.stand = stand;
+    c.registry.heartbeat_s = 0.1;
+    if (more) more(c);
+  };
 }
 
 }  // namespace
@@ -145,17 +163,11 @@ TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
 // Issue 38's lab: two stands on one PostgreSQL registry each list both; a stand stopped shows
 // offline on the other's page once three of its heartbeats are missed.
 TEST(Lab, TwoStandsOnOnePostgresRegistrySeeEachOther) {
-  static imucaltest::PostgresServer server;
+  imucaltest::PostgresServer& server = lab_server();
   if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
   ASSERT_TRUE(server.running()) << server.error();
   const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("lab"));
-  const auto on_registry = [&](const std::string& stand) {
-    return [&, stand](daemon::DaemonConfig& c) {
-      c.registry.postgresql = conninfo;
-      c.registry.stand = stand;
-      c.registry.heartbeat_s = 0.1;
-    };
-  };
+  const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
   LocalDaemon a("lab-stand-a", false, on_registry("stand-a"));
   auto b = std::make_unique<LocalDaemon>("lab-stand-b", false, on_registry("stand-b"));
   const auto both_online = [&](LocalDaemon& d) {
@@ -208,4 +220,159 @@ TEST(Lab, TheStandsAddressIsConfiguredOrItsHttpServers) {
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("registry.url"), std::string::npos) << e.what();
   }
+}
+
+// A stand's name is free text; its folder in the archive (and its segment in the archive's URLs)
+// never climbs out, and two names never share one.
+TEST(Lab, AStandsArchiveFolderStaysInsideTheArchive) {
+  EXPECT_EQ(daemon::archive_folder("stand-1_a.b"), "stand-1_a.b");
+  EXPECT_EQ(daemon::archive_folder("bay 2/left"), "bay%202%2Fleft");
+  EXPECT_EQ(daemon::archive_folder(".."), "%2E%2E");
+  EXPECT_EQ(daemon::archive_folder("."), "%2E");
+  EXPECT_EQ(daemon::archive_folder("a%2Fb"), "a%252Fb");
+  EXPECT_NE(daemon::archive_folder("a b"), daemon::archive_folder("a%20b"));
+  EXPECT_EQ(daemon::archived_recording("/arch", "../x", 7).string(), "/arch/..%2Fx/campaign-7-recording.tar");
+}
+
+// Issue 38: a unit's history on one stand fetches another stand's recording from the lab's shared
+// archive (each stand writes its ended runs' bundles there), and without it from the stand that
+// holds it, at its registered address; that stand's campaign opens on that stand's page.
+TEST(Lab, AnotherStandsRecordingIsFetchedFromTheArchiveElseFromThatStand) {
+  imucaltest::PostgresServer& server = lab_server();
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("archive"));
+  const std::string archive = scratch_dir("lab-archive");
+  const auto on_registry = [&](const std::string& stand) {
+    return joins(conninfo, stand, [archive, stand](daemon::DaemonConfig& c) {
+      c.registry.url = "http://" + stand + ".lab:8080";
+      c.registry.archive_dir = archive;
+    });
+  };
+  LocalDaemon a("lab-archive-a", false, on_registry("stand-a"));
+  LocalDaemon b("lab-archive-b", false, on_registry("stand-b"));
+  const auto id = a.post_campaign({{"name", "archived"}, {"program", "direct-short"}, {"rate_hz", 10}, {"time_scale", 0},
+                                   {"imu", {{"serial", "ARCH-1"}}}});
+  ASSERT_EQ(a.command(id, "start"), 200);
+  ASSERT_EQ(a.wait_final(id, 300).at("state"), "done");
+  const std::filesystem::path bundle = daemon::archived_recording(archive, "stand-a", id);
+
+  // On stand b, once the bundle is in the archive: from there, served by b itself.
+  const auto links_on = [&](LocalDaemon& d, const std::function<bool(const json&)>& pred) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    json links;
+    while (std::chrono::steady_clock::now() < deadline) {
+      const json unit = d.get("/api/imus/ARCH-1");
+      if (unit.contains("calibrations") && !unit.at("calibrations").empty()) links = unit.at("calibrations")[0].at("links");
+      if (links.is_object() && pred(links)) return links;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ADD_FAILURE() << "links never as expected: " << links.dump();
+    return links;
+  };
+  const json from_archive = links_on(b, [](const json& l) { return l.at("recording_from") == "archive"; });
+  EXPECT_EQ(from_archive.at("recording"), "/api/archive/stand-a/" + std::to_string(id) + "/recording");
+  EXPECT_EQ(from_archive.at("campaign_page"), "http://stand-a.lab:8080/#/campaigns/" + std::to_string(id));
+  const auto fetched = b.call("GET", from_archive.at("recording").get<std::string>(), "", kViewerToken);
+  ASSERT_EQ(fetched.status, 200) << fetched.body;
+  EXPECT_EQ(fetched.file, bundle.string());
+  EXPECT_GT(std::filesystem::file_size(bundle), 1000u);
+  EXPECT_EQ(fetched.content_type, "application/x-tar");
+  // On stand a, its own run from itself.
+  const json own = links_on(a, [](const json& l) { return l.at("recording_from") == "this stand"; });
+  EXPECT_EQ(own.at("recording"), "/api/campaigns/" + std::to_string(id) + "/recording");
+  EXPECT_EQ(own.at("campaign_page"), "#/campaigns/" + std::to_string(id));
+
+  // The archive without it: from stand a, at its registered address.
+  std::filesystem::remove(bundle);
+  const json from_stand = links_on(b, [](const json& l) { return l.at("recording_from") == "stand stand-a"; });
+  EXPECT_EQ(from_stand.at("recording"), "http://stand-a.lab:8080/api/campaigns/" + std::to_string(id) + "/recording");
+  EXPECT_EQ(b.call("GET", "/api/archive/stand-a/" + std::to_string(id) + "/recording", "", kViewerToken).status, 404);
+  // Nothing outside the archive is served, whatever the stand's segment says.
+  for (const char* stand : {"..", "%2E%2E", "..%2F..", "%2Fetc"})
+    EXPECT_EQ(b.call("GET", std::string("/api/archive/") + stand + "/" + std::to_string(id) + "/recording", "", kViewerToken).status, 404)
+        << stand;
+}
+
+// Issue 38: the limits are the lab's. Put on stand b, they supersede stand a's certificate whose
+// verdict they change, at a's next heartbeat (b has none of a's to supersede); a's number comes
+// from the lab's sequence.
+TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
+  imucaltest::PostgresServer& server = lab_server();
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("limits"));
+  const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
+  LocalDaemon a("lab-limits-a", false, on_registry("stand-a"));
+  LocalDaemon b("lab-limits-b", false, on_registry("stand-b"));
+  const auto id = a.post_campaign({{"name", "judged"}, {"program", "direct-short"}, {"rate_hz", 10}, {"time_scale", 0},
+                                   {"imu", {{"serial", "LIM-1"}, {"part_number", "PN-LAB"}}}});
+  ASSERT_EQ(a.command(id, "start"), 200);
+  ASSERT_EQ(a.wait_final(id, 300).at("state"), "done");
+  const std::string target = "/api/campaigns/" + std::to_string(id) + "/certificate";
+  const auto certificate = [&] {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    json c = a.get(target);
+    while (!c.contains("number") && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      c = a.get(target);
+    }
+    return c;
+  };
+  const json first = certificate();
+  ASSERT_TRUE(first.contains("number")) << first.dump();
+  EXPECT_TRUE(first.at("content").at("campaign").at("verdict").is_null());
+
+  const json limits = {{"format", "imucal-limits/1"}, {"part_numbers", {{"PN-LAB", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+  ASSERT_EQ(b.call("PUT", "/api/limits", limits.dump()).status, 200);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  json now = certificate();
+  while (now.value("number", "") == first.at("number") && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    now = certificate();
+  }
+  ASSERT_NE(now.value("number", ""), first.at("number")) << "stand a's certificate was not superseded";
+  EXPECT_EQ(now.at("supersedes"), first.at("number"));
+  EXPECT_EQ(now.at("reason"), "acceptance limits changed in the lab's registry");
+  EXPECT_GT(now.at("sequence").get<std::int64_t>(), first.at("sequence").get<std::int64_t>());
+  EXPECT_TRUE(now.at("content").at("campaign").at("verdict").is_object()) << now.at("content").dump().substr(0, 600);
+  // Followed once: the next heartbeats leave it in force.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_EQ(certificate().at("number"), now.at("number"));
+}
+
+// Issue 38: each stand's reference equipment is in the lab's registry with its heartbeat: a stand
+// sees another stand's overdue rate table (and its own chamber in date) on GET /api/lab.
+TEST(Lab, EveryStandsReferenceEquipmentIsJudgedOnTheLabPage) {
+  imucaltest::PostgresServer& server = lab_server();
+  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
+  ASSERT_TRUE(server.running()) << server.error();
+  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("equipment"));
+  LocalDaemon a("lab-equipment-a", false, joins(conninfo, "stand-a", [](daemon::DaemonConfig& c) {
+    c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", "", ""};
+  }));
+  LocalDaemon b("lab-equipment-b", false, joins(conninfo, "stand-b", [](daemon::DaemonConfig& c) {
+    c.reference_equipment.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123", ""};
+  }));
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  json lab;
+  const auto reported = [&] {
+    const json& s = lab.at("stands");
+    return s.size() == 2 && s[0].at("equipment").is_object() && s[1].at("equipment").is_object();
+  };
+  while (std::chrono::steady_clock::now() < deadline) {
+    lab = a.get("/api/lab");
+    if (reported()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(reported()) << lab.dump();
+  const json& own = lab.at("stands")[0].at("equipment");
+  const json& other = lab.at("stands")[1].at("equipment");
+  EXPECT_TRUE(own.at("table").is_null());
+  EXPECT_FALSE(own.at("chamber").at("overdue").get<bool>());
+  EXPECT_TRUE(other.at("chamber").is_null());
+  EXPECT_EQ(other.at("table").at("serial"), "T-0815");
+  EXPECT_TRUE(other.at("table").at("overdue").get<bool>()) << other.dump();
+  EXPECT_NE(other.at("table").at("text").get<std::string>().find("was due for calibration on 2020-01-31"), std::string::npos)
+      << other.dump();
 }

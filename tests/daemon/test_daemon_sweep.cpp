@@ -182,6 +182,9 @@ std::vector<Row> rows(const std::int64_t model_run) {
       {"GET", "/api/imus", Access::viewer, always(200), fixed("/api/imus")},
       {"GET", "/api/imus/{serial}", Access::viewer, always(200),
        [](const SweepRun& r) { return "/api/imus/SWEEP-" + std::to_string(r.id); }},
+      // No shared archive in the sweep's configuration: 404 saying so (test_daemon_lab.cpp has one).
+      {"GET", "/api/archive/{stand}/{campaign}/recording", Access::viewer, always(404),
+       [](const SweepRun& r) { return "/api/archive/sweep-stand/" + std::to_string(r.id) + "/recording"; }},
       {"GET", "/api/imus/{serial}/history.csv", Access::viewer, always(200),
        [](const SweepRun& r) { return "/api/imus/SWEEP-" + std::to_string(r.id) + "/history.csv"; }},
       {"GET", "/api/compare", Access::viewer,

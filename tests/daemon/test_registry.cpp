@@ -17,6 +17,7 @@
 
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/production/certificates.hpp"
+#include "daemon/registry/certificate_sequence.hpp"
 #include "daemon/production/limits_file.hpp"
 #include "daemon/production/unit_registry.hpp"
 #include "daemon/registry/calibrations.hpp"
@@ -700,6 +701,43 @@ TEST_F(RegistryAway, WritesWaitInTheJournalAndArriveOnceInOrderWhenTheServerRetu
   EXPECT_EQ(reg->overdue_override(3).value_or(OverdueOverrideRow{}).by, "ada");
   EXPECT_EQ(reg->issued_page(certificate.number, true).value_or(IssuedPageRow{}).html, "<html>1</html>");
   EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 4000).seq, 4);
+}
+
+// A reply lost on its way back after the server committed a write (the connection broke between
+// the commit and its answer): the stand journals it, and its replay finds it applied by its key:
+// the audit entry and the calibration arrive once (before: the entry was chained twice).
+TEST_F(RegistryAway, AWriteWhoseReplyWasLostArrivesOnce) {
+  bool lose_next_reply = false;
+  JournaledRegistry::Options options;
+  options.call_retry_interval = std::chrono::milliseconds(0);
+  options.after_direct_write = [&] {
+    if (std::exchange(lose_next_reply, false))
+      throw imucal::storage::pg::PgError("registry: the reply was lost (test)", "", true);
+  };
+  auto reg = std::make_unique<JournaledRegistry>(
+      [conninfo = store_.conninfo()] { return std::make_unique<PostgresRegistry>(conninfo, "stand-a"); }, journal_,
+      options);
+  ASSERT_TRUE(reg->reachable());
+  EXPECT_EQ(reg->append_audit("ada", "first", "s", "{}", 1000).seq, 1);
+  lose_next_reply = true;
+  (void)reg->append_audit("ada", "reply.lost", "s", "{}", 2000);
+  EXPECT_FALSE(reg->reachable());  // taken for the server's absence: journaled
+  EXPECT_EQ(reg->pending_writes(), 1);
+  lose_next_reply = true;
+  CampaignRow row;
+  row.id = 7;
+  row.name = "lost reply";
+  row.imu_serial = "LOST-1";
+  reg->record_calibration(row);  // the entry replayed first (found applied), then this one's reply lost
+  EXPECT_EQ(reg->pending_writes(), 1);
+  EXPECT_TRUE(reg->retry());
+  EXPECT_EQ(reg->pending_writes(), 0);
+  const auto trail = direct()->audit_trail();
+  ASSERT_EQ(trail.size(), 2U) << "the entry whose reply was lost was applied again";
+  EXPECT_EQ(trail[1].action, "reply.lost");
+  EXPECT_TRUE(check_audit_chain(trail, direct()->audit_head()).ok());
+  EXPECT_EQ(direct()->unit_campaigns(std::string("LOST-1")).size(), 1U);
+  EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 3000).seq, 3);
 }
 
 // A unit's calibration recorded twice while the server is away (the run's end, then an

@@ -32,6 +32,20 @@ function alarmsCell(s) {
     h('span', {}, `${a.active} active, ${a.unacknowledged} not acknowledged`), h('ul', { class: 'compact' }, ...items));
 }
 
+// The stand's reference equipment as its heartbeat judged it today: each instrument's due date,
+// those overdue or due soon marked (the words are the daemon's, reference_equipment.hpp).
+function equipmentCell(s) {
+  const e = s.equipment;
+  if (!e) return h('span', { class: 'muted' }, 'not reported');
+  const items = ['table', 'chamber', 'gravity'].filter((k) => e[k]).map((k) => {
+    const i = e[k];
+    const cls = i.overdue ? 'result-bad' : i.due_soon ? 'warn-text' : '';
+    return h('li', { class: cls, dataset: { instrument: k, overdue: String(!!i.overdue) } }, i.text || `${k}: due ${i.calibration_due}`);
+  });
+  if (!items.length) return h('span', { class: 'muted' }, 'none configured');
+  return h('ul', { class: 'compact stand-equipment' }, ...items);
+}
+
 function standRow(s) {
   const online = h('span', { class: `badge ${s.online ? 'state-done' : 'state-failed'}`, 'data-online': String(s.online) },
     s.online ? 'online' : 'offline');
@@ -39,7 +53,8 @@ function standRow(s) {
     h('td', {}, standLink(s), h('div', { class: 'hint' }, `${s.bench}, imucal ${s.version}`)),
     h('td', {}, online, h('div', { class: 'hint', title: `registered ${dateTime(s.registered_at)}` }, `seen ${dateTime(s.last_seen)}`)),
     h('td', {}, runCell(s)),
-    h('td', {}, alarmsCell(s)));
+    h('td', {}, alarmsCell(s)),
+    h('td', {}, equipmentCell(s)));
 }
 
 export function mount(root) {
@@ -52,7 +67,8 @@ export function mount(root) {
     status,
     h('section', { class: 'card' },
       h('table', { class: 'list', id: 'lab-table' },
-        h('thead', {}, h('tr', {}, h('th', {}, 'Stand'), h('th', {}, 'Status'), h('th', {}, 'Run'), h('th', {}, 'Alarms'))),
+        h('thead', {}, h('tr', {}, h('th', {}, 'Stand'), h('th', {}, 'Status'), h('th', {}, 'Run'), h('th', {}, 'Alarms'),
+          h('th', {}, 'Reference equipment'))),
         body)));
 
   let stopped = false;
@@ -62,7 +78,7 @@ export function mount(root) {
       if (stopped) return;
       status.textContent = '';
       clear(body).append(...r.stands.map(standRow));
-      if (!r.stands.length) body.append(h('tr', {}, h('td', { colspan: 4, class: 'muted' }, 'No stand has registered yet.')));
+      if (!r.stands.length) body.append(h('tr', {}, h('td', { colspan: 5, class: 'muted' }, 'No stand has registered yet.')));
     } catch (e) {
       if (!stopped) status.textContent = `Cannot read the lab's stands: ${e.message}`;
     }

@@ -12,14 +12,30 @@ export function calibrationsCard() {
     h('table', { class: 'list', id: 'unit-table' },
       h('thead', {}, h('tr', {}, h('th', { class: 'num' }, '#'), h('th', {}, 'Stand'), h('th', {}, 'Name'), h('th', {}, 'Program'),
         h('th', {}, 'Ended'), h('th', {}, 'State'), h('th', {}, 'Counts as a calibration'), h('th', {}, 'Verdict'),
-        h('th', {}, 'Change since the previous'))),
+        h('th', {}, 'Change since the previous'), h('th', {}, 'Recording'))),
       body));
   const show = (calibrations) => clear(body).append(...calibrations.map((c) => h('tr', { dataset: { id: c.campaign_id, complete: String(c.complete) } },
-    h('td', { class: 'num' }, h('a', { href: `#/campaigns/${c.campaign_id}` }, c.campaign_id)),
+    h('td', { class: 'num' }, campaignLink(c)),
     h('td', {}, c.stand || ''), h('td', {}, c.name), h('td', {}, c.program), h('td', {}, dateTime(c.date)),
     h('td', {}, outcomeBadge(c)),
-    h('td', {}, counts(c)), h('td', {}, verdictCell(c.verdict)), h('td', {}, changeCell(c.change)))));
+    h('td', {}, counts(c)), h('td', {}, verdictCell(c.verdict)), h('td', {}, changeCell(c.change)),
+    h('td', {}, recordingLink(c)))));
   return { element, show };
+}
+
+// Another stand's campaign opens on that stand's own page (its id is that stand's), when the
+// registry knows its address.
+function campaignLink(c) {
+  const page = c.links ? c.links.campaign_page : `#/campaigns/${c.campaign_id}`;
+  return page ? h('a', { href: page, title: c.stand ? `on ${c.stand}` : '' }, c.campaign_id) : String(c.campaign_id);
+}
+
+// The recording from this stand, the lab's archive or the stand that holds it (GET /api/imus/{serial} links).
+function recordingLink(c) {
+  const l = c.links;
+  if (!l) return '';
+  if (!l.recording) return h('span', { class: 'small', title: l.note || '' }, 'not reachable');
+  return h('a', { href: l.recording, download: '', class: 'recording-link' }, `download (${l.recording_from})`);
 }
 
 function counts(c) {
