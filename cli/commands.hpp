@@ -67,9 +67,24 @@ int run_plan_optimize(const std::string& program_arg, const std::string& imu_pat
 int run_passwd();
 int run_keygen(const std::string& out_path);
 // key_path or fingerprint (not both): the lab's key; both empty: the key is not checked.
+// imucal registry migrate DATA_DIR --to CONNINFO (cli/registry.cpp).
+struct RegistryMigrateArgs {
+  std::string data_dir, to;
+  std::string config_file;    // the stand's imucald.json: its registry.stand and limits_file
+  std::string stand;          // overrides the configuration's (default: the host's name)
+  std::string limits_file;    // overrides the configuration's (default: DATA_DIR/limits.json)
+  std::string operator_name;  // who migrates, in the lab's audit trail (default: the login name)
+  bool dry_run = false;
+};
+
 int run_verify(const std::string& document_path, const std::string& key_path, const std::string& fingerprint);
 // imucal audit verify DATA_DIR: 0 when the audit trail holds, 1 naming the first entry that does not.
 int run_audit_verify(const std::string& data_dir);
+// imucal audit verify --postgresql CONNINFO: the lab's chain, and each stand's chain it took in.
+int run_audit_verify_postgresql(const std::string& conninfo);
+int run_registry_migrate(const RegistryMigrateArgs& a);
+// imucal registry init --to CONNINFO: the lab's registry's schema at this imucal's version.
+int run_registry_init(const std::string& conninfo);
 int run_export(const std::string& db_path, const std::string& dir);
 int run_import(const std::string& dir, const std::string& db_path);
 int run_campaign(const std::string& file, const daemon::CampaignRunOptions& options, bool json);

@@ -267,13 +267,46 @@ int main(int argc, char** argv) {
           },
           "FINGERPRINT"));
 
-  auto* audit = app.add_subcommand("audit", "The audit trail of an imucald data directory: audit verify");
+  auto* audit = app.add_subcommand("audit", "The audit trail of an imucald data directory or a lab's registry: audit verify");
   audit->require_subcommand(1);
-  std::string audit_dir;
+  std::string audit_dir, audit_postgresql;
   auto* audit_verify = audit->add_subcommand(
-      "verify", "Check the audit trail of DATA_DIR offline: every entry's hash, its link to the one before, no "
-                "gap, the recorded last entry; names the first entry that does not hold (exit status 1)");
-  audit_verify->add_option("data_dir", audit_dir, "imucald's data directory (holding imucald.db)")->required();
+      "verify", "Check the audit trail of DATA_DIR, or of the lab's PostgreSQL registry, offline: every entry's "
+                "hash, its link to the one before, no gap, the recorded last entry; names the first entry that does "
+                "not hold (exit status 1)");
+  auto* audit_dir_opt = audit_verify->add_option("data_dir", audit_dir, "imucald's data directory (holding imucald.db)");
+  audit_verify
+      ->add_option("--postgresql", audit_postgresql,
+                   "instead of DATA_DIR: the lab's registry, a libpq connection string (as registry.postgresql); "
+                   "also checks each stand's chain moved in by imucal registry migrate")
+      ->excludes(audit_dir_opt);
+
+  auto* registry = app.add_subcommand("registry", "The lab's registry (issue 38): registry init, registry migrate");
+  registry->require_subcommand(1);
+  std::string init_to;
+  auto* registry_init = registry->add_subcommand(
+      "init", "Create the lab's PostgreSQL registry's schema, or migrate it to this imucal's version, as its owner "
+              "role (stands connect with a role that may not)");
+  registry_init->add_option("--to", init_to, "the lab's registry: a libpq connection string of its owner role")
+      ->required();
+  cli::RegistryMigrateArgs migrate_args;
+  auto* migrate = registry->add_subcommand(
+      "migrate", "Move a stand's registry (certificates, pages, overdue overrides, calibrations, limits, audit trail) "
+                 "from its data directory into the lab's PostgreSQL registry; imucald must be stopped there. Copies "
+                 "nothing twice");
+  migrate->add_option("data_dir", migrate_args.data_dir, "the stand's data directory (holding imucald.db)")->required();
+  migrate->add_option("--to", migrate_args.to, "the lab's registry: a libpq connection string (as registry.postgresql)")
+      ->required();
+  migrate->add_option("--config", migrate_args.config_file,
+                      "the stand's imucald configuration: its registry.stand and limits_file")
+      ->check(CLI::ExistingFile);
+  migrate->add_option("--stand", migrate_args.stand,
+                      "the stand's name in the lab (registry.stand; default: the configuration's, else the host's name)");
+  migrate->add_option("--limits", migrate_args.limits_file,
+                      "the stand's limits file (default: the configuration's limits_file, else DATA_DIR/limits.json)");
+  migrate->add_option("--operator", migrate_args.operator_name,
+                      "who migrates, for the lab's audit trail (default: the login name)");
+  migrate->add_flag("--dry-run", migrate_args.dry_run, "print what would be copied and write nothing");
 
   // bench record|read (storage): they run from CLI11's callbacks, inside CLI11_PARSE.
   auto* bench = app.add_subcommand("bench", "Benchmarks of the run storage: bench record, bench read");
@@ -296,7 +329,15 @@ int main(int argc, char** argv) {
     if (passwd->parsed()) return cli::run_passwd();
     if (keygen->parsed()) return cli::run_keygen(keygen_out);
     if (verify->parsed()) return cli::run_verify(verify_file, verify_key, verify_fingerprint);
-    if (audit_verify->parsed()) return cli::run_audit_verify(audit_dir);
+    if (audit_verify->parsed()) {
+      if (audit_dir.empty() == audit_postgresql.empty()) {
+        std::fprintf(stderr, "imucal audit verify: give DATA_DIR or --postgresql CONNINFO (one of them)\n");
+        return 2;
+      }
+      return audit_dir.empty() ? cli::run_audit_verify_postgresql(audit_postgresql) : cli::run_audit_verify(audit_dir);
+    }
+    if (migrate->parsed()) return cli::run_registry_migrate(migrate_args);
+    if (registry_init->parsed()) return cli::run_registry_init(init_to);
     if (planc->parsed()) {
       plan_opt.settings.navigation.attitude_noise_rad = plan_table_attitude_arcsec * units::kArcsecToRad;
       if (!plan_table.empty()) plan_opt.table = table::read_table_certificate_file(plan_table);

@@ -25,7 +25,9 @@ namespace imucaltest {
 
 class PostgresServer {
  public:
-  PostgresServer() {
+  // `durable`: the server syncs its commits to the disk as a lab's server does (the registry's
+  // benchmark, bench/bench_registry.cpp); by default not (a test's data is scratch).
+  explicit PostgresServer(bool durable = false) : durable_(durable) {
     if (!find_binaries() || !choose_user()) return;
     start();
   }
@@ -156,8 +158,10 @@ class PostgresServer {
     running_ = true;
   }
 
-  // The server's options: its socket in dir_ only (no TCP), no fsync (a test's data is scratch).
-  std::string options() const { return "-k " + dir_ + " -c listen_addresses= -F -p " + std::to_string(kPort); }
+  // The server's options: its socket in dir_ only (no TCP), no fsync unless durable.
+  std::string options() const {
+    return "-k " + dir_ + " -c listen_addresses=" + (durable_ ? "" : " -F") + " -p " + std::to_string(kPort);
+  }
 
   void stop() {
     if (running_) run("'" + bin_ + "/pg_ctl' -D '" + dir_ + "/data' -m immediate -w stop");
@@ -172,6 +176,7 @@ class PostgresServer {
   uid_t uid_ = 0;
   gid_t gid_ = 0;
   bool running_ = false;
+  bool durable_ = false;
 };
 
 }  // namespace imucaltest

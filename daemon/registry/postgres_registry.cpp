@@ -183,6 +183,21 @@ class WriteScope {
   std::optional<Transaction> own_;
 };
 
+// The head recorded beside the trail ("SEQ SHA256"); a damaged value gives seq -1, which no trail
+// matches (as the SQLite registry reads it).
+std::optional<std::pair<std::int64_t, std::string>> read_audit_head(storage::pg::Connection& db) {
+  const Result r = db.exec("SELECT value FROM setting WHERE key = $1", {kAuditHeadKey});
+  if (r.rows() == 0) return std::nullopt;
+  const std::string text = r.text(0, 0);
+  const auto space = text.find(' ');
+  try {
+    if (space != std::string::npos)
+      return std::make_pair(static_cast<std::int64_t>(std::stoll(text.substr(0, space))), text.substr(space + 1));
+  } catch (const std::exception&) {
+  }
+  return std::make_pair(std::int64_t{-1}, text);
+}
+
 std::vector<AuditEntry> audit_rows(const Result& r) {
   std::vector<AuditEntry> out;
   for (int i = 0; i < r.rows(); ++i)
@@ -205,19 +220,29 @@ storage::pg::Connection& PostgresRegistry::db() {
   return db_;
 }
 
+// A registry at the current version is only read: the stands' login role needs no right to create
+// tables (docs/daemon.md "A lab of stands from scratch": the owner role migrates the schema).
 void PostgresRegistry::migrate() {
   std::lock_guard lock(mutex_);
   Transaction txn(db());
   db().exec("SELECT pg_advisory_xact_lock($1)", {kMigrationLock});
-  db().exec("CREATE TABLE IF NOT EXISTS registry_schema(version INTEGER NOT NULL)");
-  const auto version = static_cast<int>(db().exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0));
+  const bool exists = db().exec("SELECT to_regclass('registry_schema') IS NOT NULL").boolean(0, 0);
+  const int version =
+      exists ? static_cast<int>(db().exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0)) : 0;
   if (version > kSchemaVersion)
     throw DbError("registry: the PostgreSQL server's registry has schema version " + std::to_string(version) +
                   ", newer than this imucald supports (" + std::to_string(kSchemaVersion) + ")");
-  for (int v = version + 1; v <= kSchemaVersion; ++v) db().exec_script(kMigrations[v - 1]);
-  if (version != kSchemaVersion) {
+  if (version == kSchemaVersion) return;  // nothing to write: the transaction ends empty
+  try {
+    if (!exists) db().exec("CREATE TABLE registry_schema(version INTEGER NOT NULL)");
+    for (int v = version + 1; v <= kSchemaVersion; ++v) db().exec_script(kMigrations[v - 1]);
     db().exec("DELETE FROM registry_schema");
     db().exec("INSERT INTO registry_schema(version) VALUES ($1)", {kSchemaVersion});
+  } catch (const storage::pg::PgError& e) {
+    if (e.sqlstate() != "42501") throw;  // insufficient_privilege: said in the lab's words
+    throw DbError("registry: the registry's schema is at version " + std::to_string(version) + " and this imucal needs " +
+                  std::to_string(kSchemaVersion) + ", but its role may not change the schema (" + e.what() +
+                  "): migrate it first as the registry's owner (imucal registry init --to 'OWNER CONNINFO')");
   }
   txn.commit();
 }
@@ -395,16 +420,7 @@ std::vector<AuditEntry> PostgresRegistry::audit_trail() {
 
 std::optional<std::pair<std::int64_t, std::string>> PostgresRegistry::audit_head() {
   std::lock_guard lock(mutex_);
-  const Result r = db().exec("SELECT value FROM setting WHERE key = $1", {kAuditHeadKey});
-  if (r.rows() == 0) return std::nullopt;
-  const std::string text = r.text(0, 0);
-  // "SEQ SHA256"; a damaged value gives seq -1, which no trail matches (as the SQLite registry reads it).
-  const auto space = text.find(' ');
-  try {
-    if (space != std::string::npos) return std::make_pair(static_cast<std::int64_t>(std::stoll(text.substr(0, space))), text.substr(space + 1));
-  } catch (const std::exception&) {
-  }
-  return std::make_pair(std::int64_t{-1}, text);
+  return read_audit_head(db());
 }
 
 // ---- Stands (issue 38, the lab overview) ----
@@ -500,6 +516,54 @@ void PostgresRegistry::put_limits_document(const std::string& document_json, con
   std::lock_guard lock(mutex_);
   db().exec("INSERT INTO limits(document_json, stand, put_by, put_ms) VALUES ($1, $2, $3, $4)",
             {document_json, stand_, actor, now_unix_ms()});
+}
+
+// ---- A stand's registry moved in (registry_migration.hpp) ----
+
+void PostgresRegistry::in_one_transaction(const std::function<void()>& work, bool commit) {
+  std::lock_guard lock(mutex_);
+  Transaction txn(db());
+  work();
+  if (commit) txn.commit();
+}
+
+std::int64_t PostgresRegistry::last_certificate_sequence() {
+  std::lock_guard lock(mutex_);
+  return db().exec("SELECT CASE WHEN is_called THEN last_value ELSE 0 END FROM certificate_sequence").int64(0, 0);
+}
+
+std::int64_t PostgresRegistry::raise_certificate_sequence(std::int64_t at_least) {
+  std::lock_guard lock(mutex_);
+  if (at_least < 1) return last_certificate_sequence();
+  // setval(n, true): the next nextval is n + 1. GREATEST with the last one taken: never back, even
+  // past a number another stand took meanwhile.
+  return db()
+      .exec("SELECT setval('certificate_sequence', GREATEST($1::BIGINT, "
+            "(SELECT CASE WHEN is_called THEN last_value ELSE 0 END FROM certificate_sequence)), true)",
+            {at_least})
+      .int64(0, 0);
+}
+
+RegistryAuditTrail read_postgres_audit_trail(const std::string& conninfo) {
+  storage::pg::Connection db(conninfo, "registry");
+  // One snapshot for the entries and the head, and nothing written whatever the statements.
+  Transaction txn(db, true);
+  db.exec("SET TRANSACTION READ ONLY");
+  RegistryAuditTrail out;
+  if (db.exec("SELECT to_regclass('registry_schema') IS NOT NULL").boolean(0, 0))
+    out.schema_version = static_cast<int>(db.exec("SELECT COALESCE(MAX(version), 0) FROM registry_schema").int64(0, 0));
+  if (out.schema_version == 0)
+    throw DbError("registry: the database holds no imucal registry (no table registry_schema): is it the lab's?");
+  if (out.schema_version > PostgresRegistry::kSchemaVersion)
+    throw DbError("registry: the PostgreSQL server's registry has schema version " + std::to_string(out.schema_version) +
+                  ", newer than this imucal supports (" + std::to_string(PostgresRegistry::kSchemaVersion) + ")");
+  const Result r = db.exec("SELECT seq, t_ms, actor, action, subject, details_json, prev_sha256, sha256, stand "
+                           "FROM audit ORDER BY seq");
+  out.entries = audit_rows(r);
+  for (int i = 0; i < r.rows(); ++i) out.stands.push_back(r.text(i, 8));
+  out.head = read_audit_head(db);
+  txn.commit();
+  return out;
 }
 
 }  // namespace imucal::daemon

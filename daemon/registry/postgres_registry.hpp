@@ -71,6 +71,17 @@ class PostgresRegistry final : public Registry {
   // twice. False, and nothing applied, when the key was recorded before.
   bool apply_once(const std::string& journal, std::int64_t seq, const std::function<void()>& write);
 
+  // ---- A stand's registry moved in (registry_migration.hpp, imucal registry migrate) ----------
+  // `work` (calls of this registry, on this thread) in one transaction, committed when `commit`,
+  // else rolled back (a dry run): a migration that fails half way leaves nothing behind.
+  void in_one_transaction(const std::function<void()>& work, bool commit);
+  // The last number certificate_sequence handed out (0: none yet).
+  std::int64_t last_certificate_sequence();
+  // Moves certificate_sequence so that the next number is above `at_least` (never back); the new
+  // last number. Not transactional (PostgreSQL's sequences never are): a rollback keeps it, which
+  // leaves a gap, never a repeat.
+  std::int64_t raise_certificate_sequence(std::int64_t at_least);
+
  private:
   void migrate();
   storage::pg::Connection& db();  // under mutex_
@@ -80,5 +91,17 @@ class PostgresRegistry final : public Registry {
   std::recursive_mutex mutex_;
   storage::pg::Connection db_;
 };
+
+// The lab's audit trail and the head recorded beside it, read in one snapshot (stands appending
+// meanwhile cannot make the head look ahead of the entries) and read only: no schema migration,
+// nothing written. For `imucal audit verify --postgresql`. Throws storage::pg::PgError when the
+// server cannot be reached, DbError when the database holds no registry or a newer schema.
+struct RegistryAuditTrail {
+  std::vector<AuditEntry> entries;
+  std::optional<std::pair<std::int64_t, std::string>> head;
+  std::vector<std::string> stands;  // each entry's stand, beside `entries`
+  int schema_version = 0;
+};
+RegistryAuditTrail read_postgres_audit_trail(const std::string& conninfo);
 
 }  // namespace imucal::daemon

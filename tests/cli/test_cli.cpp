@@ -49,7 +49,8 @@ fs::path fresh_dir(const std::string& name) {
 
 TEST(Cli, HelpAndBadArguments) {
   EXPECT_EQ(run("--help").status, 0);
-  for (const char* sub : {"simulate", "navigate", "calibrate", "export", "import", "evaluate", "keygen", "verify", "audit verify"})
+  for (const char* sub : {"simulate", "navigate", "calibrate", "export", "import", "evaluate", "keygen", "verify", "audit verify",
+                          "registry init", "registry migrate"})
     EXPECT_EQ(run(std::string(sub) + " --help").status, 0) << sub;
   const CliRun bad = run("simulate --program direct --db x.db --rate -5");
   EXPECT_NE(bad.status, 0);
