@@ -328,11 +328,12 @@ TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
   ASSERT_EQ(b.call("PUT", "/api/limits", limits.dump()).status, 200);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   json now = certificate();
-  while (now.value("number", "") == first.at("number") && std::chrono::steady_clock::now() < deadline) {
+  const std::string first_number = first.at("number").get<std::string>();
+  while (now.value("number", "") == first_number && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     now = certificate();
   }
-  ASSERT_NE(now.value("number", ""), first.at("number")) << "stand a's certificate was not superseded";
+  ASSERT_NE(now.value("number", ""), first_number) << "stand a's certificate was not superseded";
   EXPECT_EQ(now.at("supersedes"), first.at("number"));
   EXPECT_EQ(now.at("reason"), "acceptance limits changed in the lab's registry");
   EXPECT_GT(now.at("sequence").get<std::int64_t>(), first.at("sequence").get<std::int64_t>());

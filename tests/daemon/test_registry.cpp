@@ -763,6 +763,26 @@ TEST_F(RegistryAway, AWriteWhoseReplyWasLostArrivesOnce) {
   EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 3000).seq, 3);
 }
 
+// The lab's accounts put and removed while the server is away arrive in order, with the time
+// they were changed (written by helper-27's branch `users`, adapted).
+TEST_F(RegistryAway, AccountsPutAndRemovedWhileTheServerIsAwayArriveInOrder) {
+  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  auto reg = journaled();
+  reg->put_user({"grace", "viewer", "$hash", 1000, "ada"});
+  reg->put_user({"linus", "viewer", "$hash", 2000, "ada"});
+  EXPECT_TRUE(reg->remove_user("linus"));
+  EXPECT_EQ(reg->pending_writes(), 3);
+  expect_unreachable([&] { reg->users(); }, 3);
+  ASSERT_TRUE(postgres_server().start_again());
+  EXPECT_TRUE(reg->retry());
+  EXPECT_EQ(reg->pending_writes(), 0);
+  const auto users = direct()->users();
+  ASSERT_EQ(users.size(), 1U);
+  EXPECT_EQ(users[0].name, "grace");
+  EXPECT_EQ(users[0].changed_ms, 1000);
+  EXPECT_EQ(users[0].changed_by, "ada");
+}
+
 // A unit's calibration recorded twice while the server is away (the run's end, then an
 // operator's acceptance) and the limits put meanwhile arrive once, in order: the server has the
 // later row. The limits last read judge meanwhile.
