@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iostream>
 #include <iterator>
 #include <map>
 #include <memory>
@@ -390,6 +391,8 @@ void expect_journal_applied_once(const Stand& s, const std::string& conninfo, st
   const auto applied = pg.exec("SELECT seq FROM registry_journal_applied WHERE stand = $1 ORDER BY seq", {s.name});
   ASSERT_EQ(applied.rows(), journaled);
   for (int i = 0; i < applied.rows(); ++i) EXPECT_EQ(applied.int64(i, 0), i + 1);
+  std::cout << "[ lab      ] " << s.name << ": " << journaled << " registry writes journaled while the server was away ("
+            << waited << " waiting when it returned), each applied once\n";
 }
 
 // The campaign's transitions as the stand's own database recorded them, in order, as audit keys
