@@ -42,7 +42,8 @@ class Registry {
   // certificates state. Here the number, then this stand's clock: one stand's issues are ordered
   // (the issuer takes them one at a time). A store several stands share takes both under one lock
   // of its own (PostgresRegistry): taken apart, stand a's number N and stand b's N+1 could state
-  // b's issue as the earlier, had a's thread been held up between its number and its clock.
+  // b's issue as the earlier, had a's thread been held up between its number and its clock. (Two
+  // daemons sharing one sequence file on SQLite still take them apart: not yet mended.)
   struct CertificateNumber {
     std::int64_t sequence = 0;
     std::int64_t issued_ms = 0;
