@@ -126,8 +126,11 @@ IssuedCertificateRow CertificateIssuer::freeze_legacy(const CampaignRow& row, co
 IssuedCertificateRow CertificateIssuer::numbered(std::int64_t campaign_id, const std::string& reason) {
   IssuedCertificateRow c;
   c.campaign_id = campaign_id;
-  c.sequence = registry_.next_certificate_sequence();
-  c.issued_ms = now_unix_ms();
+  // The number and its time as one step of the registry: numbers follow the times of issue across
+  // the stands sharing it (registry.hpp take_certificate_number).
+  const Registry::CertificateNumber taken = registry_.take_certificate_number();
+  c.sequence = taken.sequence;
+  c.issued_ms = taken.issued_ms;
   c.number = certificate_number(certificate_prefix(config_), std::stoi(iso8601_utc(c.issued_ms).substr(0, 4)), c.sequence);
   c.reason = reason;
   return c;
@@ -146,12 +149,15 @@ IssuedCertificateRow CertificateIssuer::store_issued(IssuedCertificateRow c, jso
   c.content_sha256 = signing::sha256_hex(c.content_json);
   if (signing_key_) c.signed_json = signing::sign_document(content, signing::kCertificate, *signing_key_).dump();
   registry_.insert_issued(c);
+  // Audited at the time the certificate states it was issued: the trail orders the issues as
+  // their numbers do, not as the stands' threads got to their entries.
   audit_.append("imucald", "certificate.issued", c.number,
                 {{"campaign", c.campaign_id}, {"reason", c.reason}, {"supersedes", supersedes},
-                 {"content_sha256", c.content_sha256}});
+                 {"content_sha256", c.content_sha256}},
+                c.issued_ms);
   if (supersedes.is_string())
     audit_.append("imucald", "certificate.superseded", supersedes.get<std::string>(),
-                  {{"campaign", c.campaign_id}, {"superseded_by", c.number}});
+                  {{"campaign", c.campaign_id}, {"superseded_by", c.number}}, c.issued_ms);
   spdlog::info("campaign {}: certificate {} issued ({}){}", c.campaign_id, c.number, c.reason,
                supersedes.is_string() ? ", superseding " + supersedes.get<std::string>() : std::string());
   return c;

@@ -7,9 +7,9 @@
 namespace imucal::daemon {
 
 void AuditTrail::append(const std::string& actor, const std::string& action, const std::string& subject,
-                        const nlohmann::json& details) const {
+                        const nlohmann::json& details, std::optional<std::int64_t> when) const {
   // The time it happened, not the time a deferred write gets to it.
-  const std::int64_t t_ms = now_unix_ms();
+  const std::int64_t t_ms = when.value_or(now_unix_ms());
   try {
     write_("audit entry " + action + " " + subject + " by " + actor,
            [registry = &registry_, actor, action, subject, text = details.dump(), t_ms] {

@@ -4,7 +4,9 @@
 // behind the run's own deferred writes, and is chained when space returns.
 #pragma once
 
+#include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -23,9 +25,9 @@ class AuditTrail {
   AuditTrail(Registry& registry, OrderedWrite write) : registry_(registry), write_(std::move(write)) {}
 
   // Appends an entry; a failure is logged, never thrown at the caller: the change it records is
-  // made already.
+  // made already. `t_ms`: when it happened, when not now (a certificate's time of issue).
   void append(const std::string& actor, const std::string& action, const std::string& subject,
-              const nlohmann::json& details) const;
+              const nlohmann::json& details, std::optional<std::int64_t> t_ms = std::nullopt) const;
 
  private:
   Registry& registry_;

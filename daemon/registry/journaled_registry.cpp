@@ -399,6 +399,13 @@ std::int64_t JournaledRegistry::next_certificate_sequence() {
   return out;
 }
 
+Registry::CertificateNumber JournaledRegistry::take_certificate_number() {
+  std::lock_guard lock(mutex_);
+  CertificateNumber out;
+  read("a certificate number", [&](PostgresRegistry& r) { out = r.take_certificate_number(); });
+  return out;
+}
+
 std::int64_t JournaledRegistry::max_certificate_sequence() {
   std::lock_guard lock(mutex_);
   std::int64_t out = 0;

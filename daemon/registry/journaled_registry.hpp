@@ -63,6 +63,8 @@ class JournaledRegistry final : public Registry {
   // then issued at its first request, api.cpp campaign_certificate).
   std::int64_t next_certificate_sequence() override;
   std::int64_t max_certificate_sequence() override;
+  // The server's (PostgresRegistry::take_certificate_number); throws while it is away, as above.
+  CertificateNumber take_certificate_number() override;
   std::optional<CertificateRow> certificate(std::int64_t campaign_id) override;
   void insert_certificate(const CertificateRow& row) override;
   void insert_issued(const IssuedCertificateRow& row) override;

@@ -13,9 +13,11 @@ using storage::pg::Result;
 using storage::pg::Transaction;
 
 // Advisory locks of the registry (pg_advisory_xact_lock): one migration at a time, one audit
-// append at a time (the chain is one line for every stand).
+// append at a time (the chain is one line for every stand), one certificate number and its time
+// at a time (take_certificate_number).
 constexpr std::int64_t kMigrationLock = 380001;
 constexpr std::int64_t kAuditLock = 380002;
+constexpr std::int64_t kCertificateNumberLock = 380003;
 
 // Version 1. The rules the SQLite database's triggers keep (an issued certificate, a page and the
 // audit trail never change and are never deleted; superseded once) are kept by triggers here too.
@@ -270,6 +272,21 @@ bool PostgresRegistry::apply_once(const std::string& journal, std::int64_t seq, 
 std::int64_t PostgresRegistry::next_certificate_sequence() {
   std::lock_guard lock(mutex_);
   return db().exec("SELECT nextval('certificate_sequence')").int64(0, 0);
+}
+
+// Issue 38's acceptance found the numbers of three stands issuing at once could state their
+// issues out of order: nextval and then each stand's clock, two steps. Both are taken here under
+// one lock, with one clock for every stand (the server's), so a later number is never an earlier
+// issue. (A number is still taken whether or not its transaction commits: a sequence is not
+// transactional, and a failed issue leaves a gap, as before.)
+Registry::CertificateNumber PostgresRegistry::take_certificate_number() {
+  std::lock_guard lock(mutex_);
+  WriteScope txn(db());
+  db().exec("SELECT pg_advisory_xact_lock($1)", {kCertificateNumberLock});
+  const Result r = db().exec(
+      "SELECT nextval('certificate_sequence'), FLOOR(EXTRACT(EPOCH FROM clock_timestamp()) * 1000)::BIGINT");
+  txn.commit();
+  return {r.int64(0, 0), r.int64(0, 1)};
 }
 
 std::int64_t PostgresRegistry::max_certificate_sequence() {

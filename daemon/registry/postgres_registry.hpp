@@ -32,6 +32,8 @@ class PostgresRegistry final : public Registry {
   const std::string& stand() const { return stand_; }
   std::int64_t next_certificate_sequence() override;
   std::int64_t max_certificate_sequence() override;
+  // The number and the server's clock under one advisory lock (registry.hpp says why).
+  CertificateNumber take_certificate_number() override;
   std::optional<CertificateRow> certificate(std::int64_t campaign_id) override;
   void insert_certificate(const CertificateRow& row) override;
   void insert_issued(const IssuedCertificateRow& row) override;

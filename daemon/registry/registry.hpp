@@ -38,6 +38,20 @@ class Registry {
   virtual std::int64_t next_certificate_sequence() = 0;
   // The highest sequence number recorded (0: none), issued certificates and older numbers alike.
   virtual std::int64_t max_certificate_sequence() = 0;
+  // A new number with the time of its issue, taken as one step: numbers follow the times the
+  // certificates state. Here the number, then this stand's clock: one stand's issues are ordered
+  // (the issuer takes them one at a time). A store several stands share takes both under one lock
+  // of its own (PostgresRegistry): taken apart, stand a's number N and stand b's N+1 could state
+  // b's issue as the earlier, had a's thread been held up between its number and its clock. (Two
+  // daemons sharing one sequence file on SQLite still take them apart: not yet mended.)
+  struct CertificateNumber {
+    std::int64_t sequence = 0;
+    std::int64_t issued_ms = 0;
+  };
+  virtual CertificateNumber take_certificate_number() {
+    const std::int64_t sequence = next_certificate_sequence();
+    return {sequence, now_unix_ms()};
+  }
 
   // A campaign's certificate number of before issue 35 (kept as it was issued).
   virtual std::optional<CertificateRow> certificate(std::int64_t campaign_id) = 0;
