@@ -540,8 +540,9 @@ TEST_F(PostgresRegistrySchema, EachStandSeesItsOwnCampaigns) {
   EXPECT_TRUE(a.issued(issued(2, 1).number));  // a number is the lab's: found from any stand
 }
 
-// A registry of version 2 (before the units' calibrations and the limits, and the stands) is
-// migrated to the current version by the next imucald that connects, keeping what it held.
+// A registry of version 2 (before the units' calibrations and the limits, the stands and the
+// accounts) is migrated to the current version by the next imucald that connects, keeping what it
+// held.
 TEST_F(PostgresRegistrySchema, AVersion2RegistryGainsTheCalibrationsAndTheLimits) {
   {
     PostgresRegistry first(store_.conninfo(), "stand-a");
@@ -549,7 +550,7 @@ TEST_F(PostgresRegistrySchema, AVersion2RegistryGainsTheCalibrationsAndTheLimits
   }
   {
     imucal::storage::pg::Connection raw(store_.conninfo(), "test");
-    raw.exec_script("DROP TABLE calibration; DROP TABLE limits; DROP TABLE stand; UPDATE registry_schema SET version = 2;");
+    raw.exec_script("DROP TABLE calibration; DROP TABLE limits; DROP TABLE stand; DROP TABLE lab_user; UPDATE registry_schema SET version = 2;");
   }
   PostgresRegistry again(store_.conninfo(), "stand-a");
   EXPECT_EQ(again.schema_version(), PostgresRegistry::kSchemaVersion);
