@@ -143,6 +143,26 @@ class Copier {
     }
   }
 
+  // The stand's own accounts of the lab kind: an account the lab has under that name already is
+  // the lab's (kept, said in a note when it differs), the others copied.
+  void accounts() {
+    MigrationCount& n = count("accounts");
+    std::map<std::string, UserRow> there;
+    for (const UserRow& u : lab_.users()) there[u.name] = u;
+    for (const UserRow& u : db_.users()) {
+      const auto it = there.find(u.name);
+      if (it == there.end()) {
+        lab_.put_user(u);
+        ++n.copied;
+        continue;
+      }
+      ++n.skipped;
+      if (it->second.role != u.role || it->second.password_hash != u.password_hash)
+        report_.notes.push_back("the lab's registry has an account '" + u.name + "' of its own, which differs from the "
+                                "stand's: it was kept");
+    }
+  }
+
   void limits() {
     MigrationCount& n = count("limits document");
     if (!src_.limits_json) return;
@@ -266,6 +286,7 @@ MigrationReport migrate_stand_registry(const StandRegistrySource& source, Postgr
         copier.printed_pages();
         copier.overdue_overrides();
         copier.calibrations();
+        copier.accounts();
         copier.limits();
         copier.audit_trail(chain);
         copier.summary_entry(chain);

@@ -90,6 +90,7 @@ class StandDir {
     db_->append_audit("ada", "campaign.override_overdue", "campaign 2", R"({"reason":"the table is fine"})", 12);
     db_->append_audit("imucald", "certificate.issued", "LAB-2026-000004", "{}", 13);
     db_->append_audit("ada", "limits.replaced", "limits", R"({"before":{},"after":{"n":1}})", 14);
+    db_->put_user({"grace", "viewer", "$argon2id$grace", 15, "ada"});  // a lab account of the stand's
     std::ofstream(dir_ + "/limits.json") << kLimits;
   }
 
@@ -143,6 +144,7 @@ TEST_F(RegistryMigration, AStandsRegistryMovesInWholeAndASecondRunCopiesNothing)
   EXPECT_EQ(first.count("overdue overrides").copied, 1);
   EXPECT_EQ(first.count("calibrations").copied, 3);
   EXPECT_EQ(first.count("limits document").copied, 1);
+  EXPECT_EQ(first.count("accounts").copied, 1);
   EXPECT_EQ(first.count("audit entries").copied, 5);
   EXPECT_EQ(first.first_lab_audit_seq, 2);
   EXPECT_EQ(first.last_lab_audit_seq, 7);  // and the migration's own entry
@@ -163,6 +165,8 @@ TEST_F(RegistryMigration, AStandsRegistryMovesInWholeAndASecondRunCopiesNothing)
   EXPECT_EQ(fog1[0].stand, "stand-a");
   EXPECT_EQ(fog1[0].model_json, R"({"format":"imucal-imu-model/1"})");
   EXPECT_EQ(reg->limits_document(), std::optional<std::string>(kLimits));
+  ASSERT_EQ(reg->users().size(), 1U);
+  EXPECT_EQ(reg->users()[0].password_hash, "$argon2id$grace");
   // The numbers go on past the stand's highest, from any stand.
   EXPECT_EQ(first.highest_sequence, 4);
   EXPECT_EQ(lab("stand-c")->next_certificate_sequence(), 5);
