@@ -22,8 +22,8 @@ int run_audit_verify(const std::string& data_dir) {
   const std::filesystem::path db_path = std::filesystem::path(data_dir) / "imucald.db";
   if (!std::filesystem::is_regular_file(db_path))
     throw std::runtime_error("no imucald database in '" + data_dir + "' (expected " + db_path.string() + ")");
-  const auto [entries, head] = daemon::read_audit_trail(db_path.string());
-  const daemon::AuditCheck check = daemon::check_audit_chain(entries, head);
+  const daemon::AuditChain chain = daemon::read_audit_trail(db_path.string());
+  const daemon::AuditCheck check = daemon::check_audit_chain(chain);
   std::printf("%s: %s\n", check.ok() ? "OK" : "FAILED", check.message.c_str());
   return check.ok() ? 0 : 1;
 }

@@ -230,8 +230,11 @@ void Service::start_heartbeat() {
   identity.version = api_->status().at("version").get<std::string>();
   const auto period = std::chrono::milliseconds(std::max<std::int64_t>(
       1, static_cast<std::int64_t>(config_.registry.heartbeat_s * 1000.0)));
-  limits_follower_ = std::make_unique<LimitsFollower>(*registry_, *db_, *certificates_,
-                                                      [api = api_.get()] { return api->limits().document(); });
+  limits_follower_ = std::make_unique<LimitsFollower>(
+      *db_, [api = api_.get()] { return api->limits().document(); },
+      [this](const std::optional<std::set<std::string>>& changed, const std::string& reason) {
+        reissue_under_new_limits(*registry_, *db_, *certificates_, changed, reason);
+      });
   // Each beat also follows the lab's limits (limits_follower.hpp): one query, and reissues only
   // when another stand put new ones.
   heartbeat_ = std::make_unique<StandHeartbeat>(*registry_, identity, period, [this] {

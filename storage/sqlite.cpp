@@ -404,7 +404,9 @@ std::span<const unsigned char> Statement::column_blob(int col) const {
 // ---------------------------------------------------------------------------------------------
 // Transaction
 
-Transaction::Transaction(Connection& connection) : connection_(connection) { connection_.exec("BEGIN IMMEDIATE"); }
+Transaction::Transaction(Connection& connection, Lock lock) : connection_(connection) {
+  connection_.exec(lock == Lock::write ? "BEGIN IMMEDIATE" : "BEGIN");
+}
 
 void Transaction::commit() {
   connection_.exec("COMMIT");

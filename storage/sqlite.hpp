@@ -129,10 +129,12 @@ class Statement {
 
 // BEGIN IMMEDIATE .. commit(); rolled back when left without commit(), also by an exception.
 // BEGIN's and COMMIT's results are checked (a BEGIN that fails throws: nothing runs outside the
-// transaction it was meant for).
+// transaction it was meant for). Lock::read: a plain BEGIN, which takes no write lock: its reads
+// see one snapshot of the database, whatever other connections commit meanwhile.
 class Transaction {
  public:
-  explicit Transaction(Connection& connection);
+  enum class Lock { write, read };
+  explicit Transaction(Connection& connection, Lock lock = Lock::write);
   ~Transaction();
   void commit();
   Transaction(const Transaction&) = delete;

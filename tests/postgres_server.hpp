@@ -179,4 +179,22 @@ class PostgresServer {
   bool durable_ = false;
 };
 
+// The test executable's one private server, started at its first use; its tests take a database
+// each (IMUCALTEST_FRESH_POSTGRES_DATABASE).
+inline PostgresServer& shared_postgres_server() {
+  static PostgresServer server;
+  return server;
+}
+
 }  // namespace imucaltest
+
+// In a test or SetUp: skips it, saying what is missing, without PostgreSQL's binaries; fails it
+// when the server did not start; else sets `conninfo` to a fresh database "<prefix>_<n>" of
+// shared_postgres_server().
+#define IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, prefix)                                          \
+  do {                                                                                                \
+    ::imucaltest::PostgresServer& imucaltest_server = ::imucaltest::shared_postgres_server();         \
+    if (!imucaltest_server.skip_reason().empty()) GTEST_SKIP() << imucaltest_server.skip_reason();    \
+    ASSERT_TRUE(imucaltest_server.running()) << imucaltest_server.error();                            \
+    (conninfo) = imucaltest_server.create_database(::imucaltest::PostgresServer::unique_name(prefix)); \
+  } while (false)

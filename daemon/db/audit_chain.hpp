@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace imucal::daemon {
@@ -39,6 +40,14 @@ struct AuditFields {
 };
 AuditEntry next_audit_entry(const std::optional<std::pair<std::int64_t, std::string>>& last, AuditFields fields);
 
+// The whole trail in order and the head the store recorded beside it, read together in one
+// snapshot: read apart, an entry appended between the two reads looks like entries deleted at the
+// end (the head past the last entry read).
+struct AuditChain {
+  std::vector<AuditEntry> entries;
+  std::optional<std::pair<std::int64_t, std::string>> head;
+};
+
 struct AuditCheck {
   std::int64_t entries = 0;               // how many were read
   std::optional<std::int64_t> first_bad;  // the first entry that does not hold (its seq)
@@ -52,5 +61,6 @@ struct AuditCheck {
 // head (seq and sha256) when there is one. Names the first entry that fails and why.
 AuditCheck check_audit_chain(const std::vector<AuditEntry>& entries,
                              const std::optional<std::pair<std::int64_t, std::string>>& head);
+inline AuditCheck check_audit_chain(const AuditChain& chain) { return check_audit_chain(chain.entries, chain.head); }
 
 }  // namespace imucal::daemon

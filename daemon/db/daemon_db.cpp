@@ -808,19 +808,31 @@ AuditEntry DaemonDb::append_audit(const std::string& actor, const std::string& a
   return e;
 }
 
-std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::string>>> read_audit_trail(
-    const std::string& path) {
-  storage::sql::Connection db(path, storage::sql::Connection::Open::read_write, "daemon database");
-  std::vector<AuditEntry> entries;
+namespace {
+
+// One read transaction for the entries and the head: the daemon appends from other threads, and
+// `imucal audit verify` reads beside a running imucald.
+AuditChain read_audit_chain(storage::sql::Connection& db) {
+  storage::sql::Transaction snapshot(db, storage::sql::Transaction::Lock::read);
+  AuditChain out;
   {
     Statement s(db, IMUCAL_AUDIT_SELECT "ORDER BY seq");
-    while (s.step()) entries.push_back(audit_row(s));
+    while (s.step()) out.entries.push_back(audit_row(s));
   }
-  std::optional<std::pair<std::int64_t, std::string>> head;
-  Statement s(db, "SELECT value FROM setting WHERE key = ?1");
-  s.bind(1, std::string(kAuditHeadKey));
-  if (s.step()) head = parse_audit_head(s.column_text(0));
-  return {std::move(entries), head};
+  {
+    Statement s(db, "SELECT value FROM setting WHERE key = ?1");
+    s.bind(1, std::string(kAuditHeadKey));
+    if (s.step()) out.head = parse_audit_head(s.column_text(0));
+  }
+  snapshot.commit();
+  return out;
+}
+
+}  // namespace
+
+AuditChain read_audit_trail(const std::string& path) {
+  storage::sql::Connection db(path, storage::sql::Connection::Open::read_write, "daemon database");
+  return read_audit_chain(db);
 }
 
 std::vector<AuditEntry> DaemonDb::audit_entries(const AuditQuery& q) {
@@ -836,18 +848,9 @@ std::vector<AuditEntry> DaemonDb::audit_entries(const AuditQuery& q) {
   return out;
 }
 
-std::vector<AuditEntry> DaemonDb::audit_trail() {
+AuditChain DaemonDb::audit_chain() {
   std::lock_guard lock(mutex_);
-  Statement s(db_, IMUCAL_AUDIT_SELECT "ORDER BY seq");
-  std::vector<AuditEntry> out;
-  while (s.step()) out.push_back(audit_row(s));
-  return out;
-}
-
-std::optional<std::pair<std::int64_t, std::string>> DaemonDb::audit_head() {
-  const auto text = setting(kAuditHeadKey);
-  if (!text) return std::nullopt;
-  return parse_audit_head(*text);
+  return read_audit_chain(db_);
 }
 
 std::vector<std::int64_t> DaemonDb::campaigns_with_issued() {

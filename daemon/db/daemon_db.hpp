@@ -174,8 +174,7 @@ std::string iso8601_utc(std::int64_t unix_ms);
 
 // The audit trail and its recorded head from a daemon database file, read only (no migration, no
 // lock on the data directory): for `imucal audit verify` beside a running imucald or on a copy.
-std::pair<std::vector<AuditEntry>, std::optional<std::pair<std::int64_t, std::string>>> read_audit_trail(
-    const std::string& path);
+AuditChain read_audit_trail(const std::string& path);
 
 class DaemonDb {
  public:
@@ -288,9 +287,9 @@ class DaemonDb {
     std::int64_t limit = 1000;                   // newest first
   };
   std::vector<AuditEntry> audit_entries(const AuditQuery& query);
-  // The whole trail in order, and the head recorded beside it, for check_audit_chain.
-  std::vector<AuditEntry> audit_trail();
-  std::optional<std::pair<std::int64_t, std::string>> audit_head();
+  // The whole trail in order and the head recorded beside it, one snapshot, for check_audit_chain.
+  AuditChain audit_chain();
+  std::vector<AuditEntry> audit_trail() { return audit_chain().entries; }
 
   // The stand table (issue 38): this daemon alone, the SQLite registry's (registry.hpp says what
   // each does). register_stand replaces any other row (a stand renamed is no other stand).

@@ -1575,7 +1575,7 @@ HttpReply Api::list_audit(const std::map<std::string, std::string>& query) {
                     {"subject", e.subject},
                     {"details", parse_or_null(e.details_json)},
                     {"sha256", e.sha256}});
-  const AuditCheck check = check_audit_chain(registry_.audit_trail(), registry_.audit_head());
+  const AuditCheck check = check_audit_chain(registry_.audit_chain());
   return json_reply(200, {{"entries", list}, {"intact", check.ok()}, {"check", check.message}});
 }
 

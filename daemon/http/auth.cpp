@@ -172,17 +172,31 @@ std::vector<UserEntry> Auth::password_candidates(const std::string& user) {
   for (const UserEntry& u : users_)  // fixed at start: read without a lock
     if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
   if (!out.empty()) return out;  // the configuration wins
-  std::lock_guard lock(lab_mutex_);
-  if (!lab_users_) return out;
-  const auto now = Clock::now();
-  if (!lab_users_at_ || now - *lab_users_at_ >= kLabUsersFresh) {
-    lab_users_at_ = now;
+  // One sign-in reads the registry, outside the lock (a server away holds it up to its connect
+  // timeout); the sign-ins meanwhile take the accounts read before instead of queuing behind it.
+  LabUsers source;
+  {
+    std::lock_guard lock(lab_mutex_);
+    if (!lab_users_) return out;
+    const auto now = Clock::now();
+    if (!lab_users_reading_ && (!lab_users_at_ || now - *lab_users_at_ >= kLabUsersFresh)) {
+      lab_users_at_ = now;
+      lab_users_reading_ = true;
+      source = lab_users_;
+    }
+  }
+  if (source) {
+    std::optional<std::vector<UserEntry>> fresh;
     try {
-      lab_users_read_ = lab_users_();
+      fresh = source();
     } catch (const std::exception& e) {
       spdlog::warn("sign-in: the lab's accounts could not be read ({}); the ones read before are used", e.what());
     }
+    std::lock_guard lock(lab_mutex_);
+    lab_users_reading_ = false;
+    if (fresh) lab_users_read_ = std::move(*fresh);
   }
+  std::lock_guard lock(lab_mutex_);
   for (const UserEntry& u : lab_users_read_)
     if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
   return out;

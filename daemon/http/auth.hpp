@@ -62,7 +62,8 @@ class Auth {
   // The lab's accounts (registry.hpp users, issue 38): they sign in with a password as the
   // configured users do; a configured user of the same name wins. Read at a sign-in, at most
   // every kLabUsersFresh (an account put on another stand signs in here within it); a source that
-  // fails keeps the accounts last read, and the configured users sign in whatever it does.
+  // fails keeps the accounts last read, and the configured users sign in whatever it does. One
+  // sign-in at a time reads; the others meanwhile use the accounts read before, without waiting.
   using LabUsers = std::function<std::vector<UserEntry>()>;
   static constexpr std::chrono::seconds kLabUsersFresh{5};
   void set_lab_users(LabUsers source);
@@ -89,6 +90,7 @@ class Auth {
   LabUsers lab_users_;
   std::vector<UserEntry> lab_users_read_;  // under lab_mutex_
   std::optional<std::chrono::steady_clock::time_point> lab_users_at_;
+  bool lab_users_reading_ = false;  // a sign-in is reading lab_users_ (outside lab_mutex_)
   std::mutex lab_mutex_;  // apart from mutex_: reading the registry must not hold up the sessions
   std::string generated_token_, token_file_;
   double idle_timeout_s_;

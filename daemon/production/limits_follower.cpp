@@ -20,21 +20,27 @@ void reissue_under_new_limits(Registry& registry, DaemonDb& db, CertificateIssue
   }
 }
 
-LimitsFollower::LimitsFollower(Registry& registry, DaemonDb& db, CertificateIssuer& issuer, Document document)
-    : registry_(registry), db_(db), issuer_(issuer), document_(std::move(document)) {}
+LimitsFollower::LimitsFollower(DaemonDb& db, Document document, Reissue reissue)
+    : db_(db), document_(std::move(document)), reissue_(std::move(reissue)) {}
 
 void LimitsFollower::follow() {
   std::lock_guard lock(mutex_);
   try {
+    if (!followed_)
+      if (const auto text = db_.setting(kFollowedSetting)) {
+        nlohmann::json stored = nlohmann::json::parse(*text, nullptr, false);
+        if (!stored.is_discarded()) followed_ = std::move(stored);  // damaged: followed again from none
+      }
     const nlohmann::json now = document_();
     if (followed_ && *followed_ == now) return;
     std::optional<std::set<std::string>> changed;
     if (followed_) changed = changed_part_numbers(*followed_, now);
-    if (!changed || !changed->empty())
-      reissue_under_new_limits(registry_, db_, issuer_, changed, "acceptance limits changed in the lab's registry");
+    if (!changed || !changed->empty()) reissue_(changed, "acceptance limits changed in the lab's registry");
     followed_ = now;
+    db_.set_setting(kFollowedSetting, now.dump());
   } catch (const std::exception& e) {
-    // The registry away: followed at a later heartbeat.
+    // The registry away, the disk full: followed at a later heartbeat (reissuing again is harmless:
+    // a certificate whose statement stays the same is kept).
     spdlog::warn("the acceptance limits could not be followed now: {}", e.what());
   }
 }

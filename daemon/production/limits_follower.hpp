@@ -4,7 +4,8 @@
 // what they state: one whose statement stays the same is kept). The limits are one document for
 // every stand of a lab: the stand that puts new ones reissues at once (PUT /api/limits), every
 // other stand when its next heartbeat sees the document changed, and a stand that was off
-// meanwhile at its first heartbeat.
+// meanwhile at its first heartbeat. The document followed last is kept in the stand's database: a
+// restart under the same limits reissues nothing (each reissue renders every certificate in force).
 #pragma once
 
 #include <functional>
@@ -31,17 +32,21 @@ class LimitsFollower {
  public:
   // `document`: the limits in force now (LimitsFile::document, read from the registry).
   using Document = std::function<nlohmann::json()>;
-  LimitsFollower(Registry& registry, DaemonDb& db, CertificateIssuer& issuer, Document document);
+  // `reissue`: reissue_under_new_limits with this stand's registry, database and issuer.
+  using Reissue = std::function<void(const std::optional<std::set<std::string>>& changed, const std::string& reason)>;
+  LimitsFollower(DaemonDb& db, Document document, Reissue reissue);
 
-  // Compares the document in force with the one followed last; when it changed (or at the first
-  // call, whatever happened while this stand was off), reissues under it. Never throws.
+  // Compares the document in force with the one followed last (in the stand's database; none on a
+  // stand that never followed one); when it changed, reissues the part numbers whose limits changed
+  // (every one when none was followed). Never throws: a failure is followed at the next call.
   void follow();
 
+  static constexpr const char* kFollowedSetting = "limits_followed";  // DaemonDb setting: the JSON text
+
  private:
-  Registry& registry_;
   DaemonDb& db_;
-  CertificateIssuer& issuer_;
   Document document_;
+  Reissue reissue_;
   std::mutex mutex_;
   std::optional<nlohmann::json> followed_;
 };

@@ -515,17 +515,10 @@ std::vector<AuditEntry> JournaledRegistry::audit_entries(const AuditQuery& query
   return out;
 }
 
-std::vector<AuditEntry> JournaledRegistry::audit_trail() {
+AuditChain JournaledRegistry::audit_chain() {
   std::lock_guard lock(mutex_);
-  std::vector<AuditEntry> out;
-  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_trail(); });
-  return out;
-}
-
-std::optional<std::pair<std::int64_t, std::string>> JournaledRegistry::audit_head() {
-  std::lock_guard lock(mutex_);
-  std::optional<std::pair<std::int64_t, std::string>> out;
-  read("the audit trail's head", [&](PostgresRegistry& r) { out = r.audit_head(); });
+  AuditChain out;
+  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_chain(); });
   return out;
 }
 

@@ -83,8 +83,7 @@ class JournaledRegistry final : public Registry {
   AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
                           const std::string& details_json, std::optional<std::int64_t> t_ms) override;
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
-  std::vector<AuditEntry> audit_trail() override;
-  std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+  AuditChain audit_chain() override;
   // Journaled as the row was when recorded: its replay replaces what the server has of it, in
   // the order the records were made.
   void record_calibration(const CampaignRow& row) override;

@@ -430,14 +430,20 @@ std::vector<AuditEntry> PostgresRegistry::audit_entries(const AuditQuery& q) {
                              {q.from_ms, q.to_ms, q.actor, q.action_prefix, q.subject, q.limit}));
 }
 
-std::vector<AuditEntry> PostgresRegistry::audit_trail() {
+AuditChain PostgresRegistry::audit_chain() {
   std::lock_guard lock(mutex_);
-  return audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT "ORDER BY seq"));
-}
-
-std::optional<std::pair<std::int64_t, std::string>> PostgresRegistry::audit_head() {
-  std::lock_guard lock(mutex_);
-  return read_audit_head(db());
+  // REPEATABLE READ: both statements see one snapshot, whatever the other stands append meanwhile.
+  // Inside a caller's transaction (a registry migration's) the reads are that transaction's.
+  std::optional<Transaction> snapshot;
+  if (!db().in_transaction()) {
+    snapshot.emplace(db());
+    db().exec("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ, READ ONLY");
+  }
+  AuditChain out;
+  out.entries = audit_rows(db().exec(IMUCAL_PG_AUDIT_SELECT "ORDER BY seq"));
+  out.head = read_audit_head(db());
+  if (snapshot) snapshot->commit();
+  return out;
 }
 
 // ---- Stands (issue 38, the lab overview) ----

@@ -49,8 +49,7 @@ class PostgresRegistry final : public Registry {
   AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
                           const std::string& details_json, std::optional<std::int64_t> t_ms) override;
   std::vector<AuditEntry> audit_entries(const AuditQuery& query) override;
-  std::vector<AuditEntry> audit_trail() override;
-  std::optional<std::pair<std::int64_t, std::string>> audit_head() override;
+  AuditChain audit_chain() override;
   void record_calibration(const CampaignRow& row) override;
   std::vector<CampaignRow> unit_campaigns(const std::optional<std::string>& serial) override;
   std::optional<std::string> limits_document() override;

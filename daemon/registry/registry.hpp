@@ -78,8 +78,10 @@ class Registry {
   virtual AuditEntry append_audit(const std::string& actor, const std::string& action, const std::string& subject,
                                   const std::string& details_json, std::optional<std::int64_t> t_ms) = 0;
   virtual std::vector<AuditEntry> audit_entries(const AuditQuery& query) = 0;
-  virtual std::vector<AuditEntry> audit_trail() = 0;
-  virtual std::optional<std::pair<std::int64_t, std::string>> audit_head() = 0;
+  // The whole trail and its recorded head read together (audit_chain.hpp: read apart, an entry
+  // appended between the reads looks like entries deleted).
+  virtual AuditChain audit_chain() = 0;
+  std::vector<AuditEntry> audit_trail() { return audit_chain().entries; }
 
   // The units' calibrations (production/unit_registry.hpp reads them): a campaign's row as this
   // stand last recorded it (its end, an operator's acceptance, a recalibration), keyed by (stand,

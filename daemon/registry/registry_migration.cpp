@@ -240,12 +240,12 @@ class Copier {
 
 // The stand's chain, checked by the one rule before anything is copied.
 std::vector<AuditEntry> checked_source_chain(const StandRegistrySource& source) {
-  std::vector<AuditEntry> chain = source.db->audit_trail();
-  const AuditCheck check = check_audit_chain(chain, source.db->audit_head());
+  AuditChain chain = source.db->audit_chain();
+  const AuditCheck check = check_audit_chain(chain);
   if (!check.ok())
     throw MigrationError("the audit trail of " + source.label + " does not hold: " + check.message +
                          "; nothing was copied (imucal audit verify " + source.label + ")");
-  return chain;
+  return std::move(chain.entries);
 }
 
 }  // namespace

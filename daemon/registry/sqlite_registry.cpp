@@ -50,8 +50,7 @@ AuditEntry SqliteRegistry::append_audit(const std::string& actor, const std::str
   return db_.append_audit(actor, action, subject, details_json, t_ms);
 }
 std::vector<AuditEntry> SqliteRegistry::audit_entries(const AuditQuery& query) { return db_.audit_entries(query); }
-std::vector<AuditEntry> SqliteRegistry::audit_trail() { return db_.audit_trail(); }
-std::optional<std::pair<std::int64_t, std::string>> SqliteRegistry::audit_head() { return db_.audit_head(); }
+AuditChain SqliteRegistry::audit_chain() { return db_.audit_chain(); }
 
 void SqliteRegistry::register_stand(const StandRow& row) { db_.register_stand(row); }
 bool SqliteRegistry::report_stand_state(const std::string& name, const std::string& state_json, std::int64_t t_ms) {

@@ -983,8 +983,9 @@ TEST(Registry, AStandWhoseRegistryServerIsAwayRunsOnAndCatchesUpWhenItReturns) {
 
   daemon::PostgresRegistry registry(conninfo, "stand-away");
   EXPECT_TRUE(registry.overdue_override(id).has_value());
-  const auto trail = registry.audit_trail();
-  EXPECT_TRUE(daemon::check_audit_chain(trail, registry.audit_head()).ok());
+  const daemon::AuditChain chain = registry.audit_chain();
+  const auto& trail = chain.entries;
+  EXPECT_TRUE(daemon::check_audit_chain(chain).ok());
   const auto transitions = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
     return e.action == "campaign.transition";
   });
@@ -1023,8 +1024,9 @@ TEST(Registry, TwoStandsOnOnePostgresRegistryShareTheNumberingAndTheAuditTrail) 
 
   daemon::PostgresRegistry registry(conninfo, "test");
   EXPECT_EQ(registry.max_certificate_sequence(), 2);
-  const auto trail = registry.audit_trail();
-  EXPECT_TRUE(daemon::check_audit_chain(trail, registry.audit_head()).ok());
+  const daemon::AuditChain chain = registry.audit_chain();
+  const auto& trail = chain.entries;
+  EXPECT_TRUE(daemon::check_audit_chain(chain).ok());
   const auto started = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
     return e.action == "service.started";
   });

@@ -8,9 +8,13 @@
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <memory>
+#include <optional>
+#include <set>
 #include <string>
 
 #include "daemon/production/lab.hpp"
+#include "daemon/production/limits_follower.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
 #include "daemon/registry/stand_heartbeat.hpp"
 #include "service_fixture.hpp"
@@ -36,12 +40,6 @@ json wait_for_stand(LocalDaemon& d, const std::function<bool(const json&)>& pred
   }
   ADD_FAILURE() << "timed out waiting on this stand in GET /api/lab: " << last.dump().substr(0, 3000);
   return {};
-}
-
-// The lab's PostgreSQL server, one for this file's tests (each takes a database of its own).
-imucaltest::PostgresServer& lab_server() {
-  static imucaltest::PostgresServer server;
-  return server;
 }
 
 // How a stand joins the registry `conninfo` as `stand`, heartbeats every 0.1 s, then `more`.
@@ -134,6 +132,46 @@ bool poll(const std::function<bool()>& done, double timeout_s = 60.0) {
 
 }  // namespace
 
+// The limits followed last live in the stand's database: a restart under the same limits reissues
+// nothing; limits changed while the stand was off are followed at its first beat, for the part
+// numbers they changed only; a stand that never followed any reissues every part number once.
+TEST(Lab, TheLimitsFollowedLastOutliveARestart) {
+  const std::string dir = scratch_dir("lab-limits-followed");
+  const auto limits = [](double max_abs) {
+    return json{{"format", "imucal-limits/1"},
+                {"part_numbers", {{"PN-1", {{"gyro.bias_dph", {{"max_abs", max_abs}}}}},
+                                  {"PN-2", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
+  };
+  json in_force = limits(0.5);
+  std::vector<std::optional<std::set<std::string>>> reissued;
+  const auto follower = [&](daemon::DaemonDb& db) {
+    return std::make_unique<daemon::LimitsFollower>(
+        db, [&] { return in_force; },
+        [&](const std::optional<std::set<std::string>>& changed, const std::string&) { reissued.push_back(changed); });
+  };
+  {
+    daemon::DaemonDb db(dir + "/imucald.db");
+    auto f = follower(db);
+    f->follow();
+    ASSERT_EQ(reissued.size(), 1U);
+    EXPECT_FALSE(reissued[0]) << "a stand that never followed limits reissues every part number";
+    f->follow();
+    EXPECT_EQ(reissued.size(), 1U);
+  }
+  {
+    daemon::DaemonDb db(dir + "/imucald.db");  // restarted, the limits unchanged
+    follower(db)->follow();
+    EXPECT_EQ(reissued.size(), 1U) << "a restart under the same limits reissued";
+  }
+  in_force = limits(0.25);  // put by another stand while this one was off
+  {
+    daemon::DaemonDb db(dir + "/imucald.db");
+    follower(db)->follow();
+    ASSERT_EQ(reissued.size(), 2U);
+    EXPECT_EQ(reissued[1], std::optional<std::set<std::string>>(std::set<std::string>{"PN-1"}));
+  }
+}
+
 // The SQLite registry knows one stand: another registered in its place makes this one's reports
 // unknown, and its heartbeat registers it again. A stop does not wait for the period.
 TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
@@ -164,10 +202,8 @@ TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
 // Issue 38's lab: two stands on one PostgreSQL registry each list both; a stand stopped shows
 // offline on the other's page once three of its heartbeats are missed.
 TEST(Lab, TwoStandsOnOnePostgresRegistrySeeEachOther) {
-  imucaltest::PostgresServer& server = lab_server();
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("lab"));
+  std::string conninfo;
+  IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, "lab");
   const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
   LocalDaemon a("lab-stand-a", false, on_registry("stand-a"));
   auto b = std::make_unique<LocalDaemon>("lab-stand-b", false, on_registry("stand-b"));
@@ -239,10 +275,8 @@ TEST(Lab, AStandsArchiveFolderStaysInsideTheArchive) {
 // archive (each stand writes its ended runs' bundles there), and without it from the stand that
 // holds it, at its registered address; that stand's campaign opens on that stand's page.
 TEST(Lab, AnotherStandsRecordingIsFetchedFromTheArchiveElseFromThatStand) {
-  imucaltest::PostgresServer& server = lab_server();
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("archive"));
+  std::string conninfo;
+  IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, "archive");
   const std::string archive = scratch_dir("lab-archive");
   const auto on_registry = [&](const std::string& stand) {
     return joins(conninfo, stand, [archive, stand](daemon::DaemonConfig& c) {
@@ -299,10 +333,8 @@ TEST(Lab, AnotherStandsRecordingIsFetchedFromTheArchiveElseFromThatStand) {
 // verdict they change, at a's next heartbeat (b has none of a's to supersede); a's number comes
 // from the lab's sequence.
 TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
-  imucaltest::PostgresServer& server = lab_server();
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("limits"));
+  std::string conninfo;
+  IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, "limits");
   const auto on_registry = [&](const std::string& stand) { return joins(conninfo, stand); };
   LocalDaemon a("lab-limits-a", false, on_registry("stand-a"));
   LocalDaemon b("lab-limits-b", false, on_registry("stand-b"));
@@ -346,10 +378,8 @@ TEST(Lab, LimitsPutOnOneStandSupersedeAnotherStandsCertificate) {
 // Issue 38: each stand's reference equipment is in the lab's registry with its heartbeat: a stand
 // sees another stand's overdue rate table (and its own chamber in date) on GET /api/lab.
 TEST(Lab, EveryStandsReferenceEquipmentIsJudgedOnTheLabPage) {
-  imucaltest::PostgresServer& server = lab_server();
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("equipment"));
+  std::string conninfo;
+  IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, "equipment");
   LocalDaemon a("lab-equipment-a", false, joins(conninfo, "stand-a", [](daemon::DaemonConfig& c) {
     c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", "", ""};
   }));
@@ -383,10 +413,8 @@ TEST(Lab, EveryStandsReferenceEquipmentIsJudgedOnTheLabPage) {
 // password on stand b, whose configuration does not name it, in its role; removed, it no longer
 // does (within the accounts' freshness); the configuration's users are listed, no secret shown.
 TEST(Lab, AnAccountPutOnOneStandSignsInOnAnother) {
-  imucaltest::PostgresServer& server = lab_server();
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("users"));
+  std::string conninfo;
+  IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo, "users");
   LocalDaemon a("lab-users-a", false, joins(conninfo, "stand-a"));
   LocalDaemon b("lab-users-b", false, joins(conninfo, "stand-b"));
   const auto sign_in = [&](LocalDaemon& d, const std::string& password) {

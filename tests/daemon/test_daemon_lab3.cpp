@@ -132,7 +132,7 @@ std::vector<AuditRecord> audit_records(const std::string& conninfo) {
 // The trail's hashes, links and head hold (audit_chain.hpp), as `imucal audit verify` checks them.
 void expect_intact_chain(const std::string& conninfo) {
   daemon::PostgresRegistry registry(conninfo, "test");
-  const daemon::AuditCheck check = daemon::check_audit_chain(registry.audit_trail(), registry.audit_head());
+  const daemon::AuditCheck check = daemon::check_audit_chain(registry.audit_chain());
   EXPECT_TRUE(check.ok()) << check.message;
 }
 
@@ -166,14 +166,9 @@ std::string multiset_difference(std::vector<std::string> got, std::vector<std::s
 // Three stands on one private PostgreSQL server, a fresh registry database for each test.
 class ThreeStandLab : public ::testing::Test {
  protected:
-  static imucaltest::PostgresServer& server() {
-    static imucaltest::PostgresServer s;
-    return s;
-  }
+  static imucaltest::PostgresServer& server() { return imucaltest::shared_postgres_server(); }
   void SetUp() override {
-    if (!server().skip_reason().empty()) GTEST_SKIP() << server().skip_reason();
-    ASSERT_TRUE(server().running()) << server().error();
-    conninfo_ = server().create_database(imucaltest::PostgresServer::unique_name("lab3"));
+    IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo_, "lab3");
     for (const char* name : {"stand-a", "stand-b", "stand-c"})
       stands_.push_back(std::make_unique<Stand>(name, conninfo_, heartbeat_s()));
     for (const auto& s : stands_)

@@ -2,6 +2,7 @@
 // problem listed, unknown keys refused, comments ignored), static files (no way out of the root),
 // the one-time operator token.
 #include <filesystem>
+#include <future>
 #include <fstream>
 
 #include <gtest/gtest.h>
@@ -521,6 +522,33 @@ TEST(Auth, SessionsAndThrottling) {
   for (int i = 0; i < 15; ++i) EXPECT_EQ(auth.login_password("ops", "guess", "10.1.0." + std::to_string(i)).status, 401);
   EXPECT_EQ(auth.login_password("ops", "operator-password", "10.0.0.4").status, 429);
   EXPECT_EQ(auth.login_password("vic", "viewer-password", "10.0.0.4").status, 200);
+}
+
+// The lab's accounts (issue 38) are read by one sign-in at a time, outside the lock: a sign-in
+// meanwhile (the registry's server away holds a read up to its connect timeout) is answered from
+// the accounts read before instead of queuing behind the read.
+TEST(Auth, ASignInDoesNotWaitOnAnotherReadingTheLabsAccounts) {
+  Auth auth(DaemonConfig{}, daemontest::scratch_dir("lab-users-read"));
+  const std::string hash = hash_password("lab-password");
+  auth.set_lab_users([&] { return std::vector<UserEntry>{{"ann", Role::Viewer, hash, ""}}; });
+  ASSERT_EQ(auth.login_password("ann", "lab-password").status, 200);
+
+  std::promise<void> entered, release;
+  std::shared_future<void> released = release.get_future().share();
+  auth.set_lab_users([&] {  // read once: ann was removed, and the read hangs until released
+    entered.set_value();
+    released.wait();
+    return std::vector<UserEntry>{};
+  });
+  auto reading = std::async(std::launch::async, [&] { return auth.login_password("ann", "lab-password", "10.0.0.1"); });
+  entered.get_future().wait();
+  auto meanwhile = std::async(std::launch::async, [&] { return auth.login_password("ann", "lab-password", "10.0.0.2"); });
+  const bool answered = meanwhile.wait_for(std::chrono::seconds(30)) == std::future_status::ready;
+  release.set_value();
+  EXPECT_TRUE(answered) << "a sign-in waited on another's read of the lab's accounts";
+  EXPECT_EQ(meanwhile.get().status, 200) << "answered from the accounts read before";
+  EXPECT_EQ(reading.get().status, 401) << "the reader judged by what it read";
+  EXPECT_EQ(auth.login_password("ann", "lab-password", "10.0.0.3").status, 401);
 }
 
 TEST(Api, TargetsAndCookies) {

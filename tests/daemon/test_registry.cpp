@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -24,6 +25,7 @@
 #include "daemon/registry/journaled_registry.hpp"
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/sqlite_registry.hpp"
+#include "tests/daemon/certificate_rows.hpp"
 #include "tests/postgres_server.hpp"
 #include "tests/test_paths.hpp"
 
@@ -74,17 +76,12 @@ class SqliteStore {
   std::unique_ptr<DaemonDb> own_;
 };
 
-imucaltest::PostgresServer& postgres_server() {
-  static imucaltest::PostgresServer server;
-  return server;
-}
-
 // A fresh database on the private server; each connect() is another connection (another stand's
 // imucald would hold one).
 class PostgresStore {
  public:
   std::string open() {
-    auto& server = postgres_server();
+    auto& server = imucaltest::shared_postgres_server();
     if (!server.skip_reason().empty()) return "skip: " + server.skip_reason();
     if (!server.running()) return server.error();
     conninfo_ = server.create_database(imucaltest::PostgresServer::unique_name("registry"));
@@ -138,19 +135,7 @@ class StoreNames {
 using Stores = ::testing::Types<SqliteStore, PostgresStore>;
 TYPED_TEST_SUITE(RegistryTest, Stores, StoreNames);
 
-IssuedCertificateRow issued(std::int64_t sequence, std::int64_t campaign,
-                            std::optional<std::string> supersedes = std::nullopt) {
-  IssuedCertificateRow r;
-  r.sequence = sequence;
-  r.number = "LAB-2026-" + std::to_string(1000000 + sequence).substr(1);
-  r.campaign_id = campaign;
-  r.issued_ms = 1700000000000 + sequence;
-  r.content_json = R"({"n":)" + std::to_string(sequence) + "}";
-  r.content_sha256 = "sha-" + std::to_string(sequence);
-  r.supersedes = std::move(supersedes);
-  r.reason = "the run ended";
-  return r;
-}
+using imucaltest::certificate_row;
 
 TYPED_TEST(RegistryTest, CertificateNumbersFollowOneAnotherAndTheHighestIsKnown) {
   auto& reg = *this->registry_;
@@ -159,7 +144,7 @@ TYPED_TEST(RegistryTest, CertificateNumbersFollowOneAnotherAndTheHighestIsKnown)
   const std::int64_t b = reg.next_certificate_sequence();
   EXPECT_EQ(a, 1);
   EXPECT_EQ(b, 2);
-  reg.insert_issued(issued(b, 1));
+  reg.insert_issued(certificate_row(b, 1));
   EXPECT_EQ(reg.max_certificate_sequence(), 2);
   reg.insert_certificate({2, "LAB-2025-000007", 7, 1600000000000, R"({"devices":"sim"})"});
   EXPECT_EQ(reg.max_certificate_sequence(), 7);
@@ -172,10 +157,10 @@ TYPED_TEST(RegistryTest, CertificateNumbersFollowOneAnotherAndTheHighestIsKnown)
 
 TYPED_TEST(RegistryTest, ALaterCertificateSupersedesTheOneInForceOnce) {
   auto& reg = *this->registry_;
-  const auto first = issued(1, 1);
+  const auto first = certificate_row(1, 1);
   reg.insert_issued(first);
   EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, first.number);
-  const auto second = issued(2, 1, first.number);
+  const auto second = certificate_row(2, 1, first.number);
   reg.insert_issued(second);
   EXPECT_EQ(reg.current_issued(1).value_or(IssuedCertificateRow{}).number, second.number);
   const auto history = reg.issued_history(1);
@@ -188,15 +173,15 @@ TYPED_TEST(RegistryTest, ALaterCertificateSupersedesTheOneInForceOnce) {
   EXPECT_FALSE(reg.issued("LAB-2026-999999"));
   EXPECT_FALSE(reg.current_issued(2));
   // Superseded once: a third one naming the first again is refused, and nothing of it is kept.
-  EXPECT_THROW(reg.insert_issued(issued(3, 1, first.number)), imucal::storage::StorageError);
-  EXPECT_FALSE(reg.issued(issued(3, 1).number));
+  EXPECT_THROW(reg.insert_issued(certificate_row(3, 1, first.number)), imucal::storage::StorageError);
+  EXPECT_FALSE(reg.issued(certificate_row(3, 1).number));
   // A number is never issued twice.
-  EXPECT_THROW(reg.insert_issued(issued(2, 2)), imucal::storage::StorageError);
+  EXPECT_THROW(reg.insert_issued(certificate_row(2, 2)), imucal::storage::StorageError);
 }
 
 TYPED_TEST(RegistryTest, APrintedPageIsStoredOnceAndKept) {
   auto& reg = *this->registry_;
-  const auto c = issued(1, 1);
+  const auto c = certificate_row(1, 1);
   reg.insert_issued(c);
   EXPECT_TRUE(reg.insert_issued_page({c.number, "<html>1</html>", "h1", 5, "ada"}));
   EXPECT_FALSE(reg.insert_issued_page({c.number, "<html>2</html>", "h2", 6, "bob"}));
@@ -227,20 +212,20 @@ TYPED_TEST(RegistryTest, AnOverdueOverrideIsKeptWithItsCampaignUntilRemoved) {
 
 TYPED_TEST(RegistryTest, TheAuditTrailIsAChainAndAnsweredByQuery) {
   auto& reg = *this->registry_;
-  EXPECT_FALSE(reg.audit_head());
+  EXPECT_FALSE(reg.audit_chain().head);
   reg.append_audit("ada", "campaign.created", "campaign 1", R"({"name":"c1"})", 1000);
   reg.append_audit("bob", "limits.replaced", "limits", R"({})", 2000);
   const AuditEntry last = reg.append_audit("ada", "campaign.command", "campaign 1", R"({"command":"start"})", 3000);
   EXPECT_EQ(last.seq, 3);
-  const auto trail = reg.audit_trail();
+  const AuditChain chain = reg.audit_chain();
+  const auto& trail = chain.entries;
   ASSERT_EQ(trail.size(), 3U);
   EXPECT_EQ(trail[0].prev_sha256, kAuditGenesis);
   EXPECT_EQ(trail[2].sha256, last.sha256);
-  const auto head = reg.audit_head();
-  ASSERT_TRUE(head);
-  EXPECT_EQ(head->first, 3);
-  EXPECT_EQ(head->second, last.sha256);
-  EXPECT_TRUE(check_audit_chain(trail, head).ok());
+  ASSERT_TRUE(chain.head);
+  EXPECT_EQ(chain.head->first, 3);
+  EXPECT_EQ(chain.head->second, last.sha256);
+  EXPECT_TRUE(check_audit_chain(chain).ok());
 
   Registry::AuditQuery q;
   q.actor = "ada";
@@ -364,7 +349,7 @@ TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
       try {
         for (std::size_t k = 0; k < kEach; ++k) {
           const std::int64_t sequence = connections[i]->next_certificate_sequence();
-          connections[i]->insert_issued(issued(sequence, 1 + static_cast<std::int64_t>(k % kCampaigns)));
+          connections[i]->insert_issued(certificate_row(sequence, 1 + static_cast<std::int64_t>(k % kCampaigns)));
           taken[i].push_back(sequence);
         }
       } catch (const std::exception& e) {
@@ -382,7 +367,7 @@ TYPED_TEST(RegistryTest, ThreeConnectionsIssuingAtOnceNeverShareANumber) {
   ASSERT_EQ(all.size(), kConnections * kEach);
   EXPECT_EQ(*all.begin(), 1);
   EXPECT_EQ(*all.rbegin(), static_cast<std::int64_t>(kConnections * kEach));
-  for (const std::int64_t s : all) EXPECT_TRUE(this->registry_->issued(issued(s, 1).number)) << s;
+  for (const std::int64_t s : all) EXPECT_TRUE(this->registry_->issued(certificate_row(s, 1).number)) << s;
   EXPECT_EQ(this->registry_->max_certificate_sequence(), static_cast<std::int64_t>(kConnections * kEach));
 }
 
@@ -405,10 +390,38 @@ TYPED_TEST(RegistryTest, ThreeConnectionsAppendingAuditEntriesAtOnceKeepOneChain
   }
   for (auto& t : threads) t.join();
   for (const auto& e : errors) EXPECT_EQ(e, "");
-  const auto trail = this->registry_->audit_trail();
-  EXPECT_EQ(trail.size(), 30U);
-  const AuditCheck check = check_audit_chain(trail, this->registry_->audit_head());
+  const AuditChain chain = this->registry_->audit_chain();
+  EXPECT_EQ(chain.entries.size(), 30U);
+  const AuditCheck check = check_audit_chain(chain);
   EXPECT_TRUE(check.ok()) << check.message;
+}
+
+// A reader beside a writer: each read of the trail and its head is one snapshot, never a trail
+// that stops short of the head just recorded (which reads as entries deleted: the false alarm a
+// GET /api/audit raised while a campaign's start was being journaled).
+TYPED_TEST(RegistryTest, TheChainReadWhileAnotherConnectionAppendsAlwaysHolds) {
+  const std::unique_ptr<Registry> writer = this->store_.connect();
+  std::atomic<bool> done{false};
+  std::string writer_error;
+  std::thread appending([&] {
+    try {
+      for (int k = 0; k < 60; ++k) writer->append_audit("writer", "test.append", "s", "{}", std::nullopt);
+    } catch (const std::exception& e) {
+      writer_error = e.what();
+    }
+    done = true;
+  });
+  int reads = 0;
+  std::vector<std::string> broken;
+  while (!done || reads == 0) {
+    const AuditCheck check = check_audit_chain(this->registry_->audit_chain());
+    if (!check.ok()) broken.push_back(check.message);
+    ++reads;
+  }
+  appending.join();
+  EXPECT_EQ(writer_error, "");
+  EXPECT_TRUE(broken.empty()) << broken.size() << " of " << reads << " reads broken, first: " << broken.front();
+  EXPECT_EQ(this->registry_->audit_trail().size(), 60U);
 }
 
 // ---- Stands (issue 38, the lab overview) ----
@@ -532,12 +545,12 @@ TEST_F(PostgresRegistrySchema, IsMigratedOnceAndANewerOneIsRefused) {
 TEST_F(PostgresRegistrySchema, EachStandSeesItsOwnCampaigns) {
   PostgresRegistry a(store_.conninfo(), "stand-a");
   PostgresRegistry b(store_.conninfo(), "stand-b");
-  a.insert_issued(issued(a.next_certificate_sequence(), 1));
-  b.insert_issued(issued(b.next_certificate_sequence(), 1));
+  a.insert_issued(certificate_row(a.next_certificate_sequence(), 1));
+  b.insert_issued(certificate_row(b.next_certificate_sequence(), 1));
   EXPECT_EQ(a.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 1);
   EXPECT_EQ(b.current_issued(1).value_or(IssuedCertificateRow{}).sequence, 2);
   EXPECT_EQ(a.issued_history(1).size(), 1U);
-  EXPECT_TRUE(a.issued(issued(2, 1).number));  // a number is the lab's: found from any stand
+  EXPECT_TRUE(a.issued(certificate_row(2, 1).number));  // a number is the lab's: found from any stand
 }
 
 // A registry of version 2 (before the units' calibrations and the limits, the stands and the
@@ -622,7 +635,7 @@ TEST_F(PostgresRegistrySchema, TwoStandsShareAUnitsHistoryAndTheLimits) {
 TEST_F(PostgresRegistrySchema, ConnectsAgainAfterTheServerWentAway) {
   PostgresRegistry registry(store_.conninfo(), "stand-a");
   registry.append_audit("ada", "a", "s", "{}", 1);
-  ASSERT_TRUE(postgres_server().restart());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().restart());
   try {
     registry.audit_trail();
   } catch (const imucal::storage::StorageError& e) {
@@ -649,7 +662,7 @@ class RegistryAway : public ::testing::Test {
   void TearDown() override {
     // The server is shared by the executable's tests: never left stopped by a failed one.
     if (dir_.empty()) return;  // skipped
-    EXPECT_TRUE(postgres_server().start_again());
+    EXPECT_TRUE(imucaltest::shared_postgres_server().start_again());
     std::error_code ignored;
     std::filesystem::remove_all(dir_, ignored);
   }
@@ -689,13 +702,13 @@ TEST_F(RegistryAway, WritesWaitInTheJournalAndArriveOnceInOrderWhenTheServerRetu
   auto reg = journaled();
   EXPECT_TRUE(reg->reachable());
   EXPECT_EQ(reg->append_audit("ada", "before", "s", "{}", 1000).seq, 1);
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
 
   const AuditEntry waiting = reg->append_audit("ada", "away.1", "campaign 1", R"({"n":1})", 2000);
   EXPECT_EQ(waiting.seq, 0);  // not chained yet: the head is on the server
   EXPECT_EQ(waiting.t_ms, 2000);
   EXPECT_EQ(waiting.sha256, "");
-  const auto certificate = issued(1, 1);
+  const auto certificate = certificate_row(1, 1);
   reg->insert_issued(certificate);
   reg->insert_overdue_override({3, 42, "ada", "customer waits", "[]", "the rate table ..."});
   EXPECT_TRUE(reg->insert_issued_page({certificate.number, "<html>1</html>", "h1", 5, "ada"}));
@@ -707,19 +720,20 @@ TEST_F(RegistryAway, WritesWaitInTheJournalAndArriveOnceInOrderWhenTheServerRetu
   expect_unreachable([&] { reg->issued(certificate.number); }, 5);
   expect_unreachable([&] { reg->next_certificate_sequence(); }, 5);
 
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   EXPECT_TRUE(reg->retry());
   EXPECT_TRUE(reg->reachable());
   EXPECT_EQ(reg->pending_writes(), 0);
   EXPECT_EQ(lines_of(journal_), 1U);
   EXPECT_TRUE(reg->retry());  // nothing again
-  const auto trail = reg->audit_trail();
+  const AuditChain chain = reg->audit_chain();
+  const auto& trail = chain.entries;
   ASSERT_EQ(trail.size(), 3U);
   EXPECT_EQ(trail[1].action, "away.1");
   EXPECT_EQ(trail[1].t_ms, 2000);  // the time it happened, not of its replay
   EXPECT_EQ(trail[2].action, "away.2");
   EXPECT_EQ(trail[2].t_ms, 3000);
-  const AuditCheck check = check_audit_chain(trail, reg->audit_head());
+  const AuditCheck check = check_audit_chain(chain);
   EXPECT_TRUE(check.ok()) << check.message;
   EXPECT_EQ(reg->issued_history(1).size(), 1U);
   EXPECT_EQ(reg->overdue_override(3).value_or(OverdueOverrideRow{}).by, "ada");
@@ -756,10 +770,10 @@ TEST_F(RegistryAway, AWriteWhoseReplyWasLostArrivesOnce) {
   EXPECT_EQ(reg->pending_writes(), 1);
   EXPECT_TRUE(reg->retry());
   EXPECT_EQ(reg->pending_writes(), 0);
-  const auto trail = direct()->audit_trail();
-  ASSERT_EQ(trail.size(), 2U) << "the entry whose reply was lost was applied again";
-  EXPECT_EQ(trail[1].action, "reply.lost");
-  EXPECT_TRUE(check_audit_chain(trail, direct()->audit_head()).ok());
+  const AuditChain chain = direct()->audit_chain();
+  ASSERT_EQ(chain.entries.size(), 2U) << "the entry whose reply was lost was applied again";
+  EXPECT_EQ(chain.entries[1].action, "reply.lost");
+  EXPECT_TRUE(check_audit_chain(chain).ok());
   EXPECT_EQ(direct()->unit_campaigns(std::string("LOST-1")).size(), 1U);
   EXPECT_EQ(reg->append_audit("ada", "after", "s", "{}", 3000).seq, 3);
 }
@@ -767,14 +781,14 @@ TEST_F(RegistryAway, AWriteWhoseReplyWasLostArrivesOnce) {
 // The lab's accounts put and removed while the server is away arrive in order, with the time
 // they were changed (written by helper-27's branch `users`, adapted).
 TEST_F(RegistryAway, AccountsPutAndRemovedWhileTheServerIsAwayArriveInOrder) {
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   auto reg = journaled();
   reg->put_user({"grace", "viewer", "$hash", 1000, "ada"});
   reg->put_user({"linus", "viewer", "$hash", 2000, "ada"});
   EXPECT_TRUE(reg->remove_user("linus"));
   EXPECT_EQ(reg->pending_writes(), 3);
   expect_unreachable([&] { reg->users(); }, 3);
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   EXPECT_TRUE(reg->retry());
   EXPECT_EQ(reg->pending_writes(), 0);
   const auto users = direct()->users();
@@ -793,7 +807,7 @@ TEST_F(RegistryAway, CalibrationsAndLimitsWaitInTheJournalAndArriveInOrder) {
   const nlohmann::json doc = {{"format", "imucal-limits/1"},
                               {"part_numbers", {{"FOG-3A", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
   limits.replace(doc, "ada");
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   CampaignRow row = calibration_row(4, "FOG-7", 1000, R"({"k":1})");
   row.complete = false;  // stopped early: partial
   reg->record_calibration(row);
@@ -807,7 +821,7 @@ TEST_F(RegistryAway, CalibrationsAndLimitsWaitInTheJournalAndArriveInOrder) {
   expect_unreachable([&] { reg->unit_campaigns("FOG-7"); }, 3);
   EXPECT_EQ(limits.document(), limits_to_json(limits_from_json(looser)));  // as put, while away
 
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   EXPECT_TRUE(reg->retry());
   const auto server = direct();
   const auto history = server->unit_campaigns("FOG-7");
@@ -821,35 +835,36 @@ TEST_F(RegistryAway, CalibrationsAndLimitsWaitInTheJournalAndArriveInOrder) {
 // A crash after some writes were applied and before the journal was trimmed: the journal as it
 // was before the replay, put back, replayed by a new registry; and a write journaled behind them.
 TEST_F(RegistryAway, AReplayRepeatedAfterACrashAppliesNothingTwice) {
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   {
     auto reg = journaled();  // the server away from the start: no error
     EXPECT_FALSE(reg->reachable());
     reg->append_audit("ada", "away.1", "s", "{}", 1000);
-    reg->insert_issued(issued(1, 1));
+    reg->insert_issued(certificate_row(1, 1));
     reg->append_audit("ada", "away.2", "s", "{}", 2000);
     std::filesystem::copy_file(journal_, journal_ + ".before-replay");
-    ASSERT_TRUE(postgres_server().start_again());
+    ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
     EXPECT_TRUE(reg->retry());
     EXPECT_EQ(reg->audit_trail().size(), 2U);
   }
   std::filesystem::rename(journal_ + ".before-replay", journal_);
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   {
     auto reg = journaled();
     EXPECT_EQ(reg->pending_writes(), 3);
     reg->append_audit("bob", "away.3", "s", "{}", 3000);  // numbered after the three
-    ASSERT_TRUE(postgres_server().start_again());
+    ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
     EXPECT_TRUE(reg->retry());
     EXPECT_EQ(reg->pending_writes(), 0);
   }
   const auto server = direct();
-  const auto trail = server->audit_trail();
+  const AuditChain chain = server->audit_chain();
+  const auto& trail = chain.entries;
   ASSERT_EQ(trail.size(), 3U);
   EXPECT_EQ(trail[0].action, "away.1");
   EXPECT_EQ(trail[1].action, "away.2");
   EXPECT_EQ(trail[2].action, "away.3");
-  EXPECT_TRUE(check_audit_chain(trail, server->audit_head()).ok());
+  EXPECT_TRUE(check_audit_chain(chain).ok());
   EXPECT_EQ(server->issued_history(1).size(), 1U);
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/registry-journal-refused.jsonl"));  // no duplicate refused
 }
@@ -857,7 +872,7 @@ TEST_F(RegistryAway, AReplayRepeatedAfterACrashAppliesNothingTwice) {
 // A stand stopped with writes waiting: the next imucald replays them once the server answers
 // (at once when it answers at the start).
 TEST_F(RegistryAway, AJournalLeftAtShutdownIsReplayedByTheNextStart) {
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   {
     auto reg = journaled();
     reg->append_audit("ada", "away.1", "s", "{}", 1000);
@@ -868,7 +883,7 @@ TEST_F(RegistryAway, AJournalLeftAtShutdownIsReplayedByTheNextStart) {
     EXPECT_EQ(reg->pending_writes(), 2);
     EXPECT_FALSE(reg->reachable());
   }
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   auto reg = journaled();
   EXPECT_EQ(reg->pending_writes(), 0);
   EXPECT_TRUE(reg->reachable());
@@ -881,23 +896,23 @@ TEST_F(RegistryAway, AJournalLeftAtShutdownIsReplayedByTheNextStart) {
 // journal for the operator and does not hold the writes behind it.
 TEST_F(RegistryAway, ARefusedWriteIsTheCallersOrSetAsideAtReplay) {
   auto reg = journaled();
-  reg->insert_issued(issued(1, 1));
-  EXPECT_THROW(reg->insert_issued(issued(1, 2)), imucal::storage::StorageError);  // the number is taken
+  reg->insert_issued(certificate_row(1, 1));
+  EXPECT_THROW(reg->insert_issued(certificate_row(1, 2)), imucal::storage::StorageError);  // the number is taken
   EXPECT_EQ(reg->pending_writes(), 0);
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
-  reg->insert_issued(issued(1, 3));  // the same number again: refused at replay
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
+  reg->insert_issued(certificate_row(1, 3));  // the same number again: refused at replay
   reg->append_audit("ada", "away", "s", "{}", 1000);
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   EXPECT_TRUE(reg->retry());
   EXPECT_EQ(reg->audit_trail().size(), 1U);
-  EXPECT_EQ(reg->issued(issued(1, 1).number).value_or(IssuedCertificateRow{}).campaign_id, 1);
+  EXPECT_EQ(reg->issued(certificate_row(1, 1).number).value_or(IssuedCertificateRow{}).campaign_id, 1);
   EXPECT_EQ(lines_of(dir_ + "/registry-journal-refused.jsonl"), 1U);
 }
 
 // A stand registered while the server is away: its registration waits in the journal and arrives
 // when the server returns; its heartbeats meanwhile are dropped (volatile), never journaled.
 TEST_F(RegistryAway, AStandRegisteredWhileTheServerIsAwayArrivesWhenItReturns) {
-  ASSERT_TRUE(postgres_server().stop_for_a_while());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().stop_for_a_while());
   auto reg = journaled();
   reg->register_stand(stand("stand-a", 1000));
   EXPECT_EQ(reg->pending_writes(), 1);
@@ -905,7 +920,7 @@ TEST_F(RegistryAway, AStandRegisteredWhileTheServerIsAwayArrivesWhenItReturns) {
   EXPECT_TRUE(reg->report_stand_state("stand-a", R"({"run":{"id":1}})", 11000));
   EXPECT_EQ(reg->pending_writes(), 1);  // the heartbeats are not journaled
   expect_unreachable([&] { reg->stands(); }, 1);
-  ASSERT_TRUE(postgres_server().start_again());
+  ASSERT_TRUE(imucaltest::shared_postgres_server().start_again());
   EXPECT_TRUE(reg->retry());
   EXPECT_EQ(reg->pending_writes(), 0);
   auto stands = reg->stands();

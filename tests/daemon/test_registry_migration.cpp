@@ -21,6 +21,7 @@
 #include "daemon/registry/postgres_registry.hpp"
 #include "daemon/registry/registry_migration.hpp"
 #include "storage/sqlite.hpp"
+#include "tests/daemon/certificate_rows.hpp"
 #include "tests/postgres_server.hpp"
 #include "tests/test_paths.hpp"
 
@@ -28,26 +29,14 @@ using namespace imucal::daemon;
 
 namespace {
 
-imucaltest::PostgresServer& migration_server() {
-  static imucaltest::PostgresServer server;
-  return server;
-}
-
 constexpr const char* kLimits =
     R"({"format": "imucal-limits/1", "part_numbers": {"PN-100": {"gyro.bias_dph": {"max_abs": 1.0}}}})";
 
+// A stand's certificate as issued: signed (the migration copies the signature too).
 IssuedCertificateRow stand_certificate(std::int64_t sequence, std::int64_t campaign,
                                        std::optional<std::string> supersedes = std::nullopt) {
-  IssuedCertificateRow r;
-  r.sequence = sequence;
-  r.number = "LAB-2026-" + std::to_string(1000000 + sequence).substr(1);
-  r.campaign_id = campaign;
-  r.issued_ms = 1700000000000 + sequence;
-  r.content_json = R"({"n":)" + std::to_string(sequence) + "}";
-  r.content_sha256 = "sha-" + std::to_string(sequence);
+  IssuedCertificateRow r = imucaltest::certificate_row(sequence, campaign, std::move(supersedes));
   r.signed_json = R"({"signed":)" + std::to_string(sequence) + "}";
-  r.reason = supersedes ? "limits changed" : "the run ended";
-  r.supersedes = std::move(supersedes);
   return r;
 }
 
@@ -116,10 +105,7 @@ class StandDir {
 class RegistryMigration : public ::testing::Test {
  protected:
   void SetUp() override {
-    auto& server = migration_server();
-    if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-    ASSERT_TRUE(server.running()) << server.error();
-    conninfo_ = server.create_database(imucaltest::PostgresServer::unique_name("migrate"));
+    IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo_, "migrate");
     stand_.fill();
   }
   std::unique_ptr<PostgresRegistry> lab(const std::string& stand = "stand-a") {
@@ -409,7 +395,7 @@ TEST_F(RegistryMigration, TheCommandLineNamesWhatIsWrong) {
 // reads and writes rows only, cannot create the schema (told to ask the owner) and cannot switch
 // a trigger off.
 TEST_F(RegistryMigration, TheOwnerMigratesTheSchemaAndTheStandsRoleWritesRowsOnly) {
-  auto& server = migration_server();
+  auto& server = imucaltest::shared_postgres_server();
   const std::string db = imucaltest::PostgresServer::unique_name("lab");
   const std::string owner = imucaltest::PostgresServer::unique_name("imucal_owner");
   const std::string stand_role = imucaltest::PostgresServer::unique_name("imucal_stand");

@@ -13,15 +13,8 @@ namespace {
 
 class PostgresLayer : public ::testing::Test {
  protected:
-  static imucaltest::PostgresServer& server() {
-    static imucaltest::PostgresServer s;
-    return s;
-  }
-  void SetUp() override {
-    if (!server().skip_reason().empty()) GTEST_SKIP() << server().skip_reason();
-    ASSERT_TRUE(server().running()) << server().error();
-    conninfo_ = server().create_database(imucaltest::PostgresServer::unique_name("layer"));
-  }
+  static imucaltest::PostgresServer& server() { return imucaltest::shared_postgres_server(); }
+  void SetUp() override { IMUCALTEST_FRESH_POSTGRES_DATABASE(conninfo_, "layer"); }
   std::string conninfo_;
 };
 
