@@ -2,6 +2,7 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -89,16 +90,25 @@ std::optional<Principal> Auth::from_token(std::string_view token) const {
 
 std::optional<Principal> Auth::from_session(std::string_view session_id) {
   if (session_id.empty()) return std::nullopt;
-  std::lock_guard lock(mutex_);
-  const auto it = sessions_.find(session_id);
-  if (it == sessions_.end()) return std::nullopt;
-  const auto now = Clock::now();
-  if (std::chrono::duration<double>(now - it->second.last_use).count() > idle_timeout_s_) {
-    sessions_.erase(it);
+  Principal p;
+  std::string lab_hash;
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = sessions_.find(session_id);
+    if (it == sessions_.end()) return std::nullopt;
+    const auto now = Clock::now();
+    if (std::chrono::duration<double>(now - it->second.last_use).count() > idle_timeout_s_) {
+      sessions_.erase(it);
+      return std::nullopt;
+    }
+    it->second.last_use = now;
+    p = it->second.principal;
+    lab_hash = it->second.lab_password_hash;
+  }
+  if (!lab_hash.empty() && !lab_account_holds(p, lab_hash)) {
+    logout(session_id);
     return std::nullopt;
   }
-  it->second.last_use = now;
-  Principal p = it->second.principal;
   p.via = "session";
   p.session_id = std::string(session_id);
   return p;
@@ -129,7 +139,7 @@ void Auth::failed(const std::vector<std::pair<std::string, int>>& keys_and_limit
   }
 }
 
-Auth::Login Auth::start_session(const Principal& p) {
+Auth::Login Auth::start_session(const Principal& p, const std::string& lab_password_hash) {
   const auto now = Clock::now();
   // Drop expired sessions, and the oldest when there are too many.
   for (auto it = sessions_.begin(); it != sessions_.end();) {
@@ -149,7 +159,7 @@ Auth::Login Auth::start_session(const Principal& p) {
   login.session_id = random_token_hex();
   login.principal = p;
   login.principal.via = "session";
-  sessions_[login.session_id] = {login.principal, now};
+  sessions_[login.session_id] = {login.principal, now, lab_password_hash};
   return login;
 }
 
@@ -167,17 +177,23 @@ void Auth::set_lab_users(LabUsers source) {
   lab_users_at_.reset();
 }
 
-std::vector<UserEntry> Auth::password_candidates(const std::string& user) {
-  std::vector<UserEntry> out;
+std::vector<Auth::Candidate> Auth::password_candidates(const std::string& user) {
+  std::vector<Candidate> out;
   for (const UserEntry& u : users_)  // fixed at start: read without a lock
-    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
+    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back({u, false});
   if (!out.empty()) return out;  // the configuration wins
-  // One sign-in reads the registry, outside the lock (a server away holds it up to its connect
-  // timeout); the sign-ins meanwhile take the accounts read before instead of queuing behind it.
+  for (const UserEntry& u : lab_users())
+    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back({u, true});
+  return out;
+}
+
+std::vector<UserEntry> Auth::lab_users() {
+  // One caller reads the registry, outside the lock (a server away holds it up to its connect
+  // timeout); the others meanwhile take the accounts read before instead of queuing behind it.
   LabUsers source;
   {
     std::lock_guard lock(lab_mutex_);
-    if (!lab_users_) return out;
+    if (!lab_users_) return {};
     const auto now = Clock::now();
     if (!lab_users_reading_ && (!lab_users_at_ || now - *lab_users_at_ >= kLabUsersFresh)) {
       lab_users_at_ = now;
@@ -187,19 +203,28 @@ std::vector<UserEntry> Auth::password_candidates(const std::string& user) {
   }
   if (source) {
     std::optional<std::vector<UserEntry>> fresh;
+    std::string failure;
     try {
       fresh = source();
     } catch (const std::exception& e) {
-      spdlog::warn("sign-in: the lab's accounts could not be read ({}); the ones read before are used", e.what());
+      failure = e.what();
     }
     std::lock_guard lock(lab_mutex_);
     lab_users_reading_ = false;
     if (fresh) lab_users_read_ = std::move(*fresh);
+    if (!failure.empty() && !lab_users_failing_)  // once per outage, not at every read
+      spdlog::warn("the lab's accounts could not be read ({}); the ones read before sign in", failure);
+    lab_users_failing_ = !failure.empty();
   }
   std::lock_guard lock(lab_mutex_);
-  for (const UserEntry& u : lab_users_read_)
-    if (!u.password_hash.empty() && constant_time_equal(u.name, user)) out.push_back(u);
-  return out;
+  return lab_users_read_;
+}
+
+bool Auth::lab_account_holds(const Principal& p, const std::string& password_hash) {
+  const std::vector<UserEntry> accounts = lab_users();
+  return std::any_of(accounts.begin(), accounts.end(), [&](const UserEntry& u) {
+    return u.name == p.user && u.role == p.role && u.password_hash == password_hash;
+  });
 }
 
 Auth::Login Auth::login_password(const std::string& user, const std::string& password, const std::string& client) {
@@ -209,19 +234,20 @@ Auth::Login Auth::login_password(const std::string& user, const std::string& pas
     std::lock_guard lock(mutex_);
     if (throttled(keys)) return {429, "too many failed sign-ins; wait a minute", {}, {}};
   }
-  const std::vector<UserEntry> candidates = password_candidates(user);
+  const std::vector<Candidate> candidates = password_candidates(user);
   // Outside the lock: a hash takes a fraction of a second by design, other requests go on.
   // An unknown user costs a hash too, so the time does not tell which users exist.
-  const UserEntry* match = nullptr;
-  for (const UserEntry& u : candidates)
-    if (match == nullptr && verify_password(u.password_hash, password)) match = &u;
+  const Candidate* match = nullptr;
+  for (const Candidate& c : candidates)
+    if (match == nullptr && verify_password(c.user.password_hash, password)) match = &c;
   if (candidates.empty()) (void)verify_password(unknown_user_hash(), password);
   std::lock_guard lock(mutex_);
   if (match == nullptr) {
     failed(keys);
     return {401, "wrong user or password", {}, {}};
   }
-  return start_session({match->name, match->role, "session", ""});
+  return start_session({match->user.name, match->user.role, "session", ""},
+                       match->lab ? match->user.password_hash : std::string());
 }
 
 Auth::Login Auth::login_token(const std::string& token, const std::string& client) {
@@ -237,11 +263,21 @@ Auth::Login Auth::login_token(const std::string& token, const std::string& clien
 }
 
 bool Auth::session_alive(std::string_view session_id) {
-  std::lock_guard lock(mutex_);
-  const auto it = sessions_.find(session_id);
-  if (it == sessions_.end()) return false;
-  if (std::chrono::duration<double>(Clock::now() - it->second.last_use).count() > idle_timeout_s_) {
-    sessions_.erase(it);
+  Principal p;
+  std::string lab_hash;
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = sessions_.find(session_id);
+    if (it == sessions_.end()) return false;
+    if (std::chrono::duration<double>(Clock::now() - it->second.last_use).count() > idle_timeout_s_) {
+      sessions_.erase(it);
+      return false;
+    }
+    p = it->second.principal;
+    lab_hash = it->second.lab_password_hash;
+  }
+  if (!lab_hash.empty() && !lab_account_holds(p, lab_hash)) {
+    logout(session_id);
     return false;
   }
   return true;

@@ -64,18 +64,29 @@ class Auth {
   // every kLabUsersFresh (an account put on another stand signs in here within it); a source that
   // fails keeps the accounts last read, and the configured users sign in whatever it does. One
   // sign-in at a time reads; the others meanwhile use the accounts read before, without waiting.
+  // A lab account's session ends when the account is removed or its password or role changed, on
+  // any stand (seen within kLabUsersFresh of a request or a live page's check).
   using LabUsers = std::function<std::vector<UserEntry>()>;
   static constexpr std::chrono::seconds kLabUsersFresh{5};
   void set_lab_users(LabUsers source);
 
  private:
   // The configured users and the lab's accounts that may sign in as `user` with a password.
-  std::vector<UserEntry> password_candidates(const std::string& user);
+  struct Candidate {
+    UserEntry user;
+    bool lab = false;  // a lab account (else the configuration's)
+  };
+  std::vector<Candidate> password_candidates(const std::string& user);
+  // The lab's accounts, read again when older than kLabUsersFresh; none without a source.
+  std::vector<UserEntry> lab_users();
+  // Whether the lab account `p` signed in as is still there with this password hash and role.
+  bool lab_account_holds(const Principal& p, const std::string& password_hash);
   struct Session {
     Principal principal;
     std::chrono::steady_clock::time_point last_use;
+    std::string lab_password_hash;  // a lab account's session: its hash at the sign-in (else empty)
   };
-  Login start_session(const Principal& p);
+  Login start_session(const Principal& p, const std::string& lab_password_hash = {});
   // Whether the failures counted under these keys (within the last minute) reach their limits;
   // mutex_ held.
   bool throttled(const std::vector<std::pair<std::string, int>>& keys_and_limits);
@@ -90,7 +101,8 @@ class Auth {
   LabUsers lab_users_;
   std::vector<UserEntry> lab_users_read_;  // under lab_mutex_
   std::optional<std::chrono::steady_clock::time_point> lab_users_at_;
-  bool lab_users_reading_ = false;  // a sign-in is reading lab_users_ (outside lab_mutex_)
+  bool lab_users_reading_ = false;  // a caller is reading lab_users_ (outside lab_mutex_)
+  bool lab_users_failing_ = false;  // the last read failed
   std::mutex lab_mutex_;  // apart from mutex_: reading the registry must not hold up the sessions
   std::string generated_token_, token_file_;
   double idle_timeout_s_;

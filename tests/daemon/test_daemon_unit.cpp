@@ -551,6 +551,47 @@ TEST(Auth, ASignInDoesNotWaitOnAnotherReadingTheLabsAccounts) {
   EXPECT_EQ(auth.login_password("ann", "lab-password", "10.0.0.3").status, 401);
 }
 
+// A lab account's session ends when the account is removed, or its password or role changed, on
+// any stand: seen at the next request or live-page check once the accounts are read again. A
+// configured user's session does not depend on the registry.
+TEST(Auth, ALabAccountsSessionEndsWhenTheAccountIsRemovedOrChanged) {
+  DaemonConfig config;
+  config.users = {{"ops", Role::Operator, hash_password("operator-password"), ""}};
+  Auth auth(config, daemontest::scratch_dir("lab-users-sessions"));
+  const std::string hash = hash_password("lab-password");
+  std::vector<UserEntry> accounts = {{"ann", Role::Operator, hash, ""}, {"bea", Role::Viewer, hash, ""}};
+  auth.set_lab_users([&] { return accounts; });
+  const auto ann = auth.login_password("ann", "lab-password");
+  const auto bea = auth.login_password("bea", "lab-password");
+  const auto ops = auth.login_password("ops", "operator-password");
+  ASSERT_EQ(ann.status, 200);
+  ASSERT_EQ(bea.status, 200);
+  ASSERT_EQ(ops.status, 200);
+  ASSERT_TRUE(auth.from_session(ann.session_id));
+
+  accounts = {{"ann", Role::Viewer, hash, ""}, {"bea", Role::Viewer, hash_password("a new password"), ""}};
+  auth.set_lab_users([&] { return accounts; });  // read again at the next use, as after kLabUsersFresh
+  EXPECT_FALSE(auth.from_session(ann.session_id)) << "ann's role changed: her operator session ended";
+  EXPECT_FALSE(auth.session_alive(bea.session_id)) << "bea's password changed: her live page's session ended";
+  EXPECT_FALSE(auth.from_session(bea.session_id)) << "and it stays ended";
+  EXPECT_TRUE(auth.from_session(ops.session_id));
+  const auto ann_again = auth.login_password("ann", "lab-password");
+  ASSERT_EQ(ann_again.status, 200);
+  EXPECT_EQ(auth.from_session(ann_again.session_id).value_or(Principal{}).role, Role::Viewer);
+
+  accounts.clear();  // removed
+  auth.set_lab_users([&] { return accounts; });
+  EXPECT_FALSE(auth.from_session(ann_again.session_id)) << "ann's account was removed";
+  EXPECT_TRUE(auth.from_session(ops.session_id));
+  // The registry away: the accounts read before hold, and their sessions go on.
+  accounts = {{"ann", Role::Viewer, hash, ""}};
+  auth.set_lab_users([&] { return accounts; });
+  const auto during = auth.login_password("ann", "lab-password");
+  ASSERT_EQ(during.status, 200);
+  auth.set_lab_users([]() -> std::vector<UserEntry> { throw std::runtime_error("registry: server away"); });
+  EXPECT_TRUE(auth.from_session(during.session_id));
+}
+
 TEST(Api, TargetsAndCookies) {
   const auto t = parse_target("/api/imus/FOG%2F7/?limit=5&x=a%20b+c");
   ASSERT_TRUE(t);
