@@ -680,7 +680,9 @@ try {
   assert.ok(model.sigma, 'the model carries its sigmas');
   assert.match(download.suggestedFilename(), /-model-instrument\.json$/, 'the instrument-frame model has its own file name');
   log(`results page with ${coefRows} coefficients; model downloaded (${download.suggestedFilename()})`);
-  const [bundle] = await Promise.all([page.waitForEvent('download'), page.click('#download-recording')]);
+  // The bundle's job queues behind the run's analyses, which a loaded machine (CI, the sanitizer
+  // tests beside) stretches past the page's default 15 s: this waits for the job, not for speed.
+  const [bundle] = await Promise.all([page.waitForEvent('download', { timeout: 120000 }), page.click('#download-recording')]);
   const bundleFile = path.join(outDir, `campaign-${id}-recording.tar`);
   await bundle.saveAs(bundleFile);
   const tar = fs.readFileSync(bundleFile);
