@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <type_traits>
 #include <utility>
 
 #include <nlohmann/json.hpp>
@@ -392,32 +393,28 @@ void JournaledRegistry::read(const char* what, const Call& query) {
                 "", true);
 }
 
-std::int64_t JournaledRegistry::next_certificate_sequence() {
+template <class Query>
+auto JournaledRegistry::answer(const char* what, const Query& query) {
   std::lock_guard lock(mutex_);
-  std::int64_t out = 0;
-  read("a certificate number", [&](PostgresRegistry& r) { out = r.next_certificate_sequence(); });
+  std::invoke_result_t<const Query&, PostgresRegistry&> out{};
+  read(what, [&](PostgresRegistry& r) { out = query(r); });
   return out;
+}
+
+std::int64_t JournaledRegistry::next_certificate_sequence() {
+  return answer("a certificate number", [&](PostgresRegistry& r) { return r.next_certificate_sequence(); });
 }
 
 Registry::CertificateNumber JournaledRegistry::take_certificate_number() {
-  std::lock_guard lock(mutex_);
-  CertificateNumber out;
-  read("a certificate number", [&](PostgresRegistry& r) { out = r.take_certificate_number(); });
-  return out;
+  return answer("a certificate number", [&](PostgresRegistry& r) { return r.take_certificate_number(); });
 }
 
 std::int64_t JournaledRegistry::max_certificate_sequence() {
-  std::lock_guard lock(mutex_);
-  std::int64_t out = 0;
-  read("the highest certificate number", [&](PostgresRegistry& r) { out = r.max_certificate_sequence(); });
-  return out;
+  return answer("the highest certificate number", [&](PostgresRegistry& r) { return r.max_certificate_sequence(); });
 }
 
 std::optional<CertificateRow> JournaledRegistry::certificate(std::int64_t campaign_id) {
-  std::lock_guard lock(mutex_);
-  std::optional<CertificateRow> out;
-  read("a campaign's certificate number", [&](PostgresRegistry& r) { out = r.certificate(campaign_id); });
-  return out;
+  return answer("a campaign's certificate number", [&](PostgresRegistry& r) { return r.certificate(campaign_id); });
 }
 
 void JournaledRegistry::insert_certificate(const CertificateRow& row) {
@@ -433,31 +430,19 @@ void JournaledRegistry::insert_issued(const IssuedCertificateRow& row) {
 }
 
 std::optional<IssuedCertificateRow> JournaledRegistry::issued(const std::string& number) {
-  std::lock_guard lock(mutex_);
-  std::optional<IssuedCertificateRow> out;
-  read("an issued certificate", [&](PostgresRegistry& r) { out = r.issued(number); });
-  return out;
+  return answer("an issued certificate", [&](PostgresRegistry& r) { return r.issued(number); });
 }
 
 std::optional<IssuedCertificateRow> JournaledRegistry::current_issued(std::int64_t campaign_id) {
-  std::lock_guard lock(mutex_);
-  std::optional<IssuedCertificateRow> out;
-  read("a campaign's certificate", [&](PostgresRegistry& r) { out = r.current_issued(campaign_id); });
-  return out;
+  return answer("a campaign's certificate", [&](PostgresRegistry& r) { return r.current_issued(campaign_id); });
 }
 
 std::vector<IssuedCertificateRow> JournaledRegistry::issued_history(std::int64_t campaign_id) {
-  std::lock_guard lock(mutex_);
-  std::vector<IssuedCertificateRow> out;
-  read("a campaign's certificates", [&](PostgresRegistry& r) { out = r.issued_history(campaign_id); });
-  return out;
+  return answer("a campaign's certificates", [&](PostgresRegistry& r) { return r.issued_history(campaign_id); });
 }
 
 std::vector<std::int64_t> JournaledRegistry::campaigns_with_issued() {
-  std::lock_guard lock(mutex_);
-  std::vector<std::int64_t> out;
-  read("the campaigns with certificates", [&](PostgresRegistry& r) { out = r.campaigns_with_issued(); });
-  return out;
+  return answer("the campaigns with certificates", [&](PostgresRegistry& r) { return r.campaigns_with_issued(); });
 }
 
 bool JournaledRegistry::insert_issued_page(const IssuedPageRow& row) {
@@ -470,10 +455,7 @@ bool JournaledRegistry::insert_issued_page(const IssuedPageRow& row) {
 }
 
 std::optional<IssuedPageRow> JournaledRegistry::issued_page(const std::string& number, bool with_html) {
-  std::lock_guard lock(mutex_);
-  std::optional<IssuedPageRow> out;
-  read("a certificate's page", [&](PostgresRegistry& r) { out = r.issued_page(number, with_html); });
-  return out;
+  return answer("a certificate's page", [&](PostgresRegistry& r) { return r.issued_page(number, with_html); });
 }
 
 void JournaledRegistry::insert_overdue_override(const OverdueOverrideRow& row) {
@@ -490,10 +472,7 @@ void JournaledRegistry::remove_overdue_override(std::int64_t campaign_id) {
 }
 
 std::optional<OverdueOverrideRow> JournaledRegistry::overdue_override(std::int64_t campaign_id) {
-  std::lock_guard lock(mutex_);
-  std::optional<OverdueOverrideRow> out;
-  read("a campaign's overdue override", [&](PostgresRegistry& r) { out = r.overdue_override(campaign_id); });
-  return out;
+  return answer("a campaign's overdue override", [&](PostgresRegistry& r) { return r.overdue_override(campaign_id); });
 }
 
 AuditEntry JournaledRegistry::append_audit(const std::string& actor, const std::string& action,
@@ -509,17 +488,11 @@ AuditEntry JournaledRegistry::append_audit(const std::string& actor, const std::
 }
 
 std::vector<AuditEntry> JournaledRegistry::audit_entries(const AuditQuery& query) {
-  std::lock_guard lock(mutex_);
-  std::vector<AuditEntry> out;
-  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_entries(query); });
-  return out;
+  return answer("the audit trail", [&](PostgresRegistry& r) { return r.audit_entries(query); });
 }
 
 AuditChain JournaledRegistry::audit_chain() {
-  std::lock_guard lock(mutex_);
-  AuditChain out;
-  read("the audit trail", [&](PostgresRegistry& r) { out = r.audit_chain(); });
-  return out;
+  return answer("the audit trail", [&](PostgresRegistry& r) { return r.audit_chain(); });
 }
 
 // ---- Stands (issue 38, the lab overview) ----
@@ -540,10 +513,7 @@ bool JournaledRegistry::report_stand_state(const std::string& name, const std::s
 }
 
 std::vector<StandRow> JournaledRegistry::stands() {
-  std::lock_guard lock(mutex_);
-  std::vector<StandRow> out;
-  read("the lab's stands", [&](PostgresRegistry& r) { out = r.stands(); });
-  return out;
+  return answer("the lab's stands", [&](PostgresRegistry& r) { return r.stands(); });
 }
 
 void JournaledRegistry::put_user(const UserRow& row) {
@@ -561,10 +531,7 @@ bool JournaledRegistry::remove_user(const std::string& name) {
 }
 
 std::vector<UserRow> JournaledRegistry::users() {
-  std::lock_guard lock(mutex_);
-  std::vector<UserRow> out;
-  read("the lab's accounts", [&](PostgresRegistry& r) { out = r.users(); });
-  return out;
+  return answer("the lab's accounts", [&](PostgresRegistry& r) { return r.users(); });
 }
 
 void JournaledRegistry::record_calibration(const CampaignRow& row) {
@@ -574,17 +541,11 @@ void JournaledRegistry::record_calibration(const CampaignRow& row) {
 }
 
 std::vector<CampaignRow> JournaledRegistry::unit_campaigns(const std::optional<std::string>& serial) {
-  std::lock_guard lock(mutex_);
-  std::vector<CampaignRow> out;
-  read("the units' calibrations", [&](PostgresRegistry& r) { out = r.unit_campaigns(serial); });
-  return out;
+  return answer("the units' calibrations", [&](PostgresRegistry& r) { return r.unit_campaigns(serial); });
 }
 
 std::optional<std::string> JournaledRegistry::limits_document() {
-  std::lock_guard lock(mutex_);
-  std::optional<std::string> out;
-  read("the acceptance limits", [&](PostgresRegistry& r) { out = r.limits_document(); });
-  return out;
+  return answer("the acceptance limits", [&](PostgresRegistry& r) { return r.limits_document(); });
 }
 
 void JournaledRegistry::put_limits_document(const std::string& document_json, const std::string& actor) {

@@ -116,6 +116,9 @@ class JournaledRegistry final : public Registry {
   // Under mutex_.
   void write(const nlohmann::json& entry, const Call& apply);
   void read(const char* what, const Call& query);
+  // A read of its own: takes mutex_, asks `query` of the server by read() and returns its answer.
+  template <class Query>
+  auto answer(const char* what, const Query& query);
   bool ready(bool force);
   PostgresRegistry* connected();
   bool replay();

@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 
 #include <spdlog/spdlog.h>
 
@@ -25,6 +26,20 @@ inline json noisy_truth() {
     "gyro": {"bias_dph": [0.05, -0.03, 0.02], "scale_pos_ppm": [20, -10, 5], "scale_neg_ppm": [25, -5, 0],
              "noise": {"arw_deg_rth": 0.0005}},
     "accel": {"bias_mps2": [1e-4, 2e-4, -1e-4], "scale_ppm": [50, -40, 30], "noise": {"vrw_mps_rth": 0.002}}})");
+}
+
+// The suite's short calibration: stage 1 on direct-short at 20 Hz (seed 7, the noisy truth) of the
+// unit `imu` names; a complete model, hence a certificate at its end. time_scale 0: as fast as the
+// machine goes.
+inline json direct_short_calibration(const std::string& name, json imu, double time_scale = 0.0) {
+  return {{"name", name},
+          {"program", "direct-short"},
+          {"rate_hz", 20},
+          {"seed", 7},
+          {"time_scale", time_scale},
+          {"truth", noisy_truth()},
+          {"estimators", {"direct"}},
+          {"imu", std::move(imu)}};
 }
 
 inline daemon::DaemonConfig test_config(const std::string& dir) {

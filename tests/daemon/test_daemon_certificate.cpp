@@ -36,14 +36,7 @@ using imucal::daemon::parse_config;
 namespace {
 
 json certificate_campaign(const std::string& name, const std::string& serial) {
-  return {{"name", name},
-          {"program", "direct-short"},
-          {"rate_hz", 20},
-          {"seed", 7},
-          {"time_scale", 0},
-          {"truth", noisy_truth()},
-          {"estimators", {"direct"}},
-          {"imu", {{"serial", serial}, {"part_number", "PN-100"}}}};
+  return direct_short_calibration(name, {{"serial", serial}, {"part_number", "PN-100"}});
 }
 
 // Starts a campaign with an operator's override of the overdue table (configure() below names a

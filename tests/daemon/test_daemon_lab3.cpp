@@ -58,17 +58,8 @@ struct Stand {
   std::string name;
 };
 
-// The suite's short calibration (stage 1 on direct-short at 20 Hz, the one the certificate tests
-// run): a model, complete, hence a certificate at its end. time_scale 0: as fast as the machine goes.
 json calibration(const std::string& name, const std::string& serial, double time_scale = 0.0) {
-  return {{"name", name},
-          {"program", "direct-short"},
-          {"rate_hz", 20},
-          {"seed", 7},
-          {"time_scale", time_scale},
-          {"truth", noisy_truth()},
-          {"estimators", {"direct"}},
-          {"imu", {{"serial", serial}, {"part_number", kPartNumber}}}};
+  return direct_short_calibration(name, {{"serial", serial}, {"part_number", kPartNumber}}, time_scale);
 }
 
 bool poll(const std::function<bool()>& done, double timeout_s) {

@@ -19,14 +19,8 @@ using namespace imucal::daemontest;
 namespace {
 
 json unit_campaign(const std::string& name, const std::string& serial, double time_scale) {
-  return {{"name", name},
-          {"program", "direct-short"},
-          {"rate_hz", 20},
-          {"seed", 7},
-          {"time_scale", time_scale},
-          {"truth", noisy_truth()},
-          {"estimators", {"direct"}},
-          {"imu", {{"serial", serial}, {"part_number", "PN-100"}, {"firmware", "2.1"}, {"customer", "ACME"}}}};
+  return direct_short_calibration(
+      name, {{"serial", serial}, {"part_number", "PN-100"}, {"firmware", "2.1"}, {"customer", "ACME"}}, time_scale);
 }
 
 std::vector<std::string> split(const std::string& line, char sep) {
