@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include <Eigen/Geometry>
 
@@ -56,6 +57,54 @@ constexpr double kFlickerFloorFactor = 0.664;
 // deviation flat within +-2 % at 0.77 from 4 s to 4000 s: a flicker floor without 1/f synthesis.
 constexpr double kFlickerBankAllanFloor = 0.77;
 constexpr std::array<double, 5> kFlickerBankTimes_s = {1.0, 10.0, 100.0, 1000.0, 10000.0};
+
+}  // namespace
+
+// Everything a frame's signal depends on: the motion, the truth's deterministic terms, where the
+// table stands and how the IMU sits on it, the table's own errors, the rate and the length.
+struct SignalInputs {
+  std::string program_json;
+  std::string truth_json;  // without the noise
+  Site site;
+  Mount mount;
+  double rate_hz = 0.0;
+  std::int64_t n_frames = 0;
+  std::optional<table::TableCertificate> table;
+};
+
+class MotionSignal {
+ public:
+  SignalInputs inputs;
+  std::vector<Simulator::SignalFrame> frames;
+};
+
+namespace {
+
+SignalInputs signal_inputs(const motion::Program& program, ImuModel truth, const SimConfig& config,
+                           std::int64_t n_frames) {
+  if (config.thermal)
+    throw std::invalid_argument("simulate: a motion signal cannot be shared with a thermal source (its coefficients cannot be compared)");
+  if (program.source_json.empty())
+    throw std::invalid_argument("simulate: a motion signal needs a program with its JSON source (to compare programs)");
+  truth.gyro.noise = {};
+  truth.accel.noise = {};
+  return {program.source_json, imu_model_to_json_text(truth), config.site, config.mount, config.rate_hz, n_frames, config.table};
+}
+
+// The first input the two signals differ in, or null when none.
+const char* first_difference(const SignalInputs& a, const SignalInputs& b) {
+  if (a.program_json != b.program_json) return "program";
+  if (a.truth_json != b.truth_json) return "truth";
+  const Site &sa = a.site, &sb = b.site;
+  if (sa.latitude_deg != sb.latitude_deg || sa.longitude_deg != sb.longitude_deg || sa.height_m != sb.height_m ||
+      sa.gravity_mps2 != sb.gravity_mps2 || sa.middle_axis_azimuth_deg != sb.middle_axis_azimuth_deg)
+    return "site";
+  if (a.mount.C_o_p != b.mount.C_o_p || a.mount.r0_p_m != b.mount.r0_p_m) return "mount";
+  if (a.table != b.table) return "table";
+  if (a.rate_hz != b.rate_hz) return "rate";
+  if (a.n_frames != b.n_frames) return "length";
+  return nullptr;
+}
 
 }  // namespace
 
@@ -248,14 +297,8 @@ bool Simulator::next(ImuFrame& out) {
     temps_.push_back(ts);
     next_temp_t_s_ += 1.0 / config_.temp_rate_hz;
   }
-  Vector3d dtheta = Vector3d::Zero(), dv = Vector3d::Zero();
-  for (const DelayGroup& g : groups_) {
-    Vector3d ig, ia;
-    // Channel output at t reflects its input at t - delay.
-    integrate(t0 - g.delay_s, t1 - g.delay_s, g.mask, ig, ia);
-    dtheta += ig;
-    dv += ia;
-  }
+  const SignalFrame signal = signal_ ? signal_->frames[static_cast<std::size_t>(k_)] : signal_of(k_);
+  Vector3d dtheta = signal.dtheta_rad, dv = signal.dv_mps;
   if (config_.thermal) {
     // Biases that move with temperature: their value mid-sample (they change over hours).
     GyroErrors g = truth_.gyro;
@@ -304,10 +347,40 @@ bool Simulator::next(ImuFrame& out) {
     accel_remainder_[j] = ta - out.dv_mps[j];
   }
   out.t_ns = std::llround(static_cast<double>(k_ + 1) * units::kNsPerS / config_.rate_hz);
-  // What the encoders read at the true angles.
-  out.table_deg = table_.encoder_angles_rad(program_.evaluate(t1, cursor_).angle_rad) * units::kRadToDeg;
+  out.table_deg = signal.table_deg;
   ++k_;
   return true;
+}
+
+Simulator::SignalFrame Simulator::signal_of(std::int64_t k) const {
+  const double t0 = static_cast<double>(k) * dt_s_;
+  const double t1 = static_cast<double>(k + 1) * dt_s_;
+  SignalFrame s{Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero()};
+  for (const DelayGroup& g : groups_) {
+    Vector3d ig, ia;
+    // Channel output at t reflects its input at t - delay.
+    integrate(t0 - g.delay_s, t1 - g.delay_s, g.mask, ig, ia);
+    s.dtheta_rad += ig;
+    s.dv_mps += ia;
+  }
+  // What the encoders read at the true angles.
+  s.table_deg = table_.encoder_angles_rad(program_.evaluate(t1, cursor_).angle_rad) * units::kRadToDeg;
+  return s;
+}
+
+std::shared_ptr<const MotionSignal> Simulator::motion_signal() const {
+  auto signal = std::make_shared<MotionSignal>();
+  signal->inputs = signal_inputs(program_, truth_, config_, n_frames_);
+  signal->frames.reserve(static_cast<std::size_t>(n_frames_));
+  for (std::int64_t k = 0; k < n_frames_; ++k) signal->frames.push_back(signal_of(k));
+  return signal;
+}
+
+void Simulator::use_motion_signal(std::shared_ptr<const MotionSignal> signal) {
+  if (!signal) throw std::invalid_argument("simulate: no motion signal given");
+  if (const char* differs = first_difference(signal->inputs, signal_inputs(program_, truth_, config_, n_frames_)))
+    throw std::invalid_argument(std::string("simulate: the motion signal was computed for another ") + differs);
+  signal_ = std::move(signal);
 }
 
 Eigen::Matrix<double, 6, 1> Simulator::stochastic_bias() const {

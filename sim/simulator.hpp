@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <random>
 #include <vector>
@@ -71,6 +72,12 @@ struct TrueKinematics {
   Eigen::Vector3d v_origin_n;     // origin velocity relative to Earth, ENU
 };
 
+// The part of every frame that no seed changes: the increments the motion makes the sensors
+// sense through the truth's deterministic terms (before biases, noise and quantisation) and the
+// encoders' angles. Most of a simulation's time goes into it; runs of many seeds of one program,
+// truth and bench (the suite's tests of how errors spread) compute it once and share it.
+class MotionSignal;
+
 class Simulator {
  public:
   Simulator(const motion::Program& program, const ImuModel& truth, const SimConfig& config);
@@ -90,6 +97,15 @@ class Simulator {
   // Continue the same IMU from another run: its random-walk biases start where that run ended.
   void continue_stochastic_bias(const Eigen::Matrix<double, 6, 1>& bias);
 
+  // The signal of every frame of this run, computed now (as long as simulating the run without its
+  // noise), for simulators of other seeds to share. Not with a thermal source: its coefficients
+  // cannot be compared, so no other simulator could be shown to share them.
+  std::shared_ptr<const MotionSignal> motion_signal() const;
+  // Each frame's signal read from `signal` instead of computed: the frames are bit for bit those
+  // this simulator would compute. Throws std::invalid_argument, naming what differs, when the
+  // signal is of another program, truth (its noise aside), site, mount, table, rate or length.
+  void use_motion_signal(std::shared_ptr<const MotionSignal> signal);
+
   static constexpr double kGyroLsbAt1kHz_rad = 1e-11;
   static constexpr double kAccelLsbAt1kHz_mps = 1e-10;
 
@@ -100,6 +116,12 @@ class Simulator {
   // The outputs at t of the gyros and the accelerometers of `mask`'s triads (a triad outside it
   // is left zero: the channels of another delay group, which integrate() drops anyway).
   void sensor_outputs(double t, unsigned mask, Eigen::Vector3d& u_gyro, Eigen::Vector3d& u_accel) const;
+  friend class MotionSignal;
+  // Frame k's signal: the delay groups' integrals summed, and the encoders at its end.
+  struct SignalFrame {
+    Eigen::Vector3d dtheta_rad, dv_mps, table_deg;
+  };
+  SignalFrame signal_of(std::int64_t k) const;
   static void outputs(const TrueKinematics& k, const GyroErrors& gyro, const AccelErrors& accel,
                       const Eigen::Matrix3d& D_accel, unsigned mask, Eigen::Vector3d& u_gyro,
                       Eigen::Vector3d& u_accel);
@@ -123,6 +145,7 @@ class Simulator {
     unsigned mask;
   };
   std::vector<DelayGroup> groups_;
+  std::shared_ptr<const MotionSignal> signal_;  // null: computed frame by frame
 
   double gyro_lsb_rad_, accel_lsb_mps_;
   Eigen::Vector3d gyro_remainder_ = Eigen::Vector3d::Zero(), accel_remainder_ = Eigen::Vector3d::Zero();

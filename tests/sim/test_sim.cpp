@@ -221,3 +221,75 @@ TEST(Simulator, GyroNonlinearityAtFullRate) {
   const double q = 3.0, s_expected = 100e-6 + 1e-6 * q + 1.2e-6 * q * q + 0.25e-6 * q * q * q;
   EXPECT_NEAR(d_th, s_expected * angle, 3 * sim::Simulator::kGyroLsbAt1kHz_rad * 10);
 }
+
+// A motion signal shared by runs of other seeds (the suite's many-seed tests): the frames are bit
+// for bit those each simulator computes itself, and a signal of another bench is refused.
+TEST(Simulator, ASharedMotionSignalGivesEachSeedTheFramesItWouldComputeItself) {
+  const auto p = program(R"({"name":"osc","start_deg":[10,20,30],"segments":[{"type":"hold","duration_s":1},
+    {"type":"sine","axis":"outer","amplitude_deg":90,"period_s":4,"cycles":1,"phase_deg":0,"ramp_s":1},
+    {"type":"rate","axis":"middle","rate_dps":30,"revolutions":1,"accel_dps2":60},{"type":"hold","duration_s":1}]})");
+  ImuModel truth;
+  truth.gyro.delay_s = Vector3d(1e-6, 3e-6, -2e-6);
+  truth.accel.delay_s = Vector3d(2e-3, 2.1e-3, 1.9e-3);
+  truth.accel.lever_arm_y_m = Vector3d(5e-3, -2e-3, 1e-3);
+  truth.gyro.scale_pos = Vector3d(10, -20, 30) * 1e-6;
+  truth.gyro.bias_radps = Vector3d(1, 2, 3) * units::kDphToRadps;
+  truth.gyro.noise.arw_rad_rts = 0.001 * units::kDegRthToRadRts;
+  truth.accel.noise.vrw_mps_rts = 0.002 * units::kMpsRthToMpsRts;
+  truth.gyro.noise.bias_instability_radps = 0.001 * units::kDphToRadps;
+  sim::SimConfig cfg;
+  cfg.rate_hz = 200;
+  cfg.mount.r0_p_m = Vector3d(0.05, -0.02, 0.1);
+  auto frames = [&](sim::Simulator& s) {
+    std::vector<double> out;
+    ImuFrame f;
+    while (s.next(f)) {
+      out.push_back(static_cast<double>(f.t_ns));
+      for (int j = 0; j < 3; ++j) out.insert(out.end(), {f.dtheta_rad[j], f.dv_mps[j], f.table_deg[j]});
+    }
+    return out;
+  };
+  cfg.seed = 1;
+  const std::shared_ptr<const sim::MotionSignal> signal = sim::Simulator(p, truth, cfg).motion_signal();
+  for (std::uint64_t seed : {1u, 2u}) {
+    cfg.seed = seed;
+    sim::Simulator own(p, truth, cfg), shared(p, truth, cfg);
+    shared.use_motion_signal(signal);
+    EXPECT_EQ(frames(own), frames(shared)) << "seed " << seed;
+  }
+  // The noise is not the signal's: a noise-free truth shares it too.
+  ImuModel quiet = truth;
+  quiet.gyro.noise = {};
+  quiet.accel.noise = {};
+  sim::Simulator own_quiet(p, quiet, cfg), shared_quiet(p, quiet, cfg);
+  shared_quiet.use_motion_signal(signal);
+  EXPECT_EQ(frames(own_quiet), frames(shared_quiet));
+
+  auto refusal = [&](const ImuModel& t, const sim::SimConfig& c) {
+    sim::Simulator s(p, t, c);
+    try {
+      s.use_motion_signal(signal);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  ImuModel scaled = truth;
+  scaled.gyro.scale_pos[1] += 1e-6;
+  EXPECT_NE(refusal(scaled, cfg).find("another truth"), std::string::npos) << refusal(scaled, cfg);
+  sim::SimConfig other = cfg;
+  other.rate_hz = 100;
+  EXPECT_NE(refusal(truth, other).find("another rate"), std::string::npos) << refusal(truth, other);
+  other = cfg;
+  other.mount.r0_p_m.x() += 1e-3;
+  EXPECT_NE(refusal(truth, other).find("another mount"), std::string::npos) << refusal(truth, other);
+  other = cfg;
+  other.site.latitude_deg += 1.0;
+  EXPECT_NE(refusal(truth, other).find("another site"), std::string::npos) << refusal(truth, other);
+  other = cfg;
+  other.duration_s = 2.0;
+  EXPECT_NE(refusal(truth, other).find("another length"), std::string::npos) << refusal(truth, other);
+  const auto longer = program(R"({"name":"osc","segments":[{"type":"hold","duration_s":9}]})");
+  sim::Simulator another_program(longer, truth, cfg);
+  EXPECT_THROW(another_program.use_motion_signal(signal), std::invalid_argument);
+}
