@@ -447,9 +447,12 @@ struct NavCalibrationFilter::Impl {
     return Fdt;
   }
 
-  // x' = Phi x + Gamma p: the consider parameters' part of the step (Schmidt).
+  // x' = Phi x + Gamma p: the consider parameters' part of the step (Schmidt). A consider
+  // parameter moves the navigation error only (Gamma's rows below kNav are zero), so the products
+  // are kept to those rows: kNav N c instead of N^2 c (c the parameters; with a table's errors
+  // considered the dense products were a seventh of stage 3's time).
   void propagate_consider(const NavRows& Phi_top, double T) {
-    ConsiderMatrix Gamma = ConsiderMatrix::Zero(kSize, consider.size());
+    Eigen::Matrix<double, kNav, Eigen::Dynamic> Gamma = Eigen::Matrix<double, kNav, Eigen::Dynamic>::Zero(kNav, consider.size());
     // The site's g, if wrong by its sigma, accelerates the vertical channel.
     if (consider.gravity >= 0) Gamma(kVelocity.index + 2, consider.gravity) = consider.gravity_sigma_mps2 * T;
     // A start term wrong by its sigma: the gyro's rate error turns the attitude (-C dw, as a
@@ -467,9 +470,13 @@ struct NavCalibrationFilter::Impl {
     }
     ConsiderMatrix PhiPxp = consider.Pxp;  // Phi's rows below kNav are the identity's
     PhiPxp.topRows<kNav>() = Phi_top * consider.Pxp;
-    const StateMatrix cross = PhiPxp * Gamma.transpose();
-    P += cross + cross.transpose() + Gamma * Gamma.transpose();
-    consider.Pxp = PhiPxp + Gamma;
+    // P += cross + cross^T + Gamma Gamma^T, each nonzero in P's first kNav columns or rows only.
+    const Eigen::Matrix<double, kSize, kNav> cross = PhiPxp * Gamma.transpose();
+    P.leftCols<kNav>() += cross;
+    P.topRows<kNav>() += cross.transpose();
+    P.topLeftCorner<kNav, kNav>() += Gamma * Gamma.transpose();
+    consider.Pxp = PhiPxp;
+    consider.Pxp.topRows<kNav>() += Gamma;
   }
 
   void add_process_noise(double T) {

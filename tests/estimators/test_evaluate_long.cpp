@@ -65,7 +65,9 @@ TEST(EvaluateLong, ThreeVariantsOnTheEvaluateProgram) {
   // the random noise (coefficients, delays, lever arms and the biases reached are all there): over
   // a 30 min tilt, an ARW of 0.0005 deg/rt-h alone tilts the platform by ~6e-6 rad, a floor of
   // ~2e-5 m/s^2 on the implied accelerometer error whatever the calibration. The noisy figures
-  // are printed beside them.
+  // are printed beside them. The two runs differ by the noise alone: the second shares the first's
+  // motion signal (sim::MotionSignal).
+  std::shared_ptr<const sim::MotionSignal> signal;
   auto judge = [&](bool with_noise) {
     const auto p = motion::load_program("evaluate", motion::TableLimits{});
     sim::SimConfig cfg = s.cfg;
@@ -77,6 +79,8 @@ TEST(EvaluateLong, ThreeVariantsOnTheEvaluateProgram) {
       truth.accel.noise = {};
     }
     sim::Simulator sim(p, truth, cfg);
+    if (!signal) signal = sim.motion_signal();
+    sim.use_motion_signal(signal);
     sim.continue_stochastic_bias(g_bias_end);  // the same IMU, right after the navigation run
     const RecordingMeta meta = sim.meta();
     std::vector<ImuFrame> frames;
