@@ -715,6 +715,111 @@ TEST(ReferenceEquipment, CampaignRunRefusesOverdueEquipmentUnlessOverriddenWithA
 // key), and new limits, which change its verdict, issue a new certificate superseding it: the old
 // one is unchanged, marked superseded and still there; the new one takes the next number. A partial
 // run gets its certificate when an operator accepts it.
+namespace {
+
+// The run's transitions in the audit trail, in order from created to done, then `certificate`
+// issued at the end (both from the certificates' run subscriber: this daemon has no HTTP server,
+// no live feed is listened to).
+void expect_transitions_then_issued(LocalDaemon& d, std::int64_t campaign, const json& certificate) {
+  auto trail = d.get("/api/audit?limit=1000").at("entries").get<std::vector<json>>();
+  std::sort(trail.begin(), trail.end(), [](const json& x, const json& y) { return x.at("seq") < y.at("seq"); });
+  std::string state = "created";
+  bool issued_after_done = false;
+  for (const json& e : trail) {
+    if (e.at("action") == "campaign.transition" && e.at("subject") == "campaign " + std::to_string(campaign)) {
+      EXPECT_EQ(e.at("actor"), "imucald");
+      EXPECT_EQ(e.at("details").at("from"), state) << e.dump();
+      state = e.at("details").at("to");
+    } else if (e.at("action") == "certificate.issued" && e.at("subject") == certificate.at("number")) {
+      EXPECT_EQ(state, "done") << "issued before the run's transition to done";
+      EXPECT_EQ(e.at("details").at("reason"), "the run ended");
+      issued_after_done = state == "done";
+    }
+  }
+  EXPECT_EQ(state, "done");
+  EXPECT_TRUE(issued_after_done);
+}
+
+// `imucal verify` of a downloaded signed certificate against a public key file, as a customer runs it.
+std::pair<int, std::string> verify_download(const std::string& dir, const json& download, const std::string& public_key) {
+  const std::string file = dir + "/download.json";
+  std::ofstream(file) << download.dump(1);
+  return run_imucal("verify '" + file + "' --key '" + public_key + "'");
+}
+
+// Both downloads verified offline; a digit changed, the signature changed or another lab's key,
+// each named as the check that failed.
+void expect_verify_names_each_failure(const std::string& dir, const std::string& key_file, const json& first,
+                                      const json& second) {
+  for (const json* c : {&first, &second}) {
+    const auto [status, out] = verify_download(dir, c->at("signed"), key_file + ".pub");
+    EXPECT_EQ(status, 0) << out;
+  }
+  json digit = second.at("signed");
+  digit["content"]["sequence"] = digit["content"]["sequence"].get<std::int64_t>() + 1;
+  const auto [digit_status, digit_out] = verify_download(dir, digit, key_file + ".pub");
+  EXPECT_EQ(digit_status, 1) << digit_out;
+  EXPECT_NE(digit_out.find("NOT VERIFIED: the content hash check failed"), std::string::npos) << digit_out;
+  json resigned = second.at("signed");
+  std::string value = resigned["signature"]["value"];
+  value[0] = value[0] == 'A' ? 'B' : 'A';
+  resigned["signature"]["value"] = value;
+  const auto [signature_status, signature_out] = verify_download(dir, resigned, key_file + ".pub");
+  EXPECT_EQ(signature_status, 1) << signature_out;
+  EXPECT_NE(signature_out.find("NOT VERIFIED: the signature check failed"), std::string::npos) << signature_out;
+  signing::write_key_file(dir + "/other-lab.key", signing::generate_key_pair());
+  const auto [other_status, other_out] = verify_download(dir, second.at("signed"), dir + "/other-lab.key.pub");
+  EXPECT_EQ(other_status, 1) << other_out;
+  EXPECT_NE(other_out.find("NOT VERIFIED: the key check failed"), std::string::npos) << other_out;
+}
+
+// The page as printed, stored once: it must be this certificate's (of `campaign`); then it never changes.
+void expect_page_stored_once(LocalDaemon& d, std::int64_t campaign, const json& certificate) {
+  const std::string number = certificate.at("number").get<std::string>();
+  const std::string page_target = "/api/certificates/" + number + "/page";
+  EXPECT_EQ(d.call("GET", page_target).status, 404);
+  const std::string html = "<!doctype html><p>" + number + " " + certificate.at("content_sha256").get<std::string>() + "</p>\n";
+  const auto not_it = d.call("PUT", page_target, json{{"html", "<p>" + number + "</p>"}}.dump());
+  EXPECT_EQ(not_it.status, 400) << not_it.body;
+  EXPECT_EQ(d.call("PUT", page_target, json{{"html", html}}.dump(), kViewerToken).status, 403);
+  const auto stored = d.call("PUT", page_target, json{{"html", html}}.dump());
+  ASSERT_EQ(stored.status, 201) << stored.body;
+  EXPECT_EQ(json::parse(stored.body).at("sha256"), signing::sha256_hex(html));
+  const auto twice = d.call("PUT", page_target, json{{"html", html + " "}}.dump());
+  EXPECT_EQ(twice.status, 409) << twice.body;
+  EXPECT_NE(twice.body.find("never changes"), std::string::npos) << twice.body;
+  const auto page = d.call("GET", page_target, "", kViewerToken);
+  EXPECT_EQ(page.status, 200);
+  EXPECT_EQ(page.body, html) << "the stored bytes, unchanged";
+  EXPECT_EQ(d.get(certificate_target(campaign)).at("page").at("sha256"), signing::sha256_hex(html));
+}
+
+// A partial run: no certificate until an operator accepts it, then one saying so, numbered after
+// `last_sequence`.
+void expect_partial_run_certified_once_accepted(LocalDaemon& d, std::int64_t last_sequence) {
+  json slow = certificate_campaign("stopped early", "FOG-23");
+  slow["time_scale"] = 20;
+  const auto p = d.post_campaign(slow);
+  ASSERT_EQ(start_overriding(d, p), 200);
+  d.wait_for(p, [](const json& c) { return c.at("program_time_s").get<double>() > 0.8 * c.at("duration_s").get<double>(); });
+  ASSERT_EQ(d.command(p, "stop"), 200);
+  const json stopped = d.wait_final(p);
+  ASSERT_FALSE(stopped.at("complete").get<bool>());
+  ASSERT_TRUE(stopped.at("has_model").get<bool>()) << stopped.at("results").dump().substr(0, 600);
+  const auto refused = d.call("GET", certificate_target(p));
+  EXPECT_EQ(refused.status, 409);
+  EXPECT_NE(refused.body.find("accept"), std::string::npos) << refused.body;
+  const auto accepted = d.call("POST", "/api/campaigns/" + std::to_string(p) + "/accept",
+                               json{{"reason", "stopped at 80 %: enough statics"}}.dump());
+  ASSERT_EQ(accepted.status, 200) << accepted.body;
+  const json cp = d.get(certificate_target(p));
+  EXPECT_NE(cp.at("reason").get<std::string>().find("partial run accepted by"), std::string::npos) << cp.dump().substr(0, 400);
+  EXPECT_EQ(cp.at("sequence").get<std::int64_t>(), last_sequence + 1);
+  EXPECT_TRUE(cp.at("content").at("campaign").at("accepted").is_object());
+}
+
+}  // namespace
+
 TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange) {
   const std::string dir = scratch_dir("certificate-issued-lab");  // not the daemon's: that one starts empty
   const std::string key_file = dir + "/lab.key";
@@ -735,26 +840,7 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_EQ(ca.at("reason"), "the run ended");
   EXPECT_TRUE(ca.at("supersedes").is_null());
   EXPECT_TRUE(ca.at("superseded_by").is_null());
-  // Both from the certificates' run subscriber (this daemon has no HTTP server: no live feed is
-  // listened to): each transition of the run in the audit trail, in order from created to done,
-  // then the certificate issued at the end.
-  auto trail = d.get("/api/audit?limit=1000").at("entries").get<std::vector<json>>();
-  std::sort(trail.begin(), trail.end(), [](const json& x, const json& y) { return x.at("seq") < y.at("seq"); });
-  std::string state = "created";
-  bool issued_after_done = false;
-  for (const json& e : trail) {
-    if (e.at("action") == "campaign.transition" && e.at("subject") == "campaign " + std::to_string(a)) {
-      EXPECT_EQ(e.at("actor"), "imucald");
-      EXPECT_EQ(e.at("details").at("from"), state) << e.dump();
-      state = e.at("details").at("to");
-    } else if (e.at("action") == "certificate.issued" && e.at("subject") == ca.at("number")) {
-      EXPECT_EQ(state, "done") << "issued before the run's transition to done";
-      EXPECT_EQ(e.at("details").at("reason"), "the run ended");
-      issued_after_done = state == "done";
-    }
-  }
-  EXPECT_EQ(state, "done");
-  EXPECT_TRUE(issued_after_done);
+  expect_transitions_then_issued(d, a, ca);
   // What it states, frozen: no limits for PN-100 yet; signed over the content, with the lab's key.
   EXPECT_TRUE(ca.at("content").at("campaign").at("verdict").is_null()) << ca.at("content").at("campaign").dump();
   EXPECT_EQ(ca.at("content").at("number"), ca.at("number"));
@@ -783,51 +869,8 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_TRUE(ca2.at("content").at("campaign").at("verdict").is_object()) << ca2.at("content").dump().substr(0, 600);
   EXPECT_TRUE(signing::verify_document(ca2.at("signed"), lab_key).verified());
   EXPECT_EQ(ca2.at("history").size(), 2u);
-  // Both downloads checked offline by `imucal verify`, as a customer would: verified; a digit
-  // changed, the signature changed or another lab's key, each named as the check that failed.
-  const auto verify = [&](const json& download, const std::string& public_key) {
-    const std::string file = dir + "/download.json";
-    std::ofstream(file) << download.dump(1);
-    return run_imucal("verify '" + file + "' --key '" + public_key + "'");
-  };
-  for (const json* c : {&ca, &ca2}) {
-    const auto [status, out] = verify(c->at("signed"), key_file + ".pub");
-    EXPECT_EQ(status, 0) << out;
-  }
-  json digit = ca2.at("signed");
-  digit["content"]["sequence"] = digit["content"]["sequence"].get<std::int64_t>() + 1;
-  const auto [digit_status, digit_out] = verify(digit, key_file + ".pub");
-  EXPECT_EQ(digit_status, 1) << digit_out;
-  EXPECT_NE(digit_out.find("NOT VERIFIED: the content hash check failed"), std::string::npos) << digit_out;
-  json resigned = ca2.at("signed");
-  std::string value = resigned["signature"]["value"];
-  value[0] = value[0] == 'A' ? 'B' : 'A';
-  resigned["signature"]["value"] = value;
-  const auto [signature_status, signature_out] = verify(resigned, key_file + ".pub");
-  EXPECT_EQ(signature_status, 1) << signature_out;
-  EXPECT_NE(signature_out.find("NOT VERIFIED: the signature check failed"), std::string::npos) << signature_out;
-  // The page as printed, stored once: it must be this certificate's; then it never changes.
-  const std::string page_target = "/api/certificates/" + ca2.at("number").get<std::string>() + "/page";
-  EXPECT_EQ(d.call("GET", page_target).status, 404);
-  const std::string html = "<!doctype html><p>" + ca2.at("number").get<std::string>() + " " +
-                           ca2.at("content_sha256").get<std::string>() + "</p>\n";
-  const auto not_it = d.call("PUT", page_target, json{{"html", "<p>" + ca2.at("number").get<std::string>() + "</p>"}}.dump());
-  EXPECT_EQ(not_it.status, 400) << not_it.body;
-  EXPECT_EQ(d.call("PUT", page_target, json{{"html", html}}.dump(), kViewerToken).status, 403);
-  const auto stored = d.call("PUT", page_target, json{{"html", html}}.dump());
-  ASSERT_EQ(stored.status, 201) << stored.body;
-  EXPECT_EQ(json::parse(stored.body).at("sha256"), signing::sha256_hex(html));
-  const auto twice = d.call("PUT", page_target, json{{"html", html + " "}}.dump());
-  EXPECT_EQ(twice.status, 409) << twice.body;
-  EXPECT_NE(twice.body.find("never changes"), std::string::npos) << twice.body;
-  const auto page = d.call("GET", page_target, "", kViewerToken);
-  EXPECT_EQ(page.status, 200);
-  EXPECT_EQ(page.body, html) << "the stored bytes, unchanged";
-  EXPECT_EQ(d.get(certificate_target(a)).at("page").at("sha256"), signing::sha256_hex(html));
-  signing::write_key_file(dir + "/other-lab.key", signing::generate_key_pair());
-  const auto [other_status, other_out] = verify(ca2.at("signed"), dir + "/other-lab.key.pub");
-  EXPECT_EQ(other_status, 1) << other_out;
-  EXPECT_NE(other_out.find("NOT VERIFIED: the key check failed"), std::string::npos) << other_out;
+  expect_verify_names_each_failure(dir, key_file, ca, ca2);
+  expect_page_stored_once(d, a, ca2);
   // The same limits again change nothing: nothing is issued.
   ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
   EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
@@ -838,26 +881,7 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_EQ(d.get(certificate_target(a)).at("number"), ca2.at("number"));
   EXPECT_EQ(d.call("GET", "/api/certificates/NO-SUCH-1").status, 404);
 
-  // A partial run: no certificate until an operator accepts it, then one saying so.
-  json slow = certificate_campaign("stopped early", "FOG-23");
-  slow["time_scale"] = 20;
-  const auto p = d.post_campaign(slow);
-  ASSERT_EQ(start_overriding(d, p), 200);
-  d.wait_for(p, [](const json& c) { return c.at("program_time_s").get<double>() > 0.8 * c.at("duration_s").get<double>(); });
-  ASSERT_EQ(d.command(p, "stop"), 200);
-  const json stopped = d.wait_final(p);
-  ASSERT_FALSE(stopped.at("complete").get<bool>());
-  ASSERT_TRUE(stopped.at("has_model").get<bool>()) << stopped.at("results").dump().substr(0, 600);
-  const auto refused = d.call("GET", certificate_target(p));
-  EXPECT_EQ(refused.status, 409);
-  EXPECT_NE(refused.body.find("accept"), std::string::npos) << refused.body;
-  const auto accepted = d.call("POST", "/api/campaigns/" + std::to_string(p) + "/accept",
-                               json{{"reason", "stopped at 80 %: enough statics"}}.dump());
-  ASSERT_EQ(accepted.status, 200) << accepted.body;
-  const json cp = d.get(certificate_target(p));
-  EXPECT_NE(cp.at("reason").get<std::string>().find("partial run accepted by"), std::string::npos) << cp.dump().substr(0, 400);
-  EXPECT_EQ(cp.at("sequence").get<std::int64_t>(), cb2.at("sequence").get<std::int64_t>() + 1);
-  EXPECT_TRUE(cp.at("content").at("campaign").at("accepted").is_object());
+  expect_partial_run_certified_once_accepted(d, cb2.at("sequence").get<std::int64_t>());
 }
 
 namespace {
