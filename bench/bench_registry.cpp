@@ -115,8 +115,7 @@ nlohmann::json bench_sqlite(const std::string& dir, double seconds) {
   for (std::int64_t i = 1; i <= kCampaigns; ++i)
     db.insert_campaign("bench " + std::to_string(i), "{}", "direct", 3600.0, "bench", CampaignUnit{"FOG-1", "PN-100"});
   CertificateSequence sequence(dir + "/sequence.json");
-  SqliteRegistry registry(
-      db, [&sequence](std::int64_t floor) { return sequence.next(floor); }, "stand-1", dir + "/limits.json");
+  SqliteRegistry registry(db, sequence, "stand-1", dir + "/limits.json");
   nlohmann::json out = figures({run_for(registry, seconds)}, seconds);
   out["chain_intact"] = check_audit_chain(db.audit_chain()).ok();
   return out;

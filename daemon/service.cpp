@@ -47,7 +47,7 @@ std::unique_ptr<Registry> make_registry(const DaemonConfig& config, DaemonDb& db
     const fs::path limits = fs::path(config.limits_file).is_absolute() ? fs::path(config.limits_file)
                                                                         : fs::path(config.data_dir) / config.limits_file;
     return std::make_unique<SqliteRegistry>(
-        db, [&sequence](std::int64_t floor) { return sequence.next(floor); }, registry_stand(config), limits.string());
+        db, sequence, registry_stand(config), limits.string());
   }
   auto connect = [conninfo = config.registry.postgresql, stand = registry_stand(config)] {
     auto registry = std::make_unique<PostgresRegistry>(conninfo, stand);

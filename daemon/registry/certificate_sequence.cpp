@@ -67,10 +67,10 @@ void replace_file(const std::string& path, const std::string& text) {
 
 CertificateSequence::CertificateSequence(std::string path) : path_(std::move(path)) {}
 
-std::int64_t CertificateSequence::read_last() const {
+CertificateSequence::Taken CertificateSequence::read_last() const {
   std::ifstream in(path_);
   if (!in) {
-    if (!std::filesystem::exists(path_)) return 0;  // the site's first certificate
+    if (!std::filesystem::exists(path_)) return {};  // the site's first certificate
     fail(path_, "cannot read it");
   }
   std::stringstream text;
@@ -79,31 +79,37 @@ std::int64_t CertificateSequence::read_last() const {
   const json j = json::parse(text.str(), nullptr, false);
   if (j.is_discarded() || !j.is_object() || j.value("format", std::string()) != kFormat)
     fail(path_, std::string("not an ") + kFormat + " file; repair it by hand (its \"last\" number must not go back)");
-  const auto it = j.find("last");
-  if (it == j.end() || !it->is_number_integer() || it->get<std::int64_t>() < 0)
+  const auto last = j.find("last");
+  if (last == j.end() || !last->is_number_integer() || last->get<std::int64_t>() < 0)
     fail(path_, "\"last\" must be a whole number >= 0");
-  return it->get<std::int64_t>();
+  // Files written before the time was kept have none: the next number takes its own clock's.
+  const auto issued = j.find("last_issued_ms");
+  if (issued != j.end() && !issued->is_number_integer())
+    fail(path_, "\"last_issued_ms\" must be a whole number of milliseconds");
+  return {last->get<std::int64_t>(), issued == j.end() ? 0 : issued->get<std::int64_t>()};
 }
 
 std::int64_t CertificateSequence::last() const {
   std::lock_guard guard(mutex_);
   FileLock lock(path_);
-  return read_last();
+  return read_last().number;
 }
 
-std::int64_t CertificateSequence::next(std::int64_t floor) {
+CertificateSequence::Taken CertificateSequence::take(std::int64_t floor, std::int64_t now_ms) {
   std::lock_guard guard(mutex_);
   const auto dir = std::filesystem::path(path_).parent_path();
   std::error_code ec;
   if (!dir.empty()) std::filesystem::create_directories(dir, ec);
   if (ec) fail(path_, "cannot create its directory: " + ec.message());
   FileLock lock(path_);
-  const std::int64_t number = std::max(read_last(), floor) + 1;
+  const Taken last = read_last();
+  const Taken taken{std::max(last.number, floor) + 1, std::max(last.issued_ms, now_ms)};
   replace_file(path_, json{{"format", kFormat},
-                           {"last", number},
+                           {"last", taken.number},
+                           {"last_issued_ms", taken.issued_ms},
                            {"comment", "imucald's certificate numbers on this site: never edit \"last\" downwards"}}
                               .dump(1) + "\n");
-  return number;
+  return taken;
 }
 
 }  // namespace imucal::daemon

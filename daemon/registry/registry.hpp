@@ -41,9 +41,10 @@ class Registry {
   // A new number with the time of its issue, taken as one step: numbers follow the times the
   // certificates state. Here the number, then this stand's clock: one stand's issues are ordered
   // (the issuer takes them one at a time). A store several stands share takes both under one lock
-  // of its own (PostgresRegistry): taken apart, stand a's number N and stand b's N+1 could state
-  // b's issue as the earlier, had a's thread been held up between its number and its clock. (Two
-  // daemons sharing one sequence file on SQLite still take them apart: not yet mended.)
+  // of its own (PostgresRegistry: the server's clock; SqliteRegistry: the sequence file's lock,
+  // never earlier than the last number's time): taken apart, stand a's number N and stand b's N+1
+  // could state b's issue as the earlier, had a's thread been held up between its number and its
+  // clock.
   struct CertificateNumber {
     std::int64_t sequence = 0;
     std::int64_t issued_ms = 0;

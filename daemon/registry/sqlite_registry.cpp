@@ -11,12 +11,17 @@ namespace imucal::daemon {
 
 namespace fs = std::filesystem;
 
-SqliteRegistry::SqliteRegistry(DaemonDb& db, TakeNumber take_number, std::string stand, std::string limits_path)
-    : db_(db), take_number_(std::move(take_number)), stand_(std::move(stand)), limits_path_(std::move(limits_path)) {}
+SqliteRegistry::SqliteRegistry(DaemonDb& db, CertificateSequence& sequence, std::string stand, std::string limits_path)
+    : db_(db), sequence_(sequence), stand_(std::move(stand)), limits_path_(std::move(limits_path)) {}
 
 // The floor is the database's highest: a sequence file restored from an old backup cannot hand
-// out a number again.
-std::int64_t SqliteRegistry::next_certificate_sequence() { return take_number_(db_.max_certificate_sequence()); }
+// out a number again. The time is taken with the number, under the sequence file's lock: the
+// daemons sharing it state their issues in the order of their numbers.
+Registry::CertificateNumber SqliteRegistry::take_certificate_number() {
+  const CertificateSequence::Taken taken = sequence_.take(db_.max_certificate_sequence(), now_unix_ms());
+  return {taken.number, taken.issued_ms};
+}
+std::int64_t SqliteRegistry::next_certificate_sequence() { return take_certificate_number().sequence; }
 std::int64_t SqliteRegistry::max_certificate_sequence() { return db_.max_certificate_sequence(); }
 
 std::optional<CertificateRow> SqliteRegistry::certificate(std::int64_t campaign_id) {

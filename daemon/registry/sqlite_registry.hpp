@@ -1,29 +1,28 @@
 // The registry in the daemon's own SQLite database (registry.hpp): a stand alone, as before issue
-// 38. The tables are DaemonDb's; certificate numbers come from the site's sequence file
-// (registry/certificate_sequence.hpp CertificateSequence), given here as the function that takes one
-// above a floor, so that the numbering rule stays where it is. The units' calibrations are the
+// 38. The tables are DaemonDb's; certificate numbers, with their times of issue, come from the
+// site's sequence file (registry/certificate_sequence.hpp CertificateSequence), which other daemons
+// on the site may share. The units' calibrations are the
 // database's campaigns (named with this stand's name); the limits are the stand's limits file
 // (config.limits_file), replaced whole.
 #pragma once
 
-#include <functional>
 #include <string>
 
+#include "daemon/registry/certificate_sequence.hpp"
 #include "daemon/registry/registry.hpp"
 
 namespace imucal::daemon {
 
 class SqliteRegistry final : public Registry {
  public:
-  // `take_number(floor)`: the next number of the site's sequence above `floor`.
-  using TakeNumber = std::function<std::int64_t(std::int64_t floor)>;
-  // `stand`: this stand's name (registry_stand), named by each calibration; `limits_path`: the
-  // acceptance limits file.
-  SqliteRegistry(DaemonDb& db, TakeNumber take_number, std::string stand, std::string limits_path);
+  // `sequence`: the site's certificate numbers (outlives the registry); `stand`: this stand's name
+  // (registry_stand), named by each calibration; `limits_path`: the acceptance limits file.
+  SqliteRegistry(DaemonDb& db, CertificateSequence& sequence, std::string stand, std::string limits_path);
 
   std::string backend() const override { return "sqlite"; }
   std::int64_t next_certificate_sequence() override;
   std::int64_t max_certificate_sequence() override;
+  CertificateNumber take_certificate_number() override;
   std::optional<CertificateRow> certificate(std::int64_t campaign_id) override;
   void insert_certificate(const CertificateRow& row) override;
   void insert_issued(const IssuedCertificateRow& row) override;
@@ -55,7 +54,7 @@ class SqliteRegistry final : public Registry {
 
  private:
   DaemonDb& db_;
-  TakeNumber take_number_;
+  CertificateSequence& sequence_;
   std::string stand_;
   std::string limits_path_;
 };

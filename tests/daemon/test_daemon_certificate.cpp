@@ -10,7 +10,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
+#include <mutex>
 #include <regex>
 #include <set>
 #include <thread>
@@ -175,8 +177,21 @@ TEST(Certificate, SequenceFileIsSharedSafelyAndNeverGoesBack) {
   // Two daemons on one site: each takes numbers through its own descriptor of the lock file.
   CertificateSequence one(path), two(path);
   std::vector<std::int64_t> got_one, got_two;
-  std::thread t1([&] { for (int i = 0; i < 40; ++i) got_one.push_back(one.next(0)); });
-  std::thread t2([&] { for (int i = 0; i < 40; ++i) got_two.push_back(two.next(0)); });
+  // The second daemon's clock an hour behind the first's: each number still states an issue no
+  // earlier than the number before it, whichever daemon took it.
+  constexpr std::int64_t kHour_ms = 3'600'000;
+  std::map<std::int64_t, std::int64_t> issued_ms;  // number -> time
+  std::mutex issued_mutex;
+  auto take = [&](CertificateSequence& sequence, std::vector<std::int64_t>& got, std::int64_t clock_offset_ms) {
+    for (int i = 0; i < 40; ++i) {
+      const CertificateSequence::Taken t = sequence.take(0, daemon::now_unix_ms() + clock_offset_ms);
+      got.push_back(t.number);
+      std::lock_guard lock(issued_mutex);
+      issued_ms[t.number] = t.issued_ms;
+    }
+  };
+  std::thread t1([&] { take(one, got_one, 0); });
+  std::thread t2([&] { take(two, got_two, -kHour_ms); });
   t1.join();
   t2.join();
   std::set<std::int64_t> all(got_one.begin(), got_one.end());
@@ -184,15 +199,23 @@ TEST(Certificate, SequenceFileIsSharedSafelyAndNeverGoesBack) {
   EXPECT_EQ(all.size(), 80u);
   EXPECT_EQ(*all.rbegin(), 80);
   EXPECT_EQ(one.last(), 80);
+  ASSERT_EQ(issued_ms.size(), 80u);
+  for (auto it = std::next(issued_ms.begin()); it != issued_ms.end(); ++it)
+    EXPECT_LE(std::prev(it)->second, it->second) << "number " << it->first << " states an earlier issue than the one before";
 
   // A sequence file behind the database (restored from an old backup) does not go back.
-  EXPECT_EQ(one.next(500), 501);
-  EXPECT_EQ(one.next(0), 502);
+  EXPECT_EQ(one.take(500, 0).number, 501);
+  EXPECT_EQ(one.take(0, 0).number, 502);
+  // A file written before the times were kept: numbered on, the time this daemon's clock.
+  std::ofstream(path) << R"({"format": "imucal-certificate-sequence/1", "last": 7})";
+  const CertificateSequence::Taken after_old = one.take(0, 1234);
+  EXPECT_EQ(after_old.number, 8);
+  EXPECT_EQ(after_old.issued_ms, 1234);
 
   // A damaged file stops the numbering and says which file.
   std::ofstream(path) << "{\"last\": ";
   try {
-    one.next(0);
+    one.take(0, 0);
     ADD_FAILURE() << "a damaged sequence file was accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();

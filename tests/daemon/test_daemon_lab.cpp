@@ -177,7 +177,8 @@ TEST(Lab, TheLimitsFollowedLastOutliveARestart) {
 TEST(Lab, TheHeartbeatRegistersAgainWhenForgottenAndStopsAtOnce) {
   const std::string dir = scratch_dir("lab-heartbeat");
   daemon::DaemonDb db(dir + "/imucald.db");
-  daemon::SqliteRegistry registry(db, [](std::int64_t floor) { return floor + 1; }, "s", dir + "/limits.json");
+  daemon::CertificateSequence sequence(dir + "/sequence.json");
+  daemon::SqliteRegistry registry(db, sequence, "s", dir + "/limits.json");
   const daemon::StandRow identity{"s", "sim", "http://s:1", "v", 0, 0, 0, "{}"};
   const auto has = [&](const std::string& name, const std::string& state) {
     const auto stands = registry.stands();

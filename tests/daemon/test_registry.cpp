@@ -50,6 +50,7 @@ class SqliteStore {
   }
   ~SqliteStore() {
     dbs_.clear();
+    sequences_.clear();
     std::error_code ignored;
     if (!dir_.empty()) std::filesystem::remove_all(dir_, ignored);
   }
@@ -57,10 +58,8 @@ class SqliteStore {
   std::unique_ptr<Registry> connect() {
     std::lock_guard lock(mutex_);
     dbs_.push_back(std::make_unique<DaemonDb>(dir_ + "/imucald.db"));
-    auto sequence = std::make_shared<CertificateSequence>(dir_ + "/sequence");
-    return std::make_unique<SqliteRegistry>(
-        *dbs_.back(), [sequence](std::int64_t floor) { return sequence->next(floor); }, "stand-a",
-        dir_ + "/limits.json");
+    sequences_.push_back(std::make_unique<CertificateSequence>(dir_ + "/sequence"));
+    return std::make_unique<SqliteRegistry>(*dbs_.back(), *sequences_.back(), "stand-a", dir_ + "/limits.json");
   }
   // The stand's own database, whose campaigns the registry records.
   DaemonDb& stand_db() {
@@ -73,6 +72,7 @@ class SqliteStore {
   std::string dir_;
   std::mutex mutex_;
   std::vector<std::unique_ptr<DaemonDb>> dbs_;
+  std::vector<std::unique_ptr<CertificateSequence>> sequences_;
   std::unique_ptr<DaemonDb> own_;
 };
 
