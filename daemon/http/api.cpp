@@ -920,22 +920,14 @@ HttpReply Api::replace_limits(const ApiRequest& request, const Principal& who) {
   if (auto bad = parse_body(request, body)) return *bad;
   if (!body.is_object()) return error_reply(400, "the limits must be a JSON object {\"format\": \"imucal-limits/1\", ...}");
   body.erase("source");  // what GET adds, so a GET's reply can be edited and put back
-  const json before = limits_.document();
+  json doc;
   try {
-    limits_.replace(body, who.user);
+    doc = imucal::daemon::replace_limits(limits_, audit_, registry_, db_, certificates_, body, who.user);
   } catch (const std::invalid_argument& e) {
     return error_reply(400, e.what());
   } catch (const std::exception& e) {
     return error_reply(500, std::string("the limits were not saved: ") + e.what());
   }
-  spdlog::info("acceptance limits replaced by {} ({} part numbers)", who.user, limits_.current().parts.size());
-  audit_.append(who.user, "limits.replaced", "limits", {{"before", before}, {"after", limits_.document()}});
-  // A certificate states its verdict: one that the new limits change is superseded. Only units of
-  // the part numbers whose limits changed can have a new verdict (this runs on an HTTP thread).
-  // (The lab's other stands reissue theirs when they see the new limits: production/limits_follower.hpp.)
-  reissue_under_new_limits(registry_, db_, certificates_, changed_part_numbers(before, limits_.document()),
-                           "acceptance limits changed by " + who.user);
-  json doc = limits_.document();
   doc["source"] = limits_.current().source;
   return json_reply(200, doc);
 }

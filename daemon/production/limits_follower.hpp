@@ -5,7 +5,8 @@
 // every stand of a lab: the stand that puts new ones reissues at once (PUT /api/limits), every
 // other stand when its next heartbeat sees the document changed, and a stand that was off
 // meanwhile at its first heartbeat. The document followed last is kept in the stand's database: a
-// restart under the same limits reissues nothing (each reissue renders every certificate in force).
+// restart under the same limits reissues nothing (each reissue renders every certificate in force),
+// nor does a beat after the stand's own PUT (replace_limits records what it reissued for).
 #pragma once
 
 #include <functional>
@@ -18,6 +19,8 @@
 
 #include "daemon/db/daemon_db.hpp"
 #include "daemon/production/certificate_issuer.hpp"
+#include "daemon/production/limits_file.hpp"
+#include "daemon/registry/audit_trail.hpp"
 #include "daemon/registry/registry.hpp"
 
 namespace imucal::daemon {
@@ -27,6 +30,13 @@ namespace imucal::daemon {
 // campaign; the others go on.
 void reissue_under_new_limits(Registry& registry, DaemonDb& db, CertificateIssuer& issuer,
                               const std::optional<std::set<std::string>>& changed, const std::string& reason);
+
+// PUT /api/limits: `document` put by `actor` in place of the limits in force (throws
+// std::invalid_argument naming the entry at fault, changing nothing; a failure of the store: its
+// error), audited, this stand's certificates whose verdict it changes superseded at once, and the
+// document recorded as followed. Returns the limits in force after it.
+nlohmann::json replace_limits(LimitsFile& limits, const AuditTrail& audit, Registry& registry, DaemonDb& db,
+                              CertificateIssuer& issuer, const nlohmann::json& document, const std::string& actor);
 
 class LimitsFollower {
  public:
@@ -40,6 +50,9 @@ class LimitsFollower {
   // stand that never followed one); when it changed, reissues the part numbers whose limits changed
   // (every one when none was followed). Never throws: a failure is followed at the next call.
   void follow();
+  // Records `document` as followed: this stand has reissued under it (replace_limits). Throws
+  // what the database throws.
+  static void record_followed(DaemonDb& db, const nlohmann::json& document);
 
   static constexpr const char* kFollowedSetting = "limits_followed";  // DaemonDb setting: the JSON text
 
@@ -48,7 +61,7 @@ class LimitsFollower {
   Document document_;
   Reissue reissue_;
   std::mutex mutex_;
-  std::optional<nlohmann::json> followed_;
+  std::optional<nlohmann::json> followed_;  // while the database cannot say (read at each call)
 };
 
 }  // namespace imucal::daemon
