@@ -10,7 +10,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <map>
 #include <mutex>
 #include <regex>
@@ -171,37 +170,46 @@ TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
   EXPECT_DOUBLE_EQ(cc.at("gravity").at("value_mps2").get<double>(), earth::site_gravity_mps2(fresh.config.site));
 }
 
-TEST(Certificate, SequenceFileIsSharedSafelyAndNeverGoesBack) {
-  const std::string dir = scratch_dir("certificate-sequence");
-  const std::string path = dir + "/sequence.json";
-  // Two daemons on one site: each takes numbers through its own descriptor of the lock file.
-  CertificateSequence one(path), two(path);
-  std::vector<std::int64_t> got_one, got_two;
-  // The second daemon's clock an hour behind the first's: each number still states an issue no
-  // earlier than the number before it, whichever daemon took it.
-  constexpr std::int64_t kHour_ms = 3'600'000;
-  std::map<std::int64_t, std::int64_t> issued_ms;  // number -> time
-  std::mutex issued_mutex;
-  auto take = [&](CertificateSequence& sequence, std::vector<std::int64_t>& got, std::int64_t clock_offset_ms) {
+namespace {
+
+// Two daemons on one site take 40 numbers each at once, each through its own descriptor of the
+// lock file, the second's clock `offset_ms` off the first's: each number taken, with the time of
+// issue it states.
+std::map<std::int64_t, std::int64_t> take_at_once(CertificateSequence& one, CertificateSequence& two,
+                                                  std::int64_t offset_ms) {
+  std::map<std::int64_t, std::int64_t> issued_ms;
+  std::mutex mutex;
+  const auto take = [&](CertificateSequence& sequence, std::int64_t clock_offset_ms) {
     for (int i = 0; i < 40; ++i) {
       const CertificateSequence::Taken t = sequence.take(0, daemon::now_unix_ms() + clock_offset_ms);
-      got.push_back(t.number);
-      std::lock_guard lock(issued_mutex);
+      std::lock_guard lock(mutex);
       issued_ms[t.number] = t.issued_ms;
     }
   };
-  std::thread t1([&] { take(one, got_one, 0); });
-  std::thread t2([&] { take(two, got_two, -kHour_ms); });
+  std::thread t1([&] { take(one, 0); });
+  std::thread t2([&] { take(two, offset_ms); });
   t1.join();
   t2.join();
-  std::set<std::int64_t> all(got_one.begin(), got_one.end());
-  all.insert(got_two.begin(), got_two.end());
-  EXPECT_EQ(all.size(), 80u);
-  EXPECT_EQ(*all.rbegin(), 80);
+  return issued_ms;
+}
+
+}  // namespace
+
+TEST(Certificate, SequenceFileIsSharedSafelyAndNeverGoesBack) {
+  const std::string dir = scratch_dir("certificate-sequence");
+  const std::string path = dir + "/sequence.json";
+  CertificateSequence one(path), two(path);
+  // The second daemon's clock an hour behind the first's: 80 numbers, none taken twice, each
+  // stating an issue no earlier than the number before it, whichever daemon took it.
+  const std::map<std::int64_t, std::int64_t> issued_ms = take_at_once(one, two, -3'600'000);
+  ASSERT_EQ(issued_ms.size(), 80u) << "a number taken twice";
+  EXPECT_EQ(issued_ms.rbegin()->first, 80);
   EXPECT_EQ(one.last(), 80);
-  ASSERT_EQ(issued_ms.size(), 80u);
-  for (auto it = std::next(issued_ms.begin()); it != issued_ms.end(); ++it)
-    EXPECT_LE(std::prev(it)->second, it->second) << "number " << it->first << " states an earlier issue than the one before";
+  std::int64_t before_ms = 0;
+  for (const auto& number_time : issued_ms) {
+    EXPECT_LE(before_ms, number_time.second) << "number " << number_time.first << " states an earlier issue than the one before";
+    before_ms = number_time.second;
+  }
 
   // A sequence file behind the database (restored from an old backup) does not go back.
   EXPECT_EQ(one.take(500, 0).number, 501);
