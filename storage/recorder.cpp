@@ -151,6 +151,9 @@ Recorder::Push Recorder::queue_batch_locked(std::unique_lock<std::mutex>& lock, 
     if (error_ || closing_) return Push::Failed;
     if (write_problem_) return Push::Refused;
     copy_slice_locked(frames.subspan(done, slice));
+    // The writer woken for each slice, not only once the batch is queued: it is what makes room for
+    // the next slice, and an idle writer (no batch open) would otherwise sleep while this waits.
+    cv_work_.notify_one();
     const auto added = static_cast<std::int64_t>(slice);
     stats_.queued_frames += added;
     stats_.accepted_frames += added;

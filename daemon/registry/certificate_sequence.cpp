@@ -13,6 +13,7 @@
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
 
 #include "storage/durable_file.hpp"
 
@@ -23,6 +24,8 @@ using nlohmann::json;
 namespace {
 
 constexpr const char* kFormat = "imucal-certificate-sequence/1";
+// Clocks kept by NTP agree to milliseconds: a minute apart is a clock set wrong.
+constexpr std::int64_t kClockBehindWarning_ms = 60'000;
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) {
   throw std::runtime_error("certificate sequence file '" + path + "': " + what);
@@ -104,6 +107,12 @@ CertificateSequence::Taken CertificateSequence::take(std::int64_t floor, std::in
   FileLock lock(path_);
   const Taken last = read_last();
   const Taken taken{std::max(last.number, floor) + 1, std::max(last.issued_ms, now_ms)};
+  // Dated by another daemon's clock ahead of this one's: said, so that a clock set wrong (which
+  // would date every later certificate by it) is seen and set right.
+  if (last.issued_ms - now_ms > kClockBehindWarning_ms)
+    spdlog::warn("certificate {}: dated {} s later than this computer's clock, by the last number's time in the "
+                 "shared sequence file '{}' (another daemon's clock ahead): set the clocks of the daemons sharing it",
+                 taken.number, (last.issued_ms - now_ms) / 1000, path_);
   replace_file(path_, json{{"format", kFormat},
                            {"last", taken.number},
                            {"last_issued_ms", taken.issued_ms},
