@@ -12,7 +12,6 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <future>
 #include <limits>
 #include <mutex>
 #include <new>
@@ -111,29 +110,6 @@ struct Alarms {
     return {};
   }
 };
-
-// A batch larger than the queue's room, pushed while the writer is idle (no batch open, so no
-// commit deadline wakes it): the writer is woken by each slice queued and makes room for the next.
-// Found as a hang of the test below on a loaded machine (2026-11-29): the producer waited for room
-// while the writer slept, never told of the slices before.
-TEST_F(RecorderTest, ABatchLargerThanTheQueueWakesAnIdleWriter) {
-  const std::int64_t block = RunDb::kFramesPerChunk;
-  const auto frames = frames_from(0, 3 * block);
-  RecorderOptions options;
-  options.commit_interval_s = 0.02;
-  options.wait_when_full = true;
-  options.queue_capacity_frames = 2 * block;  // two slices fit, the third waits for room
-  Recorder recorder(RunDb::create(path(), test::crash_meta()), options, {}, {});
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the writer asleep, nothing queued
-  auto pushed = std::async(std::launch::async, [&] { return recorder.push(std::span(frames)); });
-  if (pushed.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
-    ADD_FAILURE() << "the push of 3 blocks into a queue of 2 waited 60 s for room the idle writer never made";
-    (void)recorder.close();  // closing wakes the producer (Push::Failed)
-  }
-  EXPECT_EQ(pushed.get(), Recorder::Push::Queued);
-  ASSERT_TRUE(recorder.commit_and_wait());
-  EXPECT_EQ(recorder.stats().committed_frames, 3 * block);
-}
 
 TEST_F(RecorderTest, RecordsEverythingOnceInOrderAndClosesTheSessionCleanly) {
   const auto frames = frames_from(0, 50'000);
