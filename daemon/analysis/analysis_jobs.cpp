@@ -171,6 +171,11 @@ void AnalysisJobs::worker() {
       status = 500;
       body = {{"error", job->key.analysis + " failed: " + e.what()}};
     }
+    // Each job's time in the log: a request that seems to hang is told apart from a slow queue.
+    const auto now = Clock::now();
+    spdlog::info("campaign {}: {} answered {} after {:.1f} s ({:.1f} s of it queued)", job->key.campaign,
+                 job->key.analysis, status, std::chrono::duration<double>(now - job->queued_at).count(),
+                 std::chrono::duration<double>(job->started_at - job->queued_at).count());
     {
       std::lock_guard lock(mutex_);
       job->status = status;

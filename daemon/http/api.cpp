@@ -1450,6 +1450,9 @@ HttpReply Api::campaign_recording(std::int64_t id) {
   key.campaign = id;
   key.analysis = "recording";
   key.state = to_string(row->state);
+  // While a job writes the bundle, its progress is the answer: the file appears (renamed into
+  // place) before the job has pruned the folder and finished.
+  if (const auto pending = jobs_->find(key); pending && !pending->ready) return job_reply(*pending);
   // The bundle on the disk is the answer kept, not the job's (a finished job's is dropped): a
   // failure is tried again at the next request, and a bundle removed since
   // (http.exports_max_bytes) is written again.

@@ -253,6 +253,57 @@ async function newPage(name) {
   return { context, page };
 }
 
+// The results of a run seen with results while still running (a partial run's card), which ends
+// while that card still waits for its data: the card drawn for the ended run is the only one, its
+// recording bundle offered (a CI failure: the superseded card's rows, drawn for "running", came
+// first, the bundle's link disabled). Forced here: the page's first read of the campaign says
+// "running", and that card's read of the progress is held back until the next read (done) has
+// drawn its card.
+async function resultsOfARunThatEndsWhileTheyAreRead(page, id) {
+  let detailReads = 0;
+  let releaseHeld;
+  const held = new Promise((resolve) => { releaseHeld = resolve; });
+  let heldAnswered = false;
+  const detailUrl = `${base}/api/campaigns/${id}`;
+  const progressUrl = `${base}/api/campaigns/${id}/progress`;
+  const onDetail = async (route) => {
+    if (++detailReads > 1) return route.continue();
+    const real = await route.fetch();
+    await route.fulfill({ response: real, json: { ...(await real.json()), state: 'running' } });
+  };
+  let progressReads = 0;
+  const onProgress = async (route) => {
+    if (++progressReads === 1) {
+      await held;
+      await route.continue();
+      heldAnswered = true;
+      return;
+    }
+    await route.continue();
+  };
+  await page.route(detailUrl, onDetail);
+  await page.route(progressUrl, onProgress);
+  try {
+    await page.goto(`${base}/#/campaigns`);
+    await page.goto(`${base}/#/campaigns/${id}`);
+    // The second read (done) draws its card: its own read of the progress passed.
+    await page.waitForFunction(() => document.querySelector('#download-recording')?.hasAttribute('href'));
+    assert.ok(progressReads >= 2, `the card of the ended run read the progress (${progressReads} reads)`);
+    releaseHeld();
+    for (const t0 = Date.now(); !heldAnswered; await new Promise((r) => setTimeout(r, 50)))
+      assert.ok(Date.now() - t0 < 15000, 'the held read of the progress answered');
+    // The superseded card's continuation runs once its reads are in; give the page a moment.
+    await page.evaluate(() => new Promise((r) => setTimeout(r, 500)));
+    assert.equal(await page.$$eval('#downloads', (els) => els.length), 1, 'one card of results: the superseded one drew nothing');
+    assert.ok(await page.getAttribute('#download-recording', 'href'), 'the bundle is offered for the ended run');
+  } finally {
+    releaseHeld();
+    await page.unroute(detailUrl, onDetail);
+    await page.unroute(progressUrl, onProgress);
+  }
+  log('a run that ended while its partial results were read: one card, drawn for the ended run');
+}
+
 async function shot(page, name) {
   await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
   const file = path.join(outDir, `${name}.png`);
@@ -703,6 +754,7 @@ try {
   await waitText(page, '#plot-evaluation-status', /Not available for this run: .*program 'evaluate'/);
   await page.$eval('#optional-plots', (el) => el.scrollIntoView());
   await shot(page, '07b-results-allan-not-available');
+  await resultsOfARunThatEndsWhileTheyAreRead(page, id);
 
   // ---- certificate ----
   const [cert] = await Promise.all([page.context().waitForEvent('page'), page.click('#certificate')]);
@@ -1482,6 +1534,16 @@ try {
   if (left.length) console.error('page problems:\n  ' + left.join('\n  '));
   try {
     for (const ctx of browser.contexts()) for (const p of ctx.pages()) await p.screenshot({ path: path.join(outDir, `failure-${Date.now()}.png`) });
+  } catch { /* best effort */ }
+  // What each page said when it failed (its alerts, a download's progress): a failure seen once
+  // in CI must be readable from its log, the screenshots going with the checkout.
+  try {
+    for (const ctx of browser.contexts()) for (const p of ctx.pages()) {
+      const said = await p.evaluate(() => [...document.querySelectorAll('[role=alert], .form-error, [data-progress]')]
+        .map((el) => `${el.id || el.className}: ${el.textContent.trim().slice(0, 300)}${el.dataset.progress ? ` (progress ${el.dataset.progress})` : ''}`)
+        .filter((t) => !/: $/.test(t)));
+      console.error(`page ${p.url()}:\n  ${said.join('\n  ') || '(no alert)'}`);
+    }
   } catch { /* best effort */ }
   console.error('imucald output (last 3000 characters):\n' + daemonLog.slice(-3000));
 } finally {

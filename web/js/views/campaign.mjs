@@ -81,8 +81,11 @@ export function mount(root, ctx) {
     const mine = run && run.id === id;
     facts.showLive(mine ? run : null);
     if (!mine) return;
-    if (detail && run.state !== detail.state) {
-      detail.state = run.state;
+    // A telemetry tick can be older than the last read of the campaign: it never takes an ended
+    // run back to a live state (the run's own events read it again), and it changes a copy, never
+    // the object the results were drawn from (their downloads were drawn for the state it had).
+    if (detail && run.state !== detail.state && !FINAL_STATES.has(detail.state)) {
+      detail = { ...detail, state: run.state };
       clear(badge).append(outcomeBadge({ state: run.state }));
       commands.update();
     }

@@ -23,7 +23,13 @@ import { optionalPlots } from './optional_plots.mjs';
 export function resultsCard({ id, status, getDetail, isStopped, onError, onAccepted, cleanups }) {
   const results = h('section', { class: 'card', id: 'results', hidden: true });
 
+  // Which load draws: a later load (the run ended while a partial run's results were being read)
+  // supersedes one still waiting for its data, which then stops instead of adding its own rows
+  // (a second download row, drawn for the state the run had then) to the card.
+  let latest = 0;
   async function load(d) {
+    const mine = ++latest;
+    const superseded = () => isStopped() || mine !== latest;
     results.hidden = false;
     clear(results).append(h('h2', {}, 'Results'));
     // The truth of a simulated run in the model's frame (imucald turns it, written in the
@@ -35,13 +41,13 @@ export function resultsCard({ id, status, getDetail, isStopped, onError, onAccep
       status().catch(() => null),
       d.has_model && hasTruth ? get(`/api/campaigns/${id}/truth`).catch(() => null) : null,
     ]);
-    if (isStopped()) return;
+    if (superseded()) return;
     // The run's model, for the Allan panel's comparison.
     const modelNoise = model && !model._error ? model : null;
     const truth = comparison && Array.isArray(comparison.rows) ? comparison : null;
     const simulated = (daemonStatus?.devices || '').startsWith('sim') || hasTruth;
 
-    results.append(downloads(d, { id, getDetail, isStopped, onError, onAccepted }));
+    results.append(downloads(d, { id, getDetail, isStopped: superseded, onError, onAccepted }));
 
     // Coefficients
     if (model && !model._error) {
@@ -55,7 +61,7 @@ export function resultsCard({ id, status, getDetail, isStopped, onError, onAccep
     const stageNames = ['direct', 'lever-arm', 'stage3'].filter((n) => d.results?.[n]?.status === 'done' && d.results[n].model);
     if (stageNames.length >= 2) {
       const models = await Promise.all(stageNames.map((n) => get(`/api/campaigns/${id}/model?stage=${n}&frame=body`).catch(() => null)));
-      if (isStopped()) return;
+      if (superseded()) return;
       if (models.every(Boolean)) {
         const stages = stageNames.map((stage, k) => ({ stage, model: models[k] }));
         results.append(contributionsTable(stages, d.results.stage3?.uncertainty_reduction || null));
@@ -95,7 +101,7 @@ export function resultsCard({ id, status, getDetail, isStopped, onError, onAccep
     // Plots whose data the API may provide (docs/web.md lists what it lacks today).
     const optional = h('div', { class: 'optional-plots', id: 'optional-plots' });
     results.append(h('h3', {}, 'Noise, thermal and navigation evaluation'), optional);
-    await optionalPlots(optional, { id, detail: getDetail(), isStopped, cleanups, modelNoise });
+    await optionalPlots(optional, { id, detail: getDetail(), isStopped: superseded, cleanups, modelNoise });
   }
   return { element: results, load };
 }
