@@ -1,32 +1,25 @@
 // Calibration certificates (issue 17, deliverable 5): numbers with the site's prefix that never
 // repeat (not across campaigns, not across a new data directory, not between two daemons sharing
 // the sequence file), the same number every time a campaign's certificate is asked for, no number
-// for a run that has not ended, and the bench a certificate states (reference equipment, gravity),
-// with the configuration's errors naming the field at fault.
+// for a run that has not ended, a certificate issued when its run ends, frozen, signed and
+// superseded, and the site gravity a certificate states, with the configuration's errors naming
+// the field at fault. The reference equipment: test_daemon_equipment.cpp; the audit trail and the
+// lab's registry: test_daemon_audit_registry.cpp.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <regex>
-#include <set>
 #include <thread>
 
+#include "certificate_fixture.hpp"
 #include "core/earth.hpp"
-#include "core/expect_value.hpp"
-#include "daemon/production/reference_equipment.hpp"
 #include "daemon/production/certificates.hpp"
 #include "daemon/registry/certificate_sequence.hpp"
-#include "daemon/registry/postgres_registry.hpp"
-#include "service_fixture.hpp"
 #include "signing/signing.hpp"
-#include "storage/sqlite.hpp"
-#include "tests/postgres_server.hpp"
-#include "tests/test_paths.hpp"
 
 using namespace imucal;
 using namespace imucal::daemontest;
@@ -35,29 +28,6 @@ using imucal::daemon::ConfigError;
 using imucal::daemon::parse_config;
 
 namespace {
-
-json certificate_campaign(const std::string& name, const std::string& serial) {
-  return direct_short_calibration(name, {{"serial", serial}, {"part_number", "PN-100"}});
-}
-
-// Starts a campaign with an operator's override of the overdue table (configure() below names a
-// table whose calibration ran out in 2020): its certificates then state the table as overdue.
-int start_overriding(LocalDaemon& d, std::int64_t id) {
-  const auto r = d.call("POST", "/api/campaigns/" + std::to_string(id) + "/start",
-                        json{{"override_overdue", "test bench: the overdue table is what the certificate must state"}}.dump());
-  EXPECT_EQ(r.status, 200) << r.body;
-  return r.status;
-}
-
-// A campaign run to its end on the simulated bench.
-std::int64_t run_campaign(LocalDaemon& d, const std::string& name, const std::string& serial) {
-  const auto id = d.post_campaign(certificate_campaign(name, serial));
-  start_overriding(d, id);
-  EXPECT_EQ(d.wait_final(id).at("state"), "done");
-  return id;
-}
-
-std::string certificate_target(std::int64_t id) { return "/api/campaigns/" + std::to_string(id) + "/certificate"; }
 
 // The configuration's message for `text` (empty when it is accepted).
 std::string config_error(const std::string& text) {
@@ -69,35 +39,13 @@ std::string config_error(const std::string& text) {
   return {};
 }
 
-void configure(daemon::DaemonConfig& c, const std::string& sequence_file) {
-  c.certificates.prefix = "LAB";
-  c.certificates.sequence_file = sequence_file;
-  c.reference_equipment.table =
-      daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2020-01-31", "DKD-123", "1 arcsec (k=2)"};
-  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2999-12-31", "", ""};
-  c.reference_equipment.gravity = daemon::GravitySurvey{"Federal Geodesy Agency", "GS-2024-17", "2999-12-31"};
-  c.site.gravity_mps2 = 9.81912;
-}
-
-// `imucal ARGS`: its exit status and what it printed (standard output and error).
-std::pair<int, std::string> run_imucal(const std::string& args) {
-  const std::string command = imucaltest::program("imucal") + " " + args + " 2>&1";
-  std::string out;
-  FILE* p = ::popen(command.c_str(), "r");
-  if (!p) return {-1, "popen failed"};
-  char buf[512];
-  while (std::fgets(buf, sizeof buf, p)) out += buf;
-  const int status = ::pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-
 }  // namespace
 
 TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
   const std::string sequence_file = scratch_dir("certificate-site") + "/sequence.json";
   std::string first_number, second_number;
   {
-    LocalDaemon d("certificate-a", false, [&](daemon::DaemonConfig& c) { configure(c, sequence_file); });
+    LocalDaemon d("certificate-a", false, [&](daemon::DaemonConfig& c) { configure_certified_bench(c, sequence_file); });
     const auto a = run_campaign(d, "first", "FOG-7");
     const auto b = run_campaign(d, "second", "FOG-8");
 
@@ -154,7 +102,7 @@ TEST(Certificate, NumbersNeverRepeatAcrossCampaignsAndDataDirectories) {
   }
   // A new data directory, the same site's sequence file: the count goes on.
   LocalDaemon fresh("certificate-b", false, [&](daemon::DaemonConfig& c) {
-    configure(c, sequence_file);
+    configure_certified_bench(c, sequence_file);
     c.site.gravity_mps2.reset();
     c.reference_equipment.gravity.reset();  // nothing measured: no survey
   });
@@ -312,269 +260,12 @@ TEST(Certificate, DatesAreDaysOfTheGregorianCalendar) {
   EXPECT_FALSE(daemon::date_day_number("tomorrow"));
 }
 
-// Issue 35, deliverable 4: the one rule for which instrument is overdue or due soon on a day, at
-// the day boundaries; the start check, the certificate and the live page all judge with it.
-TEST(ReferenceEquipment, OneRuleJudgesTheDueDatesAtTheDayBoundaries) {
-  const std::int64_t due = expect_value(daemon::date_day_number("2026-12-10"), "a date");
-  EXPECT_EQ(daemon::date_text(due), "2026-12-10");
-  EXPECT_EQ(daemon::date_text(0), "1970-01-01");
-  EXPECT_EQ(daemon::date_text(19783), "2024-03-01");
-  EXPECT_EQ(daemon::date_text(-1), "1969-12-31");
-  // A Unix time's day in UTC: midnight starts the day, the millisecond before it is the day before.
-  EXPECT_EQ(daemon::utc_day(0), 0);
-  EXPECT_EQ(daemon::utc_day(86'399'999), 0);
-  EXPECT_EQ(daemon::utc_day(86'400'000), 1);
-  EXPECT_EQ(daemon::utc_day(-1), -1);
-  EXPECT_EQ(daemon::utc_day(due * 86'400'000 + 86'399'999), due);
-
-  daemon::ReferenceEquipment e;
-  e.table = daemon::ReferenceInstrument{"Acme Motion", "ATS-3", "T-0815", "2026-12-10", "DKD-123", "1 arcsec (k=2)"};
-  const auto on = [&](std::int64_t day) {
-    const auto judged = daemon::equipment_due(e, day);
-    EXPECT_EQ(judged.size(), 1u);
-    return judged.empty() ? daemon::InstrumentDue{} : judged.front();
-  };
-  // Eight days ahead: nothing to say; seven: due soon; the due day itself: still usable, due soon;
-  // the day after: overdue.
-  EXPECT_FALSE(on(due - 8).due_soon);
-  EXPECT_FALSE(on(due - 8).overdue);
-  EXPECT_EQ(on(due - 8).due_in_days, 8);
-  EXPECT_TRUE(on(due - 7).due_soon);
-  EXPECT_TRUE(on(due).due_soon);
-  EXPECT_FALSE(on(due).overdue);
-  EXPECT_EQ(on(due).due_in_days, 0);
-  EXPECT_TRUE(on(due + 1).overdue);
-  EXPECT_FALSE(on(due + 1).due_soon);
-  EXPECT_EQ(on(due + 1).due_in_days, -1);
-  EXPECT_EQ(on(due + 1).serial, "T-0815");
-  EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due)), "");
-  EXPECT_EQ(daemon::overdue_text(daemon::equipment_due(e, due + 1)),
-            "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2026-12-10");
-  // The live page's lines and banner, written here only (web/js/equipment.mjs shows them).
-  const std::string table = "The rate table (Acme Motion ATS-3, serial T-0815) ";
-  EXPECT_EQ(daemon::due_line(on(due - 8)), table + "is due for calibration on 2026-12-10 (in 8 days).");
-  EXPECT_EQ(daemon::due_line(on(due - 1)), table + "is due for calibration on 2026-12-10 (tomorrow).");
-  EXPECT_EQ(daemon::due_line(on(due)), table + "is due for calibration on 2026-12-10 (today).");
-  EXPECT_EQ(daemon::due_line(on(due + 1)), table + "was due for calibration on 2026-12-10 (1 day ago).");
-  EXPECT_EQ(daemon::due_line(on(due + 30)), table + "was due for calibration on 2026-12-10 (30 days ago).");
-  EXPECT_EQ(daemon::due_banner(daemon::equipment_due(e, due - 8)), "");
-  EXPECT_NE(daemon::due_banner(daemon::equipment_due(e, due - 7)).find("no campaign starts without an operator's override"),
-            std::string::npos);
-  EXPECT_NE(daemon::due_banner(daemon::equipment_due(e, due + 1)).find("only when an operator overrides this with a reason"),
-            std::string::npos);
-
-  // All three instruments, in order; the JSON the certificate and the status carry is the rule's.
-  daemon::DaemonConfig c;
-  c.reference_equipment = e;
-  c.reference_equipment.chamber = daemon::ReferenceInstrument{"ClimaCo", "CC-200", "C-4711", "2026-12-03", "", ""};
-  c.reference_equipment.gravity = daemon::GravitySurvey{"Federal Geodesy Agency", "GS-2024-17", "2026-11-30"};
-  c.site.gravity_mps2 = 9.81912;
-  const auto all = daemon::equipment_due(c.reference_equipment, due - 7);
-  ASSERT_EQ(all.size(), 3u);
-  EXPECT_EQ(all[0].instrument, "table");
-  EXPECT_EQ(all[1].instrument, "chamber");
-  EXPECT_EQ(all[2].instrument, "gravity");
-  EXPECT_TRUE(all[2].overdue);
-  EXPECT_EQ(all[2].identity, "by Federal Geodesy Agency, certificate GS-2024-17");
-  const json status = daemon::reference_equipment_json(c, due - 7, true);
-  EXPECT_TRUE(status.at("table").at("due_soon").get<bool>());
-  EXPECT_EQ(status.at("table").at("due_in_days"), 7);
-  EXPECT_EQ(status.at("chamber").at("due_in_days"), 0);
-  EXPECT_TRUE(status.at("gravity").at("overdue").get<bool>());
-  EXPECT_EQ(status.at("gravity").at("text"),
-            "The gravity survey (by Federal Geodesy Agency, certificate GS-2024-17) was due for a new survey on 2026-11-30 (3 days ago).");
-  EXPECT_EQ(status.at("table").at("text"), daemon::due_line(all[0]));
-  EXPECT_EQ(status.at("banner"), daemon::due_banner(all));
-  EXPECT_DOUBLE_EQ(status.at("gravity").at("sigma_mps2").get<double>(), earth::site_gravity_sigma_mps2(c.site));
-  const json certificate = daemon::reference_equipment_json(c, due - 7, false);
-  EXPECT_FALSE(certificate.at("table").contains("due_in_days"));
-  EXPECT_FALSE(certificate.at("table").contains("text")) << "a certificate states no day-relative words";
-  EXPECT_FALSE(certificate.contains("banner"));
-  EXPECT_EQ(certificate.at("table").at("overdue"), status.at("table").at("overdue"));
-  c.reference_equipment = {};
-  EXPECT_EQ(daemon::reference_equipment_json(c, due, true),
-            json({{"table", nullptr}, {"chamber", nullptr}, {"gravity", nullptr}, {"banner", nullptr}}));
-}
-
-namespace {
-
-std::string start_target(std::int64_t id) { return "/api/campaigns/" + std::to_string(id) + "/start"; }
-
-// Today's date (UTC) `days` from now, as the configuration writes it.
-std::string days_from_today(std::int64_t days) {
-  return daemon::date_text(daemon::utc_day(daemon::now_unix_ms()) + days);
-}
-
-}  // namespace
-
-// Issue 35, deliverable 4, its acceptance: a campaign with an expired table certificate refuses to
-// start; an operator starts it anyway with a reason, which the audit trail keeps with their name.
-TEST(ReferenceEquipment, AnExpiredTableRefusesTheStartUntilAnOperatorOverridesWithAReason) {
-  LocalDaemon d("equipment-expired", false, [&](daemon::DaemonConfig& c) { configure(c, scratch_dir("equipment-site") + "/seq.json"); });
-  const auto id = d.post_campaign(certificate_campaign("with an expired table", "FOG-41"));
-
-  const auto refused = d.call("POST", start_target(id));
-  ASSERT_EQ(refused.status, 409) << refused.body;
-  const json why = json::parse(refused.body);
-  const std::string error = why.at("error");
-  for (const char* words : {"not started", "rate table", "T-0815", "2020-01-31", "override_overdue"})
-    EXPECT_NE(error.find(words), std::string::npos) << words << " missing from: " << error;
-  EXPECT_EQ(error.find("C-4711"), std::string::npos) << "the chamber is not overdue: " << error;
-  ASSERT_EQ(why.at("overdue").size(), 1u);
-  EXPECT_EQ(why.at("overdue")[0].at("instrument"), "table");
-  EXPECT_EQ(why.at("overdue")[0].at("serial"), "T-0815");
-  EXPECT_EQ(why.at("overdue")[0].at("calibration_due"), "2020-01-31");
-  EXPECT_TRUE(why.at("overdue")[0].at("text").get<std::string>().starts_with(
-      "The rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31 ("))
-      << why.dump();
-  EXPECT_EQ(d.campaign(id).at("state"), "created");
-
-  // An override needs a reason; it belongs to start alone; a viewer cannot give one.
-  const auto blank = d.call("POST", start_target(id), json{{"override_overdue", "  "}}.dump());
-  EXPECT_EQ(blank.status, 400) << blank.body;
-  EXPECT_NE(blank.body.find("body.override_overdue must say why"), std::string::npos) << blank.body;
-  EXPECT_EQ(d.call("POST", start_target(id), json{{"override_overdue", 1}}.dump()).status, 400);
-  const auto on_pause = d.call("POST", "/api/campaigns/" + std::to_string(id) + "/pause",
-                               json{{"override_overdue", "why not"}}.dump());
-  EXPECT_EQ(on_pause.status, 400) << on_pause.body;
-  const auto viewer = d.call("POST", start_target(id), json{{"override_overdue", "I am only a viewer"}}.dump(), kViewerToken);
-  EXPECT_EQ(viewer.status, 403) << viewer.body;
-  EXPECT_EQ(d.campaign(id).at("state"), "created");
-  EXPECT_TRUE(d.get("/api/audit?action=campaign.override_overdue").at("entries").empty());
-
-  // The status the live page reads says so, judged today.
-  const json status = d.get("/api/status");
-  EXPECT_TRUE(status.at("reference_equipment").at("table").at("overdue").get<bool>());
-  EXPECT_LT(status.at("reference_equipment").at("table").at("due_in_days").get<std::int64_t>(), 0);
-  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("overdue").get<bool>());
-  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
-  EXPECT_NE(status.at("reference_equipment").at("banner").get<std::string>().find("only when an operator overrides"),
-            std::string::npos) << status.at("reference_equipment").dump();
-
-  const std::string reason = "customer deadline; table checked against the reference cube on 2026-11-20";
-  const auto started = d.call("POST", start_target(id), json{{"override_overdue", reason}, {"reason", "yearly"}}.dump());
-  ASSERT_EQ(started.status, 200) << started.body;
-  EXPECT_EQ(json::parse(started.body).at("state"), "queued");
-  const json trail = d.get("/api/audit?action=campaign.override_overdue");
-  ASSERT_EQ(trail.at("entries").size(), 1u) << trail.dump();
-  const json entry = trail.at("entries")[0];
-  EXPECT_EQ(entry.at("actor"), "operator");
-  EXPECT_EQ(entry.at("subject"), "campaign " + std::to_string(id));
-  EXPECT_EQ(entry.at("details").at("reason"), reason);
-  ASSERT_EQ(entry.at("details").at("instruments").size(), 1u);
-  EXPECT_EQ(entry.at("details").at("instruments")[0].at("instrument"), "table");
-  EXPECT_EQ(entry.at("details").at("instruments")[0].at("serial"), "T-0815");
-  EXPECT_EQ(entry.at("details").at("instruments")[0].at("calibration_due"), "2020-01-31");
-  EXPECT_TRUE(trail.at("intact").get<bool>());
-  // The run's own record says it too: the start's transition names the override and its reason.
-  const json run = d.campaign(id);
-  const auto queued = std::find_if(run.at("transitions").begin(), run.at("transitions").end(),
-                                   [](const json& t) { return t.at("to") == "queued"; });
-  ASSERT_NE(queued, run.at("transitions").end()) << run.at("transitions").dump();
-  const std::string transition = queued->at("reason");
-  EXPECT_NE(transition.find("start by operator: yearly; overdue reference equipment overridden"), std::string::npos) << transition;
-  EXPECT_NE(transition.find(reason), std::string::npos) << transition;
-  EXPECT_EQ(d.command(id, "abort"), 200);
-  d.wait_final(id);
-  // Started already: a second start is the sequencer's 409, not judged again.
-  const auto again = d.call("POST", start_target(id));
-  EXPECT_EQ(again.status, 409);
-  EXPECT_NE(again.body.find("already started"), std::string::npos) << again.body;
-}
-
-// Issue 35, deliverable 4: a run started under an operator's override of overdue equipment says so
-// on its certificate, in the content that is hashed and signed: which instrument was past its due
-// date (imucald's own words and each instrument's serial and date), the operator and the reason.
-TEST(ReferenceEquipment, TheCertificateOfARunStartedUnderAnOverrideStatesWhoOverrodeWhichInstrumentAndWhy) {
-  const std::string dir = scratch_dir("equipment-override-lab");
-  const std::string key_file = dir + "/lab.key";
-  signing::write_key_file(key_file, signing::generate_key_pair());
-  const signing::PublicKey lab_key = signing::read_public_key(key_file + ".pub");
-  LocalDaemon d("equipment-override", false, [&](daemon::DaemonConfig& c) {
-    configure(c, dir + "/sequence.json");
-    c.certificates.signing_key_file = key_file;
-  });
-  const auto id = d.post_campaign(certificate_campaign("started under an override", "FOG-51"));
-  const std::string reason = "customer deadline; table checked against the reference cube on 2026-11-20";
-  const auto started = d.call("POST", start_target(id), json{{"override_overdue", reason}}.dump());
-  ASSERT_EQ(started.status, 200) << started.body;
-
-  // Kept with the run from its start (GET /api/campaigns/{id}).
-  const json kept = d.campaign(id).at("override_overdue");
-  ASSERT_TRUE(kept.is_object()) << kept.dump();
-  EXPECT_EQ(kept.at("by"), "operator");
-  EXPECT_EQ(kept.at("reason"), reason);
-  EXPECT_EQ(kept.at("text"), "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31");
-  ASSERT_EQ(kept.at("instruments").size(), 1u) << kept.dump();
-  EXPECT_EQ(kept.at("instruments")[0].at("instrument"), "table");
-  EXPECT_EQ(kept.at("instruments")[0].at("serial"), "T-0815");
-  EXPECT_EQ(kept.at("instruments")[0].at("calibration_due"), "2020-01-31");
-  EXPECT_FALSE(kept.at("instruments")[0].contains("text")) << "no words counting days from a day gone by";
-  EXPECT_TRUE(std::regex_match(kept.at("at").get<std::string>(), std::regex(R"(\d{4}-\d\d-\d\dT.*Z)"))) << kept.dump();
-
-  ASSERT_EQ(d.wait_final(id).at("state"), "done");
-  const json cert = d.get(certificate_target(id));
-  ASSERT_TRUE(cert.contains("content")) << cert.dump().substr(0, 600);
-  EXPECT_EQ(cert.at("content").at("campaign").at("override_overdue"), kept) << cert.at("content").at("campaign").dump();
-  // The certificate's table line says OVERDUE as well (judged on the day the run ended).
-  EXPECT_TRUE(cert.at("content").at("bench").at("reference_equipment").at("table").at("overdue").get<bool>());
-  // In what is hashed and signed: the envelope carries it and verifies with the lab's key.
-  EXPECT_EQ(signing::sha256_hex(signing::canonical_json(cert.at("content"))), cert.at("content_sha256").get<std::string>());
-  EXPECT_EQ(cert.at("signed").at("content").at("campaign").at("override_overdue"), kept);
-  const signing::Verification v = signing::verify_document(cert.at("signed"), lab_key);
-  EXPECT_TRUE(v.verified()) << v.message;
-}
-
-// Due in three days: the start goes ahead (no override asked, none audited) and the status the
-// live page reads says the table is due soon.
-TEST(ReferenceEquipment, DueWithinAWeekStartsAndTheStatusSaysDueSoon) {
-  LocalDaemon d("equipment-due-soon", false, [&](daemon::DaemonConfig& c) {
-    configure(c, scratch_dir("equipment-soon-site") + "/seq.json");
-    c.reference_equipment.table->calibration_due = days_from_today(3);
-    c.reference_equipment.gravity->calibration_due = days_from_today(8);
-  });
-  const json status = d.get("/api/status");
-  const json table = status.at("reference_equipment").at("table");
-  EXPECT_TRUE(table.at("due_soon").get<bool>()) << table.dump();
-  EXPECT_FALSE(table.at("overdue").get<bool>());
-  // (2 if midnight UTC passed since the configuration was made.)
-  EXPECT_GE(table.at("due_in_days").get<std::int64_t>(), 2);
-  EXPECT_LE(table.at("due_in_days").get<std::int64_t>(), 3);
-  EXPECT_EQ(table.at("uncertainty"), "1 arcsec (k=2)");
-  EXPECT_FALSE(status.at("reference_equipment").at("chamber").at("due_soon").get<bool>());
-  EXPECT_EQ(status.at("reference_equipment").at("gravity").at("surveyed_by"), "Federal Geodesy Agency");
-  EXPECT_GE(status.at("reference_equipment").at("gravity").at("due_in_days").get<std::int64_t>(), 7);
-  EXPECT_TRUE(table.at("text").get<std::string>().starts_with(
-      "The rate table (Acme Motion ATS-3, serial T-0815) is due for calibration on " +
-      table.at("calibration_due").get<std::string>() + " (in "))
-      << table.dump();
-  EXPECT_EQ(status.at("reference_equipment").at("banner"), "After its due date no campaign starts without an operator's override.");
-
-  const auto id = d.post_campaign(certificate_campaign("table due soon", "FOG-42"));
-  const auto started = d.call("POST", start_target(id));
-  ASSERT_EQ(started.status, 200) << started.body;
-  // An override where nothing is overdue changes nothing and is not audited as one.
-  const auto other = d.post_campaign(certificate_campaign("needless override", "FOG-43"));
-  ASSERT_EQ(d.call("POST", start_target(other), json{{"override_overdue", "just in case"}}.dump()).status, 200);
-  EXPECT_TRUE(d.get("/api/audit?action=campaign.override_overdue").at("entries").empty());
-  EXPECT_EQ(d.wait_final(id).at("state"), "done");
-  EXPECT_EQ(d.wait_final(other).at("state"), "done");
-  const json cert = d.get(certificate_target(id));
-  EXPECT_FALSE(cert.at("reference_equipment").at("table").at("overdue").get<bool>()) << cert.dump().substr(0, 600);
-  // Nothing was overridden: neither run records an override, nor does its certificate state one.
-  for (const auto run : {id, other}) {
-    EXPECT_TRUE(d.campaign(run).at("override_overdue").is_null()) << run;
-    const json stated = d.get(certificate_target(run)).at("content").at("campaign");
-    EXPECT_FALSE(stated.contains("override_overdue")) << stated.dump().substr(0, 600);
-  }
-}
-
 // Issue 35, deliverable 1, in part: a certificate issued with one site g, read after the
 // configuration's g was corrected, says so (its content unchanged), and the unit's page lists it.
 // (Superseding it: the next test.)
 TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheOldOne) {
   const std::string dir = scratch_dir("gravity-corrected-lab");
-  LocalDaemon d("gravity-corrected", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
+  LocalDaemon d("gravity-corrected", false, [&](daemon::DaemonConfig& c) { configure_certified_bench(c, dir + "/sequence.json"); });
   const auto id = run_campaign(d, "before the correction", "FOG-71");
   const json before = d.get(certificate_target(id));
   ASSERT_TRUE(before.contains("number")) << before.dump().substr(0, 400);
@@ -617,7 +308,7 @@ TEST(Certificate, ACorrectedSiteGravityIsReportedOnTheCertificatesIssuedWithTheO
 // gyros, calibrated against the Earth's rate, do not move.
 TEST(Certificate, ACorrectedSiteGravitySupersedesTheCertificateWithTheRunCalibratedAgain) {
   const std::string dir = scratch_dir("gravity-recalibrated-lab");
-  LocalDaemon d("gravity-recalibrated", false, [&](daemon::DaemonConfig& c) { configure(c, dir + "/sequence.json"); });
+  LocalDaemon d("gravity-recalibrated", false, [&](daemon::DaemonConfig& c) { configure_certified_bench(c, dir + "/sequence.json"); });
   const auto id = run_campaign(d, "before the survey", "FOG-72");
   const std::string target = "/api/campaigns/" + std::to_string(id) + "/recalibrate";
   const json old_cert = d.get(certificate_target(id));
@@ -687,60 +378,6 @@ TEST(Certificate, ACorrectedSiteGravitySupersedesTheCertificateWithTheRunCalibra
   EXPECT_DOUBLE_EQ(entry.at("details").at("gravity_after_mps2").get<double>(), g_new);
 }
 
-// `imucal campaign run` (no daemon) judges the configuration's reference equipment with imucald's
-// own code: refused naming the instrument and its due date, unless given --override-overdue with a
-// reason, which is then recorded with the run, audited and stated on its certificate.
-TEST(ReferenceEquipment, CampaignRunRefusesOverdueEquipmentUnlessOverriddenWithAReason) {
-  const std::string dir = scratch_dir("equipment-campaign-run");
-  const std::string config = dir + "/imucald.json";
-  const std::string campaign = dir + "/campaign.json";
-  std::ofstream(config) << json{{"certificates", {{"prefix", "RUN"}, {"sequence_file", dir + "/sequence.json"}}},
-                                {"reference_equipment",
-                                 {{"table", {{"make", "Acme Motion"}, {"model", "ATS-3"}, {"serial", "T-0815"},
-                                             {"calibration_due", "2020-01-31"}}},
-                                  {"chamber", {{"make", "ClimaCo"}, {"model", "CC-200"}, {"serial", "C-4711"},
-                                               {"calibration_due", "2999-12-31"}}}}}}
-                               .dump(1);
-  std::ofstream(campaign) << certificate_campaign("from the command line", "FOG-61").dump(1);
-  const std::string run = "campaign run '" + campaign + "' --config '" + config + "' --data-dir '" + dir + "/data'";
-
-  const auto [refused_status, refused] = run_imucal(run);
-  EXPECT_EQ(refused_status, 2) << refused;
-  for (const char* words : {"not started", "rate table", "T-0815", "2020-01-31", "--override-overdue"})
-    EXPECT_NE(refused.find(words), std::string::npos) << words << " missing from: " << refused;
-  EXPECT_EQ(refused.find("C-4711"), std::string::npos) << "the chamber is not overdue: " << refused;
-  const auto [blank_status, blank] = run_imucal(run + " --override-overdue ' '");
-  EXPECT_EQ(blank_status, 2) << blank;
-  EXPECT_NE(blank.find("--override-overdue must say why"), std::string::npos) << blank;
-
-  const std::string reason = "rehearsal of the overdue table on the simulated bench";
-  const auto [status, out] = run_imucal(run + " --override-overdue '" + reason + "' --operator alice");
-  ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("overridden by alice: " + reason), std::string::npos) << out;
-
-  daemon::DaemonDb db(dir + "/data/imucald.db");
-  const auto campaigns = db.unit_campaigns(std::string("FOG-61"));
-  ASSERT_EQ(campaigns.size(), 3u);  // two refused (still created), one run
-  const auto done = campaigns.back();
-  EXPECT_EQ(done.state, daemon::RunState::Done);
-  for (std::size_t i = 0; i + 1 < campaigns.size(); ++i) {
-    EXPECT_EQ(campaigns[i].state, daemon::RunState::Created);
-    EXPECT_FALSE(db.overdue_override(campaigns[i].id).has_value());
-  }
-  const auto certificate = db.current_issued(done.id);
-  ASSERT_TRUE(certificate.has_value());
-  const json stated = json::parse(certificate->content_json).at("campaign").at("override_overdue");
-  EXPECT_EQ(stated.at("by"), "alice");
-  EXPECT_EQ(stated.at("reason"), reason);
-  EXPECT_EQ(stated.at("text"), "the rate table (Acme Motion ATS-3, serial T-0815) was due for calibration on 2020-01-31");
-  daemon::DaemonDb::AuditQuery query;
-  query.action_prefix = "campaign.override_overdue";
-  const auto trail = db.audit_entries(query);
-  ASSERT_EQ(trail.size(), 1u);
-  EXPECT_EQ(trail[0].actor, "alice");
-  EXPECT_EQ(trail[0].subject, "campaign " + std::to_string(done.id));
-}
-
 // Issue 35, deliverable 1: a certificate is issued when its run ends (in the order runs end, not
 // the order someone first opens them), its content is frozen and hashed (and signed with the lab's
 // key), and new limits, which change its verdict, issue a new certificate superseding it: the old
@@ -775,7 +412,7 @@ void expect_transitions_then_issued(LocalDaemon& d, std::int64_t campaign, const
 std::pair<int, std::string> verify_download(const std::string& dir, const json& download, const std::string& public_key) {
   const std::string file = dir + "/download.json";
   std::ofstream(file) << download.dump(1);
-  return run_imucal("verify '" + file + "' --key '" + public_key + "'");
+  return run_imucal_cli("verify '" + file + "' --key '" + public_key + "'");
 }
 
 // Both downloads verified offline; a digit changed, the signature changed or another lab's key,
@@ -857,7 +494,7 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   signing::write_key_file(key_file, signing::generate_key_pair());
   const signing::PublicKey lab_key = signing::read_public_key(key_file + ".pub");
   LocalDaemon d("certificate-issued", false, [&](daemon::DaemonConfig& c) {
-    configure(c, dir + "/sequence.json");
+    configure_certified_bench(c, dir + "/sequence.json");
     c.certificates.signing_key_file = key_file;
   });
   const auto a = run_campaign(d, "first", "FOG-21");
@@ -913,197 +550,4 @@ TEST(Certificate, IssuedWhenTheRunEndsFrozenSignedAndSupersededWhenLimitsChange)
   EXPECT_EQ(d.call("GET", "/api/certificates/NO-SUCH-1").status, 404);
 
   expect_partial_run_certified_once_accepted(d, cb2.at("sequence").get<std::int64_t>());
-}
-
-namespace {
-
-// `imucal audit verify DIR`: its exit status and what it printed.
-std::pair<int, std::string> audit_verify(const std::string& data_dir) { return run_imucal("audit verify '" + data_dir + "'"); }
-
-}  // namespace
-
-// Issue 35, deliverable 3: who changed what, when, each entry chained to the one before; an edit
-// or a deletion anywhere makes `imucal audit verify` fail, naming the first bad entry.
-TEST(Audit, EveryChangeIsChainedAndAnEditOrADeletionIsFound) {
-  std::string data_dir;
-  {
-    LocalDaemon d("audit", false, [&](daemon::DaemonConfig& c) { configure(c, scratch_dir("audit-site") + "/seq.json"); });
-    data_dir = d.config.data_dir;
-    const auto id = run_campaign(d, "audited", "FOG-31");
-    // The state says done a moment before the run's end issues its certificate (the run's end
-    // event follows the state it reports): read it, which waits for it or issues it.
-    ASSERT_TRUE(d.get(certificate_target(id)).contains("number"));
-    const json limits = {{"format", "imucal-limits/1"},
-                         {"part_numbers", {{"PN-100", {{"gyro.bias_dph", {{"max_abs", 1.0}}}}}}}};
-    ASSERT_EQ(d.call("PUT", "/api/limits", limits.dump()).status, 200);
-    const json trail = d.get("/api/audit?limit=1000");
-    EXPECT_TRUE(trail.at("intact").get<bool>()) << trail.at("check");
-    std::map<std::string, int> actions;
-    for (const json& e : trail.at("entries")) ++actions[e.at("action").get<std::string>()];
-    EXPECT_EQ(actions["service.started"], 1);
-    EXPECT_EQ(actions["campaign.created"], 1);
-    EXPECT_EQ(actions["campaign.command"], 1);  // start
-    EXPECT_EQ(actions["campaign.override_overdue"], 1);  // of the overdue table, by the operator
-    EXPECT_GE(actions["campaign.transition"], 3);  // created -> queued -> running -> done
-    EXPECT_EQ(actions["limits.replaced"], 1);
-    EXPECT_EQ(actions["certificate.issued"], 2);  // at the end, and under the new limits
-    EXPECT_EQ(actions["certificate.superseded"], 1);
-    // Who: the operator's name on what the operator did, imucald on what the service did.
-    const json mine = d.get("/api/audit?action=limits.&actor=operator");
-    ASSERT_EQ(mine.at("entries").size(), 1u) << mine.dump();
-    EXPECT_TRUE(mine.at("entries")[0].at("details").at("before").is_object());
-    EXPECT_EQ(mine.at("entries")[0].at("details").at("after").at("part_numbers").size(), 1u);
-    const json about = d.get("/api/audit?subject=campaign%20" + std::to_string(id));
-    EXPECT_GE(about.at("entries").size(), 4u);
-    const auto csv = d.call("GET", "/api/audit?format=csv&action=limits.");
-    EXPECT_EQ(csv.status, 200);
-    EXPECT_EQ(csv.body.rfind("seq,time_utc,actor,action,subject,details,sha256\r\n", 0), 0u) << csv.body.substr(0, 200);
-    EXPECT_EQ(d.call("GET", "/api/audit?since=2026-01-01").status, 400);
-    EXPECT_EQ(d.call("GET", "/api/audit?from=yesterday").status, 400);
-  }
-  const auto [ok_status, ok_text] = audit_verify(data_dir);
-  EXPECT_EQ(ok_status, 0) << ok_text;
-  EXPECT_NE(ok_text.find("OK: audit trail intact"), std::string::npos) << ok_text;
-
-  // Tampered copies of the database: one entry edited, one deleted, the last one deleted.
-  const auto tampered = [&](const std::string& name, const std::string& sql) {
-    const std::string copy = scratch_dir("audit-" + name);
-    std::filesystem::copy_file(data_dir + "/imucald.db", copy + "/imucald.db");
-    storage::sql::Connection db(copy + "/imucald.db", storage::sql::Connection::Open::read_write, "test");
-    db.exec("DROP TRIGGER audit_append_only; DROP TRIGGER audit_kept; " + sql);
-    return copy;
-  };
-  // (The WAL was checkpointed when the service closed the database.)
-  const auto [edited_status, edited] = audit_verify(tampered("edited", "UPDATE audit SET actor = 'mallory' WHERE seq = 4"));
-  EXPECT_EQ(edited_status, 1) << edited;
-  EXPECT_NE(edited.find("audit entry 4: changed after it was written"), std::string::npos) << edited;
-  const auto [deleted_status, deleted] = audit_verify(tampered("deleted", "DELETE FROM audit WHERE seq = 3"));
-  EXPECT_EQ(deleted_status, 1) << deleted;
-  EXPECT_NE(deleted.find("audit entry 4: entries 3 to 3 before it are missing"), std::string::npos) << deleted;
-  const auto [tail_status, tail] = audit_verify(tampered("tail", "DELETE FROM audit WHERE seq = (SELECT MAX(seq) FROM audit)"));
-  EXPECT_EQ(tail_status, 1) << tail;
-  EXPECT_NE(tail.find("entries at the end were deleted"), std::string::npos) << tail;
-  EXPECT_NE(audit_verify(scratch_dir("audit-empty")).second.find("no imucald database"), std::string::npos);
-}
-
-// Issue 38, "the database away": a stand whose registry server stops runs its campaign on (the
-// start's override and the audit entries wait in its journal, the status says so, the certificate
-// answers 503); when the server is back the journal is replayed and the certificate issued at its
-// first request. Asked until it answers, with a generous bound: no clock to beat on a loaded machine.
-TEST(Registry, AStandWhoseRegistryServerIsAwayRunsOnAndCatchesUpWhenItReturns) {
-  static imucaltest::PostgresServer server;
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("away"));
-  LocalDaemon d("registry-away", false, [&](daemon::DaemonConfig& c) {
-    configure(c, scratch_dir("registry-away-unused") + "/sequence.json");
-    c.registry.postgresql = conninfo;
-    c.registry.stand = "stand-away";
-  });
-  ASSERT_TRUE(server.stop_for_a_while());
-  const auto id = run_campaign(d, "away", "FOG-A");
-  const json away = d.get("/api/status").at("registry");
-  EXPECT_EQ(away.at("backend"), "postgresql");
-  EXPECT_FALSE(away.at("reachable").get<bool>()) << away.dump();
-  EXPECT_GT(away.at("pending_writes").get<std::int64_t>(), 0) << away.dump();
-  const auto refused = d.call("GET", certificate_target(id));
-  EXPECT_EQ(refused.status, 503) << refused.body;
-  EXPECT_NE(refused.body.find("unreachable"), std::string::npos) << refused.body;
-
-  ASSERT_TRUE(server.start_again());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
-  auto reply = d.call("GET", certificate_target(id));
-  while (reply.status != 200 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(250));
-    reply = d.call("GET", certificate_target(id));
-  }
-  ASSERT_EQ(reply.status, 200) << reply.body;
-  EXPECT_EQ(json::parse(reply.body).at("sequence"), 1);
-  const json back = d.get("/api/status").at("registry");
-  EXPECT_TRUE(back.at("reachable").get<bool>()) << back.dump();
-  EXPECT_EQ(back.at("pending_writes"), 0) << back.dump();
-  // The run's calibration, recorded at its end while the server was away, is in the unit's history.
-  const json unit = d.get("/api/imus/FOG-A");
-  ASSERT_EQ(unit.at("calibrations").size(), 1U) << unit.dump();
-  EXPECT_EQ(unit.at("calibrations")[0].at("stand"), "stand-away");
-  EXPECT_EQ(unit.at("calibrations")[0].at("state"), "done");
-  EXPECT_EQ(unit.at("calibrations_counted"), 1) << unit.dump();
-
-  daemon::PostgresRegistry registry(conninfo, "stand-away");
-  EXPECT_TRUE(registry.overdue_override(id).has_value());
-  const daemon::AuditChain chain = registry.audit_chain();
-  const auto& trail = chain.entries;
-  EXPECT_TRUE(daemon::check_audit_chain(chain).ok());
-  const auto transitions = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
-    return e.action == "campaign.transition";
-  });
-  EXPECT_GE(transitions, 2);  // the run's, journaled while the server was away
-  EXPECT_TRUE(d.get("/api/audit").at("intact").get<bool>());
-}
-
-// Issue 38: two stands' imucald on one PostgreSQL registry (a private server, tests/postgres_server.hpp)
-// number their certificates from its sequence, one after the other, and write one audit trail;
-// each stand's own SQLite database keeps none of it.
-TEST(Registry, TwoStandsOnOnePostgresRegistryShareTheNumberingAndTheAuditTrail) {
-  static imucaltest::PostgresServer server;
-  if (!server.skip_reason().empty()) GTEST_SKIP() << server.skip_reason();
-  ASSERT_TRUE(server.running()) << server.error();
-  const std::string conninfo = server.create_database(imucaltest::PostgresServer::unique_name("stands"));
-  const auto on_registry = [&](const std::string& stand) {
-    return [&, stand](daemon::DaemonConfig& c) {
-      configure(c, scratch_dir("registry-unused-" + stand) + "/sequence.json");
-      c.registry.postgresql = conninfo;
-      c.registry.stand = stand;
-    };
-  };
-  LocalDaemon a("registry-stand-a", false, on_registry("stand-a"));
-  LocalDaemon b("registry-stand-b", false, on_registry("stand-b"));
-  const auto id_a = run_campaign(a, "on a", "FOG-A");
-  const auto id_b = run_campaign(b, "on b", "FOG-B");
-  const json ca = a.get(certificate_target(id_a));
-  const json cb = b.get(certificate_target(id_b));
-  EXPECT_EQ(ca.at("sequence"), 1) << ca.dump();
-  EXPECT_EQ(cb.at("sequence"), 2) << cb.dump();
-  // A number is the lab's: stand b finds stand a's certificate by it.
-  EXPECT_EQ(b.call("GET", "/api/certificates/" + ca.at("number").get<std::string>()).status, 200);
-  // Campaign ids are each stand's own: both ran campaign 1, each sees its own certificate.
-  EXPECT_EQ(id_a, id_b);
-  EXPECT_EQ(a.get(certificate_target(id_a)).at("number"), ca.at("number"));
-
-  daemon::PostgresRegistry registry(conninfo, "test");
-  EXPECT_EQ(registry.max_certificate_sequence(), 2);
-  const daemon::AuditChain chain = registry.audit_chain();
-  const auto& trail = chain.entries;
-  EXPECT_TRUE(daemon::check_audit_chain(chain).ok());
-  const auto started = std::count_if(trail.begin(), trail.end(), [](const daemon::AuditEntry& e) {
-    return e.action == "service.started";
-  });
-  EXPECT_EQ(started, 2);
-  const json listed = a.get("/api/audit");
-  EXPECT_TRUE(listed.at("intact").get<bool>()) << listed.dump();
-
-  // One unit calibrated on both stands: one history, each calibration naming its stand, read
-  // from either stand.
-  const auto again_b = run_campaign(b, "FOG-A again on b", "FOG-A");
-  for (LocalDaemon* stand : {&a, &b}) {
-    const json unit = stand->get("/api/imus/FOG-A");
-    ASSERT_EQ(unit.at("calibrations").size(), 2U) << unit.dump();
-    EXPECT_EQ(unit.at("calibrations")[0].at("stand"), "stand-a");
-    EXPECT_EQ(unit.at("calibrations")[0].at("campaign_id"), id_a);
-    EXPECT_EQ(unit.at("calibrations")[1].at("stand"), "stand-b");
-    EXPECT_EQ(unit.at("calibrations")[1].at("campaign_id"), again_b);
-    EXPECT_EQ(unit.at("calibrations_counted"), 2) << unit.dump();
-  }
-  // Limits put on one stand are the other's at once (its next run judged by them).
-  const json limits = {{"format", "imucal-limits/1"},
-                       {"part_numbers", {{"PN-LAB", {{"gyro.bias_dph", {{"max_abs", 5.0}}}}}}}};
-  ASSERT_EQ(a.call("PUT", "/api/limits", limits.dump()).status, 200);
-  const json on_b = b.get("/api/limits");
-  EXPECT_TRUE(on_b.at("part_numbers").contains("PN-LAB")) << on_b.dump();
-  EXPECT_EQ(on_b.at("source"), "the lab's registry");
-
-  // The stand's own database holds no certificate of its own.
-  daemon::DaemonDb own(a.config.data_dir + "/imucald.db");
-  EXPECT_EQ(own.max_certificate_sequence(), 0);
-  EXPECT_TRUE(own.audit_trail().empty());
 }

@@ -368,6 +368,77 @@ TEST_F(RecorderTest, ADiskThatStaysFullEndsWithTheHeldFramesCountedAsLost) {
   EXPECT_GT(*lost, 0);
 }
 
+// The producer of the full-disk test: frames pushed in batches, the disk made full after 100,000,
+// emptied again once the recorder has refused three times (with what it holds checked then); after
+// each refusal the producer takes up after the last frame the recorder holds. Whether the disk was
+// filled and emptied; a failure (a push neither queued nor refused, no progress for 60 s) is
+// reported and ends the run.
+struct FullDiskRun {
+  bool filled = false, emptied = false;
+};
+
+// The first frame after the last one the recorder holds (the producer's restart after a refusal).
+std::int64_t first_frame_not_taken(const Recorder& recorder, std::int64_t frames) {
+  const auto taken = recorder.last_accepted_t_ns();
+  if (!taken) {
+    ADD_FAILURE() << "a refusal before any frame was taken";
+    return frames;
+  }
+  const std::int64_t taken_t_ns = *taken;
+  std::int64_t next = 0;
+  while (next < frames && expected_frame(next).t_ns <= taken_t_ns) ++next;
+  return next;
+}
+
+FullDiskRun push_through_a_full_disk(Recorder& recorder, const RecorderOptions& options, std::int64_t frames) {
+  constexpr std::int64_t kBatch = 1000;
+  FullDiskRun run;
+  std::int64_t next = 0;  // the first frame not yet taken by the recorder
+  int refusals = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (next < frames) {
+    if (std::chrono::steady_clock::now() >= deadline) {
+      ADD_FAILURE() << "no progress; next frame " << next;
+      return run;
+    }
+    if (!run.filled && next >= 100'000) {
+      run.filled = true;
+      disk_fault::set_full(true);
+    }
+    const auto pushed = recorder.push(frames_from(next, std::min(kBatch, frames - next)));
+    if (pushed == Recorder::Push::Queued) {
+      next += std::min(kBatch, frames - next);
+      continue;
+    }
+    if (pushed != Recorder::Push::Refused) {
+      ADD_FAILURE() << "a push neither queued nor refused at frame " << next;
+      return run;
+    }
+    ++refusals;
+    next = first_frame_not_taken(recorder, frames);
+    if (!run.emptied && refusals >= 3) {
+      // Still held after several failed attempts: nothing lost, nothing committed meanwhile.
+      EXPECT_GT(recorder.stats().held_frames, 0);
+      EXPECT_LE(recorder.stats().queued_frames, options.queue_capacity_frames);
+      EXPECT_FALSE(recorder.commit_and_wait());
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));  // a few failed retries
+      run.emptied = true;
+      disk_fault::set_full(false);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return run;
+}
+
+// The run file after the full disk: every frame once, in one clean writer session.
+void expect_every_frame_once(const std::string& path, std::int64_t frames) {
+  const RunDb db = RunDb::open(path, OpenMode::Read);
+  EXPECT_FALSE(db.recovery().has_value());
+  ASSERT_EQ(db.sessions().size(), 1u);
+  EXPECT_FALSE(db.sessions().front().unclean);
+  expect_frames_identical(frames_from(0, frames), db.read_frames());
+}
+
 // The disk made full (storage::disk_fault, the VFS every connection goes through) while frames
 // stream in, then given space again: the recorder holds the failed batch and what was queued,
 // refuses the rest (the producer supplies it again from last_accepted_t_ns(), as the daemon's redo
@@ -385,42 +456,9 @@ TEST_F(RecorderTest, AFullDiskHoldsTheUncommittedFramesAndWritesThemOnceSpaceRet
   std::atomic<int> commits{0};
   Recorder recorder(RunDb::create(path(), test::crash_meta()), options, alarms.handler(),
                     [&](const RecorderStats&) { ++commits; });
-  constexpr std::int64_t kFrames = 400'000, kBatch = 1000;
-  std::int64_t next = 0;  // the first frame not yet taken by the recorder
-  int refusals = 0;
-  bool filled = false, emptied = false;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (next < kFrames) {
-    ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "no progress; next frame " << next;
-    if (!filled && next >= 100'000) {
-      filled = true;
-      disk_fault::set_full(true);
-    }
-    const auto pushed = recorder.push(frames_from(next, std::min(kBatch, kFrames - next)));
-    if (pushed == Recorder::Push::Queued) {
-      next += std::min(kBatch, kFrames - next);
-      continue;
-    }
-    ASSERT_EQ(pushed, Recorder::Push::Refused);
-    ++refusals;
-    // The producer takes up after the last frame the recorder holds.
-    const auto taken = recorder.last_accepted_t_ns();
-    ASSERT_TRUE(taken.has_value());
-    const std::int64_t taken_t_ns = *taken;
-    next = 0;
-    while (next < kFrames && expected_frame(next).t_ns <= taken_t_ns) ++next;
-    if (!emptied && refusals >= 3) {
-      // Still held after several failed attempts: nothing lost, nothing committed meanwhile.
-      EXPECT_GT(recorder.stats().held_frames, 0);
-      EXPECT_LE(recorder.stats().queued_frames, options.queue_capacity_frames);
-      EXPECT_FALSE(recorder.commit_and_wait());
-      std::this_thread::sleep_for(std::chrono::milliseconds(200));  // a few failed retries
-      emptied = true;
-      disk_fault::set_full(false);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  ASSERT_TRUE(filled && emptied) << "the disk was never made full while recording";
+  constexpr std::int64_t kFrames = 400'000;
+  const FullDiskRun run = push_through_a_full_disk(recorder, options, kFrames);
+  ASSERT_TRUE(run.filled && run.emptied) << "the disk was never made full while recording";
   EXPECT_TRUE(recorder.commit_and_wait());
   EXPECT_FALSE(recorder.write_problem().has_value());
   EXPECT_TRUE(recorder.close());
@@ -428,12 +466,7 @@ TEST_F(RecorderTest, AFullDiskHoldsTheUncommittedFramesAndWritesThemOnceSpaceRet
   EXPECT_THAT(alarms.message(RecorderAlarmKind::WriteHeld), HasSubstr("disk full: at least"));
   EXPECT_EQ(alarms.count(RecorderAlarmKind::WriteFailed), 0);
   EXPECT_EQ(recorder.stats().dropped_frames, 0);
-
-  const RunDb db = RunDb::open(path(), OpenMode::Read);
-  EXPECT_FALSE(db.recovery().has_value());
-  ASSERT_EQ(db.sessions().size(), 1u);
-  EXPECT_FALSE(db.sessions().front().unclean);
-  expect_frames_identical(frames_from(0, kFrames), db.read_frames());
+  expect_every_frame_once(path(), kFrames);
 }
 
 TEST_F(RecorderTest, UncleanEndIsRecoveredWithIntegrityCheckAndLossReport) {
