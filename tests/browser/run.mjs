@@ -273,13 +273,10 @@ async function resultsOfARunThatEndsWhileTheyAreRead(page, id) {
   };
   let progressReads = 0;
   const onProgress = async (route) => {
-    if (++progressReads === 1) {
-      await held;
-      await route.continue();
-      heldAnswered = true;
-      return;
-    }
+    const first = ++progressReads === 1;
+    if (first) await held;
     await route.continue();
+    if (first) heldAnswered = true;
   };
   await page.route(detailUrl, onDetail);
   await page.route(progressUrl, onProgress);

@@ -450,7 +450,8 @@ TEST(KvhSerial, AReaderStalledBehindAFullLineTakesNoLateFrameForAWrap) {
   Rig rig(kvh(kStallTestRateHz));
   rig.up();
   ImuBatch all = rig.collect(0.2);
-  std::this_thread::sleep_for(6000ms);  // 1500 samples, 54 kB: more than the line holds
+  // 1500 samples, 54 kB: more than the line holds.
+  std::this_thread::sleep_for(std::chrono::duration<double>(1500.0 / kStallTestRateHz));
   const ImuBatch more = rig.collect(0.5);
   all.samples.insert(all.samples.end(), more.samples.begin(), more.samples.end());
   ASSERT_GT(all.samples.size(), 500u);
